@@ -1,0 +1,78 @@
+"""The channel catalogue: one place that names every Trip channel, its SI unit and meaning.
+
+Measured channels are what a vehicle's CAN bus (or a logger) delivers; truth channels exist only
+for simulated trips and are stored apart so no estimator reads them by accident.
+Importers and the simulator must use these names; unknown names are allowed (extra signals) but
+must carry a unit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Channel:
+    name: str
+    unit: str
+    description: str
+
+
+_MEASURED = [
+    Channel("t", "s", "time since trip start"),
+    Channel("wheel_speed_fl", "rad/s", "front-left wheel angular speed (ABS sensor)"),
+    Channel("wheel_speed_fr", "rad/s", "front-right wheel angular speed"),
+    Channel("wheel_speed_rl", "rad/s", "rear-left wheel angular speed"),
+    Channel("wheel_speed_rr", "rad/s", "rear-right wheel angular speed"),
+    Channel("vehicle_speed", "m/s", "ESP vehicle speed v_V (section 5.2.2)"),
+    Channel("accel_x", "m/s^2", "body-fixed longitudinal accelerometer, includes g*sin(theta) (eq. 4.4/5.2)"),
+    Channel("accel_y", "m/s^2", "body-fixed lateral accelerometer, includes gravity of bank/roll"),
+    Channel("yaw_rate", "rad/s", "yaw rate, positive counter-clockwise (left turn)"),
+    Channel("steering_wheel_angle", "rad", "steering-wheel angle delta_S, positive left"),
+    Channel("drive_torque", "N*m", "engine / motor shaft torque T_E from the engine model (with model error)"),
+    Channel("engine_speed", "rad/s", "engine / motor shaft speed"),
+    Channel("gear", "1", "engaged gear G (0 = neutral / clutch open)"),
+    Channel("clutch", "1", "clutch state: 1 engaged, 0 open, between = slipping"),
+    Channel("brake_pressure_front", "Pa", "front axle brake pressure p_B"),
+    Channel("brake_pressure_rear", "Pa", "rear axle brake pressure p_B"),
+    Channel("ambient_temperature", "K", "ambient air temperature T_a"),
+    Channel("rim_torque", "N*m", "sum of rim torques T_R, where a log provides it (e.g. from motor torque)"),
+    Channel("elevation", "m", "GNSS / map elevation"),
+    Channel("latitude", "deg", "GNSS latitude"),
+    Channel("longitude", "deg", "GNSS longitude"),
+    Channel("heading", "rad", "GNSS course over ground"),
+    Channel("gnss_speed", "m/s", "GNSS speed over ground"),
+    Channel("battery_voltage", "V", "traction battery voltage"),
+    Channel("battery_current", "A", "traction battery current, positive = discharge"),
+    Channel("accelerator_pedal", "1", "accelerator pedal position 0..1"),
+    Channel("heating_power", "W", "cabin heater / auxiliary power"),
+    Channel("distance", "m", "travelled distance from a log's odometer or integrated speed"),
+]
+
+_TRUTH = [
+    Channel("t", "s", "time since trip start"),
+    Channel("position", "m", "distance travelled along the road s"),
+    Channel("speed", "m/s", "true longitudinal speed v_V"),
+    Channel("acceleration", "m/s^2", "true dv/dt"),
+    Channel("tractive_force", "N", "true vehicle tractive force F_xV (eq. 2.16b)"),
+    Channel("rim_torque", "N*m", "true sum of rim torques T_R (eq. 2.17)"),
+    Channel("mass", "kg", "true vehicle mass m_V incl. payload"),
+    Channel("rolling_resistance_coefficient", "1", "true f_r(v) (eq. 2.10)"),
+    Channel("drag_area", "m^2", "true c_x*A_V"),
+    Channel("air_density", "kg/m^3", "rho_a = p_a/(R_a T_a)"),
+    Channel("grade", "rad", "gradient angle theta"),
+    Channel("curvature", "1/m", "road curvature 1/r, positive left"),
+    Channel("bank", "rad", "road bank angle"),
+    Channel("wind_speed", "m/s", "wind speed v_w"),
+    Channel("wind_angle", "rad", "wind angle psi_w (0 = tailwind along x_V, eq. 2.8)"),
+    Channel("cornering_stiffness", "N/rad", "cornering stiffness per axle c_y"),
+]
+
+MEASURED: dict[str, Channel] = {c.name: c for c in _MEASURED}
+TRUTH: dict[str, Channel] = {c.name: c for c in _TRUTH}
+
+
+def unit_of(name: str, truth: bool = False) -> str | None:
+    """SI unit of a catalogued channel, or None for a channel the catalogue does not know."""
+    table = TRUTH if truth else MEASURED
+    return table[name].unit if name in table else None

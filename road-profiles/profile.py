@@ -29,7 +29,9 @@ class RoadProfile:
     """Road attributes sampled over distance s [m] (strictly increasing, starting at 0).
 
     grade: gradient angle theta [rad] (positive uphill); curvature: 1/r [1/m] (positive = left turn);
-    bank: road bank angle [rad]; speed_limit: [m/s]; stops: distances [m] where the vehicle must stop;
+    bank: road bank angle phi_r [rad], right-handed about the direction of travel (x forward, y left, z up):
+    positive = left edge higher, so gravity pulls to the right with g*sin(phi_r); a left curve (curvature > 0)
+    superelevated for the curve has bank < 0; speed_limit: [m/s]; stops: distances [m] where the vehicle must stop;
     meta: source, licence, generator seed, ...
     """
 

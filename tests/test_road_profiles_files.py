@@ -137,3 +137,22 @@ def test_road_profile_rejects_bad_arrays():
     with pytest.raises(RoadProfileError, match="curvature: 1 NaN/inf values, first at index 1"):
         RoadProfile("x", distance=[0.0, 1.0, 2.0], grade=[0, 0, 0], curvature=[0, np.nan, 0], bank=[0, 0, 0],
                     speed_limit=[1, 1, 1])
+
+
+def test_cli_export_and_show(tmp_path):
+    import typer
+    from typer.testing import CliRunner
+
+    from roadload.road_profiles.cli import register
+
+    app = typer.Typer()
+    register(app, typer.Typer())
+    runner = CliRunner()
+    out = tmp_path / "m.csv"
+    result = runner.invoke(app, ["profiles", "export", "motorway", str(out), "--seed", "4"])
+    assert result.exit_code == 0, result.output
+    np.testing.assert_array_equal(load_profile(out).grade, load_profile("motorway", seed=4).grade)
+    shown = runner.invoke(app, ["profiles", "show", str(out)])
+    assert shown.exit_code == 0 and "length_km" in shown.output and "50" in shown.output
+    bad = runner.invoke(app, ["profiles", "show", "moon"])
+    assert bad.exit_code != 0 and "unknown road profile 'moon'" in str(bad.exception)

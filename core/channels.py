@@ -47,6 +47,18 @@ _MEASURED = [
     Channel("accelerator_pedal", "1", "accelerator pedal position 0..1"),
     Channel("heating_power", "W", "cabin heater / auxiliary power"),
     Channel("distance", "m", "travelled distance from a log's odometer or integrated speed"),
+    # derived or logger channels of real logs (roadload.io)
+    Channel("grade", "rad", "road gradient angle theta derived from elevation smoothed over distance (real logs)"),
+    Channel("curvature", "1/m", "road curvature 1/r from yaw rate or heading rate over speed, positive left"),
+    Channel("pitch", "rad", "vehicle pitch angle from a GNSS/IMU unit, positive nose up"),
+    Channel("roll", "rad", "vehicle roll angle from a GNSS/IMU unit"),
+    Channel("engine_torque_fraction", "1", "engine torque as a fraction of an (unlogged) reference torque (OBD-II)"),
+    Channel("throttle_position", "1", "throttle valve position 0..1 (OBD-II)"),
+    Channel("ambient_pressure", "Pa", "ambient (barometric) air pressure p_a"),
+    Channel("battery_temperature", "K", "traction battery temperature"),
+    Channel("state_of_charge", "1", "traction battery state of charge 0..1"),
+    Channel("brake_pedal", "1", "brake pedal switch / position 0..1"),
+    Channel("regen_braking", "1", "regenerative braking active 0/1"),
 ]
 
 _TRUTH = [

@@ -1,0 +1,286 @@
+"""One loader per log format; each turns its file into source signals and hands them to the mapping layer.
+
+=============  ==========================================================================================
+format         source
+=============  ==========================================================================================
+dbc-mf4        ASAM MDF4 CAN bus log (a file or a folder of a session's parts) + DBC(s) from the mapping
+candump        candump ``.log`` (also ``asc``, ``blf`` — python-can readers) + DBC(s)
+comma2k19      comma2k19 ``processed_log/CAN/raw_can`` arrays + DBC(s)
+csv            any delimited text log with a time column, through a column map (mapping ``csv`` options)
+bmw-i3         TUM BMW i3 trip CSV (csv + i3 vehicle spec: rim torque, grade, payload notes)
+openxc         OpenXC JSON trace, lines ``<unix time>: {"name": ..., "value": ...}``
+=============  ==========================================================================================
+
+`import_log` is the single entry point (CLI ``roadload import``): read -> mapping -> derived channels ->
+Trip with ``meta["import_report"]`` listing every repair and drop.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import pandas as pd
+
+from ..trip import Trip
+from ..units import to_si
+from .dbc import DbcSource, Database, decode_frames, find_dbc, load_dbc
+from .frames import CanFrames, read_can_log, read_comma2k19, read_mf4, read_python_can
+from .mapping import Mapping, apply_mapping, load_mapping
+from .report import ImportReport, LogImportError
+from .signals import Signal, SignalSet
+
+Progress = Callable[[str, float], None]  # (stage, fraction 0..1)
+
+DEFAULT_MAPPINGS = {"bmw-i3": "bmw_i3", "openxc": "openxc", "dbc-mf4": "canedge_gnss_obd",
+                    "comma2k19": "comma2k19_rav4"}
+CAN_LOG_FORMATS = ("dbc-mf4", "candump", "blf", "asc", "comma2k19")
+
+
+# ------------------------------------------------------------------------------------------ CAN logs
+def resolve_dbcs(mapping: Mapping, source: Path, extra: list[str | Path] = ()) -> list[DbcSource]:
+    """The mapping's DBC entries (searched next to the source, the mapping file and in the package) + extras."""
+    roots = [source] + ([Path(mapping.path).parent] if mapping.path else [])
+    out = [DbcSource(find_dbc(str(entry["file"]), roots), entry.get("bus")) for entry in mapping.dbc]
+    out += [DbcSource(Path(p), None) for p in extra]
+    if not out:
+        raise LogImportError(f"mapping {mapping.name!r} names no DBC file and none was given (--dbc)")
+    return out
+
+
+def check_mapping_against_dbc(mapping: Mapping, db: Database, report: ImportReport) -> set[str]:
+    """Every mapped CAN source ``message.signal`` must exist in a DBC; returns the message names needed."""
+    known_msgs = db.message_names()
+    known = db.signal_names()
+    needed: set[str] = set()
+    problems = []
+    for cm in mapping.channels:
+        hits = [s for s in cm.sources if s in known]
+        if not hits:
+            msg_names = {s.partition(".")[0] for s in cm.sources}
+            absent = sorted(m for m in msg_names if m not in known_msgs)
+            what = (f"message(s) {absent} not defined in any DBC" if absent
+                    else f"signal(s) {cm.sources} not defined in their message")
+            text = f"channel {cm.channel}: {what}"
+            if cm.required:
+                problems.append(text)
+            else:
+                report.note(f"optional {text}")
+            continue
+        needed |= {h.partition(".")[0] for h in hits}
+    for extra in [cm.valid for cm in mapping.channels if cm.valid] + [p for cm in mapping.channels for p in cm.plus] + \
+            ([mapping.clock["source"], mapping.clock.get("valid")] if mapping.clock else []):
+        if extra and extra in known:
+            needed.add(extra.partition(".")[0])
+        elif extra:
+            problems.append(f"signal {extra!r} (validity flag / clock / plus) not defined in any DBC")
+    if problems:
+        raise LogImportError(f"mapping {mapping.name!r} does not fit the DBC files {db.files}: " + "; ".join(problems))
+    return needed
+
+
+def signals_from_frames(frames: CanFrames, mapping: Mapping, dbcs: list[DbcSource],
+                        report: ImportReport) -> SignalSet:
+    db = load_dbc(dbcs, report)
+    needed = check_mapping_against_dbc(mapping, db, report)
+    return decode_frames(frames, db, report, wanted_messages=needed)
+
+
+def load_can_log(source: str | Path, mapping: Mapping, *, dbc: list[str | Path] = (),
+                 progress: Progress | None = None, fmt: str = "dbc-mf4") -> Trip:
+    """A CAN bus log (MF4 file/folder, candump/asc/blf, comma2k19 raw_can) decoded with DBCs into a Trip."""
+    source = Path(source)
+    if not source.exists():
+        raise LogImportError(f"no such log: {source}")
+    report = ImportReport()
+    dbcs = resolve_dbcs(mapping, source, list(dbc))
+    mf4_progress = (lambda k, n: progress("read", 0.6 * k / n)) if progress else None
+    if fmt == "comma2k19":
+        frames = read_comma2k19(source)
+    elif fmt == "dbc-mf4":
+        frames = read_mf4(source, mf4_progress)
+    elif fmt in ("candump", "blf", "asc"):
+        frames = read_python_can(source)
+    else:
+        frames = read_can_log(source, mf4_progress)
+    if progress:
+        progress("decode", 0.6)
+    signals = signals_from_frames(frames, mapping, dbcs, report)
+    if progress:
+        progress("map", 0.8)
+    files = sorted(source.glob("*.[mM][fF]4")) if source.is_dir() and fmt == "dbc-mf4" else [source]
+    meta = {"source": {"format": fmt, "path": str(source), "files": [str(f) for f in files],
+                       "bytes": int(sum(f.stat().st_size for f in files if f.is_file())),
+                       "n_frames": len(frames), "dbc": [str(d.path) for d in dbcs]}}
+    trip = apply_mapping(signals, mapping, report, start_time=frames.start_time, meta=meta, name=source.stem)
+    return trip
+
+
+# ------------------------------------------------------------------------------------------ CSV
+_UNIT_RE = re.compile(r"^(.*?)\s*[\[(]\s*([^\])]*)\s*[\])]\s*$")
+
+
+def split_header(column: str) -> tuple[str, str | None]:
+    """'Velocity [km/h]' -> ('Velocity', 'km/h'); 'max. SoC [%)' -> ('max. SoC', '%'); no bracket -> unit None."""
+    m = _UNIT_RE.match(column.strip())
+    if not m:
+        return column.strip(), None
+    return m.group(1).strip(), m.group(2).strip()
+
+
+def read_csv_signals(path: str | Path, mapping: Mapping, report: ImportReport) -> SignalSet:
+    """Columns of a delimited log as signals on its time column. Column names are stripped; a name that occurs
+    twice is kept as ``name#2`` (counted in the report); units come from ``[unit]`` in the header."""
+    path = Path(path)
+    if not path.is_file():
+        raise LogImportError(f"no such CSV log: {path}")
+    opts = mapping.csv
+    time_col = opts.get("time")
+    if not time_col:
+        raise LogImportError(f"mapping {mapping.name!r}: csv.time (the time column) is not set")
+    try:
+        df = pd.read_csv(path, sep=opts.get("sep", ","), encoding=opts.get("encoding", "utf-8"),
+                         decimal=opts.get("decimal", "."), header=0, low_memory=False)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise LogImportError(f"{path}: unreadable CSV ({type(exc).__name__}: {exc})") from None
+    # pandas renames duplicate headers 'x' -> 'x.1'; recover the raw header to name duplicates explicitly
+    with open(path, encoding=opts.get("encoding", "utf-8"), newline="") as fh:
+        header = fh.readline().rstrip("\r\n").split(opts.get("sep", ","))
+    if len(header) != df.shape[1]:
+        raise LogImportError(f"{path}: header has {len(header)} names but rows have {df.shape[1]} columns")
+    names: list[str] = []
+    seen: dict[str, int] = {}
+    for h in header:
+        h = h.strip()
+        seen[h] = seen.get(h, 0) + 1
+        names.append(h if seen[h] == 1 else f"{h}#{seen[h]}")
+    dupes = {h: c for h, c in seen.items() if c > 1}
+    for h, c in dupes.items():
+        report.repair(h, "duplicate column name; later copies renamed name#2, ...", c - 1)
+    df.columns = names
+    tkey = None
+    for cand in [time_col] + list(opts.get("time_alternatives", [])):
+        if cand in df.columns:
+            tkey = cand
+            break
+    if tkey is None:
+        raise LogImportError(f"{path}: time column {time_col!r} missing; columns are {names[:12]}...")
+    t_unit = opts.get("time_unit", "s")
+    t = to_si(pd.to_numeric(df[tkey], errors="coerce").to_numpy(dtype=float), t_unit)[0]
+    out: SignalSet = {}
+    for col in df.columns:
+        if col == tkey:
+            continue
+        base = col.split("#")[0]
+        unit = split_header(base)[1]
+        values = df[col].to_numpy()
+        if values.dtype == object:
+            numeric = pd.to_numeric(df[col], errors="coerce").to_numpy(dtype=float)
+            bad = np.isnan(numeric) & df[col].notna().to_numpy()
+            if bad.any() and not bad.all():
+                report.drop(col, "non-numeric cell", int(bad.sum()))
+            if not bad.all():
+                values = numeric
+        out[col] = Signal(t, values, unit)
+    return out
+
+
+def load_csv_log(source: str | Path, mapping: Mapping, *, progress: Progress | None = None,
+                 meta: dict[str, Any] | None = None) -> Trip:
+    source = Path(source)
+    report = ImportReport()
+    if progress:
+        progress("read", 0.0)
+    signals = read_csv_signals(source, mapping, report)
+    if progress:
+        progress("map", 0.7)
+    meta = {"source": {"format": mapping.format, "path": str(source), "bytes": source.stat().st_size},
+            **(meta or {})}
+    return apply_mapping(signals, mapping, report, meta=meta, name=source.stem)
+
+
+# ------------------------------------------------------------------------------------------ OpenXC
+def read_openxc_signals(path: str | Path, report: ImportReport) -> tuple[SignalSet, float]:
+    """OpenXC trace lines ``<unix time>: {"name": n, "value": v}`` -> signals (t relative to the first line)."""
+    path = Path(path)
+    if not path.is_file():
+        raise LogImportError(f"no such OpenXC trace: {path}")
+    cols: dict[str, tuple[list[float], list[Any]]] = {}
+    bad = events = 0
+    with open(path, encoding="utf-8") as fh:
+        for lineno, line in enumerate(fh, 1):
+            line = line.strip()
+            if not line:
+                continue
+            head, sep, body = line.partition(": ")
+            if not sep or head.startswith("{"):
+                raise LogImportError(f"{path}:{lineno}: OpenXC line without a time stamp "
+                                     f"(expected '<unix time>: {{json}}'); untimed traces cannot be imported")
+            try:
+                ts = float(head)
+                rec = json.loads(body)
+                name, value = rec["name"], rec["value"]
+            except (ValueError, KeyError, TypeError):
+                bad += 1
+                continue
+            if "event" in rec:
+                events += 1
+            cols.setdefault(str(name), ([], []))
+            cols[str(name)][0].append(ts)
+            cols[str(name)][1].append(value)
+    report.drop("OpenXC lines", "malformed JSON record", bad)
+    if events:
+        report.note(f"{events} OpenXC records carry an 'event' field (ignored)")
+    if not cols:
+        raise LogImportError(f"{path}: no OpenXC records")
+    start = min(min(v[0]) for v in cols.values())
+    out = {k: Signal(np.asarray(tt) - start, np.asarray(vv, dtype=object if any(isinstance(x, str) for x in vv)
+                                                          else float), None)
+           for k, (tt, vv) in cols.items()}
+    return out, start
+
+
+def load_openxc(source: str | Path, mapping: Mapping, *, progress: Progress | None = None) -> Trip:
+    source = Path(source)
+    report = ImportReport()
+    signals, start = read_openxc_signals(source, report)
+    meta = {"source": {"format": "openxc", "path": str(source), "bytes": source.stat().st_size}}
+    return apply_mapping(signals, mapping, report, start_time=start, meta=meta, name=source.name.split(".")[0])
+
+
+# ------------------------------------------------------------------------------------------ entry point
+def import_log(source: str | Path, fmt: str, mapping: str | Path | Mapping | None = None, *,
+               dbc: list[str | Path] = (), progress: Progress | None = None) -> Trip:
+    """Import a log of the given format through a mapping (file, packaged name, or default for the format)."""
+    if mapping is None:
+        if fmt not in DEFAULT_MAPPINGS:
+            raise LogImportError(f"format {fmt!r} needs a mapping file (--mapping)")
+        mapping = DEFAULT_MAPPINGS[fmt]
+    m = mapping if isinstance(mapping, Mapping) else load_mapping(mapping)
+    if fmt in CAN_LOG_FORMATS:
+        trip = load_can_log(source, m, dbc=dbc, progress=progress, fmt=fmt)
+    elif fmt == "csv":
+        trip = load_csv_log(source, m, progress=progress)
+    elif fmt == "bmw-i3":
+        from .bmw_i3 import load_bmw_i3
+        trip = load_bmw_i3(source, m, progress=progress)
+    elif fmt == "openxc":
+        trip = load_openxc(source, m, progress=progress)
+    else:
+        raise LogImportError(f"unknown import format {fmt!r}; choose one of "
+                             f"{sorted(set(CAN_LOG_FORMATS) | {'csv', 'bmw-i3', 'openxc'})}")
+    if m.derived:
+        if progress:
+            progress("derive", 0.9)
+        from .derived import add_derived
+        trip = add_derived(trip, m.derived, ImportReport.from_dict(trip.meta["import_report"]), m.vehicle)
+    if progress:
+        progress("done", 1.0)
+    return trip
+
+
+__all__ = ["import_log", "load_can_log", "load_csv_log", "load_openxc", "read_csv_signals", "read_openxc_signals",
+           "split_header", "CAN_LOG_FORMATS"]

@@ -195,3 +195,16 @@ def test_malformed_track_files(tmp_path):
     swapped.write_text("lat,lon\n11,480\n11.1,480.1\n")
     with pytest.raises(ProfileFileError, match="out of range"):
         load_track_csv(swapped)
+
+
+def test_gpx_route_without_elevation_gives_flat_profile(tmp_path):
+    lat, lon = _circle_latlon(400.0, n=200, turns=0.5)
+    pts = "".join(f'<rtept lat="{a:.9f}" lon="{b:.9f}"/>' for a, b in zip(lat, lon))
+    path = tmp_path / "route.gpx"
+    path.write_text('<?xml version="1.0"?><gpx version="1.1" creator="t" xmlns="http://www.topografix.com/GPX/1/1">'
+                    f"<rte>{pts}</rte></gpx>")
+    p = load_gpx(path, step=2.0)
+    assert np.all(p.grade == 0) and not p.meta["processing"]["has_elevation"]
+    interior = (p.distance > 80) & (p.distance < p.length - 80)
+    np.testing.assert_allclose(p.curvature[interior], 1 / 400.0, rtol=0.03)
+    assert p.length == pytest.approx(np.pi * 400.0, rel=1e-3)

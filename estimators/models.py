@@ -1,0 +1,286 @@
+"""Vehicle tractive-force model structures of chapter 5 and a registry for new ones.
+
+A model structure is a list of terms; each term is one column of the measured inputs A (a regressor built from
+the preprocessed vehicle states of :mod:`roadload.estimators.pipeline`) and one parameter of X. The measured
+output is always the vehicle tractive force B = F_xV (eq. 5.5c). Built in:
+
+- ``M0``: the abc white-box model (eq. 5.4), A = [cos θ, v cos θ, v², g sin θ + v̇], X = [a_V, b_V, c_V, m_V]
+  fixed from a coast-down (no estimator);
+- ``M3``: eq. 5.5, A = [g cos θ, g sin θ + v̇, v²], X = [m_V f_r0, m_V, ρ_a/2 A_V c_x];
+- ``M4``: eq. 5.6, M3 plus the cornering resistance v⁴/(4 r²) with parameter m_V²/c_yW.
+
+A user adds a structure with extra regressors through :func:`register_model` (e.g.
+``register_model(get_model("M3").extend("M3w", Term(...)))``); the pipeline and the evaluation only ever call
+:meth:`ModelStructure.regressors`, so nothing else needs to change.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Callable, Mapping
+
+import numpy as np
+
+from roadload.units import G
+
+# Names of the preprocessed vehicle states the built-in regressors read (columns of the pipeline's "states" stage).
+SPEED = "speed"                    # v_V [m/s]
+ACCELERATION = "acceleration"      # dv_V/dt [m/s^2]
+GRADIENT_ANGLE = "gradient_angle"  # θ [rad]
+PATH_CURVATURE = "path_curvature"  # 1/r [1/m]
+TRACTIVE_FORCE = "tractive_force"  # F_xV [N], eq. 5.5c
+
+AIR_DENSITY_NOMINAL = 1.2041  # kg/m^3, dry air at 20 °C and 101.325 kPa (ρ_a = p_a/(R_a T_a))
+
+
+class ModelError(ValueError):
+    """Unknown model name, duplicate registration, or states that lack what a model needs."""
+
+
+@dataclass(frozen=True)
+class NominalParameters:
+    """What the estimating side knows about the vehicle before driving (spec sheet and coast-down).
+
+    mass: m_V [kg] (nominal, e.g. curb mass + driver); rolling_resistance_coefficient: f_r0 [1];
+    drag_area: c_x A_V [m^2]; air_density: ρ_a [kg/m^3]; cornering_stiffness: c_yW [N/rad] as it enters
+    eq. 2.15 (F_Wc = m_V² v⁴ / (4 r² c_yW)); coast_down: (a_V [N], b_V [N s/m], c_V [N s²/m²]) of eq. 5.4, or
+    None when no coast-down is known (M0 is then unavailable).
+    """
+
+    mass: float
+    rolling_resistance_coefficient: float
+    drag_area: float
+    cornering_stiffness: float
+    air_density: float = AIR_DENSITY_NOMINAL
+    coast_down: tuple[float, float, float] | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("mass", "rolling_resistance_coefficient", "drag_area", "cornering_stiffness", "air_density"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value <= 0:
+                raise ModelError(f"NominalParameters.{name} must be a positive finite number, got {value!r}")
+        if self.coast_down is not None:
+            if len(self.coast_down) != 3 or not all(np.isfinite(c) for c in self.coast_down):
+                raise ModelError(f"NominalParameters.coast_down must be three finite numbers (a_V, b_V, c_V), "
+                                 f"got {self.coast_down!r}")
+
+    @property
+    def drag_coefficient(self) -> float:
+        """ρ_a/2 A_V c_x [kg/m] — the third parameter of M3/M4."""
+        return 0.5 * self.air_density * self.drag_area
+
+
+@dataclass(frozen=True)
+class Term:
+    """One regressor column of A and its parameter in X.
+
+    regressor: the column's formula (text); parameter: the parameter's symbol; unit: the parameter's SI unit;
+    build: states -> column (1-D array); requires: state names build reads; nominal: NominalParameters ->
+    initial value of the parameter (X̂_{t-1} of section 5.5); random_walk_variance: the diagonal entry of P_d
+    for the random-walk estimators (section 5.5.3).
+    """
+
+    regressor: str
+    parameter: str
+    unit: str
+    build: Callable[[Mapping[str, np.ndarray]], np.ndarray]
+    requires: tuple[str, ...]
+    nominal: Callable[[NominalParameters], float]
+    random_walk_variance: float = 1e-6
+
+
+@dataclass(frozen=True)
+class ModelStructure:
+    """A linear-in-parameters tractive-force model A X ≈ B with B = F_xV (eq. 5.5c).
+
+    white_box: True when X is fixed from the nominal parameters (M0) and no estimator runs.
+    """
+
+    name: str
+    terms: tuple[Term, ...]
+    description: str = ""
+    white_box: bool = False
+    requires_output: tuple[str, ...] = field(default=(TRACTIVE_FORCE,))
+
+    def __post_init__(self) -> None:
+        if not self.name or not isinstance(self.name, str):
+            raise ModelError("a model structure needs a non-empty name")
+        if not self.terms:
+            raise ModelError(f"model {self.name!r} has no terms")
+        params = [t.parameter for t in self.terms]
+        if len(set(params)) != len(params):
+            raise ModelError(f"model {self.name!r} has duplicate parameters {params}")
+
+    @property
+    def n_params(self) -> int:
+        return len(self.terms)
+
+    @property
+    def parameter_names(self) -> list[str]:
+        return [t.parameter for t in self.terms]
+
+    @property
+    def parameter_units(self) -> list[str]:
+        return [t.unit for t in self.terms]
+
+    @property
+    def requires(self) -> tuple[str, ...]:
+        """Every state the regressors read (without the output)."""
+        seen: list[str] = []
+        for t in self.terms:
+            seen += [r for r in t.requires if r not in seen]
+        return tuple(seen)
+
+    def missing(self, states: Mapping[str, np.ndarray]) -> list[str]:
+        """States the model needs that are absent or entirely NaN."""
+        out = []
+        for name in self.requires + self.requires_output:
+            if name not in states:
+                out.append(name)
+                continue
+            col = np.asarray(states[name], dtype=float)
+            if col.size and not np.any(np.isfinite(col)):
+                out.append(name)
+        return out
+
+    def check(self, states: Mapping[str, np.ndarray]) -> None:
+        miss = self.missing(states)
+        if miss:
+            raise ModelError(f"model {self.name!r} needs the states {miss}, which this trip does not provide "
+                             f"(it has {sorted(states.keys()) if hasattr(states, 'keys') else '?'})")
+
+    def regressors(self, states: Mapping[str, np.ndarray]) -> np.ndarray:
+        """The measured inputs A [T x n] from the states."""
+        self.check(states)
+        cols = [np.asarray(t.build(states), dtype=float) for t in self.terms]
+        return np.column_stack(cols)
+
+    def output(self, states: Mapping[str, np.ndarray]) -> np.ndarray:
+        """The measured output B = F_xV [N] (eq. 5.5c)."""
+        self.check(states)
+        return np.asarray(states[TRACTIVE_FORCE], dtype=float)
+
+    def nominal_parameters(self, nominal: NominalParameters) -> np.ndarray:
+        """X̂ from the vehicle spec (initial value of the estimators; the fixed parameters of a white box)."""
+        return np.array([float(t.nominal(nominal)) for t in self.terms])
+
+    def random_walk_variances(self) -> np.ndarray:
+        """diag(P_d) of section 5.5.3 for this structure."""
+        return np.array([t.random_walk_variance for t in self.terms])
+
+    def predict(self, states: Mapping[str, np.ndarray], parameters: np.ndarray) -> np.ndarray:
+        """B̂ = A X [N]."""
+        return self.regressors(states) @ np.asarray(parameters, dtype=float)
+
+    def extend(self, name: str, *terms: Term, description: str = "") -> "ModelStructure":
+        """A new (gray-box) structure with this one's terms plus `terms`."""
+        return replace(self, name=name, terms=self.terms + tuple(terms),
+                       description=description or f"{self.name} + " + ", ".join(t.regressor for t in terms),
+                       white_box=False)
+
+
+def _col(states: Mapping[str, np.ndarray], name: str) -> np.ndarray:
+    return np.asarray(states[name], dtype=float)
+
+
+# ---------------------------------------------------------------- M3 / M4 terms (eq. 5.5, 5.6)
+ROLLING = Term(
+    regressor="g cos(theta)", parameter="m_V f_r0", unit="kg",
+    build=lambda s: G * np.cos(_col(s, GRADIENT_ANGLE)), requires=(GRADIENT_ANGLE,),
+    nominal=lambda n: n.mass * n.rolling_resistance_coefficient, random_walk_variance=5e-5)
+INERTIA = Term(
+    regressor="g sin(theta) + dv/dt", parameter="m_V", unit="kg",
+    build=lambda s: G * np.sin(_col(s, GRADIENT_ANGLE)) + _col(s, ACCELERATION),
+    requires=(GRADIENT_ANGLE, ACCELERATION), nominal=lambda n: n.mass, random_walk_variance=1e-6)
+AERO = Term(
+    regressor="v^2", parameter="rho_a/2 A_V c_x", unit="kg/m",
+    build=lambda s: _col(s, SPEED) ** 2, requires=(SPEED,),
+    nominal=lambda n: n.drag_coefficient, random_walk_variance=1e-8)
+CORNERING = Term(
+    regressor="v^4/(4 r^2)", parameter="m_V^2/c_yW", unit="kg^2 rad/N",
+    build=lambda s: _col(s, SPEED) ** 4 * _col(s, PATH_CURVATURE) ** 2 / 4.0,
+    requires=(SPEED, PATH_CURVATURE), nominal=lambda n: n.mass ** 2 / n.cornering_stiffness,
+    random_walk_variance=1e-6)
+
+
+def _coast(n: NominalParameters, i: int) -> float:
+    if n.coast_down is None:
+        raise ModelError("model M0 needs coast-down coefficients (a_V, b_V, c_V); the nominal parameters have none")
+    return float(n.coast_down[i])
+
+
+# ---------------------------------------------------------------- M0 terms (eq. 5.4)
+M0 = ModelStructure(
+    name="M0",
+    description="abc white-box model (eq. 5.4), parameters fixed from a coast-down",
+    white_box=True,
+    terms=(
+        Term("cos(theta)", "a_V", "N", lambda s: np.cos(_col(s, GRADIENT_ANGLE)), (GRADIENT_ANGLE,),
+             lambda n: _coast(n, 0)),
+        Term("v cos(theta)", "b_V", "N s/m", lambda s: _col(s, SPEED) * np.cos(_col(s, GRADIENT_ANGLE)),
+             (SPEED, GRADIENT_ANGLE), lambda n: _coast(n, 1)),
+        Term("v^2", "c_V", "N s^2/m^2", lambda s: _col(s, SPEED) ** 2, (SPEED,), lambda n: _coast(n, 2)),
+        INERTIA,
+    ),
+)
+M3 = ModelStructure(name="M3", terms=(ROLLING, INERTIA, AERO),
+                    description="longitudinal gray-box model (eq. 5.5)")
+M4 = M3.extend("M4", CORNERING, description="longitudinal and lateral gray-box model (eq. 5.6)")
+
+_REGISTRY: dict[str, ModelStructure] = {}
+
+
+def register_model(model: ModelStructure, replace_existing: bool = False) -> ModelStructure:
+    """Add a model structure to the registry (ModelError if the name is taken and replace_existing is False)."""
+    if not isinstance(model, ModelStructure):
+        raise ModelError(f"register_model expects a ModelStructure, got {type(model).__name__}")
+    if model.name in _REGISTRY and not replace_existing:
+        raise ModelError(f"a model named {model.name!r} is already registered; pass replace_existing=True")
+    _REGISTRY[model.name] = model
+    return model
+
+
+def get_model(name: str | ModelStructure) -> ModelStructure:
+    """The registered model structure of that name (ModelError listing the known names otherwise)."""
+    if isinstance(name, ModelStructure):
+        return name
+    try:
+        return _REGISTRY[name]
+    except KeyError:
+        raise ModelError(f"unknown model {name!r}; registered: {sorted(_REGISTRY)}") from None
+
+
+def model_names() -> list[str]:
+    return list(_REGISTRY)
+
+
+for _m in (M0, M3, M4):
+    register_model(_m)
+
+
+# ---------------------------------------------------------------- coast-down fit (for M0)
+def fit_coast_down(t: np.ndarray, speed: np.ndarray, effective_mass: float,
+                   grade: np.ndarray | None = None) -> tuple[float, float, float]:
+    """Coast-down coefficients (a_V [N], b_V [N s/m], c_V [N s²/m²]) from a coast-down record.
+
+    Fits -m_eff dv/dt - m_eff g sin θ = a_V + b_V v + c_V v² by least squares, where m_eff [kg] includes the
+    rotating parts that decelerate with the vehicle (as a manufacturer's evaluation of a coast-down does).
+    t [s], speed [m/s], grade θ [rad] (flat when None).
+    """
+    t = np.asarray(t, dtype=float)
+    v = np.asarray(speed, dtype=float)
+    if t.shape != v.shape or t.size < 10:
+        raise ModelError(f"coast-down: need >= 10 samples of equal-length t and speed, got {t.size} and {v.size}")
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(v))):
+        raise ModelError("coast-down: t or speed contains NaN/inf")
+    if not np.all(np.diff(t) > 0):
+        raise ModelError("coast-down: t is not strictly increasing")
+    if not np.isfinite(effective_mass) or effective_mass <= 0:
+        raise ModelError(f"coast-down: effective mass must be positive, got {effective_mass!r}")
+    dv = np.gradient(v, t)
+    force = -effective_mass * dv
+    if grade is not None:
+        force = force - effective_mass * G * np.sin(np.asarray(grade, dtype=float))
+    A = np.column_stack([np.ones_like(v), v, v ** 2])
+    coef, *_ = np.linalg.lstsq(A, force, rcond=None)
+    return float(coef[0]), float(coef[1]), float(coef[2])

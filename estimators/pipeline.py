@@ -1,0 +1,400 @@
+"""The chapter-5 preprocessing pipeline: CAN channels of a Trip -> vehicle states -> trigger -> (A, B).
+
+Stages (each a DataFrame, inspectable and plottable, see :func:`run_pipeline` and
+:func:`roadload.estimators.figures.plot_stage`):
+
+``measured``  the Trip's measured channels as recorded (e.g. 100 Hz);
+``smoothed``  every continuous channel through a bank of polynomial Kalman smoothers with one configuration
+              (section 5.3), so all smoothed channels carry the same, known delay; the smoothers also give the
+              derivatives dv_V/dt and the wheel angular acceleration. Rows are aligned to the time the smoothed
+              value belongs to (t - delay); discrete channels (gear, clutch, brake pressure) are taken at that time;
+``decimated`` every k-th row, k = sample rate / estimation rate (100 Hz -> 10 Hz);
+``states``    v_V, dv_V/dt, gradient angle θ (eq. 5.2), path curvature 1/r (eq. 5.3 through the steering-ratio
+              table), rim torque T_R from the estimating side's drive-train model (eq. 2.17), tractive force
+              F_xV (eq. 5.5c), the five trigger conditions of section 5.3 and the trigger.
+
+:func:`model_data` then gives the measured inputs A and output B of a model structure on the triggered samples.
+
+The estimating side knows the vehicle only through :class:`VehicleKnowledge` (nominal parameters, its own
+drive-train model with its own loss tables, the steering-ratio table); it never reads a Trip's truth.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any, Sequence
+
+import numpy as np
+import pandas as pd
+
+from roadload.trip import Trip
+from roadload.units import G
+
+from .models import (ACCELERATION, GRADIENT_ANGLE, PATH_CURVATURE, SPEED, TRACTIVE_FORCE, ModelStructure,
+                     NominalParameters, get_model)
+
+STAGES = ("measured", "smoothed", "decimated", "states")
+
+# continuous channels that pass the smoother bank (when present)
+SMOOTHED_CHANNELS = ("vehicle_speed", "accel_x", "drive_torque", "engine_speed", "steering_wheel_angle",
+                     "wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr", "rim_torque")
+# channels taken as they are (discrete or thresholded), aligned to the smoothed time base
+DISCRETE_CHANNELS = ("gear", "clutch", "brake_pressure_front", "brake_pressure_rear")
+WHEEL_SPEEDS = ("wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr")
+TRIGGER_CONDITIONS = ("no_brake", "moving", "no_slip", "torque", "rim_torque_available")
+
+
+class PipelineError(ValueError):
+    """A trip cannot be preprocessed (missing channels, bad settings, unknown stage); the message names what."""
+
+
+# ================================================================================ the estimating side's vehicle
+@dataclass(frozen=True)
+class DrivetrainModel:
+    """The estimating side's drive-train model (eq. 2.17, section 5.2.1) with its own loss tables.
+
+    gear_ratios: i_G(G) for G = 1..n; final_drive: i_D; wheel_radius: r_W [m]; wheel_inertia: I_W of all four
+    wheels [kg m^2]; reduced_inertia: I_red(G) at the wheels per gear [kg m^2]; gearbox_efficiency: η_G(G) per
+    gear and gearbox_drag: constant drag torque per gear at the gearbox input [N m] (the loss table
+    f(T_G, θ̇_G, G) ≈ (1 - η_G) |T_G| i_G + drag i_G); differential_efficiency η_D (f(T_D, θ̇_D) ≈ (1 - η_D)|T_D| i_D).
+    slip_tolerance: relative difference of engine and gear-shaft speed still counted as engaged (condition 3).
+    """
+
+    gear_ratios: tuple[float, ...]
+    final_drive: float
+    wheel_radius: float
+    wheel_inertia: float
+    reduced_inertia: tuple[float, ...]
+    gearbox_efficiency: tuple[float, ...]
+    gearbox_drag: tuple[float, ...]
+    differential_efficiency: float
+    slip_tolerance: float = 0.05
+
+    def __post_init__(self) -> None:
+        n = len(self.gear_ratios)
+        if n < 1:
+            raise PipelineError("DrivetrainModel.gear_ratios: needs at least one gear")
+        for name in ("reduced_inertia", "gearbox_efficiency", "gearbox_drag"):
+            if len(getattr(self, name)) != n:
+                raise PipelineError(f"DrivetrainModel.{name}: needs one value per gear ({n}), "
+                                    f"got {len(getattr(self, name))}")
+        if any(not 0.5 < e <= 1.0 for e in self.gearbox_efficiency) or not 0.5 < self.differential_efficiency <= 1:
+            raise PipelineError("DrivetrainModel: efficiencies must lie in (0.5, 1]")
+        for name in ("final_drive", "wheel_radius"):
+            if not getattr(self, name) > 0:
+                raise PipelineError(f"DrivetrainModel.{name}: must be > 0")
+
+    @property
+    def n_gears(self) -> int:
+        return len(self.gear_ratios)
+
+    def _per_gear(self, values: Sequence[float], gear: np.ndarray) -> np.ndarray:
+        table = np.concatenate([[np.nan], np.asarray(values, dtype=float)])
+        g = np.asarray(gear)
+        valid = np.isfinite(g) & (g >= 1) & (g <= self.n_gears)
+        idx = np.where(valid, np.rint(np.where(valid, g, 0)), 0).astype(int)
+        return table[idx]
+
+    def overall_ratio(self, gear: np.ndarray) -> np.ndarray:
+        """i_G(G) i_D; NaN where the gear is 0 (neutral) or unknown."""
+        return self._per_gear(self.gear_ratios, gear) * self.final_drive
+
+    def rim_torque(self, drive_torque: np.ndarray, gear: np.ndarray, wheel_acceleration: np.ndarray) -> np.ndarray:
+        """Σ T_R [N m] from the engine / motor torque T_E [N m], gear G and wheel angular acceleration θ̈_W
+        [rad/s^2] (eq. 2.17 without the brake torque; NaN in neutral). Losses oppose the power flow."""
+        t_e = np.asarray(drive_torque, dtype=float)
+        i_g = self._per_gear(self.gear_ratios, gear)
+        eta_g = self._per_gear(self.gearbox_efficiency, gear)
+        drag = self._per_gear(self.gearbox_drag, gear)
+        t_g = t_e * i_g
+        t_d = np.where(t_g >= 0, t_g * eta_g, t_g / eta_g) - drag * i_g
+        t_w = t_d * self.final_drive
+        eta_d = self.differential_efficiency
+        t_w = np.where(t_w >= 0, t_w * eta_d, t_w / eta_d)
+        i_red = self._per_gear(self.reduced_inertia, gear)
+        return t_w - i_red * np.asarray(wheel_acceleration, dtype=float)
+
+    def tractive_force(self, rim_torque: np.ndarray, wheel_acceleration: np.ndarray) -> np.ndarray:
+        """F_xV = (T_R - I_W θ̈_W) / r_W [N] (eq. 2.16b / 5.5c)."""
+        return (np.asarray(rim_torque, dtype=float) - self.wheel_inertia * np.asarray(wheel_acceleration)) \
+            / self.wheel_radius
+
+
+@dataclass(frozen=True)
+class SteeringGeometry:
+    """Steering-ratio table δ_W12 = f(δ_S) and the geometry of eq. 5.3.
+
+    wheelbase: l = l_12 + l_34 [m]; rear_axle_distance: l_34, CG to rear axle [m]; steering_wheel_angle /
+    wheel_angle: the table [rad] (strictly increasing, through 0).
+    """
+
+    wheelbase: float
+    rear_axle_distance: float
+    steering_wheel_angle: tuple[float, ...]
+    wheel_angle: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        if not (self.wheelbase > 0 and 0 < self.rear_axle_distance < self.wheelbase):
+            raise PipelineError(f"SteeringGeometry: need wheelbase > 0 and 0 < l_34 < wheelbase, got "
+                                f"{self.wheelbase}, {self.rear_axle_distance}")
+        s = np.asarray(self.steering_wheel_angle, dtype=float)
+        w = np.asarray(self.wheel_angle, dtype=float)
+        if s.shape != w.shape or s.size < 2 or np.any(np.diff(s) <= 0) or np.any(np.diff(w) <= 0):
+            raise PipelineError("SteeringGeometry: the steering table needs >= 2 strictly increasing pairs")
+
+    def wheel_steer_angle(self, steering_wheel_angle: np.ndarray) -> np.ndarray:
+        """δ_W12 [rad] from δ_S [rad] through the table."""
+        return np.interp(steering_wheel_angle, self.steering_wheel_angle, self.wheel_angle)
+
+    def path_curvature(self, steering_wheel_angle: np.ndarray) -> np.ndarray:
+        """1/r [1/m], signed like δ_S, from eq. 5.3: r = sqrt((l / tan δ_W)² + l_34²)."""
+        tan_d = np.tan(self.wheel_steer_angle(np.asarray(steering_wheel_angle, dtype=float)))
+        return tan_d / np.sqrt(self.wheelbase ** 2 + (self.rear_axle_distance * tan_d) ** 2)
+
+
+@dataclass(frozen=True)
+class VehicleKnowledge:
+    """Everything the estimating side knows about a vehicle: name, nominal parameters (initial X̂, M0's
+    coast-down), drive-train model, steering geometry (None: no path curvature, M4 unavailable)."""
+
+    name: str
+    nominal: NominalParameters
+    drivetrain: DrivetrainModel
+    steering: SteeringGeometry | None = None
+
+
+# ================================================================================ settings and result
+@dataclass(frozen=True)
+class PipelineSettings:
+    """Settings of the preprocessing (section 5.3). Units SI.
+
+    estimation_rate [Hz]: rate of the estimators (10 Hz); smoother: keyword settings of the polynomial Kalman
+    smoother bank, expressed at the estimation rate's 10-fold (100 Hz) and rescaled to other input rates
+    (window [samples], order, forgetting); min_speed [m/s] (condition 2, 5.5 m/s); min_drive_torque [N m]
+    (condition 4, 10 N m); brake_pressure_threshold [Pa] and brake_hold [s] (condition 1: no braking plus 0.5 s);
+    brake_deceleration [m/s^2]: when a trip logs no brake pressure, braking is assumed where dv/dt is below
+    this (and the trip is flagged); warmup [s]: samples at the start excluded while the smoothers settle.
+    """
+
+    estimation_rate: float = 10.0
+    smoother: dict = field(default_factory=lambda: {"window": 20, "order": 3, "forgetting": 0.9})
+    min_speed: float = 5.5
+    min_drive_torque: float = 10.0
+    brake_pressure_threshold: float = 2.0e4
+    brake_hold: float = 0.5
+    brake_deceleration: float = -1.5
+    warmup: float = 2.0
+
+    def __post_init__(self) -> None:
+        if not self.estimation_rate > 0:
+            raise PipelineError(f"estimation_rate must be > 0 Hz, got {self.estimation_rate}")
+        for name in ("min_speed", "min_drive_torque", "brake_pressure_threshold", "brake_hold", "warmup"):
+            if not getattr(self, name) >= 0:
+                raise PipelineError(f"{name} must be >= 0, got {getattr(self, name)}")
+
+
+@dataclass
+class PipelineResult:
+    """Frames of each stage run so far, the smoother delay [s] and notes (fallbacks taken)."""
+
+    name: str
+    stages: dict[str, pd.DataFrame]
+    delay: float
+    decimation: int
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def states(self) -> pd.DataFrame:
+        if "states" not in self.stages:
+            raise PipelineError(f"trip {self.name!r} was run only to stage {list(self.stages)[-1]!r}")
+        return self.stages["states"]
+
+    def triggered(self) -> pd.DataFrame:
+        """The states where the trigger is true (the samples the estimators see)."""
+        s = self.states
+        return s[s["trigger"].to_numpy(dtype=bool)].reset_index(drop=True)
+
+
+# ================================================================================ stages
+def _smoother_bank(values: dict[str, np.ndarray], rate: float, settings: PipelineSettings):
+    """Smoothed values, first derivatives [unit/s] and the common delay [samples] of a PKS bank."""
+    from . import pks_bank  # the estimator library's smoother bank (one configuration for all channels)
+
+    cfg = dict(settings.smoother)
+    scale = rate / (10.0 * settings.estimation_rate)
+    cfg["window"] = max(2, int(round(cfg.get("window", 20) * scale)))
+    out = pks_bank(values, dt=1.0 / rate, derivatives=1, **cfg)
+    return out
+
+
+def _stage_smoothed(trip: Trip, settings: PipelineSettings, notes: list[str]) -> tuple[pd.DataFrame, float]:
+    rate = trip.sample_rate
+    cont = {c: trip.channel(c) for c in SMOOTHED_CHANNELS if trip.has(c)}
+    if "vehicle_speed" not in cont:
+        raise PipelineError(f"trip {trip.meta.get('name', '?')!r} has no vehicle_speed channel; the pipeline "
+                            f"needs at least vehicle_speed, accel_x and drive_torque (or rim_torque)")
+    bank = _smoother_bank(cont, rate, settings)
+    d = int(bank.delay)
+    n = len(trip)
+    if n <= d + 1:
+        raise PipelineError(f"trip {trip.meta.get('name', '?')!r} is shorter ({n} samples) than the smoother "
+                            f"delay ({d} samples)")
+    rows = n - d
+    frame = {"t": trip.t[:rows]}
+    for c in cont:
+        frame[c] = bank.value[c][d:]
+    frame["vehicle_speed_derivative"] = bank.derivative["vehicle_speed"][d:]
+    wheels = [c for c in WHEEL_SPEEDS if c in cont]
+    if wheels:
+        frame["wheel_acceleration"] = np.mean([bank.derivative[c][d:] for c in wheels], axis=0)
+    for c in DISCRETE_CHANNELS:
+        if trip.has(c):
+            frame[c] = trip.channel(c)[:rows]
+    return pd.DataFrame(frame), d / rate
+
+
+def _hold(flag: np.ndarray, t: np.ndarray, hold: float) -> np.ndarray:
+    """Extend True stretches of `flag` by `hold` seconds after they end."""
+    if hold <= 0 or not flag.any():
+        return flag.copy()
+    last = np.where(flag, t, -np.inf)
+    last = np.maximum.accumulate(last)
+    return t - last <= hold
+
+
+def _stage_states(dec: pd.DataFrame, knowledge: VehicleKnowledge, settings: PipelineSettings,
+                  notes: list[str]) -> pd.DataFrame:
+    dt_model = knowledge.drivetrain
+    t = dec["t"].to_numpy(dtype=float)
+    v = dec["vehicle_speed"].to_numpy(dtype=float)
+    dv = dec["vehicle_speed_derivative"].to_numpy(dtype=float)
+    out: dict[str, np.ndarray] = {"t": t, SPEED: v, ACCELERATION: dv}
+
+    # gradient angle, eq. 5.2
+    if "accel_x" in dec:
+        ratio = (dec["accel_x"].to_numpy(dtype=float) - dv) / G
+        out[GRADIENT_ANGLE] = np.arcsin(np.clip(ratio, -1.0, 1.0))
+    else:
+        out[GRADIENT_ANGLE] = np.full_like(v, np.nan)
+        notes.append("no accel_x: gradient angle unavailable")
+
+    # path curvature, eq. 5.3
+    if knowledge.steering is not None and "steering_wheel_angle" in dec:
+        out[PATH_CURVATURE] = knowledge.steering.path_curvature(dec["steering_wheel_angle"].to_numpy(dtype=float))
+    else:
+        out[PATH_CURVATURE] = np.full_like(v, np.nan)
+        notes.append("no steering_wheel_angle or steering table: path curvature unavailable (M4 not possible)")
+
+    # gear: logged, or the single gear of a one-speed drive-train
+    if "gear" in dec:
+        gear = dec["gear"].to_numpy(dtype=float)
+    elif dt_model.n_gears == 1:
+        gear = np.ones_like(v)
+    else:
+        raise PipelineError(f"the drive-train model of {knowledge.name!r} has {dt_model.n_gears} gears but the "
+                            f"trip logs no gear channel")
+    out["gear"] = gear
+
+    # wheel angular acceleration θ̈_W: from the wheel-speed smoothers, else from dv/dt
+    if "wheel_acceleration" in dec:
+        wheel_acc = dec["wheel_acceleration"].to_numpy(dtype=float)
+    else:
+        wheel_acc = dv / dt_model.wheel_radius
+
+    # rim torque, eq. 2.17 (own drive-train model); a logged rim torque is used only without a drive torque
+    if "drive_torque" in dec:
+        drive_torque = dec["drive_torque"].to_numpy(dtype=float)
+        rim = dt_model.rim_torque(drive_torque, gear, wheel_acc)
+    elif "rim_torque" in dec:
+        drive_torque = dec["rim_torque"].to_numpy(dtype=float) / dt_model.overall_ratio(gear)
+        rim = dec["rim_torque"].to_numpy(dtype=float)
+        notes.append("no drive_torque: the logged rim_torque is used as T_R")
+    else:
+        raise PipelineError("the trip has neither drive_torque nor rim_torque; no tractive force possible")
+    out["drive_torque"] = drive_torque
+    out["rim_torque"] = rim
+    out[TRACTIVE_FORCE] = dt_model.tractive_force(rim, wheel_acc)
+
+    # trigger, section 5.3
+    if "brake_pressure_front" in dec or "brake_pressure_rear" in dec:
+        p = np.zeros_like(v)
+        for c in ("brake_pressure_front", "brake_pressure_rear"):
+            if c in dec:
+                p = np.maximum(p, np.nan_to_num(dec[c].to_numpy(dtype=float), nan=np.inf))
+        braking = p > settings.brake_pressure_threshold
+    else:
+        braking = dv < settings.brake_deceleration
+        notes.append(f"no brake pressure logged: braking assumed where dv/dt < {settings.brake_deceleration} m/s^2")
+    cond = {
+        "no_brake": ~_hold(braking, t, settings.brake_hold),
+        "moving": v > settings.min_speed,
+        "torque": np.abs(drive_torque) > settings.min_drive_torque,
+        "rim_torque_available": np.isfinite(rim) & np.isfinite(out[TRACTIVE_FORCE]),
+    }
+    slip_ok = np.isfinite(dt_model.overall_ratio(gear))
+    if "clutch" in dec:
+        slip_ok &= dec["clutch"].to_numpy(dtype=float) >= 0.99
+    if "engine_speed" in dec:
+        wheels = [c for c in WHEEL_SPEEDS if c in dec]
+        wheel_speed = (np.mean([dec[c].to_numpy(dtype=float) for c in wheels], axis=0) if wheels
+                       else v / dt_model.wheel_radius)
+        shaft = wheel_speed * dt_model.overall_ratio(gear)   # gear shaft speed θ̇_G seen from the wheels
+        eng = dec["engine_speed"].to_numpy(dtype=float)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            slip_ok &= np.abs(eng - shaft) <= dt_model.slip_tolerance * np.maximum(np.abs(eng), 1.0)
+    elif "clutch" not in dec:
+        notes.append("no engine_speed or clutch: drive-train slip (condition 3) not checked")
+    cond["no_slip"] = slip_ok
+    trigger = np.ones_like(v, dtype=bool)
+    for name in TRIGGER_CONDITIONS:
+        out[f"trigger_{name}"] = cond[name]
+        trigger &= cond[name]
+    finite = np.isfinite(out[SPEED]) & np.isfinite(out[ACCELERATION]) & np.isfinite(out[GRADIENT_ANGLE])
+    trigger &= finite & (t >= t[0] + settings.warmup if t.size else True)
+    out["trigger"] = trigger
+    return pd.DataFrame(out)
+
+
+def run_pipeline(trip: Trip, knowledge: VehicleKnowledge, settings: PipelineSettings | None = None,
+                 until: str = "states") -> PipelineResult:
+    """Run a Trip through the stages up to and including `until` (one of STAGES)."""
+    if until not in STAGES:
+        raise PipelineError(f"unknown stage {until!r}; stages are {list(STAGES)}")
+    settings = settings or PipelineSettings()
+    name = str(trip.meta.get("name", "trip"))
+    notes: list[str] = []
+    stages: dict[str, pd.DataFrame] = {"measured": trip.measured}
+    result = PipelineResult(name=name, stages=stages, delay=0.0, decimation=1, notes=notes)
+    if until == "measured":
+        return result
+    if len(trip) < 10:
+        raise PipelineError(f"trip {name!r} has only {len(trip)} samples")
+    smoothed, delay = _stage_smoothed(trip, settings, notes)
+    stages["smoothed"] = smoothed
+    result.delay = delay
+    if until == "smoothed":
+        return result
+    rate = trip.sample_rate
+    k = max(1, int(round(rate / settings.estimation_rate)))
+    if abs(rate / k - settings.estimation_rate) > 0.05 * settings.estimation_rate:
+        raise PipelineError(f"trip {name!r} is sampled at {rate:.3g} Hz, which is not an integer multiple of the "
+                            f"estimation rate {settings.estimation_rate} Hz; resample it first")
+    result.decimation = k
+    decimated = smoothed.iloc[::k].reset_index(drop=True)
+    stages["decimated"] = decimated
+    if until == "decimated":
+        return result
+    stages["states"] = _stage_states(decimated, knowledge, settings, notes)
+    return result
+
+
+def model_data(states: pd.DataFrame, model: str | ModelStructure, triggered: bool = True
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t [s], A, B) of a model structure on the (triggered) states; rows with non-finite A or B are dropped."""
+    m = get_model(model)
+    s = states[states["trigger"].to_numpy(dtype=bool)] if triggered else states
+    cols = {c: s[c].to_numpy(dtype=float) for c in s.columns}
+    A = m.regressors(cols)
+    B = m.output(cols)
+    ok = np.all(np.isfinite(A), axis=1) & np.isfinite(B)
+    return cols["t"][ok], A[ok], B[ok]

@@ -271,7 +271,7 @@ def profile_from_track(distance=None, elevation=None, heading=None, xy=None, *,
     elevation spikes (> ``elevation_spike_threshold`` m from the running median over 200 m); resample onto a
     uniform ``step`` grid; smooth elevation over ``elevation_window`` and heading over ``heading_window`` before
     differentiating; clip |tan theta| > ``max_grade`` and |kappa| > ``max_curvature``. Every repair is counted in
-    ``meta["repairs"]`` and logged as a warning.
+    ``meta["repairs"]`` and logged as a warning (dropped close samples are ordinary thinning: counted only).
     """
     repairs: dict[str, int] = {}
     x = y = None
@@ -325,7 +325,10 @@ def profile_from_track(distance=None, elevation=None, heading=None, xy=None, *,
     else:
         grade = np.zeros_like(grid)
     if psi is not None:
-        psi = np.unwrap(_fill_missing("heading", s, psi[keep], repairs))
+        psi = psi[keep].copy()
+        finite = np.isfinite(psi)
+        psi[finite] = np.unwrap(psi[finite])  # unwrap before bridging gaps, so a gap across +-pi is not a turn
+        psi = _fill_missing("heading", s, psi, repairs)
         curvature = curvature_from_heading(grid, np.interp(grid, s, psi), window=heading_window)
     elif x is not None:
         curvature = curvature_from_xy(grid, np.interp(grid, s, x[keep]), np.interp(grid, s, y[keep]),

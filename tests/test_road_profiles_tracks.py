@@ -208,3 +208,12 @@ def test_gpx_route_without_elevation_gives_flat_profile(tmp_path):
     interior = (p.distance > 80) & (p.distance < p.length - 80)
     np.testing.assert_allclose(p.curvature[interior], 1 / 400.0, rtol=0.03)
     assert p.length == pytest.approx(np.pi * 400.0, rel=1e-3)
+
+
+def test_heading_gap_across_the_wrap_is_not_a_turn():
+    s = np.linspace(0.0, 1000.0, 501)
+    psi = np.angle(np.exp(1j * (np.pi - 0.05 + s / 5000.0)))  # R = 5 km, crosses +-pi near the middle
+    psi[240:260] = np.nan  # GNSS heading missing right at the wrap
+    p = profile_from_track(s, heading=psi)
+    assert p.meta["repairs"]["heading_missing_interpolated"] == 20
+    np.testing.assert_allclose(p.curvature, 1 / 5000.0, atol=2e-5)

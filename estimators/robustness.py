@@ -348,3 +348,56 @@ def recommended(aim: str, poor_excitation: bool, outliers: bool) -> tuple[str, .
     if key not in DECISION_TREE:
         raise RobustnessError(f"unknown aim {aim!r}; use 'parameters' or 'prediction'")
     return DECISION_TREE[key]
+
+
+# ====================================================================================== sweep specifications
+@dataclass(frozen=True)
+class SweepSpec:
+    """One failure mode swept over ``levels`` for each of its ``variants``.
+
+    parameter/unit: what a level is (e.g. outlier fraction [1], cruise length [s]); breakdown: whether a
+    breakdown point over the levels is meaningful (the levels are an outlier fraction or a fault size);
+    tree: the figure-3.17 question this failure mode exercises ('outliers' | 'poor_excitation' | 'input_noise')
+    or None when the decision tree does not cover it (drift, bias, latency).
+    """
+
+    name: str
+    parameter: str
+    unit: str
+    levels: tuple[float, ...]
+    variants: tuple[str, ...]
+    breakdown: bool = False
+    tree: str | None = None
+
+    def __post_init__(self) -> None:
+        if not self.levels or np.any(np.diff(self.levels) <= 0):
+            raise RobustnessError(f"sweep {self.name!r}: levels must be non-empty and strictly increasing")
+        if not self.variants:
+            raise RobustnessError(f"sweep {self.name!r}: needs at least one variant")
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A scenario = (base trip config, fault injection spec, seed): backend + sweep/variant/level + seed."""
+
+    backend: str     # 'vehicle' (simulator trip -> chapter-5 pipeline) or 'synthetic' (A/B level)
+    sweep: str
+    variant: str
+    level: float
+    seed: int
+    duration: float  # [s]
+
+
+OUTLIER_FRACTIONS = (0.0, 0.01, 0.02, 0.05, 0.1, 0.15, 0.2, 0.3)
+
+# A/B-level sweeps on Experiment-3.3-style data (decision-tree checks, fast tests)
+SYNTHETIC_SWEEPS: dict[str, SweepSpec] = {s.name: s for s in (
+    SweepSpec("outliers", "outlier fraction", "1", OUTLIER_FRACTIONS,
+              ("output/isolated", "output/burst", "input/isolated", "both/isolated"), breakdown=True,
+              tree="outliers"),
+    SweepSpec("excitation", "unexcited stretch length", "s", (0.0, 500.0, 1000.0, 2000.0, 4000.0),
+              ("column2",), tree="poor_excitation"),
+    SweepSpec("drift", "relative parameter change", "1", (0.0, 0.25, 0.5, 1.0), ("step", "ramp")),
+    SweepSpec("input_noise", "input noise variance", "1", (0.0, 0.005, 0.01, 0.02, 0.05), ("columns2-3",),
+              tree="input_noise"),
+)}

@@ -1,0 +1,283 @@
+"""The composition of one recursive estimator: which part is used for each step of the kernel, and its settings.
+
+:class:`EstimatorConfig` is validated on construction (unknown choices, out-of-range values and wrong shapes
+raise :class:`EstimatorConfigError` naming the setting) and translates itself into the integer/float codes of
+:mod:`roadload.estimators.kernel`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from . import kernel as K
+from .influence import InfluenceError, check_psi_params, psi_code, psi_defaults
+
+
+class EstimatorConfigError(ValueError):
+    """An estimator composition or setting is invalid; the message names the setting and the allowed range."""
+
+
+COVARIANCE_KINDS = {"forgetting": K.COV_FORGETTING, "kalman": K.COV_KALMAN,
+                    "stenlund_gustafsson": K.COV_SG}
+_COV_ALIASES = {"rls": "forgetting", "lambda": "forgetting", "kf": "kalman", "sg": "stenlund_gustafsson",
+                "stenlund-gustafsson": "stenlund_gustafsson", "desired": "stenlund_gustafsson"}
+REGULARISATION_KINDS = {"none": K.REG_NONE, "levenberg_marquardt": K.REG_LM, "tikhonov": K.REG_TIKHONOV}
+_REG_ALIASES = {"lm": "levenberg_marquardt", "levenberg-marquardt": "levenberg_marquardt",
+                "levenbergmarquardt": "levenberg_marquardt", None: "none", "off": "none"}
+INSTRUMENT_KINDS = {"none": K.IV_NONE, "delayed": K.IV_DELAY, "user": K.IV_USER}
+
+
+def _matrix(value: Any, n: int, what: str, *, allow_none: bool = False, psd: bool = False) -> np.ndarray | None:
+    """A scalar (→ value·I), a length-n vector (→ diag) or an n×n matrix, checked finite."""
+    if value is None:
+        if allow_none:
+            return None
+        raise EstimatorConfigError(f"{what} is required")
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim == 0:
+        arr = float(arr) * np.eye(n)
+    elif arr.ndim == 1:
+        if arr.shape[0] != n:
+            raise EstimatorConfigError(f"{what}: expected {n} diagonal entries, got {arr.shape[0]}")
+        arr = np.diag(arr)
+    elif arr.shape != (n, n):
+        raise EstimatorConfigError(f"{what}: expected a scalar, {n} diagonal entries or an {n}x{n} matrix, "
+                                   f"got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise EstimatorConfigError(f"{what} contains NaN or inf")
+    if psd:
+        if not np.allclose(arr, arr.T, rtol=1e-10, atol=1e-300):
+            raise EstimatorConfigError(f"{what} must be symmetric")
+        if np.min(np.linalg.eigvalsh(arr)) < -1e-12 * max(1.0, np.max(np.abs(arr))):
+            raise EstimatorConfigError(f"{what} must be positive semi-definite")
+    return np.ascontiguousarray(arr)
+
+
+@dataclass
+class EstimatorConfig:
+    """One recursive estimator as a composition of parts (chapter 3). Units: X in units of B per unit of A.
+
+    Parts and their settings (the text's symbols in brackets):
+
+    - weights: ``psi`` in {'l2','huber','myriad','cauchy','tukey','hampel','l1l2','l1'}, ``psi_params``
+      (δ, β, c, or Hampel's a, b, c; defaults in :mod:`.influence`);
+    - scale: fixed ``scale0`` (σ̂), or ``robust_scale`` = recursive quantile (Algorithm 3.3) with
+      ``quantile0`` (Q̂_0), ``learn_rate`` (η), ``quantile_p`` (p), ``scale_forgetting`` (λ of σ̂²),
+      ``scale_factor`` (1.483); ``scale_iterations`` > 1 iterates a time step until X̂_t converges
+      (``iteration_tol``, relative) — the "optimal" variant;
+    - gain direction: ``instruments`` 'none' (A_t), 'delayed' (𝔄_t = the regressor ``instrument_delay``
+      valid samples earlier; the first ones use A_t itself) or 'user' (𝔄_t passed to update/run);
+    - covariance evolution: ``covariance`` 'forgetting' (``forgetting`` λ), 'kalman' (``process_noise`` Q,
+      ``output_noise`` R¹) or 'stenlund_gustafsson' (``desired_covariance`` P_d, R¹); ``joseph`` form in
+      the Kalman family without instruments;
+    - regularisation: ``regularisation`` 'none', 'levenberg_marquardt' or 'tikhonov' with ``kappa`` (κ),
+      always with the P normalisation P(I+κP)⁻¹ (eq. 3.34);
+    - constraints: ``x_min`` / ``x_max`` saturation (section 3.10.1);
+    - initial state ``x0`` (default 0) and ``p0`` (scalar·I, diagonal or matrix; default 100 I, section 5.5);
+    - ``transition`` F (n×n): prediction X' = F X, P' = F P Fᵀ before each update (used by the PKS);
+    - numerics: ``symmetrize`` keeps P symmetric (only where it is symmetric in exact arithmetic, i.e.
+      without instruments); ``blowup_ratio``: max diag P above this × max diag P0 is reported as blow-up.
+    """
+
+    n_params: int
+    name: str = "custom"
+    psi: str = "l2"
+    psi_params: tuple[float, ...] | None = None
+    robust_scale: bool = False
+    scale0: float = 25.0
+    quantile0: float = 350.0
+    learn_rate: float = 0.01
+    quantile_p: float = 0.5
+    scale_forgetting: float = 0.995
+    scale_factor: float = 1.483
+    scale_iterations: int = 1
+    iteration_tol: float = 1e-10
+    min_scale: float = 1e-12
+    covariance: str = "forgetting"
+    forgetting: float = 0.999
+    process_noise: Any = None
+    output_noise: float = 0.8
+    desired_covariance: Any = None
+    joseph: bool = False
+    regularisation: str = "none"
+    kappa: float = 0.0
+    instruments: str = "none"
+    instrument_delay: int = 4
+    x_min: Any = None
+    x_max: Any = None
+    x0: Any = None
+    p0: Any = 100.0
+    transition: Any = None
+    symmetrize: bool = True
+    blowup_ratio: float = 1e6
+    _arrays: dict = field(default=None, init=False, repr=False, compare=False)
+
+    # ------------------------------------------------------------------ validation
+    def __post_init__(self) -> None:
+        n = self.n_params
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+            raise EstimatorConfigError(f"n_params must be a positive integer, got {n!r}")
+        self.n_params = n = int(n)
+        try:
+            psi_code(self.psi)
+            params = list(psi_defaults(self.psi))
+            if self.psi_params is not None:
+                given = np.atleast_1d(np.asarray(self.psi_params, dtype=float))
+                if given.size > 3:
+                    raise EstimatorConfigError(f"psi_params: at most 3 tuning constants, got {given.size}")
+                params[:given.size] = given.tolist()
+            check_psi_params(self.psi, tuple(params))
+        except InfluenceError as exc:
+            raise EstimatorConfigError(str(exc)) from None
+        self.psi = self.psi.lower().replace("-", "").replace("_", "")
+        self.psi_params = tuple(float(p) for p in params)
+
+        cov = _COV_ALIASES.get(str(self.covariance).lower(), str(self.covariance).lower())
+        if cov not in COVARIANCE_KINDS:
+            raise EstimatorConfigError(f"covariance {self.covariance!r} unknown; choose one of "
+                                       f"{sorted(COVARIANCE_KINDS)}")
+        self.covariance = cov
+        reg = self.regularisation.lower() if isinstance(self.regularisation, str) else self.regularisation
+        reg = _REG_ALIASES.get(reg, reg)
+        if reg not in REGULARISATION_KINDS:
+            raise EstimatorConfigError(f"regularisation {self.regularisation!r} unknown; choose one of "
+                                       f"{sorted(REGULARISATION_KINDS)}")
+        self.regularisation = reg
+        iv = str(self.instruments).lower()
+        if iv not in INSTRUMENT_KINDS:
+            raise EstimatorConfigError(f"instruments {self.instruments!r} unknown; choose one of "
+                                       f"{sorted(INSTRUMENT_KINDS)}")
+        self.instruments = iv
+
+        def in_range(name: str, lo: float, hi: float, lo_open: bool, hi_open: bool) -> float:
+            val = getattr(self, name)
+            try:
+                val = float(val)
+            except (TypeError, ValueError):
+                raise EstimatorConfigError(f"{name} must be a number, got {val!r}") from None
+            ok = np.isfinite(val) and (val > lo if lo_open else val >= lo) and (val < hi if hi_open else val <= hi)
+            if not ok:
+                lb = "(" if lo_open else "["
+                rb = ")" if hi_open else "]"
+                raise EstimatorConfigError(f"{name} must lie in {lb}{lo}, {hi}{rb}, got {val}")
+            setattr(self, name, val)
+            return val
+
+        inf = np.inf
+        in_range("forgetting", 0.0, 1.0, True, False)
+        in_range("scale_forgetting", 0.0, 1.0, False, False)
+        in_range("quantile_p", 0.0, 1.0, True, True)
+        in_range("learn_rate", 0.0, inf, True, True)
+        in_range("scale0", 0.0, inf, True, True)
+        in_range("quantile0", 0.0, inf, False, True)
+        in_range("scale_factor", 0.0, inf, True, True)
+        in_range("iteration_tol", 0.0, inf, False, True)
+        in_range("min_scale", 0.0, inf, True, True)
+        in_range("output_noise", 0.0, inf, True, True)
+        in_range("kappa", 0.0, inf, False, True)
+        in_range("blowup_ratio", 1.0, inf, True, True)
+        for name in ("scale_iterations", "instrument_delay"):
+            val = getattr(self, name)
+            if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1:
+                raise EstimatorConfigError(f"{name} must be an integer >= 1, got {val!r}")
+            setattr(self, name, int(val))
+        if self.regularisation == "none" and self.kappa != 0.0:
+            raise EstimatorConfigError(f"kappa = {self.kappa} given without regularisation; set regularisation "
+                                       "to 'levenberg_marquardt' or 'tikhonov'")
+        if self.joseph and self.covariance == "forgetting":
+            raise EstimatorConfigError("joseph=True applies to the Kalman family (covariance 'kalman' or "
+                                       "'stenlund_gustafsson'), not to forgetting")
+        if self.joseph and self.instruments != "none":
+            raise EstimatorConfigError("joseph=True is defined for regressor gains only, not with instruments")
+
+        Q = _matrix(self.process_noise, n, "process_noise (Q)", allow_none=True, psd=True)
+        if self.covariance == "kalman" and Q is None:
+            raise EstimatorConfigError("covariance 'kalman' needs process_noise (Q): a scalar, "
+                                       f"{n} diagonal entries or an {n}x{n} matrix")
+        Pd = _matrix(self.desired_covariance, n, "desired_covariance (P_d)", allow_none=True, psd=True)
+        if self.covariance == "stenlund_gustafsson" and Pd is None:
+            raise EstimatorConfigError("covariance 'stenlund_gustafsson' needs desired_covariance (P_d): a "
+                                       f"scalar, {n} diagonal entries or an {n}x{n} matrix")
+        P0 = _matrix(self.p0, n, "p0", psd=True)
+        if np.max(np.diag(P0)) <= 0:
+            raise EstimatorConfigError("p0 must have a positive diagonal")
+        x0 = np.zeros(n) if self.x0 is None else np.asarray(self.x0, dtype=float).reshape(-1)
+        if x0.shape != (n,) or not np.all(np.isfinite(x0)):
+            raise EstimatorConfigError(f"x0 must be {n} finite numbers, got {self.x0!r}")
+        xmin = np.full(n, -np.inf) if self.x_min is None else np.broadcast_to(
+            np.asarray(self.x_min, dtype=float), (n,)).copy()
+        xmax = np.full(n, np.inf) if self.x_max is None else np.broadcast_to(
+            np.asarray(self.x_max, dtype=float), (n,)).copy()
+        if np.any(np.isnan(xmin)) or np.any(np.isnan(xmax)) or np.any(xmin > xmax):
+            raise EstimatorConfigError(f"need x_min <= x_max element-wise, got x_min={xmin}, x_max={xmax}")
+        if self.transition is not None:
+            F = np.asarray(self.transition, dtype=float)
+            if F.shape != (n, n) or not np.all(np.isfinite(F)):
+                raise EstimatorConfigError(f"transition must be a finite {n}x{n} matrix")
+        else:
+            F = np.eye(n)
+        constrain = bool(np.any(np.isfinite(xmin)) or np.any(np.isfinite(xmax)))
+        x0 = np.clip(x0, xmin, xmax)
+
+        ip = np.zeros(K.N_IP, dtype=np.int64)
+        ip[K.IP_PSI] = psi_code(self.psi)
+        ip[K.IP_COV] = COVARIANCE_KINDS[self.covariance]
+        ip[K.IP_REG] = REGULARISATION_KINDS[self.regularisation]
+        ip[K.IP_IV] = INSTRUMENT_KINDS[self.instruments]
+        ip[K.IP_DELAY] = self.instrument_delay
+        ip[K.IP_ROBUST_SCALE] = int(bool(self.robust_scale))
+        ip[K.IP_MAX_ITER] = self.scale_iterations
+        ip[K.IP_JOSEPH] = int(bool(self.joseph))
+        ip[K.IP_SYMMETRIC] = int(bool(self.symmetrize) and self.instruments == "none")
+        ip[K.IP_CONSTRAIN] = int(constrain)
+        ip[K.IP_TRANSITION] = int(self.transition is not None)
+        fp = np.zeros(K.N_FP)
+        fp[K.FP_C1], fp[K.FP_C2], fp[K.FP_C3] = self.psi_params
+        fp[K.FP_LAMBDA] = self.forgetting
+        fp[K.FP_R] = self.output_noise
+        fp[K.FP_KAPPA] = self.kappa
+        fp[K.FP_ETA] = self.learn_rate
+        fp[K.FP_P] = self.quantile_p
+        fp[K.FP_LAMBDA_SCALE] = self.scale_forgetting
+        fp[K.FP_SCALE_FACTOR] = self.scale_factor
+        fp[K.FP_TOL] = self.iteration_tol
+        fp[K.FP_MIN_SCALE] = self.min_scale
+        fp[K.FP_BLOWUP_LEVEL] = self.blowup_ratio * float(np.max(np.diag(P0)))
+        self._arrays = {
+            "ip": ip, "fp": fp,
+            "Q": Q if Q is not None else np.zeros((n, n)),
+            "Pd": Pd if Pd is not None else np.zeros((n, n)),
+            "F": np.ascontiguousarray(F), "xmin": xmin, "xmax": xmax, "x0": x0, "P0": P0,
+        }
+
+    # ------------------------------------------------------------------ helpers
+    @property
+    def kernel_arrays(self) -> dict:
+        """The code/setting arrays handed to the kernel (read-only by convention)."""
+        return self._arrays
+
+    def replace(self, **changes: Any) -> "EstimatorConfig":
+        """A validated copy with some settings changed (unknown names raise EstimatorConfigError)."""
+        check_setting_names(changes)
+        return dataclasses.replace(self, **changes)
+
+    def settings(self) -> dict[str, Any]:
+        """All settings as a plain dict (arrays as given)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.init}
+
+
+def setting_names() -> list[str]:
+    """Names accepted as settings/overrides."""
+    return [f.name for f in dataclasses.fields(EstimatorConfig) if f.init]
+
+
+def check_setting_names(settings: dict[str, Any]) -> None:
+    """Raise EstimatorConfigError for any key that is not an EstimatorConfig setting."""
+    valid = set(setting_names())
+    unknown = sorted(set(settings) - valid)
+    if unknown:
+        raise EstimatorConfigError(f"unknown setting(s) {unknown}; valid settings are {sorted(valid)}")

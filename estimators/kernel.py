@@ -1,0 +1,402 @@
+"""The one numeric kernel of the recursive linear estimators of chapter 3 (Algorithms 3.1-3.4, 3.9-3.21).
+
+A time step is the composition of interchangeable parts, selected by small integer codes (``ip``) and float
+settings (``fp``); see :mod:`roadload.estimators.config` for the mapping from names to codes:
+
+1. skip a non-finite sample (a_t, b_t or the instrument), count it, leave the state as it was (apart from the
+   prediction step X' = F X, P' = F P Fᵀ when a transition matrix is set, e.g. in the PKS);
+2. a priori output correction ΔB_t = b_t - a_t X̂_{t-1};
+3. weight W = ψ(ΔB/σ̂_{t-1})/(ΔB/σ̂_{t-1}) (``influence.weight_scalar``);
+4. gain L = W P 𝔄ᵀ / (c + W a P 𝔄ᵀ) with c = λ (forgetting family) or R (Kalman family), 𝔄 = a_t, a delayed
+   regressor or a user instrument;
+5. covariance P = (P - L a P)/λ, or P - L a P + Q, or P - L a P + Q_t(P_d) (Stenlund-Gustafsson); optional
+   Joseph form in the Kalman family;
+6. regularisation P ← P (I + κP)⁻¹ (eq. 3.34) and the Levenberg-Marquardt or Tikhonov parameter update;
+7. parameter saturation X_min ≤ X̂ ≤ X_max (section 3.10.1);
+8. robust recursive scale: recursive quantile of the a posteriori ΔB² (eq. 3.29) and σ̂² forgetting
+   (Algorithm 3.3 lines 10-12).
+
+Steps 3-6 can be iterated within a time step until X̂_t converges (the "optimal" variant of Algorithm 3.3).
+
+:func:`run_record` processes a whole record and is what the online ``update()`` calls with a one-sample
+record, so online and batch results are the same numbers by construction. :func:`run_many` runs independent
+records (trips) in parallel over a leading axis with the very same function.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from .influence import PSI_L2, weight_scalar
+
+# ---- integer settings (ip) ----
+IP_PSI, IP_COV, IP_REG, IP_IV, IP_DELAY, IP_ROBUST_SCALE, IP_MAX_ITER, IP_JOSEPH, IP_SYMMETRIC, \
+    IP_CONSTRAIN, IP_TRANSITION, IP_STORE = range(12)
+N_IP = 12
+# ---- float settings (fp) ----
+FP_C1, FP_C2, FP_C3, FP_LAMBDA, FP_R, FP_KAPPA, FP_ETA, FP_P, FP_LAMBDA_SCALE, FP_SCALE_FACTOR, FP_TOL, \
+    FP_MIN_SCALE, FP_BLOWUP_LEVEL = range(13)
+N_FP = 13
+
+COV_FORGETTING, COV_KALMAN, COV_SG = 0, 1, 2
+REG_NONE, REG_LM, REG_TIKHONOV = 0, 1, 2
+IV_NONE, IV_DELAY, IV_USER = 0, 1, 2
+STORE_FINAL, STORE_X, STORE_FULL = 0, 1, 2
+
+# ---- scalar state (sc) and counters ----
+SC_SIGMA2, SC_QHAT, SC_PMAX = 0, 1, 2
+N_SC = 3
+CT_SKIPPED, CT_ROLLED_BACK, CT_BLOWUP_AT, CT_T, CT_RING_POS, CT_RING_FILL = range(6)
+N_CT = 6
+
+
+@njit(cache=True)
+def run_record(A, B, Z, ip, fp, Qm, Pd, F, xmin, xmax, X, P, sc, ring, ct,
+               out_X, out_Pdiag, out_rprior, out_rpost, out_w, out_scale):
+    """Process one record (T samples) in place on the state (X, P, sc, ring, ct).
+
+    A (T×n) regressors, B (T,) outputs, Z (T×n) user instruments (only read when ip[IP_IV] == IV_USER).
+    Outputs are written per sample when ip[IP_STORE] asks for them (STORE_X: out_X; STORE_FULL: all).
+    The body is one function without array-passing calls per sample (that keeps it near the speed of a
+    hand-written loop).
+    """
+    T = B.shape[0]
+    n = X.shape[0]
+    store = ip[IP_STORE]
+    psi = ip[IP_PSI]
+    cov = ip[IP_COV]
+    reg = ip[IP_REG]
+    iv = ip[IP_IV]
+    k = ip[IP_DELAY]
+    max_iter = ip[IP_MAX_ITER]
+    robust = ip[IP_ROBUST_SCALE] != 0
+    joseph = ip[IP_JOSEPH] != 0
+    sym = ip[IP_SYMMETRIC] != 0
+    constrain = ip[IP_CONSTRAIN] != 0
+    transition = ip[IP_TRANSITION] != 0
+    c1 = fp[FP_C1]
+    c2 = fp[FP_C2]
+    c3 = fp[FP_C3]
+    lam = fp[FP_LAMBDA]
+    inv_lam = 1.0 / lam
+    R = fp[FP_R]
+    kappa = fp[FP_KAPPA]
+    regularise = reg != REG_NONE and kappa > 0.0
+    tikhonov = reg == REG_TIKHONOV and kappa > 0.0
+    c_gain = lam if cov == COV_FORGETTING else R
+    tol = fp[FP_TOL]
+    min_scale = fp[FP_MIN_SCALE]
+    blowup = fp[FP_BLOWUP_LEVEL]
+    eta = fp[FP_ETA]
+    step_up = eta * 2.0 * fp[FP_P]
+    step_down = -eta * 2.0 * (1.0 - fp[FP_P])
+    lam_s = fp[FP_LAMBDA_SCALE]
+    sfac = fp[FP_SCALE_FACTOR]
+
+    a = np.empty(n)
+    z = np.empty(n)
+    Xp = np.empty(n)
+    Pp = np.empty((n, n))
+    Xit = np.empty(n)
+    Pz = np.empty(n)
+    aP = np.empty(n)
+    L = np.empty(n)
+    u = np.empty(n)
+    v = np.empty(n)
+    M = np.empty((n, n))
+    Minv = np.empty((n, n))
+    work = np.empty((n, n))
+
+    for t in range(T):
+        b = B[t]
+        valid = np.isfinite(b)
+        for i in range(n):
+            a[i] = A[t, i]
+            if not np.isfinite(a[i]):
+                valid = False
+        if iv == IV_USER:
+            for i in range(n):
+                z[i] = Z[t, i]
+                if not np.isfinite(z[i]):
+                    valid = False
+        elif iv == IV_DELAY and ct[CT_RING_FILL] >= k:
+            pos = ct[CT_RING_POS]
+            for i in range(n):
+                z[i] = ring[pos, i]
+        else:
+            for i in range(n):
+                z[i] = a[i]
+        if transition:
+            # prediction X' = F X, P' = F P Fᵀ (also for skipped samples: time advances)
+            for i in range(n):
+                acc = 0.0
+                for j in range(n):
+                    acc += F[i, j] * X[j]
+                Xp[i] = acc
+            for i in range(n):
+                for j in range(n):
+                    acc = 0.0
+                    for kk in range(n):
+                        acc += F[i, kk] * P[kk, j]
+                    work[i, j] = acc
+            for i in range(n):
+                X[i] = Xp[i]
+                for j in range(n):
+                    acc = 0.0
+                    for kk in range(n):
+                        acc += work[i, kk] * F[j, kk]
+                    P[i, j] = acc
+            if sym:
+                for i in range(n):
+                    for j in range(i + 1, n):
+                        m = 0.5 * (P[i, j] + P[j, i])
+                        P[i, j] = m
+                        P[j, i] = m
+        if not valid:
+            ct[CT_SKIPPED] += 1
+            if store >= STORE_X:
+                for i in range(n):
+                    out_X[t, i] = X[i]
+            if store == STORE_FULL:
+                for i in range(n):
+                    out_Pdiag[t, i] = P[i, i]
+                out_rprior[t] = np.nan
+                out_rpost[t] = np.nan
+                out_w[t] = np.nan
+                out_scale[t] = np.sqrt(sc[SC_SIGMA2])
+            continue
+        # ---- quantities that do not depend on the weight
+        r0 = b
+        for i in range(n):
+            Xp[i] = X[i]
+            r0 -= a[i] * X[i]
+            for j in range(n):
+                Pp[i, j] = P[i, j]
+        s = 0.0
+        for i in range(n):
+            acc = 0.0
+            for j in range(n):
+                acc += Pp[i, j] * z[j]
+            Pz[i] = acc
+            s += a[i] * acc
+        if sym:
+            for j in range(n):
+                aP[j] = Pz[j]
+        else:
+            for j in range(n):
+                acc = 0.0
+                for i in range(n):
+                    acc += a[i] * Pp[i, j]
+                aP[j] = acc
+        sd = 0.0
+        if cov == COV_SG:
+            for i in range(n):
+                acc = 0.0
+                acc2 = 0.0
+                for j in range(n):
+                    acc += Pd[i, j] * z[j]
+                    acc2 += a[j] * Pd[j, i]
+                u[i] = acc
+                v[i] = acc2
+            for i in range(n):
+                sd += a[i] * u[i]
+        sigma = 1.0
+        w = 1.0
+        if psi != PSI_L2:
+            sigma = np.sqrt(sc[SC_SIGMA2])
+            if sigma < min_scale:
+                sigma = min_scale
+            w = weight_scalar(psi, r0 / sigma, c1, c2, c3)
+        ok = True
+        for it in range(max_iter):
+            if it > 0:
+                # iterate the weight with the current estimate until X̂_t converges ("optimal" variant)
+                r = b
+                for i in range(n):
+                    Xit[i] = X[i]
+                    r -= a[i] * X[i]
+                w = weight_scalar(psi, r / sigma, c1, c2, c3)
+            den = c_gain + w * s
+            g = w / den
+            for i in range(n):
+                L[i] = g * Pz[i]
+            rr = R * w / (den * den)
+            gq = 0.0
+            if cov == COV_SG:
+                gq = w / (R + w * sd)
+            if cov == COV_FORGETTING:
+                if sym:
+                    for i in range(n):
+                        for j in range(i, n):
+                            val = (Pp[i, j] - L[i] * aP[j]) * inv_lam
+                            P[i, j] = val
+                            P[j, i] = val
+                else:
+                    for i in range(n):
+                        for j in range(n):
+                            P[i, j] = (Pp[i, j] - L[i] * aP[j]) * inv_lam
+            else:
+                for i in range(n):
+                    j0 = i if sym else 0
+                    for j in range(j0, n):
+                        if joseph:
+                            # (I - L a) P (I - L a)ᵀ + L (R/W) Lᵀ, written without dividing by W
+                            val = (Pp[i, j] - L[i] * aP[j] - Pz[i] * L[j] + s * L[i] * L[j]
+                                   + rr * Pz[i] * Pz[j])
+                        else:
+                            val = Pp[i, j] - L[i] * aP[j]
+                        if cov == COV_KALMAN:
+                            val += Qm[i, j]
+                        else:
+                            # Stenlund-Gustafsson: Q_t = W P_d 𝔄ᵀ a P_d / (R + W a P_d 𝔄ᵀ)
+                            val += gq * u[i] * v[j]
+                        P[i, j] = val
+                        if sym:
+                            P[j, i] = val
+            if regularise:
+                # P <- P (I + κP)⁻¹ (eq. 3.34). P and I + κP commute, so solve (I + κP) Y = P by Gaussian
+                # elimination with partial pivoting on [M | P] and back substitution.
+                for i in range(n):
+                    for j in range(n):
+                        M[i, j] = kappa * P[i, j]
+                        work[i, j] = P[i, j]
+                    M[i, i] += 1.0
+                for col in range(n):
+                    piv = col
+                    best = abs(M[col, col])
+                    if not sym:  # M = I + κP is symmetric positive definite when P is: no pivoting needed
+                        for r_ in range(col + 1, n):
+                            vv = abs(M[r_, col])
+                            if vv > best:
+                                best = vv
+                                piv = r_
+                    if not (best > 0.0 and best < np.inf):
+                        ok = False
+                        break
+                    if piv != col:
+                        for j in range(n):
+                            tmp = M[col, j]
+                            M[col, j] = M[piv, j]
+                            M[piv, j] = tmp
+                            tmp = work[col, j]
+                            work[col, j] = work[piv, j]
+                            work[piv, j] = tmp
+                    dinv = 1.0 / M[col, col]
+                    Minv[col, 0] = dinv
+                    for r_ in range(col + 1, n):
+                        f = M[r_, col] * dinv
+                        for j in range(col + 1, n):
+                            M[r_, j] -= f * M[col, j]
+                        for j in range(n):
+                            work[r_, j] -= f * work[col, j]
+                if not ok:
+                    break
+                for j in range(n):
+                    for i in range(n - 1, -1, -1):
+                        acc = work[i, j]
+                        for kk in range(i + 1, n):
+                            acc -= M[i, kk] * P[kk, j]
+                        P[i, j] = acc * Minv[i, 0]
+                if sym:
+                    for i in range(n):
+                        for j in range(i + 1, n):
+                            m = 0.5 * (P[i, j] + P[j, i])
+                            P[i, j] = m
+                            P[j, i] = m
+            for i in range(n):
+                X[i] = Xp[i] + L[i] * r0
+            if tikhonov:
+                for i in range(n):
+                    acc = 0.0
+                    for j in range(n):
+                        acc += P[i, j] * Xp[j]
+                    X[i] -= kappa * acc
+            if constrain:
+                for i in range(n):
+                    if X[i] < xmin[i]:
+                        X[i] = xmin[i]
+                    elif X[i] > xmax[i]:
+                        X[i] = xmax[i]
+            if it > 0:
+                dmax = 0.0
+                xmag = 0.0
+                for i in range(n):
+                    d = abs(X[i] - Xit[i])
+                    if d > dmax:
+                        dmax = d
+                    if abs(X[i]) > xmag:
+                        xmag = abs(X[i])
+                if dmax <= tol * (1.0 + xmag):
+                    break
+        # a non-finite result (overflowing P, singular normalisation) is rolled back and counted
+        # with P symmetric positive semi-definite, |P_ij| <= sqrt(P_ii P_jj): X and diag P suffice
+        finite = ok
+        for i in range(n):
+            if not (abs(X[i]) < np.inf and abs(P[i, i]) < np.inf):
+                finite = False
+        if finite and not sym:
+            for i in range(n):
+                for j in range(n):
+                    if not abs(P[i, j]) < np.inf:
+                        finite = False
+        if not finite:
+            ct[CT_ROLLED_BACK] += 1
+            for i in range(n):
+                X[i] = Xp[i]
+                for j in range(n):
+                    P[i, j] = Pp[i, j]
+        pmax = P[0, 0]
+        for i in range(1, n):
+            if P[i, i] > pmax:
+                pmax = P[i, i]
+        if pmax > sc[SC_PMAX]:
+            sc[SC_PMAX] = pmax
+        if pmax > blowup and ct[CT_BLOWUP_AT] < 0:
+            ct[CT_BLOWUP_AT] = ct[CT_T] + t
+        rpost = b
+        if robust or store == STORE_FULL:
+            for i in range(n):
+                rpost -= a[i] * X[i]
+        if robust:
+            # recursive quantile of ΔB² (eq. 3.29) and σ̂² forgetting (Algorithm 3.3, lines 10-12)
+            d = rpost * rpost - sc[SC_QHAT]
+            if d > 0.0:
+                sc[SC_QHAT] += step_up
+            elif d < 0.0:
+                sc[SC_QHAT] += step_down
+                if sc[SC_QHAT] < 0.0:
+                    sc[SC_QHAT] = 0.0
+            sc[SC_SIGMA2] = lam_s * sc[SC_SIGMA2] + (1.0 - lam_s) * sfac * sc[SC_QHAT]
+        if iv == IV_DELAY:
+            pos = ct[CT_RING_POS]
+            for i in range(n):
+                ring[pos, i] = a[i]
+            ct[CT_RING_POS] = (pos + 1) % k
+            if ct[CT_RING_FILL] < k:
+                ct[CT_RING_FILL] += 1
+        if store >= STORE_X:
+            for i in range(n):
+                out_X[t, i] = X[i]
+        if store == STORE_FULL:
+            for i in range(n):
+                out_Pdiag[t, i] = P[i, i]
+            out_rprior[t] = r0
+            out_rpost[t] = rpost
+            out_w[t] = w
+            out_scale[t] = np.sqrt(sc[SC_SIGMA2])
+    ct[CT_T] += T
+
+
+@njit(cache=True, parallel=True)
+def run_many(A, B, Z, ip, fp, Qm, Pd, F, xmin, xmax, X, P, sc, ring, ct,
+             out_X, out_Pdiag, out_rprior, out_rpost, out_w, out_scale):
+    """:func:`run_record` over a leading trip axis (K records of equal length T, NaN-padded), in parallel.
+
+    Arrays carry the trip axis first: A (K×T×n), B (K×T), Z (K×T×n or K×0×n), state X (K×n), P (K×n×n),
+    sc (K×3), ring (K×k×n), ct (K×6) and the outputs (K×T×…, or K×0×… when not stored).
+    """
+    K = B.shape[0]
+    for r in prange(K):
+        run_record(A[r], B[r], Z[r], ip, fp, Qm, Pd, F, xmin, xmax, X[r], P[r], sc[r], ring[r], ct[r],
+                   out_X[r], out_Pdiag[r], out_rprior[r], out_rpost[r], out_w[r], out_scale[r])

@@ -1,0 +1,305 @@
+"""Recursive estimators: the online object (:class:`RecursiveEstimator`), whole-record runs and many-trip runs.
+
+All three call :func:`roadload.estimators.kernel.run_record` (the many-trip path through ``run_many``, which
+calls the same function per trip), so ``update()`` sample by sample, ``run()`` over a record and
+``run_many()`` over a trip axis give the same numbers.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import kernel as K
+from .config import EstimatorConfig
+
+
+class EstimatorInputError(ValueError):
+    """Data handed to an estimator has the wrong shape or type; the message names the argument."""
+
+
+@dataclass
+class EstimatorState:
+    """Inspectable, copyable state of a recursive estimator.
+
+    x: X̂ (n,); p: P (n×n); scale: σ̂ [unit of B]; quantile: Q̂ (recursive quantile of ΔB², [unit of B]²);
+    t: samples processed; n_skipped: non-finite samples skipped; n_rolled_back: updates that produced a
+    non-finite X̂ or P and were undone; blowup_at: first sample index with max diag P above the blow-up level
+    (-1: never); p_diag_max: largest diag P seen; ring/ring_pos/ring_fill: delayed-instrument buffer.
+    """
+
+    x: np.ndarray
+    p: np.ndarray
+    scale: float
+    quantile: float
+    t: int
+    n_skipped: int
+    n_rolled_back: int
+    blowup_at: int
+    p_diag_max: float
+    ring: np.ndarray
+    ring_pos: int
+    ring_fill: int
+
+    def copy(self) -> "EstimatorState":
+        return copy.deepcopy(self)
+
+
+@dataclass
+class EstimationResult:
+    """Result of a run over a record (or, with a leading trip axis, over many records).
+
+    X: X̂_t (T×n); P_diag: diag P_t (T×n); residual_prior: ΔB_t = B_t - A_t X̂_{t-1}; residual_post:
+    B_t - A_t X̂_t; weights: W_t,t; scale: σ̂_t after the update [unit of B]; skipped: True where the sample
+    was non-finite and skipped (residuals and weight are NaN there); n_skipped; n_rolled_back;
+    p_blowup: max diag P exceeded the blow-up level (poor excitation without regularisation);
+    p_blowup_at: first such sample index (-1: never); p_diag_max: largest diag P seen; state: final state.
+    Arrays not requested (``store='x'`` or ``'final'``) are None.
+    """
+
+    X: np.ndarray | None
+    P_diag: np.ndarray | None
+    residual_prior: np.ndarray | None
+    residual_post: np.ndarray | None
+    weights: np.ndarray | None
+    scale: np.ndarray | None
+    skipped: np.ndarray | None
+    n_skipped: int | np.ndarray
+    n_rolled_back: int | np.ndarray
+    p_blowup: bool | np.ndarray
+    p_blowup_at: int | np.ndarray
+    p_diag_max: float | np.ndarray
+    state: EstimatorState | list[EstimatorState] = field(repr=False)
+
+
+_STORE = {"final": K.STORE_FINAL, "x": K.STORE_X, "full": K.STORE_FULL}
+
+
+def _as_float(arr, what: str) -> np.ndarray:
+    try:
+        out = np.asarray(arr, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise EstimatorInputError(f"{what} must be numeric") from None
+    return out
+
+
+class RecursiveEstimator:
+    """A recursive estimator of chapter 3 built from an :class:`EstimatorConfig` composition.
+
+    ``update(a_t, b_t[, instrument])`` processes one sample and returns X̂_t; ``run(A, B[, instruments])``
+    processes a whole record from the current state (and advances it). ``reset()`` returns to the initial
+    state; ``copy()`` gives an independent estimator with the same state.
+    """
+
+    def __init__(self, config: EstimatorConfig):
+        if not isinstance(config, EstimatorConfig):
+            raise EstimatorInputError(f"config must be an EstimatorConfig, got {type(config).__name__}")
+        self.config = config
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+    def reset(self) -> None:
+        """Back to X̂_0 = x0, P_0 = p0, σ̂ = scale0, Q̂ = quantile0, empty instrument buffer."""
+        arr = self.config.kernel_arrays
+        n = self.config.n_params
+        self._x = arr["x0"].copy()
+        self._p = arr["P0"].copy()
+        self._sc = np.array([self.config.scale0 ** 2, self.config.quantile0, float(np.max(np.diag(arr["P0"])))])
+        k = self.config.instrument_delay if self.config.instruments == "delayed" else 1
+        self._ring = np.zeros((k, n))
+        self._ct = np.zeros(K.N_CT, dtype=np.int64)
+        self._ct[K.CT_BLOWUP_AT] = -1
+
+    @property
+    def n_params(self) -> int:
+        return self.config.n_params
+
+    @property
+    def x(self) -> np.ndarray:
+        """X̂_t (copy)."""
+        return self._x.copy()
+
+    @property
+    def p(self) -> np.ndarray:
+        """P_t (copy)."""
+        return self._p.copy()
+
+    @property
+    def scale(self) -> float:
+        """σ̂_t [unit of B]."""
+        return float(np.sqrt(self._sc[K.SC_SIGMA2]))
+
+    @property
+    def quantile(self) -> float:
+        """Q̂_t, the recursive quantile of the squared a posteriori correction."""
+        return float(self._sc[K.SC_QHAT])
+
+    @property
+    def state(self) -> EstimatorState:
+        """A copy of the full state."""
+        return EstimatorState(
+            x=self._x.copy(), p=self._p.copy(), scale=self.scale, quantile=self.quantile,
+            t=int(self._ct[K.CT_T]), n_skipped=int(self._ct[K.CT_SKIPPED]),
+            n_rolled_back=int(self._ct[K.CT_ROLLED_BACK]), blowup_at=int(self._ct[K.CT_BLOWUP_AT]),
+            p_diag_max=float(self._sc[K.SC_PMAX]), ring=self._ring.copy(),
+            ring_pos=int(self._ct[K.CT_RING_POS]), ring_fill=int(self._ct[K.CT_RING_FILL]))
+
+    def set_state(self, state: EstimatorState) -> None:
+        """Restore a state taken with :attr:`state` (same configuration)."""
+        n = self.config.n_params
+        if state.x.shape != (n,) or state.p.shape != (n, n) or state.ring.shape != self._ring.shape:
+            raise EstimatorInputError("state does not fit this estimator's configuration")
+        self._x = np.array(state.x, dtype=float)
+        self._p = np.array(state.p, dtype=float)
+        self._sc = np.array([state.scale ** 2, state.quantile, state.p_diag_max])
+        self._ring = np.array(state.ring, dtype=float)
+        self._ct = np.array([state.n_skipped, state.n_rolled_back, state.blowup_at, state.t,
+                             state.ring_pos, state.ring_fill], dtype=np.int64)
+
+    def copy(self) -> "RecursiveEstimator":
+        """An independent estimator with the same configuration and state."""
+        other = RecursiveEstimator.__new__(RecursiveEstimator)
+        other.config = self.config
+        other._x = self._x.copy()
+        other._p = self._p.copy()
+        other._sc = self._sc.copy()
+        other._ring = self._ring.copy()
+        other._ct = self._ct.copy()
+        return other
+
+    # ------------------------------------------------------------------ processing
+    def _check(self, A, B, instruments):
+        n = self.config.n_params
+        A = _as_float(A, "A (regressors)")
+        B = _as_float(B, "B (measured output)")
+        if A.ndim != 2 or A.shape[1] != n:
+            raise EstimatorInputError(f"A (regressors) must have shape (T, {n}), got {A.shape}")
+        if B.ndim != 1 or B.shape[0] != A.shape[0]:
+            raise EstimatorInputError(f"B (measured output) must have shape ({A.shape[0]},), got {B.shape}")
+        if self.config.instruments == "user":
+            if instruments is None:
+                raise EstimatorInputError("this estimator uses user-supplied instruments: pass instruments "
+                                          f"of shape ({A.shape[0]}, {n})")
+            Z = _as_float(instruments, "instruments")
+            if Z.shape != A.shape:
+                raise EstimatorInputError(f"instruments must have shape {A.shape}, got {Z.shape}")
+        else:
+            if instruments is not None:
+                raise EstimatorInputError(f"instruments given but the estimator uses instruments="
+                                          f"{self.config.instruments!r}; set instruments='user' to pass them")
+            Z = np.empty((0, n))
+        return A, B, Z
+
+    def update(self, a_t, b_t, instrument=None) -> np.ndarray:
+        """Process one sample (a_t: n regressors, b_t: measured output, instrument: 𝔄_t if 'user').
+
+        Returns X̂_t. A non-finite sample is skipped and counted (X̂ stays)."""
+        n = self.config.n_params
+        a = _as_float(a_t, "a_t").reshape(1, -1)
+        if a.shape[1] != n:
+            raise EstimatorInputError(f"a_t must have {n} entries, got {a.shape[1]}")
+        b = _as_float(b_t, "b_t").reshape(-1)
+        if b.shape != (1,):
+            raise EstimatorInputError(f"b_t must be a scalar, got shape {np.shape(b_t)}")
+        z = None if instrument is None else _as_float(instrument, "instrument").reshape(1, -1)
+        self._process(*self._check(a, b, z), K.STORE_FINAL)
+        return self._x.copy()
+
+    def _process(self, A, B, Z, store):
+        arr = self.config.kernel_arrays
+        T, n = A.shape
+        ip = arr["ip"].copy()
+        ip[K.IP_STORE] = store
+        full = store == K.STORE_FULL
+        out_X = np.empty((T, n)) if store >= K.STORE_X else np.empty((0, n))
+        out_Pd = np.empty((T, n)) if full else np.empty((0, n))
+        vecs = [np.empty(T) if full else np.empty(0) for _ in range(4)]
+        K.run_record(A, B, Z, ip, arr["fp"], arr["Q"], arr["Pd"], arr["F"], arr["xmin"], arr["xmax"],
+                     self._x, self._p, self._sc, self._ring, self._ct, out_X, out_Pd, *vecs)
+        return out_X, out_Pd, vecs
+
+    def run(self, A, B, instruments=None, store: str = "full") -> EstimationResult:
+        """Process a whole record A (T×n), B (T,) from the current state; returns an EstimationResult.
+
+        ``store``: 'full' (all per-sample arrays), 'x' (X̂_t only) or 'final' (state only)."""
+        if store not in _STORE:
+            raise EstimatorInputError(f"store must be one of {sorted(_STORE)}, got {store!r}")
+        A, B, Z = self._check(A, B, instruments)
+        skipped_before = int(self._ct[K.CT_SKIPPED])
+        rolled_before = int(self._ct[K.CT_ROLLED_BACK])
+        out_X, out_Pd, vecs = self._process(np.ascontiguousarray(A), np.ascontiguousarray(B),
+                                            np.ascontiguousarray(Z), _STORE[store])
+        full = store == "full"
+        skipped = np.isnan(vecs[0]) if full else None
+        st = self.state
+        return EstimationResult(
+            X=out_X if store != "final" else None, P_diag=out_Pd if full else None,
+            residual_prior=vecs[0] if full else None, residual_post=vecs[1] if full else None,
+            weights=vecs[2] if full else None, scale=vecs[3] if full else None, skipped=skipped,
+            n_skipped=st.n_skipped - skipped_before, n_rolled_back=st.n_rolled_back - rolled_before,
+            p_blowup=st.blowup_at >= 0, p_blowup_at=st.blowup_at, p_diag_max=st.p_diag_max, state=st)
+
+
+def run_many(config: EstimatorConfig, A, B, instruments=None, store: str = "full") -> EstimationResult:
+    """Run independent records (trips) in parallel from the initial state of ``config``.
+
+    A: K×T×n (or T×n shared by all trips), B: K×T; pad shorter trips with NaN (padding is skipped and
+    counted). Results carry the trip axis first; counters are arrays of length K; ``state`` is a list.
+    Identical to running :meth:`RecursiveEstimator.run` on each trip."""
+    if store not in _STORE:
+        raise EstimatorInputError(f"store must be one of {sorted(_STORE)}, got {store!r}")
+    if not isinstance(config, EstimatorConfig):
+        raise EstimatorInputError(f"config must be an EstimatorConfig, got {type(config).__name__}")
+    n = config.n_params
+    B = _as_float(B, "B (measured output)")
+    if B.ndim != 2:
+        raise EstimatorInputError(f"B must have shape (K trips, T samples), got {B.shape}")
+    Kt, T = B.shape
+    A = _as_float(A, "A (regressors)")
+    if A.ndim == 2 and A.shape == (T, n):
+        A = np.broadcast_to(A, (Kt, T, n))
+    if A.shape != (Kt, T, n):
+        raise EstimatorInputError(f"A must have shape ({Kt}, {T}, {n}) or ({T}, {n}), got {A.shape}")
+    if config.instruments == "user":
+        if instruments is None:
+            raise EstimatorInputError(f"user instruments required, shape ({Kt}, {T}, {n})")
+        Z = _as_float(instruments, "instruments")
+        if Z.shape != (Kt, T, n):
+            raise EstimatorInputError(f"instruments must have shape ({Kt}, {T}, {n}), got {Z.shape}")
+    else:
+        if instruments is not None:
+            raise EstimatorInputError("instruments given but the estimator does not use user instruments")
+        Z = np.empty((Kt, 0, n))
+    proto = RecursiveEstimator(config)
+    X = np.repeat(proto._x[None], Kt, axis=0)
+    P = np.repeat(proto._p[None], Kt, axis=0)
+    sc = np.repeat(proto._sc[None], Kt, axis=0)
+    ring = np.repeat(proto._ring[None], Kt, axis=0)
+    ct = np.repeat(proto._ct[None], Kt, axis=0)
+    code = _STORE[store]
+    full = code == K.STORE_FULL
+    arr = config.kernel_arrays
+    ip = arr["ip"].copy()
+    ip[K.IP_STORE] = code
+    out_X = np.empty((Kt, T, n)) if code >= K.STORE_X else np.empty((Kt, 0, n))
+    out_Pd = np.empty((Kt, T, n)) if full else np.empty((Kt, 0, n))
+    vecs = [np.empty((Kt, T)) if full else np.empty((Kt, 0)) for _ in range(4)]
+    if not A.flags.c_contiguous and A.strides[0] != 0:
+        A = np.ascontiguousarray(A)
+    K.run_many(A, np.ascontiguousarray(B), Z, ip, arr["fp"], arr["Q"], arr["Pd"], arr["F"], arr["xmin"],
+               arr["xmax"], X, P, sc, ring, ct, out_X, out_Pd, *vecs)
+    states = []
+    for r in range(Kt):
+        e = proto.copy()
+        e._x, e._p, e._sc, e._ring, e._ct = X[r], P[r], sc[r], ring[r], ct[r]
+        states.append(e.state)
+    blow = ct[:, K.CT_BLOWUP_AT]
+    return EstimationResult(
+        X=out_X if code >= K.STORE_X else None, P_diag=out_Pd if full else None,
+        residual_prior=vecs[0] if full else None, residual_post=vecs[1] if full else None,
+        weights=vecs[2] if full else None, scale=vecs[3] if full else None,
+        skipped=np.isnan(vecs[0]) if full else None,
+        n_skipped=ct[:, K.CT_SKIPPED].copy(), n_rolled_back=ct[:, K.CT_ROLLED_BACK].copy(),
+        p_blowup=blow >= 0, p_blowup_at=blow.copy(), p_diag_max=sc[:, K.SC_PMAX].copy(), state=states)

@@ -1,0 +1,142 @@
+"""Samples per second of the recursive estimators (4 parameters) on this machine; prints a table.
+
+Measured in one run, on the same data (trip-like records of 100 000 samples, 100 Hz x 1000 s, three sine
+inputs and a constant as regressors, output noise and 5 % outliers):
+
+- a hand-written compiled 4-parameter RLS loop (numba, fixed n = 4, storing X̂_t) — the reference;
+- the batch path ``RecursiveEstimator.run`` with store='x' (X̂_t only), 'full' (X̂, diag P, residuals,
+  weights, scale) and 'final' (state only) for RLS, RRLM with robust scale, SGMKF and SGIVMKF;
+- the online API (``update`` per sample);
+- the many-trips path ``run_many`` (trips x samples/s, store='x') with 1 and 2 threads.
+
+Usage: python scripts/bench_estimators.py [--samples 100000] [--repeats 5] [--trips 16]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import numba
+import numpy as np
+from numba import njit
+
+from roadload.estimators import make_config, make_estimator, run_many
+
+
+@njit(cache=True)
+def hand_rls4(A, B, lam, X, P, out):
+    """Reference: plain RLS (Algorithm 3.1) for exactly 4 parameters, P kept symmetric, X̂_t stored."""
+    T = B.shape[0]
+    Pa = np.empty(4)
+    L = np.empty(4)
+    il = 1.0 / lam
+    for t in range(T):
+        a0 = A[t, 0]
+        a1 = A[t, 1]
+        a2 = A[t, 2]
+        a3 = A[t, 3]
+        for i in range(4):
+            Pa[i] = P[i, 0] * a0 + P[i, 1] * a1 + P[i, 2] * a2 + P[i, 3] * a3
+        s = a0 * Pa[0] + a1 * Pa[1] + a2 * Pa[2] + a3 * Pa[3]
+        g = 1.0 / (lam + s)
+        r = B[t] - (a0 * X[0] + a1 * X[1] + a2 * X[2] + a3 * X[3])
+        for i in range(4):
+            L[i] = g * Pa[i]
+            X[i] += L[i] * r
+        for i in range(4):
+            for j in range(i, 4):
+                v = (P[i, j] - L[i] * Pa[j]) * il
+                P[i, j] = v
+                P[j, i] = v
+        for i in range(4):
+            out[t, i] = X[i]
+
+
+def make_data(T: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    t = np.arange(1, T + 1, dtype=float)
+    A = np.column_stack([np.sin(2 * np.pi * t * f) * np.sin(2 * np.pi * t * f / 3.3) for f in (0.006, 0.012, 0.014)]
+                        + [np.ones(T)])
+    B = A @ np.array([1.0, 2.0, 3.0, 0.5]) + rng.normal(0.0, np.sqrt(0.1), T)
+    out = rng.random(T) < 0.05
+    B[out] = rng.uniform(-4, 4, out.sum())
+    return A, B
+
+
+def rate(fn, samples: int, repeats: int) -> float:
+    fn()  # warm-up (compilation is cached, memory pages touched)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return samples / float(np.median(times))
+
+
+ESTIMATORS = {
+    "RLS": dict(forgetting=0.999),
+    "RRLM": dict(forgetting=0.999, kappa=1e-5, scale0=0.5, quantile0=0.1),
+    "SGMKF": dict(output_noise=0.1, desired_covariance=[1e-5, 1e-6, 1e-6, 1e-6], scale0=0.5, quantile0=0.1),
+    "SGIVMKF": dict(output_noise=0.1, desired_covariance=[1e-5, 1e-6, 1e-6, 1e-6], instrument_delay=4,
+                    scale0=0.5, quantile0=0.1),
+}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--samples", type=int, default=100_000)
+    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--trips", type=int, default=16)
+    ap.add_argument("--online-samples", type=int, default=20_000)
+    args = ap.parse_args()
+    T = args.samples
+    A, B = make_data(T, 0)
+    print(f"machine: {os.cpu_count()} cores, numba {numba.__version__}, record of {T} samples, "
+          f"median of {args.repeats} runs")
+
+    def hand():
+        X = np.zeros(4)
+        P = 100.0 * np.eye(4)
+        out = np.empty((T, 4))
+        hand_rls4(A, B, 0.999, X, P, out)
+    ref = rate(hand, T, args.repeats)
+    print(f"{'hand-written 4-parameter RLS loop (numba)':<52s} {ref / 1e6:8.2f} M samples/s")
+    rows = []
+    for name, kw in ESTIMATORS.items():
+        est = make_estimator(name, n_params=4, **kw)
+        res = {}
+        for store in ("x", "full", "final"):
+            def go(store=store):
+                est.reset()
+                est.run(A, B, store=store)
+            res[store] = rate(go, T, args.repeats)
+        m = args.online_samples
+
+        def online():
+            est.reset()
+            for i in range(m):
+                est.update(A[i], B[i])
+        res["online"] = rate(online, m, max(1, args.repeats // 3))
+        cfg = make_config(name, n_params=4, **kw)
+        K = args.trips
+        AK = np.broadcast_to(A, (K, T, 4))
+        BK = np.repeat(B[None], K, axis=0)
+        for threads in (1, 2):
+            def many(threads=threads):
+                numba.set_num_threads(threads)
+                run_many(cfg, AK, BK, store="x")
+            res[f"many{threads}"] = rate(many, K * T, max(1, args.repeats // 2))
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+        rows.append((name, res))
+    print()
+    print(f"{'estimator':<9s} {'batch x':>9s} {'batch full':>11s} {'state only':>11s} {'online':>9s} "
+          f"{'many 1 thr':>11s} {'many 2 thr':>11s} {'x / hand':>9s}   [M samples/s]")
+    for name, r in rows:
+        print(f"{name:<9s} {r['x'] / 1e6:9.2f} {r['full'] / 1e6:11.2f} {r['final'] / 1e6:11.2f} "
+              f"{r['online'] / 1e6:9.3f} {r['many1'] / 1e6:11.2f} {r['many2'] / 1e6:11.2f} {r['x'] / ref:9.2f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -72,6 +72,7 @@ def check_mapping_against_dbc(mapping: Mapping, db: Database, report: ImportRepo
             continue
         needed |= {h.partition(".")[0] for h in hits}
     for extra in [cm.valid for cm in mapping.channels if cm.valid] + [p for cm in mapping.channels for p in cm.plus] + \
+            [cm.accuracy["source"] for cm in mapping.channels if cm.accuracy] + \
             ([mapping.clock["source"], mapping.clock.get("valid")] if mapping.clock else []):
         if extra and extra in known:
             needed.add(extra.partition(".")[0])

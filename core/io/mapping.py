@@ -22,7 +22,9 @@ roadload.units), ``scale``/``offset`` (applied before the unit conversion: ``x =
 ``resample`` (linear | hold | nearest, see roadload.io.resample), optional ``valid`` (a flag signal; samples
 with flag 0 are dropped), ``required``, ``circular`` (angles that wrap), ``values`` (text -> number for
 enumerations), ``range`` (plausible SI range; outside is dropped), ``plus`` (signals added to the source
-before scaling, matched by nearest time, e.g. a fine steering-angle fraction).
+before scaling, matched by nearest time, e.g. a fine steering-angle fraction), ``event`` (sent only on change:
+held to the end of the log, long silences are not gaps), ``accuracy`` (``{"source": signal, "max": x}``:
+samples whose reported accuracy is worse than x are dropped, e.g. GNSS altitude converging after start-up).
 
 `apply_mapping` checks units against the source's declared units and the channel catalogue, aligns clocks,
 validates, resamples and builds the Trip; everything it drops or repairs is counted in the ImportReport.
@@ -61,7 +63,7 @@ UNIT_ALIASES = {"kph": "km/h", "kmh": "km/h", "km/hr": "km/h", "deg/sec": "deg/s
                 "rad/s": "rad/s", "n": "N", "kg": "kg", "g": "g"}
 
 _CHANNEL_KEYS = {"source", "channel", "unit", "scale", "offset", "resample", "valid", "required", "circular",
-                 "values", "range", "note", "plus"}
+                 "values", "range", "note", "plus", "event", "accuracy"}
 _TOP_KEYS = {"name", "format", "description", "licence", "source_url", "sample_rate", "dbc", "clock", "csv",
              "vehicle", "derived", "channels", "note", "max_gap"}
 FORMATS = ("dbc-mf4", "candump", "blf", "asc", "comma2k19", "bmw-i3", "openxc", "csv")
@@ -100,6 +102,8 @@ class ChannelMap:
     values: dict[str, float] | None = None
     range: tuple[float, float] | None = None
     plus: list[str] = field(default_factory=list)
+    event: bool = False
+    accuracy: dict[str, Any] | None = None
 
     @property
     def si_unit(self) -> str:
@@ -163,6 +167,7 @@ class Mapping:
         names = {s for c in self.channels for s in c.sources}
         names |= {c.valid for c in self.channels if c.valid}
         names |= {p for c in self.channels for p in c.plus}
+        names |= {c.accuracy["source"] for c in self.channels if c.accuracy}
         if self.clock:
             names |= {self.clock["source"]} | ({self.clock["valid"]} if self.clock.get("valid") else set())
         return names
@@ -189,7 +194,12 @@ def _parse_channel(entry: Any, where: str) -> ChannelMap:
                     valid=entry.get("valid"), required=bool(entry.get("required", False)),
                     circular=bool(entry.get("circular", False)), values=entry.get("values"),
                     range=tuple(entry["range"]) if entry.get("range") is not None else None,
-                    plus=[str(p) for p in entry.get("plus", [])])
+                    plus=[str(p) for p in entry.get("plus", [])], event=bool(entry.get("event", False)),
+                    accuracy=entry.get("accuracy"))
+    if cm.accuracy is not None and (not isinstance(cm.accuracy, dict) or set(cm.accuracy) != {"source", "max"}):
+        raise LogImportError(f"{where} ({cm.channel}): accuracy must be {{\"source\": signal, \"max\": number}}")
+    if cm.event and cm.resample != "hold":
+        raise LogImportError(f"{where} ({cm.channel}): event channels (sent on change) must use resample 'hold'")
     if cm.circular and si_unit_of(cm.unit) != "rad":
         raise LogImportError(f"{where} ({cm.channel}): circular channels must be angles (rad/deg), got {cm.unit!r}")
     expected = unit_of(cm.channel)
@@ -347,6 +357,17 @@ def apply_mapping(signals: SignalSet, mapping: Mapping, report: ImportReport, *,
             bad = ~(flag > 0.5)
             report.drop(cm.channel, f"validity flag {vkey} = 0", int(bad.sum()))
             t, raw = t[~bad], raw[~bad]
+        if cm.accuracy:
+            akey = find_source(signals, [cm.accuracy["source"]])
+            if akey is None:
+                raise LogImportError(f"accuracy signal {cm.accuracy['source']!r} of channel {cm.channel} "
+                                     f"not in the source")
+            asig = monotonic(akey, signals[akey], report)
+            acc = resample(asig.t, asig.values.astype(float), t, "nearest")
+            bad = ~(acc <= float(cm.accuracy["max"]))
+            report.drop(cm.channel, f"accuracy {akey} worse than {cm.accuracy['max']:g}", int(bad.sum()),
+                        f"worst {np.nanmax(acc[bad]):.3g}" if bad.any() else "")
+            t, raw = t[~bad], raw[~bad]
         values = cm.convert(raw)
         if cm.circular:
             values = np.mod(values, 2 * np.pi)
@@ -394,8 +415,10 @@ def apply_mapping(signals: SignalSet, mapping: Mapping, report: ImportReport, *,
     for ch, (t, values, cm, key) in per_channel.items():
         ta = align(t)
         x = resample(ta, values, grid, cm.resample, circular=cm.circular)
+        if cm.event:  # sent on change: the last value stays valid until the end of the log
+            x[grid > ta[-1]] = values[-1]
         dt = np.diff(ta)
-        if dt.size:
+        if dt.size and not cm.event:
             limit = max(mapping.max_gap, 5.0 * float(np.median(dt)))
             gaps = np.flatnonzero(dt > limit)
             if gaps.size:

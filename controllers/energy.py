@@ -1,0 +1,130 @@
+"""Energy at the source for the MPC objective: smooth fits of the powertrain maps.
+
+Both powertrains use one smooth loss polynomial in shaft speed omega [rad/s] and torque T [N m]
+(copper losses ~ T^2, friction / iron losses ~ omega, omega^2):
+
+    P_loss(omega, T) = l0 + l1 omega + l2 omega^2 + l3 T^2                                  [W]
+
+- EV: battery power P_bat = F v + P_loss(omega_M, T_M) + P_aux, where F = F_trac - F_regen is the net wheel
+  force of the motor, omega_M = v i / r_W, T_M = F r_W / i (motor/inverter map fitted by least squares).
+- ICE: fuel power P_fuel = (F_trac v + P_loss(omega_E, T_E)) / eta_i + P_idle (Willans line: indicated
+  efficiency eta_i plus speed-dependent friction), omega_E = v i_G(G) i_D / r_W, no regeneration. The gear G is
+  NOT optimised: it comes from a shift rule on speed (:meth:`SourceEnergyModel.gear_for_speed`), applied by
+  the MPC to the speeds of its previous plan, i.e. a fixed per-node ratio in each NLP.
+
+The polynomial is convex in the forces and smooth in v > 0, which keeps the NLP (and the QP path) well-behaved.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from roadload.units import G
+
+
+class EnergyModelError(ValueError):
+    """Invalid powertrain-energy settings or map data."""
+
+
+@dataclass(frozen=True)
+class SourceEnergyModel:
+    """Smooth source-energy model of one powertrain. kind: "ev" (battery energy) or "ice" (fuel energy)."""
+
+    kind: str
+    wheel_radius: float  # r_W [m]
+    gear_ratios: tuple[float, ...]  # overall ratios wheel->shaft per gear (EV: one entry, incl. final drive)
+    loss: tuple[float, float, float, float]  # l0 [W], l1 [W s/rad], l2 [W s^2/rad^2], l3 [W/(N m)^2]
+    max_power: float  # P_max [W] at the wheel (traction)
+    max_torque: float  # T_max [N m] at the shaft (motor / engine)
+    max_regen_power: float = 0.0  # [W] (EV only)
+    max_regen_torque: float = 0.0  # [N m]
+    indicated_efficiency: float = 1.0  # eta_i (ICE); 1 for EV
+    auxiliary_power: float = 0.0  # P_aux (EV) / idle fuel power (ICE) [W]
+    max_brake_deceleration: float = 8.0  # friction brake capability [m/s^2] times mass gives its force limit
+    shift_speeds: tuple[float, ...] = field(default=())  # ICE: upshift speeds [m/s], len(gear_ratios) - 1
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("ev", "ice"):
+            raise EnergyModelError(f"powertrain kind must be 'ev' or 'ice', got {self.kind!r}")
+        if self.wheel_radius <= 0 or not self.gear_ratios or min(self.gear_ratios) <= 0:
+            raise EnergyModelError("wheel_radius and gear_ratios must be positive")
+        if self.kind == "ice" and len(self.shift_speeds) != len(self.gear_ratios) - 1:
+            raise EnergyModelError(f"ICE needs {len(self.gear_ratios) - 1} shift speeds for {len(self.gear_ratios)} "
+                                   f"gears, got {len(self.shift_speeds)}")
+        if self.kind == "ev" and len(self.gear_ratios) != 1:
+            raise EnergyModelError("an EV model has exactly one (fixed) ratio")
+        if not 0 < self.indicated_efficiency <= 1:
+            raise EnergyModelError(f"indicated_efficiency must be in (0, 1], got {self.indicated_efficiency}")
+        if self.max_power <= 0 or self.max_torque <= 0:
+            raise EnergyModelError("max_power and max_torque must be positive")
+
+    # ------------------------------------------------------------------ gears
+    @property
+    def regenerates(self) -> bool:
+        return self.kind == "ev" and self.max_regen_power > 0
+
+    def gear_for_speed(self, v) -> np.ndarray:
+        """Gear index (0-based) from the speed-based shift rule; always 0 for an EV."""
+        v = np.asarray(v, dtype=float)
+        if self.kind == "ev":
+            return np.zeros(v.shape, dtype=int)
+        return np.searchsorted(np.asarray(self.shift_speeds), v, side="right").astype(int)
+
+    def ratio_for_speed(self, v) -> np.ndarray:
+        """Overall ratio shaft/wheel [-] at speed v from the shift rule."""
+        return np.asarray(self.gear_ratios, dtype=float)[self.gear_for_speed(v)]
+
+    # ------------------------------------------------------------------ limits (numpy or casadi)
+    def max_traction_force(self, v, ratio):
+        """Wheel-force limit of the drive [N] from shaft torque (ignores the power limit; see max_power)."""
+        return self.max_torque * ratio / self.wheel_radius
+
+    def max_regen_force(self, ratio):
+        return self.max_regen_torque * ratio / self.wheel_radius if self.regenerates else 0.0
+
+    # ------------------------------------------------------------------ power
+    def source_power(self, traction_force, regen_force, v, ratio):
+        """Power drawn at the source [W]: battery (EV) or fuel (ICE); numpy or CasADi expressions.
+
+        traction_force, regen_force >= 0 [N] at the wheels; v [m/s]; ratio = overall shaft/wheel ratio.
+        """
+        l0, l1, l2, l3 = self.loss
+        omega = v * ratio / self.wheel_radius
+        if self.kind == "ev":
+            net = traction_force - regen_force
+            torque = net * self.wheel_radius / ratio
+            return net * v + l0 + l1 * omega + l2 * omega * omega + l3 * torque * torque + self.auxiliary_power
+        torque = traction_force * self.wheel_radius / ratio
+        return ((traction_force * v + l0 + l1 * omega + l2 * omega * omega + l3 * torque * torque)
+                / self.indicated_efficiency + self.auxiliary_power)
+
+    def loss_power(self, shaft_speed, shaft_torque):
+        """P_loss(omega, T) [W] of the fitted polynomial."""
+        l0, l1, l2, l3 = self.loss
+        return l0 + l1 * shaft_speed + l2 * shaft_speed ** 2 + l3 * shaft_torque ** 2
+
+    def brake_force_limit(self, mass: float) -> float:
+        return self.max_brake_deceleration * mass
+
+
+def fit_loss_polynomial(shaft_speed, shaft_torque, loss_power) -> tuple[float, float, float, float]:
+    """Least-squares fit of P_loss = l0 + l1 omega + l2 omega^2 + l3 T^2 to map samples (omega [rad/s],
+    T [N m], loss [W]); NaN samples (outside the map) are dropped. Returns (l0, l1, l2, l3)."""
+    w, t, p = (np.asarray(a, dtype=float).ravel() for a in np.broadcast_arrays(shaft_speed, shaft_torque, loss_power))
+    ok = np.isfinite(w) & np.isfinite(t) & np.isfinite(p)
+    if ok.sum() < 4:
+        raise EnergyModelError(f"need at least 4 finite map samples to fit the loss polynomial, got {int(ok.sum())}")
+    a = np.column_stack([np.ones(ok.sum()), w[ok], w[ok] ** 2, t[ok] ** 2])
+    coef, *_ = np.linalg.lstsq(a, p[ok], rcond=None)
+    return tuple(float(c) for c in coef)
+
+
+def generic_ev(mass: float = 1420.0) -> SourceEnergyModel:
+    """An i3-like EV (125 kW, 250 N m, single ratio 9.665, r_W 0.35 m), loss coefficients chosen for
+    ~90-93 % motor+inverter efficiency at part load. Used when no simulator spec is at hand (tests, benches)."""
+    return SourceEnergyModel(kind="ev", wheel_radius=0.35, gear_ratios=(9.665,), loss=(300.0, 0.5, 2.0e-3, 0.06),
+                             max_power=125e3, max_torque=250.0, max_regen_power=50e3, max_regen_torque=150.0,
+                             auxiliary_power=300.0, max_brake_deceleration=0.8 * G, name="generic_ev")

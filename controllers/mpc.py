@@ -1,0 +1,433 @@
+"""Spatial-domain (distance-indexed) eco-driving optimal control problem and its two solve paths.
+
+Grid: N segments of length ds [m] starting at the vehicle's position s0; node k at s0 + k ds.
+States per node: E_k = v_k^2 / 2 (kinetic energy per unit mass) [m^2/s^2] and time t_k [s].
+Inputs per segment (piecewise constant, in kN): traction F_t, regenerative F_r and friction-brake F_b force.
+
+Dynamics (v_mid = (v_k + v_{k+1})/2, resistance at the segment midpoint, grade/curvature at the midpoint):
+    m (E_{k+1} - E_k) / ds = F_t - F_r - F_b - F_resist(v_mid, theta_k, kappa_k; p)
+    t_{k+1} - t_k = ds / v_mid
+Comfort: a_k = (E_{k+1} - E_k)/ds in [a_min, a_max]; jerk (a_k - a_{k-1}) v_k / ds in [-j_max, j_max]
+(k = 0 uses the acceleration the previous plan commanded). Drive limits: F_t <= T_max i / r_W,
+F_t v_mid <= P_max, F_r likewise for regeneration. Speed cap as a bound E_k <= v_cap,k^2/2, where the cap
+(limit less a margin, curve and stop caps) is raised to what is reachable from the current speed at half the
+comfort deceleration, so a problem started above a cap stays feasible; the closed loop's safety envelope
+guarantees the actual limit (:mod:`roadload.controllers.safety`). The time state is substituted
+(t_N = sum ds / v_mid), leaving E and the three forces as decision variables.
+
+Objective [kJ]: sum_k P_source(F_t, F_r, v_mid, i_k) ds / v_mid   (energy at the source, :mod:`.energy`)
+    + lambda t_N  (time weight [J/s]) - m E_N  (kinetic energy left at the horizon end is worth its value)
+    + small comfort/regularisation terms.
+
+Solve paths behind :class:`OcpSolver`: ``ipopt`` (interior-point NLP, warm-started primal-dual from the
+shifted previous solution) and ``osqp`` (sequential QP: the NLP linearised at the shifted previous solution,
+a convexified Lagrangian Hessian, OSQP warm-started, fixed sparsity so matrices are updated in place).
+The CasADi functions are built once per (settings, powertrain) and reused every step.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+
+from .energy import SourceEnergyModel
+from .force_model import PARAMETER_NAMES, ForceParameters, resistance_force
+
+
+class MpcError(ValueError):
+    """Invalid MPC settings or inputs (the message names the field)."""
+
+
+SOLVERS = ("ipopt", "osqp")
+
+
+@dataclass(frozen=True)
+class MpcSettings:
+    """Horizon, comfort limits and weights of the spatial MPC (SI units)."""
+
+    n_nodes: int = 100  # N segments
+    ds: float = 20.0  # segment length [m] -> horizon N*ds
+    accel_max: float = 1.5  # [m/s^2]
+    decel_max: float = 2.0  # comfort deceleration [m/s^2] (a_min = -decel_max)
+    jerk_max: float = 2.0  # [m/s^3]
+    lateral_accel_max: float = 2.0  # speed cap in curves v <= sqrt(a_y,max / |kappa|) [m/s^2]
+    speed_floor: float = 1.0  # lowest planned speed [m/s] (the spatial form needs v > 0)
+    stop_speed: float = 1.0  # speed cap at a stop node [m/s]; the closed loop stops the car from there
+    speed_margin: float = 0.3  # planned speed stays this far below the limit [m/s]
+    time_weight: float = 3000.0  # lambda [J/s]: energy worth one second of trip time
+    accel_weight: float = 0.05  # comfort term [kJ per (m/s^2)^2 per segment, times mass/1000]
+    solver: str = "ipopt"
+    max_iterations: int = 100  # IPOPT iteration cap / SQP iterations cap per call (osqp path uses sqp_iterations)
+    qp_tolerance: float = 1e-3  # OSQP eps_abs = eps_rel
+    sqp_iterations: int = 1  # QP path: linearise-solve rounds per control step (1 = real-time iteration)
+
+    def __post_init__(self) -> None:
+        if self.n_nodes < 2:
+            raise MpcError(f"n_nodes must be >= 2, got {self.n_nodes}")
+        if self.ds <= 0:
+            raise MpcError(f"ds must be positive, got {self.ds}")
+        for name in ("accel_max", "decel_max", "jerk_max", "lateral_accel_max", "speed_floor", "stop_speed"):
+            if not getattr(self, name) > 0:
+                raise MpcError(f"{name} must be positive, got {getattr(self, name)}")
+        if self.time_weight < 0:
+            raise MpcError(f"time_weight must be >= 0, got {self.time_weight}")
+        if self.solver not in SOLVERS:
+            raise MpcError(f"unknown solver {self.solver!r}; choose one of {SOLVERS}")
+        if self.stop_speed < self.speed_floor:
+            raise MpcError("stop_speed must be >= speed_floor")
+
+    @property
+    def horizon(self) -> float:
+        return self.n_nodes * self.ds
+
+
+@dataclass
+class Preview:
+    """The road ahead on the MPC grid: node positions s (N+1) [m], per-segment grade [rad], curvature [1/m]
+    and shaft/wheel ratio (N), and the per-node speed cap (N+1) [m/s] (limit, curve and stop caps combined)."""
+
+    s: np.ndarray
+    grade: np.ndarray
+    curvature: np.ndarray
+    speed_cap: np.ndarray
+    ratio: np.ndarray
+
+
+@dataclass
+class Plan:
+    """A solved (or fallback) speed/force trajectory over distance."""
+
+    s: np.ndarray  # node positions [m] (N+1)
+    v: np.ndarray  # planned speed [m/s] (N+1)
+    t: np.ndarray  # planned time from the plan start [s] (N+1)
+    traction: np.ndarray  # [N] per segment (N)
+    regen: np.ndarray  # [N]
+    brake: np.ndarray  # [N]
+    success: bool
+    status: str
+    solve_time: float  # wall-clock [s]
+    iterations: int
+    objective: float = float("nan")
+    x: np.ndarray | None = field(default=None, repr=False)  # raw primal (for warm start)
+    lam_x: np.ndarray | None = field(default=None, repr=False)
+    lam_g: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def accel(self) -> np.ndarray:
+        return np.diff(0.5 * self.v ** 2) / np.diff(self.s)
+
+    @property
+    def wheel_force(self) -> np.ndarray:
+        return self.traction - self.regen - self.brake
+
+    def speed_at(self, s) -> np.ndarray:
+        return np.interp(s, self.s, self.v)
+
+    def segment_at(self, s: float) -> int:
+        return int(np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, len(self.traction) - 1))
+
+
+class OcpSolver:
+    """The NLP of the module docstring built once; ``solve`` fills in the preview and parameters."""
+
+    def __init__(self, settings: MpcSettings, energy: SourceEnergyModel) -> None:
+        self.settings = settings
+        self.energy = energy
+        n = settings.n_nodes
+        self.n = n
+        self._build()
+        self._osqp = None
+        self._qp_x = None
+
+    # ------------------------------------------------------------------ formulation
+    def _build(self) -> None:
+        st, en, n, ds = self.settings, self.energy, self.n, self.settings.ds
+        E = ca.SX.sym("E", n + 1)
+        ft = ca.SX.sym("Ft", n)
+        fr = ca.SX.sym("Fr", n)
+        fb = ca.SX.sym("Fb", n)
+        x = ca.vertcat(E, ft, fr, fb)
+        a_prev = ca.SX.sym("a_prev")
+        grade = ca.SX.sym("grade", n)
+        curv = ca.SX.sym("curv", n)
+        ratio = ca.SX.sym("ratio", n)
+        fp = ca.SX.sym("fp", len(PARAMETER_NAMES))
+        lam = ca.SX.sym("lam")
+        p = ca.vertcat(a_prev, grade, curv, ratio, fp, lam)
+        m = fp[0]
+
+        v = ca.sqrt(2.0 * E)
+        vm = 0.5 * (v[:-1] + v[1:])
+        dt = ds / vm
+        fres = resistance_force(vm, grade, curv, fp)
+        acc = (E[1:] - E[:-1]) / ds
+        dyn = (m * acc + fres) / 1000.0 - (ft - fr - fb)
+        t_end = ca.sum1(dt)  # time state t_N, substituted: t_{k+1} = t_k + ds / v_mid
+        jerk = ca.vertcat((acc[0] - a_prev) * v[0] / ds, (acc[1:] - acc[:-1]) * v[1:-1] / ds)
+        power = ft * vm  # kW
+        regen_power = fr * vm
+        g = ca.vertcat(dyn, acc, jerk, power, regen_power)
+
+        psrc = en.source_power(1000.0 * ft, 1000.0 * fr, vm, ratio)
+        energy = ca.sum1(psrc * dt) / 1000.0  # kJ
+        obj = (energy + lam * t_end / 1000.0 - m * E[n] / 1000.0
+               + st.accel_weight * m / 1000.0 * ca.sumsqr(acc) + 1e-3 * ds / 1000.0 * ca.sum1(ft + fr + fb))
+        self._nx, self._ng, self._np = x.numel(), g.numel(), p.numel()
+        self._blocks_x = [n + 1, n, n, n]
+        self._blocks_g = [n, n, n, n, n]
+        self._nlp = {"x": x, "p": p, "f": obj, "g": g}
+        self._energy_fun = ca.Function("energy", [x, p], [energy * 1000.0])
+        opts = {"expand": True, "print_time": False, "error_on_fail": False,
+                "ipopt": {"print_level": 0, "sb": "yes", "max_iter": st.max_iterations, "tol": 1e-6,
+                          "acceptable_tol": 1e-4, "acceptable_iter": 5, "mu_strategy": "adaptive", "mumps_permuting_scaling": 0, "mumps_scaling": 0}}
+        warm = {**opts, "ipopt": {**opts["ipopt"], "warm_start_init_point": "yes", "mu_init": 1e-5,
+                                   "warm_start_bound_push": 1e-7, "warm_start_mult_bound_push": 1e-7,
+                                   "warm_start_slack_bound_push": 1e-7, "mu_strategy": "monotone"}}
+        if st.solver == "ipopt":
+            self._cold = ca.nlpsol("mpc_cold", "ipopt", self._nlp, opts)
+            self._warm = ca.nlpsol("mpc_warm", "ipopt", self._nlp, warm)
+        else:
+            lam_g = ca.SX.sym("lam_g", self._ng)
+            jac = ca.jacobian(g, x)
+            hess = ca.hessian(obj + ca.dot(lam_g, g), x)[0]
+            hess_u = ca.triu(hess)
+            self._qp_fun = ca.Function("qp_data", [x, p, lam_g],
+                                       [ca.gradient(obj, x), g, jac, hess_u]).expand()
+            jsp, hsp = jac.sparsity(), hess_u.sparsity()
+            self._jac_sp = (np.array(jsp.colind()), np.array(jsp.row()))
+            h_col = np.repeat(np.arange(self._nx), np.diff(np.array(hsp.colind())))
+            h_row = np.array(hsp.row())
+            self._h_rowcol = (h_row, h_col)
+            # P pattern: triu(H) plus the full diagonal
+            keys = set(zip(h_row.tolist(), h_col.tolist())) | {(i, i) for i in range(self._nx)}
+            pr, pc = np.array(sorted(keys, key=lambda rc: (rc[1], rc[0]))).T
+            self._p_rows, self._p_cols = pr, pc
+            index = {(r, c): i for i, (r, c) in enumerate(zip(pr.tolist(), pc.tolist()))}
+            self._p_from_h = np.array([index[(r, c)] for r, c in zip(h_row.tolist(), h_col.tolist())], dtype=int)
+            self._p_diag = np.array([index[(i, i)] for i in range(self._nx)], dtype=int)
+            self._p_indptr = np.concatenate([[0], np.cumsum(np.bincount(pc, minlength=self._nx))])
+            # A = [J; I] pattern in CSC (column by column: J's rows then the identity row)
+            jcol, jrow = self._jac_sp
+            cols_a, rows_a = [], []
+            for c in range(self._nx):
+                r = jrow[jcol[c]:jcol[c + 1]].tolist()
+                rows_a.extend(r + [self._ng + c])
+                cols_a.extend([c] * (len(r) + 1))
+            self._a_rows = np.array(rows_a)
+            self._a_indptr = np.concatenate([[0], np.cumsum(np.bincount(cols_a, minlength=self._nx))])
+            # position of each J nonzero (casadi order) and of each identity entry inside A's data
+            a_index = {}
+            for i, (r, c) in enumerate(zip(rows_a, cols_a)):
+                a_index[(r, c)] = i
+            jcols = np.repeat(np.arange(self._nx), np.diff(jcol))
+            self._a_from_j = np.array([a_index[(r, c)] for r, c in zip(jrow.tolist(), jcols.tolist())], dtype=int)
+            self._a_eye = np.array([a_index[(self._ng + c, c)] for c in range(self._nx)], dtype=int)
+
+    # ------------------------------------------------------------------ problem data
+    def reachable_cap(self, v0: float, preview: Preview, a_prev: float = 0.0) -> np.ndarray:
+        """Per-node speed cap [m/s] used as a bound: the preview cap less the margin, floored at the speed
+        floor, and raised only where the car cannot get below it from v0 even braking at decel_max from here on
+        (optimistic, so the relaxation never applies to a cap the plan could still meet), so a problem started
+        above a cap stays feasible (up to the jerk ramp; a failure then falls back); the safety envelope of the closed loop handles the actual limit."""
+        st = self.settings
+        cap = np.maximum(np.asarray(preview.speed_cap, float) - st.speed_margin, st.speed_floor)
+        dist = np.asarray(preview.s, float) - float(preview.s[0])
+        v0 = max(v0, st.speed_floor)
+        reach = np.sqrt(np.maximum(v0 ** 2 - 2.0 * st.decel_max * dist, 0.0))
+        return np.where(reach > cap, reach + 0.1, cap)
+
+    def _bounds(self, v0: float, preview: Preview, params: ForceParameters, a_prev: float = 0.0):
+        st, en, n = self.settings, self.energy, self.n
+        inf = np.inf
+        e_floor = 0.5 * st.speed_floor ** 2
+        e0 = 0.5 * max(v0, st.speed_floor) ** 2
+        lbx = np.concatenate([np.full(n + 1, e_floor), np.zeros(3 * n)])
+        ubx = np.concatenate([0.5 * self.reachable_cap(v0, preview, a_prev) ** 2,
+                              np.asarray(en.max_traction_force(None, preview.ratio), float) / 1000.0,
+                              np.full(n, 0.0) + np.asarray(en.max_regen_force(preview.ratio), float) / 1000.0,
+                              np.full(n, en.brake_force_limit(params.mass) / 1000.0)])
+        lbx[0] = ubx[0] = e0
+        lbg = np.concatenate([np.zeros(n), np.full(n, -st.decel_max), np.full(n, -st.jerk_max),
+                              np.full(2 * n, -inf)])
+        ubg = np.concatenate([np.zeros(n), np.full(n, st.accel_max), np.full(n, st.jerk_max),
+                              np.full(n, en.max_power / 1000.0),
+                              np.full(n, (en.max_regen_power if en.regenerates else 0.0) / 1000.0)])
+        return lbx, ubx, lbg, ubg
+
+    def _params(self, a_prev: float, preview: Preview, params: ForceParameters) -> np.ndarray:
+        return np.concatenate([[a_prev], preview.grade, preview.curvature, preview.ratio, params.as_vector(),
+                               [self.settings.time_weight]])
+
+    def _check(self, v0: float, a_prev: float, preview: Preview) -> None:
+        n = self.n
+        if not (np.isfinite(v0) and np.isfinite(a_prev)):
+            raise MpcError(f"initial speed/acceleration not finite (v0={v0}, a_prev={a_prev})")
+        shapes = {"s": (preview.s, n + 1), "grade": (preview.grade, n), "curvature": (preview.curvature, n),
+                  "speed_cap": (preview.speed_cap, n + 1), "ratio": (preview.ratio, n)}
+        for name, (arr, size) in shapes.items():
+            arr = np.asarray(arr, float)
+            if arr.shape != (size,):
+                raise MpcError(f"preview.{name}: expected shape ({size},), got {arr.shape}")
+            if not np.all(np.isfinite(arr)):
+                raise MpcError(f"preview.{name} contains NaN/inf")
+
+    def initial_guess(self, v0: float, preview: Preview, params: ForceParameters, a_prev: float = 0.0) -> np.ndarray:
+        """A feasible-ish cold start: speed ramps (comfortably) from v0 towards the cap, quasi-static forces."""
+        st, n, ds = self.settings, self.n, self.settings.ds
+        cap = self.reachable_cap(v0, preview, a_prev)
+        v = np.empty(n + 1)
+        v[0] = max(v0, st.speed_floor)
+        for k in range(n):
+            v[k + 1] = min(np.sqrt(v[k] ** 2 + 2 * 0.5 * st.accel_max * ds), cap[k + 1])
+        for k in range(n - 1, -1, -1):  # backward pass: comfortable deceleration before caps
+            v[k] = min(v[k], np.sqrt(v[k + 1] ** 2 + 2 * 0.5 * st.decel_max * ds)) if k > 0 else v[k]
+        E = 0.5 * v ** 2
+        vm = 0.5 * (v[1:] + v[:-1])
+        f = params.mass * np.diff(E) / ds + resistance_force(vm, preview.grade, preview.curvature, params)
+        ft = np.clip(f, 0, None) / 1000.0
+        fr = np.clip(-f, 0, np.asarray(self.energy.max_regen_force(preview.ratio), float)) / 1000.0
+        fb = np.clip(-f, 0, None) / 1000.0 - fr
+        return np.concatenate([E, ft, fr, fb])
+
+    def shift(self, plan: Plan, s0: float) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """Previous primal/dual solution moved onto a grid starting at s0 (linear interpolation per block)."""
+        shift = (s0 - plan.s[0]) / self.settings.ds
+
+        def move(vec, blocks):
+            out, i = [], 0
+            for size in blocks:
+                blk = vec[i:i + size]
+                out.append(np.interp(np.arange(size) + shift, np.arange(size), blk))
+                i += size
+            return np.concatenate(out)
+
+        x = move(plan.x, self._blocks_x)
+        lam_x = None if plan.lam_x is None else move(plan.lam_x, self._blocks_x)
+        lam_g = None if plan.lam_g is None else move(plan.lam_g, self._blocks_g)
+        return x, lam_x, lam_g
+
+    def _plan_from_x(self, x, preview, success, status, solve_time, iters, obj, lam_x=None, lam_g=None) -> Plan:
+        n = self.n
+        v = np.sqrt(2.0 * np.maximum(x[:n + 1], 0.0))
+        vm = np.maximum(0.5 * (v[1:] + v[:-1]), 1e-6)
+        return Plan(s=np.asarray(preview.s, float).copy(), v=v,
+                    t=np.concatenate([[0.0], np.cumsum(self.settings.ds / vm)]),
+                    traction=1000.0 * x[n + 1:2 * n + 1],
+                    regen=1000.0 * x[2 * n + 1:3 * n + 1], brake=1000.0 * x[3 * n + 1:4 * n + 1],
+                    success=success, status=status, solve_time=solve_time, iterations=iters, objective=obj,
+                    x=x.copy(), lam_x=None if lam_x is None else lam_x.copy(),
+                    lam_g=None if lam_g is None else lam_g.copy())
+
+    def source_energy(self, plan: Plan, a_prev: float, preview: Preview, params: ForceParameters) -> float:
+        """Source energy [J] of a plan under the model (for reporting and tests)."""
+        return float(self._energy_fun(plan.x, self._params(a_prev, preview, params)))
+
+    # ------------------------------------------------------------------ solve
+    def solve(self, v0: float, a_prev: float, preview: Preview, params: ForceParameters,
+              warm: Plan | None = None) -> Plan:
+        """Solve from speed v0 [m/s] with the previous commanded acceleration a_prev [m/s^2]."""
+        self._check(v0, a_prev, preview)
+        if self.settings.solver == "ipopt":
+            return self._solve_ipopt(v0, a_prev, preview, params, warm)
+        return self._solve_qp(v0, a_prev, preview, params, warm)
+
+    def _solve_ipopt(self, v0, a_prev, preview, params, warm) -> Plan:
+        lbx, ubx, lbg, ubg = self._bounds(v0, preview, params, a_prev)
+        p = self._params(a_prev, preview, params)
+        args = {"lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg, "p": p}
+        if warm is not None and warm.x is not None and warm.lam_g is not None:
+            x0, lam_x0, lam_g0 = self.shift(warm, float(preview.s[0]))
+            x0 = np.clip(x0, lbx, ubx)
+            solver = self._warm
+            args.update(x0=x0, lam_x0=lam_x0, lam_g0=lam_g0)
+        else:
+            solver = self._cold
+            args.update(x0=self.initial_guess(v0, preview, params, a_prev))
+        t0 = time.perf_counter()
+        res = solver(**args)
+        elapsed = time.perf_counter() - t0
+        stats = solver.stats()
+        status = str(stats.get("return_status", "unknown"))
+        ok = bool(stats.get("success", False)) or status == "Solved_To_Acceptable_Level"
+        x = np.asarray(res["x"]).ravel()
+        if not np.all(np.isfinite(x)):
+            ok = False
+        return self._plan_from_x(x, preview, ok, status, elapsed, int(stats.get("iter_count", -1)),
+                                 float(res["f"]), np.asarray(res["lam_x"]).ravel(), np.asarray(res["lam_g"]).ravel())
+
+    def _qp_matrices(self, x, p, lam_g):
+        grad, gval, jac, hess = self._qp_fun(x, p, lam_g)
+        grad = np.asarray(grad).ravel()
+        gval = np.asarray(gval).ravel()
+        jnz = np.asarray(jac.nonzeros()) if hasattr(jac, "nonzeros") else np.asarray(jac).ravel()
+        hnz = np.asarray(hess.nonzeros())
+        # convexify: Gershgorin shift makes the Hessian diagonally dominant (hence PSD) + proximal term
+        h_row, h_col = self._h_rowcol
+        off = h_row != h_col
+        rowsum = np.zeros(self._nx)
+        np.add.at(rowsum, h_row[off], np.abs(hnz[off]))
+        np.add.at(rowsum, h_col[off], np.abs(hnz[off]))
+        diag = np.zeros(self._nx)
+        np.add.at(diag, h_row[~off], hnz[~off])
+        shift = np.maximum(rowsum - diag, 0.0) + 1e-4 * (1.0 + np.abs(diag))
+        pdata = np.zeros(len(self._p_rows))
+        pdata[self._p_from_h] = hnz
+        pdata[self._p_diag] += shift
+        adata = np.zeros(len(self._a_rows))
+        adata[self._a_from_j] = jnz
+        adata[self._a_eye] = 1.0
+        return grad, gval, pdata, adata
+
+    def _solve_qp(self, v0, a_prev, preview, params, warm) -> Plan:
+        import osqp
+
+        lbx, ubx, lbg, ubg = self._bounds(v0, preview, params, a_prev)
+        p = self._params(a_prev, preview, params)
+        t0 = time.perf_counter()
+        if warm is not None and warm.x is not None:
+            x, lam_x, lam_g = self.shift(warm, float(preview.s[0]))
+            lam_g = np.zeros(self._ng) if lam_g is None else lam_g
+            y_warm = None if lam_x is None else np.concatenate([lam_g, lam_x])
+        else:
+            x, lam_g = self.initial_guess(v0, preview, params, a_prev), np.zeros(self._ng)
+            y_warm = None
+            self._osqp = None  # cold start: fresh OSQP state, so a run does not depend on the previous one
+        x = np.clip(x, lbx, ubx)
+        status, iters, ok = "not run", 0, False
+        y = None
+        for _ in range(max(1, self.settings.sqp_iterations)):
+            grad, gval, pdata, adata = self._qp_matrices(x, p, lam_g)
+            lo = np.concatenate([lbg - gval, lbx - x])
+            hi = np.concatenate([ubg - gval, ubx - x])
+            lo = np.where(np.isfinite(lo), lo, -1e20)
+            hi = np.where(np.isfinite(hi), hi, 1e20)
+            if self._osqp is None:
+                P = sp.csc_matrix((pdata, self._p_rows, self._p_indptr), shape=(self._nx, self._nx))
+                A = sp.csc_matrix((adata, self._a_rows, self._a_indptr), shape=(self._ng + self._nx, self._nx))
+                self._osqp = osqp.OSQP()
+                self._osqp.setup(P, grad, A, lo, hi, verbose=False, warm_starting=True, polishing=False,
+                                 eps_abs=self.settings.qp_tolerance, eps_rel=self.settings.qp_tolerance,
+                                 max_iter=4000, adaptive_rho=True, rho=1.0)
+            else:
+                self._osqp.update(q=grad, l=lo, u=hi, Px=pdata, Ax=adata)
+            if y_warm is not None:
+                self._osqp.warm_start(x=np.zeros(self._nx), y=y_warm)
+                y_warm = None
+            res = self._osqp.solve(raise_error=False)
+            status = str(res.info.status)
+            iters += int(res.info.iter)
+            ok = res.info.status_val in (1, 2)  # solved / solved inaccurate
+            if not ok or res.x is None or not np.all(np.isfinite(res.x)):
+                ok = False
+                break
+            x = np.clip(x + res.x, lbx, ubx)
+            y = res.y
+            lam_g = y[:self._ng]
+        elapsed = time.perf_counter() - t0
+        lam_full = None if y is None else y
+        return self._plan_from_x(x, preview, ok, status, elapsed, iters, float("nan"), None if lam_full is None
+                                 else lam_full[self._ng:], None if lam_full is None else lam_full[:self._ng])

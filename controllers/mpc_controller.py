@@ -1,0 +1,178 @@
+"""The receding-horizon eco-driving controller around :class:`~.mpc.OcpSolver`.
+
+Every ``replan_period`` seconds it previews the road ahead (grade, curvature, caps, stops) on the MPC grid,
+re-reads the force model's parameters, and solves warm-started from the previous plan. Between re-plans it
+tracks the plan by distance: the segment's planned wheel force (looked up ``lookahead_time`` ahead) plus speed
+feedback, F = F_plan(s + v tau) + m k_v (v_plan(s) - v), clipped so the model acceleration stays within the
+comfort bounds, with |dF/dt| <= m j_max.
+
+On a solver failure (not converged, infeasible, exception) it returns a safe command and counts the event:
+first the shifted previous plan (while it still covers ``min_plan_left`` metres and the speed is within
+``plan_tolerance`` of it), otherwise the cruise-control law (:mod:`.cruise`) until the next successful solve.
+The safety envelope of :class:`~.base.ControllerBase` clips every command, so a fallback cannot exceed a limit.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .base import ControllerBase, DriveContext, Observation
+from .cruise import CruiseLaw, CruiseSettings
+from .energy import SourceEnergyModel
+from .mpc import MpcSettings, OcpSolver, Plan, Preview
+from .safety import speed_cap
+
+_SOLVERS: dict[tuple[MpcSettings, SourceEnergyModel], OcpSolver] = {}
+
+
+def get_solver(settings: MpcSettings, energy: SourceEnergyModel) -> OcpSolver:
+    """The built solver for these settings and powertrain (built once per process, reused across runs)."""
+    key = (settings, energy)
+    if key not in _SOLVERS:
+        _SOLVERS[key] = OcpSolver(settings, energy)
+    return _SOLVERS[key]
+
+
+@dataclass(frozen=True)
+class MpcControllerSettings:
+    mpc: MpcSettings = field(default_factory=MpcSettings)
+    replan_period: float = 1.0  # [s]
+    speed_gain: float = 1.0  # k_v [1/s]
+    lookahead_time: float = 0.3  # [s] the segment force is applied this early (the jerk limit ramps it)
+    plan_tolerance: float = 2.0  # [m/s] previous plan usable as fallback while |v - v_plan| below this
+    min_plan_left: float = 300.0  # [m] of previous plan ahead needed to keep using it
+    fallback: CruiseSettings = field(default_factory=lambda: CruiseSettings(fraction=0.9))
+
+
+class MpcController(ControllerBase):
+    """Spatial MPC eco-driving controller (module docstring). ``force_model`` comes with the DriveContext."""
+
+    name = "mpc"
+
+    def __init__(self, settings: MpcControllerSettings | None = None) -> None:
+        super().__init__()
+        self.settings = settings or MpcControllerSettings()
+
+    # ------------------------------------------------------------------ lifecycle
+    def reset(self, ctx: DriveContext) -> None:
+        super().reset(ctx)
+        st = self.settings.mpc
+        self.ocp = get_solver(st, ctx.energy)
+        self.plan: Plan | None = None
+        self.mode = "mpc"
+        self._next_replan = -np.inf
+        self._last_force: float | None = None
+        self.solve_times: list[float] = []
+        self.iterations: list[int] = []
+        self.cruise = CruiseLaw(self.settings.fallback, ctx, ctx.force_model.parameters())
+        road = ctx.road
+        self._fine_s = np.arange(0.0, road.length + st.horizon + 2 * st.ds, 2.0)
+        self._fine_cap = speed_cap(road, st.lateral_accel_max, np.minimum(self._fine_s, road.length))
+        self._unserved = list(np.sort(np.asarray(road.stops, dtype=float)))
+
+    def serve_stop(self, index: int) -> None:
+        super().serve_stop(index)
+        self.cruise.serve_stop(index)
+        stop = float(self.envelope.stops[index])
+        self._unserved = [x for x in self._unserved if abs(x - stop) > 1e-9]
+        self.plan = None  # re-plan from standstill
+        self._next_replan = -np.inf
+
+    def stats(self) -> dict[str, Any]:
+        out = dict(self.events)
+        times = np.asarray(self.solve_times)
+        out.update(solves=int(times.size),
+                   solve_time_median=float(np.median(times)) if times.size else float("nan"),
+                   solve_time_p99=float(np.percentile(times, 99)) if times.size else float("nan"),
+                   iterations_median=float(np.median(self.iterations)) if self.iterations else float("nan"),
+                   fallbacks=int(self.events["fallback_shifted_plan"] + self.events["fallback_cruise"]))
+        return out
+
+    # ------------------------------------------------------------------ preview
+    def preview(self, s0: float, v0: float) -> Preview:
+        st, road, en = self.settings.mpc, self.ctx.road, self.ctx.energy
+        n, ds = st.n_nodes, st.ds
+        s = s0 + ds * np.arange(n + 1)
+        mid = np.minimum(s[:-1] + 0.5 * ds, road.length)
+        at = road.at(mid)
+        # node cap: the lowest cap over both adjacent segments, so the (monotone within a segment) planned
+        # speed respects the cap everywhere between nodes, wherever the moving grid falls
+        lo = np.searchsorted(self._fine_s, s - ds)
+        hi = np.searchsorted(self._fine_s, s + ds, side="right")
+        cap = np.array([self._fine_cap[a:max(b, a + 1)].min() for a, b in zip(lo, hi)])
+        for stop in self._unserved:
+            if s[0] - 1.0 <= stop <= s[-1]:
+                k = int(np.floor((stop - s0) / ds))
+                cap[max(k, 0):min(k + 2, n + 1)] = st.stop_speed
+        if self.plan is not None:
+            v_guess = self.plan.speed_at(mid)
+        else:
+            v_guess = np.full(n, max(v0, st.speed_floor))
+        ratio = en.ratio_for_speed(v_guess)
+        return Preview(s=s, grade=at["grade"], curvature=at["curvature"], speed_cap=cap, ratio=ratio)
+
+    # ------------------------------------------------------------------ control
+    def _replan(self, obs: Observation) -> None:
+        st = self.settings.mpc
+        a_prev = float(np.clip(obs.a, -st.decel_max, st.accel_max))
+        if self.plan is not None and self.plan.s[0] <= obs.s <= self.plan.s[-1]:
+            a_prev = float(np.interp(obs.s, 0.5 * (self.plan.s[1:] + self.plan.s[:-1]), self.plan.accel))
+        preview = self.preview(obs.s, obs.v)
+        params = self.params()
+        t0 = time.perf_counter()
+        try:
+            plan = self.ocp.solve(obs.v, a_prev, preview, params, warm=self.plan)
+            ok = plan.success
+        except Exception as exc:  # any solver crash becomes a counted fallback, never an exception upstream
+            self.events["solver_exception"] += 1
+            self.last_error = repr(exc)
+            plan, ok = None, False
+        self.solve_times.append(plan.solve_time if plan is not None else time.perf_counter() - t0)
+        if plan is not None:
+            self.iterations.append(plan.iterations)
+        if ok:
+            self.plan = plan
+            if self.mode != "mpc":
+                self.mode = "mpc"
+            return
+        self.events["solver_failures"] += 1
+        old = self.plan
+        usable = (old is not None and old.s[-1] - obs.s >= self.settings.min_plan_left and obs.s >= old.s[0]
+                  and abs(old.speed_at(obs.s) - obs.v) <= self.settings.plan_tolerance)
+        if usable:
+            self.events["fallback_shifted_plan"] += 1
+            self.mode = "shifted"
+        else:
+            self.events["fallback_cruise"] += 1
+            if self.mode != "cruise":
+                self.cruise.restart(obs.v)
+            self.mode = "cruise"
+            self.plan = None
+
+    def wheel_force(self, obs: Observation) -> float:
+        stale = self.plan is not None and obs.s > self.plan.s[-2]
+        if obs.t >= self._next_replan or stale or (self.plan is None and self.mode == "mpc"):
+            self._next_replan = obs.t + self.settings.replan_period
+            self._replan(obs)
+        m = self.params().mass
+        if self.mode == "cruise" or self.plan is None:
+            force = self.cruise.force(obs)
+        else:
+            plan = self.plan
+            ahead = obs.s + obs.v * self.settings.lookahead_time
+            force = float(plan.wheel_force[plan.segment_at(ahead)])
+            force += m * self.settings.speed_gain * (float(plan.speed_at(obs.s)) - obs.v)
+        # comfort: the acceleration this force gives under the controller's model stays within the bounds
+        st = self.settings.mpc
+        res = self.resistance(obs.v, obs.s)
+        force = float(np.clip(force, res - m * st.decel_max, res + m * st.accel_max))
+        # jerk limit on the command: |dF/dt| <= m j_max (the plan's accel is piecewise constant per segment)
+        if self._last_force is not None:
+            step = m * self.settings.mpc.jerk_max * self.ctx.dt
+            force = float(np.clip(force, self._last_force - step, self._last_force + step))
+        self._last_force = force
+        return force

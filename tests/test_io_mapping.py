@@ -22,8 +22,9 @@ def test_resample_rules_analytic():
     np.testing.assert_allclose(resample(t, x, tn, "linear"), [0, 4, 6, 10, 10, 0])
     np.testing.assert_array_equal(resample(t, x, tn, "hold"), [0, 0, 0, 10, 20, 0])
     np.testing.assert_array_equal(resample(t, x, tn, "nearest"), [0, 0, 10, 10, 20, 0])
-    # no extrapolation outside the signal's span
-    assert np.isnan(resample(t, x, np.array([-0.1, 3.1]), "hold")).all()
+    # no extrapolation outside the signal's span; a held value lasts one sample interval past the last sample
+    assert np.isnan(resample(t, x, np.array([-0.1, 3.1]), "linear")).all()
+    np.testing.assert_array_equal(resample(t, x, np.array([-0.1, 3.9, 4.1]), "hold"), [np.nan, 0.0, np.nan])
     # circular: 350 deg -> 10 deg passes through 0, not through 180
     ang = np.radians([350.0, 10.0])
     mid = resample(np.array([0.0, 1.0]), ang, np.array([0.5]), "linear", circular=True)

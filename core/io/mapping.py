@@ -310,12 +310,12 @@ def clock_offset(signals: SignalSet, clock: dict[str, Any], start_time: float,
         report.drop(key, "clock reference invalid (validity flag 0)", int((flag <= 0.5).sum()))
     if ok.sum() < 2:
         raise LogImportError(f"clock reference {key!r} has fewer than 2 valid samples")
-    logger_abs = start_time + sig.t[ok]
-    diff = ref[ok] - logger_abs
-    b, a = np.polyfit(logger_abs - logger_abs[0], diff, 1)
-    resid = diff - (a + b * (logger_abs - logger_abs[0]))
+    t_rel = sig.t[ok]  # logger time since start_time: small numbers keep float64 precision (~1e-15 s)
+    diff = ref[ok] - start_time - t_rel
+    b, a = np.polyfit(t_rel - t_rel[0], diff, 1)
+    resid = diff - (a + b * (t_rel - t_rel[0]))
     return {"offset_s": float(np.median(diff)), "drift_ppm": float(b * 1e6), "fit_a": float(a),
-            "fit_b": float(b), "fit_t0": float(logger_abs[0]), "residual_rms_s": float(np.sqrt(np.mean(resid ** 2))),
+            "fit_b": float(b), "fit_t0": float(t_rel[0]), "residual_rms_s": float(np.sqrt(np.mean(resid ** 2))),
             "reference": key, "n": int(ok.sum())}
 
 
@@ -389,11 +389,10 @@ def apply_mapping(signals: SignalSet, mapping: Mapping, report: ImportReport, *,
         clock_info = clock_offset(signals, mapping.clock, start_time, report)
 
         def align(t_src: np.ndarray) -> np.ndarray:
-            abs_logger = start_time + t_src
-            return abs_logger + clock_info["fit_a"] + clock_info["fit_b"] * (abs_logger - clock_info["fit_t0"])
+            return t_src + clock_info["fit_a"] + clock_info["fit_b"] * (t_src - clock_info["fit_t0"])
     else:
         def align(t_src: np.ndarray) -> np.ndarray:
-            return start_time + t_src
+            return t_src
 
     # 3. the uniform time base over the span all required channels cover
     spans = {ch: (align(v[0][:1])[0], align(v[0][-1:])[0]) for ch, v in per_channel.items()}
@@ -409,7 +408,7 @@ def apply_mapping(signals: SignalSet, mapping: Mapping, report: ImportReport, *,
     grid = uniform_time_base(t0, t1, rate)
 
     # 4. resample every channel by its rule, report bridged gaps and samples outside a channel's span
-    cols = {"t": grid - grid[0]}
+    cols = {"t": np.arange(grid.size) / rate}
     units = {"t": "s"}
     rules = {}
     for ch, (t, values, cm, key) in per_channel.items():
@@ -442,7 +441,7 @@ def apply_mapping(signals: SignalSet, mapping: Mapping, report: ImportReport, *,
         "mapping_file": mapping.path,
         "licence": mapping.licence,
         "sample_rate": rate,
-        "t0_unix": float(grid[0]),
+        "t0_unix": float(start_time + grid[0]),
         "channels": rules,
         "unmapped_signals": unmapped[:200],
     })

@@ -10,7 +10,8 @@
   lag by up to a period (e.g. quantised counters compared sample by sample).
 
 ``circular=True`` (headings) unwraps the angle before interpolating and wraps the result into [0, period).
-Times outside the signal's own span get NaN (no extrapolation).
+Times outside the signal's own span get NaN (no extrapolation); with ``hold`` the last sample stays valid for
+one median sample interval after it (until the next periodic value would have arrived).
 """
 
 from __future__ import annotations
@@ -56,7 +57,10 @@ def resample(t: np.ndarray, values: np.ndarray, t_new: np.ndarray, rule: str, ci
         left_closer = (t_new - t[idx - 1]) <= (t[idx] - t_new)
         out = x[np.where(left_closer, idx - 1, idx)]
     out = np.asarray(out, dtype=float)
-    out[(t_new < t[0]) | (t_new > t[-1])] = np.nan
+    end = t[-1]
+    if rule == "hold" and t.size > 1:  # the last value of a periodic signal is valid until the next one is due
+        end = t[-1] + float(np.median(np.diff(t)))
+    out[(t_new < t[0]) | (t_new > end)] = np.nan
     if circular:
         out = np.mod(out, period)
     return out

@@ -1,0 +1,247 @@
+"""Simulated trips out as real CAN traffic: a project DBC, frames at the channel rates, candump / BLF / MDF4 logs.
+
+The DBC is built from the sensor model: every exported channel becomes one signal whose scale equals the
+sensor's quantisation step (``ChannelSensorSpec.resolution``; channels without quantisation get
+``DEFAULT_RESOLUTION``), whose offset is a multiple of that step (so quantised values are encoded exactly) and
+whose bit length covers the channel's physical range. Channels of equal rate are packed (little-endian, in
+catalogue order) into 8-byte messages from id 0x100 up, sent every 1/rate seconds.
+
+Next to the log, `export_trip` writes the DBC and a mapping file, so ``roadload import LOG --format candump
+--mapping LOG.mapping.json`` reads the Trip channels back (equal to the exported ones within half a
+resolution step; exactly, for values on the quantisation grid).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..channels import MEASURED
+from ..trip import Trip
+from .frames import CanFrames, write_can_log
+from .report import LogImportError
+
+FIRST_ID = 0x100
+# physical ranges [SI] that size the DBC signals; channels not listed use +-DEFAULT_RANGE
+RANGES: dict[str, tuple[float, float]] = {
+    "vehicle_speed": (-10.0, 100.0), "gnss_speed": (0.0, 100.0),
+    "wheel_speed_fl": (-40.0, 400.0), "wheel_speed_fr": (-40.0, 400.0),
+    "wheel_speed_rl": (-40.0, 400.0), "wheel_speed_rr": (-40.0, 400.0),
+    "accel_x": (-30.0, 30.0), "accel_y": (-30.0, 30.0), "yaw_rate": (-3.0, 3.0),
+    "steering_wheel_angle": (-12.0, 12.0), "drive_torque": (-2000.0, 2000.0), "rim_torque": (-20000.0, 20000.0),
+    "engine_speed": (-100.0, 1500.0), "gear": (-1.0, 12.0), "clutch": (0.0, 1.0),
+    "brake_pressure_front": (0.0, 2.5e7), "brake_pressure_rear": (0.0, 2.5e7),
+    "ambient_temperature": (200.0, 350.0), "elevation": (-500.0, 9000.0), "latitude": (-90.0, 90.0),
+    "longitude": (-180.0, 180.0), "heading": (0.0, 6.3), "battery_voltage": (0.0, 1000.0),
+    "battery_current": (-1000.0, 1000.0), "accelerator_pedal": (0.0, 1.0), "heating_power": (0.0, 20000.0),
+    "distance": (0.0, 4.0e6), "grade": (-0.5, 0.5), "curvature": (-1.0, 1.0),
+}
+DEFAULT_RANGE = 1.0e4
+DEFAULT_RESOLUTION: dict[str, float] = {"gear": 1.0, "clutch": 0.01, "latitude": 1e-7, "longitude": 1e-7,
+                                        "distance": 0.01, "brake_pressure_front": 1000.0,
+                                        "brake_pressure_rear": 1000.0}
+FALLBACK_RESOLUTION = 1e-3  # of the SI unit, for channels without a quantisation step
+MAX_BITS = 32
+
+
+@dataclass(frozen=True)
+class ExportChannel:
+    """One exported channel: resolution (= DBC scale) [SI unit], rate [Hz], physical range [SI unit]."""
+
+    name: str
+    unit: str
+    resolution: float
+    rate: float
+    minimum: float
+    maximum: float
+
+    @property
+    def offset(self) -> float:
+        """DBC offset: the range minimum rounded down onto the quantisation grid (quantised values stay exact)."""
+        return math.floor(self.minimum / self.resolution) * self.resolution
+
+    @property
+    def bits(self) -> int:
+        steps = math.ceil((self.maximum - self.offset) / self.resolution)
+        return max(1, int(steps).bit_length())
+
+
+def export_channels(trip: Trip, sensors: Any | None = None, channels: list[str] | None = None,
+                    rates: dict[str, float] | None = None) -> list[ExportChannel]:
+    """Channels to export with their resolution and rate from a sensor spec (``roadload.vehicle.SensorSpec``:
+    ``sample_rate`` and per-channel ``resolution``/``enabled``/optional ``rate``), else from the defaults."""
+    names = channels if channels is not None else trip.channels
+    out = []
+    for name in names:
+        trip.require(name)
+        spec = getattr(sensors, "channels", {}).get(name) if sensors is not None else None
+        if spec is not None and not getattr(spec, "enabled", True):
+            continue
+        res = float(getattr(spec, "resolution", 0.0) or 0.0) if spec is not None else 0.0
+        if res <= 0:
+            res = DEFAULT_RESOLUTION.get(name, FALLBACK_RESOLUTION)
+        rate = (rates or {}).get(name) or (getattr(spec, "rate", None) if spec is not None else None) \
+            or (getattr(sensors, "sample_rate", None) if sensors is not None else None) or trip.sample_rate
+        lo, hi = RANGES.get(name, (-DEFAULT_RANGE, DEFAULT_RANGE))
+        values = trip.channel(name)
+        finite = values[np.isfinite(values)]
+        if finite.size:
+            lo, hi = min(lo, float(finite.min())), max(hi, float(finite.max()))
+        ch = ExportChannel(name, trip.units[name], res, float(rate), lo, hi)
+        if ch.bits > MAX_BITS:
+            raise LogImportError(f"channel {name}: range [{lo:g}, {hi:g}] at resolution {res:g} needs {ch.bits} "
+                                 f"bits (> {MAX_BITS}); coarsen the resolution")
+        out.append(ch)
+    if not out:
+        raise LogImportError("no channels to export")
+    return out
+
+
+@dataclass
+class _Layout:
+    frame_id: int
+    name: str
+    rate: float
+    signals: list[tuple[ExportChannel, int]]  # (channel, start bit)
+
+
+def _layout(channels: list[ExportChannel]) -> list[_Layout]:
+    order = {n: i for i, n in enumerate(MEASURED)}
+    by_rate: dict[float, list[ExportChannel]] = {}
+    for ch in sorted(channels, key=lambda c: (order.get(c.name, len(order)), c.name)):
+        by_rate.setdefault(ch.rate, []).append(ch)
+    msgs: list[_Layout] = []
+    fid = FIRST_ID
+    for rate in sorted(by_rate, reverse=True):
+        current: list[tuple[ExportChannel, int]] = []
+        used = 0
+        for ch in by_rate[rate]:
+            if used + ch.bits > 64:
+                msgs.append(_Layout(fid, f"RL_{rate:g}HZ_{fid:X}".replace(".", "_"), rate, current))
+                fid += 1
+                current, used = [], 0
+            current.append((ch, used))
+            used += ch.bits
+        if current:
+            msgs.append(_Layout(fid, f"RL_{rate:g}HZ_{fid:X}".replace(".", "_"), rate, current))
+            fid += 1
+    return msgs
+
+
+def dbc_text(channels: list[ExportChannel], vehicle: str = "roadload") -> str:
+    """The project DBC for these channels (Vector DBC text)."""
+    lines = ['VERSION ""', "", "", "NS_ :", "\tCM_", "", "BS_:", "", "BU_: ROADLOAD", "", ""]
+    comments = []
+    for msg in _layout(channels):
+        lines.append(f"BO_ {msg.frame_id} {msg.name}: 8 ROADLOAD")
+        for ch, start in msg.signals:
+            top = ch.offset + ((1 << ch.bits) - 1) * ch.resolution
+            lines.append(f' SG_ {ch.name} : {start}|{ch.bits}@1+ ({ch.resolution!r},{ch.offset!r}) '
+                         f'[{ch.offset:.12g}|{top:.12g}] "{ch.unit}" Vector__XXX')
+        lines.append("")
+        comments.append(f'CM_ BO_ {msg.frame_id} "roadload simulated sensors, sent every {1 / msg.rate:g} s";')
+    comments.insert(0, f'CM_ "roadload project DBC for the simulated {vehicle}: scale = sensor quantisation step, '
+                       f'offset on the quantisation grid, little-endian unsigned signals.";')
+    return "\n".join(lines + [""] + comments) + "\n"
+
+
+def encode_trip(trip: Trip, channels: list[ExportChannel]) -> CanFrames:
+    """Frames of all messages at their rates over the trip (values sampled at the nearest trip sample)."""
+    t = trip.t
+    rows_t, rows_id, rows_data = [], [], []
+    for msg in _layout(channels):
+        n = int(math.floor((t[-1] - t[0]) * msg.rate + 1e-6)) + 1
+        tm = t[0] + np.arange(n) / msg.rate
+        idx = np.clip(np.searchsorted(t, tm - 0.5 / max(trip.sample_rate, msg.rate)), 0, t.size - 1)
+        word = np.zeros(n, dtype=np.uint64)
+        for ch, start in msg.signals:
+            x = trip.channel(ch.name)[idx]
+            bad = ~np.isfinite(x)
+            if bad.any():
+                raise LogImportError(f"channel {ch.name}: {int(bad.sum())} NaN/inf values cannot be sent on CAN "
+                                     f"(first at t = {tm[np.flatnonzero(bad)[0]]:.3f} s)")
+            raw = np.round((x - ch.offset) / ch.resolution)
+            if raw.min() < 0 or raw.max() >= (1 << ch.bits):
+                raise LogImportError(f"channel {ch.name}: value outside the DBC range of the signal")
+            word |= raw.astype(np.uint64) << np.uint64(start)
+        rows_t.append(tm - t[0])
+        rows_id.append(np.full(n, msg.frame_id))
+        rows_data.append(word.astype("<u8").view(np.uint8).reshape(n, 8))
+    tt = np.concatenate(rows_t)
+    order = np.argsort(tt, kind="stable")
+    n = tt.size
+    return CanFrames(tt[order], np.ones(n, dtype=np.int64), np.concatenate(rows_id)[order], np.zeros(n, dtype=bool),
+                     np.full(n, 8), np.concatenate(rows_data)[order], float(trip.meta.get("t0_unix", 0.0) or 0.0))
+
+
+def mapping_for(channels: list[ExportChannel], dbc_name: str, fmt: str, sample_rate: float) -> dict[str, Any]:
+    """The mapping that imports an exported log back into the same Trip channels."""
+    msg_of = {ch.name: msg.name for msg in _layout(channels) for ch, _ in msg.signals}
+    top_rate = max(c.rate for c in channels)
+    return {"name": f"roadload_export_{Path(dbc_name).stem}", "format": fmt, "sample_rate": sample_rate,
+            "description": "generated by roadload export-can: reads the exported log back into Trip channels",
+            "dbc": [{"file": dbc_name, "bus": 1}],
+            "channels": [{"source": f"{msg_of[c.name]}.{c.name}", "channel": c.name, "unit": c.unit,
+                          "resample": "linear" if c.rate == top_rate else "hold",
+                          "required": c.rate == top_rate} for c in channels]}
+
+
+def _atomic_text(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+_SUFFIX = {"candump": ".log", "blf": ".blf", "mf4": ".mf4", "asc": ".asc"}
+_IMPORT_FORMAT = {"candump": "candump", "blf": "blf", "asc": "asc", "mf4": "dbc-mf4"}
+
+
+def export_trip(trip: Trip, path: str | Path, fmt: str, *, sensors: Any | None = None,
+                channels: list[str] | None = None, rates: dict[str, float] | None = None) -> dict[str, Path]:
+    """Write trip channels as a CAN log (candump | blf | mf4 | asc) plus ``<log>.dbc`` and ``<log>.mapping.json``.
+
+    sensors: a SensorSpec (resolution, rate per channel); by default the spec stored in the trip's metadata
+    under ``meta["vehicle"]["sensors"]`` when present, else defaults. Returns the written paths.
+    """
+    if fmt not in _SUFFIX:
+        raise LogImportError(f"unknown CAN export format {fmt!r}; choose one of {sorted(_SUFFIX)}")
+    path = Path(path)
+    if path.suffix.lower() != _SUFFIX[fmt]:
+        path = path.with_suffix(_SUFFIX[fmt])
+    if sensors is None:
+        sensors = sensors_from_meta(trip.meta)
+    chans = export_channels(trip, sensors, channels, rates)
+    frames = encode_trip(trip, chans)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    dbc_path = path.with_suffix(".dbc")
+    map_path = path.with_name(path.stem + ".mapping.json")
+    vehicle = trip.meta.get("vehicle", {}).get("name", "vehicle") if isinstance(trip.meta.get("vehicle"), dict) \
+        else str(trip.meta.get("vehicle", "vehicle"))
+    _atomic_text(dbc_path, dbc_text(chans, vehicle))
+    mapping = mapping_for(chans, dbc_path.name, _IMPORT_FORMAT[fmt], trip.sample_rate)
+    _atomic_text(map_path, json.dumps(mapping, indent=1))
+    write_can_log(frames, path, fmt)
+    return {"log": path, "dbc": dbc_path, "mapping": map_path}
+
+
+def sensors_from_meta(meta: dict[str, Any]):
+    """The SensorSpec stored in a simulated trip's metadata (meta["vehicle"]["sensors"]), or None."""
+    vehicle = meta.get("vehicle")
+    if not isinstance(vehicle, dict) or not isinstance(vehicle.get("sensors"), dict):
+        return None
+    from ..vehicle import VehicleSpec
+
+    return VehicleSpec.from_dict(vehicle, "meta.vehicle").sensors

@@ -21,6 +21,9 @@ import numpy as np
 from .report import LogImportError
 
 RULES = ("linear", "hold", "nearest")
+# samples this close to a time-base instant count as at that instant (hold): CAN log time stamps are rounded
+# to 1 us (candump) and absolute unix seconds in float64 carry ~0.2 us of rounding
+TIME_TOLERANCE = 1e-6
 
 
 def uniform_time_base(t_start: float, t_end: float, rate: float) -> np.ndarray:
@@ -50,7 +53,7 @@ def resample(t: np.ndarray, values: np.ndarray, t_new: np.ndarray, rule: str, ci
     elif rule == "linear":
         out = np.interp(t_new, t, x)
     elif rule == "hold":
-        idx = np.searchsorted(t, t_new, side="right") - 1
+        idx = np.searchsorted(t, t_new + TIME_TOLERANCE, side="right") - 1
         out = x[np.clip(idx, 0, t.size - 1)]
     else:  # nearest
         idx = np.clip(np.searchsorted(t, t_new), 1, t.size - 1)

@@ -1,0 +1,193 @@
+"""Polynomial Kalman smoother (PKS, Algorithm 3.21, section 3.9.1) and a bank of PKS for several channels.
+
+The PKS models the last w_l + 1 + w_r samples of a signal as a polynomial p(x) = Σ_k X_k x^k of order n-1 in the
+sample position x = 1 … w_l + 1 + w_r and runs RLS with exponential forgetting λ on it: each step shifts the
+polynomial by one sample (X' = 𝒜 X, 𝒜_ij = binom(j-1, j-i), P' = 𝒜 P 𝒜ᵀ), then updates with the newest
+sample, regressor C = [(w_l+1+w_r)^0 … (w_l+1+w_r)^(n-1)]. The smoothed value of sample t - w_r is
+p(w_l + 1) (eq. after 3.52); its derivatives are p', p'', … at the same point (per sample, divided by dt^k
+for physical units). The delay is exactly w_r samples for every channel and every frequency.
+
+The update is the recursive kernel of :mod:`.kernel` (transition matrix part, L2 weights, forgetting); a bank
+runs the channels through :func:`roadload.estimators.run_many`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from math import comb, factorial
+
+import numpy as np
+
+from .config import EstimatorConfig, EstimatorConfigError
+from .recursive import EstimatorInputError, RecursiveEstimator, run_many
+
+
+def shift_matrix(n_params: int) -> np.ndarray:
+    """𝒜 (n×n): coefficients of p(x + 1) from those of p(x); 𝒜_ij = binom(j-1, j-i) (1-based), 0 below."""
+    F = np.zeros((n_params, n_params))
+    for i in range(n_params):
+        for j in range(i, n_params):
+            F[i, j] = comb(j, j - i)
+    return F
+
+
+@dataclass(frozen=True)
+class PKSDesign:
+    """Settings of a PKS: n_params = order + 1, forgetting λ, windows w_l, w_r [samples], prior P_0 = p0 I."""
+
+    n_params: int = 5
+    forgetting: float = 0.9
+    window_left: int = 20
+    window_right: int = 20
+    p0: float = 1e4
+
+    def __post_init__(self):
+        if not (isinstance(self.n_params, (int, np.integer)) and 1 <= self.n_params <= 8):
+            raise EstimatorConfigError(f"PKS n_params (polynomial order + 1) must be an integer in 1..8, "
+                                       f"got {self.n_params!r}")
+        for name in ("window_left", "window_right"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, np.integer)) and v >= 0):
+                raise EstimatorConfigError(f"PKS {name} must be an integer >= 0 [samples], got {v!r}")
+        if not (0.0 < float(self.forgetting) <= 1.0):
+            raise EstimatorConfigError(f"PKS forgetting must lie in (0, 1], got {self.forgetting}")
+        if not (np.isfinite(self.p0) and self.p0 > 0):
+            raise EstimatorConfigError(f"PKS p0 must be finite and > 0, got {self.p0}")
+
+    @property
+    def delay(self) -> int:
+        """Delay of the smoothed output [samples] (= w_r)."""
+        return int(self.window_right)
+
+    @property
+    def regressor(self) -> np.ndarray:
+        """C = [(w_l+1+w_r)^k], k = 0 … n-1: the newest sample's position in the window."""
+        return float(self.window_left + 1 + self.window_right) ** np.arange(self.n_params)
+
+    def evaluation_rows(self, derivatives: int = 0) -> np.ndarray:
+        """Rows that map X̂ to p^(j)(w_l + 1), j = 0 … derivatives (per sample^j)."""
+        x = float(self.window_left + 1)
+        rows = np.zeros((derivatives + 1, self.n_params))
+        for j in range(derivatives + 1):
+            for k in range(j, self.n_params):
+                rows[j, k] = factorial(k) / factorial(k - j) * x ** (k - j)
+        return rows
+
+    def config(self) -> EstimatorConfig:
+        return EstimatorConfig(n_params=int(self.n_params), name="PKS", psi="l2", covariance="forgetting",
+                               forgetting=float(self.forgetting), transition=shift_matrix(int(self.n_params)),
+                               p0=float(self.p0))
+
+
+class PolynomialKalmanSmoother:
+    """One PKS (Algorithm 3.21). ``update(b_t)`` returns the smoothed value of sample t - w_r;
+    ``smooth(B, dt, derivatives)`` processes a record and returns aligned values and derivatives."""
+
+    def __init__(self, n_params: int = 5, forgetting: float = 0.9, window_left: int = 20,
+                 window_right: int = 20, p0: float = 1e4):
+        self.design = PKSDesign(n_params, forgetting, window_left, window_right, p0)
+        self._est = RecursiveEstimator(self.design.config())
+        self._c = self.design.regressor
+        self._rows = self.design.evaluation_rows(0)
+
+    @property
+    def delay(self) -> int:
+        return self.design.delay
+
+    @property
+    def x(self) -> np.ndarray:
+        """Polynomial coefficients X̂_t."""
+        return self._est.x
+
+    def reset(self) -> None:
+        self._est.reset()
+
+    def update(self, b_t: float) -> float:
+        """Process one sample; returns B̂_{t - w_r} (a NaN sample is skipped, the polynomial still shifts)."""
+        x = self._est.update(self._c, b_t)
+        return float(self._rows[0] @ x)
+
+    def run(self, B, instruments=None, store: str = "x"):
+        """Run over a record; returns the kernel's EstimationResult (X̂_t are polynomial coefficients)."""
+        B = np.asarray(B, dtype=float)
+        if B.ndim != 1:
+            raise EstimatorInputError(f"PKS input must be one signal (T,), got shape {B.shape}")
+        A = np.broadcast_to(self._c, (B.shape[0], self.design.n_params))
+        return self._est.run(A, B, store=store)
+
+    def smooth(self, B, dt: float = 1.0, derivatives: int = 0) -> "PKSBankResult":
+        """Smoothed B and its derivatives [unit/s^j]; ``value[t]`` estimates sample t - delay."""
+        return pks_bank({"signal": B}, dt=dt, derivatives=derivatives, design=self.design)
+
+
+@dataclass
+class PKSBankResult:
+    """Output of a PKS bank. value[name][t] is the smoothed sample t - delay (produced at t); derivative[name]
+    its first derivative [unit/s] (None if not requested); derivatives[name] is (T × k) with the 1st … k-th
+    derivatives [unit/s^j]; delay [samples] and delay_s [s] are the same for every channel."""
+
+    value: dict[str, np.ndarray]
+    derivative: dict[str, np.ndarray] | None
+    derivatives: dict[str, np.ndarray]
+    delay: int
+    delay_s: float
+    design: PKSDesign
+
+    def aligned(self, name: str) -> np.ndarray:
+        """Smoothed channel shifted back by the delay: element t estimates sample t (last `delay` are NaN)."""
+        v = self.value[name]
+        out = np.full_like(v, np.nan)
+        out[:v.size - self.delay] = v[self.delay:]
+        return out
+
+
+def pks_bank(values, dt: float = 1.0, derivatives: int = 1, *, window: int | None = None,
+             window_left: int | None = None, window_right: int | None = None, order: int | None = None,
+             n_params: int | None = None, forgetting: float = 0.9, p0: float = 1e4,
+             design: PKSDesign | None = None) -> PKSBankResult:
+    """Smooth several channels with one PKS configuration (section 5.3), in parallel.
+
+    values: dict name -> (T,) array (all the same length) or a (T × channels) array (names '0', '1', …).
+    dt [s]: sample period (derivatives are divided by dt^j). window sets w_l = w_r; order = n_params - 1
+    (default order 4, the text's experiment 3.7 setting). NaN samples are skipped (the polynomial shifts on).
+    """
+    if design is None:
+        if n_params is None:
+            n_params = 5 if order is None else int(order) + 1
+        elif order is not None and int(order) + 1 != n_params:
+            raise EstimatorConfigError(f"order {order} and n_params {n_params} disagree (n_params = order + 1)")
+        wl = window_left if window_left is not None else (window if window is not None else 20)
+        wr = window_right if window_right is not None else (window if window is not None else 20)
+        design = PKSDesign(int(n_params), float(forgetting), int(wl), int(wr), float(p0))
+    if isinstance(values, dict):
+        names = list(values)
+        arrays = [np.asarray(values[k], dtype=float) for k in names]
+    else:
+        arr = np.asarray(values, dtype=float)
+        if arr.ndim == 1:
+            arr = arr[:, None]
+        if arr.ndim != 2:
+            raise EstimatorInputError(f"values must be a dict of 1-D arrays or a (T x channels) array, "
+                                      f"got shape {arr.shape}")
+        names = [str(i) for i in range(arr.shape[1])]
+        arrays = [arr[:, i] for i in range(arr.shape[1])]
+    if not arrays:
+        raise EstimatorInputError("pks_bank needs at least one channel")
+    T = arrays[0].shape[0]
+    for name, a in zip(names, arrays):
+        if a.ndim != 1 or a.shape[0] != T:
+            raise EstimatorInputError(f"channel {name!r}: expected shape ({T},), got {a.shape}")
+    if not (np.isfinite(dt) and dt > 0):
+        raise EstimatorInputError(f"dt must be a positive sample period [s], got {dt}")
+    if not (isinstance(derivatives, (int, np.integer)) and 0 <= derivatives < design.n_params):
+        raise EstimatorInputError(f"derivatives must be an integer in 0..{design.n_params - 1}, got {derivatives!r}")
+    n = design.n_params
+    B = np.vstack(arrays)
+    A = np.broadcast_to(design.regressor, (T, n))
+    res = run_many(design.config(), A, B, store="x")
+    rows = design.evaluation_rows(derivatives)
+    est = res.X @ rows.T  # (channels, T, derivatives + 1)
+    value = {k: est[i, :, 0].copy() for i, k in enumerate(names)}
+    ders = {k: est[i, :, 1:] / dt ** np.arange(1, derivatives + 1) for i, k in enumerate(names)}
+    first = {k: ders[k][:, 0].copy() for k in names} if derivatives >= 1 else None
+    return PKSBankResult(value, first, ders, design.delay, design.delay * dt, design)

@@ -1,0 +1,162 @@
+"""The chapter-5 pipeline on a hand-made Trip built from known parameters (analytic truth)."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from roadload.estimators.models import NominalParameters
+from roadload.estimators.pipeline import (DrivetrainModel, PipelineError, PipelineSettings, SteeringGeometry,
+                                          VehicleKnowledge, model_data, run_pipeline)
+from roadload.trip import Trip
+from roadload.units import G
+
+X_TRUE = np.array([1850 * 0.0105, 1850.0, 0.5 * 1.2 * 0.64, 1850 ** 2 / 40000.0])   # M4 parameters
+R_W, I_W, I_RED, I_D = 0.34, 4.4, (9.0, 4.0), 3.2
+RATIOS = (3.1, 1.9)
+
+
+def _knowledge():
+    dt = DrivetrainModel(gear_ratios=RATIOS, final_drive=I_D, wheel_radius=R_W, wheel_inertia=I_W,
+                         reduced_inertia=I_RED, gearbox_efficiency=(1.0, 1.0), gearbox_drag=(0.0, 0.0),
+                         differential_efficiency=1.0)
+    steer = SteeringGeometry(wheelbase=2.95, rear_axle_distance=1.45, steering_wheel_angle=(-9.0, 0.0, 9.0),
+                             wheel_angle=(-0.6, 0.0, 0.6))
+    nom = NominalParameters(mass=1800.0, rolling_resistance_coefficient=0.012, drag_area=0.6,
+                            cornering_stiffness=45000.0, coast_down=(200.0, 1.0, 0.4))
+    return VehicleKnowledge("handmade", nom, dt, steer)
+
+
+def handmade_trip(duration=900.0, rate=100.0, events=True):
+    """100 Hz CAN channels whose tractive force is exactly A X_TRUE of eq. 5.6 (drive-train without losses)."""
+    t = np.arange(0, duration, 1 / rate)
+    v = 19 + 7 * np.sin(2 * np.pi * t / 97) + 3 * np.sin(2 * np.pi * t / 23 + 1)
+    dv = 7 * 2 * np.pi / 97 * np.cos(2 * np.pi * t / 97) + 3 * 2 * np.pi / 23 * np.cos(2 * np.pi * t / 23 + 1)
+    theta = 0.05 * np.sin(2 * np.pi * t / 151) + 0.02 * np.sin(2 * np.pi * t / 41)
+    kappa = 0.012 * np.sin(2 * np.pi * t / 37) ** 3
+    geo = _knowledge().steering
+    l, l34 = geo.wheelbase, geo.rear_axle_distance
+    tan_dw = kappa * l / np.sqrt(1 - (kappa * l34) ** 2)       # eq. 5.3 solved for tan δ_W
+    delta_s = np.arctan(tan_dw) * 15.0                         # table ratio 9/0.6 = 15
+    force = (X_TRUE[0] * G * np.cos(theta) + X_TRUE[1] * (G * np.sin(theta) + dv) + X_TRUE[2] * v ** 2
+             + X_TRUE[3] * v ** 4 * kappa ** 2 / 4)
+    gear = np.where(v < 17.0, 1, 2)
+    wheel_acc = dv / R_W
+    i_red = np.where(gear == 1, I_RED[0], I_RED[1])
+    ratio = np.where(gear == 1, RATIOS[0], RATIOS[1]) * I_D
+    drive_torque = (force * R_W + I_W * wheel_acc + i_red * wheel_acc) / ratio
+    wheel = v / R_W
+    engine = wheel * ratio
+    brake = np.zeros_like(t)
+    clutch = np.ones_like(t)
+    if events:
+        brake[(t >= 300) & (t < 302)] = 30e5                  # braking 2 s
+        engine[(t >= 400) & (t < 403)] *= 1.3                 # clutch slipping 3 s
+        gear = gear.copy()
+        gear[(t >= 500) & (t < 502)] = 0                      # neutral 2 s
+    measured = pd.DataFrame({
+        "t": t, "vehicle_speed": v, "accel_x": dv + G * np.sin(theta), "drive_torque": drive_torque,
+        "engine_speed": engine, "gear": gear.astype(float), "clutch": clutch, "steering_wheel_angle": delta_s,
+        "wheel_speed_fl": wheel, "wheel_speed_fr": wheel, "wheel_speed_rl": wheel, "wheel_speed_rr": wheel,
+        "brake_pressure_front": brake, "brake_pressure_rear": 0.5 * brake,
+    })
+    units = {"t": "s", "vehicle_speed": "m/s", "accel_x": "m/s^2", "drive_torque": "N*m", "engine_speed": "rad/s",
+             "gear": "1", "clutch": "1", "steering_wheel_angle": "rad", "brake_pressure_front": "Pa",
+             "brake_pressure_rear": "Pa", **{f"wheel_speed_{w}": "rad/s" for w in ("fl", "fr", "rl", "rr")}}
+    truth = pd.DataFrame({"t": t, "grade": theta, "curvature": kappa, "tractive_force": force, "acceleration": dv})
+    tu = {"t": "s", "grade": "rad", "curvature": "1/m", "tractive_force": "N", "acceleration": "m/s^2"}
+    return Trip(measured, units, {"name": "handmade"}, truth, tu)
+
+
+@pytest.fixture(scope="module")
+def result():
+    return run_pipeline(handmade_trip(), _knowledge())
+
+
+def test_stages_rates_and_known_delay(result):
+    assert list(result.stages) == ["measured", "smoothed", "decimated", "states"]
+    assert result.decimation == 10
+    assert result.delay == pytest.approx(0.2)                  # w_r = 20 samples at 100 Hz
+    st = result.states
+    assert np.median(np.diff(st["t"])) == pytest.approx(0.1)
+    # smoothed rows are aligned to the time they estimate: the smoothed speed matches the true speed there
+    sm = result.stages["smoothed"]
+    v_true = 19 + 7 * np.sin(2 * np.pi * sm["t"] / 97) + 3 * np.sin(2 * np.pi * sm["t"] / 23 + 1)
+    err = np.abs(sm["vehicle_speed"] - v_true)[sm["t"] > 2]
+    assert err.max() < 1e-3
+    # only the run-to stage is computed
+    part = run_pipeline(handmade_trip(duration=60.0), _knowledge(), until="decimated")
+    assert list(part.stages) == ["measured", "smoothed", "decimated"]
+    with pytest.raises(PipelineError, match="only to stage"):
+        part.states
+
+
+def test_states_match_analytic_truth(result):
+    st = result.states
+    trip = handmade_trip()
+    tt = trip.truth
+    sel = st["t"] > 3
+    for col, truth in (("gradient_angle", "grade"), ("path_curvature", "curvature"),
+                       ("acceleration", "acceleration"), ("tractive_force", "tractive_force")):
+        ref = np.interp(st["t"][sel], tt["t"], tt[truth])
+        ok = st["trigger"][sel].to_numpy()
+        err = np.abs(st[col][sel].to_numpy() - ref)[ok]
+        assert err.max() < 5e-3 * np.abs(ref).max(), col      # PKS bias on these sinusoids: well below 0.5 %
+
+
+def test_trigger_conditions(result):
+    st = result.states
+    t = st["t"].to_numpy()
+
+    def off(cond, a, b):
+        seg = (t >= a) & (t < b)
+        return not st[f"trigger_{cond}"].to_numpy()[seg].any()
+
+    assert off("no_brake", 300.0, 302.5)                       # braking plus 0.5 s after release
+    assert st["trigger_no_brake"].to_numpy()[(t > 302.7) & (t < 310)].all()
+    assert off("no_slip", 400.0, 403.0)                        # engine speed 30 % off the gear-shaft speed
+    assert off("no_slip", 500.0, 502.0) and off("rim_torque_available", 500.0, 502.0)   # neutral
+    assert st["trigger_moving"].to_numpy().all()               # speed never below 5.5 m/s here
+    low = np.abs(st["drive_torque"].to_numpy()) <= 10
+    assert not st["trigger"].to_numpy()[low].any()             # |T_E| > 10 N m
+    assert st["trigger"].mean() > 0.6
+
+
+def test_least_squares_on_pipeline_output_recovers_m3_and_m4(result):
+    _, A4, B4 = model_data(result.states, "M4")
+    X4, *_ = np.linalg.lstsq(A4, B4, rcond=None)
+    np.testing.assert_allclose(X4, X_TRUE, rtol=0.01)
+    # M3 on the same data misses the cornering resistance and must be worse in fit
+    _, A3, B3 = model_data(result.states, "M3")
+    X3, *_ = np.linalg.lstsq(A3, B3, rcond=None)
+    assert np.median((B3 - A3 @ X3) ** 2) > 10 * np.median((B4 - A4 @ X4) ** 2)
+
+
+def test_missing_channels_and_bad_rates_are_clear_errors():
+    trip = handmade_trip(duration=30.0, events=False)
+    no_speed = Trip(trip.measured.drop(columns=["vehicle_speed"]),
+                    {k: u for k, u in trip.units.items() if k != "vehicle_speed"}, {"name": "x"})
+    with pytest.raises(PipelineError, match="vehicle_speed"):
+        run_pipeline(no_speed, _knowledge())
+    odd = Trip(trip.measured.iloc[::3].reset_index(drop=True), trip.units, {"name": "odd"})   # 33.3 Hz
+    with pytest.raises(PipelineError, match="integer multiple"):
+        run_pipeline(odd, _knowledge())
+    with pytest.raises(PipelineError, match="unknown stage"):
+        run_pipeline(trip, _knowledge(), until="estimated")
+    no_gear = Trip(trip.measured.drop(columns=["gear"]), {k: u for k, u in trip.units.items() if k != "gear"},
+                   {"name": "ng"})
+    with pytest.raises(PipelineError, match="gear"):
+        run_pipeline(no_gear, _knowledge())
+
+
+def test_no_brake_channels_use_deceleration_proxy_and_no_steering_disables_m4():
+    trip = handmade_trip(duration=120.0, events=False)
+    drop = ["brake_pressure_front", "brake_pressure_rear", "steering_wheel_angle"]
+    bare = Trip(trip.measured.drop(columns=drop), {k: u for k, u in trip.units.items() if k not in drop},
+                {"name": "bare"})
+    res = run_pipeline(bare, _knowledge(), PipelineSettings(brake_deceleration=-0.5))
+    st = res.states
+    assert any("brake" in n for n in res.notes) and any("curvature" in n for n in res.notes)
+    assert not st["trigger"].to_numpy()[st["acceleration"].to_numpy() < -0.5].any()
+    model_data(st, "M3")
+    with pytest.raises(ValueError, match="path_curvature"):
+        model_data(st, "M4")

@@ -65,13 +65,16 @@ def _prod_sine(t: np.ndarray, f: float) -> np.ndarray:
 
 def linear_miso(seed: int | np.random.Generator = 0, m: int = 10_000, input_noise_var=(0.0, 0.0, 0.0),
                 output_noise_var: float = 0.1, outlier_fraction: float = 0.05, outlier_range: float = 4.0,
-                random_walk_std: float | None = None, step_at: float = 5000.0) -> MisoData:
+                random_walk_std: float | None = None, step_at: float = 5000.0,
+                outliers_in_unexcited: bool = True) -> MisoData:
     """Section 3.5.6: Ā_1 = s(0.006), Ā_2 = s(0.012) for t < 1000, 0 for 1000 ≤ t < 6000, s(0.012) of
     t - 5000 after, Ā_3 = s(0.014), with s(f) = sin(2π t f) sin(2π t f / 3.3); X̄ = [1 2 3], X̄_1 = 1.5 from
     ``step_at``; B̄ = Σ Ā_j X̄_j. Noise variances: ``input_noise_var`` (A columns), ``output_noise_var`` (B)
     (experiment 3.4: [0 0.005 0.01] and 0.02). Each column of A and B independently gets
     ``outlier_fraction`` of its entries replaced by U(-outlier_range, outlier_range). With
-    ``random_walk_std`` X̄_3 = 3 + cumulative N(0, std²) (experiment 3.6)."""
+    ``random_walk_std`` X̄_3 = 3 + cumulative N(0, std²) (experiment 3.6). The text says both that A_2
+    "remains constant" from 1000 s to 6000 s and that all signals contain outliers; with
+    ``outliers_in_unexcited=False`` A_2 gets no outliers in that interval (its noise, if any, stays)."""
     rng = np.random.default_rng(seed)
     t = np.arange(1, m + 1, dtype=float)
     a2 = np.where(t < 1000, _prod_sine(t, 0.012), 0.0)
@@ -88,6 +91,8 @@ def linear_miso(seed: int | np.random.Generator = 0, m: int = 10_000, input_nois
     A = A_true + rng.normal(size=(m, 3)) * np.sqrt(in_var)
     B = B_true + rng.normal(0.0, np.sqrt(output_noise_var), m)
     out_A = rng.random((m, 3)) < outlier_fraction
+    if not outliers_in_unexcited:
+        out_A[(t >= 1000) & (t < 6000), 1] = False
     out_B = rng.random(m) < outlier_fraction
     A[out_A] = rng.uniform(-outlier_range, outlier_range, out_A.sum())
     B[out_B] = rng.uniform(-outlier_range, outlier_range, out_B.sum())

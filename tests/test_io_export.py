@@ -104,3 +104,27 @@ def test_too_fine_resolution_is_refused():
 def test_unknown_format():
     with pytest.raises(LogImportError, match="unknown CAN export format 'pcap'"):
         export_trip(_trip(), "x.pcap", "pcap")
+
+
+def test_cli_export_then_import(tmp_path):
+    import typer
+    from typer.testing import CliRunner
+
+    from roadload.io.cli import register
+
+    app = typer.Typer()
+    register(app, typer.Typer())
+    trip = _trip(duration=5.0)
+    trip.save(tmp_path / "sim.parquet")
+    runner = CliRunner()
+    res = runner.invoke(app, ["export-can", str(tmp_path / "sim.parquet"), "--format", "candump"])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "sim.log").is_file() and (tmp_path / "sim.dbc").is_file()
+    res = runner.invoke(app, ["import", str(tmp_path / "sim.log"), "--format", "candump", "--mapping",
+                              str(tmp_path / "sim.mapping.json"), "--out", str(tmp_path / "back.parquet")])
+    assert res.exit_code == 0, res.output
+    back = Trip.load(tmp_path / "back.parquet")
+    np.testing.assert_allclose(back.channel("drive_torque"), trip.channel("drive_torque"), atol=1e-3 * 0.5)
+    res = runner.invoke(app, ["import", str(tmp_path / "missing.log"), "--format", "candump", "--mapping",
+                              str(tmp_path / "sim.mapping.json"), "--out", str(tmp_path / "x.parquet")])
+    assert res.exit_code == 2 and not (tmp_path / "x.parquet").exists()

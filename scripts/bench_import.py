@@ -4,7 +4,7 @@ Prints, per session and stage (read MF4 -> decode with the DBCs -> map/resample 
 MB/s of MF4 input, CAN frames/s, decoded signal samples/s and output Trip samples/s (rows x channels).
 Best of --repeat runs (the first run also pays imports and file-cache misses; it is shown separately).
 
-    /work/venv/bin/python scripts/bench_import.py [--repeat 5]
+    /work/venv/bin/python scripts/bench_import.py [--repeat 5] [--cantools]
 """
 
 from __future__ import annotations
@@ -43,6 +43,7 @@ def run_once(folder, mapping):
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--cantools", action="store_true", help="also time cantools' per-frame decoding")
     args = ap.parse_args()
     base = shared_data_dir()
     if base is None or not (base / "css_canedge_gnss_obd").is_dir():
@@ -71,7 +72,31 @@ def main() -> int:
     print(f"{'all':<20}{tot_mb:7.1f}{int(tot_frames):9d}{'':>8}{'':>9}{'':>7}{tot_t:9.3f}{tot_mb / tot_t:8.1f}"
           f"{tot_frames / tot_t:11.3g}{tot_sig / tot_t:12.3g}{tot_out / tot_t:12.3g}")
     print(f"output: {best['rows']} rows x {best['channels']} channels at 100 Hz (last session)")
+    if args.cantools:
+        compare_cantools(sessions[0], mapping)
     return 0
+
+
+def compare_cantools(folder, mapping) -> None:
+    """Reference: decoding the same frames one at a time with cantools' decode_message (no mapping stage)."""
+    from roadload.io.dbc import decode_frames
+
+    frames = read_mf4(folder)
+    report = ImportReport()
+    db = load_dbc(resolve_dbcs(mapping, folder), report)
+    t0 = time.perf_counter()
+    decode_frames(frames, db, report)
+    t_vec = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    n = 0
+    for i in range(len(frames)):
+        msg = db.messages.get((int(frames.bus[i]), int(frames.arbitration_id[i]), bool(frames.is_extended[i])))
+        if msg is not None:
+            msg.decode(frames.data[i, : msg.length].tobytes(), decode_choices=False)
+            n += 1
+    t_ct = time.perf_counter() - t0
+    print(f"decode only, {folder.name}: vectorised {len(frames) / t_vec:.3g} frames/s, cantools per frame "
+          f"{n / t_ct:.3g} frames/s ({t_ct / t_vec:.0f}x)")
 
 
 if __name__ == "__main__":

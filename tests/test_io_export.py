@@ -128,3 +128,20 @@ def test_cli_export_then_import(tmp_path):
     res = runner.invoke(app, ["import", str(tmp_path / "missing.log"), "--format", "candump", "--mapping",
                               str(tmp_path / "sim.mapping.json"), "--out", str(tmp_path / "x.parquet")])
     assert res.exit_code == 2 and not (tmp_path / "x.parquet").exists()
+
+
+def test_packaged_project_dbcs_match_the_presets_sensor_quantisation(tmp_path):
+    from roadload.envs.presets import PRESETS, get_preset
+    from roadload.io.export import PROJECT_DBC_DIR, write_project_dbc
+
+    for preset in PRESETS:
+        fresh = write_project_dbc(preset, tmp_path)
+        packaged = PROJECT_DBC_DIR / fresh.name
+        assert packaged.read_text() == fresh.read_text(), \
+            f"{packaged.name} is stale: regenerate with roadload.io.export.write_project_dbc({preset!r})"
+        sensors = get_preset(preset).sensors
+        db = cantools.database.load_file(str(packaged))
+        scales = {s.name: s.scale for m in db.messages for s in m.signals}
+        for name, ch in sensors.channels.items():
+            if ch.enabled and ch.resolution > 0:
+                assert scales[name] == ch.resolution, name

@@ -60,6 +60,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         fmt: str = typer.Option("candump", "--format", "-f", help="candump | blf | mf4 | asc"),
         out: Path = typer.Option(None, "--out", "-o", help="output log (default: next to the trip)"),
         channels: str = typer.Option(None, help="comma-separated channels (default: all measured channels)"),
+        vehicle: str = typer.Option(None, help="vehicle preset whose sensor set gives resolutions and rates "
+                                               "(default: the sensor spec in the trip's metadata, if any)"),
     ) -> None:
         """Write a Trip as CAN traffic: log + project DBC (scales = sensor quantisation) + import mapping."""
         from .export import export_trip
@@ -68,8 +70,13 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
             trip = Trip.load(trip_path)
             target = out or trip_path.with_suffix("")
             names = [c.strip() for c in channels.split(",")] if channels else None
-            paths = export_trip(trip, target, fmt, channels=names)
-        except (LogImportError, TripError, FileNotFoundError) as exc:
+            sensors = None
+            if vehicle:
+                from roadload.envs.presets import get_preset
+
+                sensors = get_preset(vehicle).sensors
+            paths = export_trip(trip, target, fmt, channels=names, sensors=sensors)
+        except (LogImportError, TripError, FileNotFoundError, ValueError) as exc:
             _fail(exc)
         for kind, p in paths.items():
             typer.echo(f"{kind}: {p}")

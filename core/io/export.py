@@ -73,32 +73,68 @@ class ExportChannel:
         return max(1, int(steps).bit_length())
 
 
+def sensor_channel(name: str, unit: str, sensors: Any | None, rate: float | None = None,
+                   values: np.ndarray | None = None) -> ExportChannel | None:
+    """The export layout of one channel from a sensor spec (``roadload.vehicle.SensorSpec``: ``sample_rate``,
+    per-channel ``resolution``/``enabled``/optional ``rate``); None when the sensor is disabled. The range is
+    RANGES[name], widened to the values when given; the rate is `rate`, else the sensor's, else sample_rate."""
+    spec = getattr(sensors, "channels", {}).get(name) if sensors is not None else None
+    if spec is not None and not getattr(spec, "enabled", True):
+        return None
+    res = float(getattr(spec, "resolution", 0.0) or 0.0) if spec is not None else 0.0
+    if res <= 0:
+        res = DEFAULT_RESOLUTION.get(name, FALLBACK_RESOLUTION)
+    rate = rate or (getattr(spec, "rate", None) if spec is not None else None) \
+        or (getattr(sensors, "sample_rate", None) if sensors is not None else None)
+    if not rate:
+        raise LogImportError(f"channel {name}: no rate (no sensor rate and no trip rate given)")
+    lo, hi = RANGES.get(name, (-DEFAULT_RANGE, DEFAULT_RANGE))
+    if values is not None:
+        finite = values[np.isfinite(values)]
+        if finite.size:
+            lo, hi = min(lo, float(finite.min())), max(hi, float(finite.max()))
+    ch = ExportChannel(name, unit, res, float(rate), lo, hi)
+    if ch.bits > MAX_BITS:
+        raise LogImportError(f"channel {name}: range [{lo:g}, {hi:g}] at resolution {res:g} needs {ch.bits} "
+                             f"bits (> {MAX_BITS}); coarsen the resolution")
+    return ch
+
+
+def project_dbc(sensors: Any, vehicle: str = "vehicle") -> str:
+    """The project DBC of a sensor configuration alone (its enabled catalogue channels, catalogue units)."""
+    chans = [sensor_channel(name, MEASURED[name].unit, sensors) for name in sensors.channels if name in MEASURED]
+    return dbc_text([c for c in chans if c is not None], vehicle)
+
+
+PROJECT_DBC_DIR = Path(__file__).parent / "dbc"
+
+
+def write_project_dbc(preset: str, folder: str | Path = PROJECT_DBC_DIR) -> Path:
+    """Write ``roadload_<preset>.dbc``: the project DBC of a roadload.envs vehicle preset's sensor set (atomic).
+    The packaged copies are regenerated with this function (a test checks they are up to date)."""
+    from roadload.envs.presets import get_preset
+
+    spec = get_preset(preset)
+    path = Path(folder) / f"roadload_{preset}.dbc"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    _atomic_text(path, project_dbc(spec.sensors, spec.name))
+    return path
+
+
 def export_channels(trip: Trip, sensors: Any | None = None, channels: list[str] | None = None,
                     rates: dict[str, float] | None = None) -> list[ExportChannel]:
-    """Channels to export with their resolution and rate from a sensor spec (``roadload.vehicle.SensorSpec``:
-    ``sample_rate`` and per-channel ``resolution``/``enabled``/optional ``rate``), else from the defaults."""
+    """Channels of a trip laid out by `sensor_channel`; without a sensor spec they go at the trip's rate."""
     names = channels if channels is not None else trip.channels
     out = []
     for name in names:
         trip.require(name)
+        rate = (rates or {}).get(name)
         spec = getattr(sensors, "channels", {}).get(name) if sensors is not None else None
-        if spec is not None and not getattr(spec, "enabled", True):
-            continue
-        res = float(getattr(spec, "resolution", 0.0) or 0.0) if spec is not None else 0.0
-        if res <= 0:
-            res = DEFAULT_RESOLUTION.get(name, FALLBACK_RESOLUTION)
-        rate = (rates or {}).get(name) or (getattr(spec, "rate", None) if spec is not None else None) \
-            or (getattr(sensors, "sample_rate", None) if sensors is not None else None) or trip.sample_rate
-        lo, hi = RANGES.get(name, (-DEFAULT_RANGE, DEFAULT_RANGE))
-        values = trip.channel(name)
-        finite = values[np.isfinite(values)]
-        if finite.size:
-            lo, hi = min(lo, float(finite.min())), max(hi, float(finite.max()))
-        ch = ExportChannel(name, trip.units[name], res, float(rate), lo, hi)
-        if ch.bits > MAX_BITS:
-            raise LogImportError(f"channel {name}: range [{lo:g}, {hi:g}] at resolution {res:g} needs {ch.bits} "
-                                 f"bits (> {MAX_BITS}); coarsen the resolution")
-        out.append(ch)
+        if rate is None and getattr(spec, "rate", None) is None and not getattr(sensors, "sample_rate", None):
+            rate = trip.sample_rate
+        ch = sensor_channel(name, trip.units[name], sensors, rate, trip.channel(name))
+        if ch is not None:
+            out.append(ch)
     if not out:
         raise LogImportError("no channels to export")
     return out

@@ -284,3 +284,51 @@ def fit_coast_down(t: np.ndarray, speed: np.ndarray, effective_mass: float,
     A = np.column_stack([np.ones_like(v), v, v ** 2])
     coef, *_ = np.linalg.lstsq(A, force, rcond=None)
     return float(coef[0]), float(coef[1]), float(coef[2])
+
+
+def simulate_coast_down(spec, v_start: float = 130 / 3.6, v_end: float = 15 / 3.6, dt: float = 0.1
+                        ) -> tuple[np.ndarray, np.ndarray, float]:
+    """A coast-down of the nominal vehicle (no effects, flat road, no wind, neutral) as a manufacturer runs it.
+
+    Integrates m_eff dv/dt = -F_road(v) with the simulator's road load of the spec (rolling resistance, drag and
+    the drive-train's spin losses in neutral; :meth:`roadload.vehicle.VehicleSpec.road_load`) by RK4 from
+    v_start to v_end [m/s]; returns (t [s], v [m/s], m_eff [kg]) sampled every dt [s]."""
+    m_eff = float(spec.effective_mass(0))
+    if not (v_start > v_end > 0 and dt > 0):
+        raise ModelError(f"coast-down needs v_start > v_end > 0 and dt > 0, got {v_start}, {v_end}, {dt}")
+
+    v_grid = np.linspace(0.9 * v_end, 1.05 * v_start, 300)
+    force = np.asarray(spec.road_load(v_grid), dtype=float)   # the simulator's road load, evaluated once
+    if force.shape != v_grid.shape or not np.all(np.isfinite(force)):
+        raise ModelError(f"the road load of vehicle {getattr(spec, 'name', '?')!r} is not finite on "
+                         f"[{v_grid[0]:.3g}, {v_grid[-1]:.3g}] m/s")
+
+    def accel(v: float) -> float:
+        return -float(np.interp(v, v_grid, force)) / m_eff
+
+    t, v = [0.0], [float(v_start)]
+    while v[-1] > v_end:
+        x = v[-1]
+        k1 = accel(x)
+        k2 = accel(x + 0.5 * dt * k1)
+        k3 = accel(x + 0.5 * dt * k2)
+        k4 = accel(x + dt * k3)
+        v.append(x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4))
+        t.append(t[-1] + dt)
+        if len(t) > 200_000:
+            raise ModelError("coast-down did not reach v_end (road load too small?)")
+    return np.array(t), np.array(v), m_eff
+
+
+def coast_down_coefficients(spec) -> tuple[float, float, float]:
+    """(a_V [N], b_V [N s/m], c_V [N s²/m²]) of M0 (eq. 5.4) from a simulated coast-down of the nominal spec."""
+    t, v, m_eff = simulate_coast_down(spec)
+    return fit_coast_down(t, v, m_eff)
+
+
+def published_coast_down(spec, air_density: float = AIR_DENSITY_NOMINAL) -> tuple[float, float, float]:
+    """(a_V, b_V, c_V) of eq. 5.4 from spec-sheet values alone: a_V = m_V g f_r0, b_V = m_V g f_r1,
+    c_V = ρ_a/2 c_x A_V (section 5.4.1) — for vehicles whose coast-down is not measured (real logs)."""
+    m = float(spec.body.mass)
+    return (m * G * float(spec.tires.rolling_resistance_f0), m * G * float(spec.tires.rolling_resistance_f1),
+            0.5 * air_density * float(spec.aero.drag_area))

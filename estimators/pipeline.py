@@ -37,7 +37,7 @@ STAGES = ("measured", "smoothed", "decimated", "states")
 
 # continuous channels that pass the smoother bank (when present)
 SMOOTHED_CHANNELS = ("vehicle_speed", "accel_x", "drive_torque", "engine_speed", "steering_wheel_angle",
-                     "wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr", "rim_torque")
+                     "wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr", "rim_torque", "grade")
 # channels taken as they are (discrete or thresholded), aligned to the smoothed time base
 DISCRETE_CHANNELS = ("gear", "clutch", "brake_pressure_front", "brake_pressure_rear")
 WHEEL_SPEEDS = ("wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr")
@@ -56,7 +56,8 @@ class DrivetrainModel:
     gear_ratios: i_G(G) for G = 1..n; final_drive: i_D; wheel_radius: r_W [m]; wheel_inertia: I_W of all four
     wheels [kg m^2]; reduced_inertia: I_red(G) at the wheels per gear [kg m^2]; gearbox_efficiency: η_G(G) per
     gear and gearbox_drag: constant drag torque per gear at the gearbox input [N m] (the loss table
-    f(T_G, θ̇_G, G) ≈ (1 - η_G) |T_G| i_G + drag i_G); differential_efficiency η_D (f(T_D, θ̇_D) ≈ (1 - η_D)|T_D| i_D).
+    f(T_G, θ̇_G, G) ≈ (1 - η_G) |T_G| i_G + drag i_G); differential_efficiency η_D and differential_drag [N m at
+    the differential input] (f(T_D, θ̇_D) ≈ (1 - η_D) |T_D| i_D + drag_D i_D).
     slip_tolerance: relative difference of engine and gear-shaft speed still counted as engaged (condition 3).
     """
 
@@ -68,6 +69,7 @@ class DrivetrainModel:
     gearbox_efficiency: tuple[float, ...]
     gearbox_drag: tuple[float, ...]
     differential_efficiency: float
+    differential_drag: float = 0.0
     slip_tolerance: float = 0.05
 
     def __post_init__(self) -> None:
@@ -110,7 +112,7 @@ class DrivetrainModel:
         t_d = np.where(t_g >= 0, t_g * eta_g, t_g / eta_g) - drag * i_g
         t_w = t_d * self.final_drive
         eta_d = self.differential_efficiency
-        t_w = np.where(t_w >= 0, t_w * eta_d, t_w / eta_d)
+        t_w = np.where(t_w >= 0, t_w * eta_d, t_w / eta_d) - self.differential_drag * self.final_drive
         i_red = self._per_gear(self.reduced_inertia, gear)
         return t_w - i_red * np.asarray(wheel_acceleration, dtype=float)
 
@@ -163,6 +165,48 @@ class VehicleKnowledge:
     steering: SteeringGeometry | None = None
 
 
+def _fit_loss_table(loss_map, ratio: float) -> tuple[float, float]:
+    """(η, drag at the input [N m]) of a loss table f(T_in, ω_in) [N m at the output], fitted as
+    (1 - η) |T_in| i + drag i over the table's torque axis at the median of its speed axis (the estimating side's
+    simplification: no speed dependence of the spin losses, no oil temperature)."""
+    torque = np.asarray(loss_map.x, dtype=float)
+    speed = float(np.median(np.asarray(loss_map.y, dtype=float)))
+    loss = np.asarray(loss_map(torque, np.full_like(torque, speed)), dtype=float)
+    A = np.column_stack([np.abs(torque) * ratio, np.full_like(torque, ratio)])
+    (one_minus_eta, drag), *_ = np.linalg.lstsq(A, loss, rcond=None)
+    return float(np.clip(1.0 - one_minus_eta, 0.51, 1.0)), float(max(drag, 0.0))
+
+
+def knowledge_from_spec(spec, coast_down: tuple[float, float, float] | None = None,
+                        air_density: float | None = None) -> VehicleKnowledge:
+    """The estimating side's knowledge of a :class:`roadload.vehicle.VehicleSpec`: nominal mass, f_r0, drag area,
+    c_yW (eq. 2.15 equivalent of the axle stiffnesses), geometry, steering table, and a drive-train model whose
+    loss tables are simplified from the spec's maps (warm oil, one speed; the same structure for rear- and
+    all-wheel drive, as in section 5.9). coast_down: (a_V, b_V, c_V) for M0 (see
+    :func:`roadload.estimators.models.simulate_coast_down`)."""
+    from roadload.vehicle import STANDARD_AIR_DENSITY
+
+    d = spec.drivetrain
+    eff, drag = zip(*[_fit_loss_table(m, r) for m, r in zip(d.gearbox_loss, d.gear_ratios)])
+    eta_d, drag_d = _fit_loss_table(d.differential_loss, d.final_drive)
+    drivetrain = DrivetrainModel(
+        gear_ratios=tuple(float(r) for r in d.gear_ratios), final_drive=float(d.final_drive),
+        wheel_radius=float(spec.tires.dynamic_radius), wheel_inertia=4.0 * float(spec.tires.wheel_inertia),
+        reduced_inertia=tuple(float(d.reduced_inertia(g)) for g in range(1, d.n_gears + 1)),
+        gearbox_efficiency=tuple(eff), gearbox_drag=tuple(drag), differential_efficiency=eta_d,
+        differential_drag=drag_d)
+    steering = SteeringGeometry(wheelbase=float(spec.body.wheelbase),
+                                rear_axle_distance=float(spec.body.cg_to_rear_axle),
+                                steering_wheel_angle=tuple(map(float, spec.steering.steering_wheel_angle)),
+                                wheel_angle=tuple(map(float, spec.steering.wheel_angle)))
+    nominal = NominalParameters(mass=float(spec.body.mass),
+                                rolling_resistance_coefficient=float(spec.tires.rolling_resistance_f0),
+                                drag_area=float(spec.aero.drag_area),
+                                cornering_stiffness=float(spec.equivalent_cornering_stiffness()),
+                                air_density=float(air_density or STANDARD_AIR_DENSITY), coast_down=coast_down)
+    return VehicleKnowledge(spec.name, nominal, drivetrain, steering)
+
+
 # ================================================================================ settings and result
 @dataclass(frozen=True)
 class PipelineSettings:
@@ -173,7 +217,11 @@ class PipelineSettings:
     setting w = 20, order 4, λ = 0.9), rescaled to the same memory in seconds at other input rates; min_speed [m/s] (condition 2, 5.5 m/s); min_drive_torque [N m]
     (condition 4, 10 N m); brake_pressure_threshold [Pa] and brake_hold [s] (condition 1: no braking plus 0.5 s);
     brake_deceleration [m/s^2]: when a trip logs no brake pressure, braking is assumed where dv/dt is below
-    this (and the trip is flagged); warmup [s]: samples at the start excluded while the smoothers settle.
+    this (and the trip is flagged); warmup [s]: samples at the start excluded while the smoothers settle;
+    smoother_rate [Hz]: the input rate the smoother settings are given for; drive_torque_floor [N m]: samples with
+    T_E at or below it are excluded too (e.g. where a BEV's regenerative torque saturates and unlogged friction
+    brakes take over; -inf = off); gradient: 'accelerometer' (eq. 5.2) or 'grade_channel' (a logged / map grade
+    channel named 'grade', e.g. from elevation, when the accelerometer does not see g sin θ).
     """
 
     estimation_rate: float = 10.0
@@ -184,8 +232,15 @@ class PipelineSettings:
     brake_hold: float = 0.5
     brake_deceleration: float = -1.5
     warmup: float = 2.0
+    smoother_rate: float = 100.0
+    drive_torque_floor: float = -np.inf
+    gradient: str = "accelerometer"
 
     def __post_init__(self) -> None:
+        if self.gradient not in ("accelerometer", "grade_channel"):
+            raise PipelineError(f"gradient must be 'accelerometer' or 'grade_channel', got {self.gradient!r}")
+        if not self.smoother_rate > 0:
+            raise PipelineError(f"smoother_rate must be > 0 Hz, got {self.smoother_rate}")
         if not self.estimation_rate > 0:
             raise PipelineError(f"estimation_rate must be > 0 Hz, got {self.estimation_rate}")
         for name in ("min_speed", "min_drive_torque", "brake_pressure_threshold", "brake_hold", "warmup"):
@@ -219,13 +274,13 @@ class PipelineResult:
 def _smoother_bank(values: dict[str, np.ndarray], rate: float, settings: PipelineSettings):
     """Smoothed values, first derivatives [unit/s] and the common delay [samples] of the library's PKS bank.
 
-    The smoother settings are given for 100 Hz (ten times the 10 Hz estimation rate); at another input rate the
-    window is scaled with the rate and the forgetting factor λ to the same memory in seconds (λ^(100 Hz/rate))."""
+    The smoother settings are given for settings.smoother_rate (100 Hz); at another input rate the window is
+    scaled with the rate and the forgetting factor λ to the same memory in seconds (λ^(smoother_rate/rate))."""
     from .pks import pks_bank  # the estimator library's bank: one PKS configuration for all channels
 
     cfg = dict(settings.smoother)
-    scale = rate / (10.0 * settings.estimation_rate)
-    if scale != 1.0:
+    scale = rate / settings.smoother_rate
+    if abs(scale - 1.0) > 1e-6:
         cfg["window"] = max(1, int(round(cfg.get("window", 20) * scale)))
         cfg["forgetting"] = float(cfg.get("forgetting", 0.9)) ** (1.0 / scale)
     return pks_bank(values, dt=1.0 / rate, derivatives=1, **cfg)
@@ -287,8 +342,13 @@ def _stage_states(dec: pd.DataFrame, knowledge: VehicleKnowledge, settings: Pipe
     dv = dec["vehicle_speed_derivative"].to_numpy(dtype=float)
     out: dict[str, np.ndarray] = {"t": t, SPEED: v, ACCELERATION: dv}
 
-    # gradient angle, eq. 5.2
-    if "accel_x" in dec:
+    # gradient angle, eq. 5.2 (or a grade channel)
+    if settings.gradient == "grade_channel":
+        if "grade" not in dec:
+            raise PipelineError("gradient='grade_channel' but the trip has no 'grade' channel")
+        out[GRADIENT_ANGLE] = dec["grade"].to_numpy(dtype=float)
+        notes.append("gradient angle from the trip's grade channel, not eq. 5.2")
+    elif "accel_x" in dec:
         ratio = (dec["accel_x"].to_numpy(dtype=float) - dv) / G
         out[GRADIENT_ANGLE] = np.arcsin(np.clip(ratio, -1.0, 1.0))
     else:
@@ -345,7 +405,7 @@ def _stage_states(dec: pd.DataFrame, knowledge: VehicleKnowledge, settings: Pipe
     cond = {
         "no_brake": ~_hold(braking, t, settings.brake_hold),
         "moving": v > settings.min_speed,
-        "torque": np.abs(drive_torque) > settings.min_drive_torque,
+        "torque": (np.abs(drive_torque) > settings.min_drive_torque) & (drive_torque > settings.drive_torque_floor),
         "rim_torque_available": np.isfinite(rim) & np.isfinite(out[TRACTIVE_FORCE]),
     }
     slip_ok = np.isfinite(dt_model.overall_ratio(gear))

@@ -149,3 +149,27 @@ def test_path_curvature_eq_5_3():
     assert k[1] == pytest.approx(1 / r) and k[2] == pytest.approx(-1 / r)
     with pytest.raises(PipelineError, match="l_34"):
         SteeringGeometry(2.9, 3.0, (-1.0, 1.0), (-0.1, 0.1))
+
+
+def test_knowledge_from_a_preset_spec_and_its_simulated_coast_down():
+    presets = pytest.importorskip("roadload.envs.presets")
+    from roadload.estimators.models import coast_down_coefficients, published_coast_down, simulate_coast_down
+    from roadload.estimators.pipeline import knowledge_from_spec
+
+    spec = presets.get_preset("gt_rwd")
+    t, v, m_eff = simulate_coast_down(spec)
+    assert v[0] == pytest.approx(130 / 3.6) and v[-1] <= 15 / 3.6 and m_eff > spec.body.mass
+    a, b, c = coast_down_coefficients(spec)
+    # the fitted polynomial reproduces the simulator's road load it was coasting against (within 1 %)
+    vv = np.linspace(6.0, 35.0, 20)
+    np.testing.assert_allclose(a + b * vv + c * vv ** 2, spec.road_load(vv), rtol=0.01)
+    k = knowledge_from_spec(spec, coast_down=(a, b, c))
+    assert k.nominal.mass == spec.body.mass and k.nominal.coast_down == (a, b, c)
+    assert k.drivetrain.n_gears == len(spec.drivetrain.gear_ratios)
+    assert k.drivetrain.reduced_inertia[0] == pytest.approx(spec.drivetrain.reduced_inertia(1))
+    assert k.steering.rear_axle_distance == pytest.approx(spec.body.cg_to_rear_axle)
+    # the estimating side's loss table is a fit of the spec's maps at one speed: efficiencies of a real gearbox
+    assert all(0.9 < e <= 1.0 for e in k.drivetrain.gearbox_efficiency)
+    a0, b0, c0 = published_coast_down(spec)
+    assert a0 == pytest.approx(spec.body.mass * G * spec.tires.rolling_resistance_f0)
+    assert c0 == pytest.approx(0.5 * 1.2041 * spec.aero.drag_area)

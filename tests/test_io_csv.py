@@ -164,3 +164,18 @@ def test_comma2k19_arrays(tmp_path):
     (folder / "src").unlink()
     with pytest.raises(LogImportError, match="raw_can array 'src' missing"):
         read_comma2k19(folder)
+
+
+def test_elevation_change_at_standstill_is_removed_and_counted():
+    from roadload.io.derived import freeze_elevation_at_standstill, grade_from_elevation_track
+    from roadload.io.report import ImportReport
+
+    t = np.arange(0, 200, 0.1)
+    v = np.where(t < 30, 0.0, 10.0)
+    z = np.where(t < 30, 500 + t / 3, 510.0)  # the log ramps 10 m while the car stands, then the road is flat
+    report = ImportReport()
+    fixed = freeze_elevation_at_standstill(v, z, report)
+    assert np.all(fixed == 500.0)
+    assert report.repairs[0]["count"] == 299 and "10.0 m in total" in report.repairs[0]["detail"]
+    grade = grade_from_elevation_track(t, v, z, ImportReport())
+    assert np.abs(np.tan(grade)).max() < 1e-9

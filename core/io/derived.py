@@ -46,6 +46,28 @@ def _profile(distance, *, name: str, report: ImportReport, what: str, **kwargs):
     return prof
 
 
+def freeze_elevation_at_standstill(speed, elevation, report: ImportReport, what: str = "elevation",
+                                   threshold: float = STANDSTILL_SPEED) -> np.ndarray:
+    """Elevation [m] with every change that happens while the vehicle stands (speed < threshold) removed.
+
+    A standing vehicle cannot climb: such changes are sensor artefacts (a GNSS altitude wandering at a traffic
+    light, the i3 log ramping its elevation over the first minute at standstill), and over almost no distance
+    they become absurd grades. The changes are subtracted cumulatively (the profile after the stop continues
+    from the elevation before it); the number of samples and the metres removed are reported.
+    """
+    v = np.nan_to_num(np.asarray(speed, dtype=float), nan=0.0)
+    z = np.asarray(elevation, dtype=float)
+    dz = np.diff(z, prepend=z[:1])
+    dz = np.where(np.isfinite(dz), dz, 0.0)
+    still = (v < threshold) & (dz != 0)
+    if not still.any():
+        return z
+    removed = np.cumsum(np.where(still, dz, 0.0))
+    report.repair(what, "elevation change at standstill removed", int(still.sum()),
+                  f"{np.abs(dz[still]).sum():.1f} m in total, net {removed[-1]:+.1f} m")
+    return z - removed
+
+
 def grade_from_elevation_track(t, speed, elevation, report: ImportReport, *, window: float = 150.0,
                                name: str = "trip") -> np.ndarray | None:
     """Grade theta [rad] at each time sample: elevation z over distance (integrated speed), smoothed over
@@ -60,6 +82,7 @@ def grade_from_elevation_track(t, speed, elevation, report: ImportReport, *, win
     if finite.size and np.ptp(finite) == 0 and s[-1] > 1000:
         report.note(f"grade not derived: elevation frozen at {finite[0]:g} m over {s[-1] / 1000:.1f} km")
         return None
+    z = freeze_elevation_at_standstill(speed, z, report)
     prof = _profile(s, elevation=z, name=name, report=report, what="grade", elevation_window=window)
     return prof.at(s - s[0])["grade"]
 

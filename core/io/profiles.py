@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 
 from ..trip import Trip
-from .derived import distance_from_speed
-from .report import LogImportError
+from .derived import distance_from_speed, freeze_elevation_at_standstill
+from .report import ImportReport, LogImportError
 
 MAX_PROFILE_GRADE = 0.30  # |tan theta| above 30 % is clipped (and counted) like every import
 
@@ -71,9 +71,10 @@ def profile_from_trip(trip: Trip, *, name: str, source: str, licence: str, grade
     if trip.meta.get("t0_unix") is not None:
         info["t0_unix"] = trip.meta["t0_unix"]
     elevation = None
+    report = ImportReport()
     if grade_source == "elevation":
         trip.require("elevation")
-        elevation = trip.channel("elevation")
+        elevation = freeze_elevation_at_standstill(v, trip.channel("elevation"), report)
     elif grade_source == "pitch":
         trip.require("pitch", "elevation")
         pitch = np.where(np.isfinite(trip.channel("pitch")), trip.channel("pitch"), 0.0)
@@ -100,6 +101,7 @@ def profile_from_trip(trip: Trip, *, name: str, source: str, licence: str, grade
         heading = np.pi / 2 - course  # compass course (clockwise from north) -> counter-clockwise from east
     elif curvature_source is not None:
         raise LogImportError(f"curvature_source must be 'yaw_rate', 'heading' or None, got {curvature_source!r}")
+    info["repairs_before_smoothing"] = report.to_dict()["repairs"]
     return profile_from_track(s, elevation=elevation, heading=heading, name=name, step=step,
                               elevation_window=elevation_window, heading_window=heading_window,
                               max_grade=MAX_PROFILE_GRADE, default_speed_limit=default_speed_limit, meta=info)

@@ -670,17 +670,28 @@ def run_scenario(scenario: Scenario, estimators: Sequence[str] | None = None) ->
 
 
 def run_sweep_results(tasks: Sequence[Scenario], estimators: Sequence[str] | None = None, *,
-                      scheduler: str | None = None, progress: bool = True):
-    """Run scenarios on the shared sweep runner (local processes or Dask) and return one long DataFrame."""
+                      scheduler: str | None = None, progress: bool = True, workers: int | None = None):
+    """Run scenarios on the shared sweep runner (local processes or a Dask cluster at ``scheduler``).
+
+    Returns (results, failed): one long DataFrame of metric rows, and [(scenario, error text)] for the
+    scenarios whose construction or evaluation raised (they are reported, not dropped silently)."""
     import functools
 
     import pandas as pd
 
     from roadload.sweep import run_sweep
 
+    if estimators is not None:
+        known = default_estimators()
+        unknown = [e for e in estimators if e not in known]
+        if unknown:
+            raise RobustnessError(f"unknown estimators {unknown}; known: {known}")
     fn = functools.partial(run_scenario, estimators=list(estimators) if estimators is not None else None)
-    out = run_sweep(fn, list(tasks), scheduler=scheduler, progress=progress)
-    return pd.DataFrame([row for rows in out for row in rows])
+    outcomes = run_sweep(fn, list(tasks), scheduler=scheduler, progress=progress, workers=workers,
+                         description="robustness")
+    rows = [row for o in outcomes if o.ok for row in o.value]
+    failed = [(o.task, o.error) for o in outcomes if not o.ok]
+    return pd.DataFrame(rows), failed
 
 
 # ====================================================================================== aggregation and report
@@ -880,7 +891,8 @@ def _markdown(df, columns: Sequence[str]) -> str:
     return "\n".join(lines)
 
 
-def write_report(results, out_dir, bound: float = DEFAULT_BOUND) -> dict[str, Any]:
+def write_report(results, out_dir, bound: float = DEFAULT_BOUND,
+                 failed: Sequence[tuple[Any, str]] = ()) -> dict[str, Any]:
     """Tables per sweep (CSV + Markdown), breakdown curves (PNG), rankings and the one-page summary.
 
     Returns {'rankings': {sweep: DataFrame}, 'checks': [decision-tree check rows], 'files': [paths]}."""
@@ -938,6 +950,9 @@ def write_report(results, out_dir, bound: float = DEFAULT_BOUND) -> dict[str, An
         summary.append("No sweep in this run exercises a question of the decision tree.")
     summary.append("")
     summary.append("Drift, headwind, bias and latency are not covered by figure 3.17; they are ranked only.")
+    if failed:
+        summary += ["", f"## Failed scenarios ({len(failed)})", ""]
+        summary += [f"- {task}: {err}" for task, err in failed]
     _atomic_write_text(out / "summary.md", "\n".join(summary) + "\n")
     files.append(out / "summary.md")
     return {"rankings": rankings, "checks": checks, "files": files}

@@ -178,4 +178,4 @@ def test_elevation_change_at_standstill_is_removed_and_counted():
     np.testing.assert_allclose(fixed, 500.0, atol=0.034)  # only the last 0.1 s step falls on a moving sample
     assert report.repairs[0]["count"] == 299 and "10.0 m in total" in report.repairs[0]["detail"]
     grade = grade_from_elevation_track(t, v, z, ImportReport())
-    assert np.abs(np.tan(grade)).max() < 5e-4  # without the repair: 10 m over ~0 m
+    assert np.abs(np.tan(grade)).max() < 1e-3  # 0.1 %; without the repair: 10 m over ~0 m

@@ -40,15 +40,6 @@ class Database:
     def signal_names(self) -> set[str]:
         return {f"{m.name}.{s.name}" for m in self.messages.values() for s in m.signals}
 
-    def unit_of(self, key: str) -> str | None:
-        msg_name, _, sig_name = key.partition(".")
-        for m in self.messages.values():
-            if m.name == msg_name:
-                for s in m.signals:
-                    if s.name == sig_name:
-                        return s.unit or None
-        return None
-
 
 def load_dbc(sources: list[DbcSource], report: ImportReport | None = None) -> Database:
     """Parse DBC files with cantools (non-strict: overlapping signals are allowed, as real DBCs have them)."""

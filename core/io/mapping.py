@@ -47,7 +47,7 @@ from ..trip import Trip
 from ..units import si_unit_of, to_si
 from .report import ImportReport, LogImportError
 from .resample import RULES, resample, uniform_time_base
-from .signals import Signal, SignalSet, monotonic
+from .signals import SignalSet, monotonic
 from .validate import plausible
 
 MAPPINGS_DIR = Path(__file__).parent / "mappings"
@@ -449,7 +449,3 @@ def apply_mapping(signals: SignalSet, mapping: Mapping, report: ImportReport, *,
         meta["clock"] = {k: clock_info[k] for k in ("reference", "offset_s", "drift_ppm", "residual_rms_s", "n")}
     meta["import_report"] = report.to_dict()
     return Trip(pd.DataFrame(cols), units, meta)
-
-
-def signal_from_series(t: np.ndarray, values, unit: str | None) -> Signal:
-    return Signal(np.asarray(t, dtype=float), np.asarray(values), unit)

@@ -8,7 +8,7 @@ p(w_l + 1) (eq. after 3.52); its derivatives are p', p'', … at the same point 
 for physical units). The delay is exactly w_r samples for every channel and every frequency.
 
 The update is the recursive kernel of :mod:`.kernel` (transition matrix part, L2 weights, forgetting); a bank
-runs the channels through :func:`roadload.estimators.run_many`.
+runs every channel through it with the same configuration.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from math import comb, factorial
 import numpy as np
 
 from .config import EstimatorConfig, EstimatorConfigError
-from .recursive import EstimatorInputError, RecursiveEstimator, run_many
+from .recursive import EstimatorInputError, RecursiveEstimator
 
 
 def shift_matrix(n_params: int) -> np.ndarray:
@@ -112,7 +112,7 @@ class PolynomialKalmanSmoother:
         B = np.asarray(B, dtype=float)
         if B.ndim != 1:
             raise EstimatorInputError(f"PKS input must be one signal (T,), got shape {B.shape}")
-        A = np.broadcast_to(self._c, (B.shape[0], self.design.n_params))
+        A = np.tile(self._c, (B.shape[0], 1))
         return self._est.run(A, B, store=store)
 
     def smooth(self, B, dt: float = 1.0, derivatives: int = 0) -> "PKSBankResult":
@@ -182,11 +182,11 @@ def pks_bank(values, dt: float = 1.0, derivatives: int = 1, *, window: int | Non
     if not (isinstance(derivatives, (int, np.integer)) and 0 <= derivatives < design.n_params):
         raise EstimatorInputError(f"derivatives must be an integer in 0..{design.n_params - 1}, got {derivatives!r}")
     n = design.n_params
-    B = np.vstack(arrays)
-    A = np.broadcast_to(design.regressor, (T, n))
-    res = run_many(design.config(), A, B, store="x")
+    A = np.tile(design.regressor, (T, 1))
     rows = design.evaluation_rows(derivatives)
-    est = res.X @ rows.T  # (channels, T, derivatives + 1)
+    cfg = design.config()
+    # channels one after the other through the kernel (cheap; the parallel path is for long estimator runs)
+    est = np.stack([RecursiveEstimator(cfg).run(A, a, store="x").X @ rows.T for a in arrays])
     value = {k: est[i, :, 0].copy() for i, k in enumerate(names)}
     ders = {k: est[i, :, 1:] / dt ** np.arange(1, derivatives + 1) for i, k in enumerate(names)}
     first = {k: ders[k][:, 0].copy() for k in names} if derivatives >= 1 else None

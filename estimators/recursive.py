@@ -85,6 +85,11 @@ def _as_float(arr, what: str) -> np.ndarray:
     return out
 
 
+def kernel_array(arr: np.ndarray) -> np.ndarray:
+    """C-contiguous, writeable float64 (one array type for the kernel: one compiled specialisation)."""
+    return np.require(arr, dtype=np.float64, requirements=["C", "W", "A"])
+
+
 class RecursiveEstimator:
     """A recursive estimator of chapter 3 built from an :class:`EstimatorConfig` composition.
 
@@ -204,7 +209,8 @@ class RecursiveEstimator:
         if b.shape != (1,):
             raise EstimatorInputError(f"b_t must be a scalar, got shape {np.shape(b_t)}")
         z = None if instrument is None else _as_float(instrument, "instrument").reshape(1, -1)
-        self._process(*self._check(a, b, z), K.STORE_FINAL)
+        A, B, Z = self._check(a, b, z)
+        self._process(kernel_array(A), kernel_array(B), kernel_array(Z), K.STORE_FINAL)
         return self._x.copy()
 
     def _process(self, A, B, Z, store):
@@ -229,8 +235,7 @@ class RecursiveEstimator:
         A, B, Z = self._check(A, B, instruments)
         skipped_before = int(self._ct[K.CT_SKIPPED])
         rolled_before = int(self._ct[K.CT_ROLLED_BACK])
-        out_X, out_Pd, vecs = self._process(np.ascontiguousarray(A), np.ascontiguousarray(B),
-                                            np.ascontiguousarray(Z), _STORE[store])
+        out_X, out_Pd, vecs = self._process(kernel_array(A), kernel_array(B), kernel_array(Z), _STORE[store])
         full = store == "full"
         skipped = np.isnan(vecs[0]) if full else None
         st = self.state
@@ -245,7 +250,7 @@ class RecursiveEstimator:
 def run_many(config: EstimatorConfig, A, B, instruments=None, store: str = "full") -> EstimationResult:
     """Run independent records (trips) in parallel from the initial state of ``config``.
 
-    A: K×T×n (or T×n shared by all trips), B: K×T; pad shorter trips with NaN (padding is skipped and
+    A: K×T×n (or T×n shared by all trips; it is copied per trip), B: K×T; pad shorter trips with NaN (padding is skipped and
     counted). Results carry the trip axis first; counters are arrays of length K; ``state`` is a list.
     Identical to running :meth:`RecursiveEstimator.run` on each trip."""
     if store not in _STORE:
@@ -286,9 +291,7 @@ def run_many(config: EstimatorConfig, A, B, instruments=None, store: str = "full
     out_X = np.empty((Kt, T, n)) if code >= K.STORE_X else np.empty((Kt, 0, n))
     out_Pd = np.empty((Kt, T, n)) if full else np.empty((Kt, 0, n))
     vecs = [np.empty((Kt, T)) if full else np.empty((Kt, 0)) for _ in range(4)]
-    if not A.flags.c_contiguous and A.strides[0] != 0:
-        A = np.ascontiguousarray(A)
-    K.run_many(A, np.ascontiguousarray(B), Z, ip, arr["fp"], arr["Q"], arr["Pd"], arr["F"], arr["xmin"],
+    K.run_many(kernel_array(A), kernel_array(B), kernel_array(Z), ip, arr["fp"], arr["Q"], arr["Pd"], arr["F"], arr["xmin"],
                arr["xmax"], X, P, sc, ring, ct, out_X, out_Pd, *vecs)
     states = []
     for r in range(Kt):

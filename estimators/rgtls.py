@@ -19,7 +19,7 @@ from numba import njit
 
 from .config import EstimatorConfigError, _matrix
 from .pks import PolynomialKalmanSmoother
-from .recursive import EstimationResult, EstimatorInputError, EstimatorState
+from .recursive import EstimationResult, EstimatorInputError, EstimatorState, kernel_array
 
 # counters
 _SKIP, _ROLLED, _BLOW, _T = 0, 1, 2, 3
@@ -226,13 +226,13 @@ class RecursiveGTLS:
         """Process a record A (T×n), B (T,) from the current state; returns an EstimationResult."""
         if instruments is not None:
             raise EstimatorInputError("RGTLS takes no instruments")
-        A = np.ascontiguousarray(np.asarray(A, dtype=float))
-        B = np.ascontiguousarray(np.asarray(B, dtype=float))
+        A = kernel_array(np.asarray(A, dtype=float))
+        B = kernel_array(np.asarray(B, dtype=float))
         n = self.n_params
         if A.ndim != 2 or A.shape[1] != n or B.shape != (A.shape[0],):
             raise EstimatorInputError(f"need A (T, {n}) and B (T,), got {A.shape} and {B.shape}")
         T = A.shape[0]
-        Nz = np.ascontiguousarray(self._noise_rows(A, B))
+        Nz = kernel_array(self._noise_rows(A, B))
         out = [np.empty((T, n)), np.empty((T, n)), np.empty(T), np.empty(T), np.empty(T)]
         before = self._ct.copy()
         rgtls_record(A, B, Nz, self.nce, self.forgetting, self.nce_forgetting, self.blowup, self._x, self._p,

@@ -17,6 +17,7 @@ _COMMAND_MODULES: list[str] = [
     "roadload.road_profiles.cli",
     "roadload.io.cli",
     "roadload.estimators.robustness_cli",
+    "roadload.estimators.cli",
 ]
 
 

@@ -146,8 +146,12 @@ class ModelStructure:
     def check(self, states: Mapping[str, np.ndarray]) -> None:
         miss = self.missing(states)
         if miss:
-            raise ModelError(f"model {self.name!r} needs the states {miss}, which this trip does not provide "
-                             f"(it has {sorted(states.keys()) if hasattr(states, 'keys') else '?'})")
+            absent = [m for m in miss if m not in states]
+            empty = [m for m in miss if m in states]
+            parts = ([f"lacks the states {absent}"] if absent else []) + \
+                    ([f"has no valid sample of {empty} (all NaN, e.g. no steering signal for the path curvature)"]
+                     if empty else [])
+            raise ModelError(f"model {self.name!r} cannot be built: the trip " + " and ".join(parts))
 
     def regressors(self, states: Mapping[str, np.ndarray]) -> np.ndarray:
         """The measured inputs A [T x n] from the states."""

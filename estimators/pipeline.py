@@ -157,12 +157,15 @@ class SteeringGeometry:
 @dataclass(frozen=True)
 class VehicleKnowledge:
     """Everything the estimating side knows about a vehicle: name, nominal parameters (initial X̂, M0's
-    coast-down), drive-train model, steering geometry (None: no path curvature, M4 unavailable)."""
+    coast-down), drive-train model, steering geometry (None: no path curvature, M4 unavailable) and
+    drive_torque_floor [N m]: below it the drive-train model is not trusted (a BEV near its regenerative torque
+    limit, where unlogged friction brakes may add torque)."""
 
     name: str
     nominal: NominalParameters
     drivetrain: DrivetrainModel
     steering: SteeringGeometry | None = None
+    drive_torque_floor: float = -np.inf
 
 
 def _fit_loss_table(loss_map, ratio: float) -> tuple[float, float]:
@@ -204,7 +207,10 @@ def knowledge_from_spec(spec, coast_down: tuple[float, float, float] | None = No
                                 drag_area=float(spec.aero.drag_area),
                                 cornering_stiffness=float(spec.equivalent_cornering_stiffness()),
                                 air_density=float(air_density or STANDARD_AIR_DENSITY), coast_down=coast_down)
-    return VehicleKnowledge(spec.name, nominal, drivetrain, steering)
+    floor = -np.inf
+    if d.kind == "bev" and d.motor is not None:
+        floor = -0.92 * float(d.motor.regen_torque_limit)
+    return VehicleKnowledge(spec.name, nominal, drivetrain, steering, floor)
 
 
 # ================================================================================ settings and result
@@ -220,8 +226,10 @@ class PipelineSettings:
     this (and the trip is flagged); warmup [s]: samples at the start excluded while the smoothers settle;
     smoother_rate [Hz]: the input rate the smoother settings are given for; drive_torque_floor [N m]: samples with
     T_E at or below it are excluded too (e.g. where a BEV's regenerative torque saturates and unlogged friction
-    brakes take over; -inf = off); gradient: 'accelerometer' (eq. 5.2) or 'grade_channel' (a logged / map grade
-    channel named 'grade', e.g. from elevation, when the accelerometer does not see g sin θ).
+    brakes take over; -inf = off; the knowledge's floor applies as well); gradient: 'accelerometer' (eq. 5.2),
+    'grade_channel' (a logged / map grade channel named 'grade', e.g. from elevation) or 'auto' (eq. 5.2 unless
+    the trip has a grade channel and the accelerometer is found not to see g sin θ: the slope of
+    (ẍ_CAN - v̇) over g sin θ_grade below 0.5).
     """
 
     estimation_rate: float = 10.0
@@ -234,11 +242,11 @@ class PipelineSettings:
     warmup: float = 2.0
     smoother_rate: float = 100.0
     drive_torque_floor: float = -np.inf
-    gradient: str = "accelerometer"
+    gradient: str = "auto"
 
     def __post_init__(self) -> None:
-        if self.gradient not in ("accelerometer", "grade_channel"):
-            raise PipelineError(f"gradient must be 'accelerometer' or 'grade_channel', got {self.gradient!r}")
+        if self.gradient not in ("accelerometer", "grade_channel", "auto"):
+            raise PipelineError(f"gradient must be 'accelerometer', 'grade_channel' or 'auto', got {self.gradient!r}")
         if not self.smoother_rate > 0:
             raise PipelineError(f"smoother_rate must be > 0 Hz, got {self.smoother_rate}")
         if not self.estimation_rate > 0:
@@ -246,6 +254,17 @@ class PipelineSettings:
         for name in ("min_speed", "min_drive_torque", "brake_pressure_threshold", "brake_hold", "warmup"):
             if not getattr(self, name) >= 0:
                 raise PipelineError(f"{name} must be >= 0, got {getattr(self, name)}")
+
+
+def settings_for_rate(rate: float, **overrides: Any) -> PipelineSettings:
+    """Default settings for a trip sampled at `rate` [Hz]: the 100 Hz smoother for CAN-rate logs; for logs already
+    at about the estimation rate (e.g. 10 Hz) a shorter, lower-order smoother given at 10 Hz (w = 5, order 2,
+    λ = 0.9), since rescaling the 100 Hz design would leave ~1 sample of memory."""
+    if rate >= 50.0:
+        return PipelineSettings(**overrides)
+    base = dict(smoother_rate=10.0, smoother={"window": 5, "order": 2, "forgetting": 0.9})
+    base.update(overrides)
+    return PipelineSettings(**base)
 
 
 @dataclass
@@ -334,6 +353,19 @@ def _hold(flag: np.ndarray, t: np.ndarray, hold: float) -> np.ndarray:
     return t - last <= hold
 
 
+def accelerometer_gravity_slope(frame: pd.DataFrame, min_speed: float = 3.0) -> float:
+    """Least-squares slope of (ẍ_CAN - v̇) over g sin θ of the 'grade' channel: ≈ 1 when the body-fixed
+    accelerometer measures gravity along the slope (eq. 5.2 applies), ≈ 0 when it does not (NaN: no grade
+    variation to tell)."""
+    y = frame["accel_x"].to_numpy(dtype=float) - frame["vehicle_speed_derivative"].to_numpy(dtype=float)
+    x = G * np.sin(frame["grade"].to_numpy(dtype=float))
+    ok = np.isfinite(x) & np.isfinite(y) & (frame["vehicle_speed"].to_numpy(dtype=float) > min_speed)
+    if ok.sum() < 50 or np.std(x[ok]) < 1e-3:
+        return float("nan")
+    xc = x[ok] - x[ok].mean()
+    return float(np.sum(xc * (y[ok] - y[ok].mean())) / np.sum(xc ** 2))
+
+
 def _stage_states(dec: pd.DataFrame, knowledge: VehicleKnowledge, settings: PipelineSettings,
                   notes: list[str]) -> pd.DataFrame:
     dt_model = knowledge.drivetrain
@@ -343,7 +375,16 @@ def _stage_states(dec: pd.DataFrame, knowledge: VehicleKnowledge, settings: Pipe
     out: dict[str, np.ndarray] = {"t": t, SPEED: v, ACCELERATION: dv}
 
     # gradient angle, eq. 5.2 (or a grade channel)
-    if settings.gradient == "grade_channel":
+    gradient = settings.gradient
+    if gradient == "auto":
+        gradient = "accelerometer"
+        if "grade" in dec and "accel_x" in dec:
+            slope = accelerometer_gravity_slope(dec)
+            if np.isfinite(slope) and slope < 0.5:
+                gradient = "grade_channel"
+                notes.append(f"the accelerometer does not see g sin(theta) (slope {slope:.2f} against the grade "
+                             f"channel)")
+    if gradient == "grade_channel":
         if "grade" not in dec:
             raise PipelineError("gradient='grade_channel' but the trip has no 'grade' channel")
         out[GRADIENT_ANGLE] = dec["grade"].to_numpy(dtype=float)
@@ -405,7 +446,8 @@ def _stage_states(dec: pd.DataFrame, knowledge: VehicleKnowledge, settings: Pipe
     cond = {
         "no_brake": ~_hold(braking, t, settings.brake_hold),
         "moving": v > settings.min_speed,
-        "torque": (np.abs(drive_torque) > settings.min_drive_torque) & (drive_torque > settings.drive_torque_floor),
+        "torque": ((np.abs(drive_torque) > settings.min_drive_torque)
+                   & (drive_torque > max(settings.drive_torque_floor, knowledge.drive_torque_floor))),
         "rim_torque_available": np.isfinite(rim) & np.isfinite(out[TRACTIVE_FORCE]),
     }
     slip_ok = np.isfinite(dt_model.overall_ratio(gear))
@@ -439,8 +481,9 @@ def run_pipeline(trip: Trip, knowledge: VehicleKnowledge, settings: PipelineSett
     """Run a Trip through the stages up to and including `until` (one of STAGES)."""
     if until not in STAGES:
         raise PipelineError(f"unknown stage {until!r}; stages are {list(STAGES)}")
-    settings = settings or PipelineSettings()
     name = str(trip.meta.get("name", "trip"))
+    if settings is None:
+        settings = settings_for_rate(trip.sample_rate) if len(trip) > 1 else PipelineSettings()
     notes: list[str] = []
     stages: dict[str, pd.DataFrame] = {"measured": trip.measured}
     result = PipelineResult(name=name, stages=stages, delay=0.0, decimation=1, notes=notes)

@@ -26,25 +26,41 @@ def _knowledge():
     return VehicleKnowledge("handmade", nom, dt, steer)
 
 
-def handmade_trip(duration=900.0, rate=100.0, events=True):
-    """100 Hz CAN channels whose tractive force is exactly A X_TRUE of eq. 5.6 (drive-train without losses)."""
+def invert_drivetrain(dt, wheel_torque, gear):
+    """Engine torque T_E that makes the estimating side's drive-train model deliver `wheel_torque` (after the
+    differential, before the reduced inertia) — the exact inverse of DrivetrainModel.rim_torque's loss model."""
+    i_g = np.asarray(dt.gear_ratios)[gear - 1]
+    eta_g = np.asarray(dt.gearbox_efficiency)[gear - 1]
+    drag_g = np.asarray(dt.gearbox_drag)[gear - 1]
+    t_w1 = wheel_torque + dt.differential_drag * dt.final_drive
+    t_w1 = np.where(t_w1 >= 0, t_w1 / dt.differential_efficiency, t_w1 * dt.differential_efficiency)
+    t_d = t_w1 / dt.final_drive + drag_g * i_g
+    t_g = np.where(t_d >= 0, t_d / eta_g, t_d * eta_g)
+    return t_g / i_g
+
+
+def handmade_trip(duration=900.0, rate=100.0, events=True, knowledge=None, gears=(1, 2)):
+    """100 Hz CAN channels whose tractive force is exactly A X_TRUE of eq. 5.6, made through the inverse of the
+    estimating side's drive-train model (default: the lossless one of _knowledge())."""
+    k = knowledge or _knowledge()
+    dtm, geo = k.drivetrain, k.steering
     t = np.arange(0, duration, 1 / rate)
     v = 19 + 7 * np.sin(2 * np.pi * t / 97) + 3 * np.sin(2 * np.pi * t / 23 + 1)
     dv = 7 * 2 * np.pi / 97 * np.cos(2 * np.pi * t / 97) + 3 * 2 * np.pi / 23 * np.cos(2 * np.pi * t / 23 + 1)
     theta = 0.05 * np.sin(2 * np.pi * t / 151) + 0.02 * np.sin(2 * np.pi * t / 41)
     kappa = 0.012 * np.sin(2 * np.pi * t / 37) ** 3
-    geo = _knowledge().steering
     l, l34 = geo.wheelbase, geo.rear_axle_distance
     tan_dw = kappa * l / np.sqrt(1 - (kappa * l34) ** 2)       # eq. 5.3 solved for tan δ_W
-    delta_s = np.arctan(tan_dw) * 15.0                         # table ratio 9/0.6 = 15
+    delta_s = np.interp(np.arctan(tan_dw), geo.wheel_angle, geo.steering_wheel_angle)
     force = (X_TRUE[0] * G * np.cos(theta) + X_TRUE[1] * (G * np.sin(theta) + dv) + X_TRUE[2] * v ** 2
              + X_TRUE[3] * v ** 4 * kappa ** 2 / 4)
-    gear = np.where(v < 17.0, 1, 2)
-    wheel_acc = dv / R_W
-    i_red = np.where(gear == 1, I_RED[0], I_RED[1])
-    ratio = np.where(gear == 1, RATIOS[0], RATIOS[1]) * I_D
-    drive_torque = (force * R_W + I_W * wheel_acc + i_red * wheel_acc) / ratio
-    wheel = v / R_W
+    gear = np.where(v < 17.0, gears[0], gears[1])
+    r_w = dtm.wheel_radius
+    wheel_acc = dv / r_w
+    i_red = np.asarray(dtm.reduced_inertia)[gear - 1]
+    ratio = np.asarray(dtm.gear_ratios)[gear - 1] * dtm.final_drive
+    drive_torque = invert_drivetrain(dtm, force * r_w + dtm.wheel_inertia * wheel_acc + i_red * wheel_acc, gear)
+    wheel = v / r_w
     engine = wheel * ratio
     brake = np.zeros_like(t)
     clutch = np.ones_like(t)

@@ -145,3 +145,32 @@ def test_packaged_project_dbcs_match_the_presets_sensor_quantisation(tmp_path):
         for name, ch in sensors.channels.items():
             if ch.enabled and ch.resolution > 0:
                 assert scales[name] == ch.resolution, name
+
+
+def test_simulated_trip_round_trip_through_mf4(tmp_path):
+    """The simulator's trip (sensor spec in its metadata) -> MF4 + project DBC -> import: every channel back to
+    quantisation; the only differences are the importer's counted repairs (negative wheel speeds at standstill
+    clipped to 0)."""
+    from roadload.envs.simulator import simulate
+    from roadload.io.export import sensors_from_meta
+    from roadload.road_profiles.registry import load_profile
+
+    trip = simulate("bmw_i3", load_profile("hilly", seed=1, length=2000.0), seed=3, duration=30.0)
+    sensors = sensors_from_meta(trip.meta)
+    paths = export_trip(trip, tmp_path / "sim", "mf4")
+    db = cantools.database.load_file(str(paths["dbc"]))
+    scales = {s.name: s.scale for m in db.messages for s in m.signals}
+    for name, spec in sensors.channels.items():
+        if spec.enabled and spec.resolution > 0 and name in trip.channels:
+            assert scales[name] == spec.resolution, name
+    back = import_log(paths["log"], "dbc-mf4", paths["mapping"])
+    assert back.channels == trip.channels and len(back) == len(trip)
+    clipped = 0
+    for name in trip.channels:
+        a, b = back.channel(name), trip.channel(name)
+        differs = np.abs(a - b) > 1e-9
+        np.testing.assert_array_equal(a[differs], 0.0, err_msg=name)  # only clipped samples differ ...
+        assert np.all(b[differs] < 0), name  # ... and those were negative speeds
+        clipped += int(differs.sum())
+    report = back.meta["import_report"]
+    assert report["n_repaired"] == clipped and report["n_dropped"] == 0

@@ -249,8 +249,8 @@ def export_trip(trip: Trip, path: str | Path, fmt: str, *, sensors: Any | None =
                 channels: list[str] | None = None, rates: dict[str, float] | None = None) -> dict[str, Path]:
     """Write trip channels as a CAN log (candump | blf | mf4 | asc) plus ``<log>.dbc`` and ``<log>.mapping.json``.
 
-    sensors: a SensorSpec (resolution, rate per channel); by default the spec stored in the trip's metadata
-    under ``meta["vehicle"]["sensors"]`` when present, else defaults. Returns the written paths.
+    sensors: a SensorSpec (resolution, rate per channel); by default the spec the simulator stored in the trip's
+    metadata (``sensors_from_meta``), else defaults. Returns the written paths.
     """
     if fmt not in _SUFFIX:
         raise LogImportError(f"unknown CAN export format {fmt!r}; choose one of {sorted(_SUFFIX)}")
@@ -274,10 +274,18 @@ def export_trip(trip: Trip, path: str | Path, fmt: str, *, sensors: Any | None =
 
 
 def sensors_from_meta(meta: dict[str, Any]):
-    """The SensorSpec stored in a simulated trip's metadata (meta["vehicle"]["sensors"]), or None."""
-    vehicle = meta.get("vehicle")
-    if not isinstance(vehicle, dict) or not isinstance(vehicle.get("sensors"), dict):
-        return None
-    from ..vehicle import VehicleSpec
+    """The SensorSpec a simulated trip was measured with: ``meta["sensors"]`` (the simulator's record), else
+    ``meta["vehicle"]["sensors"]``; None for trips without one (real logs)."""
+    from ..vehicle import ChannelSensorSpec, SensorSpec
 
-    return VehicleSpec.from_dict(vehicle, "meta.vehicle").sensors
+    raw = meta.get("sensors")
+    if not isinstance(raw, dict):
+        vehicle = meta.get("vehicle")
+        raw = vehicle.get("sensors") if isinstance(vehicle, dict) else None
+    if not isinstance(raw, dict):
+        return None
+    try:
+        channels = {k: ChannelSensorSpec(**v) for k, v in raw.get("channels", {}).items()}
+        return SensorSpec(**{**raw, "channels": channels})
+    except TypeError as exc:
+        raise LogImportError(f"trip metadata 'sensors' is not a sensor spec: {exc}") from None

@@ -1,0 +1,51 @@
+"""``jit``: numba ``njit(cache=True)`` with a cache that is invalidated when ANY simulator-core source changes.
+
+numba's on-disk cache is keyed by the time stamp of the file that holds a function, but the core's functions
+inline each other and the index constants of ``layout.py`` across files; a change in one file would leave stale
+machine code in the others. The cache directory therefore carries a hash of all core sources.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+import numba
+from numba.core import config
+
+_HERE = Path(__file__).resolve().parent
+_SOURCES = ("_jit.py", "layout.py", "numerics.py", "drivetrain.py", "driver.py", "physics.py")
+STAMP = hashlib.sha1(b"".join((_HERE / f).read_bytes() for f in _SOURCES)).hexdigest()[:12]
+
+
+def _cache_dir() -> str:
+    for base in (_HERE / "__pycache__", Path(tempfile.gettempdir()) / "roadload-numba"):
+        d = base / f"numba-{STAMP}"
+        try:
+            d.mkdir(parents=True, exist_ok=True)
+            probe = d / f".probe-{os.getpid()}"
+            probe.write_bytes(b"")
+            probe.unlink()
+            for old in base.glob("numba-*"):  # caches of earlier sources are dead weight
+                if old.name != d.name:
+                    shutil.rmtree(old, ignore_errors=True)
+            return str(d)
+        except OSError:
+            continue
+    return ""  # numba falls back to its default locators
+
+
+CACHE_DIR = _cache_dir()
+
+
+def jit(fn):
+    """njit(cache=True) with the core's hashed cache directory."""
+    old = config.CACHE_DIR
+    config.CACHE_DIR = CACHE_DIR
+    try:
+        return numba.njit(cache=True)(fn)
+    finally:
+        config.CACHE_DIR = old

@@ -1,0 +1,191 @@
+"""Drive-train model (eq. 2.17), jitted: loss maps, forward / inverse torque transmission, torque limits,
+fuel and electric power, and the wheel-force allocator.
+
+Torque path with the clutch engaged (eq. 2.17):
+    T_G = T_E,   T_D = T_G i_G(G) - phi f(T_G, omega_G, G),   omega_D = omega_G / i_G(G),
+    T_W = T_D i_D - phi f(T_D, omega_D),
+where f are the gearbox / differential loss maps [N m at the output side] and phi >= 1 the oil-temperature loss
+factor. Loss torques fade linearly to zero below 1 rad/s shaft speed so nothing sticks at standstill.
+The rotational-inertia term -I_red(G) theta_ddot_W and the brake torques of eq. 2.17 are applied in
+``physics.substep``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from ._jit import jit
+
+from .layout import *  # noqa: F401,F403 - index constants
+from .numerics import invert_through_map, table1, table2
+
+
+@jit
+def gear_ratio(P, gear):
+    """i_G(G); 0 for neutral."""
+    if gear < 1:
+        return 0.0
+    return P[P_RATIO0 + gear - 1]
+
+
+@jit
+def source_side_inertia(P, gear):
+    """Inertia on the engine side of the clutch [kg m^2]: I_E + I_C + I_G(G) (I_G lumped to the input side)."""
+    j = P[P_I_SOURCE] + P[P_I_CLUTCH]
+    if gear >= 1:
+        j += P[P_IGEAR0 + gear - 1]
+    return j
+
+
+@jit
+def wheel_side_mass(P, mass):
+    """m_V + (4 I_W + i_D^2 I_D) / r_W^2 [kg]: translational mass plus the inertias that always turn with the
+    wheels."""
+    r = P[P_RW]
+    return mass + (P[P_IW4] + P[P_ID] * P[P_ID] * P[P_I_DIFF]) / (r * r)
+
+
+@jit
+def speed_ratio(P, gear):
+    """k(G) = i_G i_D / r_W: gearbox input speed [rad/s] per vehicle speed [m/s]."""
+    return gear_ratio(P, gear) * P[P_ID] / P[P_RW]
+
+
+@jit
+def _fade(omega):
+    if omega >= 1.0:
+        return 1.0
+    if omega <= 0.0:
+        return 0.0
+    return omega
+
+
+@jit
+def oil_loss_factor(P, oil_temperature):
+    """phi(T_oil) = 1 + (phi_cold - 1) clip((T_warm - T_oil)/(T_warm - 293.15), 0, 1.5)."""
+    x = (P[P_OIL_WARM] - oil_temperature) / (P[P_OIL_WARM] - 293.15)
+    if x < 0.0:
+        x = 0.0
+    elif x > 1.5:
+        x = 1.5
+    return 1.0 + (P[P_OIL_COLD_FACTOR] - 1.0) * x
+
+
+@jit
+def forward_wheel_torque(P, tabs, ti, gear, torque_in, omega_in, phi):
+    """(T_W, gearbox loss, differential loss) for gearbox input torque T_G and speed omega_G (eq. 2.17).
+    Neutral (gear 0): no input torque, only the differential's spin loss."""
+    i_d = P[P_ID]
+    if gear < 1:
+        omega_d = omega_in  # caller passes the differential input speed in neutral
+        loss_d = phi * _fade(omega_d) * table2(tabs, ti, T_DIFFLOSS, 0.0, omega_d)
+        return -loss_d, 0.0, loss_d
+    i_g = P[P_RATIO0 + gear - 1]
+    loss_g = phi * _fade(omega_in) * table2(tabs, ti, T_GBLOSS + gear - 1, torque_in, omega_in)
+    t_d = torque_in * i_g - loss_g
+    omega_d = omega_in / i_g
+    loss_d = phi * _fade(omega_d) * table2(tabs, ti, T_DIFFLOSS, t_d, omega_d)
+    return t_d * i_d - loss_d, loss_g, loss_d
+
+
+@jit
+def inverse_wheel_torque(P, tabs, ti, gear, wheel_torque, omega_in, phi):
+    """Gearbox input torque T_G that delivers the wheel torque T_W at input speed omega_G (exact inverse of
+    ``forward_wheel_torque``)."""
+    i_g = P[P_RATIO0 + gear - 1]
+    omega_d = omega_in / i_g
+    t_d = invert_through_map(tabs, ti, T_DIFFLOSS, P[P_ID], phi * _fade(omega_d), omega_d, wheel_torque)
+    return invert_through_map(tabs, ti, T_GBLOSS + gear - 1, i_g, phi * _fade(omega_in), omega_in, t_d)
+
+
+@jit
+def torque_limits(P, tabs, ti, omega, v):
+    """(T_min, T_max) of the engine / motor at shaft speed omega [rad/s]; ICE: drag and full-load curves with a
+    rev limit; BEV: torque/power limits and the regen limit, regen faded out below 1.5 m/s."""
+    if P[P_KIND_BEV] > 0.5:
+        w = omega if omega > 1.0 else 1.0
+        t_max = min(P[P_MAX_TORQUE], P[P_MAX_POWER] / w)
+        if omega > P[P_MAX_SPEED]:
+            t_max = 0.0
+        fade = v / 1.5
+        if fade > 1.0:
+            fade = 1.0
+        elif fade < 0.0:
+            fade = 0.0
+        t_min = -min(P[P_REGEN_T], P[P_REGEN_P] / w) * fade
+        return t_min, t_max
+    t_drag = table1(tabs, ti, T_DRAG, omega)
+    t_max = table1(tabs, ti, T_FULLLOAD, omega)
+    if omega > P[P_MAX_SPEED]:
+        t_max = t_drag
+    return t_drag, t_max
+
+
+@jit
+def fuel_power(P, tabs, ti, omega, torque):
+    """Fuel power P_fuel(omega, T_E) [W] from the fuel map; zero at or below the drag curve (fuel cut)."""
+    if torque <= table1(tabs, ti, T_DRAG, omega) + 1e-6:
+        return 0.0
+    p = table2(tabs, ti, T_FUEL, omega, torque)
+    return p if p > 0.0 else 0.0
+
+
+@jit
+def motor_electric_power(P, tabs, ti, omega, torque):
+    """Electric power of the motor P_el = T omega + P_loss(omega, T) [W] (positive = drawn from the battery)."""
+    return torque * omega + table2(tabs, ti, T_MOTORLOSS, omega, torque)
+
+
+@jit
+def battery_current(P, terminal_power):
+    """Battery current I [A] for terminal power P = V_oc I - R I^2 (positive = discharge)."""
+    voc = P[P_BAT_VOC]
+    res = P[P_BAT_R]
+    if res <= 0.0:
+        return terminal_power / voc
+    disc = voc * voc - 4.0 * res * terminal_power
+    if disc < 0.0:
+        disc = 0.0
+    return (voc - math.sqrt(disc)) / (2.0 * res)
+
+
+@jit
+def regen_capacity(P, tabs, ti, gear, mode, omega_e, v, phi):
+    """Largest braking force [N] the engine (drag, fuel cut) or motor (regen limit) can put on the wheels now."""
+    if gear < 1 or (mode != MODE_LOCKED and P[P_KIND_BEV] < 0.5):
+        return 0.0
+    t_min, t_max = torque_limits(P, tabs, ti, omega_e, v)
+    t_w, lg, ld = forward_wheel_torque(P, tabs, ti, gear, t_min, omega_e, phi)
+    f = -t_w / P[P_RW]
+    return f if f > 0.0 else 0.0
+
+
+@jit
+def allocate(force, capacity):
+    """Split a signed wheel force [N] into (traction, regen, friction): regen first, friction for the rest."""
+    if force >= 0.0:
+        return force, 0.0, 0.0
+    regen = -force
+    if regen > capacity:
+        regen = capacity
+    return 0.0, regen, -force - regen
+
+
+def neutral_drag_force(spec, speed) -> np.ndarray:
+    """Drive-train drag [N] at the wheels with zero drive torque, warm oil: ICE in neutral (differential spin loss),
+    BEV with zero motor torque (single-speed gearbox + differential). Used for the coast-down road load."""
+    from .packing import pack_vehicle
+
+    P, tabs, ti = pack_vehicle(spec)
+    r = spec.tires.dynamic_radius
+    out = []
+    for v in np.atleast_1d(np.asarray(speed, dtype=float)):
+        if spec.drivetrain.kind == "bev":
+            omega = speed_ratio(P, 1) * v
+            t_w, _, _ = forward_wheel_torque(P, tabs, ti, 1, 0.0, omega, 1.0)
+        else:
+            t_w, _, _ = forward_wheel_torque(P, tabs, ti, 0, 0.0, spec.drivetrain.final_drive * v / r, 1.0)
+        out.append(-t_w / r)
+    res = np.asarray(out)
+    return res if np.ndim(speed) else res[0]

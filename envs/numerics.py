@@ -1,0 +1,189 @@
+"""Jitted numerical helpers of the simulator core: a small seeded random generator and table interpolation.
+
+The generator is splitmix64 on a per-simulator ``uint64[1]`` state array, so several simulators in one process
+never share random state (numba's ``np.random`` is process-global). Tables live in one flat float64 array
+``tabs``; row k of the int64 descriptor array ``ti`` is (offset_x, n_x, offset_y, n_y, offset_values) where for a
+1-D curve offset_y points to the n_x values and for a 2-D map values[i][j] = f(x[i], y[j]) are stored row-major.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from ._jit import jit
+
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_M1 = np.uint64(0xBF58476D1CE4E5B9)
+_M2 = np.uint64(0x94D049BB133111EB)
+_S30 = np.uint64(30)
+_S27 = np.uint64(27)
+_S31 = np.uint64(31)
+_S11 = np.uint64(11)
+
+
+@jit
+def rng_next(rng):
+    """Next 64-bit output of splitmix64; ``rng`` is a uint64[1] state array."""
+    rng[0] += _GOLDEN
+    z = rng[0]
+    z = (z ^ (z >> _S30)) * _M1
+    z = (z ^ (z >> _S27)) * _M2
+    return z ^ (z >> _S31)
+
+
+@jit
+def rng_uniform(rng):
+    """Uniform in [0, 1)."""
+    return float(rng_next(rng) >> _S11) * (1.0 / 9007199254740992.0)
+
+
+@jit
+def rng_normal(rng):
+    """Standard normal (Box-Muller)."""
+    u1 = rng_uniform(rng)
+    if u1 < 1e-300:
+        u1 = 1e-300
+    u2 = rng_uniform(rng)
+    return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
+
+
+@jit
+def segment(tabs, off, n, x):
+    """Index i and weight w with x = (1-w) a[i] + w a[i+1] on the increasing axis tabs[off:off+n], clamped."""
+    if x <= tabs[off]:
+        return 0, 0.0
+    if x >= tabs[off + n - 1]:
+        return n - 2, 1.0
+    lo = 0
+    hi = n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if tabs[off + mid] <= x:
+            lo = mid
+        else:
+            hi = mid
+    return lo, (x - tabs[off + lo]) / (tabs[off + lo + 1] - tabs[off + lo])
+
+
+@jit
+def table1(tabs, ti, k, x):
+    """Curve k at x (linear, clamped)."""
+    ox = ti[k, 0]
+    n = ti[k, 1]
+    oy = ti[k, 2]
+    i, w = segment(tabs, ox, n, x)
+    return tabs[oy + i] * (1.0 - w) + tabs[oy + i + 1] * w
+
+
+@jit
+def table1_inverse(tabs, ti, k, y):
+    """x with curve_k(x) = y for a strictly increasing curve (linear, clamped)."""
+    ox = ti[k, 0]
+    n = ti[k, 1]
+    oy = ti[k, 2]
+    i, w = segment(tabs, oy, n, y)
+    return tabs[ox + i] * (1.0 - w) + tabs[ox + i + 1] * w
+
+
+@jit
+def table2(tabs, ti, k, x, y):
+    """Map k at (x, y) (bilinear, clamped)."""
+    ox = ti[k, 0]
+    nx = ti[k, 1]
+    oy = ti[k, 2]
+    ny = ti[k, 3]
+    ov = ti[k, 4]
+    i, u = segment(tabs, ox, nx, x)
+    j, w = segment(tabs, oy, ny, y)
+    a = ov + i * ny + j
+    b = a + ny
+    return ((1.0 - u) * ((1.0 - w) * tabs[a] + w * tabs[a + 1])
+            + u * ((1.0 - w) * tabs[b] + w * tabs[b + 1]))
+
+
+@jit
+def invert_through_map(tabs, ti, k, ratio, scale, speed, target):
+    """Solve T*ratio - scale*f_k(T, speed) = target for T, f_k piecewise linear in T (x axis) at fixed speed.
+
+    Exact for the bilinear map (clamped beyond the torque axis, where the left side has slope ``ratio``);
+    requires ratio > scale * df/dT (true for any physical loss map).
+    """
+    ox = ti[k, 0]
+    nx = ti[k, 1]
+    oy = ti[k, 2]
+    ny = ti[k, 3]
+    ov = ti[k, 4]
+    j, w = segment(tabs, oy, ny, speed)
+    t_prev = tabs[ox]
+    f_prev = (1.0 - w) * tabs[ov + j] + w * tabs[ov + j + 1]
+    g_prev = t_prev * ratio - scale * f_prev
+    if target <= g_prev:
+        return t_prev + (target - g_prev) / ratio
+    for i in range(1, nx):
+        t_i = tabs[ox + i]
+        a = ov + i * ny + j
+        g_i = t_i * ratio - scale * ((1.0 - w) * tabs[a] + w * tabs[a + 1])
+        if target <= g_i:
+            return t_prev + (target - g_prev) * (t_i - t_prev) / (g_i - g_prev)
+        t_prev = t_i
+        g_prev = g_i
+    return t_prev + (target - g_prev) / ratio
+
+
+@jit
+def _bisect(s_axis, s):
+    n = s_axis.shape[0]
+    if s <= s_axis[0]:
+        return 0
+    if s >= s_axis[n - 1]:
+        return n - 2
+    lo = 0
+    hi = n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if s_axis[mid] <= s:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@jit
+def road_locate(s_axis, s, idx):
+    """Index i with s_axis[i] <= s < s_axis[i+1] (clamped), starting at the cached index idx (monotone travel)."""
+    n = s_axis.shape[0]
+    if idx < 0 or idx > n - 2 or s < s_axis[idx]:
+        return _bisect(s_axis, s)
+    steps = 0
+    while idx < n - 2 and s >= s_axis[idx + 1]:
+        idx += 1
+        steps += 1
+        if steps > 8:  # far jump: fall back to bisection
+            return _bisect(s_axis, s)
+    return idx
+
+
+@jit
+def road_value(road, row, i, s):
+    """Linear interpolation of road[row] at s inside segment i (clamped to the profile ends)."""
+    s0 = road[0, i]
+    s1 = road[0, i + 1]
+    w = (s - s0) / (s1 - s0)
+    if w < 0.0:
+        w = 0.0
+    elif w > 1.0:
+        w = 1.0
+    return road[row, i] * (1.0 - w) + road[row, i + 1] * w
+
+
+@jit
+def road_value_at(road, row, s):
+    """road[row] at any s (binary search; for previews)."""
+    n = road.shape[1]
+    if s <= road[0, 0]:
+        return road[row, 0]
+    if s >= road[0, n - 1]:
+        return road[row, n - 1]
+    i = road_locate(road[0], s, -1)
+    return road_value(road, row, i, s)

@@ -1,0 +1,225 @@
+"""CAN-like sensors: turn the simulator's truth log into measured channels with latency, bias, noise,
+quantisation, outliers and dropouts.
+
+Per channel j and sample k (names and SI units from ``roadload.channels``):
+    y_k = Q( h_j(truth_{k - d_j}) + b_j + sigma_j e_k + o_k ),   NaN where a dropout hits,
+with the sensor's physical relation h_j (e.g. the body-fixed accelerometer reads a + g sin(theta + pitch),
+eq. 4.4/5.2; the CAN torque is T_E (1 + gain error) + offset), latency d_j samples, bias b_j (spec + the random
+``sensor_bias`` effect), white noise sigma_j, outliers o_k (``sensor_outliers``) and quantisation Q to the channel's
+resolution. Dropouts (``sensor_dropouts``) set runs to NaN or remove rows ('missing' mode).
+
+All randomness is drawn in fixed chunks of samples from generators keyed by (seed, feature, channel, chunk), so a
+sample's value does not depend on how the trip was cut into steps: ``SensorModel.sample`` (the step API's
+``observe()``) returns exactly the row that ``SensorModel.measure`` (the whole-trip Trip) produces.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+
+import numpy as np
+
+from roadload.channels import MEASURED
+from roadload.vehicle import SensorSpec, VehicleSpec
+
+from .effects import EffectsConfig
+from .layout import *  # noqa: F401,F403 - log column constants
+
+INPUT_CHANNELS = ("vehicle_speed", "wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr",
+                  "accel_x", "accel_y", "yaw_rate", "steering_wheel_angle")
+OUTPUT_CHANNELS = ("drive_torque", "brake_pressure_front", "brake_pressure_rear")
+DISCRETE_CHANNELS = ("gear", "clutch")
+# reference size of a random sensor bias (effect sensor_bias, scale 1)
+BIAS_REFERENCE = {"accel_x": 0.05, "accel_y": 0.05, "yaw_rate": 0.002, "steering_wheel_angle": 0.01,
+                  "vehicle_speed": 0.05, "drive_torque": 5.0, "brake_pressure_front": 2e4,
+                  "brake_pressure_rear": 2e4, "ambient_temperature": 1.0, "elevation": 5.0,
+                  "battery_current": 0.5, "battery_voltage": 0.5}
+CHUNK = 8192
+
+_SIMPLE = {"wheel_speed_fl": L_WFL, "wheel_speed_fr": L_WFR, "wheel_speed_rl": L_WRL, "wheel_speed_rr": L_WRR,
+           "accel_x": L_ACC_X_SENS, "accel_y": L_ACC_Y_SENS, "yaw_rate": L_YAW, "engine_speed": L_WE,
+           "clutch": L_CLUTCH, "brake_pressure_front": L_PBF, "brake_pressure_rear": L_PBR,
+           "ambient_temperature": L_TAMB, "battery_voltage": L_VBAT, "battery_current": L_IBAT, "elevation": L_ELEV}
+SUPPORTED_CHANNELS = tuple(_SIMPLE) + ("vehicle_speed", "steering_wheel_angle", "drive_torque", "gear")
+
+
+class SensorConfigError(ValueError):
+    """The sensor configuration asks for something the simulator cannot produce."""
+
+
+class SensorModel:
+    """Measured channels from the truth log (see module doc)."""
+
+    def __init__(self, vehicle: VehicleSpec, sensors: SensorSpec, effects: EffectsConfig, seed: int,
+                 dt: float = 0.01) -> None:
+        self.vehicle = vehicle
+        self.spec = sensors
+        self.seed = int(seed)
+        self.dt = dt
+        step = 1.0 / (sensors.sample_rate * dt)
+        if abs(step - round(step)) > 1e-9 or round(step) < 1:
+            raise SensorConfigError(f"sensors.sample_rate: {sensors.sample_rate} Hz must divide the simulation rate "
+                                    f"{1.0 / dt:g} Hz")
+        self.decimation = int(round(step))
+        self.names = [n for n, c in sensors.channels.items() if c.enabled]
+        for n in self.names:
+            if n not in SUPPORTED_CHANNELS:
+                raise SensorConfigError(f"sensors.channels.{n}: the simulator does not produce this channel; "
+                                        f"supported: {sorted(SUPPORTED_CHANNELS)}")
+            if n in ("battery_voltage", "battery_current") and vehicle.drivetrain.kind != "bev":
+                raise SensorConfigError(f"sensors.channels.{n}: only a 'bev' drive-train has a traction battery")
+        nch = len(self.names)
+        cs = [sensors.channels[n] for n in self.names]
+        self.noise = np.array([c.noise_std for c in cs])
+        self.resolution = np.array([c.resolution for c in cs])
+        self.bias = np.array([c.bias for c in cs])
+        latency = np.array([c.latency for c in cs])
+        if effects.enabled("sensor_latency"):
+            latency = latency + float(effects.params("sensor_latency")["extra"])
+        self.delay = np.round(latency / dt).astype(np.int64)
+        if effects.enabled("sensor_bias"):
+            g = np.random.default_rng([self.seed, 4])
+            ref = np.array([BIAS_REFERENCE.get(n, 0.0) for n in self.names])
+            self.bias = self.bias + g.standard_normal(nch) * ref * float(effects.params("sensor_bias")["scale"])
+        self.gain_error = sensors.drive_torque_gain_error
+        self.offset = sensors.drive_torque_offset
+        if effects.enabled("torque_model_error"):
+            p = effects.params("torque_model_error")
+            self.gain_error, self.offset = float(p["gain_error"]), float(p["offset"])
+
+        def group(which: str) -> np.ndarray:
+            if which == "inputs":
+                sel = INPUT_CHANNELS
+            elif which == "outputs":
+                sel = OUTPUT_CHANNELS
+            else:
+                sel = [n for n in self.names if n not in DISCRETE_CHANNELS]
+            return np.array([n in sel for n in self.names], dtype=bool)
+
+        self.outliers = effects.params("sensor_outliers") if effects.enabled("sensor_outliers") else None
+        if self.outliers is not None:
+            self.outlier_on = group(str(self.outliers["channels"]))
+            self.outlier_size = np.array([c.outlier_scale for c in cs]) * float(self.outliers["magnitude"])
+        self.dropouts = effects.params("sensor_dropouts") if effects.enabled("sensor_dropouts") else None
+        if self.dropouts is not None:
+            self.dropout_on = group(str(self.dropouts["channels"]))
+            self.missing_mode = self.dropouts["mode"] == "missing"
+        self._cache: OrderedDict[int, tuple[np.ndarray, np.ndarray | None, np.ndarray | None]] = OrderedDict()
+        st = vehicle.steering
+        self._steer_x = np.asarray(st.wheel_angle, float)
+        self._steer_y = np.asarray(st.steering_wheel_angle, float)
+
+    @property
+    def units(self) -> dict[str, str]:
+        return {n: MEASURED[n].unit for n in self.names}
+
+    # ------------------------------------------------------------------ physical relation h_j
+    def _true(self, name: str, cols: np.ndarray) -> np.ndarray:
+        """cols: log rows (2-D) -> the channel's error-free reading."""
+        if name in _SIMPLE:
+            return cols[:, _SIMPLE[name]]
+        if name == "vehicle_speed":
+            return cols[:, L_V] * (1.0 + self.spec.speed_scale_error)
+        if name == "steering_wheel_angle":
+            return np.interp(cols[:, L_DELTA], self._steer_x, self._steer_y)
+        if name == "drive_torque":
+            return cols[:, L_TE] * (1.0 + self.gain_error) + self.offset
+        if name == "gear":
+            return cols[:, L_GEAR] * (cols[:, L_CLUTCH] > 0.0)
+        raise SensorConfigError(f"no sensor model for channel {name!r}")  # pragma: no cover - checked in __init__
+
+    # ------------------------------------------------------------------ random perturbations, chunk by chunk
+    def _dropout_runs(self, c: int) -> list[tuple[int, int]]:
+        """(start, length) of dropout events that begin in chunk c (absolute sample indices)."""
+        p = self.dropouts
+        g = np.random.default_rng([self.seed, 3, c])
+        dt_meas = self.dt * self.decimation
+        n = g.poisson(float(p["rate"]) / 3600.0 * CHUNK * dt_meas)
+        starts = c * CHUNK + g.integers(0, CHUNK, size=n)
+        lengths = np.minimum(np.ceil(g.exponential(float(p["mean_duration"]) / dt_meas, size=n)), CHUNK)
+        return list(zip(starts.tolist(), lengths.astype(int).tolist()))
+
+    def _chunk(self, c: int) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        hit = self._cache.get(c)
+        if hit is not None:
+            return hit
+        nch = len(self.names)
+        add = np.empty((nch, CHUNK))
+        for j in range(nch):
+            g = np.random.default_rng([self.seed, 1, j, c])
+            add[j] = self.bias[j] + self.noise[j] * g.standard_normal(CHUNK) if self.noise[j] > 0 else self.bias[j]
+            if self.outliers is not None and self.outlier_on[j]:
+                go = np.random.default_rng([self.seed, 2, j, c])
+                u = go.random(CHUNK)
+                idx = np.flatnonzero(u < float(self.outliers["rate"]))
+                if idx.size:
+                    sign = np.where(go.random(idx.size) < 0.5, -1.0, 1.0)
+                    add[j, idx] += sign * self.outlier_size[j] * (1.0 + np.abs(go.standard_normal(idx.size)))
+        nan = missing = None
+        if self.dropouts is not None:
+            drop = np.zeros(CHUNK, dtype=bool)
+            for cc in (c - 1, c):
+                if cc < 0:
+                    continue
+                for start, length in self._dropout_runs(cc):
+                    a = max(start - c * CHUNK, 0)
+                    b = min(start + length - c * CHUNK, CHUNK)
+                    if b > a:
+                        drop[a:b] = True
+            if self.missing_mode:
+                missing = drop
+            else:
+                nan = self.dropout_on[:, None] & drop[None, :]
+        out = (add, nan, missing)
+        self._cache[c] = out
+        while len(self._cache) > 4:
+            self._cache.popitem(last=False)
+        return out
+
+    def _quantise(self, values: np.ndarray, j: int) -> np.ndarray:
+        res = self.resolution[j]
+        return np.round(values / res) * res if res > 0 else values
+
+    # ------------------------------------------------------------------ whole trip / one sample
+    def measure(self, log: np.ndarray, n: int) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray]:
+        """(t, channels, keep) for the first n log rows: measured sample i uses log row (i+1) m - 1 with the
+        decimation m; ``keep`` is False for samples removed by 'missing' dropouts."""
+        rows = np.arange(self.decimation - 1, n, self.decimation)
+        n_meas = rows.size
+        t = log[rows, L_T].copy()
+        out: dict[str, np.ndarray] = {}
+        keep = np.ones(n_meas, dtype=bool)
+        n_chunks = (n_meas + CHUNK - 1) // CHUNK
+        perturb = [self._chunk(c) for c in range(n_chunks)]
+        for j, name in enumerate(self.names):
+            src = np.maximum(rows - self.delay[j], 0)
+            val = self._true(name, log[src])
+            if n_chunks:
+                val = val + np.concatenate([p[0][j] for p in perturb])[:n_meas]
+            val = self._quantise(val, j)
+            if self.dropouts is not None and not self.missing_mode:
+                val[np.concatenate([p[1][j] for p in perturb])[:n_meas]] = np.nan
+            out[name] = val
+        if self.dropouts is not None and self.missing_mode and n_chunks:
+            keep = ~np.concatenate([p[2] for p in perturb])[:n_meas]
+        return t, out, keep
+
+    def sample(self, log: np.ndarray, n: int) -> dict[str, float] | None:
+        """The latest measured sample given n log rows (None before the first sample); values are NaN and
+        'valid' is False when a 'missing' dropout removed it."""
+        i = n // self.decimation - 1
+        if i < 0:
+            return None
+        row = (i + 1) * self.decimation - 1
+        add, nan, missing = self._chunk(i // CHUNK)
+        ii = i % CHUNK
+        out: dict[str, float] = {"t": float(log[row, L_T])}
+        valid = missing is None or not missing[ii]
+        for j, name in enumerate(self.names):
+            val = self._true(name, log[max(row - int(self.delay[j]), 0)][None, :])[0] + add[j, ii]
+            val = float(self._quantise(np.asarray(val), j))
+            if not valid or (nan is not None and nan[j, ii]):
+                val = float("nan")
+            out[name] = val
+        out["valid"] = valid
+        return out

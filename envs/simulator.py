@@ -1,0 +1,541 @@
+"""The simulator: step API (``Simulator``) and whole-trip runs (``simulate``) producing a Trip.
+
+See ``roadload.envs`` (the package docstring) for the contract other packages rely on.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+from dataclasses import asdict, dataclass
+from typing import Any, Callable
+
+import numpy as np
+import pandas as pd
+
+from roadload.channels import TRUTH
+from roadload.road_profiles import DriveCycle, RoadProfile
+from roadload.trip import Trip
+from roadload.units import G, air_density
+from roadload.vehicle import SensorSpec, VehicleSpec, VehicleSpecError
+
+from . import physics
+from .driver import DriverConfig, cruise_stretches, pack_driver, speed_plan
+from .drivetrain import regen_capacity as _regen_capacity
+from .drivetrain import oil_loss_factor, speed_ratio
+from .effects import EffectsConfig
+from .layout import *  # noqa: F401,F403 - index constants
+from .numerics import road_value_at
+from .packing import pack_vehicle
+from .presets import get_preset
+from .sensors import SensorModel
+
+DT = 0.01  # s, physics step (100 Hz)
+
+# truth channels of the Trip: catalogue name -> log column
+TRUTH_COLUMNS = {
+    "position": L_POS, "speed": L_V, "acceleration": L_A, "tractive_force": L_FX, "rim_torque": L_RIM,
+    "mass": L_MASS, "rolling_resistance_coefficient": L_FR, "rolling_resistance_f0": L_FR0,
+    "rolling_resistance_f1": L_FR1, "rolling_resistance_f4": L_FR4, "drag_area": L_CXA, "drag_area_factor": L_DRAGF,
+    "air_density": L_RHO, "grade": L_GRADE, "curvature": L_CURV, "path_curvature": L_PATHCURV, "bank": L_BANK,
+    "wind_speed": L_WIND_S, "wind_angle": L_WIND_A, "cornering_stiffness_front": L_CSF,
+    "cornering_stiffness_rear": L_CSR, "engine_torque": L_TE, "engine_speed": L_WE, "gear": L_GEAR,
+    "clutch": L_CLUTCH, "brake_pressure_front": L_PBF, "brake_pressure_rear": L_PBR,
+    "brake_friction_coefficient": L_MU, "brake_disc_temperature": L_DISC_T, "lateral_acceleration": L_AY,
+    "specific_force_x": L_ACC_X_SENS, "specific_force_y": L_ACC_Y_SENS, "yaw_rate": L_YAW,
+    "side_slip_angle": L_BETA, "wheel_steer_angle": L_DELTA, "oil_temperature": L_OIL,
+    "drivetrain_loss_factor": L_LOSSF, "source_power": L_PSRC, "source_energy": L_ESRC,
+    "ambient_temperature": L_TAMB, "air_pressure": L_PAMB, "elevation": L_ELEV, "heading": L_HEAD,
+    "wheel_speed_fl": L_WFL, "wheel_speed_fr": L_WFR, "wheel_speed_rl": L_WRL, "wheel_speed_rr": L_WRR,
+    "brake_force": L_FBRAKE, "rolling_resistance_force": L_FROLL, "aero_force": L_FAERO,
+    "climbing_force": L_FCLIMB, "cornering_resistance": L_FCORNER,
+}
+_BEV_ONLY = ("battery_voltage", "battery_current", "state_of_charge")
+_BEV_TRUTH = {"battery_voltage": L_VBAT, "battery_current": L_IBAT, "state_of_charge": L_SOC}
+
+
+class SimulationError(ValueError):
+    """Invalid simulator input (the message names the argument or field)."""
+
+
+class LateralValidityWarning(UserWarning):
+    """The lateral acceleration exceeded ~4 m/s^2, where the single-track model is no longer valid (sec. 2.5.1)."""
+
+
+@dataclass
+class Action:
+    """Wheel-force command for one step [N, all >= 0, at the wheels]: traction (engine / motor torque in the
+    current gear within its limits), regen (negative motor torque within the regen limit; ICE: engine drag /
+    fuel cut), friction brakes (-> brake pressures). Optional: steer = front wheel steer angle [rad] (None: the
+    built-in steering law follows the road), gear = requested gear (None: shift strategy; 0 = neutral / sailing)."""
+
+    traction_force: float = 0.0
+    regen_force: float = 0.0
+    friction_brake_force: float = 0.0
+    steer: float | None = None
+    gear: int | None = None
+
+
+@dataclass(slots=True)
+class StepResult:
+    """State after a step (SI): time, distance, speed, acceleration, gear, engine/motor speed and torque, clutch,
+    source energy used in this step and in total (fuel [J] for ICE, battery [J] for BEV), tractive force, lateral
+    acceleration, road attributes at s, and done (end of road / cycle / duration / distance)."""
+
+    t: float
+    s: float
+    v: float
+    a: float
+    gear: int
+    engine_speed: float
+    engine_torque: float
+    clutch: float
+    source_energy: float
+    source_energy_total: float
+    tractive_force: float
+    lateral_acceleration: float
+    grade: float
+    curvature: float
+    bank: float
+    speed_limit: float
+    done: bool
+
+
+def _road_from_cycle(cycle: DriveCycle) -> RoadProfile:
+    """A straight road along the cycle's distance (grade from the cycle if given) with generous end margin."""
+    t = cycle.time
+    dist = np.concatenate([[0.0], np.cumsum(0.5 * (cycle.speed[1:] + cycle.speed[:-1]) * np.diff(t))])
+    length = float(dist[-1]) + 200.0
+    s = np.arange(0.0, length + 5.0, 5.0)
+    grade = np.zeros_like(s)
+    if cycle.grade is not None:
+        d_u, first = np.unique(dist, return_index=True)
+        grade = np.interp(s, d_u, cycle.grade[first]) if d_u.size > 1 else np.full_like(s, cycle.grade[0])
+    return RoadProfile(name=f"cycle:{cycle.name}", distance=s, grade=grade, curvature=np.zeros_like(s),
+                       bank=np.zeros_like(s), speed_limit=np.full_like(s, 70.0),
+                       meta={"from_cycle": cycle.name, **cycle.meta})
+
+
+def _jsonable(obj: Any) -> Any:
+    return json.loads(json.dumps(obj, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)))
+
+
+def _check_vehicle(vehicle: VehicleSpec | str) -> VehicleSpec:
+    if isinstance(vehicle, str):
+        return get_preset(vehicle)
+    if not isinstance(vehicle, VehicleSpec):
+        raise SimulationError(f"vehicle: expected a VehicleSpec or preset name, got {type(vehicle).__name__}")
+    vehicle.validate()
+    return vehicle
+
+
+class Simulator:
+    """Vehicle simulator with a step API (see the ``roadload.envs`` docstring)."""
+
+    def __init__(self, vehicle: VehicleSpec | str, road: RoadProfile | DriveCycle,
+                 effects: EffectsConfig | list[str] | str | dict | None = None, sensors: SensorSpec | None = None,
+                 seed: int = 0, driver: DriverConfig | DriveCycle | None = None, initial_speed: float = 0.0) -> None:
+        self.vehicle = _check_vehicle(vehicle)
+        self.effects = EffectsConfig.parse(effects)
+        if sensors is not None and not isinstance(sensors, SensorSpec):
+            raise SimulationError(f"sensors: expected a SensorSpec or None, got {type(sensors).__name__}")
+        self.sensors = sensors if sensors is not None else self.vehicle.sensors
+        self.sensors.validate("sensors")
+        self.cycle: DriveCycle | None = None
+        self.driver = DriverConfig()
+        if isinstance(driver, DriveCycle):
+            self.cycle = driver
+        elif isinstance(driver, DriverConfig):
+            self.driver = driver
+        elif driver is not None:
+            raise SimulationError(f"driver: expected a DriverConfig, a DriveCycle or None, got {type(driver).__name__}")
+        if isinstance(road, DriveCycle):
+            self.cycle = road
+            road = _road_from_cycle(road)
+        if not isinstance(road, RoadProfile):
+            raise SimulationError(f"road: expected a RoadProfile or DriveCycle, got {type(road).__name__}")
+        self.road = road
+        if not (isinstance(initial_speed, (int, float)) and math.isfinite(initial_speed) and initial_speed >= 0):
+            raise SimulationError(f"initial_speed: must be a finite speed >= 0 m/s, got {initial_speed!r}")
+        self.initial_speed = float(initial_speed)
+        self._check_seed(seed)
+        self.seed = int(seed)
+
+        self.P, self.tabs, self.ti = pack_vehicle(self.vehicle, DT)
+        self._pack_effects()
+        rho_nom = float(air_density(self.effects.ambient_temperature, self.effects.ambient_pressure))
+        pack_driver(self.P, self.driver, self.vehicle.understeer_gradient(), rho_nom)
+        self.P[P_ROAD_LEN] = road.length
+        self._road = self._build_road()
+        self._stops = np.ascontiguousarray(np.sort(np.asarray(road.stops, dtype=float)))
+        if self.cycle is not None:
+            self.P[P_CYCLE_MODE] = 1.0
+            self._cycle = np.ascontiguousarray(np.vstack([self.cycle.time - self.cycle.time[0], self.cycle.speed]))
+            self._stops = np.zeros(0)
+        else:
+            self._cycle = np.zeros((2, 2))
+            self._cycle[0, 1] = 1.0
+        self._cmd = np.zeros(N_CMD)
+        self._log = np.zeros((1 << 14, N_LOG))
+        self.reset(seed)
+
+    # ------------------------------------------------------------------ setup
+    @staticmethod
+    def _check_seed(seed: Any) -> None:
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise SimulationError(f"seed: expected an integer >= 0, got {seed!r}")
+
+    def _pack_effects(self) -> None:
+        P, e = self.P, self.effects
+        P[P_T_AMB] = e.ambient_temperature
+        P[P_P_AMB] = e.ambient_pressure
+
+        def on(name: str, flag: int) -> dict[str, Any]:
+            P[flag] = 1.0 if e.enabled(name) else 0.0
+            return e.params(name)
+
+        p = on("wind", P_WIND_ON)
+        P[P_WIND_MEAN], P[P_WIND_DIR] = p["mean_speed"], p["direction"]
+        P[P_WIND_GUST_STD], P[P_WIND_GUST_TAU], P[P_WIND_DIR_STD] = (p["gust_std"], p["gust_time_constant"],
+                                                                     p["direction_std"])
+        p = on("payload", P_PAYLOAD_ON)
+        P[P_PAYLOAD_STD], P[P_PAYLOAD_MIN], P[P_PAYLOAD_MAX] = p["change_std"], p["min_payload"], p["max_payload"]
+        if self.vehicle.body.mass + p["min_payload"] <= 0:
+            raise SimulationError("effect 'payload' parameter 'min_payload': would make the mass <= 0")
+        p = on("tire_warmup", P_WARM_ON)
+        P[P_WARM_FACTOR], P[P_WARM_DIST] = p["cold_factor"], p["distance_constant"]
+        p = on("winter_tires", P_WINTER_ON)
+        P[P_WINTER_RR], P[P_WINTER_CS] = p["rolling_factor"], p["cornering_factor"]
+        p = on("drag_area", P_DRAG_ON)
+        P[P_DRAG_ROOFBOX], P[P_DRAG_WIN], P[P_DRAG_SUN], P[P_DRAG_RATE] = (p["roof_box"], p["windows"],
+                                                                           p["sunroof"], p["toggle_rate"])
+        p = on("road_bank", P_BANK_ON)
+        P[P_BANK_SCALE], P[P_BANK_GAIN], P[P_BANK_MAX] = p["scale"], p["superelevation_gain"], p["max_bank"]
+        p = on("wet_road", P_WET_ON)
+        P[P_WET_FACTOR], P[P_WET_F1] = p["rolling_factor"], p["water_f1"]
+        p = on("oil_temperature", P_OIL_ON)
+        start = p["start_temperature"]
+        P[P_OIL_START] = e.ambient_temperature if (isinstance(start, float) and math.isnan(start)) else start
+        p = on("brake_pad_drift", P_PAD_ON)
+        P[P_PAD_TCOEF], P[P_PAD_TREF], P[P_PAD_RW_STD] = (p["temperature_coefficient"], p["reference_temperature"],
+                                                          p["random_walk_std"])
+        p = on("barometric", P_BARO_ON)
+        P[P_BARO_H] = p["scale_height"]
+        p = on("auxiliary_load", P_AUX_ON)
+        P[P_AUX_EXTRA] = p["power"]
+
+    def _build_road(self) -> np.ndarray:
+        rd = self.road
+        road = np.zeros((N_ROAD, rd.distance.size))
+        road[R_S] = rd.distance
+        road[R_GRADE] = rd.grade
+        road[R_CURV] = rd.curvature
+        road[R_BANK] = rd.bank
+        road[R_VLIM] = rd.speed_limit
+        ds = np.diff(rd.distance)
+        road[R_HEAD, 1:] = np.cumsum(0.5 * (rd.curvature[1:] + rd.curvature[:-1]) * ds)
+        road[R_ELEV] = rd.elevation()
+        road[R_VPLAN] = speed_plan(rd.distance, rd.curvature, rd.speed_limit, self.driver)
+        return np.ascontiguousarray(road)
+
+    # ------------------------------------------------------------------ reset / step
+    def reset(self, seed: int | None = None, initial_speed: float | None = None) -> StepResult:
+        """Back to the start of the road (optionally with a new seed / initial speed); returns the initial state."""
+        if seed is not None:
+            self._check_seed(seed)
+            self.seed = int(seed)
+        if initial_speed is not None:
+            if not (math.isfinite(initial_speed) and initial_speed >= 0):
+                raise SimulationError(f"initial_speed: must be a finite speed >= 0 m/s, got {initial_speed!r}")
+            self.initial_speed = float(initial_speed)
+        scen = np.random.default_rng([self.seed, 200])
+        if self.effects.enabled("poor_excitation"):
+            p = self.effects.params("poor_excitation")
+            self._road[R_CRUISE] = cruise_stretches(self._road[R_S], float(p["fraction"]),
+                                                    float(p["stretch_length"]), scen)
+        else:
+            self._road[R_CRUISE] = 0.0
+        self._rng = np.array([np.random.default_rng([self.seed, 100]).integers(0, 2 ** 63)], dtype=np.uint64)
+        self.sensor_model = SensorModel(self.vehicle, self.sensors, self.effects, self.seed, DT)
+        P = self.P
+        P[P_T_END] = np.inf
+        P[P_S_END] = np.inf
+        X = np.zeros(N_STATE)
+        v = self.initial_speed
+        X[S_V] = v
+        X[S_LAST_SHIFT] = -1e9
+        X[S_RIDX] = 0
+        pay = self.effects.params("payload")
+        X[S_MASS] = self.vehicle.body.mass + (pay["initial_payload"] if self.effects.enabled("payload") else 0.0)
+        if X[S_MASS] <= 0:
+            raise SimulationError("effect 'payload' parameter 'initial_payload': makes the mass <= 0")
+        X[S_DRAGF] = 1.0 + (P[P_DRAG_ROOFBOX] if P[P_DRAG_ON] > 0.5 else 0.0)
+        X[S_OIL_T] = P[P_OIL_START] if P[P_OIL_ON] > 0.5 else P[P_OIL_WARM]
+        X[S_DISC_T] = P[P_T_AMB]
+        X[S_SOC] = self.vehicle.drivetrain.battery.initial_soc if self.vehicle.drivetrain.kind == "bev" else 0.0
+        if P[P_KIND_BEV] > 0.5:
+            X[S_GEAR], X[S_MODE] = 1, MODE_LOCKED
+            X[S_OMEGA_E] = speed_ratio(P, 1) * v
+        else:
+            gear = 1
+            for g in range(1, int(P[P_N_GEARS]) + 1):
+                if speed_ratio(P, g) * v >= max(1.3 * P[P_IDLE], 1.2 * P[P_DN_LO]):
+                    gear = g
+            X[S_GEAR] = gear
+            if speed_ratio(P, gear) * v >= P[P_IDLE]:
+                X[S_MODE], X[S_OMEGA_E] = MODE_LOCKED, speed_ratio(P, gear) * v
+            else:
+                X[S_MODE], X[S_OMEGA_E] = MODE_OPEN, P[P_IDLE]
+        self.X = X
+        self._log[:] = 0.0
+        self._warned = False
+        self._last_energy = 0.0
+        self._result = self._make_result(0.0)
+        return self._result
+
+    def _ensure_capacity(self, extra: int) -> None:
+        n = int(self.X[S_NLOG])
+        if n + extra > self._log.shape[0]:
+            new = np.zeros((max(2 * self._log.shape[0], n + extra), N_LOG))
+            new[:n] = self._log[:n]
+            self._log = new
+
+    def step(self, action: Action | float | None = None, n_substeps: int = 10) -> StepResult:
+        """Advance n_substeps x 10 ms with a constant command: an Action, a signed wheel force [N] (split by the
+        default allocator: regen first, then friction brakes), or None (the built-in driver)."""
+        cmd = self._cmd
+        if action is None:
+            cmd[C_USE_DRIVER] = 1.0
+        elif isinstance(action, Action):
+            tr, rg, fb = action.traction_force, action.regen_force, action.friction_brake_force
+            if not (tr >= 0 and rg >= 0 and fb >= 0) or not math.isfinite(tr + rg + fb):
+                raise SimulationError(f"action: forces must be finite and >= 0 N, got traction={tr!r}, "
+                                      f"regen={rg!r}, friction={fb!r}")
+            cmd[C_USE_DRIVER] = 0.0
+            cmd[C_TRACTION] = tr
+            cmd[C_REGEN] = rg
+            cmd[C_FRICTION] = fb
+            cmd[C_STEER] = np.nan if action.steer is None else action.steer
+            cmd[C_GEAR_REQ] = -1.0 if action.gear is None else action.gear
+            if action.gear is not None and not 0 <= action.gear <= self.vehicle.drivetrain.n_gears:
+                raise SimulationError(f"action.gear: must be in 0..{self.vehicle.drivetrain.n_gears}, got "
+                                      f"{action.gear!r}")
+        else:
+            f = float(action)
+            if not math.isfinite(f):
+                raise SimulationError(f"action: wheel force must be finite, got {action!r}")
+            cmd[C_USE_DRIVER] = 2.0
+            cmd[C_TRACTION] = f
+            cmd[C_STEER] = np.nan
+            cmd[C_GEAR_REQ] = -1.0
+        if n_substeps < 1:
+            raise SimulationError(f"n_substeps: must be >= 1, got {n_substeps!r}")
+        if int(self.X[S_NLOG]) + n_substeps > self._log.shape[0]:
+            self._ensure_capacity(n_substeps)
+        physics.advance(self.X, self.P, self.tabs, self.ti, self._road, self._stops, self._cycle, self._rng, cmd,
+                        self._log, n_substeps)
+        if self.X[S_AY_WARN_N] > 0 and not self._warned:
+            self._warn_lateral()
+        e = self.X[S_E_SOURCE]
+        self._result = self._make_result(e - self._last_energy)
+        self._last_energy = e
+        return self._result
+
+    def _make_result(self, d_energy: float) -> StepResult:
+        X = self.X
+        n = int(X[S_NLOG])
+        s = X[S_POS]
+        if n:
+            row = self._log[n - 1]
+            fx, grade, curv, bank = row[L_FX], row[L_GRADE], row[L_CURV], row[L_BANK]
+        else:
+            fx = 0.0
+            at = self.road.at(s)
+            grade, curv, bank = float(at["grade"]), float(at["curvature"]), 0.0
+        return StepResult(t=X[S_T], s=s, v=X[S_V], a=X[S_A], gear=int(X[S_GEAR]), engine_speed=X[S_OMEGA_E],
+                          engine_torque=X[S_TE],
+                          clutch=1.0 if X[S_MODE] == MODE_LOCKED else (0.5 if X[S_MODE] == MODE_SLIP else 0.0),
+                          source_energy=d_energy, source_energy_total=X[S_E_SOURCE], tractive_force=fx,
+                          lateral_acceleration=X[S_AY], grade=grade, curvature=curv, bank=bank,
+                          speed_limit=road_value_at(self._road, R_VLIM, s), done=bool(physics.is_done(X, self.P)))
+
+    def _warn_lateral(self) -> None:
+        self._warned = True
+        warnings.warn(LateralValidityWarning(
+            f"lateral acceleration reached {self.X[S_AY_MAX]:.2f} m/s^2 (above 4 m/s^2, where the single-track "
+            f"model is no longer valid, section 2.5.1) at t={self.X[S_T]:.1f} s, s={self.X[S_POS]:.0f} m"),
+            stacklevel=3)
+
+    # ------------------------------------------------------------------ whole trips
+    def run(self, duration: float | None = None, distance: float | None = None,
+            progress: Callable[[float], None] | None = None, chunk_seconds: float = 120.0) -> None:
+        """Drive with the built-in driver (or the drive cycle) until the end of the road / cycle, or for the given
+        duration [s] / distance [m] from now, whichever comes first."""
+        X, P = self.X, self.P
+        if duration is not None and not (math.isfinite(duration) and duration > 0):
+            raise SimulationError(f"duration: must be a positive number of seconds, got {duration!r}")
+        if distance is not None and not (math.isfinite(distance) and distance > 0):
+            raise SimulationError(f"distance: must be a positive number of metres, got {distance!r}")
+        remaining = self.road.length - X[S_POS]
+        if distance is not None and distance > remaining + 1e-6:
+            raise SimulationError(f"distance: {distance:g} m exceeds the {remaining:.0f} m left on road "
+                                  f"{self.road.name!r}")
+        t0 = X[S_T]
+        if self.cycle is not None:
+            horizon = self.cycle.duration - t0
+            if duration is not None:
+                horizon = min(horizon, duration)
+        elif duration is not None:
+            horizon = duration
+        else:
+            dist = remaining if distance is None else distance
+            horizon = dist / 2.0 + self._stops.size * (self.driver.dwell_max + 30.0) + 600.0
+        P[P_T_END] = t0 + horizon if (duration is not None or self.cycle is not None) else np.inf
+        P[P_S_END] = X[S_POS] + distance if distance is not None else np.inf
+        max_steps = int(math.ceil(horizon / DT)) + 1
+        self._cmd[C_USE_DRIVER] = 1.0
+        chunk = max(1, int(chunk_seconds / DT))
+        done = 0
+        while done < max_steps and not physics.is_done(X, P):
+            n = min(chunk, max_steps - done)
+            self._ensure_capacity(n)
+            done += physics.run(X, P, self.tabs, self.ti, self._road, self._stops, self._cycle, self._rng,
+                                self._cmd, self._log, n)
+            if progress is not None:
+                frac = (X[S_T] - t0) / horizon if P[P_T_END] < np.inf else (
+                    (X[S_POS] - (P[P_S_END] - distance if distance else 0.0)) / max(dist if distance is None
+                                                                                    else distance, 1e-9))
+                progress(min(1.0, max(0.0, float(frac))))
+        if not physics.is_done(X, P):
+            warnings.warn(f"trip stopped after {X[S_T] - t0:.0f} s at s={X[S_POS]:.0f} m without reaching the end "
+                          f"of road {self.road.name!r} (vehicle too slow or stuck)", RuntimeWarning, stacklevel=2)
+        P[P_T_END] = np.inf
+        P[P_S_END] = np.inf
+        if X[S_AY_WARN_N] > 0 and not self._warned:
+            self._warn_lateral()
+        e = X[S_E_SOURCE]
+        self._result = self._make_result(e - self._last_energy)
+        self._last_energy = e
+
+    # ------------------------------------------------------------------ queries
+    @property
+    def state(self) -> StepResult:
+        return self._result
+
+    def energy_ledger(self) -> dict[str, float]:
+        """Cumulative energies [J] since reset: source (fuel/battery), shaft work T_E omega_E, dissipation by
+        component, climbing work (= m g delta h for constant mass), and the kinetic energy now."""
+        X = self.X
+        return {"source": X[S_E_SOURCE], "shaft_work": X[S_W_SHAFT], "gearbox_loss": X[S_D_GEARBOX],
+                "differential_loss": X[S_D_DIFF], "clutch_loss": X[S_D_CLUTCH], "brake_loss": X[S_D_BRAKE],
+                "rolling_loss": X[S_D_ROLL], "aero_loss": X[S_D_AERO], "cornering_loss": X[S_D_CORNER],
+                "climbing_work": X[S_W_CLIMB], "payload_potential": X[S_E_PAYLOAD_PE],
+                "kinetic_energy": self.kinetic_energy()}
+
+    def kinetic_energy(self) -> float:
+        """Translational + rotational kinetic energy [J] of the longitudinal model now."""
+        from .drivetrain import source_side_inertia, wheel_side_mass
+
+        X, P = self.X, self.P
+        gear = int(X[S_GEAR])
+        m_w = wheel_side_mass(P, X[S_MASS])
+        return 0.5 * m_w * X[S_V] ** 2 + 0.5 * source_side_inertia(P, gear) * X[S_OMEGA_E] ** 2
+
+    def true_parameters(self) -> dict[str, float]:
+        """Current true lumped parameters (for oracle controllers / evaluation), SI units."""
+        X, P = self.X, self.P
+        n = int(X[S_NLOG])
+        row = self._log[n - 1] if n else None
+        v = X[S_V]
+        mass = X[S_MASS]
+        if row is None:  # before the first step: nominal values
+            fr0, fr1, fr4 = P[P_FR0], P[P_FR1], P[P_FR4]
+            rho = P[P_P_AMB] / (287.058 * P[P_T_AMB])
+            cxa = P[P_CW] * P[P_AREA] * X[S_DRAGF]
+            csf, csr, ws, wa, mu, grade, curv, bank = P[P_CF], P[P_CR], 0.0, 0.0, P[P_MU0], 0.0, 0.0, 0.0
+        else:
+            fr0, fr1, fr4, rho, cxa = row[L_FR0], row[L_FR1], row[L_FR4], row[L_RHO], row[L_CXA]
+            csf, csr, ws, wa, mu = row[L_CSF], row[L_CSR], row[L_WIND_S], row[L_WIND_A], row[L_MU]
+            grade, curv, bank = row[L_GRADE], row[L_CURV], row[L_BANK]
+        lf, lr, wb = P[P_LF], P[P_LR], P[P_L]
+        c_eq = 1.0 / (4.0 * (lr ** 2 / csf + lf ** 2 / csr) / wb ** 2)
+        phi = oil_loss_factor(P, X[S_OIL_T]) if P[P_OIL_ON] > 0.5 else 1.0
+        return {
+            "mass": mass, "rolling_resistance_f0": fr0, "rolling_resistance_f1": fr1, "rolling_resistance_f4": fr4,
+            "rolling_resistance_coefficient": fr0 + fr1 * v + fr4 * v ** 4, "drag_area": cxa, "air_density": rho,
+            "aero_coefficient": 0.5 * rho * cxa, "wind_speed": ws, "wind_angle": wa,
+            "cornering_stiffness_front": csf, "cornering_stiffness_rear": csr, "cornering_stiffness": c_eq,
+            "brake_friction_coefficient": mu, "drivetrain_loss_factor": phi, "oil_temperature": X[S_OIL_T],
+            "ambient_temperature": P[P_T_AMB], "ambient_pressure": P[P_P_AMB], "grade": grade, "curvature": curv,
+            "bank": bank, "wheel_radius": P[P_RW], "effective_mass": self.vehicle.effective_mass(int(X[S_GEAR]), mass),
+            "a": mass * G * fr0, "b": mass * G * fr1, "c": 0.5 * rho * cxa,
+        }
+
+    def regen_capacity(self) -> float:
+        """Largest braking force [N] the engine drag / motor regen can apply now."""
+        X = self.X
+        phi = oil_loss_factor(self.P, X[S_OIL_T]) if self.P[P_OIL_ON] > 0.5 else 1.0
+        return float(_regen_capacity(self.P, self.tabs, self.ti, int(X[S_GEAR]), int(X[S_MODE]), X[S_OMEGA_E],
+                                     X[S_V], phi))
+
+    def observe(self) -> dict[str, float] | None:
+        """The latest CAN-like sensor sample (measured channels, SI), None before the first step."""
+        return self.sensor_model.sample(self._log, int(self.X[S_NLOG]))
+
+    def truth_log(self) -> np.ndarray:
+        """The raw truth log so far (rows = 10-ms substeps, columns = ``layout.LOG``); a view, do not modify."""
+        return self._log[: int(self.X[S_NLOG])]
+
+    def to_trip(self, name: str | None = None) -> Trip:
+        """The Trip of everything stepped since reset: measured channels (sensor model) + truth + metadata."""
+        n = int(self.X[S_NLOG])
+        if n == 0:
+            raise SimulationError("to_trip: nothing simulated yet (call step() or run() first)")
+        log = self._log[:n]
+        t, channels, keep = self.sensor_model.measure(log, n)
+        measured = pd.DataFrame({"t": t, **channels})
+        if not keep.all():
+            measured = measured[keep]
+        units = {"t": "s", **self.sensor_model.units}
+        truth_map = dict(TRUTH_COLUMNS)
+        if self.vehicle.drivetrain.kind == "bev":
+            truth_map.update(_BEV_TRUTH)
+        truth = pd.DataFrame({"t": log[:, L_T], **{k: log[:, c] for k, c in truth_map.items()}})
+        truth["cornering_stiffness"] = 1.0 / (4.0 * (self.P[P_LR] ** 2 / truth["cornering_stiffness_front"]
+                                                    + self.P[P_LF] ** 2 / truth["cornering_stiffness_rear"])
+                                              / self.P[P_L] ** 2)
+        truth_units = {c: TRUTH[c].unit for c in truth.columns}
+        warn = []
+        if self.X[S_AY_WARN_N] > 0:
+            warn.append(f"lateral acceleration above 4 m/s^2 in {int(self.X[S_AY_WARN_N])} samples (max "
+                        f"{self.X[S_AY_MAX]:.2f} m/s^2): single-track model outside its validity")
+        meta = {
+            "source": "sim",
+            "name": name or f"sim-{self.vehicle.name}-{self.road.name}-{self.seed}",
+            "vehicle": self.vehicle.to_dict(),
+            "road": {"name": self.road.name, "length": self.road.length, "meta": _jsonable(self.road.meta)},
+            "seed": self.seed,
+            "effects": self.effects.to_dict(),
+            "sample_rate": float(self.sensors.sample_rate),
+            "driver": ({"drive_cycle": self.cycle.name} if self.cycle is not None else asdict(self.driver)),
+            "sensors": asdict(self.sensors),
+            "energy": {k: float(v) for k, v in self.energy_ledger().items()},
+            "initial_speed": self.initial_speed,
+            "warnings": warn,
+        }
+        return Trip(measured.reset_index(drop=True), units, meta, truth, truth_units)
+
+
+def simulate(vehicle: VehicleSpec | str, road: RoadProfile | DriveCycle,
+             effects: EffectsConfig | list[str] | str | dict | None = None, sensors: SensorSpec | None = None,
+             seed: int = 0, duration: float | None = None, distance: float | None = None,
+             driver: DriverConfig | DriveCycle | None = None, progress: Callable[[float], None] | None = None,
+             initial_speed: float = 0.0) -> Trip:
+    """Run the built-in driver (or a drive cycle) over a road and return the Trip (measured + truth + meta)."""
+    try:
+        sim = Simulator(vehicle, road, effects, sensors, seed, driver=driver, initial_speed=initial_speed)
+    except VehicleSpecError:
+        raise
+    sim.run(duration=duration, distance=distance, progress=progress)
+    return sim.to_trip()

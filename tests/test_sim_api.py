@@ -1,0 +1,165 @@
+"""Simulator step API, Trip contract, determinism, bad input."""
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+from roadload import Trip
+from roadload.envs import (Action, EffectsConfig, EffectsError, LateralValidityWarning, SimulationError, Simulator,
+                           get_preset, simulate)
+from roadload.road_profiles import RoadProfile
+from roadload.vehicle import VehicleSpec, VehicleSpecError, load_vehicle
+
+
+def short_road(length=1500.0, stops=()):
+    s = np.arange(0.0, length + 1.0, 10.0)
+    return RoadProfile("short", s, 0.02 * np.sin(s / 200.0), 0.003 * np.sin(s / 150.0), np.zeros_like(s),
+                       np.full_like(s, 20.0), stops=np.asarray(stops, float))
+
+
+def test_same_seed_identical_trip_and_different_seed_different_noise():
+    road = short_road()
+    a = simulate("gt_rwd", road, effects=["wind", "sensor_outliers"], seed=3)
+    b = simulate("gt_rwd", road, effects=["wind", "sensor_outliers"], seed=3)
+    c = simulate("gt_rwd", road, effects=["wind", "sensor_outliers"], seed=4)
+    assert a.equals(b)
+    n = min(len(a), len(c))
+    diff = a.measured["accel_x"].to_numpy()[:n] - c.measured["accel_x"].to_numpy()[:n]
+    assert np.mean(np.abs(diff) > 0) > 0.5  # noise differs in most samples
+    assert not np.allclose(a.truth["wind_speed"].to_numpy()[:n], c.truth["wind_speed"].to_numpy()[:n])
+
+
+def test_trip_contract_measured_truth_and_meta(tmp_path):
+    trip = simulate("bmw_i3", short_road(stops=[800.0]), effects=["payload", "tire_warmup"], seed=1)
+    for ch in ("wheel_speed_fl", "wheel_speed_rr", "vehicle_speed", "accel_x", "accel_y", "yaw_rate",
+               "steering_wheel_angle", "drive_torque", "engine_speed", "gear", "clutch", "brake_pressure_front",
+               "brake_pressure_rear", "ambient_temperature", "battery_voltage", "battery_current"):
+        assert ch in trip.measured.columns, ch
+    for ch in ("tractive_force", "mass", "rolling_resistance_coefficient", "drag_area", "grade", "curvature",
+               "wind_speed", "cornering_stiffness", "air_density"):
+        assert ch in trip.truth.columns, ch
+        assert ch not in trip.measured.columns
+    assert trip.sample_rate == pytest.approx(100.0)
+    assert trip.meta["source"] == "sim" and trip.meta["seed"] == 1
+    assert trip.meta["effects"]["effects"].keys() == {"payload", "tire_warmup"}
+    assert VehicleSpec.from_dict(trip.meta["vehicle"]).name == "bmw_i3"
+    # payload changed at the stop, and the truth says so
+    mass = trip.true("mass")
+    assert mass[0] == pytest.approx(1400.0) and abs(mass[-1] - mass[0]) > 1.0
+    # f_r falls as the tires warm up
+    fr0 = trip.true("rolling_resistance_f0")
+    assert fr0[0] > fr0[-1] > get_preset("bmw_i3").tires.rolling_resistance_f0
+    path = trip.save(tmp_path / "t.parquet")
+    assert Trip.load(path).equals(trip)
+
+
+def test_step_api_observe_matches_trip_rows_and_done_at_end():
+    sim = Simulator("gt_rwd", short_road(600.0), effects=["sensor_bias", "sensor_dropouts"], seed=2)
+    assert sim.observe() is None
+    obs = []
+    while not sim.state.done:
+        r = sim.step(None, n_substeps=10)
+        obs.append(sim.observe())
+    trip = sim.to_trip()
+    assert r.s >= 600.0 - 1e-6
+    m = trip.measured.set_index(np.round(trip.measured["t"].to_numpy(), 6))
+    for o in obs[::7]:
+        row = m.loc[round(o["t"], 6)]
+        for k in ("vehicle_speed", "accel_x", "drive_torque", "gear"):
+            assert (np.isnan(o[k]) and np.isnan(row[k])) or o[k] == row[k], k
+
+
+def test_step_api_actions_and_true_parameters():
+    sim = Simulator("bmw_i3", short_road(3000.0), seed=0, initial_speed=15.0)
+    r0 = sim.step(Action(traction_force=1500.0), n_substeps=50)
+    assert r0.a > 0.3 and r0.source_energy > 0  # accelerating draws battery energy
+    r1 = sim.step(-1200.0, n_substeps=50)  # signed force: regen first
+    assert r1.a < -0.5 and r1.source_energy < 0  # regenerating puts energy back
+    cap = sim.regen_capacity()
+    assert 0 < cap < 5000
+    r2 = sim.step(Action(friction_brake_force=3000.0), n_substeps=20)
+    log = sim.truth_log()
+    from roadload.envs.layout import L_PBF
+    assert log[-1, L_PBF] > 1e5  # friction braking shows as brake pressure
+    p = sim.true_parameters()
+    spec = get_preset("bmw_i3")
+    assert p["mass"] == spec.body.mass
+    assert p["drag_area"] == pytest.approx(spec.aero.drag_area)
+    assert p["rolling_resistance_f0"] == pytest.approx(spec.tires.rolling_resistance_f0)
+    assert p["c"] == pytest.approx(0.5 * p["air_density"] * p["drag_area"])
+    assert r2.t == pytest.approx(1.2)
+    with pytest.raises(SimulationError, match="action"):
+        sim.step(Action(traction_force=-1.0))
+    with pytest.raises(SimulationError, match="action.gear"):
+        sim.step(Action(gear=3))
+    first = sim.reset()
+    assert first.t == 0.0 and first.s == 0.0
+
+
+def test_lateral_validity_warning_above_4_mps2():
+    s = np.array([0.0, 3000.0])
+    road = RoadProfile("straight", s, [0, 0], [0, 0], [0, 0], [40, 40])
+    sim = Simulator("gt_rwd", road, seed=0, initial_speed=25.0)
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        for _ in range(30):
+            sim.step(Action(traction_force=800.0, steer=0.03), n_substeps=10)
+    assert any(issubclass(w.category, LateralValidityWarning) for w in rec)
+    assert sim.to_trip().meta["warnings"]
+
+
+def test_bad_inputs_name_the_field(tmp_path):
+    spec = get_preset("gt_rwd")
+    d = spec.to_dict()
+    d["body"]["mass"] = -5.0
+    with pytest.raises(VehicleSpecError, match=r"vehicle\.body\.mass: must be > 0"):
+        VehicleSpec.from_dict(d)
+    d = spec.to_dict()
+    d["aero"]["drag_coeff"] = 0.3
+    with pytest.raises(VehicleSpecError, match=r"vehicle\.aero\.drag_coeff: unknown field"):
+        VehicleSpec.from_dict(d)
+    d = spec.to_dict()
+    d["drivetrain"]["gearbox_loss"][2]["values"][0][0] = float("nan")
+    with pytest.raises(VehicleSpecError, match=r"vehicle\.drivetrain\.gearbox_loss\[2\]\.values"):
+        VehicleSpec.from_dict(d)
+    bad = tmp_path / "v.json"
+    bad.write_text('{"name": "x", "body": {"mass": 1}')
+    with pytest.raises(VehicleSpecError, match="not valid JSON"):
+        load_vehicle(bad)
+    d = spec.to_dict()
+    d["tires"]["dynamic_radius"] = "big"
+    bad.write_text(json.dumps(d))
+    with pytest.raises(VehicleSpecError, match=r"vehicle\.tires\.dynamic_radius: expected a number"):
+        load_vehicle(bad)
+    with pytest.raises(EffectsError, match="unknown effect 'rain'.*known effects"):
+        EffectsConfig.parse(["rain"])
+    with pytest.raises(EffectsError, match="'wind' has no parameter 'speed'"):
+        EffectsConfig.parse("wind:speed=3")
+    with pytest.raises(EffectsError, match="mean_speed"):
+        EffectsConfig.parse("wind:mean_speed=-3")
+    with pytest.raises(VehicleSpecError, match="unknown vehicle preset"):
+        get_preset("porsche")
+    with pytest.raises(SimulationError, match="seed"):
+        Simulator("gt_rwd", short_road(), seed=-1)
+    with pytest.raises(SimulationError, match="distance"):
+        simulate("gt_rwd", short_road(), distance=5000.0)
+
+
+def test_vehicle_json_round_trip(tmp_path):
+    for name in ("gt_rwd", "gt_awd", "bmw_i3"):
+        spec = get_preset(name)
+        path = spec.save(tmp_path / f"{name}.json")
+        again = load_vehicle(path)
+        assert again == spec
+        assert again.replace(**{"body.mass": 2000.0}).body.mass == 2000.0
+
+
+def test_effects_parse_forms():
+    cfg = EffectsConfig.parse("wind:mean_speed=5,gust_std=2,payload")
+    assert cfg.names == ["payload", "wind"]
+    assert cfg.params("wind")["mean_speed"] == 5.0 and cfg.params("wind")["gust_std"] == 2.0
+    again = EffectsConfig.from_dict(json.loads(json.dumps(cfg.to_dict())))
+    assert again.to_dict() == cfg.to_dict()
+    assert EffectsConfig.parse("all").names == sorted(EffectsConfig.parse("all").names)

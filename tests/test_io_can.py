@@ -263,3 +263,17 @@ def test_declared_dbc_unit_must_match_mapping(synthetic_mf4, tmp_path):
     (tmp_path / "bad.json").write_text(json.dumps(bad))
     with pytest.raises(LogImportError, match="unit mismatch for MOTION.speed"):
         import_log(path, "dbc-mf4", tmp_path / "bad.json")
+
+
+def test_malformed_dbc_and_mapping_files(tmp_path, synthetic_mf4):
+    path, _, _ = synthetic_mf4
+    broken = tmp_path / "broken.dbc"
+    broken.write_text('BO_ 256 MOTION: 8 ECU\n SG_ speed : 0|16@1+ (0.01,0 [0|655.35] "km/h" ECU\n')
+    with pytest.raises(LogImportError, match="broken.dbc: not a valid DBC file"):
+        load_dbc([DbcSource(broken)])
+    (tmp_path / "m.json").write_text('{"name": "x", "format": "dbc-mf4", "channels": [}')
+    with pytest.raises(LogImportError, match="m.json: not valid JSON"):
+        import_log(path, "dbc-mf4", tmp_path / "m.json")
+    (tmp_path / "m2.json").write_text(json.dumps(dict(MAPPING, format="pcap")))
+    with pytest.raises(LogImportError, match="unknown format 'pcap'"):
+        import_log(path, "dbc-mf4", tmp_path / "m2.json")

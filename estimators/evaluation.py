@@ -28,7 +28,8 @@ HORIZONS: tuple[int, ...] = (300, 900, 1200, 1500, 1800)   # k, triggered sample
 ESTIMATORS: tuple[str, ...] = ("RLS", "RRLM", "SGMKF", "RGTLS", "SGIVMKF")  # section 5.5
 GRAY_BOX_MODELS: tuple[str, ...] = ("M3", "M4")
 MIN_TRAINING = 600          # triggered samples (60 s at 10 Hz) before a validation block may start
-P_MAX = 1.0                 # convergence test P_t < P_max on every diagonal entry of SGMKF's P (P_0 = 100 I)
+P_MAX = 0.1                 # convergence test P_t < P_max on every diagonal entry of SGMKF's P (P_0 = 100 I);
+                            # the text gives no value: 1e-3 P_0, reached after ~10-60 s of triggered data
 CONVERGENCE_ESTIMATOR = "SGMKF"
 MASS_PARAMETER = "m_V"
 NOTCH_FACTOR = 1.57         # McGill, Tukey and Larsen

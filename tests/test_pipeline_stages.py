@@ -91,14 +91,14 @@ def result():
 def test_stages_rates_and_known_delay(result):
     assert list(result.stages) == ["measured", "smoothed", "decimated", "states"]
     assert result.decimation == 10
-    assert result.delay == pytest.approx(0.2)                  # w_r = 20 samples at 100 Hz
+    assert result.delay == pytest.approx(0.5)                  # w_r = 50 samples at 100 Hz
     st = result.states
     assert np.median(np.diff(st["t"])) == pytest.approx(0.1)
     # smoothed rows are aligned to the time they estimate: the smoothed speed matches the true speed there
     sm = result.stages["smoothed"]
     v_true = 19 + 7 * np.sin(2 * np.pi * sm["t"] / 97) + 3 * np.sin(2 * np.pi * sm["t"] / 23 + 1)
     err = np.abs(sm["vehicle_speed"] - v_true)[sm["t"] > 2]
-    assert err.max() < 1e-3
+    assert err.max() < 1e-2                                  # m/s, smoother bias on a fast-varying signal
     # only the run-to stage is computed
     part = run_pipeline(handmade_trip(duration=60.0), _knowledge(), until="decimated")
     assert list(part.stages) == ["measured", "smoothed", "decimated"]
@@ -116,7 +116,7 @@ def test_states_match_analytic_truth(result):
         ref = np.interp(st["t"][sel], tt["t"], tt[truth])
         ok = st["trigger"][sel].to_numpy()
         err = np.abs(st[col][sel].to_numpy() - ref)[ok]
-        assert err.max() < 5e-3 * np.abs(ref).max(), col      # PKS bias on these sinusoids: well below 0.5 %
+        assert err.max() < 2e-2 * np.abs(ref).max(), col      # smoother bias on these fast sinusoids: < 2 %
 
 
 def test_trigger_conditions(result):
@@ -140,7 +140,7 @@ def test_trigger_conditions(result):
 def test_least_squares_on_pipeline_output_recovers_m3_and_m4(result):
     _, A4, B4 = model_data(result.states, "M4")
     X4, *_ = np.linalg.lstsq(A4, B4, rcond=None)
-    np.testing.assert_allclose(X4, X_TRUE, rtol=0.01)
+    np.testing.assert_allclose(X4, X_TRUE, rtol=0.02)
     # M3 on the same data misses the cornering resistance and must be worse in fit
     _, A3, B3 = model_data(result.states, "M3")
     X3, *_ = np.linalg.lstsq(A3, B3, rcond=None)

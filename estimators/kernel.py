@@ -104,9 +104,9 @@ def run_record(A, B, Z, ip, fp, Qm, Pd, F, xmin, xmax, X, P, sc, ring, ct,
     L = np.empty(n)
     u = np.empty(n)
     v = np.empty(n)
-    M = np.empty((n, n))
-    Minv = np.empty((n, n))
     work = np.empty((n, n))
+    pc = np.empty(n)
+    pr = np.empty(n)
 
     for t in range(T):
         b = B[t]
@@ -255,55 +255,38 @@ def run_record(A, B, Z, ip, fp, Qm, Pd, F, xmin, xmax, X, P, sc, ring, ct,
                         if sym:
                             P[j, i] = val
             if regularise:
-                # P <- P (I + κP)⁻¹ (eq. 3.34). P and I + κP commute, so solve (I + κP) Y = P by Gaussian
-                # elimination with partial pivoting on [M | P] and back substitution.
-                for i in range(n):
-                    for j in range(n):
-                        M[i, j] = kappa * P[i, j]
-                        work[i, j] = P[i, j]
-                    M[i, i] += 1.0
-                for col in range(n):
-                    piv = col
-                    best = abs(M[col, col])
-                    if not sym:  # M = I + κP is symmetric positive definite when P is: no pivoting needed
-                        for r_ in range(col + 1, n):
-                            vv = abs(M[r_, col])
-                            if vv > best:
-                                best = vv
-                                piv = r_
-                    if not (best > 0.0 and best < np.inf):
+                # P <- P (I + κP)⁻¹ = (P⁻¹ + κ I)⁻¹ (eq. 3.34), as n Sherman-Morrison updates with κ e_i e_iᵀ:
+                # P <- P - κ P e_i e_iᵀ P / (1 + κ P_ii); exact, no pivoting, keeps P symmetric.
+                for kk in range(n):
+                    dd = 1.0 + kappa * P[kk, kk]
+                    if not (dd > 0.0 and dd < np.inf):
                         ok = False
                         break
-                    if piv != col:
-                        for j in range(n):
-                            tmp = M[col, j]
-                            M[col, j] = M[piv, j]
-                            M[piv, j] = tmp
-                            tmp = work[col, j]
-                            work[col, j] = work[piv, j]
-                            work[piv, j] = tmp
-                    dinv = 1.0 / M[col, col]
-                    Minv[col, 0] = dinv
-                    for r_ in range(col + 1, n):
-                        f = M[r_, col] * dinv
-                        for j in range(col + 1, n):
-                            M[r_, j] -= f * M[col, j]
-                        for j in range(n):
-                            work[r_, j] -= f * work[col, j]
+                    f = kappa / dd
+                    if sym:
+                        # work on the upper triangle only; mirrored once below
+                        for i in range(kk):
+                            pc[i] = P[i, kk]
+                        for i in range(kk, n):
+                            pc[i] = P[kk, i]
+                        for i in range(n):
+                            fi = f * pc[i]
+                            for j in range(i, n):
+                                P[i, j] -= fi * pc[j]
+                    else:
+                        for i in range(n):
+                            pc[i] = P[i, kk]
+                            pr[i] = P[kk, i]
+                        for i in range(n):
+                            fi = f * pc[i]
+                            for j in range(n):
+                                P[i, j] -= fi * pr[j]
                 if not ok:
                     break
-                for j in range(n):
-                    for i in range(n - 1, -1, -1):
-                        acc = work[i, j]
-                        for kk in range(i + 1, n):
-                            acc -= M[i, kk] * P[kk, j]
-                        P[i, j] = acc * Minv[i, 0]
                 if sym:
                     for i in range(n):
                         for j in range(i + 1, n):
-                            m = 0.5 * (P[i, j] + P[j, i])
-                            P[i, j] = m
-                            P[j, i] = m
+                            P[j, i] = P[i, j]
             for i in range(n):
                 X[i] = Xp[i] + L[i] * r0
             if tikhonov:

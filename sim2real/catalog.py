@@ -1,0 +1,305 @@
+"""The catalog of candidate effects: each one both a regressor for the force model and a switch of the simulator.
+
+A :class:`CandidateEffect` maps an unmodelled effect to
+
+- ``terms(model, shape)``: extra regressor column(s) (:class:`roadload.estimators.models.Term`) whose fitted
+  parameters explain the residual F_xV,measured - F_xV,sim; :meth:`CandidateEffect.structure` registers
+  ``sim:<vehicle>+<effect>`` in the chapter-5 model registry (the sim's white box extended by the terms);
+- ``shape_grid``: values of one non-linear shape parameter (e.g. a warm-up time constant τ [s]) profiled on a
+  grid, or () when the effect is linear in its parameters;
+- ``needs``: diagnosis-table columns (channels) it cannot do without;
+- ``sim_effect`` and ``to_sim(params, shape, model)``: the simulator switch and its parameters from the fitted
+  values, so the identified effect can be switched on in the simulator. A switch is an effect name of
+  :data:`roadload.envs.effects.EFFECTS`, or ``spec:<dotted path>`` for a vehicle-spec field (e.g.
+  ``spec:sensors.channels.drive_torque.latency``), whose parameters are then ``{"value": ...}``.
+
+Users add their own with :func:`register_candidate`. Parameters are in SI; signs follow "measured minus sim".
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from roadload.estimators.models import ACCELERATION, GRADIENT_ANGLE, PATH_CURVATURE, SPEED, ModelStructure, \
+    Term, register_model
+from roadload.units import G
+
+from .errors import DiagnosisError
+from .forcemodel import AIR_DENSITY, SimForceModel
+
+# further diagnosis-table columns candidates read (see .table)
+TIME_SINCE_START = "time_since_start"
+DISTANCE = "distance"
+# the drive-side force the sim's balance asks for (F_xV,sim + F_brake) and its rate: candidates that scale with
+# the drive force read this one, not the measured drive force, whose noise is also in the residual
+DRIVE_FORCE = "sim_drive_force"
+DRIVE_FORCE_RATE = "sim_drive_force_rate"
+BRAKE_FORCE = "brake_force"
+GEAR = "gear"
+HEADING = "heading"
+
+TermFactory = Callable[[SimForceModel, "float | None"], tuple[Term, ...]]
+SimMapping = Callable[[dict[str, float], "float | None", SimForceModel], dict[str, float]]
+
+
+@dataclass(frozen=True)
+class CandidateEffect:
+    """One unmodelled effect (see module doc). ``description`` says what it is; ``regime_hint`` names the
+    regime where it shows most (for reports)."""
+
+    name: str
+    description: str
+    terms: TermFactory
+    needs: tuple[str, ...]
+    sim_effect: str | None = None
+    to_sim: SimMapping | None = None
+    shape_grid: tuple[float, ...] = ()
+    shape_name: str = ""
+    shape_unit: str = ""
+    regime_hint: str = ""
+    sim_aliases: tuple[str, ...] = ()
+
+    @property
+    def explains(self) -> tuple[str, ...]:
+        """Simulator switches this candidate stands for (its own plus aliases), e.g. for the selftest."""
+        return ((self.sim_effect,) if self.sim_effect else ()) + self.sim_aliases
+
+    def missing(self, columns) -> list[str]:
+        """Needed columns absent from ``columns`` (a table or mapping) or without one finite value."""
+        out = []
+        for c in self.needs:
+            if c not in columns:
+                out.append(c)
+                continue
+            col = np.asarray(columns[c], dtype=float)
+            usable = np.isfinite(col)
+            if c in (BRAKE_FORCE, HEADING):      # all-zero brake force / heading carries no information
+                usable &= col != 0
+            if not usable.any():
+                out.append(c)
+        return out
+
+    def shapes(self) -> tuple[float | None, ...]:
+        return self.shape_grid if self.shape_grid else (None,)
+
+    def structure(self, model: SimForceModel, shape: float | None = None) -> ModelStructure:
+        """``sim:<vehicle>+<name>`` in the model registry: the sim's white box extended by this effect's terms."""
+        name = f"{model.structure().name}+{self.name}" + ("" if shape is None else f"@{shape:g}")
+        return register_model(model.structure().extend(name, *self.terms(model, shape),
+                                                       description=f"sim + {self.description}"),
+                              replace_existing=True)
+
+    def sim_parameters(self, params: dict[str, float], shape: float | None, model: SimForceModel
+                       ) -> dict[str, float] | None:
+        """Simulator effect parameters for the fitted values (None when the effect has no simulator switch)."""
+        if self.to_sim is None:
+            return None
+        return self.to_sim(params, shape, model)
+
+
+def _c(s, name):
+    return np.asarray(s[name], dtype=float)
+
+
+# ---------------------------------------------------------------------------------------------- built-in effects
+def _drag_area(model, shape):
+    return (Term("rho_a/2 v^2", "delta c_x A_V", "m^2", lambda s: 0.5 * _c(s, AIR_DENSITY) * _c(s, SPEED) ** 2,
+                 (AIR_DENSITY, SPEED), lambda n: 0.0),)
+
+
+def _wind(model, shape):
+    # F_a = rho/2 c_x A_V (v + w)^2 -> d/dw at w = 0: rho c_x A_V v (w > 0: headwind along the vehicle's course)
+    return (Term("rho_a c_x A_V v", "headwind w", "m/s",
+                 lambda s: _c(s, AIR_DENSITY) * model.drag_area * _c(s, SPEED), (AIR_DENSITY, SPEED),
+                 lambda n: 0.0),)
+
+
+def _wind_heading(model, shape):
+    # wind fixed in the world frame, blowing towards heading psi_w: headwind component -w cos(heading - psi_w)
+    # = w_x cos(h) + w_y sin(h) with (w_x, w_y) the wind's velocity *from* which it comes
+    return (Term("rho_a c_x A_V v cos(heading)", "wind w_x", "m/s",
+                 lambda s: _c(s, AIR_DENSITY) * model.drag_area * _c(s, SPEED) * np.cos(_c(s, HEADING)),
+                 (AIR_DENSITY, SPEED, HEADING), lambda n: 0.0),
+            Term("rho_a c_x A_V v sin(heading)", "wind w_y", "m/s",
+                 lambda s: _c(s, AIR_DENSITY) * model.drag_area * _c(s, SPEED) * np.sin(_c(s, HEADING)),
+                 (AIR_DENSITY, SPEED, HEADING), lambda n: 0.0))
+
+
+def _rolling_scale(model, shape):
+    return (Term("m_V g cos(theta) f_r(v)", "rolling factor - 1", "1",
+                 lambda s: model.mass * G * np.cos(_c(s, GRADIENT_ANGLE))
+                 * model.rolling_resistance_coefficient(_c(s, SPEED)), (GRADIENT_ANGLE, SPEED), lambda n: 0.0),)
+
+
+def _rolling_speed(model, shape):
+    return (Term("m_V g cos(theta) v", "delta f_r1", "s/m",
+                 lambda s: model.mass * G * np.cos(_c(s, GRADIENT_ANGLE)) * _c(s, SPEED), (GRADIENT_ANGLE, SPEED),
+                 lambda n: 0.0),
+            Term("m_V g cos(theta) v^4", "delta f_r4", "s^4/m^4",
+                 lambda s: model.mass * G * np.cos(_c(s, GRADIENT_ANGLE)) * _c(s, SPEED) ** 4,
+                 (GRADIENT_ANGLE, SPEED), lambda n: 0.0))
+
+
+def _mass_offset(model, shape):
+    def build(s):
+        th = _c(s, GRADIENT_ANGLE)
+        return G * np.sin(th) + _c(s, ACCELERATION) + G * np.cos(th) * model.rolling_resistance_coefficient(_c(s, SPEED))
+    return (Term("g sin(theta) + dv/dt + g cos(theta) f_r(v)", "delta m_V", "kg", build,
+                 (GRADIENT_ANGLE, ACCELERATION, SPEED), lambda n: 0.0),)
+
+
+def _accel_bias(model, shape):
+    # a bias b of accel_x shifts the gradient angle of eq. 5.2 by ~ b/g: the sim's climbing force is off by m_V b
+    return (Term("-m_V", "accelerometer bias b", "m/s^2", lambda s: -model.mass * np.ones_like(_c(s, SPEED)),
+                 (SPEED, GRADIENT_ANGLE), lambda n: 0.0),)
+
+
+def _cornering(model, shape):
+    return (Term("v^4/(4 r^2)", "delta m_V^2/c_yW", "kg^2 rad/N",
+                 lambda s: _c(s, SPEED) ** 4 * np.nan_to_num(_c(s, PATH_CURVATURE)) ** 2 / 4.0,
+                 (SPEED, PATH_CURVATURE), lambda n: 0.0),)
+
+
+def _drivetrain_oil(model, shape):
+    tau = float(shape)
+    return (Term(f"|F_drive| exp(-t/{tau:g} s)", "cold loss fraction", "1",
+                 lambda s: np.abs(_c(s, DRIVE_FORCE)) * np.exp(-_c(s, TIME_SINCE_START) / tau),
+                 (DRIVE_FORCE, TIME_SINCE_START), lambda n: 0.0),)
+
+
+def _tire_warmup(model, shape):
+    d = float(shape)
+    return (Term(f"m_V g cos(theta) f_r(v) exp(-s/{d:g} m)", "cold tire factor - 1", "1",
+                 lambda s: model.mass * G * np.cos(_c(s, GRADIENT_ANGLE))
+                 * model.rolling_resistance_coefficient(_c(s, SPEED)) * np.exp(-_c(s, DISTANCE) / d),
+                 (GRADIENT_ANGLE, SPEED, DISTANCE), lambda n: 0.0),)
+
+
+def _friction_brake(model, shape):
+    # measured side subtracts the nominal brake force; a pad friction off by a factor (1 + k) leaves -k F_B
+    return (Term("-F_brake", "pad friction error k", "1", lambda s: -np.nan_to_num(_c(s, BRAKE_FORCE)),
+                 (BRAKE_FORCE,), lambda n: 0.0),)
+
+
+def _rotational_inertia(model, shape):
+    def per_gear(g):
+        return Term(f"dv/dt [gear {g}]", f"delta I_red/r_W^2 (gear {g})", "kg",
+                    lambda s, g=g: _c(s, ACCELERATION) * (np.rint(np.nan_to_num(_c(s, GEAR))) == g),
+                    (ACCELERATION, GEAR), lambda n: 0.0)
+    return tuple(per_gear(g) for g in range(1, model.n_gears + 1))
+
+
+def _torque_scale(model, shape):
+    return (Term("F_drive", "torque scale error epsilon", "1", lambda s: _c(s, DRIVE_FORCE), (DRIVE_FORCE,),
+                 lambda n: 0.0),)
+
+
+def _latency(model, shape):
+    # a torque signal late by tau: F_meas(t) = F(t - tau) ~ F(t) - tau dF/dt
+    return (Term("-dF_drive/dt", "latency tau", "s", lambda s: -_c(s, DRIVE_FORCE_RATE), (DRIVE_FORCE_RATE,),
+                 lambda n: 0.0),)
+
+
+def _p(params, key):
+    return float(params[key])
+
+
+_CATALOG: dict[str, CandidateEffect] = {}
+
+
+def register_candidate(candidate: CandidateEffect, replace_existing: bool = False) -> CandidateEffect:
+    """Add a candidate effect (DiagnosisError if the name is taken and replace_existing is False)."""
+    if not isinstance(candidate, CandidateEffect):
+        raise DiagnosisError(f"register_candidate expects a CandidateEffect, got {type(candidate).__name__}")
+    if candidate.name in _CATALOG and not replace_existing:
+        raise DiagnosisError(f"a candidate effect named {candidate.name!r} exists; pass replace_existing=True")
+    _CATALOG[candidate.name] = candidate
+    return candidate
+
+
+def get_candidate(name: str | CandidateEffect) -> CandidateEffect:
+    if isinstance(name, CandidateEffect):
+        return name
+    try:
+        return _CATALOG[name]
+    except KeyError:
+        raise DiagnosisError(f"unknown candidate effect {name!r}; known: {sorted(_CATALOG)}") from None
+
+
+def candidate_names() -> list[str]:
+    return list(_CATALOG)
+
+
+_TAU_GRID = (150.0, 300.0, 600.0, 1200.0, 2400.0)
+_DIST_GRID = (1000.0, 2500.0, 5000.0, 10000.0, 20000.0)
+
+
+def _oil_to_sim(p, shape, model):
+    """Fitted extra loss fraction k at the start -> the sim's oil start temperature: phi_start - 1 =
+    k / (1 - eta) = (phi_cold - 1) x, T_start = T_warm - x (T_warm - 293.15 K), x <= 1.5."""
+    k = _p(p, "cold loss fraction")
+    x = k / max(1.0 - model.drivetrain_efficiency, 1e-3) / max(model.oil_cold_loss_factor - 1.0, 1e-3)
+    x = float(np.clip(x, 0.0, 1.5))
+    return {"start_temperature": float(model.oil_warm_temperature - x * (model.oil_warm_temperature - 293.15))}
+
+for _cand in (
+    CandidateEffect("drag_area", "drag-area change c_x A_V (roof box, open windows, body change)", _drag_area,
+                    (SPEED, AIR_DENSITY), "drag_area",
+                    lambda p, sh, m: {"delta_drag_area": _p(p, "delta c_x A_V")}, regime_hint="speed"),
+    CandidateEffect("wind", "drag with wind: constant headwind along the course (air approach velocity)", _wind,
+                    (SPEED, AIR_DENSITY), "wind",
+                    lambda p, sh, m: {"speed": abs(_p(p, "headwind w")),
+                                      "angle": float(np.pi if _p(p, "headwind w") >= 0 else 0.0)},
+                    regime_hint="speed"),
+    CandidateEffect("wind_world", "drag with a wind fixed in the world frame (needs the course heading)",
+                    _wind_heading, (SPEED, AIR_DENSITY, HEADING), "wind",
+                    lambda p, sh, m: {"speed": float(np.hypot(_p(p, "wind w_x"), _p(p, "wind w_y"))),
+                                      "direction": float(np.arctan2(_p(p, "wind w_y"), _p(p, "wind w_x")))},
+                    regime_hint="speed"),
+    CandidateEffect("rolling_scale", "rolling resistance f_r(v) scaled (winter tires, tire pressure, road surface)",
+                    _rolling_scale, (GRADIENT_ANGLE, SPEED), "winter_tires",
+                    lambda p, sh, m: {"rolling_factor": 1.0 + _p(p, "rolling factor - 1"), "cornering_factor": 1.0},
+                    regime_hint="speed", sim_aliases=("wet_road",)),
+    CandidateEffect("rolling_speed", "rolling-resistance speed terms f_r1 v + f_r4 v^4 (eq. 2.10; wet road)",
+                    _rolling_speed, (GRADIENT_ANGLE, SPEED), "wet_road",
+                    lambda p, sh, m: {"rolling_factor": 1.0, "water_f1": max(_p(p, "delta f_r1"), 0.0)},
+                    regime_hint="speed"),
+    CandidateEffect("mass_offset", "mass offset (payload, passengers)", _mass_offset,
+                    (GRADIENT_ANGLE, ACCELERATION, SPEED), "payload",
+                    lambda p, sh, m: {"mass": _p(p, "delta m_V")}, regime_hint="acceleration"),
+    CandidateEffect("accel_bias", "accelerometer bias / mounting pitch (gradient angle of eq. 5.2 off)",
+                    _accel_bias, (SPEED, GRADIENT_ANGLE), "spec:sensors.channels.accel_x.bias",
+                    lambda p, sh, m: {"value": _p(p, "accelerometer bias b")}, regime_hint="grade",
+                    sim_aliases=("sensor_bias",)),
+    CandidateEffect("cornering", "cornering resistance (eq. 2.15) off", _cornering, (SPEED, PATH_CURVATURE),
+                    "cornering_stiffness",
+                    lambda p, sh, m: {"scale": 1.0 / (1.0 + _p(p, "delta m_V^2/c_yW")
+                                                      * m.cornering_stiffness / m.mass ** 2)},
+                    regime_hint="lateral_acceleration"),
+    CandidateEffect("drivetrain_oil", "drive-train losses raised while the oil is cold (decay with tau)",
+                    _drivetrain_oil, (DRIVE_FORCE, TIME_SINCE_START), "oil_temperature", _oil_to_sim,
+                    shape_grid=_TAU_GRID, shape_name="tau", shape_unit="s", regime_hint="time_since_start"),
+    CandidateEffect("tire_warmup", "rolling resistance raised on cold tires (decays over distance d)", _tire_warmup,
+                    (GRADIENT_ANGLE, SPEED, DISTANCE), "tire_warmup",
+                    lambda p, sh, m: {"cold_factor": float(np.clip(1.0 + _p(p, "cold tire factor - 1"), 1.0, 3.0)),
+                                      "distance_constant": float(sh)},
+                    shape_grid=_DIST_GRID, shape_name="d", shape_unit="m", regime_hint="time_since_start"),
+    CandidateEffect("friction_brake", "friction-brake force off (pad friction drift)", _friction_brake,
+                    (BRAKE_FORCE,), "brake_pad_drift",
+                    lambda p, sh, m: {"friction_factor": 1.0 + _p(p, "pad friction error k")}, regime_hint="mode"),
+    CandidateEffect("rotational_inertia", "rotational inertia per gear off", _rotational_inertia,
+                    (ACCELERATION, GEAR), None, None, regime_hint="gear"),
+    CandidateEffect("torque_scale", "drive-torque scale error (efficiency, torque model)", _torque_scale,
+                    (DRIVE_FORCE,), "torque_model_error",
+                    lambda p, sh, m: {"gain_error": _p(p, "torque scale error epsilon"), "offset": 0.0},
+                    regime_hint="mode"),
+    CandidateEffect("latency", "drive-torque signal latency", _latency, (DRIVE_FORCE_RATE,),
+                    "spec:sensors.channels.drive_torque.latency",
+                    lambda p, sh, m: {"value": max(_p(p, "latency tau"), 0.0)}, regime_hint="acceleration"),
+):
+    register_candidate(_cand)
+
+DEFAULT_CANDIDATES: tuple[str, ...] = tuple(_CATALOG)

@@ -1,0 +1,282 @@
+"""The diagnosis: where the sim departs from recorded trips, which candidate effect explains it, how far the gap
+shrinks once the effect is switched on, and what stays unexplained.
+
+Steps of :func:`diagnose` (settings in :class:`DiagnosisSettings`):
+
+1. the sim's floor (:mod:`.floor`) from trips the sim itself drives, reduced to the recorded trips' channels;
+2. the diagnosis table of the recorded trips (:mod:`.table`): residual r = F_xV,measured - (F_xV,sim + floor);
+3. the split (:func:`.selection.make_split`): held-out test segments, training segments in CV folds;
+4. gap measures before (:mod:`.gap`) on the held-out part; localisation of r over the regimes
+   (:mod:`.regimes`) and the residual analysis of eq. 3.4a/3.4b;
+5. candidates ranked alone by out-of-fold MSE with ΔAIC/ΔBIC; greedy forward selection (:mod:`.selection`);
+6. the accepted effects fitted on the whole training part (parameters with block-robust standard errors),
+   mapped to simulator switches; gap measures after / remaining per regime on the held-out part;
+7. the unexplained residual: regime bins of the held-out residual after the accepted effects that still depart
+   from 0 by at least ``min_effect`` N, and the flexible reference's strongest regime variable when the
+   reference still removes a significant part of it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+import pandas as pd
+
+from roadload.trip import Trip
+
+from .catalog import DEFAULT_CANDIDATES, get_candidate
+from .errors import DiagnosisError
+from .floor import SimFloor, reduce_channels
+from .gap import gap_measures
+from .reference import AdditiveRegimeModel
+from .regimes import DEFAULT_REGIMES, get_regime, localise, residual_analysis, strongest_departures
+from .selection import Selector, make_split
+from .simconfig import SimConfig
+from .stats import block_bootstrap_mean_difference
+from .table import DiagnosisTable, build_table, sim_force_model
+
+SCHEMA_VERSION = 1
+FLOOR_ROADS: tuple[tuple[str, int], ...] = (("hilly", 9101), ("city", 9102), ("motorway", 9103))
+RESIDUAL_SIGNALS = ("speed", "acceleration", "gradient_angle", "sim_drive_force", "sim_drive_force_rate",
+                    "time_since_start", "lateral_acceleration")
+
+
+@dataclass
+class DiagnosisSettings:
+    """Settings of :func:`diagnose`: candidate and regime names; split (segment_length [s], test_fraction,
+    n_folds, block_length [s] of the bootstrap, seed); fitting (robust Huber fit, n_boot bootstrap draws);
+    acceptance (min_gain relative held-out gain, min_explained share of the reference-removable part,
+    max_effects); min_effect [N]: smallest bin median reported as a departure / unexplained residual;
+    floor roads (profile name, seed) and floor_duration [s] per road for the sim's own trips (none: no floor)."""
+
+    candidates: tuple[str, ...] = DEFAULT_CANDIDATES
+    regimes: tuple[str, ...] = DEFAULT_REGIMES
+    segment_length: float = 60.0
+    test_fraction: float = 1 / 3
+    n_folds: int = 5
+    block_length: float = 10.0
+    seed: int = 0
+    robust: bool = True
+    n_boot: int = 300
+    min_gain: float = 0.01
+    min_explained: float = 0.5
+    max_effects: int = 3
+    min_effect: float = 20.0
+    floor_roads: tuple[tuple[str, int], ...] = FLOOR_ROADS
+    floor_duration: float = 900.0
+
+
+@dataclass
+class Diagnosis:
+    """Result of :func:`diagnose`; :meth:`to_dict` is the documented diagnosis.json schema."""
+
+    sim: dict
+    trips: list[str]
+    settings: dict
+    split: dict
+    floor: dict
+    gap_before: dict
+    gap_after: dict
+    regimes_before: dict
+    per_regime: list[dict]
+    residual_analysis: dict
+    ranking: list[dict]
+    skipped: dict
+    selection: list[dict]
+    effects: list[dict]
+    unexplained: dict
+    notes: dict
+    table: DiagnosisTable | None = field(default=None, repr=False)
+    residual_after: np.ndarray | None = field(default=None, repr=False)
+    test_rows: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def identified(self) -> list[str]:
+        return [e["name"] for e in self.effects]
+
+    def shrinkage(self, measure: str = "rmse") -> float:
+        """1 - gap_after / gap_before of the held-out force residual's ``measure`` (rmse, medse or |median|)."""
+        b = self.gap_before["force_residual"][measure]
+        a = self.gap_after["force_residual"][measure]
+        if measure == "median":
+            b, a = abs(b), abs(a)
+        return float(1.0 - a / b) if b > 0 else float("nan")
+
+    def to_dict(self) -> dict:
+        return _jsonable({
+            "schema_version": SCHEMA_VERSION, "sim": self.sim, "trips": self.trips, "settings": self.settings,
+            "split": self.split, "floor": self.floor,
+            "gap": {"before": self.gap_before, "after": self.gap_after,
+                    "shrinkage": {m: self.shrinkage(m) for m in ("rmse", "medse", "median")},
+                    "per_regime": self.per_regime},
+            "regimes": self.regimes_before, "residual_analysis": self.residual_analysis,
+            "ranking": self.ranking, "skipped_candidates": self.skipped, "forward_selection": self.selection,
+            "effects": self.effects, "unexplained": self.unexplained, "notes": self.notes})
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, (np.floating, float)):
+        return None if not np.isfinite(x) else float(x)
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    return x
+
+
+def sim_trips(sim: SimConfig, roads: Sequence[tuple[str, int]], duration: float,
+              effects=None) -> list[Trip]:
+    """Trips the sim itself drives on the given (profile, seed) roads (``effects`` overrides the sim's)."""
+    from roadload.envs.simulator import simulate
+    from roadload.road_profiles import load_profile
+
+    out = []
+    for name, seed in roads:
+        trip = simulate(sim.vehicle, load_profile(name, seed=seed), sim.effects if effects is None else effects,
+                        seed=seed, duration=duration)
+        trip.meta["name"] = f"sim-{name}-{seed}"
+        out.append(trip)
+    return out
+
+
+def fit_floor(sim: SimConfig, channels: set[str], settings: DiagnosisSettings,
+              trips: Sequence[Trip] | None = None) -> SimFloor:
+    """The sim's floor from its own trips reduced to ``channels`` (see :mod:`.floor`)."""
+    if not settings.floor_roads and trips is None:
+        return SimFloor.none()
+    own = list(trips) if trips is not None else sim_trips(sim, settings.floor_roads, settings.floor_duration)
+    own = [reduce_channels(t, channels) for t in own]
+    tab = build_table(own, sim)
+    f = tab.frame
+    return SimFloor.fit(f, f["sim_balance"].to_numpy(), f["residual"].to_numpy(), f["valid"].to_numpy(bool))
+
+
+def _per_regime(table: pd.DataFrame, before: np.ndarray, after: np.ndarray, rows: np.ndarray,
+                regimes: Sequence[str]) -> list[dict]:
+    out = []
+    for name in regimes:
+        reg = get_regime(name)
+        if reg.column not in table.columns:
+            continue
+        idx = reg.assign(table)
+        for i, label in enumerate(reg.bin_labels()):
+            sel = rows & (idx == i)
+            if sel.sum() < 20:
+                continue
+            b = float(np.sqrt(np.mean(before[sel] ** 2)))
+            a = float(np.sqrt(np.mean(after[sel] ** 2)))
+            out.append({"regime": reg.name, "bin": label, "n": int(sel.sum()), "rmse_before": b, "rmse_after": a,
+                        "median_before": float(np.median(before[sel])), "median_after": float(np.median(after[sel])),
+                        "remaining": a / b if b > 0 else float("nan")})
+    return out
+
+
+def _unexplained(table: pd.DataFrame, residual_after: np.ndarray, split, settings: DiagnosisSettings,
+                 rng: np.random.Generator) -> dict:
+    test = split.test
+    tabs = localise(np.where(test, residual_after, np.nan), table, split.blocks, settings.regimes, rng,
+                    n_boot=settings.n_boot, min_effect=settings.min_effect)
+    departures = strongest_departures(tabs, top=8)
+    # does a flexible reference still find structure? fitted on training, judged on the held-out rows
+    train = split.train
+    ref = AdditiveRegimeModel().fit(table[train], residual_after[train])
+    pred = ref.predict(table)
+    loss0 = np.where(test, residual_after ** 2, np.nan)
+    loss1 = np.where(test, (residual_after - pred) ** 2, np.nan)
+    gain = block_bootstrap_mean_difference(loss0, loss1, split.blocks, rng, settings.n_boot)
+    base = float(np.nanmean(loss0))
+    rel = gain[0] / base if base > 0 else 0.0
+    structured = bool(gain[1] > 0 and rel >= settings.min_gain)
+    importance = ref.importance(table[test]) if structured else []
+    return {"present": bool(departures) or structured, "departing_bins": departures,
+            "reference_gain": {"relative": rel, "interval": list(gain), "significant": structured},
+            "reference_importance": importance[:5],
+            "rms_after": float(np.sqrt(np.nanmean(loss0)))}
+
+
+def diagnose(real: Sequence[Trip], sim: SimConfig, settings: DiagnosisSettings | None = None,
+             floor_trips: Sequence[Trip] | None = None, floor: SimFloor | None = None,
+             progress: Callable[[str, float], None] | None = None) -> Diagnosis:
+    """Diagnose ``sim`` against the recorded trips ``real`` (see module doc)."""
+    settings = settings or DiagnosisSettings()
+    step = progress or (lambda what, frac: None)
+    for name in settings.candidates:
+        get_candidate(name)
+    for name in settings.regimes:
+        get_regime(name)
+    if not real:
+        raise DiagnosisError("no recorded trips given")
+    channels = set.intersection(*[set(t.channels) for t in real])
+    step("sim floor", 0.05)
+    if floor is None:
+        floor = fit_floor(sim, channels, settings, floor_trips)
+    step("diagnosis table", 0.25)
+    dt = build_table(real, sim, floor=floor)
+    table = dt.frame
+    model = dt.model
+    split = make_split(table, segment_length=settings.segment_length, test_fraction=settings.test_fraction,
+                       n_folds=settings.n_folds, block_length=settings.block_length, seed=settings.seed)
+    rng = np.random.default_rng(settings.seed)
+    r = np.where(split.valid, table["residual"].to_numpy(dtype=float), np.nan)
+    test = split.test
+    step("gap and regimes", 0.35)
+    gap_before = gap_measures(table, np.nan_to_num(r), model.mass, test)
+    regs = localise(r, table, split.blocks, settings.regimes, rng, n_boot=settings.n_boot,
+                    min_effect=settings.min_effect)
+    valid = split.valid
+    signals = {c: table[c].to_numpy(dtype=float)[valid] for c in RESIDUAL_SIGNALS if c in table.columns}
+    ra = residual_analysis(r[valid], signals, table["trip"].to_numpy()[valid], max_lag=20)
+    step("ranking candidates", 0.45)
+    sel = Selector(table, np.nan_to_num(r), split, model, robust=settings.robust, n_boot=settings.n_boot,
+                   seed=settings.seed, min_gain=settings.min_gain, min_explained=settings.min_explained)
+    explicit = settings.candidates != DEFAULT_CANDIDATES
+    ranked, skipped = sel.rank(settings.candidates)
+    if explicit:
+        bad = {k: v for k, v in skipped.items() if "needs" in v}
+        if bad:
+            raise DiagnosisError("requested candidates cannot be fitted on these trips: "
+                                 + "; ".join(f"{k} {v}" for k, v in bad.items()))
+    step("forward selection", 0.7)
+    steps = sel.forward(ranked, max_effects=settings.max_effects)
+    chosen = sel.chosen
+    effects: list[dict] = []
+    r_after = np.nan_to_num(r).copy()
+    if chosen:
+        d, fit = sel.final_fit(chosen)
+        r_after = np.nan_to_num(r) - d.A @ fit.X
+        se = np.sqrt(np.clip(np.diag(fit.cov), 0, None)) if fit.cov is not None else np.full(fit.X.size, np.nan)
+        for cand, shape in chosen:
+            own = [i for i, o in enumerate(d.owner) if o == cand.name]
+            params = {d.names[i]: float(fit.X[i]) for i in own}
+            step_info = next(s for s in steps if s["effect"] == cand.name)
+            effects.append({"name": cand.name, "description": cand.description, "shape": shape,
+                            "shape_name": cand.shape_name, "shape_unit": cand.shape_unit, "parameters": params,
+                            "std_errors": {d.names[i]: float(se[i]) for i in own},
+                            "units": {d.names[i]: d.units[i] for i in own},
+                            "heldout_gain": step_info["relative_gain"],
+                            "explained_fraction": step_info["explained_fraction"],
+                            "sim_switch": cand.sim_effect,
+                            "sim_parameters": cand.sim_parameters(params, shape, model)})
+    step("gap after", 0.85)
+    gap_after = gap_measures(table, r_after, model.mass, test)
+    per_regime = _per_regime(table, np.nan_to_num(r), r_after, test, settings.regimes)
+    unexplained = _unexplained(table, np.where(valid, r_after, np.nan), split, settings, rng)
+    regimes_before = {k: v.rows for k, v in regs.items()}
+    diag = Diagnosis(
+        sim=sim.to_dict(), trips=list(pd.unique(table["trip"])), settings=asdict(settings), split=split.describe(),
+        floor=floor.to_dict(), gap_before=gap_before, gap_after=gap_after, regimes_before=regimes_before,
+        per_regime=per_regime, residual_analysis=ra, ranking=[c.to_dict() for c in ranked], skipped=skipped,
+        selection=steps, effects=effects, unexplained=unexplained,
+        notes={"pipeline": dt.notes, "baseline": sel.baseline_info,
+               "strongest_departures_before": strongest_departures(regs, top=8)},
+        table=dt, residual_after=r_after, test_rows=test)
+    step("done", 1.0)
+    return diag

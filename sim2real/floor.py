@@ -1,0 +1,83 @@
+"""The sim's own floor: what the simulator does that its analytic force balance (:mod:`.forcemodel`) does not
+say, measured on trips the sim itself produced and processed exactly like the recorded ones.
+
+Even a trip of the sim leaves a residual F_xV,measured - F_xV,sim: the pipeline's simplified drive-train loss
+tables, the accelerometer's pitch under acceleration, smoothing delays, toe-in drag. The floor is a least-squares
+fit of that residual on a small generic basis; the sim's force balance used for the diagnosis is then
+F_xV,sim + floor, so the gap that remains is the one between the simulator and the data, not between the
+simulator and its own equations. Sim trips are reduced to the channels the recorded trips have, so both sides
+go through the same pipeline steps.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from roadload.trip import Trip
+from roadload.units import G
+
+from .errors import DiagnosisError
+
+BASIS: tuple[str, ...] = ("1", "v", "v^2", "dv/dt", "g sin(theta)", "F_sim,drive", "|F_sim,drive|",
+                          "dF_sim,drive/dt", "v^4/r^2", "F_brake")
+
+
+def basis(frame: pd.DataFrame, sim_force: np.ndarray) -> np.ndarray:
+    """Columns of the floor basis (NaN entries of curvature / brake force count as 0)."""
+    v = frame["speed"].to_numpy(dtype=float)
+    fb = np.nan_to_num(frame["brake_force"].to_numpy(dtype=float))
+    drive = np.asarray(sim_force, dtype=float) + fb
+    rate = np.zeros_like(drive)
+    for k in pd.unique(frame["trip"]):
+        sel = (frame["trip"] == k).to_numpy()
+        if sel.sum() > 2:
+            rate[sel] = np.gradient(drive[sel], frame["t"].to_numpy(dtype=float)[sel])
+    kappa = np.nan_to_num(frame["path_curvature"].to_numpy(dtype=float))
+    cols = [np.ones_like(v), v, v ** 2, frame["acceleration"].to_numpy(dtype=float),
+            G * np.sin(frame["gradient_angle"].to_numpy(dtype=float)), drive, np.abs(drive), rate,
+            v ** 4 * kappa ** 2, fb]
+    return np.nan_to_num(np.column_stack(cols))
+
+
+@dataclass
+class SimFloor:
+    """Coefficients of the floor basis [N per unit], the floor's residual scale [N] and how many samples."""
+
+    coefficients: np.ndarray
+    scale: float
+    n: int
+
+    @classmethod
+    def none(cls) -> "SimFloor":
+        return cls(np.zeros(len(BASIS)), float("nan"), 0)
+
+    @classmethod
+    def fit(cls, frame: pd.DataFrame, sim_force: np.ndarray, residual: np.ndarray, valid: np.ndarray
+            ) -> "SimFloor":
+        A = basis(frame, sim_force)[valid]
+        y = np.asarray(residual, dtype=float)[valid]
+        if y.size < 10 * A.shape[1]:
+            raise DiagnosisError(f"the sim's floor needs more valid samples of sim trips ({y.size})")
+        scale = np.sqrt(np.mean(A ** 2, axis=0))
+        scale[~(scale > 0)] = 1.0
+        x, *_ = np.linalg.lstsq(A / scale, y, rcond=1e-8)
+        x = x / scale
+        r = y - A @ x
+        return cls(x, float(np.sqrt(np.mean(r ** 2))), int(y.size))
+
+    def predict(self, frame: pd.DataFrame, sim_force: np.ndarray) -> np.ndarray:
+        return basis(frame, sim_force) @ self.coefficients
+
+    def to_dict(self) -> dict:
+        return {"basis": list(BASIS), "coefficients": [float(c) for c in self.coefficients],
+                "residual_rms": self.scale, "n": self.n}
+
+
+def reduce_channels(trip: Trip, channels: set[str]) -> Trip:
+    """A copy of a (sim) trip with only the measured channels in ``channels`` (plus t)."""
+    keep = ["t"] + [c for c in trip.channels if c in channels]
+    units = {c: trip.units[c] for c in keep}
+    return Trip(trip.measured[keep].copy(), units, dict(trip.meta), trip.truth, dict(trip.truth_units))

@@ -1,0 +1,70 @@
+"""Gap measures between the sim and recorded trips, on any subset of the diagnosis table (e.g. held-out rows).
+
+- force residual F_xV,measured - F_xV,sim [N]: n, mean, median, MAD, MEDSE, RMSE (robust first);
+- replay speed error [m/s]: the recorded force fed through the sim's longitudinal balance over windows of
+  ``window`` seconds starting at the recorded speed; to first order the replayed speed departs from the recorded
+  one by e(t) = ∫ (F_xV,measured - F_xV,sim) / m_V dt, so the measure is the RMS of e over the windows (the
+  speed trace the sim would drive with the recorded drive torque, brakes and road);
+- traction energy per distance [kWh/100 km]: ∫ max(F, 0) v dt / ∫ v dt for the measured and the sim's force.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from .stats import robust_summary
+
+J_PER_M_TO_KWH_PER_100KM = 100e3 / 3.6e6
+
+
+def replay_speed_error(frame: pd.DataFrame, residual: np.ndarray, mass: float, rows: np.ndarray,
+                       window: float = 20.0) -> dict[str, float]:
+    """RMS and final-value median of the windowed replay speed error e(t) = ∫ r / m dt on ``rows`` [m/s]."""
+    r = np.asarray(residual, dtype=float)
+    t = frame["t"].to_numpy(dtype=float)
+    trip = frame["trip"].to_numpy()
+    sq, ends, n = 0.0, [], 0
+    for k in pd.unique(trip[rows]):
+        sel = np.flatnonzero(rows & (trip == k))
+        if sel.size < 2:
+            continue
+        tk, rk = t[sel], r[sel]
+        win = np.floor((tk - tk[0]) / window).astype(int)
+        # a window restarts at every gap in the selected rows too (the replay starts at the recorded speed)
+        gaps = np.concatenate([[0], np.cumsum(np.diff(tk) > 0.5)])
+        key = win * 100000 + gaps
+        dt = np.concatenate([[0.0], np.diff(tk)])
+        for w in np.unique(key):
+            idx = key == w
+            e = np.cumsum(rk[idx] * dt[idx]) / mass
+            e -= e[0]
+            sq += float(np.sum(e ** 2))
+            n += e.size
+            ends.append(abs(e[-1]))
+    if n == 0:
+        return {"rms": float("nan"), "median_end": float("nan"), "windows": 0}
+    return {"rms": float(np.sqrt(sq / n)), "median_end": float(np.median(ends)), "windows": len(ends)}
+
+
+def energy_per_distance(frame: pd.DataFrame, force: np.ndarray, rows: np.ndarray) -> float:
+    """Traction energy per distance ∫ max(F, 0) v dt / ∫ v dt [kWh/100 km] over ``rows``."""
+    v = frame["speed"].to_numpy(dtype=float)[rows]
+    f = np.asarray(force, dtype=float)[rows]
+    dist = float(np.sum(v))
+    if dist <= 0:
+        return float("nan")
+    return float(np.sum(np.clip(f, 0, None) * v) / dist * J_PER_M_TO_KWH_PER_100KM)
+
+
+def gap_measures(frame: pd.DataFrame, residual: np.ndarray, mass: float, rows: np.ndarray) -> dict:
+    """All gap measures of ``residual`` on ``rows`` (see module doc)."""
+    r = np.asarray(residual, dtype=float)
+    measured = frame["tractive_force"].to_numpy(dtype=float)
+    e_meas = energy_per_distance(frame, measured, rows)
+    e_sim = energy_per_distance(frame, measured - r, rows)
+    return {"force_residual": robust_summary(r[rows]),
+            "replay_speed_error": replay_speed_error(frame, r, mass, rows),
+            "energy_per_distance": {"measured": e_meas, "sim": e_sim,
+                                    "relative_error": (e_sim - e_meas) / e_meas if e_meas else float("nan"),
+                                    "unit": "kWh/100 km"}}

@@ -1,0 +1,370 @@
+"""Which effect causes the gap: candidates fitted on training data, judged on held-out data (section 3.2.3), with
+ΔAIC/ΔBIC (eq. 3.5b, 3.6b) alongside, ranked, and a greedy forward selection that stops when the held-out gain
+is not significant.
+
+Data are split by whole segments (default 60 s of one trip): every k-th segment of a trip (random phase) is the
+*test* part, kept away from all fitting and used only for the before/after gap measures; the remaining
+*training* segments are dealt into folds for cross-validation. The target is the force residual
+y = F_xV,measured - F_xV,sim [N]; a candidate set is fitted to y (Huber M-estimation by default,
+:func:`roadload.estimators.batch.m_estimate`) and judged by the out-of-fold squared error. A held-out gain is
+significant when the block-bootstrap 95 % interval of the per-sample loss reduction lies above 0 (blocks of
+10 s, so autocorrelation does not fake significance) and the relative gain is at least ``min_gain``; a
+candidate must also remove at least ``min_explained`` of what the flexible reference (:mod:`.reference`) can
+remove, otherwise it is a partial fit and the rest is left unexplained, never forced onto it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+import pandas as pd
+
+from roadload.estimators.batch import BatchInputError, least_squares, m_estimate
+
+from .catalog import CandidateEffect, get_candidate
+from .errors import DiagnosisError
+from .forcemodel import SimForceModel, columns_of
+from .reference import AdditiveRegimeModel
+from .stats import block_bootstrap_mean_difference, block_ids, cluster_covariance
+
+
+# ============================================================================================ split
+@dataclass
+class Split:
+    """valid: rows used at all; test: held-out rows; fold: CV fold of training rows (-1 elsewhere);
+    blocks: 10 s bootstrap blocks; segments: the split units."""
+
+    valid: np.ndarray
+    test: np.ndarray
+    fold: np.ndarray
+    n_folds: int
+    blocks: np.ndarray
+    segments: np.ndarray
+
+    @property
+    def train(self) -> np.ndarray:
+        return self.valid & ~self.test
+
+    def describe(self) -> dict:
+        return {"n_valid": int(self.valid.sum()), "n_train": int(self.train.sum()), "n_test": int(self.test.sum()),
+                "n_folds": self.n_folds, "n_segments": int(np.unique(self.segments[self.valid]).size),
+                "n_test_segments": int(np.unique(self.segments[self.test]).size)}
+
+
+def make_split(table: pd.DataFrame, *, segment_length: float = 60.0, test_fraction: float = 1 / 3,
+               n_folds: int = 5, block_length: float = 10.0, seed: int = 0) -> Split:
+    """Training / test split by segments (see module doc); rows with ``valid`` False are in neither part."""
+    for c in ("trip", "t", "valid"):
+        if c not in table.columns:
+            raise DiagnosisError(f"the diagnosis table lacks the column {c!r}")
+    if not 0 < test_fraction < 1:
+        raise DiagnosisError(f"test_fraction must lie in (0, 1), got {test_fraction}")
+    if n_folds < 2:
+        raise DiagnosisError(f"n_folds must be >= 2, got {n_folds}")
+    trip = table["trip"].to_numpy()
+    t = table["t"].to_numpy(dtype=float)
+    valid = table["valid"].to_numpy(dtype=bool)
+    seg = block_ids(trip, t, segment_length)
+    blocks = block_ids(trip, t, block_length)
+    rng = np.random.default_rng(seed)
+    every = max(2, int(round(1.0 / test_fraction)))
+    test_segs: set[int] = set()
+    train_segs: list[int] = []
+    for k in pd.unique(trip):
+        segs = np.unique(seg[(trip == k) & valid])
+        phase = int(rng.integers(0, every))
+        for i, s in enumerate(segs):
+            (test_segs.add(int(s)) if (i + phase) % every == 0 else train_segs.append(int(s)))
+    if len(train_segs) < n_folds or not test_segs:
+        raise DiagnosisError(f"too little valid data to split: {len(train_segs)} training and {len(test_segs)} test "
+                             f"segments of {segment_length:g} s (need >= {n_folds} and >= 1); give longer trips")
+    test = np.isin(seg, list(test_segs)) & valid
+    fold = np.full(len(table), -1)
+    order = rng.permutation(len(train_segs))
+    fold_of = {train_segs[j]: int(i % n_folds) for i, j in enumerate(order)}
+    tr = valid & ~test
+    fold[tr] = [fold_of[int(s)] for s in seg[tr]]
+    return Split(valid, test, fold, n_folds, blocks, seg)
+
+
+# ============================================================================================ fitting
+@dataclass
+class Fit:
+    X: np.ndarray
+    cov: np.ndarray | None
+
+
+def fit_linear(A: np.ndarray, y: np.ndarray, rows: np.ndarray, robust: bool = True,
+               blocks: np.ndarray | None = None) -> Fit:
+    """X̂ of y ≈ A X on ``rows`` (columns scaled internally), with the block covariance when blocks are given."""
+    As, ys = A[rows], y[rows]
+    if As.shape[0] <= As.shape[1]:
+        raise DiagnosisError(f"{As.shape[0]} samples cannot determine {As.shape[1]} parameters")
+    scale = np.sqrt(np.mean(As ** 2, axis=0))
+    scale[~(scale > 0)] = 1.0
+    try:
+        res = (m_estimate(As / scale, ys, "huber", max_iter=15, tol=1e-5) if robust
+               else least_squares(As / scale, ys))
+    except BatchInputError as exc:
+        raise DiagnosisError(f"fit failed: {exc}") from None
+    X = res.X / scale
+    cov = None
+    if blocks is not None:
+        cov = cluster_covariance(As, ys - As @ X, blocks[rows], res.weights)
+    return Fit(X, cov)
+
+
+def cv_predict(A: np.ndarray | None, y: np.ndarray, table: pd.DataFrame, split: Split, robust: bool = True,
+               reference: bool = False) -> np.ndarray:
+    """Out-of-fold prediction of y on the training rows (NaN elsewhere); A None = no candidate (prediction 0);
+    ``reference`` adds the additive regime model fitted on the fold's training residual."""
+    pred = np.full(y.shape, np.nan)
+    for k in range(split.n_folds):
+        tr = split.train & (split.fold != k)
+        te = split.train & (split.fold == k)
+        if not te.any():
+            continue
+        p_tr = np.zeros(int(tr.sum()))
+        p_te = np.zeros(int(te.sum()))
+        if A is not None:
+            X = fit_linear(A, y, tr, robust).X
+            p_tr, p_te = A[tr] @ X, A[te] @ X
+        if reference:
+            ref = AdditiveRegimeModel().fit(table[tr], y[tr] - p_tr)
+            p_te = p_te + ref.predict(table[te])
+        pred[te] = p_te
+    return pred
+
+
+# ============================================================================================ candidates
+@dataclass
+class Design:
+    """Regressor columns of a set of (candidate, shape) choices."""
+
+    A: np.ndarray
+    names: list[str]
+    units: list[str]
+    owner: list[str]
+
+
+def design(choices: Sequence[tuple[CandidateEffect, float | None]], model: SimForceModel,
+           cols: dict[str, np.ndarray]) -> Design:
+    blocks, names, units, owner = [], [], [], []
+    for cand, shape in choices:
+        ext = cand.structure(model, shape)
+        own = ext.terms[-len(cand.terms(model, shape)):]
+        for term in own:
+            col = np.asarray(term.build(cols), dtype=float)
+            blocks.append(np.nan_to_num(col, nan=0.0, posinf=0.0, neginf=0.0))
+            names.append(term.parameter)
+            units.append(term.unit)
+            owner.append(cand.name)
+    return Design(np.column_stack(blocks), names, units, owner)
+
+
+@dataclass
+class CandidateResult:
+    """One candidate judged alone against the sim as is (see :func:`rank_candidates`)."""
+
+    name: str
+    description: str
+    shape: float | None
+    shape_name: str
+    parameters: dict[str, float]
+    std_errors: dict[str, float]
+    units: dict[str, str]
+    cv_mse: float
+    baseline_cv_mse: float
+    improvement: float
+    gain: tuple[float, float, float]
+    significant: bool
+    aic: float
+    bic: float
+    delta_aic: float = float("nan")
+    delta_bic: float = float("nan")
+    explained_fraction: float = float("nan")
+    sim_effect: str | None = None
+    sim_parameters: dict[str, float] | None = None
+    regime_hint: str = ""
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "description": self.description, "shape": self.shape,
+                "shape_name": self.shape_name, "parameters": self.parameters, "std_errors": self.std_errors,
+                "units": self.units, "cv_mse": self.cv_mse, "baseline_cv_mse": self.baseline_cv_mse,
+                "heldout_improvement": self.improvement, "heldout_gain": list(self.gain),
+                "significant": self.significant, "aic": self.aic, "bic": self.bic, "delta_aic": self.delta_aic,
+                "delta_bic": self.delta_bic, "explained_fraction": self.explained_fraction,
+                "sim_effect": self.sim_effect, "sim_parameters": self.sim_parameters,
+                "regime_hint": self.regime_hint}
+
+
+def information_criteria(sse: float, m: int, o: int) -> tuple[float, float]:
+    """AIC (eq. 3.5b) and BIC (eq. 3.6b) of a least-squares fit: m log(SSE/m) + 2o and m log(SSE/m) + o log m."""
+    base = m * np.log(max(sse, 1e-300) / m)
+    return float(base + 2 * o), float(base + o * np.log(m))
+
+
+@dataclass
+class Selector:
+    """Everything the ranking needs: the table, the residual y, the split, the sim's force model."""
+
+    table: pd.DataFrame
+    residual: np.ndarray
+    split: Split
+    model: SimForceModel
+    robust: bool = True
+    n_boot: int = 400
+    seed: int = 0
+    min_gain: float = 0.01
+    min_explained: float = 0.5
+    cols: dict[str, np.ndarray] = field(init=False)
+    baseline_loss: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.cols = columns_of(self.table)
+        y = np.asarray(self.residual, dtype=float)
+        if y.shape[0] != len(self.table):
+            raise DiagnosisError("residual and table differ in length")
+        bad = self.split.valid & ~np.isfinite(y)
+        if bad.any():
+            raise DiagnosisError(f"the residual is not finite on {int(bad.sum())} valid rows")
+        self.residual = y
+        self.baseline_loss = np.where(self.split.train, y ** 2, np.nan)
+        self.rng = np.random.default_rng(self.seed)
+
+    # ---------------------------------------------------------------- helpers
+    def _mse(self, pred: np.ndarray) -> tuple[float, np.ndarray]:
+        loss = np.where(self.split.train, (self.residual - np.nan_to_num(pred)) ** 2, np.nan)
+        return float(np.nanmean(loss)), loss
+
+    def choose_shape(self, cand: CandidateEffect, prior: Sequence[tuple[CandidateEffect, float | None]] = ()
+                     ) -> float | None:
+        """The shape value (e.g. τ) with the smallest training SSE, profiled on the candidate's grid."""
+        if not cand.shape_grid:
+            return None
+        best, best_sse = None, np.inf
+        tr = self.split.train
+        for sh in cand.shape_grid:
+            d = design(list(prior) + [(cand, sh)], self.model, self.cols)
+            X = fit_linear(d.A, self.residual, tr, self.robust).X
+            sse = float(np.sum((self.residual[tr] - d.A[tr] @ X) ** 2))
+            if sse < best_sse:
+                best, best_sse = sh, sse
+        return best
+
+    def usable(self, names: Sequence[str]) -> tuple[list[CandidateEffect], dict[str, str]]:
+        """Candidates whose needed columns the table has; the others with the reason."""
+        ok, skipped = [], {}
+        valid = self.split.valid
+        sub = {k: np.asarray(v)[valid] for k, v in self.cols.items()}
+        for n in names:
+            cand = get_candidate(n)
+            miss = cand.missing(sub)
+            if miss:
+                skipped[cand.name] = f"needs {miss}, which the trips do not provide"
+            else:
+                ok.append(cand)
+        return ok, skipped
+
+    def evaluate(self, choices: list[tuple[CandidateEffect, float | None]], reference: bool = False
+                 ) -> tuple[float, np.ndarray]:
+        A = design(choices, self.model, self.cols).A if choices else None
+        pred = cv_predict(A, self.residual, self.table, self.split, self.robust, reference)
+        return self._mse(pred)
+
+    def final_fit(self, choices: list[tuple[CandidateEffect, float | None]]) -> tuple[Design, Fit]:
+        d = design(choices, self.model, self.cols)
+        return d, fit_linear(d.A, self.residual, self.split.train, self.robust, self.split.blocks)
+
+    # ---------------------------------------------------------------- ranking
+    def rank(self, names: Sequence[str]) -> tuple[list[CandidateResult], dict[str, str]]:
+        """Every usable candidate alone: fitted on training, judged out-of-fold; sorted by held-out MSE."""
+        cands, skipped = self.usable(names)
+        base_mse = float(np.nanmean(self.baseline_loss))
+        ref_mse, _ = self.evaluate([], reference=True)
+        tr = self.split.train
+        m = int(tr.sum())
+        aic0, bic0 = information_criteria(float(np.sum(self.residual[tr] ** 2)), m, 0)
+        results = []
+        for cand in cands:
+            try:
+                shape = self.choose_shape(cand)
+                mse, loss = self.evaluate([(cand, shape)])
+                d, fit = self.final_fit([(cand, shape)])
+            except DiagnosisError as exc:
+                skipped[cand.name] = str(exc)
+                continue
+            gain = block_bootstrap_mean_difference(self.baseline_loss, loss, self.split.blocks, self.rng,
+                                                   self.n_boot)
+            sse = float(np.sum((self.residual[tr] - d.A[tr] @ fit.X) ** 2))
+            o = d.A.shape[1] + (1 if cand.shape_grid else 0)
+            aic, bic = information_criteria(sse, m, o)
+            se = np.sqrt(np.clip(np.diag(fit.cov), 0, None)) if fit.cov is not None else np.full(fit.X.size, np.nan)
+            params = {n: float(x) for n, x in zip(d.names, fit.X)}
+            improvement = (base_mse - mse) / base_mse if base_mse > 0 else 0.0
+            explainable = base_mse - min(ref_mse, mse)
+            frac = float(np.clip((base_mse - mse) / explainable, -np.inf, 1.0)) if explainable > 0 else 0.0
+            results.append(CandidateResult(
+                cand.name, cand.description, shape, cand.shape_name, params,
+                {n: float(s) for n, s in zip(d.names, se)}, dict(zip(d.names, d.units)), mse, base_mse,
+                float(improvement), gain, bool(gain[1] > 0 and improvement >= self.min_gain), aic, bic,
+                explained_fraction=frac, sim_effect=cand.sim_effect,
+                sim_parameters=cand.sim_parameters(params, shape, self.model), regime_hint=cand.regime_hint))
+        results.sort(key=lambda r: r.cv_mse)
+        if results:
+            amin = min([aic0] + [r.aic for r in results])
+            bmin = min([bic0] + [r.bic for r in results])
+            for r in results:
+                r.delta_aic, r.delta_bic = r.aic - amin, r.bic - bmin
+        self.baseline_info = {"cv_mse": base_mse, "reference_cv_mse": ref_mse, "aic": aic0, "bic": bic0,
+                              "delta_aic": aic0 - min([aic0] + [r.aic for r in results]),
+                              "delta_bic": bic0 - min([bic0] + [r.bic for r in results])}
+        return results, skipped
+
+    # ---------------------------------------------------------------- greedy forward selection
+    def forward(self, ranked: list[CandidateResult], max_effects: int = 4) -> list[dict]:
+        """Greedy forward selection over the ranked candidates (top 6 considered at each step).
+
+        Each step adds the candidate with the smallest out-of-fold MSE given the ones already chosen and records
+        whether it is accepted: significant held-out gain, relative gain >= min_gain and explained share of the
+        reference-removable remainder >= min_explained. Stops at the first step that is not accepted."""
+        pool = [(get_candidate(r.name), r.shape) for r in ranked if r.significant][:6]
+        chosen: list[tuple[CandidateEffect, float | None]] = []
+        cur_mse = float(np.nanmean(self.baseline_loss))
+        cur_loss = self.baseline_loss
+        steps: list[dict] = []
+        while pool and len(chosen) < max_effects:
+            ref_mse, _ = self.evaluate(chosen, reference=True)
+            trials = []
+            for cand, _sh in pool:
+                shape = self.choose_shape(cand, chosen)
+                try:
+                    mse, loss = self.evaluate(chosen + [(cand, shape)])
+                except DiagnosisError:
+                    continue
+                trials.append((mse, cand, shape, loss))
+            if not trials:
+                break
+            mse, cand, shape, loss = min(trials, key=lambda x: x[0])
+            gain = block_bootstrap_mean_difference(cur_loss, loss, self.split.blocks, self.rng, self.n_boot)
+            rel = (cur_mse - mse) / cur_mse if cur_mse > 0 else 0.0
+            explainable = cur_mse - min(ref_mse, mse)
+            frac = float(min((cur_mse - mse) / explainable, 1.0)) if explainable > 0 else 0.0
+            accepted = bool(gain[1] > 0 and rel >= self.min_gain and frac >= self.min_explained)
+            reason = ("accepted" if accepted else
+                      "held-out gain not significant" if not gain[1] > 0 else
+                      f"relative gain {rel:.3f} below {self.min_gain}" if rel < self.min_gain else
+                      f"partial fit: explains {frac:.2f} of the removable remainder (< {self.min_explained})")
+            steps.append({"step": len(steps) + 1, "effect": cand.name, "shape": shape, "cv_mse_before": cur_mse,
+                          "cv_mse_after": mse, "relative_gain": float(rel), "gain": list(gain),
+                          "reference_cv_mse": ref_mse, "explained_fraction": frac, "accepted": accepted,
+                          "reason": reason})
+            if not accepted:
+                break
+            chosen.append((cand, shape))
+            pool = [(c, s) for c, s in pool if c.name != cand.name]
+            cur_mse, cur_loss = mse, loss
+        self.chosen = chosen
+        return steps

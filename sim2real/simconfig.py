@@ -1,0 +1,98 @@
+"""The "sim" of a diagnosis: a vehicle (preset name or spec file) plus the simulator effects it models.
+
+A sim config file is JSON::
+
+    {"vehicle": "bmw_i3",                      # preset name, or a path to a vehicle spec JSON
+     "effects": {"effects": {"wind": {"mean_speed": 2.0}}, "ambient_temperature": 293.15},   # EffectsConfig
+     "name": "i3 as shipped"}
+
+:meth:`SimConfig.with_effect` gives the sim with one more effect switched on (the "after" of a diagnosis).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from roadload.envs.effects import EffectsConfig, EffectsError
+from roadload.vehicle import VehicleSpec, VehicleSpecError, load_vehicle
+
+from .errors import DiagnosisError
+
+_KEYS = {"vehicle", "effects", "name"}
+
+
+@dataclass
+class SimConfig:
+    """vehicle: a VehicleSpec; effects: the EffectsConfig the sim runs with; name: for reports."""
+
+    vehicle: VehicleSpec
+    effects: EffectsConfig = field(default_factory=EffectsConfig)
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.name:
+            self.name = self.vehicle.name
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], base: Path | None = None) -> "SimConfig":
+        if not isinstance(data, dict):
+            raise DiagnosisError(f"sim config: expected a JSON object, got {type(data).__name__}")
+        unknown = set(data) - _KEYS
+        if unknown:
+            raise DiagnosisError(f"sim config: unknown keys {sorted(unknown)}; allowed: {sorted(_KEYS)}")
+        if "vehicle" not in data:
+            raise DiagnosisError("sim config: missing 'vehicle' (a preset name such as 'bmw_i3' or a spec file)")
+        vehicle = load_sim_vehicle(data["vehicle"], base)
+        try:
+            effects = EffectsConfig.parse(data.get("effects"))
+        except EffectsError as exc:
+            raise DiagnosisError(f"sim config 'effects': {exc}") from None
+        return cls(vehicle, effects, str(data.get("name", "")))
+
+    @classmethod
+    def load(cls, source: str | Path) -> "SimConfig":
+        """From a JSON file, or a bare preset name ('bmw_i3')."""
+        path = Path(source)
+        if path.suffix.lower() != ".json":
+            return cls(load_sim_vehicle(str(source), None))
+        if not path.is_file():
+            raise DiagnosisError(f"sim config file {path} does not exist")
+        try:
+            data = json.loads(path.read_text())
+        except json.JSONDecodeError as exc:
+            raise DiagnosisError(f"sim config {path}: not valid JSON ({exc})") from None
+        return cls.from_dict(data, path.parent)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"vehicle": self.vehicle.name, "effects": self.effects.to_dict(), "name": self.name}
+
+    def with_effect(self, effect: str, params: dict[str, Any]) -> "SimConfig":
+        """A copy with ``effect`` switched on (or re-parameterised) with ``params``."""
+        eff = EffectsConfig.parse(self.effects)
+        try:
+            eff.enable(effect, **params)
+        except EffectsError as exc:
+            raise DiagnosisError(f"cannot switch on {effect!r} in the sim: {exc}") from None
+        return SimConfig(self.vehicle, eff, f"{self.name} + {effect}")
+
+
+def load_sim_vehicle(vehicle: str | dict, base: Path | None) -> VehicleSpec:
+    """A preset name, a spec file (relative to ``base``) or a spec dict -> VehicleSpec (DiagnosisError otherwise)."""
+    from roadload.envs.presets import PRESETS, get_preset
+
+    try:
+        if isinstance(vehicle, dict):
+            return VehicleSpec.from_dict(vehicle)
+        if vehicle in PRESETS:
+            return get_preset(vehicle)
+        path = Path(vehicle)
+        if base is not None and not path.is_absolute():
+            path = base / path
+        if path.is_file():
+            return load_vehicle(path)
+    except VehicleSpecError as exc:
+        raise DiagnosisError(f"sim config vehicle: {exc}") from None
+    raise DiagnosisError(f"sim config vehicle {vehicle!r} is neither a preset ({list(PRESETS)}) nor a spec file")

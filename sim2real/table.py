@@ -1,0 +1,241 @@
+"""The diagnosis table: recorded trips -> one row per 10 Hz sample of the chapter-5 pipeline's states, with the
+measured force F_xV,measured, the sim's force balance F_xV,sim and the regime columns.
+
+Per trip the chapter-5 pipeline (:func:`roadload.estimators.pipeline.run_pipeline`, with the estimating-side
+knowledge of the sim's vehicle) gives v_V, v̇_V, θ, 1/r, gear and F_xV from the drive torque (eq. 5.5c). Added:
+
+=====================  ==============================================================================
+trip, t                trip name, time [s]
+time_since_start       t - t_0 [s]; distance [m] integrated speed
+air_density            ρ_a [kg/m³] from the trip's ambient temperature (else the sim's ambient)
+brake_force            F_B = Σ 2 p_B A_B r_B X_B / r_W [N] from the brake pressures with the sim's brakes
+drive_force            F_xV from the drive torque (pipeline) [N]
+tractive_force         F_xV,measured = drive_force - brake_force [N]
+sim_balance            F_xV,sim of :class:`.forcemodel.SimForceModel` for the measured motion [N]
+sim_force              sim_balance + the sim's floor (:mod:`.floor`) [N]
+residual               tractive_force - sim_force [N]
+sim_drive_force(_rate) sim_force + brake_force [N] and its time derivative [N/s]
+lateral_acceleration   v² / r [m/s²]; heading: integrated yaw rate [rad] (NaN without yaw rate)
+mode                   'traction' / 'coast' / 'regen' / 'braking'
+ambient_temperature, heating_power, payload [kg] (metadata), season
+valid                  moving (v > 1 m/s), smoothers settled, drive-train engaged, finite; on trips without
+                       brake pressure also not braking and not at the regenerative torque floor (unknown
+                       friction-brake force)
+=====================  ==============================================================================
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+import pandas as pd
+
+from roadload.estimators.pipeline import PipelineError, PipelineSettings, knowledge_from_spec, run_pipeline
+from roadload.trip import Trip
+from roadload.units import KELVIN, air_density
+
+from .errors import DiagnosisError
+from .forcemodel import SimForceModel
+from .simconfig import SimConfig
+
+MIN_SPEED = 1.0               # m/s, slower samples are not diagnosed (standstill, creeping)
+BRAKE_PRESSURE_ON = 2.0e4     # Pa, brake pressure counted as braking (pipeline's threshold)
+REQUIRED_CHANNELS = ("vehicle_speed", "accel_x")
+
+
+def trip_name(trip: Trip, i: int) -> str:
+    return str(trip.meta.get("name") or trip.meta.get("trip") or f"trip{i}")
+
+
+def trip_vehicle(trip: Trip) -> str | None:
+    v = trip.meta.get("vehicle")
+    if isinstance(v, dict):
+        return v.get("name")
+    return v if isinstance(v, str) else None
+
+
+def check_trip(trip: Trip, sim: SimConfig, i: int) -> None:
+    """DiagnosisError naming what a trip lacks or where it contradicts the sim's vehicle."""
+    name = trip_name(trip, i)
+    missing = [c for c in REQUIRED_CHANNELS if not trip.has(c)]
+    if not (trip.has("drive_torque") or trip.has("rim_torque")):
+        missing.append("drive_torque (or rim_torque)")
+    if missing:
+        raise DiagnosisError(f"trip {name!r} lacks the channels {missing} that the force residual needs; "
+                             f"it has {trip.channels}")
+    veh = trip_vehicle(trip)
+    if veh is not None and veh != sim.vehicle.name:
+        raise DiagnosisError(f"trip {name!r} was recorded with vehicle {veh!r}, but the sim config models "
+                             f"{sim.vehicle.name!r}; pass a sim config of that vehicle")
+    if trip.has("gear"):
+        g = trip.channel("gear")
+        g = g[np.isfinite(g)]
+        n = sim.vehicle.drivetrain.n_gears
+        if g.size and g.max() > n + 0.5:
+            raise DiagnosisError(f"trip {name!r} engages gear {int(g.max())}, but the sim's vehicle "
+                                 f"{sim.vehicle.name!r} has {n} gear(s): the sim config does not match the vehicle")
+
+
+def _season(trip: Trip, ambient: np.ndarray) -> str:
+    ov = trip.meta.get("overview") or {}
+    date = str(ov.get("Date") or trip.meta.get("date") or "")
+    month = None
+    if len(date) >= 7 and date[4] == "-" and date[5:7].isdigit():
+        month = int(date[5:7])
+    if month is None:
+        a = ambient[np.isfinite(ambient)]
+        if not a.size:
+            return "unknown"
+        c = float(np.median(a)) - KELVIN
+        return "winter" if c < 8 else "summer" if c > 18 else "spring"
+    return {12: "winter", 1: "winter", 2: "winter", 3: "spring", 4: "spring", 5: "spring", 6: "summer",
+            7: "summer", 8: "summer"}.get(month, "autumn")
+
+
+def _sample(trip: Trip, name: str, t: np.ndarray) -> np.ndarray:
+    if not trip.has(name):
+        return np.full(t.shape, np.nan)
+    x = trip.channel(name)
+    tt = trip.t
+    ok = np.isfinite(x)
+    if ok.sum() < 2:
+        return np.full(t.shape, np.nan)
+    return np.interp(t, tt[ok], x[ok])
+
+
+def brake_force_from_pressure(vehicle, p_front: np.ndarray, p_rear: np.ndarray) -> np.ndarray:
+    """F_B = 2 (p_f A_f r_f + p_r A_r r_r) X_B / r_W [N] (two wheels per axle, nominal pad friction X_B)."""
+    b = vehicle.brakes
+    pf = np.clip(np.nan_to_num(p_front), 0, None)
+    pr = np.clip(np.nan_to_num(p_rear), 0, None)
+    return 2.0 * (pf * b.front_area * b.front_radius + pr * b.rear_area * b.rear_radius) * b.pad_friction \
+        / vehicle.wheel_radius
+
+
+@dataclass
+class DiagnosisTable:
+    """The table (see module doc), the sim's force model and notes (pipeline fallbacks, per trip)."""
+
+    frame: pd.DataFrame
+    model: SimForceModel
+    notes: dict[str, list[str]] = field(default_factory=dict)
+
+    @property
+    def residual(self) -> np.ndarray:
+        return self.frame["residual"].to_numpy(dtype=float)
+
+
+def sim_force_model(sim: SimConfig) -> SimForceModel:
+    """The sim's force balance, with the sim's own effects where they are constant (initial payload)."""
+    spec = sim.vehicle
+    mass = spec.mass
+    if sim.effects.enabled("payload"):
+        mass += float(sim.effects.params("payload")["initial_payload"])
+    know = knowledge_from_spec(spec)
+    d = know.drivetrain
+    eta = float(np.mean(d.gearbox_efficiency)) * float(d.differential_efficiency)
+    base = SimForceModel.from_spec(spec, mass=mass)
+    return SimForceModel(**{**base.__dict__, "drivetrain_efficiency": eta})
+
+
+def build_table(trips: Sequence[Trip], sim: SimConfig, settings: PipelineSettings | None = None,
+                model: SimForceModel | None = None, floor=None) -> DiagnosisTable:
+    """The diagnosis table of ``trips`` against ``sim`` (DiagnosisError naming missing channels or mismatches)."""
+    if not trips:
+        raise DiagnosisError("no trips given")
+    knowledge = knowledge_from_spec(sim.vehicle)
+    model = model or sim_force_model(sim)
+    frames, notes = [], {}
+    names = set()
+    for i, trip in enumerate(trips):
+        check_trip(trip, sim, i)
+        name = trip_name(trip, i)
+        if name in names:
+            name = f"{name}#{i}"
+        names.add(name)
+        st = settings or PipelineSettings()
+        try:
+            res = run_pipeline(trip, knowledge, settings)
+        except PipelineError as exc:
+            raise DiagnosisError(f"trip {name!r}: {exc}") from None
+        s = res.states
+        dec = res.stages["decimated"]
+        notes[name] = list(res.notes)
+        t = s["t"].to_numpy(dtype=float)
+        v = s["speed"].to_numpy(dtype=float)
+        f = pd.DataFrame({"trip": name, "t": t})
+        for c in ("speed", "acceleration", "gradient_angle", "path_curvature", "gear", "drive_torque"):
+            f[c] = s[c].to_numpy(dtype=float)
+        f["time_since_start"] = t - float(trip.t[0])
+        f["distance"] = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
+        amb = _sample(trip, "ambient_temperature", t)
+        amb_fill = np.where(np.isfinite(amb), amb, sim.effects.ambient_temperature)
+        pres = _sample(trip, "ambient_pressure", t)
+        pres = np.where(np.isfinite(pres), pres, sim.effects.ambient_pressure)
+        f["ambient_temperature"] = amb
+        f["air_density"] = air_density(amb_fill, pres)
+        has_brakes = any(c in dec for c in ("brake_pressure_front", "brake_pressure_rear"))
+        if has_brakes:
+            pf = dec["brake_pressure_front"].to_numpy(dtype=float) if "brake_pressure_front" in dec else 0.0 * v
+            pr = dec["brake_pressure_rear"].to_numpy(dtype=float) if "brake_pressure_rear" in dec else 0.0 * v
+            f["brake_force"] = brake_force_from_pressure(sim.vehicle, pf, pr)
+            braking = np.maximum(np.nan_to_num(pf), np.nan_to_num(pr)) > BRAKE_PRESSURE_ON
+        else:
+            f["brake_force"] = 0.0
+            braking = ~s["trigger_no_brake"].to_numpy(dtype=bool)
+        f["drive_force"] = s["tractive_force"].to_numpy(dtype=float)
+        f["tractive_force"] = f["drive_force"] - f["brake_force"]
+        f["lateral_acceleration"] = v ** 2 * f["path_curvature"].to_numpy(dtype=float)
+        if trip.has("yaw_rate"):
+            yr = np.nan_to_num(trip.channel("yaw_rate"))
+            tt = trip.t
+            head = np.concatenate([[0.0], np.cumsum(0.5 * (yr[1:] + yr[:-1]) * np.diff(tt))])
+            f["heading"] = np.interp(t, tt, head)
+        else:
+            f["heading"] = np.nan
+        torque = f["drive_torque"].to_numpy(dtype=float)
+        min_tq = st.min_drive_torque
+        f["mode"] = np.where(braking, "braking", np.where(torque > min_tq, "traction",
+                                                          np.where(torque < -min_tq, "regen", "coast")))
+        f["heating_power"] = _sample(trip, "heating_power", t)
+        payload = trip.meta.get("extra_payload_kg")
+        f["payload"] = float(payload) if payload is not None else (0.0 if trip.meta.get("overview") else np.nan)
+        f["season"] = _season(trip, amb)
+        valid = (v > MIN_SPEED) & (t >= t[0] + st.warmup) & s["trigger_no_slip"].to_numpy(dtype=bool)
+        valid &= s["trigger_rim_torque_available"].to_numpy(dtype=bool)
+        if not has_brakes:
+            torque_floor = max(st.drive_torque_floor, knowledge.drive_torque_floor)
+            valid &= ~braking & (torque > torque_floor)
+        f["has_brake_pressure"] = has_brakes
+        f["valid_base"] = valid
+        frames.append(f)
+    frame = pd.concat(frames, ignore_index=True)
+    return finish_table(frame, model, notes, floor)
+
+
+def finish_table(frame: pd.DataFrame, model: SimForceModel, notes: dict | None = None, floor=None
+                 ) -> DiagnosisTable:
+    """Add sim_balance (the analytic balance), sim_force (balance + the sim's floor, :mod:`.floor`), residual,
+    sim_drive_force(_rate) and valid (finite everywhere it matters)."""
+    frame = frame.copy()
+    balance = model.predict(frame)
+    frame["sim_balance"] = balance
+    frame["sim_force"] = balance + (floor.predict(frame, balance) if floor is not None else 0.0)
+    frame["residual"] = frame["tractive_force"].to_numpy(dtype=float) - frame["sim_force"].to_numpy(dtype=float)
+    sdf = frame["sim_force"].to_numpy(dtype=float) + frame["brake_force"].to_numpy(dtype=float)
+    frame["sim_drive_force"] = sdf
+    rate = np.zeros_like(sdf)
+    for k in pd.unique(frame["trip"]):
+        sel = (frame["trip"] == k).to_numpy()
+        if sel.sum() > 2:
+            rate[sel] = np.gradient(sdf[sel], frame["t"].to_numpy(dtype=float)[sel])
+    frame["sim_drive_force_rate"] = rate
+    valid = frame["valid_base"].to_numpy(dtype=bool).copy() if "valid_base" in frame else np.ones(len(frame), bool)
+    for c in ("speed", "acceleration", "gradient_angle", "residual", "sim_drive_force_rate"):
+        valid &= np.isfinite(frame[c].to_numpy(dtype=float))
+    frame["valid"] = valid
+    if not valid.any():
+        raise DiagnosisError("no valid samples in the trips (moving, drive-train engaged, finite states)")
+    return DiagnosisTable(frame, model, notes or {})

@@ -4,3 +4,20 @@ from .trip import Trip, TripError
 
 __version__ = "0.1.0"
 __all__ = ["Trip", "TripError", "__version__"]
+
+
+# --- gymnasium registration -------------------------------------------------------------------------------------
+# Gymnasium 1.x scans no plugin entry points, so the ids are registered when ``roadload`` is imported, with string
+# entry points (the env modules load only on ``gymnasium.make``). ``gymnasium.make("roadload:roadload/EcoDrive-v0")``
+# imports ``roadload`` first, which is what makes the ids resolve in SubprocVecEnv workers started with spawn or
+# forkserver. The envs truncate at their own configured time limit, hence no max_episode_steps.
+def _register_gym_envs() -> None:
+    import gymnasium
+
+    for env_id, entry_point in (("roadload/EcoDrive-v0", "roadload.envs.gym_ecodrive:EcoDriveEnv"),
+                                ("roadload/EcoHighway-v0", "roadload.envs.gym_highway:EcoHighwayEnv")):
+        if env_id not in gymnasium.registry:
+            gymnasium.register(id=env_id, entry_point=entry_point, disable_env_checker=False)
+
+
+_register_gym_envs()

@@ -445,8 +445,8 @@ def substep(X, P, tabs, ti, road, stops, cycle, rng, cmd, log):
 
     # ------------------------------------------------------------------ log row (truth at this substep)
     n = int(X[S_NLOG])
-    if n < log.shape[0]:
-        row = log[n]
+    if n < log.shape[1]:
+        row = log[:, n]  # the log is column-major: one contiguous array per channel
         f_xv = mass * a_act + f_cl + f_roll + f_aero + f_corner
         row[L_T] = t + dt
         row[L_POS] = X[S_POS]

@@ -114,18 +114,18 @@ class SensorModel:
         return {n: MEASURED[n].unit for n in self.names}
 
     # ------------------------------------------------------------------ physical relation h_j
-    def _true(self, name: str, cols: np.ndarray) -> np.ndarray:
-        """cols: log rows (2-D) -> the channel's error-free reading."""
+    def _true(self, name: str, log: np.ndarray, rows) -> np.ndarray:
+        """The channel's error-free reading at the given substeps (index array) of the column-major log."""
         if name in _SIMPLE:
-            return cols[:, _SIMPLE[name]]
+            return log[_SIMPLE[name], rows]
         if name == "vehicle_speed":
-            return cols[:, L_V] * (1.0 + self.spec.speed_scale_error)
+            return log[L_V, rows] * (1.0 + self.spec.speed_scale_error)
         if name == "steering_wheel_angle":
-            return np.interp(cols[:, L_DELTA], self._steer_x, self._steer_y)
+            return np.interp(log[L_DELTA, rows], self._steer_x, self._steer_y)
         if name == "drive_torque":
-            return cols[:, L_TE] * (1.0 + self.gain_error) + self.offset
+            return log[L_TE, rows] * (1.0 + self.gain_error) + self.offset
         if name == "gear":
-            return cols[:, L_GEAR] * (cols[:, L_CLUTCH] > 0.0)
+            return log[L_GEAR, rows] * (log[L_CLUTCH, rows] > 0.0)
         raise SensorConfigError(f"no sensor model for channel {name!r}")  # pragma: no cover - checked in __init__
 
     # ------------------------------------------------------------------ random perturbations, chunk by chunk
@@ -182,18 +182,19 @@ class SensorModel:
 
     # ------------------------------------------------------------------ whole trip / one sample
     def measure(self, log: np.ndarray, n: int) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray]:
-        """(t, channels, keep) for the first n log rows: measured sample i uses log row (i+1) m - 1 with the
-        decimation m; ``keep`` is False for samples removed by 'missing' dropouts."""
+        """(t, channels, keep) for the first n substeps of the column-major log (N_LOG, >= n): measured sample i
+        uses substep (i+1) m - 1 with the decimation m; ``keep`` is False for samples removed by 'missing'
+        dropouts."""
         rows = np.arange(self.decimation - 1, n, self.decimation)
         n_meas = rows.size
-        t = log[rows, L_T].copy()
+        t = log[L_T, rows].copy()
         out: dict[str, np.ndarray] = {}
         keep = np.ones(n_meas, dtype=bool)
         n_chunks = (n_meas + CHUNK - 1) // CHUNK
         perturb = [self._chunk(c) for c in range(n_chunks)]
         for j, name in enumerate(self.names):
             src = np.maximum(rows - self.delay[j], 0)
-            val = self._true(name, log[src])
+            val = self._true(name, log, src)
             if n_chunks:
                 val = val + np.concatenate([p[0][j] for p in perturb])[:n_meas]
             val = self._quantise(val, j)
@@ -213,10 +214,10 @@ class SensorModel:
         row = (i + 1) * self.decimation - 1
         add, nan, missing = self._chunk(i // CHUNK)
         ii = i % CHUNK
-        out: dict[str, float] = {"t": float(log[row, L_T])}
+        out: dict[str, float] = {"t": float(log[L_T, row])}
         valid = missing is None or not missing[ii]
         for j, name in enumerate(self.names):
-            val = self._true(name, log[max(row - int(self.delay[j]), 0)][None, :])[0] + add[j, ii]
+            val = self._true(name, log, [max(row - int(self.delay[j]), 0)])[0] + add[j, ii]
             val = float(self._quantise(np.asarray(val), j))
             if not valid or (nan is not None and nan[j, ii]):
                 val = float("nan")

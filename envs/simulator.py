@@ -177,7 +177,7 @@ class Simulator:
             self._cycle = np.zeros((2, 2))
             self._cycle[0, 1] = 1.0
         self._cmd = np.zeros(N_CMD)
-        self._log = np.zeros((1 << 14, N_LOG))
+        self._log = np.zeros((N_LOG, 1 << 14))  # column-major: one contiguous array per channel
         self.reset(seed)
 
     # ------------------------------------------------------------------ setup
@@ -288,7 +288,7 @@ class Simulator:
             else:
                 X[S_MODE], X[S_OMEGA_E] = MODE_OPEN, P[P_IDLE]
         self.X = X
-        self._log[:] = 0.0
+        self._log = np.zeros((N_LOG, 1 << 14))
         self._warned = False
         self._last_energy = 0.0
         self._result = self._make_result(0.0)
@@ -296,9 +296,9 @@ class Simulator:
 
     def _ensure_capacity(self, extra: int) -> None:
         n = int(self.X[S_NLOG])
-        if n + extra > self._log.shape[0]:
-            new = np.zeros((max(2 * self._log.shape[0], n + extra), N_LOG))
-            new[:n] = self._log[:n]
+        if n + extra > self._log.shape[1]:
+            new = np.zeros((N_LOG, max(2 * self._log.shape[1], n + extra)))
+            new[:, :n] = self._log[:, :n]
             self._log = new
 
     def step(self, action: Action | float | None = None, n_substeps: int = 10) -> StepResult:
@@ -331,7 +331,7 @@ class Simulator:
             cmd[C_GEAR_REQ] = -1.0
         if n_substeps < 1:
             raise SimulationError(f"n_substeps: must be >= 1, got {n_substeps!r}")
-        if int(self.X[S_NLOG]) + n_substeps > self._log.shape[0]:
+        if int(self.X[S_NLOG]) + n_substeps > self._log.shape[1]:
             self._ensure_capacity(n_substeps)
         physics.advance(self.X, self.P, self.tabs, self.ti, self._road, self._stops, self._cycle, self._rng, cmd,
                         self._log, n_substeps)
@@ -347,7 +347,7 @@ class Simulator:
         n = int(X[S_NLOG])
         s = X[S_POS]
         if n:
-            row = self._log[n - 1]
+            row = self._log[:, n - 1]
             fx, grade, curv, bank = row[L_FX], row[L_GRADE], row[L_CURV], row[L_BANK]
         else:
             fx = 0.0
@@ -394,6 +394,13 @@ class Simulator:
         P[P_T_END] = t0 + horizon if (duration is not None or self.cycle is not None) else np.inf
         P[P_S_END] = X[S_POS] + distance if distance is not None else np.inf
         max_steps = int(math.ceil(horizon / DT)) + 1
+        if P[P_T_END] < np.inf:
+            self._ensure_capacity(max_steps)
+        else:  # expected duration from the speed plan, so the log rarely has to grow
+            rd = self._road
+            plan = np.maximum(0.5 * (rd[R_VPLAN, 1:] + rd[R_VPLAN, :-1]), 3.0)
+            expect = float(np.sum(np.diff(rd[R_S]) / plan)) + self._stops.size * (self.driver.dwell_max + 20.0)
+            self._ensure_capacity(int(min(1.15 * expect, horizon) / DT))
         self._cmd[C_USE_DRIVER] = 1.0
         chunk = max(1, int(chunk_seconds / DT))
         done = 0
@@ -446,7 +453,7 @@ class Simulator:
         """Current true lumped parameters (for oracle controllers / evaluation), SI units."""
         X, P = self.X, self.P
         n = int(X[S_NLOG])
-        row = self._log[n - 1] if n else None
+        row = self._log[:, n - 1] if n else None
         v = X[S_V]
         mass = X[S_MASS]
         if row is None:  # before the first step: nominal values
@@ -485,23 +492,28 @@ class Simulator:
 
     def truth_log(self) -> np.ndarray:
         """The raw truth log so far (rows = 10-ms substeps, columns = ``layout.LOG``); a view, do not modify."""
-        return self._log[: int(self.X[S_NLOG])]
+        return self._log[:, : int(self.X[S_NLOG])].T
 
     def to_trip(self, name: str | None = None) -> Trip:
         """The Trip of everything stepped since reset: measured channels (sensor model) + truth + metadata."""
         n = int(self.X[S_NLOG])
         if n == 0:
             raise SimulationError("to_trip: nothing simulated yet (call step() or run() first)")
-        log = self._log[:n]
+        log = self._log
         t, channels, keep = self.sensor_model.measure(log, n)
-        measured = pd.DataFrame({"t": t, **channels})
+        block = np.empty((len(channels) + 1, t.size))  # one 2-D block: no column-by-column consolidation
+        block[0] = t
+        for i, arr in enumerate(channels.values()):
+            block[i + 1] = arr
         if not keep.all():
-            measured = measured[keep]
+            block = block[:, keep]
+        measured = pd.DataFrame(block.T, columns=["t", *channels], copy=False)
         units = {"t": "s", **self.sensor_model.units}
         truth_map = dict(TRUTH_COLUMNS)
         if self.vehicle.drivetrain.kind == "bev":
             truth_map.update(_BEV_TRUTH)
-        truth = pd.DataFrame({"t": log[:, L_T], **{k: log[:, c] for k, c in truth_map.items()}})
+        cols = [L_T, *truth_map.values()]
+        truth = pd.DataFrame(log[cols, :n].T, columns=["t", *truth_map], copy=False)
         truth["cornering_stiffness"] = 1.0 / (4.0 * (self.P[P_LR] ** 2 / truth["cornering_stiffness_front"]
                                                     + self.P[P_LF] ** 2 / truth["cornering_stiffness_rear"])
                                               / self.P[P_L] ** 2)
@@ -524,7 +536,7 @@ class Simulator:
             "initial_speed": self.initial_speed,
             "warnings": warn,
         }
-        return Trip(measured.reset_index(drop=True), units, meta, truth, truth_units)
+        return Trip(measured, units, meta, truth, truth_units)
 
 
 def simulate(vehicle: VehicleSpec | str, road: RoadProfile | DriveCycle,

@@ -49,7 +49,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                                        help="comma-separated catalog names (default: all but the PKS)"),
         sweep: list[str] = typer.Option([], "--sweep", "-s",
                                         help="outliers | excitation | drift | bias | input_noise, or a single "
-                                             "sweep name (dropouts, headwind, latency); repeatable; default all"),
+                                             "sweep name (dropouts, latency); repeatable; default all"),
         backend: str = typer.Option("vehicle", "--backend", "-b",
                                     help="vehicle (simulated trips -> chapter-5 pipeline) or synthetic (A/B level)"),
         seeds: int = typer.Option(DEFAULT_SEEDS, "--seeds", "-n", help="seeds per level (>= 20 for the report)"),

@@ -56,7 +56,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         duration: float = typer.Option(None, "--duration", help="record length in s (default 10000 synthetic, "
                                                                "1200 vehicle)"),
         bound: float = typer.Option(DEFAULT_BOUND, "--bound",
-                                    help="breakdown bound on the median relative parameter error"),
+                                    help="breakdown: median relative parameter error this much above its fault-free value"),
         scheduler: str = typer.Option(None, "--scheduler", help="Dask scheduler address (default: local processes)"),
         workers: int = typer.Option(None, "--workers", help="local worker processes (default: CPU count)"),
     ) -> None:

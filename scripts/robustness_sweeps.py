@@ -53,8 +53,8 @@ def main() -> None:
             continue
         if spec.breakdown:
             bd = breakdown_table(res, args.bound)
-            print(f"\n## breakdown points — {name} ({spec.parameter} [{spec.unit}], bound {args.bound:g} on the "
-                  f"median relative parameter error): median [q25, q75] over {args.seeds} seeds")
+            print(f"\n## breakdown points — {name} ({spec.parameter} [{spec.unit}], error > fault-free + {args.bound:g}, "
+                  f"relative parameter error): median [q25, q75] over {args.seeds} seeds")
             for (model, variant), g in bd.groupby(["model", "variant"]):
                 g = g.sort_values(["breakdown"], ascending=False)
                 print(f"  {variant} ({model}): " + ", ".join(

@@ -109,6 +109,8 @@ def test_breakdown_point_and_spread():
     assert breakdown_point(levels, [0.01, 0.02, 0.5, 0.9, 1.0], bound=0.1) == 0.1
     assert breakdown_point(levels, [0.01, 0.02, 0.03, np.nan, 0.0], bound=0.1) == 0.2
     assert breakdown_point(levels, [0.01] * 5, bound=0.1) == np.inf
+    # relative to the fault-free error: a biased but stable estimator does not "break down"
+    assert breakdown_point(levels, [0.3, 0.32, 0.35, 0.45, 0.6], bound=0.1, baseline=0.3) == 0.2
     with pytest.raises(RobustnessError, match="increasing"):
         breakdown_point([0.1, 0.0], [0, 0], 0.1)
     s = spread([1.0, 2.0, 3.0, 4.0, np.nan])

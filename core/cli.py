@@ -14,6 +14,7 @@ app.add_typer(benchmark_app, name="benchmark")
 
 # modules that define register(app, benchmark_app); a missing module is a packaging bug, so no try/except
 _COMMAND_MODULES: list[str] = [
+    "roadload.envs.cli",
     "roadload.road_profiles.cli",
     "roadload.io.cli",
     "roadload.estimators.robustness_cli",

@@ -51,7 +51,7 @@ EFFECTS: dict[str, EffectDef] = {e.name: e for e in [
                "gust_time_constant": EffectParam(5.0, "s", "gust correlation time", 0.1, 3600.0),
                "direction_std": EffectParam(0.2, "rad", "direction wander standard deviation", 0.0, 3.2)}),
     EffectDef("payload", "Payload changes at stops: at each road stop (v = 0 within 30 m) the payload changes by "
-              "N(0, change_std^2), clipped to [min_payload, max_payload]; m_V = m_nominal + payload (eq. 2.5/2.6).",
+              "N(0, change_std^2), reflected into [min_payload, max_payload]; m_V = m_nominal + payload (eq. 2.5/2.6).",
               {"change_std": EffectParam(80.0, "kg", "std of the payload change per stop", 0.0, 2000.0),
                "min_payload": EffectParam(0.0, "kg", "lowest payload", -500.0, 5000.0),
                "max_payload": EffectParam(400.0, "kg", "highest payload", -500.0, 5000.0),

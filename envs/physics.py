@@ -437,7 +437,12 @@ def substep(X, P, tabs, ti, road, stops, cycle, rng, cmd, log):
             kst += 1
         if kst < n_stops and abs(s_now - stops[kst]) <= 30.0:
             payload = mass - P[P_MASS0]
-            new_payload = _clip(payload + P[P_PAYLOAD_STD] * rng_normal(rng), P[P_PAYLOAD_MIN], P[P_PAYLOAD_MAX])
+            new_payload = payload + P[P_PAYLOAD_STD] * rng_normal(rng)
+            if new_payload < P[P_PAYLOAD_MIN]:  # reflect at the bounds, so a stop always changes something
+                new_payload = 2.0 * P[P_PAYLOAD_MIN] - new_payload
+            elif new_payload > P[P_PAYLOAD_MAX]:
+                new_payload = 2.0 * P[P_PAYLOAD_MAX] - new_payload
+            new_payload = _clip(new_payload, P[P_PAYLOAD_MIN], P[P_PAYLOAD_MAX])
             X[S_MASS] = P[P_MASS0] + new_payload
             X[S_E_PAYLOAD_PE] += (new_payload - payload) * GRAVITY * road_value(road, R_ELEV, ridx, s_now)
             kst += 1

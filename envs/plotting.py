@@ -1,0 +1,110 @@
+"""Overview figure of a Trip over distance: speed, forces, grade / elevation and the drifting parameters."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from roadload.trip import Trip
+
+
+def _distance(trip: Trip) -> tuple[np.ndarray, np.ndarray | None]:
+    """Distance [m] of the measured samples (and of the truth samples, if any)."""
+    if trip.truth is not None and "position" in trip.truth:
+        d_truth = trip.truth["position"].to_numpy()
+        return np.interp(trip.t, trip.truth["t"].to_numpy(), d_truth), d_truth
+    if "distance" in trip.measured:
+        return trip.channel("distance"), None
+    v = np.nan_to_num(trip.channel("vehicle_speed")) if trip.has("vehicle_speed") else np.zeros(len(trip))
+    t = trip.t
+    return np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))]), None
+
+
+def plot_trip(trip: Trip, out: str | os.PathLike) -> Path:
+    """Write a PNG (4 panels over distance [km]) and return its path; written atomically."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out)
+    if out.suffix.lower() != ".png":
+        raise ValueError(f"plot output must end in .png, got {out.name!r}")
+    d_meas, d_truth = _distance(trip)
+    km, km_t = d_meas / 1000.0, None if d_truth is None else d_truth / 1000.0
+    tr = trip.truth
+    fig, axes = plt.subplots(4, 1, figsize=(11, 11), sharex=True)
+    ax = axes[0]
+    if trip.has("vehicle_speed"):
+        ax.plot(km, trip.channel("vehicle_speed") * 3.6, lw=0.6, label="vehicle_speed (measured)")
+    if tr is not None:
+        ax.plot(km_t, tr["speed"] * 3.6, lw=0.8, label="speed (truth)")
+    ax.set_ylabel("speed [km/h]")
+    ax.legend(loc="upper right", fontsize=8)
+
+    ax = axes[1]
+    if tr is not None:
+        for name, label in (("tractive_force", "tractive force F_xV"), ("rolling_resistance_force", "rolling"),
+                            ("aero_force", "aero"), ("climbing_force", "climbing"), ("brake_force", "brakes")):
+            if name in tr:
+                ax.plot(km_t, tr[name] / 1000.0, lw=0.6, label=label)
+        ax.set_ylabel("force [kN]")
+    elif trip.has("drive_torque"):
+        ax.plot(km, trip.channel("drive_torque"), lw=0.6, label="drive_torque")
+        ax.set_ylabel("torque [N m]")
+    ax.legend(loc="upper right", fontsize=8, ncol=3)
+
+    ax = axes[2]
+    if tr is not None and "grade" in tr:
+        ax.plot(km_t, np.tan(tr["grade"]) * 100.0, lw=0.8, label="grade (truth)")
+    if trip.has("accel_x"):
+        ax.plot(km, trip.channel("accel_x") / 9.80665 * 100.0, lw=0.3, alpha=0.5, label="accel_x / g")
+    ax.set_ylabel("grade [%]")
+    ax.legend(loc="upper left", fontsize=8)
+    elev = tr["elevation"].to_numpy() if tr is not None and "elevation" in tr else (
+        trip.channel("elevation") if trip.has("elevation") else None)
+    if elev is not None:
+        ax2 = ax.twinx()
+        ax2.plot(km_t if tr is not None and "elevation" in tr else km, elev, color="0.4", lw=0.8)
+        ax2.set_ylabel("elevation [m]")
+
+    ax = axes[3]
+    if tr is not None:
+        for name in ("mass", "rolling_resistance_f0", "drag_area", "air_density", "brake_friction_coefficient",
+                     "drivetrain_loss_factor", "cornering_stiffness"):
+            if name in tr:
+                x = tr[name].to_numpy()
+                ref = x[0] if x[0] != 0 else 1.0
+                ax.plot(km_t, (x / ref - 1.0) * 100.0, lw=0.8, label=name)
+        ax.set_ylabel("parameter change [%]")
+        ax.legend(loc="upper right", fontsize=8, ncol=2)
+    else:
+        for name in ("gear", "clutch"):
+            if trip.has(name):
+                ax.plot(km, trip.channel(name), lw=0.6, label=name)
+        ax.legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("distance [km]")
+    title = trip.meta.get("name", "trip")
+    if trip.meta.get("source") == "sim":
+        title += f"  (effects: {', '.join(trip.meta.get('effects', {}).get('effects', {})) or 'none'})"
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".png", dir=out.parent)
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=90)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the PNG ordinary permissions
+        os.replace(tmp, out)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    finally:
+        plt.close(fig)
+    return out

@@ -13,8 +13,8 @@ Metrics per (scenario, estimator, model):
 - wind-up indicators: trace and condition number of the covariance P;
 - the empirical breakdown point: the smallest outlier fraction at which the error exceeds a stated bound.
 
-Everything is seeded through ``numpy.random.Generator``; nothing here reads the truth of a trip except the
-metrics.
+Everything is seeded through ``numpy.random.Generator``. The truth of a trip is read only by the metrics and
+the scenario bookkeeping (time of the payload step, where the driver really cruised), never by an estimator.
 """
 
 from __future__ import annotations
@@ -923,8 +923,8 @@ def run_sweep_results(tasks: Sequence[Scenario], estimators: Sequence[str] | Non
 
 
 # ====================================================================================== aggregation and report
-METRICS = ("rel_error", "sevn", "medse", "recovery_time", "trace_P_max", "cond_P_max", "trace_P_growth",
-           "longest_stretch")
+METRICS = ("rel_error", "excess_error", "sevn", "medse", "recovery_time", "trace_P_max", "cond_P_max",
+           "trace_P_growth", "longest_stretch")
 _KEYS = ["backend", "sweep", "variant", "model", "estimator"]
 
 
@@ -935,6 +935,7 @@ def aggregate(results):
 
     if results.empty:
         raise RobustnessError("no results to aggregate")
+    results = with_excess_error(results)
     out = []
     for key, g in results.groupby(_KEYS[:3] + ["level"] + _KEYS[3:], sort=True):
         row = dict(zip(_KEYS[:3] + ["level"] + _KEYS[3:], key))
@@ -952,6 +953,17 @@ def aggregate(results):
         row["runs_nonfinite"] = int((~g["finite"].astype(bool)).sum())
         out.append(row)
     return pd.DataFrame(out)
+
+
+def with_excess_error(results):
+    """A copy with 'excess_error': rel_error minus the fault-free rel_error of the same seed (level 0 of the
+    same backend, sweep, variant, model, estimator; NaN when level 0 was not swept)."""
+    out = results.copy()
+    base = out[out["level"] == 0].set_index(_KEYS + ["seed"])["rel_error"]
+    base = base[~base.index.duplicated()]
+    idx = out.set_index(_KEYS + ["seed"]).index
+    out["excess_error"] = out["rel_error"].to_numpy(dtype=float) - base.reindex(idx).to_numpy(dtype=float)
+    return out
 
 
 def breakdown_table(results, bound: float = DEFAULT_BOUND, metric: str = "rel_error"):
@@ -1059,9 +1071,9 @@ def _atomic_write_text(path, text: str) -> None:
 
 
 def plot_curves(agg, spec: SweepSpec, path, bound: float = DEFAULT_BOUND) -> None:
-    """Breakdown curves: median relative parameter error (IQR band) over the swept level, one line per
-    estimator (solid: robust, dashed: non-robust), one panel per (model, variant); the breakdown bound dotted.
-    Errors are clipped to [1e-4, 1e3] for display. Written atomically (PNG)."""
+    """Breakdown curves: median excess error (relative parameter error above the fault-free one of the same
+    seed; IQR band) over the swept level, one line per estimator (solid: robust, dashed: non-robust), one panel
+    per (model, variant); the breakdown bound dotted. Clipped to [1e-4, 1e3] for the log axis. Atomic PNG."""
     import os
     import tempfile
     from pathlib import Path
@@ -1082,16 +1094,19 @@ def plot_curves(agg, spec: SweepSpec, path, bound: float = DEFAULT_BOUND) -> Non
             e = g[g["estimator"] == name].sort_values("level")
             if e.empty:
                 continue
-            y = np.clip(e["rel_error"].to_numpy(dtype=float), 1e-4, 1e3)
+            e = e[e["level"] > 0]
+            if e.empty or "excess_error" not in e:
+                continue
+            y = np.clip(e["excess_error"].to_numpy(dtype=float), 1e-4, 1e3)
             ax.plot(e["level"], y, marker="os^vD<>ph*"[i % 10], ms=3.5, color=cmap(i % 20), label=name,
                     ls="-" if name in ROBUST else "--", lw=1.2)
-            ax.fill_between(e["level"], np.clip(e["rel_error_q25"], 1e-4, 1e3),
-                            np.clip(e["rel_error_q75"], 1e-4, 1e3), color=cmap(i % 20), alpha=0.12)
+            ax.fill_between(e["level"], np.clip(e["excess_error_q25"], 1e-4, 1e3),
+                            np.clip(e["excess_error_q75"], 1e-4, 1e3), color=cmap(i % 20), alpha=0.12)
         ax.axhline(bound, color="k", ls=":", lw=1)
         ax.set_yscale("log")
         ax.set_title(f"{spec.name}: {variant} ({model})", fontsize=9)
         ax.set_xlabel(f"{spec.parameter} [{spec.unit}]")
-        ax.set_ylabel("relative parameter error [1]")
+        ax.set_ylabel("rel. parameter error above fault-free [1]")
         ax.grid(alpha=0.3)
     for ax in axes.flat[len(panels):]:
         ax.axis("off")
@@ -1151,7 +1166,7 @@ def write_report(results, out_dir, bound: float = DEFAULT_BOUND,
         agg = aggregate(res)
         stem = f"{backend}_{sweep}"
         cols = [c for c in ["variant", "model", "level", "estimator", "n_seeds", "rel_error", "rel_error_q25",
-                            "rel_error_q75", "sevn", "medse", "recovery_time", "trace_P_max", "cond_P_max",
+                            "rel_error_q75", "excess_error", "sevn", "medse", "recovery_time", "trace_P_max", "cond_P_max",
                             "trace_P_growth", "longest_stretch", "n_skipped", "n_pipeline_dropped", "runs_p_blowup",
                             "runs_nonfinite"] if c in agg]
         _atomic_write_text(out / f"table_{stem}.csv", agg[cols].to_csv(index=False))

@@ -95,7 +95,8 @@ def run_record(A, B, Z, ip, fp, Qm, Pd, F, xmin, xmax, X, P, sc, ring, ct,
     sfac = fp[FP_SCALE_FACTOR]
 
     a = np.empty(n)
-    z = np.empty(n)
+    # without instruments the gain direction is the regressor itself: share the buffer (no per-sample copy)
+    z = a if iv == IV_NONE else np.empty(n)
     Xp = np.empty(n)
     Pp = np.empty((n, n))
     Xit = np.empty(n)
@@ -124,7 +125,7 @@ def run_record(A, B, Z, ip, fp, Qm, Pd, F, xmin, xmax, X, P, sc, ring, ct,
             pos = ct[CT_RING_POS]
             for i in range(n):
                 z[i] = ring[pos, i]
-        else:
+        elif iv != IV_NONE:
             for i in range(n):
                 z[i] = a[i]
         if transition:
@@ -167,17 +168,18 @@ def run_record(A, B, Z, ip, fp, Qm, Pd, F, xmin, xmax, X, P, sc, ring, ct,
                 out_scale[t] = np.sqrt(sc[SC_SIGMA2])
             continue
         # ---- quantities that do not depend on the weight
+        # backup of the state for iterations and roll-back (upper triangle suffices when P is symmetric)
         r0 = b
         for i in range(n):
             Xp[i] = X[i]
             r0 -= a[i] * X[i]
-            for j in range(n):
+            for j in range(i if sym else 0, n):
                 Pp[i, j] = P[i, j]
         s = 0.0
         for i in range(n):
             acc = 0.0
             for j in range(n):
-                acc += Pp[i, j] * z[j]
+                acc += P[i, j] * z[j]
             Pz[i] = acc
             s += a[i] * acc
         if sym:
@@ -187,7 +189,7 @@ def run_record(A, B, Z, ip, fp, Qm, Pd, F, xmin, xmax, X, P, sc, ring, ct,
             for j in range(n):
                 acc = 0.0
                 for i in range(n):
-                    acc += a[i] * Pp[i, j]
+                    acc += a[i] * P[i, j]
                 aP[j] = acc
         sd = 0.0
         if cov == COV_SG:
@@ -327,8 +329,10 @@ def run_record(A, B, Z, ip, fp, Qm, Pd, F, xmin, xmax, X, P, sc, ring, ct,
             ct[CT_ROLLED_BACK] += 1
             for i in range(n):
                 X[i] = Xp[i]
-                for j in range(n):
+                for j in range(i if sym else 0, n):
                     P[i, j] = Pp[i, j]
+                    if sym:
+                        P[j, i] = Pp[i, j]
         pmax = P[0, 0]
         for i in range(1, n):
             if P[i, i] > pmax:

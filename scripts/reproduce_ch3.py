@@ -174,6 +174,10 @@ def _exp_3_3(seeds: int, out: Path, literal: bool, label: str) -> dict:
 
 
 # ------------------------------------------------------------------------------------------ 3.4
+def t_all(datas) -> np.ndarray:
+    return datas[0].t
+
+
 def exp_3_4(seeds: int, out: Path) -> dict:
     res = {}
     for frac in (0.05, 0.0):
@@ -212,6 +216,12 @@ def _exp_3_4(seeds: int, out: Path, frac: float) -> dict:
           f"|X3 - 3| smaller for RRIVM in {int(np.sum(abs(a['x3'] - 3) < abs(b['x3'] - 3)))}/{seeds}; "
           f"validation MSE (measured A, B) lower for RRLM in {int(np.sum(b['mse'] < a['mse']))}/{seeds}; "
           f"vs true output with true inputs lower for RRIVM in {int(np.sum(a['mse_true'] < b['mse_true']))}/{seeds}")
+    # RGTLS (Algorithm 3.8, neither robust nor regularised), with the true P̃ and with the NCE
+    for label, extra in (("RGTLS P̌ = P̃", {}), ("RGTLS + NCE", dict(nce=True))):
+        runs = [E.run("RGTLS", d.A, d.B, forgetting=LAMBDA, noise_covariance=[0.0, 0.005, 0.01, 0.02], **extra)
+                for d in datas]
+        X = np.stack([r.X for r in runs])
+        print(f"{label:<16s} SEVN t>=100: {q(E.sevn(Xt, X)[:, t_all(datas) >= 100].mean(axis=1))}")
     fig, axes = plt.subplots(1, 3, figsize=(16, 4))
     for ax, (k, r) in zip(axes, res.items()):
         ax.plot(t, r.X[0], lw=0.8)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -90,7 +91,7 @@ def plot_trip(trip: Trip, out: str | os.PathLike) -> Path:
     title = trip.meta.get("name", "trip")
     if trip.meta.get("source") == "sim":
         title += f"  (effects: {', '.join(trip.meta.get('effects', {}).get('effects', {})) or 'none'})"
-    fig.suptitle(title, fontsize=10)
+    fig.suptitle("\n".join(textwrap.wrap(title, 130)), fontsize=9)
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".png", dir=out.parent)

@@ -163,3 +163,33 @@ def test_effects_parse_forms():
     again = EffectsConfig.from_dict(json.loads(json.dumps(cfg.to_dict())))
     assert again.to_dict() == cfg.to_dict()
     assert EffectsConfig.parse("all").names == sorted(EffectsConfig.parse("all").names)
+
+
+def test_presets_are_plausible_and_expose_the_estimating_side_quantities():
+    rwd, awd, i3 = get_preset("gt_rwd"), get_preset("gt_awd"), get_preset("bmw_i3")
+    assert 1800 <= rwd.mass <= 2000 and awd.mass > rwd.mass and 1300 <= i3.mass <= 1450
+    assert rwd.drivetrain.n_gears == 7 and awd.drivetrain.driven_axle == "all"
+    p_rwd = max(np.asarray(rwd.drivetrain.engine.full_load.x) * rwd.drivetrain.engine.full_load.y)
+    p_awd = max(np.asarray(awd.drivetrain.engine.full_load.x) * awd.drivetrain.engine.full_load.y)
+    assert 200e3 < p_rwd < 250e3 and 390e3 < p_awd < 440e3
+    assert i3.drivetrain.gear_ratios[0] * i3.drivetrain.final_drive == pytest.approx(9.665)
+    assert i3.wheel_radius == pytest.approx(0.35, abs=0.01) and i3.aero.drag_coefficient == 0.29
+    assert i3.aero.frontal_area == 2.38
+    m = i3.drivetrain.motor
+    assert m.max_power == 125e3 and m.max_torque == 250.0 and m.regen_torque_limit > 0
+    w, tq = np.meshgrid(np.linspace(200, 1100, 30), np.linspace(20, 250, 30))
+    eta = m.efficiency(w, tq)
+    assert 0.93 < eta.max() < 0.975 and eta.min() > 0.6
+    # best brake efficiency of the engines: 30-40 % (BSFC ~ 210-290 g/kWh at 43 MJ/kg)
+    for spec in (rwd, awd):
+        e = spec.drivetrain.engine
+        w, tq = np.meshgrid(np.linspace(150, 500, 30), np.linspace(100, 0.95 * min(e.full_load.y[3:]), 30))
+        eff = w * tq / e.fuel_power(w, tq)
+        assert 0.30 < eff.max() < 0.40
+    # what the estimating side needs, straight from the spec
+    assert rwd.body.cg_to_front_axle + rwd.body.cg_to_rear_axle == pytest.approx(rwd.body.wheelbase)
+    assert rwd.drivetrain.reduced_inertia(1) > rwd.drivetrain.reduced_inertia(7) > 0
+    assert rwd.effective_mass(1) > rwd.effective_mass(7) > rwd.mass
+    assert rwd.steering.wheel_from_steering_wheel(np.radians(90)) == pytest.approx(np.radians(90) / 15.5, rel=0.02)
+    assert rwd.understeer_gradient() > 0  # the presets understeer
+    assert rwd.tires.cornering_stiffness_front > 0 and rwd.aero.drag_area == pytest.approx(0.29 * 2.36)

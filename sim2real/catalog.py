@@ -11,7 +11,7 @@ A :class:`CandidateEffect` maps an unmodelled effect to
 - ``sim_effect`` and ``to_sim(params, shape, model)``: the simulator switch and its parameters from the fitted
   values, so the identified effect can be switched on in the simulator. A switch is an effect name of
   :data:`roadload.envs.effects.EFFECTS`, or ``spec:<dotted path>`` for a vehicle-spec field (e.g.
-  ``spec:sensors.channels.drive_torque.latency``), whose parameters are then ``{"value": ...}``.
+  ``spec:sensors.channels.drive_torque.latency``), whose parameter ``{"delta": x}`` is added to the field (``{"factor": f}``: multiplied).
 
 Users add their own with :func:`register_candidate`. Parameters are in SI; signs follow "measured minus sim".
 """
@@ -248,16 +248,19 @@ def _oil_to_sim(p, shape, model):
 for _cand in (
     CandidateEffect("drag_area", "drag-area change c_x A_V (roof box, open windows, body change)", _drag_area,
                     (SPEED, AIR_DENSITY), "drag_area",
-                    lambda p, sh, m: {"delta_drag_area": _p(p, "delta c_x A_V")}, regime_hint="speed"),
+                    lambda p, sh, m: {"roof_box": float(np.clip(_p(p, "delta c_x A_V") / m.drag_area, 0.0, 2.0)),
+                                      "windows": 0.0, "sunroof": 0.0, "toggle_rate": 0.0}, regime_hint="speed"),
     CandidateEffect("wind", "drag with wind: constant headwind along the course (air approach velocity)", _wind,
                     (SPEED, AIR_DENSITY), "wind",
-                    lambda p, sh, m: {"speed": abs(_p(p, "headwind w")),
-                                      "angle": float(np.pi if _p(p, "headwind w") >= 0 else 0.0)},
+                    lambda p, sh, m: {"mean_speed": abs(_p(p, "headwind w")),
+                                      "direction": float(np.pi if _p(p, "headwind w") >= 0 else 0.0),
+                                      "gust_std": 0.0, "direction_std": 0.0},
                     regime_hint="speed"),
     CandidateEffect("wind_world", "drag with a wind fixed in the world frame (needs the course heading)",
                     _wind_heading, (SPEED, AIR_DENSITY, HEADING), "wind",
-                    lambda p, sh, m: {"speed": float(np.hypot(_p(p, "wind w_x"), _p(p, "wind w_y"))),
-                                      "direction": float(np.arctan2(_p(p, "wind w_y"), _p(p, "wind w_x")))},
+                    lambda p, sh, m: {"mean_speed": float(np.hypot(_p(p, "wind w_x"), _p(p, "wind w_y"))),
+                                      "direction": float(np.arctan2(-_p(p, "wind w_y"), -_p(p, "wind w_x"))),
+                                      "gust_std": 0.0, "direction_std": 0.0},
                     regime_hint="speed"),
     CandidateEffect("rolling_scale", "rolling resistance f_r(v) scaled (winter tires, tire pressure, road surface)",
                     _rolling_scale, (GRADIENT_ANGLE, SPEED), "winter_tires",
@@ -269,15 +272,17 @@ for _cand in (
                     regime_hint="speed"),
     CandidateEffect("mass_offset", "mass offset (payload, passengers)", _mass_offset,
                     (GRADIENT_ANGLE, ACCELERATION, SPEED), "payload",
-                    lambda p, sh, m: {"mass": _p(p, "delta m_V")}, regime_hint="acceleration"),
+                    lambda p, sh, m: {"initial_payload": _p(p, "delta m_V"), "change_std": 0.0,
+                                      "min_payload": min(0.0, _p(p, "delta m_V")),
+                                      "max_payload": max(400.0, _p(p, "delta m_V"))}, regime_hint="acceleration"),
     CandidateEffect("accel_bias", "accelerometer bias / mounting pitch (gradient angle of eq. 5.2 off)",
                     _accel_bias, (SPEED, GRADIENT_ANGLE), "spec:sensors.channels.accel_x.bias",
-                    lambda p, sh, m: {"value": _p(p, "accelerometer bias b")}, regime_hint="grade",
+                    lambda p, sh, m: {"delta": _p(p, "accelerometer bias b")}, regime_hint="grade",
                     sim_aliases=("sensor_bias",)),
     CandidateEffect("cornering", "cornering resistance (eq. 2.15) off", _cornering, (SPEED, PATH_CURVATURE),
-                    "cornering_stiffness",
-                    lambda p, sh, m: {"scale": 1.0 / (1.0 + _p(p, "delta m_V^2/c_yW")
-                                                      * m.cornering_stiffness / m.mass ** 2)},
+                    "winter_tires",
+                    lambda p, sh, m: {"rolling_factor": 1.0, "cornering_factor": float(np.clip(
+                        1.0 / (1.0 + _p(p, "delta m_V^2/c_yW") * m.cornering_stiffness / m.mass ** 2), 0.2, 2.0))},
                     regime_hint="lateral_acceleration"),
     CandidateEffect("drivetrain_oil", "drive-train losses raised while the oil is cold (decay with tau)",
                     _drivetrain_oil, (DRIVE_FORCE, TIME_SINCE_START), "oil_temperature", _oil_to_sim,
@@ -288,17 +293,18 @@ for _cand in (
                                       "distance_constant": float(sh)},
                     shape_grid=_DIST_GRID, shape_name="d", shape_unit="m", regime_hint="time_since_start"),
     CandidateEffect("friction_brake", "friction-brake force off (pad friction drift)", _friction_brake,
-                    (BRAKE_FORCE,), "brake_pad_drift",
-                    lambda p, sh, m: {"friction_factor": 1.0 + _p(p, "pad friction error k")}, regime_hint="mode"),
+                    (BRAKE_FORCE,), "spec:brakes.pad_friction",
+                    lambda p, sh, m: {"factor": 1.0 + _p(p, "pad friction error k")}, regime_hint="mode",
+                    sim_aliases=("brake_pad_drift",)),
     CandidateEffect("rotational_inertia", "rotational inertia per gear off", _rotational_inertia,
                     (ACCELERATION, GEAR), None, None, regime_hint="gear"),
     CandidateEffect("torque_scale", "drive-torque scale error (efficiency, torque model)", _torque_scale,
-                    (DRIVE_FORCE,), "torque_model_error",
-                    lambda p, sh, m: {"gain_error": _p(p, "torque scale error epsilon"), "offset": 0.0},
-                    regime_hint="mode"),
+                    (DRIVE_FORCE,), "spec:sensors.drive_torque_gain_error",
+                    lambda p, sh, m: {"delta": _p(p, "torque scale error epsilon")},
+                    regime_hint="mode", sim_aliases=("torque_model_error",)),
     CandidateEffect("latency", "drive-torque signal latency", _latency, (DRIVE_FORCE_RATE,),
                     "spec:sensors.channels.drive_torque.latency",
-                    lambda p, sh, m: {"value": max(_p(p, "latency tau"), 0.0)}, regime_hint="acceleration"),
+                    lambda p, sh, m: {"delta": max(_p(p, "latency tau"), 0.0)}, regime_hint="acceleration"),
 ):
     register_candidate(_cand)
 

@@ -47,9 +47,11 @@ RESIDUAL_SIGNALS = ("speed", "acceleration", "gradient_angle", "sim_drive_force"
 class DiagnosisSettings:
     """Settings of :func:`diagnose`: candidate and regime names; split (segment_length [s], test_fraction,
     n_folds, block_length [s] of the bootstrap, seed); fitting (robust Huber fit, n_boot bootstrap draws);
-    acceptance (min_gain relative held-out gain, min_explained share of the reference-removable part,
+    acceptance (min_gain held-out gain as a share of the sim's original MSE, min_explained share of the reference-removable part,
     max_effects); min_effect [N]: smallest bin median reported as a departure / unexplained residual;
-    floor roads (profile name, seed) and floor_duration [s] per road for the sim's own trips (none: no floor)."""
+    floor roads (profile name, seed) and floor_duration [s] per road for the sim's own trips (none: no floor);
+    resimulate: switch the identified effects on in the simulator with their fitted parameters, re-drive the
+    floor trips and recompute the gap ("after, simulator")."""
 
     candidates: tuple[str, ...] = DEFAULT_CANDIDATES
     regimes: tuple[str, ...] = DEFAULT_REGIMES
@@ -60,12 +62,13 @@ class DiagnosisSettings:
     seed: int = 0
     robust: bool = True
     n_boot: int = 300
-    min_gain: float = 0.01
+    min_gain: float = 0.02
     min_explained: float = 0.5
     max_effects: int = 3
     min_effect: float = 20.0
     floor_roads: tuple[tuple[str, int], ...] = FLOOR_ROADS
     floor_duration: float = 900.0
+    resimulate: bool = True
 
 
 @dataclass
@@ -79,6 +82,7 @@ class Diagnosis:
     floor: dict
     gap_before: dict
     gap_after: dict
+    gap_after_sim: dict | None
     regimes_before: dict
     per_regime: list[dict]
     residual_analysis: dict
@@ -96,10 +100,14 @@ class Diagnosis:
     def identified(self) -> list[str]:
         return [e["name"] for e in self.effects]
 
-    def shrinkage(self, measure: str = "rmse") -> float:
-        """1 - gap_after / gap_before of the held-out force residual's ``measure`` (rmse, medse or |median|)."""
+    def shrinkage(self, measure: str = "rmse", simulator: bool = False) -> float:
+        """1 - gap_after / gap_before of the held-out force residual's ``measure`` (rmse, medse or |median|);
+        ``simulator``: the after of the re-simulated sim with the effects switched on (NaN when not run)."""
+        after = self.gap_after_sim if simulator else self.gap_after
+        if after is None:
+            return float("nan")
         b = self.gap_before["force_residual"][measure]
-        a = self.gap_after["force_residual"][measure]
+        a = after["force_residual"][measure]
         if measure == "median":
             b, a = abs(b), abs(a)
         return float(1.0 - a / b) if b > 0 else float("nan")
@@ -108,8 +116,9 @@ class Diagnosis:
         return _jsonable({
             "schema_version": SCHEMA_VERSION, "sim": self.sim, "trips": self.trips, "settings": self.settings,
             "split": self.split, "floor": self.floor,
-            "gap": {"before": self.gap_before, "after": self.gap_after,
+            "gap": {"before": self.gap_before, "after": self.gap_after, "after_simulator": self.gap_after_sim,
                     "shrinkage": {m: self.shrinkage(m) for m in ("rmse", "medse", "median")},
+                    "shrinkage_simulator": {m: self.shrinkage(m, simulator=True) for m in ("rmse", "medse", "median")},
                     "per_regime": self.per_regime},
             "regimes": self.regimes_before, "residual_analysis": self.residual_analysis,
             "ranking": self.ranking, "skipped_candidates": self.skipped, "forward_selection": self.selection,
@@ -148,15 +157,27 @@ def sim_trips(sim: SimConfig, roads: Sequence[tuple[str, int]], duration: float,
 
 
 def fit_floor(sim: SimConfig, channels: set[str], settings: DiagnosisSettings,
-              trips: Sequence[Trip] | None = None) -> SimFloor:
-    """The sim's floor from its own trips reduced to ``channels`` (see :mod:`.floor`)."""
+              trips: Sequence[Trip] | None = None, extra: tuple = ()) -> SimFloor:
+    """The sim's floor from its own trips reduced to ``channels`` (see :mod:`.floor`); ``extra``: (candidate,
+    shape) pairs whose regressors join the floor basis."""
     if not settings.floor_roads and trips is None:
         return SimFloor.none()
     own = list(trips) if trips is not None else sim_trips(sim, settings.floor_roads, settings.floor_duration)
     own = [reduce_channels(t, channels) for t in own]
     tab = build_table(own, sim)
     f = tab.frame
-    return SimFloor.fit(f, f["sim_balance"].to_numpy(), f["residual"].to_numpy(), f["valid"].to_numpy(bool))
+    return SimFloor.fit(f, f["sim_balance"].to_numpy(), f["residual"].to_numpy(), f["valid"].to_numpy(bool),
+                        extra=extra, model=tab.model)
+
+
+def switched_on(sim: SimConfig, effects: Sequence[dict]) -> SimConfig | None:
+    """The sim with every identified effect's simulator switch on (None when one has no switch)."""
+    out = sim
+    for e in effects:
+        if not e.get("sim_switch") or e.get("sim_parameters") is None:
+            return None
+        out = out.with_effect(e["sim_switch"], e["sim_parameters"])
+    return out
 
 
 def _per_regime(table: pd.DataFrame, before: np.ndarray, after: np.ndarray, rows: np.ndarray,
@@ -180,7 +201,9 @@ def _per_regime(table: pd.DataFrame, before: np.ndarray, after: np.ndarray, rows
 
 
 def _unexplained(table: pd.DataFrame, residual_after: np.ndarray, split, settings: DiagnosisSettings,
-                 rng: np.random.Generator) -> dict:
+                 rng: np.random.Generator, mse_before: float) -> dict:
+    """Held-out bins still departing after the accepted effects, and whether the flexible reference still
+    removes a significant part (at least min_gain of the held-out MSE before) — with its strongest regimes."""
     test = split.test
     tabs = localise(np.where(test, residual_after, np.nan), table, split.blocks, settings.regimes, rng,
                     n_boot=settings.n_boot, min_effect=settings.min_effect)
@@ -192,8 +215,7 @@ def _unexplained(table: pd.DataFrame, residual_after: np.ndarray, split, setting
     loss0 = np.where(test, residual_after ** 2, np.nan)
     loss1 = np.where(test, (residual_after - pred) ** 2, np.nan)
     gain = block_bootstrap_mean_difference(loss0, loss1, split.blocks, rng, settings.n_boot)
-    base = float(np.nanmean(loss0))
-    rel = gain[0] / base if base > 0 else 0.0
+    rel = gain[0] / mse_before if mse_before > 0 else 0.0
     structured = bool(gain[1] > 0 and rel >= settings.min_gain)
     importance = ref.importance(table[test]) if structured else []
     return {"present": bool(departures) or structured, "departing_bins": departures,
@@ -267,12 +289,25 @@ def diagnose(real: Sequence[Trip], sim: SimConfig, settings: DiagnosisSettings |
                             "sim_parameters": cand.sim_parameters(params, shape, model)})
     step("gap after", 0.85)
     gap_after = gap_measures(table, r_after, model.mass, test)
+    gap_after_sim = None
+    sim_after = switched_on(sim, effects) if effects else None
+    if settings.resimulate and sim_after is not None and not floor.is_none:
+        step("re-simulating with the effects on", 0.88)
+        extra = tuple((c.name, sh) for c, sh in chosen)
+        floor_after = fit_floor(sim_after, channels, settings, extra=extra)
+        t_after = build_table(real, sim_after, floor=floor_after).frame
+        if len(t_after) == len(table):
+            r_sim = np.where(split.valid, t_after["residual"].to_numpy(dtype=float), 0.0)
+            gap_after_sim = gap_measures(table, np.nan_to_num(r_sim), model.mass, test)
+            gap_after_sim["sim"] = sim_after.to_dict()
     per_regime = _per_regime(table, np.nan_to_num(r), r_after, test, settings.regimes)
-    unexplained = _unexplained(table, np.where(valid, r_after, np.nan), split, settings, rng)
+    unexplained = _unexplained(table, np.where(valid, r_after, np.nan), split, settings, rng,
+                               float(gap_before["force_residual"]["rmse"]) ** 2)
     regimes_before = {k: v.rows for k, v in regs.items()}
     diag = Diagnosis(
         sim=sim.to_dict(), trips=list(pd.unique(table["trip"])), settings=asdict(settings), split=split.describe(),
-        floor=floor.to_dict(), gap_before=gap_before, gap_after=gap_after, regimes_before=regimes_before,
+        floor=floor.to_dict(), gap_before=gap_before, gap_after=gap_after, gap_after_sim=gap_after_sim,
+        regimes_before=regimes_before,
         per_regime=per_regime, residual_analysis=ra, ranking=[c.to_dict() for c in ranked], skipped=skipped,
         selection=steps, effects=effects, unexplained=unexplained,
         notes={"pipeline": dt.notes, "baseline": sel.baseline_info,

@@ -42,22 +42,40 @@ def basis(frame: pd.DataFrame, sim_force: np.ndarray) -> np.ndarray:
     return np.nan_to_num(np.column_stack(cols))
 
 
+def _extra_columns(frame: pd.DataFrame, extra, model) -> np.ndarray:
+    if not extra:
+        return np.zeros((len(frame), 0))
+    from .catalog import get_candidate
+    from .forcemodel import columns_of
+    from .selection import design
+
+    return design([(get_candidate(n), sh) for n, sh in extra], model, columns_of(frame)).A
+
+
 @dataclass
 class SimFloor:
-    """Coefficients of the floor basis [N per unit], the floor's residual scale [N] and how many samples."""
+    """Coefficients of the floor basis [N per unit] (then of the ``extra`` candidates' regressors, built with
+    ``model``: used when an identified effect is switched on in the sim, so the floor can follow what the
+    simulator does with it), the floor's residual scale [N] and how many samples."""
 
     coefficients: np.ndarray
     scale: float
     n: int
+    extra: tuple = ()
+    model: object = None
 
     @classmethod
     def none(cls) -> "SimFloor":
         return cls(np.zeros(len(BASIS)), float("nan"), 0)
 
+    @property
+    def is_none(self) -> bool:
+        return self.n == 0
+
     @classmethod
-    def fit(cls, frame: pd.DataFrame, sim_force: np.ndarray, residual: np.ndarray, valid: np.ndarray
-            ) -> "SimFloor":
-        A = basis(frame, sim_force)[valid]
+    def fit(cls, frame: pd.DataFrame, sim_force: np.ndarray, residual: np.ndarray, valid: np.ndarray,
+            extra: tuple = (), model=None) -> "SimFloor":
+        A = np.hstack([basis(frame, sim_force), _extra_columns(frame, extra, model)])[valid]
         y = np.asarray(residual, dtype=float)[valid]
         if y.size < 10 * A.shape[1]:
             raise DiagnosisError(f"the sim's floor needs more valid samples of sim trips ({y.size})")
@@ -66,13 +84,15 @@ class SimFloor:
         x, *_ = np.linalg.lstsq(A / scale, y, rcond=1e-8)
         x = x / scale
         r = y - A @ x
-        return cls(x, float(np.sqrt(np.mean(r ** 2))), int(y.size))
+        return cls(x, float(np.sqrt(np.mean(r ** 2))), int(y.size), tuple(extra), model)
 
     def predict(self, frame: pd.DataFrame, sim_force: np.ndarray) -> np.ndarray:
-        return basis(frame, sim_force) @ self.coefficients
+        A = np.hstack([basis(frame, sim_force), _extra_columns(frame, self.extra, self.model)])
+        return A @ self.coefficients
 
     def to_dict(self) -> dict:
-        return {"basis": list(BASIS), "coefficients": [float(c) for c in self.coefficients],
+        names = list(BASIS) + [f"{n} regressors" for n, _ in self.extra]
+        return {"basis": names, "coefficients": [float(c) for c in self.coefficients],
                 "residual_rms": self.scale, "n": self.n}
 
 

@@ -8,7 +8,8 @@ Data are split by whole segments (default 60 s of one trip): every k-th segment 
 y = F_xV,measured - F_xV,sim [N]; a candidate set is fitted to y (Huber M-estimation by default,
 :func:`roadload.estimators.batch.m_estimate`) and judged by the out-of-fold squared error. A held-out gain is
 significant when the block-bootstrap 95 % interval of the per-sample loss reduction lies above 0 (blocks of
-10 s, so autocorrelation does not fake significance) and the relative gain is at least ``min_gain``; a
+10 s, so autocorrelation does not fake significance) and the gain is at least ``min_gain`` of the sim's
+original out-of-fold MSE; a
 candidate must also remove at least ``min_explained`` of what the flexible reference (:mod:`.reference`) can
 remove, otherwise it is a partial fit and the rest is left unexplained, never forced onto it.
 """
@@ -217,7 +218,7 @@ class Selector:
     robust: bool = True
     n_boot: int = 400
     seed: int = 0
-    min_gain: float = 0.01
+    min_gain: float = 0.02
     min_explained: float = 0.5
     cols: dict[str, np.ndarray] = field(init=False)
     baseline_loss: np.ndarray = field(init=False)
@@ -328,11 +329,12 @@ class Selector:
         """Greedy forward selection over the ranked candidates (top 6 considered at each step).
 
         Each step adds the candidate with the smallest out-of-fold MSE given the ones already chosen and records
-        whether it is accepted: significant held-out gain, relative gain >= min_gain and explained share of the
-        reference-removable remainder >= min_explained. Stops at the first step that is not accepted."""
+        whether it is accepted: significant held-out gain, a gain of at least min_gain of the original
+        (sim as is) out-of-fold MSE, and an explained share of the reference-removable remainder >=
+        min_explained. Stops at the first step that is not accepted."""
         pool = [(get_candidate(r.name), r.shape) for r in ranked if r.significant][:6]
         chosen: list[tuple[CandidateEffect, float | None]] = []
-        cur_mse = float(np.nanmean(self.baseline_loss))
+        cur_mse = base_mse = float(np.nanmean(self.baseline_loss))
         cur_loss = self.baseline_loss
         steps: list[dict] = []
         while pool and len(chosen) < max_effects:
@@ -350,15 +352,17 @@ class Selector:
             mse, cand, shape, loss = min(trials, key=lambda x: x[0])
             gain = block_bootstrap_mean_difference(cur_loss, loss, self.split.blocks, self.rng, self.n_boot)
             rel = (cur_mse - mse) / cur_mse if cur_mse > 0 else 0.0
+            rel_base = (cur_mse - mse) / base_mse if base_mse > 0 else 0.0
             explainable = cur_mse - min(ref_mse, mse)
             frac = float(min((cur_mse - mse) / explainable, 1.0)) if explainable > 0 else 0.0
-            accepted = bool(gain[1] > 0 and rel >= self.min_gain and frac >= self.min_explained)
+            accepted = bool(gain[1] > 0 and rel_base >= self.min_gain and frac >= self.min_explained)
             reason = ("accepted" if accepted else
                       "held-out gain not significant" if not gain[1] > 0 else
-                      f"relative gain {rel:.3f} below {self.min_gain}" if rel < self.min_gain else
+                      f"gain {rel_base:.3f} of the original gap, below {self.min_gain}" if rel_base < self.min_gain else
                       f"partial fit: explains {frac:.2f} of the removable remainder (< {self.min_explained})")
             steps.append({"step": len(steps) + 1, "effect": cand.name, "shape": shape, "cv_mse_before": cur_mse,
-                          "cv_mse_after": mse, "relative_gain": float(rel), "gain": list(gain),
+                          "cv_mse_after": mse, "relative_gain": float(rel), "gain_of_original": float(rel_base),
+                          "gain": list(gain),
                           "reference_cv_mse": ref_mse, "explained_fraction": frac, "accepted": accepted,
                           "reason": reason})
             if not accepted:

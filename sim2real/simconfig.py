@@ -11,6 +11,7 @@ A sim config file is JSON::
 
 from __future__ import annotations
 
+import copy
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -70,7 +71,12 @@ class SimConfig:
         return {"vehicle": self.vehicle.name, "effects": self.effects.to_dict(), "name": self.name}
 
     def with_effect(self, effect: str, params: dict[str, Any]) -> "SimConfig":
-        """A copy with ``effect`` switched on (or re-parameterised) with ``params``."""
+        """A copy with ``effect`` switched on (or re-parameterised) with ``params``; ``spec:<dotted.path>``
+        switches change that field of the vehicle spec instead (``{"delta": x}`` added, ``{"factor": f}``
+        multiplied)."""
+        if effect.startswith("spec:"):
+            return SimConfig(with_spec_change(self.vehicle, effect[5:], params),
+                             EffectsConfig.parse(self.effects), f"{self.name} + {effect}")
         eff = EffectsConfig.parse(self.effects)
         try:
             eff.enable(effect, **params)
@@ -96,3 +102,27 @@ def load_sim_vehicle(vehicle: str | dict, base: Path | None) -> VehicleSpec:
     except VehicleSpecError as exc:
         raise DiagnosisError(f"sim config vehicle: {exc}") from None
     raise DiagnosisError(f"sim config vehicle {vehicle!r} is neither a preset ({list(PRESETS)}) nor a spec file")
+
+
+def with_spec_change(vehicle: VehicleSpec, path: str, params: dict[str, Any]) -> VehicleSpec:
+    """A copy of ``vehicle`` with the field at ``path`` (attributes and dict keys, dotted) changed by
+    ``params``: {"delta": x} adds x, {"factor": f} multiplies by f."""
+    if set(params) not in ({"delta"}, {"factor"}):
+        raise DiagnosisError(f"spec switch {path!r} takes {{'delta': x}} or {{'factor': f}}, got {params}")
+    spec = copy.deepcopy(vehicle)
+    parts = path.split(".")
+    obj = spec
+    for part in parts[:-1]:
+        obj = obj[part] if isinstance(obj, dict) else getattr(obj, part, None)
+        if obj is None:
+            raise DiagnosisError(f"vehicle spec has no field {path!r} (stopped at {part!r})")
+    last = parts[-1]
+    if not hasattr(obj, last):
+        raise DiagnosisError(f"vehicle spec has no field {path!r}")
+    old = float(getattr(obj, last))
+    setattr(obj, last, old + float(params["delta"]) if "delta" in params else old * float(params["factor"]))
+    try:
+        spec.validate()
+    except VehicleSpecError as exc:
+        raise DiagnosisError(f"switching {path} by {params}: {exc}") from None
+    return spec

@@ -42,8 +42,9 @@ Step API (used by the MPC and the gym environments; stable)
 ``sim.run(duration=None, distance=None, progress=None)``  continue with the built-in driver
 ``sim.energy_ledger()``     cumulative energies [J]: source, shaft work, losses by component, climbing work, kinetic
 
-Throughput: one ``step`` costs a few microseconds of Python plus ~0.2 us per 10-ms substep of jitted physics
-(``scripts/bench_simulator.py``). Effects: ``EFFECTS`` (names, equations, parameters with defaults). Lateral
+Throughput (``scripts/bench_simulator.py``, CPU time on one core): a one-hour 100 Hz trip with all sensors and
+effects in ~0.8 s (~4500x real time, ~430 MB peak); ``step`` with 10 substeps ~14 us (~70 000 steps/s);
+``observe`` ~13 us. The first import compiles the jitted core (~20-40 s) into a cache under ``__pycache__``. Effects: ``EFFECTS`` (names, equations, parameters with defaults). Lateral
 accelerations above ~4 m/s^2 raise a ``LateralValidityWarning`` (single-track model validity, section 2.5.1).
 """
 

@@ -116,6 +116,15 @@ class RecursiveEstimator:
         self._ring = np.zeros((k, n))
         self._ct = np.zeros(K.N_CT, dtype=np.int64)
         self._ct[K.CT_BLOWUP_AT] = -1
+        self._init_online()
+
+    def _init_online(self) -> None:
+        """Per-estimator constants of the one-sample path (kept to make update() cheap)."""
+        n = self.config.n_params
+        self._ip_final = self.config.kernel_arrays["ip"].copy()
+        self._ip_final[K.IP_STORE] = K.STORE_FINAL
+        self._empty_out = (np.empty((0, n)), np.empty(0))
+        self._no_instruments = np.empty((0, n))
 
     @property
     def n_params(self) -> int:
@@ -172,6 +181,7 @@ class RecursiveEstimator:
         other._sc = self._sc.copy()
         other._ring = self._ring.copy()
         other._ct = self._ct.copy()
+        other._init_online()
         return other
 
     # ------------------------------------------------------------------ processing
@@ -208,9 +218,22 @@ class RecursiveEstimator:
         b = _as_float(b_t, "b_t").reshape(-1)
         if b.shape != (1,):
             raise EstimatorInputError(f"b_t must be a scalar, got shape {np.shape(b_t)}")
-        z = None if instrument is None else _as_float(instrument, "instrument").reshape(1, -1)
-        A, B, Z = self._check(a, b, z)
-        self._process(kernel_array(A), kernel_array(B), kernel_array(Z), K.STORE_FINAL)
+        if instrument is None:
+            if self.config.instruments == "user":
+                raise EstimatorInputError("this estimator uses user-supplied instruments: pass instrument")
+            Z = self._no_instruments
+        else:
+            if self.config.instruments != "user":
+                raise EstimatorInputError(f"instrument given but the estimator uses instruments="
+                                          f"{self.config.instruments!r}; set instruments='user' to pass them")
+            Z = kernel_array(_as_float(instrument, "instrument").reshape(1, -1))
+            if Z.shape != (1, n):
+                raise EstimatorInputError(f"instrument must have {n} entries, got {Z.shape[1]}")
+        arr = self.config.kernel_arrays
+        e2, e1 = self._empty_out
+        K.run_record(kernel_array(a), kernel_array(b), Z, self._ip_final, arr["fp"], arr["Q"], arr["Pd"],
+                     arr["F"], arr["xmin"], arr["xmax"], self._x, self._p, self._sc, self._ring, self._ct,
+                     e2, e2, e1, e1, e1, e1)
         return self._x.copy()
 
     def _process(self, A, B, Z, store):

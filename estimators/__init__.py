@@ -50,6 +50,9 @@ def run(estimator, A, B, instruments=None, store: str = "full", **overrides) -> 
     :class:`RecursiveGTLS` (continues from its current state)."""
     import numpy as np
 
+    if isinstance(estimator, str) and estimator.upper() == "PKS":
+        raise EstimatorConfigError("PKS smooths signals, it has no regressors: use pks_bank(values, ...) or "
+                                   "PolynomialKalmanSmoother(...).smooth(B)")
     if isinstance(estimator, str):
         overrides.setdefault("n_params", int(np.shape(A)[1]) if np.ndim(A) == 2 else 0)
         estimator = make_estimator(estimator, **overrides)

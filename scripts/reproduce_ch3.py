@@ -85,6 +85,18 @@ def exp_3_1(seeds: int, out: Path) -> dict:
     axes[0].set_ylabel("B")
     axes[0].legend(fontsize=7)
     save(fig, out / "fig_3_4_3_6_straight_lines.png")
+    u = np.linspace(-5, 5, 501)
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4))
+    for name in ("l2", "huber", "myriad", "cauchy", "tukey", "hampel"):
+        for ax, fn in zip(axes, (E.rho, E.psi, E.weight)):
+            ax.plot(u, fn(u, name), label=name)
+    for ax, title in zip(axes, ("ρ(u)", "ψ(u)", "W(u) = ψ(u)/u")):
+        ax.set_title(title)
+        ax.set_xlabel("u = ΔB/σ̂")
+    axes[0].set_ylim(0, 6)
+    axes[1].set_ylim(-3, 3)
+    axes[0].legend()
+    save(fig, out / "fig_3_5_influence_functions.png")
     return table
 
 

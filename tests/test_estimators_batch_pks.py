@@ -136,3 +136,15 @@ def test_metrics():
     assert rc[0] == pytest.approx(np.mean(r ** 2))
     with pytest.raises(E.MetricError, match="same shape"):
         E.mse([1.0, 2.0], [1.0])
+
+
+def test_pks_equals_exponentially_weighted_polynomial_fit_evaluated_at_the_window_centre():
+    rng = np.random.default_rng(5)
+    B = np.cumsum(rng.normal(size=1500)) * 0.1
+    out = E.pks_bank({"B": B}, window=20, order=4, forgetting=0.9)
+    k = np.arange(600)
+    w = 0.9 ** k
+    V = np.vander(41.0 - k, 5, increasing=True)
+    for t in (900, 1200, 1499):
+        c, *_ = np.linalg.lstsq(V * np.sqrt(w)[:, None], B[t - k] * np.sqrt(w), rcond=None)
+        assert out.value["B"][t] == pytest.approx(np.polyval(c[::-1], 21.0), rel=1e-8, abs=1e-9)

@@ -156,7 +156,7 @@ class ControllerBase:
             return None
         index, pos = nxt
         d = pos - obs.s
-        m = self.params().mass
+        m = self.params().inertial_mass
         if self._stop_hold_since is not None:
             if obs.t - self._stop_hold_since >= ctx.stop_dwell:
                 self._stop_hold_since = None
@@ -184,7 +184,7 @@ class ControllerBase:
             return force
         params = self.params()
         env_decel = max(0.0, -self.envelope.slope(obs.s) * obs.v)
-        limit = self.resistance(obs.v, obs.s, params) - params.mass * (env_decel + 2.0 * excess)
+        limit = self.resistance(obs.v, obs.s, params) - params.inertial_mass * (env_decel + 2.0 * excess)
         if force > limit:
             self.events["guard_active_steps"] += 1
             return limit

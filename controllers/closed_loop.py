@@ -47,10 +47,11 @@ def run_closed_loop(controller: ControllerBase, plant: Plant, ctx: DriveContext,
     energy = 0.0
     done = False
     while not done and obs.t < max_time:
-        cmd = controller.act(obs)
+        cmd = controller.act(obs)  # None: the plant's own driver decides (human-driver baseline)
         step = plant.step(cmd)
         energy += step.energy
-        rows.append((obs.t, obs.s, obs.v, cmd.traction, cmd.regen, cmd.brake, energy))
+        forces = (np.nan, np.nan, np.nan) if cmd is None else (cmd.traction, cmd.regen, cmd.brake)
+        rows.append((obs.t, obs.s, obs.v, *forces, energy))
         obs, done = step.obs, step.done
         rows[-1] = rows[-1] + (obs.a,)
         if progress is not None:
@@ -61,8 +62,11 @@ def run_closed_loop(controller: ControllerBase, plant: Plant, ctx: DriveContext,
     log["speed_limit"] = road.at(log["s"].to_numpy())["speed_limit"]
     log["grade"] = road.at(log["s"].to_numpy())["grade"]
     metrics = run_metrics(log, plant.dt, arrived=done)
-    metrics.update({f"ctl_{k}": v for k, v in controller.stats().items()})
-    metrics["fallbacks"] = int(controller.stats().get("fallbacks", 0))
+    stats = controller.stats()
+    metrics.update({f"ctl_{k}": v for k, v in stats.items()})
+    metrics["fallbacks"] = int(stats.get("fallbacks", 0))
+    metrics["solve_time_median"] = float(stats.get("solve_time_median", float("nan")))
+    metrics["solve_time_p99"] = float(stats.get("solve_time_p99", float("nan")))
     metrics["energy_J"] = float(energy)
     metrics["energy_kWh"] = float(energy) / 3.6e6
     metrics["trip_time"] = float(obs.t) if done else float("nan")

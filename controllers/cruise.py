@@ -69,7 +69,7 @@ class CruiseLaw:
         err = self.v_ref - obs.v
         self.integral = float(np.clip(self.integral + st.ki * err * dt, -st.integral_limit, st.integral_limit))
         ff = float(resistance_force(obs.v, 0.0, 0.0, self.ff))
-        return ff + self.ff.mass * (st.kp * err + self.integral)
+        return ff + self.ff.inertial_mass * (st.kp * err + self.integral)
 
 
 class CruiseController(ControllerBase):

@@ -1,9 +1,9 @@
 """Energy at the source for the MPC objective: smooth fits of the powertrain maps.
 
 Both powertrains use one smooth loss polynomial in shaft speed omega [rad/s] and torque T [N m]
-(copper losses ~ T^2, friction / iron losses ~ omega, omega^2):
+(copper losses ~ T^2, friction / iron losses ~ omega, omega^2, battery resistance ~ (T omega)^2):
 
-    P_loss(omega, T) = l0 + l1 omega + l2 omega^2 + l3 T^2                                  [W]
+    P_loss(omega, T) = l0 + l1 omega + l2 omega^2 + l3 T^2 + l4 (T omega)^2                 [W]
 
 - EV: battery power P_bat = F v + P_loss(omega_M, T_M) + P_aux, where F = F_trac - F_regen is the net wheel
   force of the motor, omega_M = v i / r_W, T_M = F r_W / i (motor/inverter map fitted by least squares).
@@ -35,7 +35,7 @@ class SourceEnergyModel:
     kind: str
     wheel_radius: float  # r_W [m]
     gear_ratios: tuple[float, ...]  # overall ratios wheel->shaft per gear (EV: one entry, incl. final drive)
-    loss: tuple[float, float, float, float]  # l0 [W], l1 [W s/rad], l2 [W s^2/rad^2], l3 [W/(N m)^2]
+    loss: tuple[float, ...]  # l0 [W], l1 [W s/rad], l2 [W s^2/rad^2], l3 [W/(N m)^2], l4 [1/W]
     max_power: float  # P_max [W] at the wheel (traction)
     max_torque: float  # T_max [N m] at the shaft (motor / engine)
     max_regen_power: float = 0.0  # [W] (EV only)
@@ -56,6 +56,8 @@ class SourceEnergyModel:
                                    f"gears, got {len(self.shift_speeds)}")
         if self.kind == "ev" and len(self.gear_ratios) != 1:
             raise EnergyModelError("an EV model has exactly one (fixed) ratio")
+        if len(self.loss) != 5 or not all(np.isfinite(self.loss)):
+            raise EnergyModelError(f"loss must hold 5 finite coefficients (l0..l4), got {self.loss}")
         if not 0 < self.indicated_efficiency <= 1:
             raise EnergyModelError(f"indicated_efficiency must be in (0, 1], got {self.indicated_efficiency}")
         if self.max_power <= 0 or self.max_torque <= 0:
@@ -91,40 +93,43 @@ class SourceEnergyModel:
 
         traction_force, regen_force >= 0 [N] at the wheels; v [m/s]; ratio = overall shaft/wheel ratio.
         """
-        l0, l1, l2, l3 = self.loss
         omega = v * ratio / self.wheel_radius
         if self.kind == "ev":
             net = traction_force - regen_force
-            torque = net * self.wheel_radius / ratio
-            return net * v + l0 + l1 * omega + l2 * omega * omega + l3 * torque * torque + self.auxiliary_power
+            return net * v + self.loss_power(omega, net * self.wheel_radius / ratio) + self.auxiliary_power
         torque = traction_force * self.wheel_radius / ratio
-        return ((traction_force * v + l0 + l1 * omega + l2 * omega * omega + l3 * torque * torque)
-                / self.indicated_efficiency + self.auxiliary_power)
+        return (traction_force * v + self.loss_power(omega, torque)) / self.indicated_efficiency + self.auxiliary_power
 
     def loss_power(self, shaft_speed, shaft_torque):
         """P_loss(omega, T) [W] of the fitted polynomial."""
-        l0, l1, l2, l3 = self.loss
-        return l0 + l1 * shaft_speed + l2 * shaft_speed ** 2 + l3 * shaft_torque ** 2
+        l0, l1, l2, l3, l4 = self.loss
+        p_mech = shaft_torque * shaft_speed
+        return l0 + l1 * shaft_speed + l2 * shaft_speed * shaft_speed + l3 * shaft_torque * shaft_torque + l4 * p_mech * p_mech
 
     def brake_force_limit(self, mass: float) -> float:
         return self.max_brake_deceleration * mass
 
 
-def fit_loss_polynomial(shaft_speed, shaft_torque, loss_power) -> tuple[float, float, float, float]:
-    """Least-squares fit of P_loss = l0 + l1 omega + l2 omega^2 + l3 T^2 to map samples (omega [rad/s],
-    T [N m], loss [W]); NaN samples (outside the map) are dropped. Returns (l0, l1, l2, l3)."""
+def fit_loss_polynomial(shaft_speed, shaft_torque, loss_power) -> tuple[float, float, float, float, float]:
+    """Non-negative least-squares fit of P_loss = l0 + l1 omega + l2 omega^2 + l3 T^2 + l4 (T omega)^2 to samples
+    (omega [rad/s], T [N m], loss [W]); NaN samples (outside the map) are dropped. Non-negative coefficients
+    keep the losses physical and the objective convex in the forces. Returns (l0, l1, l2, l3, l4)."""
+    from scipy.optimize import nnls
+
     w, t, p = (np.asarray(a, dtype=float).ravel() for a in np.broadcast_arrays(shaft_speed, shaft_torque, loss_power))
     ok = np.isfinite(w) & np.isfinite(t) & np.isfinite(p)
-    if ok.sum() < 4:
-        raise EnergyModelError(f"need at least 4 finite map samples to fit the loss polynomial, got {int(ok.sum())}")
-    a = np.column_stack([np.ones(ok.sum()), w[ok], w[ok] ** 2, t[ok] ** 2])
-    coef, *_ = np.linalg.lstsq(a, p[ok], rcond=None)
-    return tuple(float(c) for c in coef)
+    if ok.sum() < 5:
+        raise EnergyModelError(f"need at least 5 finite map samples to fit the loss polynomial, got {int(ok.sum())}")
+    a = np.column_stack([np.ones(ok.sum()), w[ok], w[ok] ** 2, t[ok] ** 2, (t[ok] * w[ok]) ** 2])
+    scale = np.abs(a).max(axis=0)
+    scale[scale == 0] = 1.0
+    coef, _ = nnls(a / scale, p[ok])
+    return tuple(float(c) for c in coef / scale)
 
 
 def generic_ev(mass: float = 1420.0) -> SourceEnergyModel:
     """An i3-like EV (125 kW, 250 N m, single ratio 9.665, r_W 0.35 m), loss coefficients chosen for
     ~90-93 % motor+inverter efficiency at part load. Used when no simulator spec is at hand (tests, benches)."""
-    return SourceEnergyModel(kind="ev", wheel_radius=0.35, gear_ratios=(9.665,), loss=(300.0, 0.5, 2.0e-3, 0.06),
+    return SourceEnergyModel(kind="ev", wheel_radius=0.35, gear_ratios=(9.665,), loss=(300.0, 0.5, 2.0e-3, 0.06, 1.5e-7),
                              max_power=125e3, max_torque=250.0, max_regen_power=50e3, max_regen_torque=150.0,
                              auxiliary_power=300.0, max_brake_deceleration=0.8 * G, name="generic_ev")

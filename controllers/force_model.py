@@ -6,7 +6,8 @@ One polynomial form covers the text's white-box and gray-box models (eq. 5.4-5.6
 
 with c0 = m g f_r0 = a_V [N], c1 = m g f_r1 = b_V [N s/m], c4 = m g f_r4 [N s^4/m^4],
 c2 = rho_a/2 A_V c_x = c_V [kg/m], w the headwind component [m/s] (0 when unknown), m = m_V [kg] and
-k_c = m_V^2 / c_yW [kg^2/N] (M4's fourth parameter). The wheel force balances F_resist + m dv/dt.
+k_c = m_V^2 / c_yW [kg^2/N] (M4's fourth parameter). The wheel force balances F_resist + (m + m_rot) dv/dt,
+m_rot the equivalent mass of the rotating parts (0 where the model lumps it into m, as M3/M4 do).
 
 Three sources of parameters sit behind one interface (:class:`ForceModel`), re-read by the controller every
 step: ``abc`` (fixed coast-down coefficients, M0), ``oracle`` (the simulator's true current parameters) and
@@ -32,7 +33,7 @@ class ForceModelError(ValueError):
     """Invalid force-model parameters or an unknown force-model name."""
 
 
-PARAMETER_NAMES = ("mass", "c0", "c1", "c2", "c4", "k_corner", "headwind")
+PARAMETER_NAMES = ("mass", "c0", "c1", "c2", "c4", "k_corner", "headwind", "rotational_mass")
 
 
 @dataclass(frozen=True)
@@ -46,6 +47,7 @@ class ForceParameters:
     c4: float = 0.0  # m g f_r4 [N s^4/m^4]
     k_corner: float = 0.0  # m_V^2 / c_yW [kg^2/N]
     headwind: float = 0.0  # w [m/s], positive against the direction of travel
+    rotational_mass: float = 0.0  # (I_red + 4 I_W) / r_W^2 [kg]: adds to m in the acceleration term only
 
     def __post_init__(self) -> None:
         for name in PARAMETER_NAMES:
@@ -54,6 +56,13 @@ class ForceParameters:
                 raise ForceModelError(f"force parameter {name} is not finite ({value})")
         if self.mass <= 0:
             raise ForceModelError(f"force parameter mass must be positive, got {self.mass} kg")
+        if self.rotational_mass < 0:
+            raise ForceModelError(f"force parameter rotational_mass must be >= 0, got {self.rotational_mass} kg")
+
+    @property
+    def inertial_mass(self) -> float:
+        """m_V + rotational equivalent mass [kg] (multiplies dv/dt)."""
+        return self.mass + self.rotational_mass
 
     def as_vector(self) -> np.ndarray:
         return np.array([getattr(self, n) for n in PARAMETER_NAMES], dtype=float)
@@ -92,15 +101,15 @@ def resistance_force(v, grade, curvature, p):
         p = p.as_vector()
     symbolic = ca is not None and any(isinstance(x, (ca.SX, ca.MX, ca.DM)) for x in (v, grade, curvature, p))
     cos, sin = (ca.cos, ca.sin) if symbolic else (np.cos, np.sin)
-    m, c0, c1, c2, c4, k, w = (p[i] for i in range(len(PARAMETER_NAMES)))
+    m, c0, c1, c2, c4, k, w = (p[i] for i in range(7))
     v2 = v * v
     return ((c0 + c1 * v + c4 * v2 * v2) * cos(grade) + c2 * (v + w) * (v + w) + m * G * sin(grade)
             + k * v2 * v2 * curvature * curvature / 4.0)
 
 
 def wheel_force(v, acceleration, grade, curvature, p):
-    """Wheel (tractive) force F_xV [N] needed for acceleration dv/dt [m/s^2]: F_resist + m dv/dt."""
-    m = p.mass if isinstance(p, ForceParameters) else p[0]
+    """Wheel (tractive) force F_xV [N] needed for acceleration dv/dt [m/s^2]: F_resist + (m + m_rot) dv/dt."""
+    m = p.inertial_mass if isinstance(p, ForceParameters) else p[0] + p[7]
     return resistance_force(v, grade, curvature, p) + m * acceleration
 
 

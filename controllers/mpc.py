@@ -5,7 +5,7 @@ States per node: E_k = v_k^2 / 2 (kinetic energy per unit mass) [m^2/s^2] and ti
 Inputs per segment (piecewise constant, in kN): traction F_t, regenerative F_r and friction-brake F_b force.
 
 Dynamics (v_mid = (v_k + v_{k+1})/2, resistance at the segment midpoint, grade/curvature at the midpoint):
-    m (E_{k+1} - E_k) / ds = F_t - F_r - F_b - F_resist(v_mid, theta_k, kappa_k; p)
+    (m + m_rot) (E_{k+1} - E_k) / ds = F_t - F_r - F_b - F_resist(v_mid, theta_k, kappa_k; p)
     t_{k+1} - t_k = ds / v_mid
 Comfort: a_k = (E_{k+1} - E_k)/ds in [a_min, a_max]; jerk (a_k - a_{k-1}) v_k / ds in [-j_max, j_max]
 (k = 0 uses the acceleration the previous plan commanded). Drive limits: F_t <= T_max i / r_W,
@@ -165,7 +165,8 @@ class OcpSolver:
         dt = ds / vm
         fres = resistance_force(vm, grade, curv, fp)
         acc = (E[1:] - E[:-1]) / ds
-        dyn = (m * acc + fres) / 1000.0 - (ft - fr - fb)
+        m_in = m + fp[7]  # inertial mass m_V + m_rot
+        dyn = (m_in * acc + fres) / 1000.0 - (ft - fr - fb)
         t_end = ca.sum1(dt)  # time state t_N, substituted: t_{k+1} = t_k + ds / v_mid
         jerk = ca.vertcat((acc[0] - a_prev) * v[0] / ds, (acc[1:] - acc[:-1]) * v[1:-1] / ds)
         power = ft * vm  # kW
@@ -174,7 +175,7 @@ class OcpSolver:
 
         psrc = en.source_power(1000.0 * ft, 1000.0 * fr, vm, ratio)
         energy = ca.sum1(psrc * dt) / 1000.0  # kJ
-        obj = (energy + lam * t_end / 1000.0 - m * E[n] / 1000.0
+        obj = (energy + lam * t_end / 1000.0 - m_in * E[n] / 1000.0
                + st.accel_weight * m / 1000.0 * ca.sumsqr(acc) + 1e-3 * ds / 1000.0 * ca.sum1(ft + fr + fb))
         self._nx, self._ng, self._np = x.numel(), g.numel(), p.numel()
         self._blocks_x = [n + 1, n, n, n]
@@ -287,7 +288,7 @@ class OcpSolver:
             v[k] = min(v[k], np.sqrt(v[k + 1] ** 2 + 2 * 0.5 * st.decel_max * ds)) if k > 0 else v[k]
         E = 0.5 * v ** 2
         vm = 0.5 * (v[1:] + v[:-1])
-        f = params.mass * np.diff(E) / ds + resistance_force(vm, preview.grade, preview.curvature, params)
+        f = params.inertial_mass * np.diff(E) / ds + resistance_force(vm, preview.grade, preview.curvature, params)
         ft = np.clip(f, 0, None) / 1000.0
         fr = np.clip(-f, 0, np.asarray(self.energy.max_regen_force(preview.ratio), float)) / 1000.0
         fb = np.clip(-f, 0, None) / 1000.0 - fr

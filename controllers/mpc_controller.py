@@ -158,7 +158,7 @@ class MpcController(ControllerBase):
         if obs.t >= self._next_replan or stale or (self.plan is None and self.mode == "mpc"):
             self._next_replan = obs.t + self.settings.replan_period
             self._replan(obs)
-        m = self.params().mass
+        m = self.params().inertial_mass
         if self.mode == "cruise" or self.plan is None:
             force = self.cruise.force(obs)
         else:

@@ -59,7 +59,7 @@ class ModelPlant:
             ratio = float(self.energy.ratio_for_speed(self.v))
             res = float(resistance_force(self.v, at["grade"], at["curvature"], p))
             net = cmd.traction - cmd.regen - cmd.brake - res
-            acc = net / p.mass
+            acc = net / p.inertial_mass
             if self.v <= 0.0 and acc < 0.0:  # standing: brakes/static friction hold the car (no roll-back)
                 acc = 0.0
             power = float(self.energy.source_power(cmd.traction, cmd.regen, max(self.v, 0.0), ratio))

@@ -34,7 +34,7 @@ def test_force_parameters_reject_bad_values():
         ForceParameters(mass=-1.0, c0=100.0)
     with pytest.raises(ForceModelError, match="c2"):
         ForceParameters(mass=1000.0, c0=100.0, c2=float("nan"))
-    with pytest.raises(ForceModelError, match="expected 7"):
+    with pytest.raises(ForceModelError, match="expected 8"):
         ForceParameters.from_vector([1, 2, 3])
     p = ForceParameters(mass=1000.0, c0=100.0, c2=0.3)
     assert ForceParameters.from_vector(p.as_vector()) == p
@@ -46,11 +46,11 @@ def test_loss_polynomial_fit_recovers_coefficients():
     rng = np.random.default_rng(0)
     w = rng.uniform(0, 1000, 400)
     t = rng.uniform(-250, 250, 400)
-    truth = (250.0, 0.8, 1.5e-3, 0.05)
-    loss = truth[0] + truth[1] * w + truth[2] * w ** 2 + truth[3] * t ** 2
+    truth = (250.0, 0.8, 1.5e-3, 0.05, 2e-7)
+    loss = truth[0] + truth[1] * w + truth[2] * w ** 2 + truth[3] * t ** 2 + truth[4] * (t * w) ** 2
     loss[::50] = np.nan  # outside-map samples are dropped
     assert np.allclose(fit_loss_polynomial(w, t, loss), truth, rtol=1e-9)
-    with pytest.raises(EnergyModelError, match="at least 4"):
+    with pytest.raises(EnergyModelError, match="at least 5"):
         fit_loss_polynomial([1.0, 2.0], [1.0, 2.0], [1.0, np.nan])
 
 
@@ -69,7 +69,7 @@ def test_ev_source_power_is_mechanical_power_plus_losses():
 
 def test_ice_shift_rule_and_validation():
     ice = SourceEnergyModel(kind="ice", wheel_radius=0.33, gear_ratios=(14.0, 9.0, 6.5, 5.0, 4.0, 3.3),
-                            loss=(2000.0, 5.0, 0.01, 0.0), max_power=200e3, max_torque=400.0,
+                            loss=(2000.0, 5.0, 0.01, 0.0, 0.0), max_power=200e3, max_torque=400.0,
                             indicated_efficiency=0.38, shift_speeds=(4.0, 8.0, 12.0, 17.0, 23.0))
     gears = ice.gear_for_speed(np.array([0.0, 5.0, 10.0, 20.0, 40.0]))
     assert list(gears) == [0, 1, 2, 4, 5]
@@ -78,8 +78,8 @@ def test_ice_shift_rule_and_validation():
     base = ice.source_power(0.0, 0.0, 20.0, 4.0)
     assert ice.source_power(1000.0, 0.0, 20.0, 4.0) - base == pytest.approx(1000.0 * 20.0 / 0.38, rel=1e-9)
     with pytest.raises(EnergyModelError, match="shift speeds"):
-        SourceEnergyModel(kind="ice", wheel_radius=0.33, gear_ratios=(14.0, 9.0), loss=(0, 0, 0, 0),
+        SourceEnergyModel(kind="ice", wheel_radius=0.33, gear_ratios=(14.0, 9.0), loss=(0, 0, 0, 0, 0),
                           max_power=1e5, max_torque=300.0, shift_speeds=())
     with pytest.raises(EnergyModelError, match="kind"):
-        SourceEnergyModel(kind="diesel", wheel_radius=0.33, gear_ratios=(1.0,), loss=(0, 0, 0, 0),
+        SourceEnergyModel(kind="diesel", wheel_radius=0.33, gear_ratios=(1.0,), loss=(0, 0, 0, 0, 0),
                           max_power=1e5, max_torque=300.0)

@@ -1,0 +1,108 @@
+"""One closed-loop drive on the simulator from names: vehicle preset, road, effects, controller, force model.
+
+``drive(vehicle="bmw_i3", road="hilly", controller="mpc", force_model="online", effects=..., seed=0)`` builds
+the plant (:class:`~.sim_plant.SimulatorPlant`), the powertrain-energy fit, the force model (abc / online /
+oracle) and the controller (mpc / cruise / human), runs :func:`~.closed_loop.run_closed_loop` and returns the
+:class:`~.closed_loop.RunResult` (plus the simulator, for ``to_trip()``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from roadload.road_profiles import RoadProfile
+
+from .base import ControllerError, DriveContext
+from .closed_loop import RunResult, run_closed_loop
+from .cruise import CruiseController, CruiseSettings
+from .force_model import FORCE_MODEL_NAMES, FixedForceModel, OracleForceModel
+from .mpc import MpcSettings
+from .mpc_controller import MpcController, MpcControllerSettings
+from .sim_plant import HumanDriver, SimulatorPlant
+from .vehicle_models import abc_parameters, energy_model_from_spec
+
+CONTROLLERS = ("mpc", "cruise", "human")
+
+
+@dataclass(frozen=True)
+class DriveSettings:
+    """Controller choice and its settings for one drive."""
+
+    controller: str = "mpc"
+    force_model: str = "online"
+    solver: str = "ipopt"
+    time_weight: float = 8000.0  # [J/s], MPC only
+    model: str = "M4"  # online force model: structure ...
+    estimator: str = "RRLM"  # ... and catalog estimator
+    mpc: MpcSettings = field(default_factory=MpcSettings)
+    cruise: CruiseSettings = field(default_factory=CruiseSettings)
+    dt: float = 0.1
+
+    def __post_init__(self) -> None:
+        if self.controller not in CONTROLLERS:
+            raise ControllerError(f"unknown controller {self.controller!r}; choose one of {CONTROLLERS}")
+        if self.force_model not in FORCE_MODEL_NAMES:
+            raise ControllerError(f"unknown force model {self.force_model!r}; choose one of {FORCE_MODEL_NAMES}")
+
+
+def _knowledge(vehicle):
+    from roadload.estimators.fleet import knowledge_for_preset
+    from roadload.estimators.models import coast_down_coefficients
+    from roadload.estimators.pipeline import knowledge_from_spec
+
+    if isinstance(vehicle, str):
+        return knowledge_for_preset(vehicle)
+    return knowledge_from_spec(vehicle, coast_down=coast_down_coefficients(vehicle))
+
+
+def resolve_road(road: RoadProfile | str, seed: int = 0) -> RoadProfile:
+    if isinstance(road, RoadProfile):
+        return road
+    from roadload.road_profiles import load_profile
+
+    try:
+        prof = load_profile(road, seed=seed)
+    except TypeError:
+        prof = load_profile(road)
+    if not isinstance(prof, RoadProfile):
+        raise ControllerError(f"road {road!r} is a drive cycle, not a road profile; the controllers need a road")
+    return prof
+
+
+def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, seed: int = 0,
+          settings: DriveSettings | None = None, progress=None, road_seed: int | None = None
+          ) -> tuple[RunResult, SimulatorPlant]:
+    """Run one closed-loop drive (module docstring)."""
+    st = settings or DriveSettings()
+    road = resolve_road(road, seed if road_seed is None else road_seed)
+    plant = SimulatorPlant(vehicle, road, effects=effects, seed=seed, dt=st.dt)
+    spec = plant.spec
+    energy = energy_model_from_spec(vehicle if isinstance(vehicle, str) else spec)
+    abc = abc_parameters(vehicle if isinstance(vehicle, str) else spec)
+    if st.controller == "mpc" and st.force_model == "oracle":
+        force_model = OracleForceModel(plant.true_parameters)
+    elif st.controller == "mpc" and st.force_model == "online":
+        from .online import OnlineForceModel
+
+        force_model = OnlineForceModel(_knowledge(vehicle if isinstance(vehicle, str) else spec), model=st.model,
+                                       estimator=st.estimator)
+        force_model.attach(plant.can_window)
+    else:
+        force_model = FixedForceModel(abc)
+    ctx = DriveContext(road=road, energy=energy, force_model=force_model, dt=st.dt,
+                       lateral_accel_max=st.mpc.lateral_accel_max)
+    if st.controller == "mpc":
+        mpc_settings = MpcSettings(**{**st.mpc.__dict__, "solver": st.solver, "time_weight": st.time_weight})
+        controller = MpcController(MpcControllerSettings(mpc=mpc_settings))
+    elif st.controller == "cruise":
+        controller = CruiseController(st.cruise)
+    else:
+        controller = HumanDriver()
+    result = run_closed_loop(controller, plant, ctx, progress=progress)
+    result.metrics.update(controller=st.controller, force_model=st.force_model if st.controller == "mpc" else "-",
+                          solver=st.solver if st.controller == "mpc" else "-",
+                          time_weight=st.time_weight if st.controller == "mpc" else float("nan"))
+    if hasattr(force_model, "describe") and st.force_model == "online" and st.controller == "mpc":
+        result.metrics["online"] = force_model.describe()
+    return result, plant

@@ -1,0 +1,170 @@
+"""The controller's view of a simulator vehicle: source-energy fit, abc (M0) parameters, oracle parameters.
+
+- :func:`energy_model_from_spec` samples the vehicle's own maps through the simulator's drive-train functions
+  (exact inverse of the loss maps, motor loss map / fuel map, battery resistance) on a grid of speed and wheel
+  force (and gear for the ICE) and fits the smooth loss polynomial of :mod:`.energy` by least squares.
+- :func:`abc_parameters`: M0 (eq. 5.4) with the coast-down coefficients of the nominal vehicle
+  (:func:`roadload.estimators.models.coast_down_coefficients`, a simulated coast-down) and the nominal mass.
+- :func:`oracle_parameters`: the simulator's current true parameters (``Simulator.true_parameters()``) as
+  :class:`~.force_model.ForceParameters` (wind: its component along the current heading).
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+
+from roadload.units import G
+from roadload.vehicle import VehicleSpec
+
+from .energy import SourceEnergyModel, fit_loss_polynomial
+from .force_model import ForceParameters
+
+
+def _spec(vehicle: VehicleSpec | str) -> VehicleSpec:
+    if isinstance(vehicle, str):
+        from roadload.envs import get_preset
+
+        return get_preset(vehicle)
+    return vehicle
+
+
+def rotational_mass(spec: VehicleSpec, gear: int | None = None) -> float:
+    """(I_red(G) + 4 I_W) / r_W^2 [kg]; ICE without a gear: the middle gear."""
+    d = spec.drivetrain
+    g = gear if gear is not None else (1 if d.n_gears == 1 else max(1, d.n_gears // 2 + 1))
+    return float(spec.effective_mass(g) - spec.body.mass)
+
+
+FIT_QUALITY: dict[str, dict[str, float]] = {}
+
+
+def _record_fit(name: str, w, t, loss, coef) -> None:
+    w, t, loss = map(np.asarray, (w, t, loss))
+    pred = coef[0] + coef[1] * w + coef[2] * w ** 2 + coef[3] * t ** 2 + coef[4] * (t * w) ** 2
+    FIT_QUALITY[name] = {"rms_error_W": float(np.sqrt(np.mean((pred - loss) ** 2))),
+                         "mean_loss_W": float(np.mean(loss))}
+
+
+@lru_cache(maxsize=16)
+def _energy_model_cached(name: str, spec_json: str) -> SourceEnergyModel:
+    import json
+
+    return _fit_energy(VehicleSpec.from_dict(json.loads(spec_json)))
+
+
+def energy_model_from_spec(vehicle: VehicleSpec | str) -> SourceEnergyModel:
+    """Smooth source-energy model fitted to the vehicle's maps (module docstring); cached per spec."""
+    import json
+
+    spec = _spec(vehicle)
+    return _energy_model_cached(spec.name, json.dumps(spec.to_dict(), sort_keys=True))
+
+
+def _fit_energy(spec: VehicleSpec) -> SourceEnergyModel:
+    from roadload.envs.drivetrain import (battery_current, fuel_power, inverse_wheel_torque, motor_electric_power,
+                                          speed_ratio, torque_limits)
+    from roadload.envs.packing import pack_vehicle
+
+    P, tabs, ti = pack_vehicle(spec)
+    d = spec.drivetrain
+    r = float(spec.tires.dynamic_radius)
+    speeds = np.linspace(3.0, 40.0, 38)
+    if d.kind == "bev":
+        m = d.motor
+        ratio = float(d.gear_ratios[0] * d.final_drive)
+        aux = float(d.battery.auxiliary_power)
+        voc = float(d.battery.open_circuit_voltage)
+        w_list, t_list, loss = [], [], []
+        for v in speeds:
+            omega = float(speed_ratio(P, 1)) * v
+            t_min, t_max = torque_limits(P, tabs, ti, omega, v)
+            # the operating region of eco-driving: |P_mech| <= 60 kW
+            f_hi = min(t_max * ratio / r * 0.95, 60e3 / v)
+            f_lo = max(t_min * ratio / r * 0.95, -60e3 / v)
+            for f in np.linspace(f_lo, f_hi, 25):
+                t_m = float(inverse_wheel_torque(P, tabs, ti, 1, f * r, omega, 1.0))
+                if not (t_min <= t_m <= t_max):
+                    continue
+                p_src = voc * float(battery_current(P, float(motor_electric_power(P, tabs, ti, omega, t_m)) + aux))
+                w_list.append(omega)
+                t_list.append(f * r / ratio)
+                loss.append(p_src - f * v - aux)
+        coef = fit_loss_polynomial(w_list, t_list, loss)
+        _record_fit(spec.name, w_list, t_list, loss, coef)
+        return SourceEnergyModel(kind="ev", wheel_radius=r, gear_ratios=(ratio,), loss=coef,
+                                 max_power=float(m.max_power), max_torque=float(m.max_torque),
+                                 max_regen_power=float(m.regen_power_limit), max_regen_torque=float(m.regen_torque_limit),
+                                 auxiliary_power=aux, max_brake_deceleration=0.8 * G, name=spec.name)
+    e = d.engine
+    ratios = tuple(float(g * d.final_drive) for g in d.gear_ratios)
+    rows, target = [], []
+    for gear in range(1, d.n_gears + 1):
+        for v in speeds:
+            omega = float(speed_ratio(P, gear)) * v
+            if not e.idle_speed <= omega <= e.max_speed:
+                continue
+            t_drag, t_max = torque_limits(P, tabs, ti, omega, v)
+            ratio = ratios[gear - 1]
+            for f in np.linspace(50.0, min(0.9 * t_max * ratio / r, 80e3 / v), 15):
+                t_e = float(inverse_wheel_torque(P, tabs, ti, gear, f * r, omega, 1.0))
+                if not (t_drag < t_e <= t_max):
+                    continue
+                torque_w = f * r / ratio
+                rows.append([f * v, 1.0, omega, omega ** 2, torque_w ** 2, (f * v) ** 2])
+                target.append(float(fuel_power(P, tabs, ti, omega, t_e)))
+    from scipy.optimize import nnls
+
+    a = np.asarray(rows)
+    scale = np.abs(a).max(axis=0)
+    coef, _ = nnls(a / scale, np.asarray(target))  # Willans line with non-negative friction terms
+    coef = coef / scale
+    eta = 1.0 / coef[0]
+    loss = tuple(float(c * eta) for c in coef[1:])
+    pred = np.asarray(rows) @ coef
+    FIT_QUALITY[spec.name] = {"rms_error_W": float(np.sqrt(np.mean((pred - np.asarray(target)) ** 2))),
+                              "mean_fuel_power_W": float(np.mean(target))}
+    # speed-only shift rule: upshift where the engine reaches the mean of the zero/full-load upshift speeds
+    up = 0.5 * (d.shift.upshift_speed_low + d.shift.upshift_speed_high)
+    shift = tuple(float(up * r / ratios[g]) for g in range(d.n_gears - 1))
+    torque_max = float(np.max(e.full_load.y))
+    power_max = float(np.max(np.asarray(e.full_load.x) * np.asarray(e.full_load.y)))
+    return SourceEnergyModel(kind="ice", wheel_radius=r, gear_ratios=ratios, loss=loss, max_power=power_max,
+                             max_torque=torque_max, indicated_efficiency=float(min(max(eta, 0.05), 1.0)),
+                             auxiliary_power=0.0, max_brake_deceleration=0.8 * G, shift_speeds=shift, name=spec.name)
+
+
+@lru_cache(maxsize=16)
+def _coast_down(name: str) -> tuple[float, float, float]:
+    from roadload.envs import get_preset
+    from roadload.estimators.models import coast_down_coefficients
+
+    return coast_down_coefficients(get_preset(name))
+
+
+def abc_parameters(vehicle: VehicleSpec | str) -> ForceParameters:
+    """M0 (eq. 5.4): a_V, b_V, c_V of the nominal vehicle's simulated coast-down, nominal mass m_V and the
+    rotational equivalent mass (preset vehicles: cached by name)."""
+    spec = _spec(vehicle)
+    if isinstance(vehicle, str):
+        a, b, c = _coast_down(vehicle)
+    else:
+        from roadload.estimators.models import coast_down_coefficients
+
+        a, b, c = coast_down_coefficients(spec)
+    return ForceParameters(mass=float(spec.body.mass), c0=float(a), c1=float(b), c2=float(c),
+                           rotational_mass=rotational_mass(spec))
+
+
+def oracle_parameters(truth: dict[str, float], spec: VehicleSpec) -> ForceParameters:
+    """ForceParameters from ``Simulator.true_parameters()``: a, b, m g f_r4, rho/2 c_x A, m^2/c_yW, the wind's
+    headwind component -v_w cos(psi_w) (psi_w = 0 is a tailwind) and the effective mass of the engaged gear."""
+    m = float(truth["mass"])
+    headwind = -float(truth.get("wind_speed", 0.0)) * math.cos(float(truth.get("wind_angle", 0.0)))
+    c_y = float(truth.get("cornering_stiffness", 0.0))
+    return ForceParameters(mass=m, c0=float(truth["a"]), c1=float(truth["b"]),
+                           c2=float(truth["aero_coefficient"]), c4=m * G * float(truth["rolling_resistance_f4"]),
+                           k_corner=m * m / c_y if c_y > 0 else 0.0, headwind=headwind,
+                           rotational_mass=max(float(truth.get("effective_mass", m)) - m, 0.0))

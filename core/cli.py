@@ -19,6 +19,7 @@ _COMMAND_MODULES: list[str] = [
     "roadload.io.cli",
     "roadload.estimators.robustness_cli",
     "roadload.estimators.cli",
+    "roadload.sim2real.cli",
 ]
 
 

@@ -76,7 +76,7 @@ class CandidateEffect:
                 continue
             col = np.asarray(columns[c], dtype=float)
             usable = np.isfinite(col)
-            if c in (BRAKE_FORCE, HEADING):      # all-zero brake force / heading carries no information
+            if c in (BRAKE_FORCE, HEADING, PATH_CURVATURE):   # all-zero columns carry no information
                 usable &= col != 0
             if not usable.any():
                 out.append(c)

@@ -195,8 +195,9 @@ def localise(residual: np.ndarray, table: pd.DataFrame, blocks: np.ndarray, regi
 
 
 def strongest_departures(tables: dict[str, RegimeTable], top: int = 5) -> list[dict]:
-    """Departing bins of all regimes, largest |median| × √share first (effect size weighted by coverage)."""
-    rows = [r for tab in tables.values() for r in tab.departing()]
+    """Departing bins of all regimes, largest |median| × √share first (effect size weighted by coverage).
+    Regimes with one populated bin are left out: they only repeat the overall median."""
+    rows = [r for tab in tables.values() if len(tab.rows) > 1 for r in tab.departing()]
     rows.sort(key=lambda r: -abs(r["median"]) * np.sqrt(r["share"]))
     return rows[:top]
 

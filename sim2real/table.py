@@ -26,6 +26,7 @@ valid                  moving (v > 1 m/s), smoothers settled, drive-train engage
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from typing import Sequence
 
@@ -81,9 +82,8 @@ def check_trip(trip: Trip, sim: SimConfig, i: int) -> None:
 def _season(trip: Trip, ambient: np.ndarray) -> str:
     ov = trip.meta.get("overview") or {}
     date = str(ov.get("Date") or trip.meta.get("date") or "")
-    month = None
-    if len(date) >= 7 and date[4] == "-" and date[5:7].isdigit():
-        month = int(date[5:7])
+    m = re.match(r"\s*\d{4}[-_/](\d{2})", date)
+    month = int(m.group(1)) if m else None
     if month is None:
         a = ambient[np.isfinite(ambient)]
         if not a.size:
@@ -188,6 +188,10 @@ def build_table(trips: Sequence[Trip], sim: SimConfig, settings: PipelineSetting
         f["drive_force"] = s["tractive_force"].to_numpy(dtype=float)
         f["tractive_force"] = f["drive_force"] - f["brake_force"]
         f["lateral_acceleration"] = v ** 2 * f["path_curvature"].to_numpy(dtype=float)
+        if not np.isfinite(f["path_curvature"].to_numpy(dtype=float)).any():
+            # no steering signal: the balance goes without cornering resistance (lateral regime stays NaN)
+            f["path_curvature"] = 0.0
+            notes[name].append("no path curvature: cornering resistance left out of the sim's balance")
         if trip.has("yaw_rate"):
             yr = np.nan_to_num(trip.channel("yaw_rate"))
             tt = trip.t

@@ -1,0 +1,299 @@
+"""Writing a diagnosis: ``diagnosis.json`` (schema below), ``report.md`` and PNG figures, each file atomically.
+
+diagnosis.json (schema_version 1; SI units, forces in N, NaN written as null):
+
+- ``sim``: {vehicle, effects (EffectsConfig dict), name}; ``trips``: trip names; ``settings``: DiagnosisSettings;
+- ``split``: {n_valid, n_train, n_test, n_folds, n_segments, n_test_segments} — the held-out part is ``test``;
+- ``floor``: {basis, coefficients, residual_rms, n}: the sim's own floor (sim trips vs the sim's balance);
+- ``gap``: {before, after, after_simulator, shrinkage, shrinkage_simulator, per_regime} on the held-out part;
+  before/after = {force_residual: {n, mean, median, mad, medse, rmse}, replay_speed_error: {rms, median_end,
+  windows} [m/s], energy_per_distance: {measured, sim, relative_error, unit}}; shrinkage = 1 - after/before for
+  rmse, medse, |median|; per_regime: [{regime, bin, n, rmse_before, rmse_after, median_before, median_after,
+  remaining}];
+- ``regimes``: {regime: [{bin, n, n_blocks, share, median, mad, mean, medse, ci_low, ci_high, p_value,
+  notch_low, notch_high, departs}]} of the residual before (all valid samples);
+- ``residual_analysis``: {signal: {correlation [per lag], max_abs, lag, bound}} (eq. 3.4a; 'residual': 3.4b);
+- ``ranking``: candidates alone, best first: {name, description, parameters, std_errors, units, shape,
+  cv_mse, baseline_cv_mse, heldout_improvement, heldout_gain [mean, low, high], significant, aic, bic,
+  delta_aic, delta_bic, explained_fraction, sim_effect, sim_parameters}; ``skipped_candidates``: {name: reason};
+- ``forward_selection``: steps {step, effect, cv_mse_before, cv_mse_after, relative_gain, gain_of_original,
+  gain, reference_cv_mse, explained_fraction, accepted, reason};
+- ``effects``: the accepted effects {name, parameters, std_errors, units, shape, heldout_gain,
+  explained_fraction, sim_switch, sim_parameters};
+- ``unexplained``: {present, departing_bins [regime bins as above], reference_gain {relative, interval,
+  significant}, reference_importance [{column, std, strongest_bin, strongest_effect}], rms_after};
+- ``notes``: pipeline notes per trip, baseline CV/AIC/BIC, strongest departures before.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .diagnose import Diagnosis
+
+
+def _atomic_write(path: Path, write) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def write_json(diag: Diagnosis, path: Path) -> Path:
+    def w(tmp):
+        with open(tmp, "w") as fh:
+            json.dump(diag.to_dict(), fh, indent=1)
+    _atomic_write(path, w)
+    return path
+
+
+# ------------------------------------------------------------------------------------------------ figures
+def _save(fig, path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    _atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+    plt.close(fig)
+
+
+def figure_residual_map(diag: Diagnosis, path: Path) -> Path:
+    """Median residual over speed × acceleration, before and after (held-out part)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    f = diag.table.frame
+    test = diag.test_rows
+    v = f["speed"].to_numpy() * 3.6
+    a = f["acceleration"].to_numpy()
+    ve = np.arange(0, max(140, np.nanmax(v[test]) + 10), 10)
+    ae = np.array([-3, -1.5, -1, -0.5, -0.2, 0.2, 0.5, 1, 1.5, 3])
+    before = f["residual"].to_numpy()
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharey=True)
+    maps = []
+    for r in (before, diag.residual_after):
+        m = np.full((ae.size - 1, ve.size - 1), np.nan)
+        iv = np.searchsorted(ve, v, side="right") - 1
+        ia = np.searchsorted(ae, a, side="right") - 1
+        for i in range(ae.size - 1):
+            for j in range(ve.size - 1):
+                sel = test & (ia == i) & (iv == j)
+                if sel.sum() >= 20:
+                    m[i, j] = np.median(r[sel])
+        maps.append(m)
+    lim = np.nanmax(np.abs(maps[0])) if np.isfinite(maps[0]).any() else 1.0
+    for ax, m, title in zip(axes, maps, ("before", "after (identified effects)")):
+        im = ax.pcolormesh(ve, np.arange(ae.size), m, cmap="RdBu_r", vmin=-lim, vmax=lim)
+        ax.set_title(f"median force residual, {title}")
+        ax.set_xlabel("speed [km/h]")
+        ax.set_yticks(np.arange(ae.size))
+        ax.set_yticklabels([f"{x:g}" for x in ae])
+    axes[0].set_ylabel("acceleration [m/s²]")
+    fig.colorbar(im, ax=axes, label="N")
+    _save(fig, path)
+    return path
+
+
+def figure_residual_time(diag: Diagnosis, path: Path) -> Path:
+    """Residual over time since start per trip (30 s rolling median), before and after."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    f = diag.table.frame
+    valid = f["valid"].to_numpy(bool)
+    fig, axes = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
+    trips = list(pd.unique(f["trip"]))[:12]
+    for k in trips:
+        sel = valid & (f["trip"] == k).to_numpy()
+        if sel.sum() < 50:
+            continue
+        t = f["time_since_start"].to_numpy()[sel] / 60
+        for ax, r in zip(axes, (f["residual"].to_numpy()[sel], diag.residual_after[sel])):
+            ax.plot(t, pd.Series(r).rolling(300, min_periods=30, center=True).median(), lw=1, label=str(k))
+    axes[0].set_title("force residual (30 s rolling median), before")
+    axes[1].set_title("after the identified effects")
+    for ax in axes:
+        ax.axhline(0, color="k", lw=0.6)
+        ax.set_ylabel("N")
+    axes[1].set_xlabel("time since start [min]")
+    if len(trips) <= 8:
+        axes[0].legend(fontsize=7, ncol=4)
+    _save(fig, path)
+    return path
+
+
+def figure_regimes(diag: Diagnosis, path: Path) -> Path:
+    """Per regime bin: held-out RMSE before and after."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = pd.DataFrame(diag.per_regime)
+    if rows.empty:
+        fig = plt.figure(figsize=(4, 2))
+        _save(fig, path)
+        return path
+    regs = list(pd.unique(rows["regime"]))
+    fig, axes = plt.subplots(len(regs), 1, figsize=(10, 1.9 * len(regs)))
+    axes = np.atleast_1d(axes)
+    for ax, reg in zip(axes, regs):
+        sub = rows[rows["regime"] == reg]
+        x = np.arange(len(sub))
+        ax.bar(x - 0.2, sub["rmse_before"], 0.4, label="before")
+        ax.bar(x + 0.2, sub["rmse_after"], 0.4, label="after")
+        ax.set_xticks(x)
+        ax.set_xticklabels(sub["bin"], fontsize=7)
+        ax.set_ylabel(f"{reg}\nRMSE [N]", fontsize=8)
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    _save(fig, path)
+    return path
+
+
+def figure_ranking(diag: Diagnosis, path: Path) -> Path:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rk = diag.ranking
+    fig, ax = plt.subplots(figsize=(8, 0.35 * max(len(rk), 3) + 1))
+    names = [r["name"] for r in rk][::-1]
+    imp = [100 * r["heldout_improvement"] for r in rk][::-1]
+    colors = ["tab:green" if r["significant"] else "tab:gray" for r in rk][::-1]
+    ax.barh(names, imp, color=colors)
+    ax.axvline(0, color="k", lw=0.6)
+    ax.set_xlabel("held-out MSE reduction alone [%] (green: significant)")
+    fig.tight_layout()
+    _save(fig, path)
+    return path
+
+
+# ------------------------------------------------------------------------------------------------ report.md
+def _fmt(x, nd=1):
+    if x is None or (isinstance(x, float) and not np.isfinite(x)):
+        return "–"
+    return f"{x:.{nd}f}"
+
+
+def _param_text(params: dict, se: dict, units: dict) -> str:
+    return "; ".join(f"{k} = {v:.4g} ± {se.get(k, float('nan')):.2g} {units.get(k, '')}" for k, v in params.items())
+
+
+def markdown(diag: Diagnosis, figures: dict[str, str]) -> str:
+    d = diag
+    fb, fa = d.gap_before, d.gap_after
+    fs = d.gap_after_sim
+    L = [f"# Sim-to-real diagnosis: {d.sim['name']}", ""]
+    L += [f"Sim: vehicle `{d.sim['vehicle']}`, effects {sorted(d.sim['effects']['effects']) or 'none'}. "
+          f"Trips: {len(d.trips)} ({', '.join(map(str, d.trips[:8]))}{' …' if len(d.trips) > 8 else ''}). "
+          f"Held-out part: {d.split['n_test']} of {d.split['n_valid']} valid samples "
+          f"({d.split['n_test_segments']} segments of {d.settings['segment_length']:g} s); training in "
+          f"{d.split['n_folds']} CV folds. Sim floor RMS (the sim against its own balance): "
+          f"{_fmt(d.floor['residual_rms'])} N.", ""]
+    L += ["## Gap (held-out)", "", "| measure | before | after (fitted) | after (sim re-run) |", "|---|---|---|---|"]
+
+    def row(name, get, nd=1):
+        return f"| {name} | {_fmt(get(fb), nd)} | {_fmt(get(fa), nd)} | {_fmt(get(fs), nd) if fs else '–'} |"
+    L += [row("force residual median [N]", lambda g: g["force_residual"]["median"]),
+          row("force residual MAD [N]", lambda g: g["force_residual"]["mad"]),
+          row("force residual RMSE [N]", lambda g: g["force_residual"]["rmse"]),
+          row("force residual MEDSE [N²]", lambda g: g["force_residual"]["medse"], 0),
+          row("replay speed error RMS [m/s]", lambda g: g["replay_speed_error"]["rms"], 3),
+          row("traction energy sim vs measured [%]", lambda g: 100 * g["energy_per_distance"]["relative_error"], 2)]
+    L += ["", f"Measured traction energy {_fmt(fb['energy_per_distance']['measured'], 2)} kWh/100 km. "
+          f"Shrinkage of the held-out RMSE: {100 * d.shrinkage('rmse'):.0f} % (fitted)"
+          + (f", {100 * d.shrinkage('rmse', True):.0f} % (sim re-run with the effects on)" if fs else "") + ".", ""]
+    L += ["## Where the gap lies", ""]
+    dep = d.notes.get("strongest_departures_before", [])
+    if dep:
+        L += ["Regime bins whose median residual departs from 0 (block-bootstrap 95 % interval and notch exclude 0), "
+              "largest first:", "", "| regime | bin | share | median [N] | 95 % CI [N] |", "|---|---|---|---|---|"]
+        L += [f"| {b['regime']} | {b['bin']} | {100 * b['share']:.0f} % | {_fmt(b['median'])} | "
+              f"{_fmt(b['ci_low'])} … {_fmt(b['ci_high'])} |" for b in dep]
+    else:
+        L += ["No regime bin departs significantly from 0."]
+    ra = d.residual_analysis
+    strong = sorted(((k, v) for k, v in ra.items()), key=lambda kv: -kv[1]["max_abs"])[:4]
+    L += ["", "Residual analysis (eq. 3.4a/3.4b, correlation coefficients, white-noise bound "
+          f"±{ra['residual']['bound']:.3f}): " + ", ".join(f"{k} {v['max_abs']:.2f} at lag {v['lag']}"
+                                                        for k, v in strong) + ".", ""]
+    for key in ("residual_map", "residual_time"):
+        if key in figures:
+            L += [f"![{key}]({figures[key]})", ""]
+    L += ["## Which effect", "", "Candidates alone (fitted on training, judged out-of-fold):", "",
+          "| candidate | held-out gain | significant | ΔAIC | ΔBIC | explained share | parameters |",
+          "|---|---|---|---|---|---|---|"]
+    for r in d.ranking:
+        L.append(f"| {r['name']} | {100 * r['heldout_improvement']:.1f} % | {'yes' if r['significant'] else 'no'} | "
+                 f"{_fmt(r['delta_aic'], 0)} | {_fmt(r['delta_bic'], 0)} | {_fmt(r['explained_fraction'], 2)} | "
+                 f"{_param_text(r['parameters'], r['std_errors'], r['units'])} |")
+    if d.skipped:
+        L += ["", "Not fitted: " + "; ".join(f"{k} ({v})" for k, v in d.skipped.items()) + "."]
+    L += ["", "Greedy forward selection:", ""]
+    L += [f"{s['step']}. {s['effect']}: out-of-fold MSE {s['cv_mse_before']:.0f} → {s['cv_mse_after']:.0f} N² "
+          f"({100 * s['gain_of_original']:.1f} % of the original), {s['reason']}" for s in d.selection]
+    if "ranking" in figures:
+        L += ["", f"![ranking]({figures['ranking']})"]
+    L += ["", "## Identified effects", ""]
+    if d.effects:
+        for e in d.effects:
+            L += [f"- **{e['name']}** ({e['description']}): {_param_text(e['parameters'], e['std_errors'], e['units'])}"
+                  + (f", {e['shape_name']} = {e['shape']:g} {e['shape_unit']}" if e["shape"] is not None else "")
+                  + f"; simulator switch `{e['sim_switch']}` {e['sim_parameters']}"]
+    else:
+        L += ["None: no candidate gave a significant held-out gain that explains the gap."]
+    L += ["", "## How far it shrinks, per regime (held-out RMSE)", "", "| regime | bin | n | before [N] | after [N] | "
+          "remaining |", "|---|---|---|---|---|---|"]
+    for p in d.per_regime:
+        L.append(f"| {p['regime']} | {p['bin']} | {p['n']} | {_fmt(p['rmse_before'])} | {_fmt(p['rmse_after'])} | "
+                 f"{_fmt(100 * p['remaining'], 0)} % |")
+    if "regimes" in figures:
+        L += ["", f"![regimes]({figures['regimes']})"]
+    un = d.unexplained
+    L += ["", "## Unexplained residual", ""]
+    if un["present"]:
+        L += [f"Held-out RMS after the identified effects: {_fmt(un['rms_after'])} N."]
+        if un["departing_bins"]:
+            L += ["Still departing from 0 (not forced onto a candidate):", ""]
+            L += [f"- {b['regime']} {b['bin']}: median {_fmt(b['median'])} N (95 % CI {_fmt(b['ci_low'])} … "
+                  f"{_fmt(b['ci_high'])}, {100 * b['share']:.0f} % of the held-out samples)"
+                  for b in un["departing_bins"]]
+        rg = un["reference_gain"]
+        if rg["significant"]:
+            L += ["", f"A regime-only reference model still removes {100 * rg['relative']:.1f} % of the original "
+                  f"held-out MSE; its strongest regime variables: "
+                  + ", ".join(f"{i['column']} (strongest bin {i['strongest_bin']}, {i['strongest_effect']:.0f} N)"
+                              for i in un["reference_importance"][:3]) + "."]
+    else:
+        L += ["None significant."]
+    return "\n".join(L) + "\n"
+
+
+def write_report(diag: Diagnosis, out: str | os.PathLike) -> dict[str, Path]:
+    """diagnosis.json, report.md and the figures into folder ``out``; returns the paths."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    figs = {"residual_map": figure_residual_map(diag, out / "residual_map.png"),
+            "residual_time": figure_residual_time(diag, out / "residual_time.png"),
+            "regimes": figure_regimes(diag, out / "regimes.png"),
+            "ranking": figure_ranking(diag, out / "ranking.png")}
+    paths = {"json": write_json(diag, out / "diagnosis.json"), **figs}
+    text = markdown(diag, {k: p.name for k, p in figs.items()})
+
+    def w(tmp):
+        Path(tmp).write_text(text)
+    _atomic_write(out / "report.md", w)
+    paths["report"] = out / "report.md"
+    return paths

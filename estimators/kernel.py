@@ -111,16 +111,15 @@ def run_record(A, B, Z, ip, fp, Qm, Pd, F, xmin, xmax, X, P, sc, ring, ct,
 
     for t in range(T):
         b = B[t]
-        valid = np.isfinite(b)
+        # one test for all entries: x * 0 is 0 for finite x and NaN for inf/NaN
+        probe = b * 0.0
         for i in range(n):
             a[i] = A[t, i]
-            if not np.isfinite(a[i]):
-                valid = False
+            probe += a[i] * 0.0
         if iv == IV_USER:
             for i in range(n):
                 z[i] = Z[t, i]
-                if not np.isfinite(z[i]):
-                    valid = False
+                probe += z[i] * 0.0
         elif iv == IV_DELAY and ct[CT_RING_FILL] >= k:
             pos = ct[CT_RING_POS]
             for i in range(n):
@@ -128,6 +127,7 @@ def run_record(A, B, Z, ip, fp, Qm, Pd, F, xmin, xmax, X, P, sc, ring, ct,
         elif iv != IV_NONE:
             for i in range(n):
                 z[i] = a[i]
+        valid = probe == 0.0
         if transition:
             # prediction X' = F X, P' = F P Fᵀ (also for skipped samples: time advances)
             for i in range(n):
@@ -316,15 +316,14 @@ def run_record(A, B, Z, ip, fp, Qm, Pd, F, xmin, xmax, X, P, sc, ring, ct,
                     break
         # a non-finite result (overflowing P, singular normalisation) is rolled back and counted
         # with P symmetric positive semi-definite, |P_ij| <= sqrt(P_ii P_jj): X and diag P suffice
-        finite = ok
+        probe = 0.0
         for i in range(n):
-            if not (abs(X[i]) < np.inf and abs(P[i, i]) < np.inf):
-                finite = False
-        if finite and not sym:
+            probe += X[i] * 0.0 + P[i, i] * 0.0
+        if not sym:
             for i in range(n):
                 for j in range(n):
-                    if not abs(P[i, j]) < np.inf:
-                        finite = False
+                    probe += P[i, j] * 0.0
+        finite = ok and probe == 0.0
         if not finite:
             ct[CT_ROLLED_BACK] += 1
             for i in range(n):

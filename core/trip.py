@@ -220,12 +220,25 @@ class Trip:
         return path
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> "Trip":
+    def load(cls, path: str | os.PathLike, channels: list[str] | None = None,
+             truth_channels: list[str] | None = None) -> "Trip":
+        """Read a trip; `channels` / `truth_channels` (optional) read only those measured / truth channels (plus
+        't'; names the file lacks are ignored) — faster when a consumer needs a few of many channels."""
         path = Path(path)
         if not path.exists():
             raise TripError(f"no trip file at {path}")
         try:
-            table = pq.read_table(path)
+            columns = None
+            if channels is not None or truth_channels is not None:
+                names = list(pq.read_schema(path).names)   # file order
+                want = ["t"] + list(channels if channels is not None else
+                                    [c for c in names if not c.startswith(TRUTH_PREFIX) and c != "t"])
+                want += [TRUTH_PREFIX + c for c in (["t"] + list(truth_channels) if truth_channels is not None
+                                                    else [c[len(TRUTH_PREFIX):] for c in names
+                                                          if c.startswith(TRUTH_PREFIX)])]
+                wanted = set(want)
+                columns = [c for c in names if c in wanted]
+            table = pq.read_table(path, columns=columns)
         except Exception as exc:  # pyarrow raises several types for corrupt files
             raise TripError(f"{path}: not a readable Parquet file ({exc})") from None
         raw = (table.schema.metadata or {}).get(_META_KEY)
@@ -240,8 +253,10 @@ class Trip:
             truth = df[truth_cols].iloc[: payload["n_truth"]]
             truth.columns = [c[len(TRUTH_PREFIX):] for c in truth_cols]
         # restore dtypes that NaN padding of unequal time bases may have widened
-        measured = measured.astype(payload.get("dtypes", {}))
+        measured = measured.astype({c: d for c, d in payload.get("dtypes", {}).items() if c in measured.columns})
         if truth is not None:
-            truth = truth.astype(payload.get("truth_dtypes", {}))
-        return cls(measured.reset_index(drop=True), payload["units"], payload["meta"],
-                   None if truth is None else truth.reset_index(drop=True), payload["truth_units"])
+            truth = truth.astype({c: d for c, d in payload.get("truth_dtypes", {}).items() if c in truth.columns})
+        units = {c: u for c, u in payload["units"].items() if c in measured.columns}
+        truth_units = {c: u for c, u in payload["truth_units"].items() if truth is not None and c in truth.columns}
+        return cls(measured.reset_index(drop=True), units, payload["meta"],
+                   None if truth is None else truth.reset_index(drop=True), truth_units)

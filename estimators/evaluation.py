@@ -270,7 +270,8 @@ def notch_table(values: pd.DataFrame, value: str = "medse", by: Sequence[str] = 
             row.update(m=int(x.size), median=med, q25=q25, q75=q75, iqr=q75 - q25, notch_low=med - half,
                        notch_high=med + half)
         rows.append(row)
-    return pd.DataFrame(rows)
+    cols = list(by) + ["m", "median", "q25", "q75", "iqr", "notch_low", "notch_high"]
+    return pd.DataFrame(rows, columns=cols)
 
 
 def significantly_different(a: pd.Series | dict, b: pd.Series | dict) -> bool:

@@ -153,8 +153,30 @@ def plot_notched_boxplot(values: pd.DataFrame, value: str, order: Sequence[str] 
     for c in order:
         x = values.loc[values["combination"] == c, value].to_numpy(dtype=float)
         data.append(x[np.isfinite(x)])
+    # notches median ± 1.57 IQR/√m computed linearly (as in the text); on a log axis a notch below zero is cut
+    # at the smallest positive value shown
+    conf = []
+    floor = min((x[x > 0].min() for x in data if np.any(x > 0)), default=1.0) * 0.5
+    for x in data:
+        if x.size == 0:
+            conf.append(None)
+            continue
+        q25, med, q75 = np.percentile(x, [25, 50, 75])
+        half = 1.57 * (q75 - q25) / np.sqrt(x.size)
+        lo = med - half
+        conf.append((max(lo, floor) if log else lo, med + half))
+    off_scale = 0
+    if log:   # diverged estimators (MEDSE up to 1e278) would break a log axis: draw them at a ceiling
+        tops = [np.percentile(x, 75) for x in data if x.size]
+        ceiling = 1e3 * max(tops) if tops else np.inf
+        off_scale = int(sum(np.sum(x > ceiling) for x in data))
+        data = [np.minimum(x, ceiling) for x in data]
+        conf = [None if c is None else (min(c[0], ceiling), min(c[1], ceiling)) for c in conf]
     fig, ax = plt.subplots(figsize=(max(6, 0.8 * len(order) + 2), 4.5))
-    ax.boxplot(data, notch=True, whis=1.5, tick_labels=order, flierprops={"markersize": 2})
+    ax.boxplot([x if x.size else [np.nan] for x in data], notch=True, whis=1.5, tick_labels=order,
+               conf_intervals=conf, flierprops={"markersize": 2})
+    if off_scale:
+        title = f"{title} ({off_scale} values beyond {ceiling:.3g} drawn at that ceiling)"
     if log:
         ax.set_yscale("log")
     ax.set_ylabel(ylabel)

@@ -31,7 +31,7 @@ from roadload.trip import Trip
 from .evaluation import (ESTIMATORS, GRAY_BOX_MODELS, HORIZONS, MIN_TRAINING, P_MAX, combination_name,
                          common_trips, default_combinations, evaluate_trip, notch_table, significantly_different)
 from .models import coast_down_coefficients, published_coast_down
-from .pipeline import PipelineSettings, VehicleKnowledge, knowledge_from_spec
+from .pipeline import PIPELINE_CHANNELS, PipelineSettings, VehicleKnowledge, knowledge_from_spec
 
 FLEET_VERSION = 1
 ROAD_KINDS = ("city", "hilly", "motorway")
@@ -222,7 +222,7 @@ class BenchmarkTask:
 def evaluate_stored_trip(task: BenchmarkTask) -> dict[str, Any]:
     """Sweep task: load one stored trip and evaluate all 11 combinations at all horizons."""
     t0 = time.perf_counter()
-    trip = Trip.load(task.path)
+    trip = Trip.load(task.path, channels=list(PIPELINE_CHANNELS), truth_channels=["mass"])
     knowledge = knowledge_for_preset(trip_vehicle(trip))
     t_load = time.perf_counter() - t0
     ev = evaluate_trip(trip, knowledge, task.settings, default_combinations(), task.horizons, task.min_training,

@@ -6,7 +6,7 @@ Stages (each a DataFrame, inspectable and plottable, see :func:`run_pipeline` an
 ``measured``  the Trip's measured channels as recorded (e.g. 100 Hz);
 ``smoothed``  every continuous channel through a bank of polynomial Kalman smoothers with one configuration
               (section 5.3), so all smoothed channels carry the same, known delay; the smoothers also give the
-              derivatives dv_V/dt and the wheel angular acceleration. Rows are aligned to the time the smoothed
+              derivatives dv_V/dt and the wheel angular acceleration (of the mean wheel speed 'wheel_speed'). Rows are aligned to the time the smoothed
               value belongs to (t - delay); discrete channels (gear, clutch, brake pressure) are taken at that time;
 ``decimated`` every k-th row, k = sample rate / estimation rate (100 Hz -> 10 Hz);
 ``states``    v_V, dv_V/dt, gradient angle θ (eq. 5.2), path curvature 1/r (eq. 5.3 through the steering-ratio
@@ -21,7 +21,8 @@ drive-train model with its own loss tables, the steering-ratio table); it never 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+import warnings
+from dataclasses import dataclass, field
 from typing import Any, Sequence
 
 import numpy as np
@@ -42,6 +43,7 @@ SMOOTHED_CHANNELS = ("vehicle_speed", "accel_x", "drive_torque", "engine_speed",
 DISCRETE_CHANNELS = ("gear", "clutch", "brake_pressure_front", "brake_pressure_rear")
 WHEEL_SPEEDS = ("wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr")
 TRIGGER_CONDITIONS = ("no_brake", "moving", "no_slip", "torque", "rim_torque_available")
+PIPELINE_CHANNELS = SMOOTHED_CHANNELS + DISCRETE_CHANNELS   # every measured channel the pipeline reads
 
 
 class PipelineError(ValueError):
@@ -239,7 +241,7 @@ class PipelineSettings:
     smoother: dict = field(default_factory=lambda: {"window": 50, "order": 2, "forgetting": 0.98})
     min_speed: float = 5.5
     min_drive_torque: float = 10.0
-    brake_pressure_threshold: float = 2.0e4
+    brake_pressure_threshold: float = 1.0e5
     brake_hold: float = 0.5
     brake_deceleration: float = -1.5
     warmup: float = 2.0
@@ -299,7 +301,12 @@ def _smoother_bank(values: dict[str, np.ndarray], rate: float, settings: Pipelin
 
 def _stage_smoothed(trip: Trip, settings: PipelineSettings, notes: list[str]) -> tuple[pd.DataFrame, float]:
     rate = trip.sample_rate
-    cont = {c: trip.channel(c) for c in SMOOTHED_CHANNELS if trip.has(c)}
+    cont = {c: trip.channel(c) for c in SMOOTHED_CHANNELS if trip.has(c) and c not in WHEEL_SPEEDS}
+    wheels = [trip.channel(c) for c in WHEEL_SPEEDS if trip.has(c)]
+    if wheels:   # the smoother is linear in its input: smoothing the mean equals the mean of the smoothed wheels
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            cont["wheel_speed"] = np.nanmean(np.vstack(wheels), axis=0)
     if "vehicle_speed" not in cont:
         raise PipelineError(f"trip {trip.meta.get('name', '?')!r} has no vehicle_speed channel; the pipeline "
                             f"needs at least vehicle_speed, accel_x and drive_torque (or rim_torque)")
@@ -314,9 +321,8 @@ def _stage_smoothed(trip: Trip, settings: PipelineSettings, notes: list[str]) ->
     for c in cont:
         frame[c] = bank.value[c][d:]
     frame["vehicle_speed_derivative"] = bank.derivative["vehicle_speed"][d:]
-    wheels = [c for c in WHEEL_SPEEDS if c in cont]
-    if wheels:
-        frame["wheel_acceleration"] = np.mean([bank.derivative[c][d:] for c in wheels], axis=0)
+    if "wheel_speed" in cont:
+        frame["wheel_acceleration"] = bank.derivative["wheel_speed"][d:]
     for c in DISCRETE_CHANNELS:
         if trip.has(c):
             frame[c] = trip.channel(c)[:rows]
@@ -448,8 +454,7 @@ def _stage_states(dec: pd.DataFrame, knowledge: VehicleKnowledge, settings: Pipe
     if "clutch" in dec:
         slip_ok &= dec["clutch"].to_numpy(dtype=float) >= 0.99
     if "engine_speed" in dec:
-        wheels = [c for c in WHEEL_SPEEDS if c in dec]
-        wheel_speed = (np.mean([dec[c].to_numpy(dtype=float) for c in wheels], axis=0) if wheels
+        wheel_speed = (dec["wheel_speed"].to_numpy(dtype=float) if "wheel_speed" in dec
                        else v / dt_model.wheel_radius)
         shaft = wheel_speed * dt_model.overall_ratio(gear)   # gear shaft speed θ̇_G seen from the wheels
         eng = dec["engine_speed"].to_numpy(dtype=float)

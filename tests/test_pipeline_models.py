@@ -173,3 +173,21 @@ def test_knowledge_from_a_preset_spec_and_its_simulated_coast_down():
     a0, b0, c0 = published_coast_down(spec)
     assert a0 == pytest.approx(spec.body.mass * G * spec.tires.rolling_resistance_f0)
     assert c0 == pytest.approx(0.5 * 1.2041 * spec.aero.drag_area)
+
+
+def test_trip_load_selected_channels(tmp_path):
+    """Trip.load(channels=..., truth_channels=...) reads a subset (used by the fleet benchmark)."""
+    import pandas as pd
+
+    from roadload.trip import Trip
+
+    t = np.arange(5) * 0.01
+    trip = Trip(pd.DataFrame({"t": t, "vehicle_speed": t + 1, "accel_x": t * 2, "gear": np.ones(5)}),
+                {"t": "s", "vehicle_speed": "m/s", "accel_x": "m/s^2", "gear": "1"}, {"name": "x"},
+                pd.DataFrame({"t": t, "mass": np.full(5, 1900.0), "grade": t}), {"t": "s", "mass": "kg", "grade": "rad"})
+    path = trip.save(tmp_path / "x.parquet")
+    sub = Trip.load(path, channels=["gear", "vehicle_speed", "not_there"], truth_channels=["mass"])
+    assert sub.channels == ["vehicle_speed", "gear"] and list(sub.truth.columns) == ["t", "mass"]
+    assert sub.units == {"t": "s", "vehicle_speed": "m/s", "gear": "1"} and sub.meta == trip.meta
+    np.testing.assert_array_equal(sub.channel("vehicle_speed"), trip.channel("vehicle_speed"))
+    assert Trip.load(path).equals(trip)

@@ -219,6 +219,19 @@ def build_table(trips: Sequence[Trip], sim: SimConfig, settings: PipelineSetting
     return finish_table(frame, model, notes, floor)
 
 
+def _drive_columns(frame: pd.DataFrame, force: np.ndarray) -> None:
+    """sim_drive_force = force + brake_force [N] and its time derivative per trip [N/s], in place."""
+    sdf = np.asarray(force, dtype=float) + frame["brake_force"].to_numpy(dtype=float)
+    frame["sim_drive_force"] = sdf
+    rate = np.zeros_like(sdf)
+    t = frame["t"].to_numpy(dtype=float)
+    for k in pd.unique(frame["trip"]):
+        sel = (frame["trip"] == k).to_numpy()
+        if sel.sum() > 2:
+            rate[sel] = np.gradient(sdf[sel], t[sel])
+    frame["sim_drive_force_rate"] = rate
+
+
 def finish_table(frame: pd.DataFrame, model: SimForceModel, notes: dict | None = None, floor=None
                  ) -> DiagnosisTable:
     """Add sim_balance (the analytic balance), sim_force (balance + the sim's floor, :mod:`.floor`), residual,
@@ -226,16 +239,10 @@ def finish_table(frame: pd.DataFrame, model: SimForceModel, notes: dict | None =
     frame = frame.copy()
     balance = model.predict(frame)
     frame["sim_balance"] = balance
+    _drive_columns(frame, balance)        # provisional, from the balance alone: what the floor was fitted on
     frame["sim_force"] = balance + (floor.predict(frame, balance) if floor is not None else 0.0)
     frame["residual"] = frame["tractive_force"].to_numpy(dtype=float) - frame["sim_force"].to_numpy(dtype=float)
-    sdf = frame["sim_force"].to_numpy(dtype=float) + frame["brake_force"].to_numpy(dtype=float)
-    frame["sim_drive_force"] = sdf
-    rate = np.zeros_like(sdf)
-    for k in pd.unique(frame["trip"]):
-        sel = (frame["trip"] == k).to_numpy()
-        if sel.sum() > 2:
-            rate[sel] = np.gradient(sdf[sel], frame["t"].to_numpy(dtype=float)[sel])
-    frame["sim_drive_force_rate"] = rate
+    _drive_columns(frame, frame["sim_force"].to_numpy(dtype=float))
     valid = frame["valid_base"].to_numpy(dtype=bool).copy() if "valid_base" in frame else np.ones(len(frame), bool)
     for c in ("speed", "acceleration", "gradient_angle", "residual", "sim_drive_force_rate"):
         valid &= np.isfinite(frame[c].to_numpy(dtype=float))

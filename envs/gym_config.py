@@ -56,21 +56,24 @@ def _check_effects(effects: Any) -> Any:
 
 class EcoDriveReward(_Strict):
     """Weights of the EcoDrive reward r = -scale * (energy + time * dt + speeding * (v - v_lim)+ * dt
-    + lateral * (|a_y| - a_y,max)+ * dt + stop * [stop passed too fast] + jerk * jerk^2 * dt
-    + unfinished * remaining distance at truncation).
+    + lateral * (|a_y| - a_y,max)+ * dt + stop * [stop passed too fast] + jerk * jerk^2 * dt - progress * ds).
 
     Every weight converts its term into joule-equivalents, so the raw terms reported in ``info`` can be
-    re-weighted by the user.
+    re-weighted by the user. The progress term is potential-based shaping with potential -progress * (remaining
+    distance): over an arrived episode it adds the constant progress * route length (so it does not change which
+    arrival is best), and a truncated episode pays progress * (distance left); without it a policy that stands
+    still until the time limit out-scores careless driving early in training.
     """
 
     energy: float = Field(1.0, ge=0, description="weight of the source energy [1 per J] (battery or fuel)")
-    time: float = Field(2000.0, ge=0, description="value of time [J/s]")
-    speeding: float = Field(5000.0, ge=0, description="penalty per m/s above the speed limit per second [J s/m / s]")
-    lateral: float = Field(5000.0, ge=0, description="penalty per m/s^2 above the lateral-acceleration limit per s")
+    time: float = Field(3000.0, ge=0, description="value of time [J/s] (the MPC's default time weight)")
+    speeding: float = Field(2000.0, ge=0, description="penalty per m/s above the speed limit per second [J s/m / s]")
+    lateral: float = Field(2000.0, ge=0, description="penalty per m/s^2 above the lateral-acceleration limit per s")
     stop: float = Field(2.0e5, ge=0, description="penalty for passing a stop line faster than stop_speed [J]")
-    jerk: float = Field(20.0, ge=0, description="penalty per (m/s^3)^2 per second [J s^5/m^2 / s]")
-    unfinished: float = Field(1000.0, ge=0, description="penalty per metre left when the time limit truncates "
-                                                        "[J/m]; keeps standing still from paying off")
+    jerk: float = Field(1.0, ge=0, description="penalty per (m/s^3)^2 per second [J s^5/m^2 / s]")
+    progress: float = Field(3000.0, ge=0, description="credit per metre driven along the route [J/m] "
+                                                      "(potential-based shaping, see above); above the energy per "
+                                                      "metre of a steep climb (~1.2 kJ/m for 1.4 t at 6 %)")
     scale: float = Field(1e-4, gt=0, description="reward units per joule-equivalent [1/J]")
 
 
@@ -96,7 +99,8 @@ class EcoDriveConfig(_Strict):
                                                              "schedule's time + 30 s")
     schedule_speed_fraction: float = Field(0.9, gt=0, le=1.2, description="schedule speed as a fraction of the "
                                                                           "speed limit (curve speed caps it)")
-    lateral_acceleration_limit: float = Field(3.0, gt=0, le=12.0, description="comfort limit of |a_y| [m/s^2]")
+    lateral_acceleration_limit: float = Field(2.0, gt=0, le=12.0, description="comfort limit of |a_y| [m/s^2] "
+                                                                             "(as the controllers' curve cap)")
     stop_speed: float = Field(1.0, gt=0, le=5.0, description="max speed when crossing a stop line [m/s]")
     initial_speed: float = Field(0.0, ge=0, le=60.0, description="speed at reset [m/s]")
     obs_scaling: Literal["normalized", "si"] = Field("normalized", description="'si': raw SI values; "

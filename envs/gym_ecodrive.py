@@ -3,15 +3,15 @@ and time (gymnasium env on top of :class:`roadload.envs.simulator.Simulator`).
 
 Action: ``u`` in [-1, 1] (Box, shape (1,)), a normalised wheel-force command held for one control period
 (default 0.1 s = 10 physics steps at 100 Hz). u >= 0 asks for traction u * min(F_peak, P_max / max(v, 1 m/s));
-u < 0 asks for a braking force |u| * m_V g, which the simulator splits regen first, friction brakes for the rest
+u < 0 asks for a braking force |u| * 0.5 m_V g, which the simulator splits regen first, friction brakes for the rest
 (its default allocator). The drive-train clips the request to what it can deliver in the current gear.
 
 Observation: see :data:`OBSERVATION_DOC` (built by :func:`observation_layout`) and the README table. Every entry is
 an SI value divided by a fixed scale (``obs_scaling='normalized'``, default) or the raw SI value (``'si'``).
 
 Reward: ``-scale * (energy + time * dt + speeding * (v - v_lim)+ dt + lateral * (|a_y| - a_y,max)+ dt
-+ stop * [stop line crossed faster than stop_speed] + jerk * jerk^2 dt + unfinished * remaining [m] at
-truncation)``; each raw term is in ``info['terms']`` and each weighted term (J-equivalent) in
++ stop * [stop line crossed faster than stop_speed] + jerk * jerk^2 dt - progress * ds)`` with ds the metres
+driven along the route in the step (potential-based shaping; see EcoDriveReward); each raw term is in ``info['terms']`` and each weighted term (J-equivalent) in
 ``info['costs']``, so users can re-weight.
 Terminates when the route's end is reached, truncates at the time limit.
 """
@@ -37,6 +37,8 @@ from .gym_config import (SPACE_FIELDS_ECODRIVE, EcoDriveConfig, GymConfigError, 
 from .presets import get_preset
 from .simulator import LateralValidityWarning, Simulator
 
+FULL_BRAKE_DECELERATION = 0.5 * G
+"""Deceleration [m/s^2] asked for by u = -1 (before resistances)."""
 PREVIEW_GRID = 1.0
 """Resolution [m] of the resampled route table the preview reads."""
 MIN_SCHEDULE_SPEED = 2.0
@@ -54,7 +56,8 @@ SCALE = {"v": 30.0, "a": 3.0, "grade": 0.05, "curvature": 0.01, "speed_limit": 3
 @dataclass(frozen=True)
 class DriveScales:
     """Scales of the normalised wheel-force command: peak traction force F_peak [N] (max shaft torque in first
-    gear at the wheels), peak drive power P_max [W] and the braking force of u = -1, m_V g [N]."""
+    gear at the wheels), peak drive power P_max [W] and the braking force of u = -1, FULL_BRAKE_DECELERATION * m_V
+    [N] (about as strong as full traction, so that a zero-mean exploring policy does not mostly brake)."""
 
     peak_traction_force: float
     peak_power: float
@@ -69,7 +72,7 @@ class DriveScales:
         else:
             x, y = np.asarray(dt.engine.full_load.x), np.asarray(dt.engine.full_load.y)
             torque, power = float(y.max()), float((x * y).max())
-        return cls(float(torque * ratio), float(power), float(spec.body.mass * G))
+        return cls(float(torque * ratio), float(power), float(spec.body.mass * FULL_BRAKE_DECELERATION))
 
     def wheel_force(self, u: float, v: float) -> float:
         """Signed wheel-force request [N] for the normalised command u in [-1, 1] at speed v [m/s]."""
@@ -258,7 +261,7 @@ class EcoDriveEnv(gym.Env):
         self._can = None
         self._can_hold = np.zeros(len(CAN_CHANNELS))
         self._can_hold[0] = cfg.initial_speed
-        self._return_costs = dict.fromkeys(("energy", "time", "speeding", "lateral", "stop", "jerk", "unfinished"),
+        self._return_costs = dict.fromkeys(("energy", "time", "speeding", "lateral", "stop", "jerk", "progress"),
                                            0.0)
         self._limit = float(self._route.at(self._state.s)[RouteTable.SPEED_LIMIT])
         self._obs_buf = np.zeros(len(self.layout))
@@ -305,13 +308,13 @@ class EcoDriveEnv(gym.Env):
         jerk = (st.a - self._a_prev) / dt
         terminated = bool(st.s >= self._route.length - 1e-6)
         truncated = bool(not terminated and st.t >= self._time_limit - 1e-9)
-        unfinished = max(self._route.length - st.s, 0.0) if truncated else 0.0
+        progress = min(st.s, self._route.length) - min(st0.s, self._route.length)
         energy = float(st.source_energy)
         terms = {"energy": energy, "time": dt, "speeding": speeding, "lateral": lateral, "stop": stop,
-                 "jerk": jerk * jerk * dt, "unfinished": unfinished}
+                 "jerk": jerk * jerk * dt, "progress": progress}
         costs = {"energy": w.energy * energy, "time": w.time * dt, "speeding": w.speeding * speeding,
                  "lateral": w.lateral * lateral, "stop": w.stop * stop, "jerk": w.jerk * terms["jerk"],
-                 "unfinished": w.unfinished * unfinished}
+                 "progress": -w.progress * progress}
         total = 0.0
         acc = self._return_costs
         for k, c in costs.items():

@@ -64,7 +64,7 @@ def test_reward_is_weighted_sum_of_reported_terms_and_reweights():
         t = info["terms"]
         expect = -w.scale * (w.energy * t["energy"] + w.time * t["time"] + w.speeding * t["speeding"]
                              + w.lateral * t["lateral"] + w.stop * t["stop"] + w.jerk * t["jerk"]
-                             + w.unfinished * t["unfinished"])
+                             - w.progress * t["progress"])
         assert r == pytest.approx(expect, rel=1e-12, abs=1e-15)
         total_energy += t["energy"]
         if te or tr:
@@ -90,10 +90,13 @@ def test_full_throttle_terminates_at_route_end():
         if te or tr:
             break
     assert te and not tr
-    assert info["s"] >= 300.0 and info["terms"]["unfinished"] == 0.0
+    assert info["s"] >= 300.0
+    # the progress credit sums to exactly progress * route length on arrival (potential-based shaping)
+    w = env.unwrapped.config.reward
+    assert info["return_costs"]["progress"] == pytest.approx(-w.progress * 300.0, rel=1e-12)
 
 
-def test_standing_still_truncates_with_unfinished_penalty():
+def test_standing_still_truncates_without_progress_credit():
     env = gym.make("roadload/EcoDrive-v0", road="motorway", route_length=300.0, time_limit=5.0)
     env.reset(seed=0)
     n = 0
@@ -105,7 +108,8 @@ def test_standing_still_truncates_with_unfinished_penalty():
     assert tr and not te and n == 50  # 5 s / 0.1 s
     assert info["s"] < 1.0
     w = env.unwrapped.config.reward
-    assert info["costs"]["unfinished"] == pytest.approx(w.unfinished * (300.0 - info["s"]))
+    assert info["return_costs"]["progress"] == pytest.approx(-w.progress * info["s"], abs=1e-9)
+    assert info["return_costs"]["time"] == pytest.approx(w.time * 5.0)
 
 
 def test_state_preview_matches_the_road_profile():

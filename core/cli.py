@@ -20,6 +20,7 @@ _COMMAND_MODULES: list[str] = [
     "roadload.estimators.robustness_cli",
     "roadload.estimators.cli",
     "roadload.sim2real.cli",
+    "roadload.envs.rl_cli",
 ]
 
 

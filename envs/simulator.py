@@ -18,7 +18,7 @@ from roadload.channels import TRUTH
 from roadload.road_profiles import DriveCycle, RoadProfile
 from roadload.trip import Trip
 from roadload.units import G, air_density
-from roadload.vehicle import SensorSpec, VehicleSpec, VehicleSpecError
+from roadload.vehicle import SensorSpec, VehicleSpec
 
 from . import physics
 from .driver import DriverConfig, cruise_stretches, pack_driver, speed_plan
@@ -545,9 +545,6 @@ def simulate(vehicle: VehicleSpec | str, road: RoadProfile | DriveCycle,
              driver: DriverConfig | DriveCycle | None = None, progress: Callable[[float], None] | None = None,
              initial_speed: float = 0.0) -> Trip:
     """Run the built-in driver (or a drive cycle) over a road and return the Trip (measured + truth + meta)."""
-    try:
-        sim = Simulator(vehicle, road, effects, sensors, seed, driver=driver, initial_speed=initial_speed)
-    except VehicleSpecError:
-        raise
+    sim = Simulator(vehicle, road, effects, sensors, seed, driver=driver, initial_speed=initial_speed)
     sim.run(duration=duration, distance=distance, progress=progress)
     return sim.to_trip()

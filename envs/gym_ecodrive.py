@@ -235,7 +235,17 @@ class EcoDriveEnv(gym.Env):
                 if not isinstance(profile, RoadProfile):
                     raise GymConfigError(f"road: {cfg.road!r} is not a road profile")
                 spec = get_preset(cfg.vehicle)
-                self._sim = Simulator(spec, profile, cfg.effects, None, sim_seed, initial_speed=cfg.initial_speed)
+                self._can_window = None
+                if cfg.observation == "can+estimates":
+                    # the controllers' plant adapter owns the simulator here: its can_window() feeds the online
+                    # estimator the CAN samples exactly as in the MPC's closed loop
+                    from roadload.controllers.sim_plant import SimulatorPlant
+
+                    plant = SimulatorPlant(spec, profile, effects=cfg.effects, seed=sim_seed, dt=cfg.control_period)
+                    self._sim, self._can_window = plant.sim, plant.can_window
+                else:
+                    self._sim = Simulator(spec, profile, cfg.effects, None, sim_seed,
+                                          initial_speed=cfg.initial_speed)
             except GymConfigError:
                 raise
             except ValueError as exc:  # RoadProfileError, SimulationError, EffectsError, VehicleSpecError
@@ -252,7 +262,7 @@ class EcoDriveEnv(gym.Env):
                             else 2.0 * self._route.route_time + 30.0)
         self._state = self._sim.reset(seed=sim_seed, initial_speed=cfg.initial_speed)
         if cfg.observation == "can+estimates":
-            self._estimator = _make_online_estimator(cfg.estimator, self._spec)
+            self._estimator = _make_online_estimator(cfg, self._can_window)
         self._dt = cfg.control_period
         self._n_sub = cfg.n_substeps
         self._u_prev = 0.0
@@ -411,13 +421,15 @@ class EcoDriveEnv(gym.Env):
         return self._profile
 
 
-def _make_online_estimator(name: str, spec: VehicleSpec):
-    """The running estimator of observation mode 'can+estimates' (roadload.controllers' online force model)."""
+def _make_online_estimator(cfg: EcoDriveConfig, can_window):
+    """The running estimator of observation mode 'can+estimates': roadload.controllers' online force model (the
+    chapter-5 pipeline + a catalog estimator, model M4) on the episode's CAN samples, updated every 10 s."""
+    from roadload.controllers.online import OnlineForceModel
+    from roadload.estimators.fleet import knowledge_for_preset
+
     try:
-        from roadload.controllers.online import OnlineForceModel
-    except ImportError as exc:  # pragma: no cover - depends on the controllers package
-        raise GymConfigError("observation='can+estimates' needs roadload.controllers.online "
-                             f"(not available: {exc})") from exc
-    model = OnlineForceModel.from_spec(spec, estimator=name)
-    model.reset()
+        model = OnlineForceModel(knowledge_for_preset(cfg.vehicle), model="M4", estimator=cfg.estimator)
+    except ValueError as exc:
+        raise GymConfigError(f"estimator: {exc}") from exc
+    model.attach(can_window)
     return model

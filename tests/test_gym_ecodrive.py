@@ -28,7 +28,7 @@ def _rollout(env, seed, n, action_seed=0):
     return np.array(out), np.array(rewards)
 
 
-@pytest.mark.parametrize("mode", ["state", "can"])
+@pytest.mark.parametrize("mode", ["state", "can", "can+estimates"])
 def test_checkers_pass(mode):
     from gymnasium.utils.env_checker import check_env
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
@@ -202,3 +202,21 @@ def test_observation_layout_documents_every_entry():
     img.reset(seed=0)
     frame = img.render()
     assert frame.dtype == np.uint8 and frame.shape == (160, 480, 3) and frame.min() < 255
+
+
+def test_can_estimates_mode_runs_the_online_estimator():
+    env = gym.make("roadload/EcoDrive-v0", observation="can+estimates", obs_scaling="si", road="motorway",
+                   route_length=2000.0)
+    obs, _ = env.reset(seed=0)
+    names = [row[0] for row in env.unwrapped.layout]
+    k = names.index("estimated_mass")
+    assert names[k:] == ["estimated_mass", "estimated_c0", "estimated_c2"]
+    nominal = obs[k:].copy()
+    assert nominal[0] == pytest.approx(env.unwrapped.simulator.vehicle.body.mass, rel=0.05)
+    for _ in range(350):  # 35 s: three estimator updates (every 10 s)
+        v = obs[names.index("can_vehicle_speed")]
+        obs, *_ = env.step(np.array([np.clip(0.3 * (25.0 - v), -1, 1)], dtype=np.float32))
+    assert env.unwrapped._estimator.updates >= 3 and env.unwrapped._estimator.rows > 100
+    assert not np.array_equal(obs[k:], nominal)  # the estimate moved
+    truth = env.unwrapped.simulator.true_parameters()
+    assert obs[k] == pytest.approx(truth["mass"], rel=0.1)

@@ -90,7 +90,7 @@ def benchmark_fleet_command(
     figures: bool = typer.Option(True, "--figures/--no-figures", help="write PNG figures"),
 ) -> None:
     """Chapter-5 benchmark over the simulated fleet (generated into the cache when absent)."""
-    from .fleet import FleetError, generate_fleet, run_benchmark, stored_trips, write_report
+    from .fleet import FleetError, generate_fleet, run_benchmark, single_trip_figures, stored_trips, write_report
 
     n = trips or 84
     if n < 1:
@@ -114,6 +114,12 @@ def benchmark_fleet_command(
         _fail(str(exc))
         return
     report = write_report(res, out, figures=figures, title=f"chapter-5 benchmark, fleet seed {seed}, {len(paths)} trips")
+    if figures and not res.trips.empty:
+        # figures 5.4-5.8 for one trip: the longest one with outliers (else the longest)
+        info = res.trips.sort_values("duration", ascending=False)
+        pick = info[info["outliers"].astype(bool)] if info["outliers"].astype(bool).any() else info
+        name = str(pick.iloc[0]["trip"])
+        single_trip_figures(next(p for p in paths if p.stem == name), out / "single_trip")
     t = res.timing
     typer.echo(f"{len(res.trips)} trips evaluated, {len(res.failed)} failed")
     for name, err in res.failed:

@@ -224,6 +224,14 @@ def evaluate_states(name: str, states: pd.DataFrame, knowledge: VehicleKnowledge
                 row.update(nmse=mass_nmse(est.X[start:, j], true_mass), final_mass=float(est.X[-1, j]),
                            median_mass=float(np.median(est.X[start:, j])))
             ev.mass.append(row)
+    # outliers as the estimators see them: share of |ΔB| above 5 robust standard deviations (1.483 MAD) and the
+    # largest |ΔB| of the robust reference run (figures 5.5/5.6 show 2000 N corrections in the text's data)
+    ref = estimates.get("M3-RRLM")
+    if ref is not None and np.isfinite(ref.residual).sum() > 10:
+        r = ref.residual[np.isfinite(ref.residual)]
+        sigma = 1.483 * np.median(np.abs(r - np.median(r)))
+        ev.info["outlier_share"] = float(np.mean(np.abs(r) > 5 * sigma)) if sigma > 0 else float("nan")
+        ev.info["max_output_correction"] = float(np.max(np.abs(r)))
     t_eval += time.perf_counter() - t1
     ev.timing.update(estimation=t_est, evaluation=t_eval)
     ev.info["n_triggered"] = int(np.sum(states["trigger"].to_numpy(dtype=bool)))

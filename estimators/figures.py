@@ -48,6 +48,17 @@ def save(fig: plt.Figure, path: str | os.PathLike, dpi: int = 110) -> Path:
     return path
 
 
+def _robust_ylim(ax: plt.Axes, values: np.ndarray, spread: float = 1.0) -> None:
+    """Y limits from the 1st-99th percentile widened by `spread` ranges, so a start-up spike of a diverging
+    estimator does not flatten every other trace (the spike runs off the axis)."""
+    v = values[np.isfinite(values)]
+    if v.size < 10:
+        return
+    lo, hi = np.percentile(v, [1, 99])
+    pad = spread * max(hi - lo, 1e-9 * max(abs(lo), abs(hi), 1.0))
+    ax.set_ylim(lo - pad, hi + pad)
+
+
 def plot_stage(result: PipelineResult, stage: str, channels: Sequence[str] | None = None) -> plt.Figure:
     """Time series of a pipeline stage (one panel per channel)."""
     if stage not in result.stages:
@@ -79,6 +90,7 @@ def plot_parameter_traces(estimates: Mapping[str, Estimate], truth: Mapping[str,
         for j, ax in enumerate(axes[:, 0]):
             ax.plot(e.t, e.X[:, j], lw=0.9, label=e.name)
     for j, ax in enumerate(axes[:, 0]):
+        _robust_ylim(ax, np.concatenate([e.X[:, j] for e in ests]))
         ax.set_ylabel(names[j], fontsize=8)
         if truth and names[j] in truth:
             ax.axhline(truth[names[j]], color="k", ls="--", lw=0.8, label="truth")
@@ -92,6 +104,7 @@ def plot_output_corrections(estimates: Mapping[str, Estimate]) -> plt.Figure:
     """Output corrections ΔB_t over time per estimator (figure 5.5)."""
     ests = [e for e in estimates.values() if e.estimator]
     fig, axes = plt.subplots(len(ests), 1, sharex=True, sharey=True, figsize=(9, 1.8 * len(ests)), squeeze=False)
+    _robust_ylim(axes[0, 0], np.concatenate([e.residual for e in ests]), spread=3.0)
     for ax, e in zip(axes[:, 0], ests):
         ax.plot(e.t, e.residual, lw=0.6)
         ax.set_ylabel(f"{e.name}\nΔB [N]", fontsize=8)

@@ -360,11 +360,40 @@ def check_findings(result: BenchmarkResult, horizon: int = 900) -> list[dict[str
         share = {e: np.nanmean([r[2] for r in rows if r[1] == e]) for e in ESTIMATORS if e != "RRLM"}
         nonrobust = [share.get("RLS", np.nan), share.get("RGTLS", np.nan)]
         robust = [share.get("SGMKF", np.nan), share.get("SGIVMKF", np.nan)]
+        tails = ""
+        if "outlier_share" in info and "max_output_correction" in info:
+            tails = (f"; outliers as the estimators see them (M3-RRLM ΔB): median share beyond 5 robust σ "
+                     f"{np.nanmedian(info['outlier_share']):.4f}, median of the per-trip largest |ΔB| "
+                     f"{np.nanmedian(info['max_output_correction']):.0f} N")
         out.append({"finding": "RLS and RGTLS are unstable under outliers (fig. 5.4/5.8)",
                     "reproduced": bool(np.nanmin(nonrobust) > np.nanmax(robust)),
                     "evidence": "share of trips with MEDSE > 2x the same model's RRLM (all trips / trips with "
-                                "outliers): " + ", ".join(f"{c} {f:.2f}/{fo:.2f}" for c, _, f, fo in rows)})
+                                "outliers): " + ", ".join(f"{c} {f:.2f}/{fo:.2f}" for c, _, f, fo in rows)
+                                + tails})
     return out
+
+
+def single_trip_figures(path: str | os.PathLike, out_dir: str | os.PathLike, model: str = "M3") -> list[Path]:
+    """Figures 5.4-5.8 for one stored trip: parameter traces, output corrections, histograms, scatter (model
+    `model` with the four estimators of section 5.6) and the cross-validation bars of all combinations."""
+    from .figures import (plot_correction_histograms, plot_cv_single_trip, plot_output_corrections,
+                          plot_parameter_traces, plot_scatter, plot_stage, save)
+    from .pipeline import run_pipeline
+
+    trip = Trip.load(path)
+    knowledge = knowledge_for_trip(trip)
+    res = run_pipeline(trip, knowledge)
+    ev = evaluate_trip(trip, knowledge, keep_estimates=True, true_mass=true_mass(trip))
+    ests = {k: v for k, v in ev.estimates.items() if k.startswith(model + "-") and not k.endswith("SGIVMKF")}
+    out = Path(out_dir)
+    truth = {"m_V": true_mass(trip)} if true_mass(trip) else None
+    files = [save(plot_stage(res, "states"), out / f"{res.name}_states.png"),
+             save(plot_parameter_traces(ests, truth), out / f"{res.name}_fig5_4_parameters.png"),
+             save(plot_output_corrections(ests), out / f"{res.name}_fig5_5_output_corrections.png"),
+             save(plot_correction_histograms(ests), out / f"{res.name}_fig5_6_histograms.png"),
+             save(plot_scatter(ests), out / f"{res.name}_fig5_7_scatter.png"),
+             save(plot_cv_single_trip(pd.DataFrame(ev.medse), res.name), out / f"{res.name}_fig5_8_cv.png")]
+    return files
 
 
 def _markdown_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:

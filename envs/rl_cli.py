@@ -570,7 +570,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         highway-env's highway-fast-v0 in the same run."""
         from rich.console import Console
 
-        console = Console()
+        console = Console(width=max(150, Console().width))
         with console.status("measuring") as status:
             table = run_benchmark(seconds, n_envs, highway, progress=lambda m: status.update(f"done: {m}"))
         print_table(console, table.drop(columns=["episodes"]), "environment steps per second", "{:.1f}")

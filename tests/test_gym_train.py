@@ -54,3 +54,28 @@ def test_bad_training_input(tmp_path):
     with pytest.raises(rl_cli.RLError, match="does not exist"):
         rl_cli.load_policy(tmp_path / "ppo_missing.zip")
     assert not list(tmp_path.iterdir())  # nothing half-written
+
+
+def test_evaluation_table_uses_the_controllers_metrics_and_baselines():
+    cfg = {"road": "motorway", "route_length": 800.0}
+
+    def p_control(obs):  # obs is normalised: v / 30, speed_limit@0m / 30 at index 2 + 2 * 6
+        v, limit = 30.0 * obs[0], 30.0 * obs[2 + 2 * 6]
+        return np.array([np.clip(0.5 * (0.85 * limit - v), -1.0, 1.0)], dtype=np.float32)
+
+    table, notes = rl_cli.evaluation_table({"p": p_control}, cfg, road_seeds=(50_000,), controllers=("cruise",))
+    assert not notes and list(table.controller) == ["p", "cruise"]
+    assert list(table.columns) == rl_cli.TABLE_COLUMNS
+    row = table.iloc[0]
+    assert row.arrived and row.speed_violations == 0 and 20.0 < row.trip_time < 80.0
+    m, log = rl_cli.run_policy(p_control, cfg, 50_000)
+    assert m["energy_kWh"] == pytest.approx(log.energy.iloc[-1] / 3.6e6)
+    cruise = table.iloc[1]
+    assert cruise.arrived and np.isfinite(cruise.energy_kWh) and np.isnan(cruise.episode_return)
+    summary = rl_cli.summarise(table)
+    assert list(summary.controller) == ["p", "cruise"]
+
+
+def test_bench_single_counts_steps():
+    row = rl_cli.bench_single("roadload/EcoDrive-v0", seconds=0.01, route_length=300.0)
+    assert row["steps"] >= 64 and row["steps_per_s"] > 0

@@ -19,14 +19,14 @@ settings (``fp``); see :mod:`roadload.estimators.config` for the mapping from na
 Steps 3-6 can be iterated within a time step until X̂_t converges (the "optimal" variant of Algorithm 3.3).
 
 :func:`run_record` processes a whole record and is what the online ``update()`` calls with a one-sample
-record, so online and batch results are the same numbers by construction. :func:`run_many` runs independent
-records (trips) in parallel over a leading axis with the very same function.
+record, so online and batch results are the same numbers by construction. ``recursive.run_many`` runs
+independent records (trips) in parallel threads with the very same function (it releases the GIL).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from .influence import PSI_L2, weight_scalar
 
@@ -51,7 +51,7 @@ CT_SKIPPED, CT_ROLLED_BACK, CT_BLOWUP_AT, CT_T, CT_RING_POS, CT_RING_FILL = rang
 N_CT = 6
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def run_record(A, B, Z, ip, fp, Qm, Pd, F, xmin, xmax, X, P, sc, ring, ct,
                out_X, out_Pdiag, out_rprior, out_rpost, out_w, out_scale):
     """Process one record (T samples) in place on the state (X, P, sc, ring, ct).
@@ -372,17 +372,3 @@ def run_record(A, B, Z, ip, fp, Qm, Pd, F, xmin, xmax, X, P, sc, ring, ct,
             out_w[t] = w
             out_scale[t] = np.sqrt(sc[SC_SIGMA2])
     ct[CT_T] += T
-
-
-@njit(cache=True, parallel=True)
-def run_many(A, B, Z, ip, fp, Qm, Pd, F, xmin, xmax, X, P, sc, ring, ct,
-             out_X, out_Pdiag, out_rprior, out_rpost, out_w, out_scale):
-    """:func:`run_record` over a leading trip axis (K records of equal length T, NaN-padded), in parallel.
-
-    Arrays carry the trip axis first: A (K×T×n), B (K×T), Z (K×T×n or K×0×n), state X (K×n), P (K×n×n),
-    sc (K×3), ring (K×k×n), ct (K×6) and the outputs (K×T×…, or K×0×… when not stored).
-    """
-    K = B.shape[0]
-    for r in prange(K):
-        run_record(A[r], B[r], Z[r], ip, fp, Qm, Pd, F, xmin, xmax, X[r], P[r], sc[r], ring[r], ct[r],
-                   out_X[r], out_Pdiag[r], out_rprior[r], out_rpost[r], out_w[r], out_scale[r])

@@ -1,13 +1,15 @@
 """Recursive estimators: the online object (:class:`RecursiveEstimator`), whole-record runs and many-trip runs.
 
-All three call :func:`roadload.estimators.kernel.run_record` (the many-trip path through ``run_many``, which
-calls the same function per trip), so ``update()`` sample by sample, ``run()`` over a record and
+All three call :func:`roadload.estimators.kernel.run_record` (``run_many`` from worker threads, one trip per
+call; the kernel releases the GIL), so ``update()`` sample by sample, ``run()`` over a record and
 ``run_many()`` over a trip axis give the same numbers.
 """
 
 from __future__ import annotations
 
 import copy
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -270,12 +272,14 @@ class RecursiveEstimator:
             p_blowup=st.blowup_at >= 0, p_blowup_at=st.blowup_at, p_diag_max=st.p_diag_max, state=st)
 
 
-def run_many(config: EstimatorConfig, A, B, instruments=None, store: str = "full") -> EstimationResult:
-    """Run independent records (trips) in parallel from the initial state of ``config``.
+def run_many(config: EstimatorConfig, A, B, instruments=None, store: str = "full",
+             n_threads: int | None = None) -> EstimationResult:
+    """Run independent records (trips) in parallel threads from the initial state of ``config``.
 
     A: K×T×n (or T×n shared by all trips; it is copied per trip), B: K×T; pad shorter trips with NaN (padding is skipped and
     counted). Results carry the trip axis first; counters are arrays of length K; ``state`` is a list.
-    Identical to running :meth:`RecursiveEstimator.run` on each trip."""
+    ``n_threads``: worker threads (default: all cores); the kernel releases the GIL, so trips run on all cores.
+    Identical to running :meth:`RecursiveEstimator.run` on each trip (the same compiled function)."""
     if store not in _STORE:
         raise EstimatorInputError(f"store must be one of {sorted(_STORE)}, got {store!r}")
     if not isinstance(config, EstimatorConfig):
@@ -314,8 +318,21 @@ def run_many(config: EstimatorConfig, A, B, instruments=None, store: str = "full
     out_X = np.empty((Kt, T, n)) if code >= K.STORE_X else np.empty((Kt, 0, n))
     out_Pd = np.empty((Kt, T, n)) if full else np.empty((Kt, 0, n))
     vecs = [np.empty((Kt, T)) if full else np.empty((Kt, 0)) for _ in range(4)]
-    K.run_many(kernel_array(A), kernel_array(B), kernel_array(Z), ip, arr["fp"], arr["Q"], arr["Pd"], arr["F"], arr["xmin"],
-               arr["xmax"], X, P, sc, ring, ct, out_X, out_Pd, *vecs)
+    A, B, Z = kernel_array(A), kernel_array(B), kernel_array(Z)
+
+    def one(r: int) -> None:
+        K.run_record(A[r], B[r], Z[r], ip, arr["fp"], arr["Q"], arr["Pd"], arr["F"], arr["xmin"], arr["xmax"],
+                     X[r], P[r], sc[r], ring[r], ct[r], out_X[r], out_Pd[r], vecs[0][r], vecs[1][r], vecs[2][r],
+                     vecs[3][r])
+    workers = (os.cpu_count() or 1) if n_threads is None else int(n_threads)
+    if workers < 1:
+        raise EstimatorInputError(f"n_threads must be >= 1, got {n_threads}")
+    if workers == 1 or Kt == 1:
+        for r in range(Kt):
+            one(r)
+    else:
+        with ThreadPoolExecutor(max_workers=min(workers, Kt)) as pool:
+            list(pool.map(one, range(Kt)))
     states = []
     for r in range(Kt):
         e = proto.copy()

@@ -95,6 +95,10 @@ class Preview:
     curvature: np.ndarray
     speed_cap: np.ndarray
     ratio: np.ndarray
+    segment0_cap: np.ndarray | None = None  # cap [m/s] at s0 + x ds, x = SEGMENT0_FRACTIONS (inside segment 0)
+
+
+SEGMENT0_FRACTIONS = np.linspace(0.0, 1.0, 11)[1:]
 
 
 @dataclass
@@ -252,6 +256,15 @@ class OcpSolver:
                               np.full(n, 0.0) + np.asarray(en.max_regen_force(preview.ratio), float) / 1000.0,
                               np.full(n, en.brake_force_limit(params.mass) / 1000.0)])
         lbx[0] = ubx[0] = e0
+        if preview.segment0_cap is not None:
+            # inside segment 0 E is linear in s: E0 (1 - x) + E1 x <= c(x)^2/2 for every sampled x where the cap
+            # is below the current speed -> an upper bound on E1 (kept reachable at the comfort deceleration)
+            c = 0.5 * np.maximum(np.asarray(preview.segment0_cap, float) - st.speed_margin, st.speed_floor) ** 2
+            x = SEGMENT0_FRACTIONS
+            low = c < e0
+            if low.any():
+                bound = float(np.min(e0 + (c[low] - e0) / x[low]))
+                ubx[1] = min(ubx[1], max(bound, e0 - st.decel_max * st.ds + 1e-3, e_floor + 1e-6))
         lbg = np.concatenate([np.zeros(n), np.full(n, -st.decel_max), np.full(n, -st.jerk_max),
                               np.full(2 * n, -inf)])
         ubg = np.concatenate([np.zeros(n), np.full(n, st.accel_max), np.full(n, st.jerk_max),

@@ -23,7 +23,7 @@ import numpy as np
 from .base import ControllerBase, DriveContext, Observation
 from .cruise import CruiseLaw, CruiseSettings
 from .energy import SourceEnergyModel
-from .mpc import MpcSettings, OcpSolver, Plan, Preview
+from .mpc import SEGMENT0_FRACTIONS, MpcSettings, OcpSolver, Plan, Preview
 from .safety import speed_cap
 
 _SOLVERS: dict[tuple[MpcSettings, SourceEnergyModel], OcpSolver] = {}
@@ -108,12 +108,17 @@ class MpcController(ControllerBase):
             if s[0] - 1.0 <= stop <= s[-1]:
                 k = int(np.floor((stop - s0) / ds))
                 cap[max(k, 0):min(k + 2, n + 1)] = st.stop_speed
+        seg0 = np.interp(s0 + SEGMENT0_FRACTIONS * ds, self._fine_s, self._fine_cap)
+        for stop in self._unserved:
+            if s0 - 1.0 <= stop <= s0 + ds:
+                seg0 = np.where(s0 + SEGMENT0_FRACTIONS * ds >= stop - 1e-9, np.minimum(seg0, st.stop_speed), seg0)
         if self.plan is not None:
             v_guess = self.plan.speed_at(mid)
         else:
             v_guess = np.full(n, max(v0, st.speed_floor))
         ratio = en.ratio_for_speed(v_guess)
-        return Preview(s=s, grade=at["grade"], curvature=at["curvature"], speed_cap=cap, ratio=ratio)
+        return Preview(s=s, grade=at["grade"], curvature=at["curvature"], speed_cap=cap, ratio=ratio,
+                       segment0_cap=seg0)
 
     # ------------------------------------------------------------------ control
     def _replan(self, obs: Observation) -> None:

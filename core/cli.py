@@ -21,6 +21,7 @@ _COMMAND_MODULES: list[str] = [
     "roadload.estimators.cli",
     "roadload.sim2real.cli",
     "roadload.envs.rl_cli",
+    "roadload.controllers.cli",
 ]
 
 

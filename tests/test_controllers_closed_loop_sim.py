@@ -6,7 +6,7 @@ from roadload.controllers.vehicle_models import FIT_QUALITY, energy_model_from_s
 from roadload.road_profiles import RoadProfile
 
 
-def short_road(length=1500.0):
+def short_road(length=1200.0):
     s = np.arange(0.0, length + 1, 5.0)
     grade = 0.04 * np.sin(2 * np.pi * s / 1000.0)
     limit = np.where(s > 1000, 50 / 3.6, 80 / 3.6)

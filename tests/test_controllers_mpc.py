@@ -62,9 +62,10 @@ def test_mpc_respects_limits_and_comfort_on_a_scripted_road(solver):
 
 
 def test_mpc_beats_cruise_at_equal_time_with_a_perfect_model_on_a_flat_road():
-    road = scripted_road(hills=False, stops=[2700.0])
+    road = scripted_road(length=2200.0, hills=False, stops=[2000.0])
     cruise = drive(CruiseController(), road).metrics
-    matched = match_trip_time(lambda lam: drive(mpc(time_weight=lam), road), cruise["trip_time"], tol=0.01)
+    matched = match_trip_time(lambda lam: drive(mpc(time_weight=lam), road), cruise["trip_time"], tol=0.01,
+                              lam0=6000.0)
     assert matched.matched, (matched.time_error, matched.runs)
     m = matched.result.metrics
     assert abs(m["trip_time"] / cruise["trip_time"] - 1) <= 0.01
@@ -108,7 +109,7 @@ def test_forced_solver_failure_gives_fallback_not_exception():
 
 
 def test_unsuccessful_solve_is_counted_and_plan_not_used():
-    road = scripted_road()
+    road = scripted_road(length=1200.0)
     ctl = mpc()
     ctx = DriveContext(road, ENERGY, FixedForceModel(PARAMS))
     ctl.reset(ctx)

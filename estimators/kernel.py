@@ -183,8 +183,9 @@ def run_record(A, B, Z, ip, fp, Qm, Pd, F, xmin, xmax, X, P, sc, ring, ct,
             Pz[i] = acc
             s += a[i] * acc
         if sym:
-            for j in range(n):
-                aP[j] = Pz[j]
+            if cov != COV_FORGETTING:
+                for j in range(n):
+                    aP[j] = Pz[j]
         else:
             for j in range(n):
                 acc = 0.0
@@ -231,7 +232,7 @@ def run_record(A, B, Z, ip, fp, Qm, Pd, F, xmin, xmax, X, P, sc, ring, ct,
                 if sym:
                     for i in range(n):
                         for j in range(i, n):
-                            val = (Pp[i, j] - L[i] * aP[j]) * inv_lam
+                            val = (Pp[i, j] - L[i] * Pz[j]) * inv_lam
                             P[i, j] = val
                             P[j, i] = val
                 else:
@@ -317,8 +318,11 @@ def run_record(A, B, Z, ip, fp, Qm, Pd, F, xmin, xmax, X, P, sc, ring, ct,
         # a non-finite result (overflowing P, singular normalisation) is rolled back and counted
         # with P symmetric positive semi-definite, |P_ij| <= sqrt(P_ii P_jj): X and diag P suffice
         probe = 0.0
+        pmax = P[0, 0]
         for i in range(n):
             probe += X[i] * 0.0 + P[i, i] * 0.0
+            if P[i, i] > pmax:
+                pmax = P[i, i]
         if not sym:
             for i in range(n):
                 for j in range(n):
@@ -332,10 +336,10 @@ def run_record(A, B, Z, ip, fp, Qm, Pd, F, xmin, xmax, X, P, sc, ring, ct,
                     P[i, j] = Pp[i, j]
                     if sym:
                         P[j, i] = Pp[i, j]
-        pmax = P[0, 0]
-        for i in range(1, n):
-            if P[i, i] > pmax:
-                pmax = P[i, i]
+            pmax = P[0, 0]
+            for i in range(1, n):
+                if P[i, i] > pmax:
+                    pmax = P[i, i]
         if pmax > sc[SC_PMAX]:
             sc[SC_PMAX] = pmax
         if pmax > blowup and ct[CT_BLOWUP_AT] < 0:

@@ -231,10 +231,10 @@ class PipelineSettings:
     this (and the trip is flagged); warmup [s]: samples at the start excluded while the smoothers settle;
     smoother_rate [Hz]: the input rate the smoother settings are given for; drive_torque_floor [N m]: samples with
     T_E at or below it are excluded too (e.g. where a BEV's regenerative torque saturates and unlogged friction
-    brakes take over; -inf = off; the knowledge's floor applies as well); gradient: 'accelerometer' (eq. 5.2),
-    'grade_channel' (a logged / map grade channel named 'grade', e.g. from elevation) or 'auto' (eq. 5.2 unless
-    the trip has a grade channel and the accelerometer is found not to see g sin θ: the slope of
-    (ẍ_CAN - v̇) over g sin θ_grade below 0.5).
+    brakes take over; -inf = off; the knowledge's floor applies as well); gradient: 'accelerometer' (eq. 5.2,
+    default), 'grade_channel' (a logged / map grade channel named 'grade', e.g. from elevation) or 'auto'
+    (eq. 5.2 unless the trip has a grade channel and :func:`accelerometer_gravity_slope` finds that the
+    accelerometer does not see g sin θ: slope below 0.25; undecided on flat roads -> eq. 5.2).
     """
 
     estimation_rate: float = 10.0
@@ -247,7 +247,7 @@ class PipelineSettings:
     warmup: float = 2.0
     smoother_rate: float = 100.0
     drive_torque_floor: float = -np.inf
-    gradient: str = "auto"
+    gradient: str = "accelerometer"
 
     def __post_init__(self) -> None:
         if self.gradient not in ("accelerometer", "grade_channel", "auto"):
@@ -351,17 +351,27 @@ def _hold(flag: np.ndarray, t: np.ndarray, hold: float) -> np.ndarray:
     return t - last <= hold
 
 
-def accelerometer_gravity_slope(frame: pd.DataFrame, min_speed: float = 3.0) -> float:
-    """Least-squares slope of (ẍ_CAN - v̇) over g sin θ of the 'grade' channel: ≈ 1 when the body-fixed
-    accelerometer measures gravity along the slope (eq. 5.2 applies), ≈ 0 when it does not (NaN: no grade
-    variation to tell)."""
+def accelerometer_gravity_slope(frame: pd.DataFrame, min_speed: float = 3.0, average: float = 20.0) -> float:
+    """Least-squares slope of (ẍ_CAN - v̇) over g sin θ of the 'grade' channel, both averaged over `average`
+    seconds first (the grade of a map or of quantised elevation is only meaningful over distance): ≈ 1 when the
+    body-fixed accelerometer measures gravity along the slope (eq. 5.2 applies), ≈ 0 when it does not. NaN when
+    the road is too flat to tell (std of the averaged g sin θ below 0.02 m/s², i.e. 0.2 % grade)."""
+    t = frame["t"].to_numpy(dtype=float)
+    if t.size < 3:
+        return float("nan")
+    n = max(1, int(round(average / np.median(np.diff(t)))))
     y = frame["accel_x"].to_numpy(dtype=float) - frame["vehicle_speed_derivative"].to_numpy(dtype=float)
     x = G * np.sin(frame["grade"].to_numpy(dtype=float))
-    ok = np.isfinite(x) & np.isfinite(y) & (frame["vehicle_speed"].to_numpy(dtype=float) > min_speed)
-    if ok.sum() < 50 or np.std(x[ok]) < 1e-3:
+    moving = (frame["vehicle_speed"].to_numpy(dtype=float) > min_speed).astype(float)
+    ok_in = np.isfinite(x) & np.isfinite(y) & (moving > 0)
+    ker = np.ones(n) / n
+    xs = np.convolve(np.where(ok_in, x, 0.0), ker, "same")
+    ys = np.convolve(np.where(ok_in, y, 0.0), ker, "same")
+    ok = np.convolve(ok_in.astype(float), ker, "same") > 0.99
+    if ok.sum() < 5 * n or np.std(xs[ok]) < 0.02:
         return float("nan")
-    xc = x[ok] - x[ok].mean()
-    return float(np.sum(xc * (y[ok] - y[ok].mean())) / np.sum(xc ** 2))
+    xc = xs[ok] - xs[ok].mean()
+    return float(np.sum(xc * (ys[ok] - ys[ok].mean())) / np.sum(xc ** 2))
 
 
 def _stage_states(dec: pd.DataFrame, knowledge: VehicleKnowledge, settings: PipelineSettings,
@@ -378,7 +388,7 @@ def _stage_states(dec: pd.DataFrame, knowledge: VehicleKnowledge, settings: Pipe
         gradient = "accelerometer"
         if "grade" in dec and "accel_x" in dec:
             slope = accelerometer_gravity_slope(dec)
-            if np.isfinite(slope) and slope < 0.5:
+            if np.isfinite(slope) and slope < 0.25:
                 gradient = "grade_channel"
                 notes.append(f"the accelerometer does not see g sin(theta) (slope {slope:.2f} against the grade "
                              f"channel)")

@@ -176,3 +176,39 @@ def test_no_brake_channels_use_deceleration_proxy_and_no_steering_disables_m4():
     model_data(st, "M3")
     with pytest.raises(ValueError, match="path_curvature"):
         model_data(st, "M4")
+
+
+def test_accelerometer_gravity_test():
+    from roadload.estimators.pipeline import accelerometer_gravity_slope
+
+    rng = np.random.default_rng(3)
+    t = np.arange(0, 1200, 0.1)
+    grade = 0.03 * np.sin(2 * np.pi * t / 300)
+    dv = 0.3 * np.sin(2 * np.pi * t / 17)
+    base = {"t": t, "vehicle_speed": np.full_like(t, 15.0), "vehicle_speed_derivative": dv,
+            "grade": grade + 0.002 * rng.standard_normal(t.size)}
+    with_g = pd.DataFrame(base | {"accel_x": dv + G * np.sin(grade) + 0.1 * rng.standard_normal(t.size)})
+    without = pd.DataFrame(base | {"accel_x": dv + 0.1 * rng.standard_normal(t.size)})
+    assert accelerometer_gravity_slope(with_g) == pytest.approx(1.0, abs=0.1)
+    assert accelerometer_gravity_slope(without) == pytest.approx(0.0, abs=0.1)
+    flat = pd.DataFrame(base | {"grade": np.zeros_like(t), "accel_x": dv})
+    assert np.isnan(accelerometer_gravity_slope(flat))
+
+
+def test_auto_gradient_source_follows_the_accelerometer_test():
+    trip = handmade_trip(duration=900.0, events=False)
+    theta = np.interp(trip.t, trip.truth["t"], trip.truth["grade"])
+    m = trip.measured.assign(grade=theta)
+    units = dict(trip.units, grade="rad")
+    sees = Trip(m, units, {"name": "sees"})
+    blind = Trip(m.assign(accel_x=m["accel_x"] - G * np.sin(theta)), units, {"name": "blind"})
+    auto = PipelineSettings(gradient="auto")
+    r1 = run_pipeline(sees, _knowledge(), auto)
+    r2 = run_pipeline(blind, _knowledge(), auto)
+    assert not any("grade channel" in n for n in r1.notes)
+    assert any("does not see g sin" in n for n in r2.notes)
+    ok = r2.states["trigger"].to_numpy()
+    ref = np.interp(r2.states["t"], trip.truth["t"], trip.truth["grade"])
+    assert np.max(np.abs(r2.states["gradient_angle"].to_numpy() - ref)[ok]) < 2e-3
+    with pytest.raises(PipelineError, match="gradient"):
+        PipelineSettings(gradient="gps")

@@ -33,7 +33,6 @@ from gymnasium import spaces
 from highway_env.envs.common.abstract import AbstractEnv
 from highway_env.envs.common.action import ActionType
 from highway_env.envs.common.observation import ObservationType
-from highway_env.road.lane import AbstractLane
 from highway_env.road.road import Road, RoadNetwork
 from highway_env.utils import class_from_path, near_split
 from highway_env.vehicle.controller import ControlledVehicle

@@ -13,7 +13,9 @@ A :class:`CandidateEffect` maps an unmodelled effect to
   :data:`roadload.envs.effects.EFFECTS`, or ``spec:<dotted path>`` for a vehicle-spec field (e.g.
   ``spec:sensors.channels.drive_torque.latency``), whose parameter ``{"delta": x}`` is added to the field (``{"factor": f}``: multiplied).
 
-Users add their own with :func:`register_candidate`. Parameters are in SI; signs follow "measured minus sim".
+``side`` is "force" (explains the force residual) or "power" (explains the battery-power residual of
+:mod:`.energy`, e.g. auxiliary loads). Users add their own with :func:`register_candidate`. Parameters are in
+SI; signs follow "measured minus sim".
 """
 
 from __future__ import annotations
@@ -40,6 +42,8 @@ DRIVE_FORCE_RATE = "sim_drive_force_rate"
 BRAKE_FORCE = "brake_force"
 GEAR = "gear"
 HEADING = "heading"
+POWER_RESIDUAL = "power_residual"
+AUX_LOGGED = "aux_power_logged"
 
 TermFactory = Callable[[SimForceModel, "float | None"], tuple[Term, ...]]
 SimMapping = Callable[[dict[str, float], "float | None", SimForceModel], dict[str, float]]
@@ -61,6 +65,7 @@ class CandidateEffect:
     shape_unit: str = ""
     regime_hint: str = ""
     sim_aliases: tuple[str, ...] = ()
+    side: str = "force"
 
     @property
     def explains(self) -> tuple[str, ...]:
@@ -203,6 +208,15 @@ def _latency(model, shape):
                  lambda n: 0.0),)
 
 
+def _aux_constant(model, shape):
+    return (Term("1", "delta P_aux", "W", lambda s: np.ones_like(_c(s, SPEED)), (SPEED,), lambda n: 0.0),)
+
+
+def _aux_logged(model, shape):
+    return (Term("P_heater + P_aircon (logged)", "logged auxiliary power gain", "1",
+                 lambda s: np.nan_to_num(_c(s, AUX_LOGGED)), (AUX_LOGGED,), lambda n: 0.0),)
+
+
 def _p(params, key):
     return float(params[key])
 
@@ -305,6 +319,13 @@ for _cand in (
     CandidateEffect("latency", "drive-torque signal latency", _latency, (DRIVE_FORCE_RATE,),
                     "spec:sensors.channels.drive_torque.latency",
                     lambda p, sh, m: {"delta": max(_p(p, "latency tau"), 0.0)}, regime_hint="acceleration"),
+    CandidateEffect("auxiliary_power", "auxiliary power on the energy side (heater, air conditioning), constant",
+                    _aux_constant, (SPEED, POWER_RESIDUAL), "auxiliary_load",
+                    lambda p, sh, m: {"power": float(np.clip(_p(p, "delta P_aux"), 0.0, 20000.0))}, side="power",
+                    regime_hint="ambient_temperature"),
+    CandidateEffect("logged_aux_power", "auxiliary power following the logged heater / air-conditioning power",
+                    _aux_logged, (AUX_LOGGED, POWER_RESIDUAL), None, None, side="power",
+                    regime_hint="ambient_temperature"),
 ):
     register_candidate(_cand)
 

@@ -91,6 +91,7 @@ class Diagnosis:
     selection: list[dict]
     effects: list[dict]
     unexplained: dict
+    energy: dict | None
     notes: dict
     table: DiagnosisTable | None = field(default=None, repr=False)
     residual_after: np.ndarray | None = field(default=None, repr=False)
@@ -98,7 +99,8 @@ class Diagnosis:
 
     @property
     def identified(self) -> list[str]:
-        return [e["name"] for e in self.effects]
+        """Accepted effects: force side first, then the energy side."""
+        return [e["name"] for e in self.effects] + [e["name"] for e in (self.energy or {}).get("effects", [])]
 
     def shrinkage(self, measure: str = "rmse", simulator: bool = False) -> float:
         """1 - gap_after / gap_before of the held-out force residual's ``measure`` (rmse, medse or |median|);
@@ -122,7 +124,8 @@ class Diagnosis:
                     "per_regime": self.per_regime},
             "regimes": self.regimes_before, "residual_analysis": self.residual_analysis,
             "ranking": self.ranking, "skipped_candidates": self.skipped, "forward_selection": self.selection,
-            "effects": self.effects, "unexplained": self.unexplained, "notes": self.notes})
+            "effects": self.effects, "unexplained": self.unexplained, "energy_side": self.energy,
+            "notes": self.notes})
 
 
 def _jsonable(x):
@@ -224,6 +227,50 @@ def _unexplained(table: pd.DataFrame, residual_after: np.ndarray, split, setting
             "rms_after": float(np.sqrt(np.nanmean(loss0)))}
 
 
+def _energy_side(table: pd.DataFrame, split, settings: DiagnosisSettings, model) -> dict | None:
+    """The battery-power residual (:mod:`.energy`): gap before/after, ranking and forward selection of the
+    power-side candidates on the same split; None without battery power."""
+    from .energy import POWER_RESIDUAL, SIM_ELECTRIC_POWER, ELECTRIC_POWER, electric_energy_per_distance
+    from .selection import Split
+
+    pr = table[POWER_RESIDUAL].to_numpy(dtype=float)
+    ok = np.isfinite(pr)
+    names = [n for n in settings.candidates if get_candidate(n).side == "power"]
+    if not names or (ok & split.valid).sum() < 100:
+        return None
+    sp = Split(split.valid & ok, split.test & ok, np.where(ok, split.fold, -1), split.n_folds, split.blocks,
+               split.segments)
+    sel = Selector(table, np.where(ok, pr, 0.0), sp, model, robust=settings.robust, n_boot=settings.n_boot,
+                   seed=settings.seed, min_gain=settings.min_gain, min_explained=settings.min_explained, side="power")
+    ranked, skipped = sel.rank(names)
+    steps = sel.forward(ranked, max_effects=settings.max_effects)
+    after = np.where(ok, pr, 0.0)
+    effects = []
+    if sel.chosen:
+        d, fit = sel.final_fit(sel.chosen)
+        after = after - d.A @ fit.X
+        se = np.sqrt(np.clip(np.diag(fit.cov), 0, None)) if fit.cov is not None else np.full(fit.X.size, np.nan)
+        for cand, shape in sel.chosen:
+            own = [i for i, o in enumerate(d.owner) if o == cand.name]
+            params = {d.names[i]: float(fit.X[i]) for i in own}
+            effects.append({"name": cand.name, "parameters": params,
+                            "std_errors": {d.names[i]: float(se[i]) for i in own},
+                            "units": {d.names[i]: d.units[i] for i in own}, "sim_switch": cand.sim_effect,
+                            "sim_parameters": cand.sim_parameters(params, shape, model)})
+    test = sp.test
+    measured = table[ELECTRIC_POWER].to_numpy(dtype=float)
+    sim_p = table[SIM_ELECTRIC_POWER].to_numpy(dtype=float)
+    e_meas = electric_energy_per_distance(table, measured, test)
+    e_before = electric_energy_per_distance(table, sim_p, test)
+    e_after = electric_energy_per_distance(table, measured - after, test)
+    from .stats import robust_summary
+    return {"power_residual_before": robust_summary(pr[test]), "power_residual_after": robust_summary(after[test]),
+            "electric_energy_per_distance": {"measured": e_meas, "sim_before": e_before, "sim_after": e_after,
+                                             "unit": "kWh/100 km (while moving)"},
+            "ranking": [r.to_dict() for r in ranked], "skipped_candidates": skipped, "forward_selection": steps,
+            "effects": effects}
+
+
 def diagnose(real: Sequence[Trip], sim: SimConfig, settings: DiagnosisSettings | None = None,
              floor_trips: Sequence[Trip] | None = None, floor: SimFloor | None = None,
              progress: Callable[[str, float], None] | None = None) -> Diagnosis:
@@ -260,7 +307,7 @@ def diagnose(real: Sequence[Trip], sim: SimConfig, settings: DiagnosisSettings |
     sel = Selector(table, np.nan_to_num(r), split, model, robust=settings.robust, n_boot=settings.n_boot,
                    seed=settings.seed, min_gain=settings.min_gain, min_explained=settings.min_explained)
     explicit = settings.candidates != DEFAULT_CANDIDATES
-    ranked, skipped = sel.rank(settings.candidates)
+    ranked, skipped = sel.rank([n for n in settings.candidates if get_candidate(n).side == "force"])
     if explicit:
         bad = {k: v for k, v in skipped.items() if "needs" in v}
         if bad:
@@ -287,6 +334,11 @@ def diagnose(real: Sequence[Trip], sim: SimConfig, settings: DiagnosisSettings |
                             "explained_fraction": step_info["explained_fraction"],
                             "sim_switch": cand.sim_effect,
                             "sim_parameters": cand.sim_parameters(params, shape, model)})
+    energy = _energy_side(table, split, settings, model)
+    power_asked = [n for n in settings.candidates if get_candidate(n).side == "power"]
+    if explicit and power_asked and energy is None:
+        raise DiagnosisError(f"requested energy-side candidates {power_asked} need battery_voltage and "
+                             f"battery_current on the trips and a battery-electric sim vehicle")
     step("gap after", 0.85)
     gap_after = gap_measures(table, r_after, model.mass, test)
     gap_after_sim = None
@@ -309,7 +361,7 @@ def diagnose(real: Sequence[Trip], sim: SimConfig, settings: DiagnosisSettings |
         floor=floor.to_dict(), gap_before=gap_before, gap_after=gap_after, gap_after_sim=gap_after_sim,
         regimes_before=regimes_before,
         per_regime=per_regime, residual_analysis=ra, ranking=[c.to_dict() for c in ranked], skipped=skipped,
-        selection=steps, effects=effects, unexplained=unexplained,
+        selection=steps, effects=effects, unexplained=unexplained, energy=energy,
         notes={"pipeline": dt.notes, "baseline": sel.baseline_info,
                "strongest_departures_before": strongest_departures(regs, top=8)},
         table=dt, residual_after=r_after, test_rows=test)

@@ -20,6 +20,9 @@ diagnosis.json (schema_version 1; SI units, forces in N, NaN written as null):
   gain, reference_cv_mse, explained_fraction, accepted, reason};
 - ``effects``: the accepted effects {name, parameters, std_errors, units, shape, heldout_gain,
   explained_fraction, sim_switch, sim_parameters};
+- ``energy_side`` (battery-electric only, else null): {power_residual_before/after (robust summaries, W),
+  electric_energy_per_distance {measured, sim_before, sim_after}, ranking, skipped_candidates,
+  forward_selection, effects} of the battery-power residual (:mod:`.energy`);
 - ``unexplained``: {present, departing_bins [regime bins as above], reference_gain {relative, interval,
   significant}, reference_importance [{column, std, strongest_bin, strongest_effect}], rms_after};
 - ``notes``: pipeline notes per trip, baseline CV/AIC/BIC, strongest departures before.
@@ -261,6 +264,17 @@ def markdown(diag: Diagnosis, figures: dict[str, str]) -> str:
                  f"{_fmt(100 * p['remaining'], 0)} % |")
     if "regimes" in figures:
         L += ["", f"![regimes]({figures['regimes']})"]
+    en = d.energy
+    if en:
+        ee = en["electric_energy_per_distance"]
+        L += ["", "## Energy side (traction battery)", "",
+              f"Battery energy while moving: measured {_fmt(ee['measured'], 2)}, sim {_fmt(ee['sim_before'], 2)}, "
+              f"sim with the identified auxiliary effects {_fmt(ee['sim_after'], 2)} kWh/100 km. Power residual "
+              f"median {_fmt(en['power_residual_before']['median'], 0)} → {_fmt(en['power_residual_after']['median'], 0)} W, "
+              f"RMSE {_fmt(en['power_residual_before']['rmse'], 0)} → {_fmt(en['power_residual_after']['rmse'], 0)} W.", ""]
+        L += [f"- {r['name']}: held-out gain {100 * r['heldout_improvement']:.1f} %, "
+              f"{_param_text(r['parameters'], r['std_errors'], r['units'])}" for r in en["ranking"]]
+        L += ["", "Accepted: " + (", ".join(e["name"] for e in en["effects"]) or "none") + "."]
     un = d.unexplained
     L += ["", "## Unexplained residual", ""]
     if un["present"]:

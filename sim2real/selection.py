@@ -209,7 +209,8 @@ def information_criteria(sse: float, m: int, o: int) -> tuple[float, float]:
 
 @dataclass
 class Selector:
-    """Everything the ranking needs: the table, the residual y, the split, the sim's force model."""
+    """Everything the ranking needs: the table, the residual y, the split, the sim's force model; ``side``: which
+    candidates apply ("force": y is the force residual [N]; "power": the battery-power residual [W])."""
 
     table: pd.DataFrame
     residual: np.ndarray
@@ -220,6 +221,7 @@ class Selector:
     seed: int = 0
     min_gain: float = 0.02
     min_explained: float = 0.5
+    side: str = "force"
     cols: dict[str, np.ndarray] = field(init=False)
     baseline_loss: np.ndarray = field(init=False)
 
@@ -262,6 +264,8 @@ class Selector:
         sub = {k: np.asarray(v)[valid] for k, v in self.cols.items()}
         for n in names:
             cand = get_candidate(n)
+            if cand.side != self.side:      # the other side's residual is not this selector's
+                continue
             miss = cand.missing(sub)
             if miss:
                 skipped[cand.name] = f"needs {miss}, which the trips do not provide"

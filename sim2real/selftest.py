@@ -51,6 +51,7 @@ SELFTEST_EFFECTS: tuple[WithheldEffect, ...] = (
     WithheldEffect("torque_gain", "spec:sensors.drive_torque_gain_error", {"delta": 0.05}),
     WithheldEffect("accel_bias", "spec:sensors.channels.accel_x.bias", {"delta": 0.1}),
     WithheldEffect("torque_latency", "spec:sensors.channels.drive_torque.latency", {"delta": 0.25}),
+    WithheldEffect("auxiliary_load", "auxiliary_load", {"power": 1500.0}),
 )
 REAL_ROADS: tuple[tuple[str, int], ...] = (("hilly", 11), ("city", 12), ("motorway", 13))
 
@@ -150,11 +151,17 @@ class SelftestResult:
 
 
 def _case(label: str, switch: str, diag: Diagnosis, correct: bool, where: str, seconds: float) -> SelftestCase:
-    eff = diag.effects[0] if diag.effects else {}
-    return SelftestCase(label, switch, identified_effect(diag), correct, diag.shrinkage("rmse"),
-                        diag.shrinkage("rmse", simulator=True), diag.gap_before["force_residual"]["rmse"],
-                        diag.gap_after["force_residual"]["rmse"], eff.get("parameters", {}),
-                        eff.get("sim_parameters"), where, seconds)
+    effects = diag.effects + ((diag.energy or {}).get("effects") or [])
+    eff = effects[0] if effects else {}
+    if diag.effects or not (diag.energy or {}).get("effects"):
+        shrink, shrink_sim = diag.shrinkage("rmse"), diag.shrinkage("rmse", simulator=True)
+        before, after = diag.gap_before["force_residual"]["rmse"], diag.gap_after["force_residual"]["rmse"]
+    else:   # identified on the energy side: the battery-power residual's RMSE [W]
+        before = diag.energy["power_residual_before"]["rmse"]
+        after = diag.energy["power_residual_after"]["rmse"]
+        shrink, shrink_sim = 1.0 - after / before, float("nan")
+    return SelftestCase(label, switch, identified_effect(diag), correct, shrink, shrink_sim, before, after,
+                        eff.get("parameters", {}), eff.get("sim_parameters"), where, seconds)
 
 
 def run_case(task: dict[str, Any]) -> SelftestCase:

@@ -18,6 +18,7 @@ sim_drive_force(_rate) sim_force + brake_force [N] and its time derivative [N/s]
 lateral_acceleration   v² / r [m/s²]; heading: integrated yaw rate [rad] (NaN without yaw rate)
 mode                   'traction' / 'coast' / 'regen' / 'braking'
 ambient_temperature, heating_power, payload [kg] (metadata), season
+electric_power, sim_electric_power, power_residual, aux_power_logged: the energy side [W] (:mod:`.energy`)
 valid                  moving (v > 1 m/s), smoothers settled, drive-train engaged, finite; on trips without
                        brake pressure also not braking and not at the regenerative torque floor (unknown
                        friction-brake force)
@@ -37,6 +38,7 @@ from roadload.estimators.pipeline import PipelineError, PipelineSettings, knowle
 from roadload.trip import Trip
 from roadload.units import KELVIN, air_density
 
+from .energy import power_columns
 from .errors import DiagnosisError
 from .forcemodel import SimForceModel
 from .simconfig import SimConfig
@@ -212,6 +214,8 @@ def build_table(trips: Sequence[Trip], sim: SimConfig, settings: PipelineSetting
         if not has_brakes:
             torque_floor = max(st.drive_torque_floor, knowledge.drive_torque_floor)
             valid &= ~braking & (torque > torque_floor)
+        for key, col in power_columns(trip, f, sim).items():
+            f[key] = col
         f["has_brake_pressure"] = has_brakes
         f["valid_base"] = valid
         frames.append(f)

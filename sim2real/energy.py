@@ -1,0 +1,70 @@
+"""The energy side of the gap (battery-electric vehicles): the measured traction-battery power against the sim's.
+
+P_el,measured = U_bat I_bat [W] at the battery terminals; P_el,sim = T_E ω_E + P_loss(ω_E, T_E) + P_aux for the
+recorded motor torque T_E and speed ω_E (the sim's motor loss map, its auxiliary power and the sim config's
+``auxiliary_load``). The power residual P_el,measured - P_el,sim is what auxiliary loads (heater, air
+conditioning) and motor-map errors leave; candidates with ``side="power"`` in :mod:`.catalog` explain it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from roadload.trip import Trip
+
+from .simconfig import SimConfig
+
+ELECTRIC_POWER = "electric_power"
+SIM_ELECTRIC_POWER = "sim_electric_power"
+POWER_RESIDUAL = "power_residual"
+AUX_LOGGED = "aux_power_logged"
+
+
+def _sample(trip: Trip, name: str, t: np.ndarray) -> np.ndarray:
+    if not trip.has(name):
+        return np.full(t.shape, np.nan)
+    x = trip.channel(name)
+    ok = np.isfinite(x)
+    if ok.sum() < 2:
+        return np.full(t.shape, np.nan)
+    return np.interp(t, trip.t[ok], x[ok])
+
+
+def power_columns(trip: Trip, frame: pd.DataFrame, sim: SimConfig) -> dict[str, np.ndarray]:
+    """electric_power, sim_electric_power, power_residual, aux_power_logged [W] on the frame's times (NaN where the
+    trip or the sim's vehicle has no traction battery)."""
+    t = frame["t"].to_numpy(dtype=float)
+    nan = np.full(t.shape, np.nan)
+    d = sim.vehicle.drivetrain
+    if d.kind != "bev" or d.motor is None or d.battery is None or not (trip.has("battery_voltage")
+                                                                       and trip.has("battery_current")):
+        return {ELECTRIC_POWER: nan, SIM_ELECTRIC_POWER: nan, POWER_RESIDUAL: nan, AUX_LOGGED: nan}
+    p_meas = _sample(trip, "battery_voltage", t) * _sample(trip, "battery_current", t)
+    torque = frame["drive_torque"].to_numpy(dtype=float)
+    if trip.has("engine_speed"):
+        omega = _sample(trip, "engine_speed", t)
+    else:
+        omega = frame["speed"].to_numpy(dtype=float) / sim.vehicle.wheel_radius * d.gear_ratios[0] * d.final_drive
+    aux = d.battery.auxiliary_power
+    if sim.effects.enabled("auxiliary_load"):
+        aux += float(sim.effects.params("auxiliary_load")["power"])
+    p_sim = torque * omega + np.asarray(d.motor.loss_map(np.abs(omega), torque), dtype=float) + aux
+    logged = np.zeros(t.shape)
+    have = False
+    for c in ("heating_power", "aircon_power"):
+        if trip.has(c):
+            logged = logged + np.nan_to_num(_sample(trip, c, t))
+            have = True
+    return {ELECTRIC_POWER: p_meas, SIM_ELECTRIC_POWER: p_sim, POWER_RESIDUAL: p_meas - p_sim,
+            AUX_LOGGED: logged if have else nan}
+
+
+def electric_energy_per_distance(frame: pd.DataFrame, power: np.ndarray, rows: np.ndarray) -> float:
+    """∫ P dt / ∫ v dt over ``rows`` [kWh/100 km] (equal sample spacing assumed)."""
+    v = frame["speed"].to_numpy(dtype=float)[rows]
+    p = np.asarray(power, dtype=float)[rows]
+    ok = np.isfinite(p)
+    if not ok.any() or np.sum(v[ok]) <= 0:
+        return float("nan")
+    return float(np.sum(p[ok]) / np.sum(v[ok]) * 100e3 / 3.6e6)

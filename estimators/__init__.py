@@ -73,3 +73,13 @@ __all__ = [
     "catalog_names", "chapter5_settings", "make_config", "make_estimator", "psi", "rho", "run", "run_many",
     "setting_names", "weight",
 ]
+
+# chapter 5: tractive-force model structures, the preprocessing pipeline and its evaluation (issue 5)
+from .models import (M0, M3, M4, ModelError, ModelStructure, NominalParameters, Term, get_model,  # noqa: E402
+                     model_names, register_model)
+from .pipeline import (PipelineError, PipelineResult, PipelineSettings, VehicleKnowledge,  # noqa: E402
+                       knowledge_from_spec, model_data, run_pipeline)
+
+__all__ += ["M0", "M3", "M4", "ModelError", "ModelStructure", "NominalParameters", "PipelineError",
+            "PipelineResult", "PipelineSettings", "Term", "VehicleKnowledge", "get_model", "knowledge_from_spec",
+            "model_data", "model_names", "register_model", "run_pipeline"]

@@ -13,6 +13,7 @@ import argparse
 import time
 
 import numpy as np
+import pandas as pd
 
 from roadload.estimators.robustness import (
     DEFAULT_BOUND, breakdown_table, scenarios, sweep_specs, write_report, run_sweep_results,
@@ -35,17 +36,26 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=None)
     ap.add_argument("--scheduler", default=None)
     ap.add_argument("--out", required=True)
+    ap.add_argument("--from-results", default=None,
+                    help="rebuild the report from a results.csv of an earlier run instead of sweeping")
     args = ap.parse_args()
     specs = sweep_specs(args.backend)
-    names = args.sweeps or list(specs)
-    duration = args.duration or DURATION[args.backend]
-    tasks = [sc for name in names for sc in scenarios(args.backend, name, args.seeds, duration)]
-    t0 = time.perf_counter()
-    results, failed = run_sweep_results(tasks, scheduler=args.scheduler, workers=args.workers)
-    wall = time.perf_counter() - t0
-    report = write_report(results, args.out, args.bound, failed)
-    print(f"{len(tasks)} scenarios ({args.seeds} seeds, {duration:g} s records), {len(results)} estimator runs, "
-          f"{len(failed)} failed scenarios, wall time {wall:.1f} s")
+    if args.from_results:
+        results, failed = pd.read_csv(args.from_results), []
+        names = [n for n in (args.sweeps or list(specs)) if n in set(results["sweep"])]
+        args.seeds = int(results["seed"].nunique())
+        report = write_report(results, args.out, args.bound, failed)
+        print(f"report rebuilt from {args.from_results}: {len(results)} estimator runs")
+    else:
+        names = args.sweeps or list(specs)
+        duration = args.duration or DURATION[args.backend]
+        tasks = [sc for name in names for sc in scenarios(args.backend, name, args.seeds, duration)]
+        t0 = time.perf_counter()
+        results, failed = run_sweep_results(tasks, scheduler=args.scheduler, workers=args.workers)
+        wall = time.perf_counter() - t0
+        report = write_report(results, args.out, args.bound, failed)
+        print(f"{len(tasks)} scenarios ({args.seeds} seeds, {duration:g} s records), {len(results)} estimator "
+              f"runs, {len(failed)} failed scenarios, wall time {wall:.1f} s")
     for name in names:
         spec = specs[name]
         res = results[results["sweep"] == name]

@@ -3,7 +3,9 @@
 P_el,measured = U_bat I_bat [W] at the battery terminals; P_el,sim = T_E ω_E + P_loss(ω_E, T_E) + P_aux for the
 recorded motor torque T_E and speed ω_E (the sim's motor loss map, its auxiliary power and the sim config's
 ``auxiliary_load``). The power residual P_el,measured - P_el,sim is what auxiliary loads (heater, air
-conditioning) and motor-map errors leave; candidates with ``side="power"`` in :mod:`.catalog` explain it.
+conditioning) and motor-map errors leave; candidates with ``side="power"`` in :mod:`.catalog` explain it. As on
+the force side, the sim's own trips give an energy floor (:data:`POWER_BASIS`, e.g. the drive-torque sensor's
+gain and offset errors times the motor speed) that is added to P_el,sim.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ ELECTRIC_POWER = "electric_power"
 SIM_ELECTRIC_POWER = "sim_electric_power"
 POWER_RESIDUAL = "power_residual"
 AUX_LOGGED = "aux_power_logged"
+MOTOR_SPEED = "motor_speed"
 
 
 def _sample(trip: Trip, name: str, t: np.ndarray) -> np.ndarray:
@@ -39,7 +42,7 @@ def power_columns(trip: Trip, frame: pd.DataFrame, sim: SimConfig) -> dict[str, 
     d = sim.vehicle.drivetrain
     if d.kind != "bev" or d.motor is None or d.battery is None or not (trip.has("battery_voltage")
                                                                        and trip.has("battery_current")):
-        return {ELECTRIC_POWER: nan, SIM_ELECTRIC_POWER: nan, POWER_RESIDUAL: nan, AUX_LOGGED: nan}
+        return {ELECTRIC_POWER: nan, SIM_ELECTRIC_POWER: nan, POWER_RESIDUAL: nan, AUX_LOGGED: nan, MOTOR_SPEED: nan}
     p_meas = _sample(trip, "battery_voltage", t) * _sample(trip, "battery_current", t)
     torque = frame["drive_torque"].to_numpy(dtype=float)
     if trip.has("engine_speed"):
@@ -57,7 +60,18 @@ def power_columns(trip: Trip, frame: pd.DataFrame, sim: SimConfig) -> dict[str, 
             logged = logged + np.nan_to_num(_sample(trip, c, t))
             have = True
     return {ELECTRIC_POWER: p_meas, SIM_ELECTRIC_POWER: p_sim, POWER_RESIDUAL: p_meas - p_sim,
-            AUX_LOGGED: logged if have else nan}
+            AUX_LOGGED: logged if have else nan, MOTOR_SPEED: omega}
+
+
+POWER_BASIS: tuple[str, ...] = ("1", "omega", "T omega", "|T omega|", "T^2")
+
+
+def power_basis(frame: pd.DataFrame) -> np.ndarray:
+    """Columns of the sim's energy floor (what its sensors and loss map do that P_el,sim does not say)."""
+    om = frame[MOTOR_SPEED].to_numpy(dtype=float)
+    tq = frame["drive_torque"].to_numpy(dtype=float)
+    p = tq * om
+    return np.nan_to_num(np.column_stack([np.ones_like(om), om, p, np.abs(p), tq ** 2]))
 
 
 def electric_energy_per_distance(frame: pd.DataFrame, power: np.ndarray, rows: np.ndarray) -> float:

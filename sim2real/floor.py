@@ -63,6 +63,7 @@ class SimFloor:
     n: int
     extra: tuple = ()
     model: object = None
+    power_coefficients: np.ndarray | None = None
 
     @classmethod
     def none(cls) -> "SimFloor":
@@ -84,16 +85,41 @@ class SimFloor:
         x, *_ = np.linalg.lstsq(A / scale, y, rcond=1e-8)
         x = x / scale
         r = y - A @ x
-        return cls(x, float(np.sqrt(np.mean(r ** 2))), int(y.size), tuple(extra), model)
+        return cls(x, float(np.sqrt(np.mean(r ** 2))), int(y.size), tuple(extra), model,
+                   _fit_power_floor(frame, valid))
 
     def predict(self, frame: pd.DataFrame, sim_force: np.ndarray) -> np.ndarray:
         A = np.hstack([basis(frame, sim_force), _extra_columns(frame, self.extra, self.model)])
         return A @ self.coefficients
 
+    def predict_power(self, frame: pd.DataFrame) -> np.ndarray:
+        """The energy floor [W] (0 when the sim trips had no battery power)."""
+        if self.power_coefficients is None or "motor_speed" not in frame.columns:
+            return np.zeros(len(frame))
+        from .energy import power_basis
+        return power_basis(frame) @ self.power_coefficients
+
     def to_dict(self) -> dict:
         names = list(BASIS) + [f"{n} regressors" for n, _ in self.extra]
         return {"basis": names, "coefficients": [float(c) for c in self.coefficients],
-                "residual_rms": self.scale, "n": self.n}
+                "residual_rms": self.scale, "n": self.n,
+                "power_coefficients": None if self.power_coefficients is None
+                else [float(c) for c in self.power_coefficients]}
+
+
+def _fit_power_floor(frame: pd.DataFrame, valid: np.ndarray) -> np.ndarray | None:
+    if "power_residual" not in frame.columns:
+        return None
+    from .energy import power_basis
+    y = frame["power_residual"].to_numpy(dtype=float)
+    ok = np.asarray(valid, bool) & np.isfinite(y)
+    if ok.sum() < 100:
+        return None
+    A = power_basis(frame)[ok]
+    scale = np.sqrt(np.mean(A ** 2, axis=0))
+    scale[~(scale > 0)] = 1.0
+    x, *_ = np.linalg.lstsq(A / scale, y[ok], rcond=1e-8)
+    return x / scale
 
 
 def reduce_channels(trip: Trip, channels: set[str]) -> Trip:

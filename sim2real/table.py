@@ -247,6 +247,10 @@ def finish_table(frame: pd.DataFrame, model: SimForceModel, notes: dict | None =
     frame["sim_force"] = balance + (floor.predict(frame, balance) if floor is not None else 0.0)
     frame["residual"] = frame["tractive_force"].to_numpy(dtype=float) - frame["sim_force"].to_numpy(dtype=float)
     _drive_columns(frame, frame["sim_force"].to_numpy(dtype=float))
+    if floor is not None and "power_residual" in frame.columns:
+        p_floor = floor.predict_power(frame)
+        frame["sim_electric_power"] = frame["sim_electric_power"].to_numpy(dtype=float) + p_floor
+        frame["power_residual"] = frame["power_residual"].to_numpy(dtype=float) - p_floor
     valid = frame["valid_base"].to_numpy(dtype=bool).copy() if "valid_base" in frame else np.ones(len(frame), bool)
     for c in ("speed", "acceleration", "gradient_angle", "residual", "sim_drive_force_rate"):
         valid &= np.isfinite(frame[c].to_numpy(dtype=float))

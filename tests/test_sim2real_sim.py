@@ -117,3 +117,16 @@ def test_cli_diagnose_reports_missing_trip_clearly(tmp_path):
     assert res.exit_code == 2
     assert "no trip file" in res.output
     assert not (tmp_path / "o").exists()
+
+
+def test_withheld_auxiliary_load_is_found_on_the_energy_side(sim):
+    real = sim_trips(sim, (("city", 41),), 360.0, effects=EffectsConfig.parse({"auxiliary_load": {"power": 1500.0}}))
+    settings = DiagnosisSettings(candidates=("mass_offset", "auxiliary_power"), floor_roads=(("city", 42),),
+                                 floor_duration=360.0, resimulate=False, n_boot=100, segment_length=30.0)
+    d = diagnose(real, sim, settings)
+    assert d.energy is not None
+    assert [e["name"] for e in d.energy["effects"]] == ["auxiliary_power"]
+    p = d.energy["effects"][0]["parameters"]["delta P_aux"]
+    assert p == pytest.approx(1500.0, rel=0.05)
+    assert d.energy["effects"][0]["sim_parameters"] == {"power": pytest.approx(p)}
+    assert abs(d.energy["power_residual_after"]["median"]) < 0.05 * abs(d.energy["power_residual_before"]["median"])

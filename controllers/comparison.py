@@ -109,12 +109,15 @@ class ComparisonTask:
 
 
 def _row(task: ComparisonTask, controller: str, force_model: str, metrics: dict[str, Any], t_ref: float,
-         matched: bool, runs: int, lam: float) -> dict[str, Any]:
+         matched: bool, runs: int, lam: float, energy_at_ref: float = float("nan")) -> dict[str, Any]:
     keys = ("energy_kWh", "trip_time", "speed_violations", "violation_time", "max_excess_kmh", "rms_jerk",
             "max_abs_accel", "solve_time_median", "solve_time_p99", "fallbacks", "arrived")
     row = {"road": task.road, "condition": task.condition, "vehicle": task.vehicle, "controller": controller,
            "force_model": force_model, **{k: metrics.get(k) for k in keys}}
     row["time_error_pct"] = 100.0 * (metrics["trip_time"] / t_ref - 1.0) if t_ref > 0 else float("nan")
+    if controller == "cruise":
+        energy_at_ref = metrics["energy_J"]
+    row["energy_at_Tref_kWh"] = energy_at_ref / 3.6e6
     row.update(matched=bool(matched), runs=int(runs), time_weight=float(lam),
                solves=int(metrics.get("ctl_solves", 0) or 0))
     if "online" in metrics:
@@ -152,7 +155,7 @@ def run_comparison_task(task: ComparisonTask) -> dict[str, Any]:
         if fm == "oracle" and matched.matched:
             lam0 = matched.time_weight
         rows.append(_row(task, "mpc", fm, matched.result.metrics, t_ref, matched.matched, matched.runs,
-                         matched.time_weight))
+                         matched.time_weight, matched.energy_at_target()))
         logs[f"mpc_{fm}"] = matched.result.log
     out: dict[str, Any] = {"rows": rows}
     if task.keep_logs:
@@ -164,12 +167,17 @@ def run_comparison_task(task: ComparisonTask) -> dict[str, Any]:
 
 
 def summarise(table: pd.DataFrame) -> pd.DataFrame:
-    """Per (road, condition): MPC energy relative to cruise and to the oracle MPC [%] (matched runs only)."""
+    """Per (road, condition): MPC energy relative to cruise and to the oracle MPC [%]: the energy interpolated to
+    exactly the cruise trip time where bracketing runs exist, else the matched run's energy (|dT| <= tol);
+    NaN where the run could not be matched."""
     out = []
     for (road, cond), g in table.groupby(["road", "condition"], sort=False):
         def energy(ctl, fm="-"):
             r = g[(g.controller == ctl) & (g.force_model == fm)]
-            return float(r.energy_kWh.iloc[0]) if len(r) and bool(r.matched.iloc[0]) else float("nan")
+            if not len(r) or not bool(r.matched.iloc[0]):
+                return float("nan")
+            e = float(r.energy_at_Tref_kWh.iloc[0])
+            return e if math.isfinite(e) else float(r.energy_kWh.iloc[0])
 
         cruise, oracle = energy("cruise"), energy("mpc", "oracle")
         row = {"road": road, "condition": cond}

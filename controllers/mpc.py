@@ -43,6 +43,7 @@ class MpcError(ValueError):
 
 
 SOLVERS = ("ipopt", "osqp")
+QP_E_SCALE = 30.0  # QP path: kinetic-energy variables in units of 30 m^2/s^2 (forces are in kN)
 
 
 @dataclass(frozen=True)
@@ -116,6 +117,7 @@ class Plan:
     solve_time: float  # wall-clock [s]
     iterations: int
     objective: float = float("nan")
+    cpu_time: float = float("nan")  # process CPU time of the solve [s] (robust to a loaded machine)
     x: np.ndarray | None = field(default=None, repr=False)  # raw primal (for warm start)
     lam_x: np.ndarray | None = field(default=None, repr=False)
     lam_g: np.ndarray | None = field(default=None, repr=False)
@@ -231,6 +233,9 @@ class OcpSolver:
             jcols = np.repeat(np.arange(self._nx), np.diff(jcol))
             self._a_from_j = np.array([a_index[(r, c)] for r, c in zip(jrow.tolist(), jcols.tolist())], dtype=int)
             self._a_eye = np.array([a_index[(self._ng + c, c)] for c in range(self._nx)], dtype=int)
+            self._a_cols = np.array(cols_a, dtype=int)
+            self._qp_scale = np.ones(self._nx)
+            self._qp_scale[:n + 1] = QP_E_SCALE
 
     # ------------------------------------------------------------------ problem data
     def reachable_cap(self, v0: float, preview: Preview, a_prev: float = 0.0) -> np.ndarray:
@@ -361,17 +366,19 @@ class OcpSolver:
         else:
             solver = self._cold
             args.update(x0=self.initial_guess(v0, preview, params, a_prev))
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         res = solver(**args)
-        elapsed = time.perf_counter() - t0
+        elapsed, cpu = time.perf_counter() - t0, time.process_time() - c0
         stats = solver.stats()
         status = str(stats.get("return_status", "unknown"))
         ok = bool(stats.get("success", False)) or status == "Solved_To_Acceptable_Level"
         x = np.asarray(res["x"]).ravel()
         if not np.all(np.isfinite(x)):
             ok = False
-        return self._plan_from_x(x, preview, ok, status, elapsed, int(stats.get("iter_count", -1)),
+        plan = self._plan_from_x(x, preview, ok, status, elapsed, int(stats.get("iter_count", -1)),
                                  float(res["f"]), np.asarray(res["lam_x"]).ravel(), np.asarray(res["lam_g"]).ravel())
+        plan.cpu_time = cpu
+        return plan
 
     def _qp_matrices(self, x, p, lam_g):
         grad, gval, jac, hess = self._qp_fun(x, p, lam_g)
@@ -394,14 +401,18 @@ class OcpSolver:
         adata = np.zeros(len(self._a_rows))
         adata[self._a_from_j] = jnz
         adata[self._a_eye] = 1.0
-        return grad, gval, pdata, adata
+        # variable scaling dx = D z (E in units of QP_E_SCALE): P -> D P D, q -> D q, A -> A D
+        d = self._qp_scale
+        pdata *= d[self._p_rows] * d[self._p_cols]
+        adata *= d[self._a_cols]
+        return grad * d, gval, pdata, adata
 
     def _solve_qp(self, v0, a_prev, preview, params, warm) -> Plan:
         import osqp
 
         lbx, ubx, lbg, ubg = self._bounds(v0, preview, params, a_prev)
         p = self._params(a_prev, preview, params)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         if warm is not None and warm.x is not None:
             x, lam_x, lam_g = self.shift(warm, float(preview.s[0]))
             lam_g = np.zeros(self._ng) if lam_g is None else lam_g
@@ -415,7 +426,7 @@ class OcpSolver:
         y = None
         for _ in range(max(1, self.settings.sqp_iterations)):
             grad, gval, pdata, adata = self._qp_matrices(x, p, lam_g)
-            lo = np.concatenate([lbg - gval, lbx - x])
+            lo = np.concatenate([lbg - gval, lbx - x])  # bound rows carry D: lbx - x <= D z <= ubx - x
             hi = np.concatenate([ubg - gval, ubx - x])
             lo = np.where(np.isfinite(lo), lo, -1e20)
             hi = np.where(np.isfinite(hi), hi, 1e20)
@@ -425,7 +436,7 @@ class OcpSolver:
                 self._osqp = osqp.OSQP()
                 self._osqp.setup(P, grad, A, lo, hi, verbose=False, warm_starting=True, polishing=False,
                                  eps_abs=self.settings.qp_tolerance, eps_rel=self.settings.qp_tolerance,
-                                 max_iter=4000, adaptive_rho=True, rho=1.0)
+                                 max_iter=4000, adaptive_rho=True, rho=3.0)
             else:
                 self._osqp.update(q=grad, l=lo, u=hi, Px=pdata, Ax=adata)
             if y_warm is not None:
@@ -438,10 +449,12 @@ class OcpSolver:
             if not ok or res.x is None or not np.all(np.isfinite(res.x)):
                 ok = False
                 break
-            x = np.clip(x + res.x, lbx, ubx)
+            x = np.clip(x + self._qp_scale * res.x, lbx, ubx)
             y = res.y
             lam_g = y[:self._ng]
-        elapsed = time.perf_counter() - t0
+        elapsed, cpu = time.perf_counter() - t0, time.process_time() - c0
         lam_full = None if y is None else y
-        return self._plan_from_x(x, preview, ok, status, elapsed, iters, float("nan"), None if lam_full is None
+        plan = self._plan_from_x(x, preview, ok, status, elapsed, iters, float("nan"), None if lam_full is None
                                  else lam_full[self._ng:], None if lam_full is None else lam_full[:self._ng])
+        plan.cpu_time = cpu
+        return plan

@@ -3,12 +3,13 @@
 Trip time falls monotonically with lambda, so the search brackets lambda on a log scale and then takes
 secant/bisection steps in (log lambda, time) until |T - T_target| <= tol * T_target. Runs that miss the
 tolerance within ``max_runs`` are returned flagged (``matched`` False) with the closest run, never silently.
+:meth:`MatchedRun.energy_at_target` interpolates the energy to exactly the target time between bracketing runs.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable
 
 from .closed_loop import RunResult
@@ -21,6 +22,20 @@ class MatchedRun:
     target_time: float
     matched: bool
     runs: int
+    history: list[tuple[float, float, float]] = field(default_factory=list)  # (lambda, trip time, energy J)
+
+    def energy_at_target(self) -> float:
+        """Source energy [J] interpolated linearly in trip time to exactly the target time between the two
+        closest runs that bracket it; NaN when no run pair brackets the target."""
+        runs = [(t, e) for _, t, e in self.history if math.isfinite(t) and math.isfinite(e)]
+        above = [r for r in runs if r[0] >= self.target_time]
+        below = [r for r in runs if r[0] <= self.target_time]
+        if not above or not below:
+            return float("nan")
+        (t1, e1), (t2, e2) = min(above), max(below)
+        if t1 == t2:
+            return e1
+        return e1 + (self.target_time - t1) * (e2 - e1) / (t2 - t1)
 
     @property
     def time_error(self) -> float:
@@ -70,4 +85,5 @@ def match_trip_time(run: Callable[[float], RunResult], target_time: float, tol: 
     best_lam, best = min(history, key=lambda h: abs(h[1].metrics["trip_time"] / target_time - 1.0)
                          if math.isfinite(h[1].metrics["trip_time"]) else float("inf"))
     ok = math.isfinite(best.metrics["trip_time"]) and done(best.metrics["trip_time"])
-    return MatchedRun(best, best_lam, target_time, ok, len(history))
+    trace = [(lam_i, r.metrics["trip_time"], r.metrics["energy_J"]) for lam_i, r in history]
+    return MatchedRun(best, best_lam, target_time, ok, len(history), trace)

@@ -86,7 +86,8 @@ def benchmark_fleet_command(
     cache: Optional[Path] = typer.Option(None, "--cache", help="folder of the stored fleet trips "
                                          "(default: $ROADLOAD_CACHE/fleet-SEED-N or ~/.cache/roadload/...)"),
     seed: int = typer.Option(2012, "--seed", help="fleet seed"),
-    hours: float = typer.Option(20.0, "--hours", help="total fleet duration [h] (scaled for fewer trips)"),
+    hours: Optional[float] = typer.Option(None, "--hours", help="total fleet duration [h] (default: 20 h for "
+                                          "84 trips, proportionally less for fewer)"),
     figures: bool = typer.Option(True, "--figures/--no-figures", help="write PNG figures"),
 ) -> None:
     """Chapter-5 benchmark over the simulated fleet (generated into the cache when absent)."""
@@ -95,7 +96,9 @@ def benchmark_fleet_command(
     n = trips or 84
     if n < 1:
         _fail(f"--trips must be >= 1, got {n}")
-    total = hours * n / 84 if trips else hours
+    total = hours if hours is not None else 20.0 * n / 84
+    if not total > 0:
+        _fail(f"--hours must be > 0, got {total}")
     base = Path(os.environ.get("ROADLOAD_CACHE", Path.home() / ".cache" / "roadload"))
     folder = cache or base / f"fleet-{seed}-{n}"
     try:

@@ -28,7 +28,14 @@ def main() -> None:
     ap.add_argument("--scheduler", default=None)
     ap.add_argument("--cache", type=Path, default=None)
     ap.add_argument("--out", type=Path, default=Path("out/bench_fleet"))
+    ap.add_argument("--output-outliers", default=None, metavar="RATE,SIZE",
+                    help="sensitivity experiment: outlier events of SIZE N (1 s bursts) starting with probability "
+                         "RATE per triggered sample, added to F_xV after preprocessing (not part of the simulator)")
     args = ap.parse_args()
+    extra = {}
+    if args.output_outliers:
+        rate, size = (float(x) for x in args.output_outliers.split(","))
+        extra["output_outliers"] = (rate, size)
     base = Path(os.environ.get("ROADLOAD_CACHE", Path.home() / ".cache" / "roadload"))
     folder = args.cache or base / f"fleet-{args.seed}-{args.trips}"
     hours = args.hours * args.trips / 84
@@ -39,7 +46,7 @@ def main() -> None:
               f"({len(gen['failed'])} failed)")
     paths = stored_trips(folder, args.trips)
     print(f"load average before the run: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
-    res = run_benchmark(paths, scheduler=args.scheduler, workers=args.workers, progress=False)
+    res = run_benchmark(paths, scheduler=args.scheduler, workers=args.workers, progress=False, **extra)
     t = res.timing
     hours_done = res.trips["duration"].sum() / 3600 if not res.trips.empty else 0.0
     n_rows = len(res.medse)

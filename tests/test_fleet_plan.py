@@ -47,3 +47,20 @@ def test_bad_requests_are_clear_errors():
         plan_fleet(0)
     with pytest.raises(FleetError, match="total_hours"):
         plan_fleet(5, total_hours=-1)
+
+
+def test_output_outlier_experiment_touches_only_triggered_samples():
+    import pandas as pd
+
+    from roadload.estimators.fleet import inject_output_outliers
+
+    trig = np.zeros(5000, dtype=bool)
+    trig[1000:4000] = True
+    states = pd.DataFrame({"t": np.arange(5000) * 0.1, "tractive_force": np.zeros(5000), "trigger": trig})
+    a = inject_output_outliers(states, rate=2e-3, size=2000.0, seed=1)
+    b = inject_output_outliers(states, rate=2e-3, size=2000.0, seed=1)
+    f = a["tractive_force"].to_numpy()
+    assert np.array_equal(f, b["tractive_force"].to_numpy())          # seeded
+    assert np.all(f[~trig] == 0.0) and np.count_nonzero(f) >= 10
+    assert np.all(np.abs(f[f != 0]) >= 2000.0)
+    assert states["tractive_force"].eq(0).all()                         # input left alone

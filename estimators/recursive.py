@@ -127,6 +127,7 @@ class RecursiveEstimator:
         self._ip_final[K.IP_STORE] = K.STORE_FINAL
         self._empty_out = (np.empty((0, n)), np.empty(0))
         self._no_instruments = np.empty((0, n))
+        self._tag = K.size_tag(n)
 
     @property
     def n_params(self) -> int:
@@ -235,7 +236,7 @@ class RecursiveEstimator:
         e2, e1 = self._empty_out
         K.run_record(kernel_array(a), kernel_array(b), Z, self._ip_final, arr["fp"], arr["Q"], arr["Pd"],
                      arr["F"], arr["xmin"], arr["xmax"], self._x, self._p, self._sc, self._ring, self._ct,
-                     e2, e2, e1, e1, e1, e1)
+                     e2, e2, e1, e1, e1, e1, self._tag)
         return self._x.copy()
 
     def _process(self, A, B, Z, store):
@@ -248,7 +249,7 @@ class RecursiveEstimator:
         out_Pd = np.empty((T, n)) if full else np.empty((0, n))
         vecs = [np.empty(T) if full else np.empty(0) for _ in range(4)]
         K.run_record(A, B, Z, ip, arr["fp"], arr["Q"], arr["Pd"], arr["F"], arr["xmin"], arr["xmax"],
-                     self._x, self._p, self._sc, self._ring, self._ct, out_X, out_Pd, *vecs)
+                     self._x, self._p, self._sc, self._ring, self._ct, out_X, out_Pd, *vecs, self._tag)
         return out_X, out_Pd, vecs
 
     def run(self, A, B, instruments=None, store: str = "full") -> EstimationResult:
@@ -319,11 +320,12 @@ def run_many(config: EstimatorConfig, A, B, instruments=None, store: str = "full
     out_Pd = np.empty((Kt, T, n)) if full else np.empty((Kt, 0, n))
     vecs = [np.empty((Kt, T)) if full else np.empty((Kt, 0)) for _ in range(4)]
     A, B, Z = kernel_array(A), kernel_array(B), kernel_array(Z)
+    tag = K.size_tag(n)
 
     def one(r: int) -> None:
         K.run_record(A[r], B[r], Z[r], ip, arr["fp"], arr["Q"], arr["Pd"], arr["F"], arr["xmin"], arr["xmax"],
                      X[r], P[r], sc[r], ring[r], ct[r], out_X[r], out_Pd[r], vecs[0][r], vecs[1][r], vecs[2][r],
-                     vecs[3][r])
+                     vecs[3][r], tag)
     workers = (os.cpu_count() or 1) if n_threads is None else int(n_threads)
     if workers < 1:
         raise EstimatorInputError(f"n_threads must be >= 1, got {n_threads}")

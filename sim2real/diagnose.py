@@ -51,7 +51,8 @@ class DiagnosisSettings:
     max_effects); min_effect [N]: smallest bin median reported as a departure / unexplained residual;
     floor roads (profile name, seed) and floor_duration [s] per road for the sim's own trips (none: no floor);
     resimulate: switch the identified effects on in the simulator with their fitted parameters, re-drive the
-    floor trips and recompute the gap ("after, simulator")."""
+    floor trips and recompute the gap ("after, simulator"); replay: feed the recorded forces and road into the
+    simulator (before, and after with the effects on) and compare the speed traces (:mod:`.replay`)."""
 
     candidates: tuple[str, ...] = DEFAULT_CANDIDATES
     regimes: tuple[str, ...] = DEFAULT_REGIMES
@@ -69,6 +70,7 @@ class DiagnosisSettings:
     floor_roads: tuple[tuple[str, int], ...] = FLOOR_ROADS
     floor_duration: float = 900.0
     resimulate: bool = True
+    replay: bool = True
 
 
 @dataclass
@@ -297,7 +299,7 @@ def diagnose(real: Sequence[Trip], sim: SimConfig, settings: DiagnosisSettings |
     r = np.where(split.valid, table["residual"].to_numpy(dtype=float), np.nan)
     test = split.test
     step("gap and regimes", 0.35)
-    gap_before = gap_measures(table, np.nan_to_num(r), model.mass, test)
+    gap_before = gap_measures(table, np.nan_to_num(r), model.mass, test, replay_sim=sim if settings.replay else None)
     regs = localise(r, table, split.blocks, settings.regimes, rng, n_boot=settings.n_boot,
                     min_effect=settings.min_effect)
     valid = split.valid
@@ -350,7 +352,8 @@ def diagnose(real: Sequence[Trip], sim: SimConfig, settings: DiagnosisSettings |
         t_after = build_table(real, sim_after, floor=floor_after).frame
         if len(t_after) == len(table):
             r_sim = np.where(split.valid, t_after["residual"].to_numpy(dtype=float), 0.0)
-            gap_after_sim = gap_measures(table, np.nan_to_num(r_sim), model.mass, test)
+            gap_after_sim = gap_measures(t_after, np.nan_to_num(r_sim), model.mass, test,
+                                         replay_sim=sim_after if settings.replay else None)
             gap_after_sim["sim"] = sim_after.to_dict()
     per_regime = _per_regime(table, np.nan_to_num(r), r_after, test, settings.regimes)
     unexplained = _unexplained(table, np.where(valid, r_after, np.nan), split, settings, rng,

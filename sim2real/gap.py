@@ -1,7 +1,9 @@
 """Gap measures between the sim and recorded trips, on any subset of the diagnosis table (e.g. held-out rows).
 
 - force residual F_xV,measured - F_xV,sim [N]: n, mean, median, MAD, MEDSE, RMSE (robust first);
-- replay speed error [m/s]: the recorded force fed through the sim's longitudinal balance over windows of
+- replay through the simulator (:mod:`.replay`, with a sim config given): recorded drive force, brakes and road
+  fed into the simulator, speed trace compared [m/s];
+- replay speed error, linearised [m/s]: the recorded force fed through the sim's longitudinal balance over windows of
   ``window`` seconds starting at the recorded speed; to first order the replayed speed departs from the recorded
   one by e(t) = ∫ (F_xV,measured - F_xV,sim) / m_V dt, so the measure is the RMS of e over the windows (the
   speed trace the sim would drive with the recorded drive torque, brakes and road);
@@ -57,14 +59,20 @@ def energy_per_distance(frame: pd.DataFrame, force: np.ndarray, rows: np.ndarray
     return float(np.sum(np.clip(f, 0, None) * v) / dist * J_PER_M_TO_KWH_PER_100KM)
 
 
-def gap_measures(frame: pd.DataFrame, residual: np.ndarray, mass: float, rows: np.ndarray) -> dict:
-    """All gap measures of ``residual`` on ``rows`` (see module doc)."""
+def gap_measures(frame: pd.DataFrame, residual: np.ndarray, mass: float, rows: np.ndarray, replay_sim=None) -> dict:
+    """All gap measures of ``residual`` on ``rows`` (see module doc); with ``replay_sim`` (a SimConfig) also the
+    replay through the simulator itself (:func:`roadload.sim2real.replay.simulator_replay`)."""
     r = np.asarray(residual, dtype=float)
     measured = frame["tractive_force"].to_numpy(dtype=float)
     e_meas = energy_per_distance(frame, measured, rows)
     e_sim = energy_per_distance(frame, measured - r, rows)
+    out_replay = None
+    if replay_sim is not None:
+        from .replay import simulator_replay
+        out_replay = simulator_replay(frame, rows, replay_sim)
     return {"force_residual": robust_summary(r[rows]),
             "replay_speed_error": replay_speed_error(frame, r, mass, rows),
+            "replay_simulator": out_replay,
             "energy_per_distance": {"measured": e_meas, "sim": e_sim,
                                     "relative_error": (e_sim - e_meas) / e_meas if e_meas else float("nan"),
                                     "unit": "kWh/100 km"}}

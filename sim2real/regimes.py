@@ -210,6 +210,7 @@ def residual_analysis(residual: np.ndarray, signals: dict[str, np.ndarray], trip
     samples, the largest |correlation| with its lag, and the ±2/√m white-noise bound."""
     r = np.asarray(residual, dtype=float)
     trip_index = np.asarray(trip_index)
+    signals = {k: v for k, v in signals.items() if np.isfinite(np.asarray(v, dtype=float)).sum() > max_lag + 1}
     names = ["residual"] + list(signals)
     acc = {n: np.zeros(max_lag + 1) for n in names}
     m_total = 0

@@ -6,8 +6,9 @@ diagnosis.json (schema_version 1; SI units, forces in N, NaN written as null):
 - ``split``: {n_valid, n_train, n_test, n_folds, n_segments, n_test_segments} — the held-out part is ``test``;
 - ``floor``: {basis, coefficients, residual_rms, n}: the sim's own floor (sim trips vs the sim's balance);
 - ``gap``: {before, after, after_simulator, shrinkage, shrinkage_simulator, per_regime} on the held-out part;
-  before/after = {force_residual: {n, mean, median, mad, medse, rmse}, replay_speed_error: {rms, median_end,
-  windows} [m/s], energy_per_distance: {measured, sim, relative_error, unit}}; shrinkage = 1 - after/before for
+  before/after = {force_residual: {n, mean, median, mad, medse, rmse}, replay_simulator: {rms, median_end,
+  windows} [m/s] (recorded forces and road fed into the simulator; null for the fitted after),
+  replay_speed_error: {rms, median_end, windows} [m/s] (linearised), energy_per_distance: {measured, sim, relative_error, unit}}; shrinkage = 1 - after/before for
   rmse, medse, |median|; per_regime: [{regime, bin, n, rmse_before, rmse_after, median_before, median_after,
   remaining}];
 - ``regimes``: {regime: [{bin, n, n_blocks, share, median, mad, mean, medse, ci_low, ci_high, p_value,
@@ -213,7 +214,9 @@ def markdown(diag: Diagnosis, figures: dict[str, str]) -> str:
           row("force residual MAD [N]", lambda g: g["force_residual"]["mad"]),
           row("force residual RMSE [N]", lambda g: g["force_residual"]["rmse"]),
           row("force residual MEDSE [N²]", lambda g: g["force_residual"]["medse"], 0),
-          row("replay speed error RMS [m/s]", lambda g: g["replay_speed_error"]["rms"], 3),
+          row("replay through the simulator, speed RMS [m/s]",
+              lambda g: (g.get("replay_simulator") or {}).get("rms", float("nan")), 3),
+          row("replay speed error RMS, linearised [m/s]", lambda g: g["replay_speed_error"]["rms"], 3),
           row("traction energy sim vs measured [%]", lambda g: 100 * g["energy_per_distance"]["relative_error"], 2)]
     L += ["", f"Measured traction energy {_fmt(fb['energy_per_distance']['measured'], 2)} kWh/100 km. "
           f"Shrinkage of the held-out RMSE: {100 * d.shrinkage('rmse'):.0f} % (fitted)"

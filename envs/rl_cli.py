@@ -49,6 +49,9 @@ def _atomic_write_bytes(path: Path, writer: Callable[[Path], None]) -> None:
     os.close(fd)
     try:
         writer(Path(tmp))
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp's 0600 -> what a plain open() would have given
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -278,8 +281,10 @@ def plot_learning_curves(results: list[TrainResult], path: Path) -> Path:
 
 
 # --------------------------------------------------------------------------------------------- evaluation
-TABLE_COLUMNS = ["controller", "road_seed", "arrived", "energy_kWh", "trip_time", "speed_violations",
+TABLE_COLUMNS = ["controller", "road_seed", "arrived", "energy_kWh", "trip_time", "cost_kJ", "speed_violations",
                  "violation_time", "max_excess_kmh", "stop_violations", "rms_jerk", "episode_return"]
+"""cost_kJ = (source energy + lambda * trip time) / 1000 with lambda the reward's time weight (= the MPC's):
+the objective both the RL reward (up to its penalty and shaping terms) and the MPC minimise."""
 
 
 def evaluation_table(policies: dict[str, Callable[[np.ndarray], np.ndarray]], env_config: dict[str, Any],
@@ -308,6 +313,10 @@ def evaluation_table(policies: dict[str, Callable[[np.ndarray], np.ndarray]], en
     for col in TABLE_COLUMNS:
         if col not in table:
             table[col] = np.nan
+    from roadload.envs.gym_config import EcoDriveConfig, make_config
+
+    lam = make_config(EcoDriveConfig, env_config).reward.time
+    table["cost_kJ"] = (table["energy_kWh"].astype(float) * 3.6e6 + lam * table["trip_time"].astype(float)) / 1e3
     return table[TABLE_COLUMNS], notes
 
 

@@ -540,6 +540,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         eval_every: int = typer.Option(20_000, help="validation-road evaluation period [steps] (0 = off)"),
         held_out: int = typer.Option(len(HELD_OUT_SEEDS), help="number of held-out roads in the final table"),
         out: Path = typer.Option(Path("out/rl"), help="output folder (policies, learning_curve.png, CSV)"),
+        baselines: str = typer.Option("cruise,mpc", help="controller baselines in the table: cruise (PI, abc model), "
+                                      "mpc (oracle force model), mpc_online (online RRLM force model)"),
         evaluate_only: bool = typer.Option(False, help="no training: evaluate the policies saved in --out"),
         skip_evaluation: bool = typer.Option(False, help="train and plot only, no held-out evaluation"),
     ) -> None:
@@ -556,8 +558,13 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                 raise RLError("--held-out must be >= 1")
             env_config = _parse_config(config)
             seeds = tuple(HELD_OUT_SEEDS[0] + i for i in range(held_out))
+            ctl = tuple(b.strip() for b in baselines.split(",") if b.strip())
+            bad = [b for b in ctl if b not in CONTROLLER_BASELINES]
+            if bad:
+                raise RLError(f"--baselines: unknown {bad}; choose from {sorted(CONTROLLER_BASELINES)}")
             res = train_and_evaluate(algos, timesteps, out, n_envs, seed, env_config, vec, eval_every, seeds,
-                                     console, evaluate_only=evaluate_only, skip_evaluation=skip_evaluation)
+                                     console, controllers=ctl, evaluate_only=evaluate_only,
+                                     skip_evaluation=skip_evaluation)
         except ValueError as exc:  # RLError, GymConfigError
             _fail(str(exc))
         for r in res["results"]:

@@ -273,3 +273,10 @@ def test_chapter5_settings_build():
             assert est.n_params == n and np.allclose(est.p, 100 * np.eye(n))
         assert make_config("SGIVMKF", **s["SGIVMKF"]).instrument_delay == 4
         assert make_config("RRLM", **s["RRLM"]).kappa == 1e-5
+
+
+def test_single_parameter_rls_is_the_running_mean():
+    rng = np.random.default_rng(12)
+    B = 2.0 + rng.normal(size=500)
+    res = run("RLS", np.ones((500, 1)), B, forgetting=1.0, p0=1e12)
+    np.testing.assert_allclose(res.X[:, 0], np.cumsum(B) / np.arange(1, 501), rtol=1e-9)

@@ -1053,6 +1053,16 @@ def decision_tree_checks(results, spec: SweepSpec, bound: float = DEFAULT_BOUND)
     return checks
 
 
+def _publish(tmp: str, path) -> None:
+    """Give a finished temporary file the usual permissions (mkstemp makes it 0600) and move it into place."""
+    import os
+
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)
+    os.replace(tmp, path)
+
+
 def _atomic_write_text(path, text: str) -> None:
     import os
     import tempfile
@@ -1063,7 +1073,7 @@ def _atomic_write_text(path, text: str) -> None:
     try:
         with os.fdopen(fd, "w") as f:
             f.write(text)
-        os.replace(tmp, path)
+        _publish(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
@@ -1117,7 +1127,7 @@ def plot_curves(agg, spec: SweepSpec, path, bound: float = DEFAULT_BOUND) -> Non
     os.close(fd)
     try:
         fig.savefig(tmp, dpi=110)
-        os.replace(tmp, path)
+        _publish(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)

@@ -1,5 +1,7 @@
 """``roadload benchmark robustness`` end to end on the synthetic backend (few seeds, short records)."""
 
+import os
+
 import pandas as pd
 from typer.testing import CliRunner
 
@@ -29,6 +31,9 @@ def test_cli_writes_tables_curves_and_summary(tmp_path):
     first = ranking[(ranking["variant"] == "output/isolated") & (ranking["rank"] == 1)]["estimator"].item()
     assert first == "RLM"
     assert not list(out.glob(".*.tmp"))           # atomic writes leave no temporary files
+    umask = os.umask(0)
+    os.umask(umask)
+    assert (out / "summary.md").stat().st_mode & 0o777 == 0o666 & ~umask   # not mkstemp's 0600
 
 
 def test_cli_rejects_bad_input(tmp_path):

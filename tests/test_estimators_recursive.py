@@ -278,5 +278,7 @@ def test_chapter5_settings_build():
 def test_single_parameter_rls_is_the_running_mean():
     rng = np.random.default_rng(12)
     B = 2.0 + rng.normal(size=500)
-    res = run("RLS", np.ones((500, 1)), B, forgetting=1.0, p0=1e12)
-    np.testing.assert_allclose(res.X[:, 0], np.cumsum(B) / np.arange(1, 501), rtol=1e-9)
+    res = run("RLS", np.ones((500, 1)), B, forgetting=1.0, p0=1e4)
+    t = np.arange(1, 501)
+    np.testing.assert_allclose(res.X[:, 0], np.cumsum(B) / (1e-4 + t), rtol=1e-10)
+    np.testing.assert_allclose(res.P_diag[:, 0], 1.0 / (1e-4 + t), rtol=1e-10)

@@ -82,7 +82,8 @@ def main() -> None:
     print("\n## check against the decision tree (figure 3.17)")
     for c in report["checks"]:
         print(f"  {c['sweep']} / {c['variant']} ({c['model']}): {'agrees' if c['agrees'] else 'DISAGREES'} — "
-              f"{c['expected']}: {c['metric']} {_f(c['group_median'])} vs {_f(c['others_median'])}")
+              f"{c['expected']}: {c['metric']} {_f(c['group_median'])} vs {_f(c['others_median'])}"
+              + (f" [{c['note']}]" if c["note"] else ""))
     for task, err in failed[:20]:
         print(f"  failed: {task}: {err}")
 

@@ -185,11 +185,20 @@ def plot_notched_boxplot(values: pd.DataFrame, value: str, order: Sequence[str] 
         off_scale = int(sum(np.sum(x > ceiling) for x in data))
         data = [np.minimum(x, ceiling) for x in data]
         conf = [None if c is None else (min(c[0], ceiling), min(c[1], ceiling)) for c in conf]
+    elif any(x.size for x in data):   # linear axis: a diverged estimate (NMSE -1e296) is drawn at a floor / ceiling
+        q = np.array([np.percentile(x, [25, 75]) for x in data if x.size])
+        span = 3.0 * max(float(np.max(q[:, 1] - q[:, 0])), 1e-12)
+        lo, hi = float(q[:, 0].min()) - span, float(q[:, 1].max()) + span
+        off_scale = int(sum(np.sum((x < lo) | (x > hi)) for x in data))
+        ceiling = f"[{lo:.4g}, {hi:.4g}]"
+        data = [np.clip(x, lo, hi) for x in data]
+        conf = [None if c is None else (float(np.clip(c[0], lo, hi)), float(np.clip(c[1], lo, hi))) for c in conf]
     fig, ax = plt.subplots(figsize=(max(6, 0.8 * len(order) + 2), 4.5))
     ax.boxplot([x if x.size else [np.nan] for x in data], notch=True, whis=1.5, tick_labels=order,
                conf_intervals=conf, flierprops={"markersize": 2})
     if off_scale:
-        title = f"{title} ({off_scale} values beyond {ceiling:.3g} drawn at that ceiling)"
+        where = f"beyond {ceiling:.3g} drawn at that ceiling" if log else f"outside {ceiling} drawn at its edge"
+        title = f"{title} ({off_scale} values {where})"
     if log:
         ax.set_yscale("log")
     ax.set_ylabel(ylabel)

@@ -212,3 +212,16 @@ def test_auto_gradient_source_follows_the_accelerometer_test():
     assert np.max(np.abs(r2.states["gradient_angle"].to_numpy() - ref)[ok]) < 2e-3
     with pytest.raises(PipelineError, match="gradient"):
         PipelineSettings(gradient="gps")
+
+
+def test_any_stage_can_be_plotted(tmp_path):
+    from roadload.estimators.figures import plot_stage, save
+
+    res = run_pipeline(handmade_trip(duration=60.0, events=False), _knowledge(), until="smoothed")
+    fig = plot_stage(res, "smoothed", ["vehicle_speed", "vehicle_speed_derivative"])
+    assert len(fig.axes) == 2
+    assert save(fig, tmp_path / "s.png").stat().st_size > 1000
+    with pytest.raises(PipelineError, match="was not run"):
+        plot_stage(res, "states")
+    with pytest.raises(PipelineError, match="none of the channels"):
+        plot_stage(res, "smoothed", ["nope"])

@@ -7,7 +7,8 @@ Recursive estimators (one numeric kernel, :mod:`.kernel`, composed by :class:`Es
   SGIVMKF, plus 'RGTLS' and 'PKS'. :func:`make_config` gives the validated composition only.
 - :meth:`RecursiveEstimator.update` (a_t, b_t[, instrument]) -> X̂_t; :meth:`RecursiveEstimator.run`
   (A, B) -> :class:`EstimationResult`; :func:`run` (name or config, A, B, **overrides) does both steps;
-  :func:`run_many` runs many trips (leading axis) in parallel with identical results.
+  :func:`run_many` runs many trips (leading axis) on all cores (worker threads, GIL-free kernel) with
+  identical results.
 - :func:`chapter5_settings` ('M3' | 'M4'): the section-5.5 settings by estimator name.
 - influence functions: :func:`weight`, :func:`psi`, :func:`rho` (kinds in :data:`PSI_KINDS`).
 

@@ -156,7 +156,8 @@ def inject_ab_outliers(data: ABData, fraction: float, *, magnitude: float = 4.0,
     """Add outliers to measured inputs and/or output at A/B level (decision-tree checks only).
 
     fraction in [0, 0.5]: share of corrupted samples; a corrupted sample gets uniform noise in
-    [-magnitude, magnitude]·s added, s the standard deviation of the clean channel (Experiment 3.3 used
+    [-magnitude, magnitude]·s added, s the standard deviation of the clean channel (of the measured one when
+    the clean one is unknown, as on vehicle trips) (Experiment 3.3 used
     uniform numbers in [-4, 4] on unit-amplitude signals). target: 'input' (one random column of A per
     sample), 'output' (B) or 'both' (each corrupted sample hits A or B with equal probability).
     Vehicle-trip sweeps use the simulator's sensor faults instead.
@@ -176,11 +177,11 @@ def inject_ab_outliers(data: ABData, fraction: float, *, magnitude: float = 4.0,
     hit_output = {"input": np.zeros(idx.size, bool), "output": np.ones(idx.size, bool),
                   "both": rng.random(idx.size) < 0.5}[target]
     u = rng.uniform(-magnitude, magnitude, idx.size)
-    b_scale = float(np.std(data.B_true)) or 1.0
+    b_scale = float(np.std(data.B_true if data.B_true is not None else data.B)) or 1.0
     B[idx[hit_output]] += u[hit_output] * b_scale
     in_rows = idx[~hit_output]
     cols = rng.integers(0, n, in_rows.size)
-    a_scale = np.std(data.A_true, axis=0)
+    a_scale = np.std(data.A_true if data.A_true is not None else data.A, axis=0)
     a_scale[a_scale == 0] = 1.0
     A[in_rows, cols] += u[~hit_output] * a_scale[cols]
     meta = {**data.meta, "outliers": {"fraction": fraction, "magnitude": magnitude, "target": target,
@@ -440,12 +441,15 @@ SYNTHETIC_SWEEPS: dict[str, SweepSpec] = {s.name: s for s in (
 # 'sensor_dropouts', 'poor_excitation', 'payload' and its per-channel SensorSpec (bias, latency, outlier scale) —
 # and A/B from the chapter-5 pipeline. Outliers target one channel by zeroing the outlier scale of the others;
 # variant '<channel>/x<k>': outlier size k × the channel's outlier scale of the preset (drive torque 80 N m,
-# accelerometer 2 m/s², speed 3 m/s, steering 0.3 rad). The simulator draws isolated outliers only: burst
-# outliers are covered by the A/B-level sweep. Bias and latency levels are multiples of the reference bias
+# accelerometer 2 m/s², speed 3 m/s, steering 0.3 rad), rate per 100 Hz sample. The simulator draws isolated
+# outliers only: burst outliers are covered by the A/B-level sweep. Variants 'output/ab' and 'input/ab' put
+# isolated outliers (±10 σ, rate per 10 Hz triggered sample) into B or A after the pipeline (the A/B-level
+# layer), to separate the estimators' robustness from what the preprocessing does to sensor outliers. Bias and latency levels are multiples of the reference bias
 # (0.05 m/s² accelerometer, 5 N m drive torque, 0.05 m/s speed) and seconds added to the channel's latency.
 VEHICLE_SWEEPS: dict[str, SweepSpec] = {s.name: s for s in (
-    SweepSpec("outliers", "outlier rate per 100 Hz sample", "1", OUTLIER_FRACTIONS,
-              ("drive_torque/x1", "drive_torque/x10", "accel_x/x1", "vehicle_speed/x1", "steering_wheel_angle/x1"),
+    SweepSpec("outliers", "outlier rate per sample", "1", OUTLIER_FRACTIONS,
+              ("drive_torque/x1", "drive_torque/x10", "accel_x/x1", "vehicle_speed/x1", "steering_wheel_angle/x1",
+               "output/ab", "input/ab"),
               breakdown=True, tree="outliers"),
     SweepSpec("dropouts", "share of samples in NaN dropouts", "1", (0.0, 0.01, 0.05, 0.1, 0.2, 0.3),
               ("outputs", "inputs", "all"), breakdown=True),
@@ -587,6 +591,8 @@ def vehicle_effects(scenario: Scenario) -> dict[str, dict[str, Any]]:
     if lv == 0 or sw in ("bias", "latency"):
         return {}
     if sw == "outliers":
+        if var.endswith("/ab"):
+            return {}
         return {"sensor_outliers": {"rate": lv, "magnitude": OUTLIER_MAGNITUDES[var.split("/")[1]],
                                     "channels": "all"}}
     if sw == "dropouts":   # share of samples ≈ rate [1/h] / 3600 s × mean duration
@@ -609,7 +615,7 @@ def vehicle_sensors(scenario: Scenario):
     _check_vehicle_scenario(scenario)
     spec = copy.deepcopy(get_preset(VEHICLE_PRESET).sensors)
     channel = scenario.variant.split("/")[0]
-    if scenario.sweep == "outliers":
+    if scenario.sweep == "outliers" and not scenario.variant.endswith("/ab"):
         for name, ch in spec.channels.items():
             if name != channel:
                 ch.outlier_scale = 0.0
@@ -732,6 +738,10 @@ def build_vehicle(scenario: Scenario) -> list[tuple[str, ABData, Any]]:
         # the pipeline drops triggered rows whose regressors or output are not finite: count them as reported
         data = ABData(t, A, B, X, None, None, np.zeros(t.size, dtype=bool),
                       {**meta, "n_pipeline_dropped": n_triggered - int(t.size)})
+        if scenario.sweep == "outliers" and scenario.variant.endswith("/ab"):
+            data = inject_ab_outliers(data, scenario.level, magnitude=SYNTHETIC_OUTLIER_MAGNITUDE,
+                                      target=scenario.variant.split("/")[0], pattern="isolated",
+                                      seed=_sub_seed(scenario.seed, "outliers", model))
         out.append((model, data, functools.partial(vehicle_settings, model, x0=x0)))
     return out
 
@@ -1029,7 +1039,8 @@ def decision_tree_checks(results, spec: SweepSpec, bound: float = DEFAULT_BOUND)
     ones; poor_excitation: the regularised / Stenlund-Gustafsson estimators keep trace(P) bounded (median
     growth over the longest stretch) where the others wind up; input_noise: the errors-in-variables estimators
     have a lower parameter error at the largest input noise than the output-error ones. One row per model and
-    variant: what the tree expects, the two group medians, and whether the measurement agrees."""
+    variant: what the tree expects, the two group medians, and whether the measurement agrees (None: a tie, e.g.
+    neither group breaks down)."""
     if spec.tree is None:
         return []
     table, _, _ = _score(results, spec, bound)
@@ -1049,7 +1060,7 @@ def decision_tree_checks(results, spec: SweepSpec, bound: float = DEFAULT_BOUND)
         if ins.size == 0 or outs.size == 0:
             continue
         a, b = spread(ins)["median"], spread(outs)["median"]
-        agrees = bool(a > b) if better == "higher" else bool(a < b)
+        agrees = None if a == b else (bool(a > b) if better == "higher" else bool(a < b))  # None: a tie
         note = ""
         if spec.tree == "outliers" and variant.split("/")[0] in INPUT_TARGETS:
             note = ("outliers in A are bad leverage points, against which M-estimators are not robust "
@@ -1152,6 +1163,10 @@ def _fmt(x: float) -> str:
     return str(x)
 
 
+def _verdict(agrees: bool | None) -> str:
+    return "tie" if agrees is None else ("yes" if agrees else "NO")
+
+
 def _markdown(df, columns: Sequence[str]) -> str:
     lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     for _, r in df.iterrows():
@@ -1216,7 +1231,7 @@ def write_report(results, out_dir, bound: float = DEFAULT_BOUND,
         for x in checks:
             summary.append(f"| {x['backend']} | {x['sweep']} | {x['model']} | {x['variant']} | {x['expected']} | "
                            f"{x['metric']} | {_fmt(x['group_median'])} | {_fmt(x['others_median'])} | "
-                           f"{'yes' if x['agrees'] else 'NO'} | {x['note']} |")
+                           f"{_verdict(x['agrees'])} | {x['note']} |")
     else:
         summary.append("No sweep in this run exercises a question of the decision tree.")
     summary.append("")

@@ -96,6 +96,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                               ", ".join(f"{r.estimator} {getattr(r, score):.3g}" for r in g.itertuples()))
             console.print(table)
         for c in report["checks"]:
-            mark = "[green]agrees[/green]" if c["agrees"] else "[red]DISAGREES[/red]"
+            mark = ("tie" if c["agrees"] is None else
+                    "[green]agrees[/green]" if c["agrees"] else "[red]DISAGREES[/red]")
             console.print(f"fig. 3.17 {c['sweep']} {c['variant']} ({c['model']}): {mark} — {c['metric']} "
                           f"{c['group_median']:.3g} vs {c['others_median']:.3g}")

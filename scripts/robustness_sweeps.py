@@ -81,7 +81,8 @@ def main() -> None:
               f"{int(res['p_blowup'].sum())} runs; {int(res['n_skipped'].sum())} non-finite samples skipped")
     print("\n## check against the decision tree (figure 3.17)")
     for c in report["checks"]:
-        print(f"  {c['sweep']} / {c['variant']} ({c['model']}): {'agrees' if c['agrees'] else 'DISAGREES'} — "
+        verdict = "tie" if c["agrees"] is None else ("agrees" if c["agrees"] else "DISAGREES")
+        print(f"  {c['sweep']} / {c['variant']} ({c['model']}): {verdict} — "
               f"{c['expected']}: {c['metric']} {_f(c['group_median'])} vs {_f(c['others_median'])}"
               + (f" [{c['note']}]" if c["note"] else ""))
     for task, err in failed[:20]:

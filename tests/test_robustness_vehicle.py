@@ -65,3 +65,18 @@ def test_payload_step_is_detected_and_recovery_measured():
     rec = {(r["model"], r["estimator"]): r["recovery_time"] for r in rows}
     assert all(v >= 0 for v in rec.values())
     assert np.isfinite(rec[("M3", "RLS")])             # λ = 0.999 RLS follows a 500 kg step within the trip
+
+
+def test_rls_breaks_down_before_rlm_and_rrlm_on_vehicle_data_with_outliers_in_b():
+    """The text's claim on vehicle data, outliers put into B after the chapter-5 pipeline (A/B-level layer)."""
+    import pandas as pd
+
+    from roadload.estimators.robustness import breakdown_table, scenarios
+
+    rows = []
+    for sc in scenarios("vehicle", "outliers", [0, 1], DURATION, variants=["output/ab"], levels=(0.0, 0.02, 0.1, 0.3)):
+        rows += run_scenario(sc, ["RLS", "RLM", "RRLM"])
+    bd = breakdown_table(pd.DataFrame(rows)).set_index(["model", "estimator"])["breakdown"]
+    for model in ("M3", "M4"):
+        assert bd[(model, "RLS")] <= 0.1
+        assert bd[(model, "RLM")] > bd[(model, "RLS")] and bd[(model, "RRLM")] > bd[(model, "RLS")]

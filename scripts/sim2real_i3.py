@@ -20,11 +20,36 @@ from roadload.sim2real.report import write_report
 from roadload.sim2real.simconfig import SimConfig
 
 
+def register_cold_rolling() -> str:
+    """A user-added candidate (not in the catalog): rolling resistance rising in the cold,
+    f_r(v, T_a) = f_r(v) (1 + k max(293.15 K - T_a, 0) / 10 K); regressor m_V g cos(theta) f_r(v) max(...)/10 K,
+    parameter k (relative rise per 10 K below 20 degC). The simulator has no such switch (sim_effect None)."""
+    from roadload.estimators.models import Term
+    from roadload.sim2real.catalog import CandidateEffect, register_candidate
+    from roadload.units import G
+
+    def terms(model, shape):
+        def build(s):
+            th = np.asarray(s["gradient_angle"], dtype=float)
+            cold = np.clip(293.15 - np.asarray(s["ambient_temperature"], dtype=float), 0.0, None) / 10.0
+            return model.mass * G * np.cos(th) * model.rolling_resistance_coefficient(
+                np.asarray(s["speed"], dtype=float)) * np.nan_to_num(cold)
+        return (Term("m_V g cos(theta) f_r(v) max(20 degC - T_a, 0)/10 K", "cold rolling rise k", "1/(10 K)",
+                     build, ("gradient_angle", "speed", "ambient_temperature"), lambda n: 0.0),)
+
+    register_candidate(CandidateEffect("cold_rolling", "rolling resistance rising in the cold (user candidate)",
+                                       terms, ("gradient_angle", "speed", "ambient_temperature"),
+                                       regime_hint="ambient_temperature"), replace_existing=True)
+    return "cold_rolling"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--trips", default="", help="comma-separated trip names (default: all)")
     ap.add_argument("--out", default="out/sim2real_i3")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--user-candidate", action="store_true",
+                    help="add the user candidate 'cold_rolling' (temperature-dependent rolling resistance)")
     args = ap.parse_args()
     folder = require_shared_data("bmw_i3_tum") / "data"
     files = sorted(folder.glob("Trip*.csv"))
@@ -40,7 +65,9 @@ def main() -> None:
             skipped.append(f"{f.stem}: {exc}")
     print(f"loaded {len(trips)} trips in {time.perf_counter() - t0:.0f} s; skipped {skipped or 'none'}")
     sim = SimConfig.load("bmw_i3")
-    diag = diagnose(trips, sim, DiagnosisSettings(seed=args.seed),
+    from roadload.sim2real.catalog import DEFAULT_CANDIDATES
+    cands = DEFAULT_CANDIDATES + ((register_cold_rolling(),) if args.user_candidate else ())
+    diag = diagnose(trips, sim, DiagnosisSettings(seed=args.seed, candidates=cands),
                     progress=lambda what, frac: print(f"  [{time.perf_counter() - t0:5.0f} s] {what}"))
     paths = write_report(diag, Path(args.out))
     fb, fa = diag.gap_before["force_residual"], diag.gap_after["force_residual"]
@@ -60,6 +87,13 @@ def main() -> None:
               f" share {100 * b['share']:.0f} %")
     print("season:", [(r["bin"], round(r["median"], 1), r["n"]) for r in diag.regimes_before.get("season", [])])
     print("unexplained:", [(b["regime"], b["bin"], round(b["median"], 1)) for b in diag.unexplained["departing_bins"]])
+    if diag.energy:
+        en = diag.energy
+        ee = en["electric_energy_per_distance"]
+        print(f"energy side: battery energy measured {ee['measured']:.2f}, sim {ee['sim_before']:.2f} kWh/100 km; "
+              f"power residual RMSE {en['power_residual_before']['rmse']:.0f} W; accepted "
+              f"{[e['name'] for e in en['effects']]}; ranking "
+              + ", ".join(f"{r['name']} {100 * r['heldout_improvement']:.1f} %" for r in en["ranking"]))
     print(f"wrote {paths['report']} ({time.perf_counter() - t0:.0f} s)")
 
 

@@ -28,16 +28,20 @@ def main() -> None:
     t0 = time.perf_counter()
     res = run_selftest(args.vehicle, duration=args.duration, workers=args.workers)
     pd.set_option("display.width", 200)
-    rows = res.cases + ([res.outside] if res.outside else [])
+    rows = res.cases + ([res.outside] if res.outside else []) + ([res.none] if res.none else [])
     print(pd.DataFrame([{"withheld": c.label, "identified": c.identified, "correct": c.correct,
                          "rmse_before_N": round(c.rmse_before, 1), "rmse_after_N": round(c.rmse_after, 1),
                          "shrinkage": round(c.shrinkage, 3), "shrinkage_resim": round(c.shrinkage_simulator, 3),
+                         "excess_shrinkage": round(res.excess_shrinkage(c), 3),
                          "unexplained_at": c.unexplained_where} for c in rows]).to_string(index=False))
     print("\nconfusion matrix (rows withheld, columns identified):")
     print(res.confusion().to_string())
     print(f"\ntop-1 identification: {res.top1:.1%} of {len(res.cases)} catalog effects")
     print(f"median gap shrinkage (held-out force RMSE): fitted {res.median_shrinkage:.1%}, "
           f"re-simulated {res.median_shrinkage_simulator:.1%}")
+    print(f"noise floor (nothing withheld): held-out RMSE {res.noise_rmse:.1f} N, identified "
+          f"{res.none.identified if res.none else '?'}; median shrinkage of the gap above it "
+          f"{res.median_excess_shrinkage:.1%}")
     print(f"outside-catalog effect unexplained and localised: {res.outside_ok}"
           + (f" ({res.outside.unexplained_where})" if res.outside else ""))
     print(f"wall time {time.perf_counter() - t0:.0f} s")

@@ -96,7 +96,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
 
         console = Console()
         res = run_selftest(vehicle, duration=duration, workers=workers)
-        for c in res.cases + ([res.outside] if res.outside else []):
+        for c in res.cases + ([res.outside] if res.outside else []) + ([res.none] if res.none else []):
             console.print(f"{c.label:34s} -> {c.identified:20s} {'ok ' if c.correct else 'MISS'} "
                           f"shrinkage {100 * c.shrinkage:5.1f} % (re-sim {100 * c.shrinkage_simulator:5.1f} %) "
                           f"{c.unexplained_where}")

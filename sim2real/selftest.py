@@ -5,7 +5,8 @@ Reported: the confusion matrix (withheld vs identified), top-1 accuracy, the gap
 residual RMSE, fitted model and re-simulated sim), and the behaviour on an effect outside the catalog — a
 torque-map error confined to one speed band (the drive-torque channel reads ``offset`` N m high between
 ``low`` and ``high`` km/h), which no candidate models: it must come out as unexplained and be localised to
-that speed band.
+that speed band. A last case withholds nothing (the "real" trips are the sim's own): nothing may be identified,
+and its held-out RMSE is the noise floor for the excess shrinkage 1 - sqrt(after² - noise²)/sqrt(before² - noise²).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from .simconfig import SimConfig
 
 UNEXPLAINED = "unexplained"
 OUTSIDE_LABEL = "torque_map_band (outside catalog)"
+NONE_LABEL = "nothing withheld"
 
 
 @dataclass(frozen=True)
@@ -115,6 +117,29 @@ class SelftestResult:
     outside: SelftestCase | None
     outside_ok: bool
     vehicle: str
+    none: SelftestCase | None = None
+
+    @property
+    def noise_rmse(self) -> float:
+        """Held-out force RMSE of the sim against its own trips (nothing withheld) [N]: the floor no effect
+        can go below."""
+        return self.none.rmse_after if self.none is not None else float("nan")
+
+    def excess_shrinkage(self, case: SelftestCase) -> float:
+        """1 - sqrt(after² - noise²) / sqrt(before² - noise²): the shrinkage of the gap above the noise floor
+        (force side only)."""
+        n2 = self.noise_rmse ** 2
+        if not np.isfinite(n2) or case.rmse_before > 1000:    # energy-side cases are in W, not N
+            return float("nan")
+        b = max(case.rmse_before ** 2 - n2, 0.0)
+        a = max(case.rmse_after ** 2 - n2, 0.0)
+        return float(1.0 - np.sqrt(a / b)) if b > 0 else float("nan")
+
+    @property
+    def median_excess_shrinkage(self) -> float:
+        x = [self.excess_shrinkage(c) for c in self.cases]
+        x = [v for v in x if np.isfinite(v)]
+        return float(np.median(x)) if x else float("nan")
 
     @property
     def catalog_cases(self) -> list[SelftestCase]:
@@ -134,7 +159,7 @@ class SelftestResult:
         return float(np.median(x)) if x else float("nan")
 
     def confusion(self) -> pd.DataFrame:
-        rows = self.cases + ([self.outside] if self.outside else [])
+        rows = self.cases + ([self.outside] if self.outside else []) + ([self.none] if self.none else [])
         labels = [c.label for c in rows]
         cols = sorted({c.identified for c in rows})
         m = pd.DataFrame(0, index=labels, columns=cols)
@@ -145,6 +170,8 @@ class SelftestResult:
     def to_dict(self) -> dict:
         return {"vehicle": self.vehicle, "top1": self.top1, "median_shrinkage_rmse": self.median_shrinkage,
                 "median_shrinkage_rmse_simulator": self.median_shrinkage_simulator,
+                "noise_rmse": self.noise_rmse, "median_excess_shrinkage": self.median_excess_shrinkage,
+                "none": self.none.to_dict() if self.none else None,
                 "cases": [c.to_dict() for c in self.cases],
                 "outside": self.outside.to_dict() if self.outside else None, "outside_ok": self.outside_ok,
                 "confusion": self.confusion().to_dict()}
@@ -174,6 +201,11 @@ def run_case(task: dict[str, Any]) -> SelftestCase:
     roads = task["roads"]
     duration = task["duration"]
     w: WithheldEffect | None = task["effect"]
+    if task.get("none"):   # nothing withheld: the 'real' trips are the sim's own; nothing may be identified
+        diag = diagnose(sim_trips(sim, roads, duration), sim, settings, floor=task["floor"])
+        bins = diag.unexplained.get("departing_bins") or []
+        where = f"{bins[0]['regime']}: {bins[0]['bin']}" if bins else ""
+        return _case(NONE_LABEL, "none", diag, not diag.identified, where, time.perf_counter() - t0)
     if w is None:   # the out-of-catalog effect
         real = [torque_map_band_error(t) for t in sim_trips(sim, roads, duration)]
     else:
@@ -196,6 +228,8 @@ def run_selftest(vehicle: str = "bmw_i3", effects: Sequence[WithheldEffect] = SE
     from roadload.sweep import run_sweep
 
     sim = SimConfig.load(vehicle)
+    if sim.vehicle.drivetrain.kind != "bev":   # the energy side (battery power) exists for electric vehicles only
+        effects = [w for w in effects if w.switch != "auxiliary_load"]
     settings = settings or DiagnosisSettings()
     probe = sim_trips(sim, roads[:1], 30.0)[0]
     floor = fit_floor(sim, set(probe.channels), settings)
@@ -204,10 +238,12 @@ def run_selftest(vehicle: str = "bmw_i3", effects: Sequence[WithheldEffect] = SE
     if outside:
         tasks.append({"sim": sim, "settings": settings, "roads": tuple(roads), "duration": duration,
                       "effect": None, "floor": floor})
+    tasks.append({"sim": sim, "settings": settings, "roads": tuple(roads), "duration": duration,
+                  "effect": None, "floor": floor, "none": True})
     outcomes = run_sweep(run or run_case, tasks, progress=progress, workers=workers,
                          description="sim2real selftest")
     cases = []
-    for o in outcomes:     # a failed case is reported as such (identified = 'error: ...'), never dropped
+    for o in outcomes[:-1]:     # a failed case is reported as such (identified = 'error: ...'), never dropped
         if o.ok:
             cases.append(o.value)
         else:
@@ -216,4 +252,7 @@ def run_selftest(vehicle: str = "bmw_i3", effects: Sequence[WithheldEffect] = SE
                                       f"error: {o.error}", False, float("nan"), float("nan"), float("nan"),
                                       float("nan"), {}, None, ""))
     out_case = cases.pop() if outside else None
-    return SelftestResult(cases, out_case, bool(out_case.correct) if out_case else False, vehicle)
+    last = outcomes[-1]
+    none_case = last.value if last.ok else SelftestCase(NONE_LABEL, "none", f"error: {last.error}", False,
+                                                        *([float("nan")] * 4), {}, None, "")
+    return SelftestResult(cases, out_case, bool(out_case.correct) if out_case else False, vehicle, none_case)

@@ -188,3 +188,24 @@ def test_candidate_missing_channels_are_named():
     assert get_candidate("cornering").missing({"speed": np.ones(3)}) == ["path_curvature"]
     with pytest.raises(DiagnosisError, match="unknown candidate"):
         get_candidate("nope")
+
+
+def test_selftest_scoring():
+    from roadload.sim2real.selftest import SelftestCase, SelftestResult, WithheldEffect, is_correct
+
+    assert is_correct(WithheldEffect("p", "payload"), "mass_offset")
+    assert is_correct(WithheldEffect("w", "wet_road"), "rolling_scale")          # alias
+    assert not is_correct(WithheldEffect("p", "payload"), "drag_area")
+    assert not is_correct(WithheldEffect("p", "payload"), "unexplained")
+
+    def case(label, ident, ok, before, after):
+        return SelftestCase(label, label, ident, ok, 1 - after / before, float("nan"), before, after, {}, None, "")
+    res = SelftestResult([case("a", "mass_offset", True, 50.0, 10.0), case("b", "unexplained", False, 30.0, 30.0)],
+                         case("out", "unexplained", True, 40.0, 40.0), True, "toy",
+                         case("none", "unexplained", True, 10.0, 6.0))
+    assert res.top1 == 0.5
+    assert res.median_shrinkage == pytest.approx(np.median([0.8, 0.0]))
+    assert res.noise_rmse == 6.0
+    assert res.excess_shrinkage(res.cases[0]) == pytest.approx(1 - np.sqrt(100 - 36) / np.sqrt(2500 - 36))
+    conf = res.confusion()
+    assert conf.loc["a", "mass_offset"] == 1 and conf.loc["b", "unexplained"] == 1 and conf.values.sum() == 4

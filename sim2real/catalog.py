@@ -247,17 +247,19 @@ def candidate_names() -> list[str]:
     return list(_CATALOG)
 
 
-_TAU_GRID = (150.0, 300.0, 600.0, 1200.0, 2400.0)
+_TAU_GRID = (150.0, 300.0, 600.0, 1200.0, 2400.0, 4800.0)
 _DIST_GRID = (1000.0, 2500.0, 5000.0, 10000.0, 20000.0)
 
 
 def _oil_to_sim(p, shape, model):
     """Fitted extra loss fraction k at the start -> the sim's oil start temperature: phi_start - 1 =
-    k / (1 - eta) = (phi_cold - 1) x, T_start = T_warm - x (T_warm - 293.15 K), x <= 1.5."""
+    k / (1 - eta) = (phi_cold - 1) x, T_start = T_warm - x (T_warm - 293.15 K), x <= 1.5; the fitted decay time
+    tau becomes the drive-train's oil time constant."""
     k = _p(p, "cold loss fraction")
     x = k / max(1.0 - model.drivetrain_efficiency, 1e-3) / max(model.oil_cold_loss_factor - 1.0, 1e-3)
     x = float(np.clip(x, 0.0, 1.5))
-    return {"start_temperature": float(model.oil_warm_temperature - x * (model.oil_warm_temperature - 293.15))}
+    return {"start_temperature": float(model.oil_warm_temperature - x * (model.oil_warm_temperature - 293.15)),
+            "spec_changes": {"drivetrain.oil_time_constant": {"factor": float(shape) / model.oil_time_constant}}}
 
 for _cand in (
     CandidateEffect("drag_area", "drag-area change c_x A_V (roof box, open windows, body change)", _drag_area,

@@ -39,7 +39,8 @@ def columns_of(table: pd.DataFrame) -> dict[str, np.ndarray]:
 @dataclass(frozen=True)
 class SimForceModel:
     """Parameters of the sim's force balance (SI): m_V [kg], f_r0 [1], f_r1 [s/m], f_r4 [s⁴/m⁴], c_x A_V [m²],
-    c_yW [N/rad] as in eq. 2.15, drive-train efficiency η (for converting loss fractions), r_W [m], number of gears, the drive-train oil's warm temperature [K] and cold loss factor φ_cold."""
+    c_yW [N/rad] as in eq. 2.15, drive-train efficiency η (for converting loss fractions), r_W [m], number of
+    gears, the drive-train oil's warm temperature [K], cold loss factor φ_cold and time constant [s]."""
 
     vehicle: str
     mass: float
@@ -53,6 +54,7 @@ class SimForceModel:
     n_gears: int = 1
     oil_warm_temperature: float = 363.15
     oil_cold_loss_factor: float = 1.6
+    oil_time_constant: float = 1200.0
 
     def __post_init__(self) -> None:
         for name in ("mass", "drag_area", "cornering_stiffness", "wheel_radius"):
@@ -70,7 +72,8 @@ class SimForceModel:
                    drag_area=spec.drag_area, cornering_stiffness=float(spec.equivalent_cornering_stiffness()),
                    wheel_radius=spec.wheel_radius, n_gears=int(spec.drivetrain.n_gears),
                    oil_warm_temperature=float(spec.drivetrain.oil_warm_temperature),
-                   oil_cold_loss_factor=float(spec.drivetrain.oil_cold_loss_factor))
+                   oil_cold_loss_factor=float(spec.drivetrain.oil_cold_loss_factor),
+                   oil_time_constant=float(spec.drivetrain.oil_time_constant))
 
     def rolling_resistance_coefficient(self, speed: np.ndarray) -> np.ndarray:
         """f_r(v) (eq. 2.10)."""

@@ -73,16 +73,20 @@ class SimConfig:
     def with_effect(self, effect: str, params: dict[str, Any]) -> "SimConfig":
         """A copy with ``effect`` switched on (or re-parameterised) with ``params``; ``spec:<dotted.path>``
         switches change that field of the vehicle spec instead (``{"delta": x}`` added, ``{"factor": f}``
-        multiplied)."""
+        multiplied); ``params["spec_changes"]`` = {path: change} changes further spec fields along with it."""
+        params = dict(params)
+        vehicle = self.vehicle
+        for path, change in (params.pop("spec_changes", None) or {}).items():
+            vehicle = with_spec_change(vehicle, path, change)
         if effect.startswith("spec:"):
-            return SimConfig(with_spec_change(self.vehicle, effect[5:], params),
+            return SimConfig(with_spec_change(vehicle, effect[5:], params),
                              EffectsConfig.parse(self.effects), f"{self.name} + {effect}")
         eff = EffectsConfig.parse(self.effects)
         try:
             eff.enable(effect, **params)
         except EffectsError as exc:
             raise DiagnosisError(f"cannot switch on {effect!r} in the sim: {exc}") from None
-        return SimConfig(self.vehicle, eff, f"{self.name} + {effect}")
+        return SimConfig(vehicle, eff, f"{self.name} + {effect}")
 
 
 def load_sim_vehicle(vehicle: str | dict, base: Path | None) -> VehicleSpec:

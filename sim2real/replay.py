@@ -19,6 +19,9 @@ import pandas as pd
 from .simconfig import SimConfig
 
 
+MAX_GRADE = float(np.arctan(0.29))   # rad, the simulator's road profiles stop at 30 %
+
+
 def _windows(t: np.ndarray, window: float) -> np.ndarray:
     win = np.floor((t - t[0]) / window).astype(int)
     gaps = np.concatenate([[0], np.cumsum(np.diff(t) > 0.5)])
@@ -50,7 +53,9 @@ def _replay(frame, rows, sim, window, seed, t_all, trip, DT, Action, LateralVali
         s = d[keep] - d[0]
         if s.size < 2:
             continue
-        grade = np.nan_to_num(frame["gradient_angle"].to_numpy(dtype=float)[in_trip][keep])
+        # the measured gradient angle (eq. 5.2) is noisy where the vehicle is slow; a road stays below 30 %
+        grade = np.clip(np.nan_to_num(frame["gradient_angle"].to_numpy(dtype=float)[in_trip][keep]),
+                        -MAX_GRADE, MAX_GRADE)
         curv = np.nan_to_num(frame["path_curvature"].to_numpy(dtype=float)[in_trip][keep])
         s = np.concatenate([s, [s[-1] + 500.0]])
         grade, curv = np.append(grade, grade[-1]), np.append(curv, 0.0)

@@ -10,7 +10,7 @@ Both powertrains use one smooth loss polynomial in shaft speed omega [rad/s] and
 - ICE: fuel power P_fuel = (F_trac v + P_loss(omega_E, T_E)) / eta_i + P_idle (Willans line: indicated
   efficiency eta_i plus speed-dependent friction), omega_E = v i_G(G) i_D / r_W, no regeneration. The gear G is
   NOT optimised: it comes from a shift rule on speed (:meth:`SourceEnergyModel.gear_for_speed`), applied by
-  the MPC to the speeds of its previous plan, i.e. a fixed per-node ratio in each NLP.
+  the MPC as a smooth function of the planned speed (:meth:`SourceEnergyModel.smooth_ratio`).
 
 The polynomial is convex in the forces and smooth in v > 0, which keeps the NLP (and the QP path) well-behaved.
 """
@@ -78,6 +78,23 @@ class SourceEnergyModel:
     def ratio_for_speed(self, v) -> np.ndarray:
         """Overall ratio shaft/wheel [-] at speed v from the shift rule."""
         return np.asarray(self.gear_ratios, dtype=float)[self.gear_for_speed(v)]
+
+    def smooth_ratio(self, v, width: float = 1.0):
+        """The shift rule as a smooth function of speed (numpy or CasADi): i_1 + sum_g (i_{g+1} - i_g)
+        (1 + tanh((v - v_shift,g)/width))/2 [-]; used inside the NLP so the engine speed follows the planned
+        speed (a ratio fixed from a previous plan would penalise speeding up in a low gear)."""
+        if self.kind == "ev":
+            return self.gear_ratios[0] + 0.0 * v
+        try:
+            import casadi as ca
+            tanh = ca.tanh if isinstance(v, (ca.SX, ca.MX, ca.DM)) else np.tanh
+        except ImportError:  # pragma: no cover
+            tanh = np.tanh
+        r = self.gear_ratios
+        out = r[0] + 0.0 * v
+        for g, vs in enumerate(self.shift_speeds):
+            out = out + (r[g + 1] - r[g]) * 0.5 * (1.0 + tanh((v - vs) / width))
+        return out
 
     # ------------------------------------------------------------------ limits (numpy or casadi)
     def max_traction_force(self, v, ratio):

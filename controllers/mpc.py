@@ -179,7 +179,9 @@ class OcpSolver:
         regen_power = fr * vm
         g = ca.vertcat(dyn, acc, jerk, power, regen_power)
 
-        psrc = en.source_power(1000.0 * ft, 1000.0 * fr, vm, ratio)
+        # ICE: gear from the speed-based shift rule, smooth in the planned speed; EV: the fixed ratio
+        ratio_obj = en.smooth_ratio(vm) if en.kind == "ice" else ratio
+        psrc = en.source_power(1000.0 * ft, 1000.0 * fr, vm, ratio_obj)
         energy = ca.sum1(psrc * dt) / 1000.0  # kJ
         obj = (energy + lam * t_end / 1000.0 - m_in * E[n] / 1000.0
                + st.accel_weight * m / 1000.0 * ca.sumsqr(acc) + 1e-3 * ds / 1000.0 * ca.sum1(ft + fr + fb))

@@ -116,7 +116,9 @@ class MpcController(ControllerBase):
             v_guess = self.plan.speed_at(mid)
         else:
             v_guess = np.full(n, max(v0, st.speed_floor))
-        ratio = en.ratio_for_speed(v_guess)
+        ratio = np.full(n, en.gear_ratios[0]) if en.kind == "ice" else en.ratio_for_speed(v_guess)  # ICE: lowest
+        # gear for the traction-force bound (the power constraint limits the rest); the objective's gear follows
+        # the planned speed through the smooth shift rule
         return Preview(s=s, grade=at["grade"], curvature=at["curvature"], speed_cap=cap, ratio=ratio,
                        segment0_cap=seg0)
 

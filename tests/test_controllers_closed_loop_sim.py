@@ -45,3 +45,14 @@ def test_energy_fit_matches_the_simulator_maps():
     ice = energy_model_from_spec("gt_rwd")
     assert 0.25 < ice.indicated_efficiency < 0.5
     assert list(ice.shift_speeds) == sorted(ice.shift_speeds)
+
+
+def test_combustion_car_mpc_keeps_pace_with_the_shift_rule_in_the_nlp():
+    # a gear fixed from a slow previous plan would make speeding up look expensive (high engine speed) and
+    # trap the MPC at crawling speed; the smooth shift rule inside the NLP must not
+    road = short_road()
+    mpc, _ = drive("gt_rwd", road, seed=0, settings=DriveSettings(controller="mpc", force_model="oracle"))
+    cruise, _ = drive("gt_rwd", road, seed=0, settings=DriveSettings(controller="cruise", force_model="abc"))
+    assert mpc.metrics["arrived"] and mpc.metrics["speed_violations"] == 0
+    assert mpc.metrics["trip_time"] < 1.3 * cruise.metrics["trip_time"]
+    assert mpc.metrics["energy_J"] < cruise.metrics["energy_J"]

@@ -83,3 +83,30 @@ def test_ice_shift_rule_and_validation():
     with pytest.raises(EnergyModelError, match="kind"):
         SourceEnergyModel(kind="diesel", wheel_radius=0.33, gear_ratios=(1.0,), loss=(0, 0, 0, 0, 0),
                           max_power=1e5, max_torque=300.0)
+
+
+def test_online_model_maps_estimates_and_selects_model_and_estimator():
+    from roadload.controllers.online import OnlineForceModel
+    from roadload.estimators.fleet import knowledge_for_preset
+
+    kn = knowledge_for_preset("bmw_i3")
+    nom = kn.nominal
+    m3 = OnlineForceModel(kn, model="M3", estimator="SGMKF")
+    p = m3.parameters()  # before any data: the nominal X_0 mapped onto the resistance polynomial
+    assert p.mass == pytest.approx(nom.mass)
+    assert p.c0 == pytest.approx(G * nom.mass * nom.rolling_resistance_coefficient)
+    assert p.c2 == pytest.approx(0.5 * nom.air_density * nom.drag_area)
+    assert p.k_corner == 0.0 and m3.describe()["estimator"] == "SGMKF"
+    m4 = OnlineForceModel(kn)  # default M4-RRLM
+    assert m4.parameters().k_corner == pytest.approx(nom.mass ** 2 / nom.cornering_stiffness)
+    with pytest.raises(ForceModelError, match="CAN source"):
+        m4.update()
+    # an implausible estimate (negative mass, NaN drag) is clipped / replaced, not passed to the NLP
+    state = m4.estimator.state
+    state.x = np.array([state.x[0], -5.0, np.nan, state.x[3]])
+    m4.estimator.set_state(state)
+    p = m4.parameters()
+    assert p.mass == pytest.approx(0.5 * nom.mass) and p.c2 == pytest.approx(0.5 * nom.air_density * nom.drag_area)
+    assert m4.clipped == 2
+    with pytest.raises(Exception, match="M9"):
+        OnlineForceModel(kn, model="M9")

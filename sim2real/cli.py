@@ -67,7 +67,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
             cfg = SimConfig.load(sim)
             trips = load_trips(list(real), fmt)
             cands = tuple(c.strip() for c in candidates.split(",") if c.strip()) if candidates else DEFAULT_CANDIDATES
-            settings = DiagnosisSettings(candidates=cands, seed=seed, resimulate=resimulate)
+            settings = DiagnosisSettings(candidates=cands, seed=seed, resimulate=resimulate,
+                                         strict_candidates=candidates is not None)
             with Progress(console=console) as bar:
                 task = bar.add_task("diagnosis", total=1.0)
                 diag = diagnose(trips, cfg, settings,

@@ -52,7 +52,9 @@ class DiagnosisSettings:
     floor roads (profile name, seed) and floor_duration [s] per road for the sim's own trips (none: no floor);
     resimulate: switch the identified effects on in the simulator with their fitted parameters, re-drive the
     floor trips and recompute the gap ("after, simulator"); replay: feed the recorded forces and road into the
-    simulator (before, and after with the effects on) and compare the speed traces (:mod:`.replay`)."""
+    simulator (before, and after with the effects on) and compare the speed traces (:mod:`.replay`);
+    strict_candidates: a candidate the trips lack channels for is an error (the user asked for it by name)
+    instead of being skipped with the reason."""
 
     candidates: tuple[str, ...] = DEFAULT_CANDIDATES
     regimes: tuple[str, ...] = DEFAULT_REGIMES
@@ -71,6 +73,7 @@ class DiagnosisSettings:
     floor_duration: float = 900.0
     resimulate: bool = True
     replay: bool = True
+    strict_candidates: bool = False
 
 
 @dataclass
@@ -308,7 +311,7 @@ def diagnose(real: Sequence[Trip], sim: SimConfig, settings: DiagnosisSettings |
     step("ranking candidates", 0.45)
     sel = Selector(table, np.nan_to_num(r), split, model, robust=settings.robust, n_boot=settings.n_boot,
                    seed=settings.seed, min_gain=settings.min_gain, min_explained=settings.min_explained)
-    explicit = settings.candidates != DEFAULT_CANDIDATES
+    explicit = settings.strict_candidates
     ranked, skipped = sel.rank([n for n in settings.candidates if get_candidate(n).side == "force"])
     if explicit:
         bad = {k: v for k, v in skipped.items() if "needs" in v}

@@ -86,7 +86,7 @@ def test_requested_candidate_without_its_channels_is_an_error(sim, payload_diagn
             c.units.pop(k)
         no_brakes.append(c)
     settings = DiagnosisSettings(candidates=("mass_offset", "friction_brake"), floor_roads=(), resimulate=False,
-                                 n_boot=50, segment_length=30.0)
+                                 n_boot=50, segment_length=30.0, strict_candidates=True)
     with pytest.raises(DiagnosisError, match="brake_force"):
         diagnose(no_brakes, sim, settings)
 

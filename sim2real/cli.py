@@ -51,6 +51,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         fmt: Optional[str] = typer.Option(None, "--format", help="import format of raw logs, e.g. bmw-i3"),
         seed: int = typer.Option(0, help="seed of the split and the bootstrap"),
         resimulate: bool = typer.Option(True, help="re-run the sim with the identified effects switched on"),
+        more: Optional[list[Path]] = typer.Argument(None, help="further trips (so '--real A B C' works)"),
     ) -> None:
         """Diagnose where a sim departs from recorded trips, which effect explains it, how far the gap shrinks."""
         from rich.console import Console
@@ -65,7 +66,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         console = Console()
         try:
             cfg = SimConfig.load(sim)
-            trips = load_trips(list(real), fmt)
+            trips = load_trips(list(real) + list(more or []), fmt)
             cands = tuple(c.strip() for c in candidates.split(",") if c.strip()) if candidates else DEFAULT_CANDIDATES
             settings = DiagnosisSettings(candidates=cands, seed=seed, resimulate=resimulate,
                                          strict_candidates=candidates is not None)

@@ -1067,7 +1067,43 @@ def decision_tree_checks(results, spec: SweepSpec, bound: float = DEFAULT_BOUND)
                     "(section 3.4.2): the text itself expects no advantage here")
         checks.append({"sweep": spec.name, "model": model, "variant": variant, "expected": expect,
                        "metric": col, "group_median": a, "others_median": b, "agrees": agrees, "note": note})
+        checks += _pairwise_checks(spec, model, variant, g.set_index("estimator")[col], note)
     return checks
+
+
+#: the text's pairwise claims: (sweep tree question, estimator that should be better, the one it beats)
+PAIRWISE_CLAIMS = {
+    "outliers": [("RLM", "RLS"), ("RRLM", "RLS")],                      # section 3.4 / figure 3.8
+    "poor_excitation": [("RRLM", "RLM"), ("SGMKF", "RLM")],             # sections 3.3, 3.5.5, 3.7.4
+    "input_noise": [("RIV", "RLS"), ("RIVM", "RLM"), ("RRIVM", "RRLM"), ("IVKF", "KF"), ("IVMKF", "MKF"),
+                    ("RIVMKF", "RMKF"), ("SGIVMKF", "SGMKF")],          # section 3.6.8 / figure 3.14
+}
+
+
+def _pairwise_checks(spec: SweepSpec, model: str, variant: str, score, note: str) -> list[dict[str, Any]]:
+    """One row per pairwise claim of the text whose two estimators were both run.
+
+    outliers: a larger breakdown point; poor_excitation: trace(P) growth at most half of the unregularised
+    estimator's growth above 1 (i.e. g - 1 < (g_RLM - 1)/2), so "bounded" means a clear difference; input
+    noise: a smaller parameter error at the largest noise level. Ties (e.g. neither breaks down) give None."""
+    rows = []
+    for better, worse in PAIRWISE_CLAIMS.get(spec.tree or "", []):
+        if better not in score.index or worse not in score.index:
+            continue
+        a, b = float(score[better]), float(score[worse])
+        if spec.tree == "outliers":
+            agrees = None if a == b else a > b
+            text = f"{worse} breaks down at a lower outlier fraction than {better}"
+        elif spec.tree == "poor_excitation":
+            agrees = (a - 1.0) < 0.5 * (b - 1.0)
+            text = f"{better} bounds the wind-up of trace(P) that {worse} shows"
+        else:
+            agrees = None if a == b else a < b
+            text = f"{better} has a smaller parameter bias than {worse} under input noise"
+        rows.append({"sweep": spec.name, "model": model, "variant": variant, "expected": text,
+                     "metric": f"{better} vs {worse}", "group_median": a, "others_median": b,
+                     "agrees": None if agrees is None else bool(agrees), "note": note})
+    return rows
 
 
 def _publish(tmp: str, path) -> None:

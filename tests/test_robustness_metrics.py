@@ -123,3 +123,32 @@ def test_decision_tree_lookup():
     assert "RIV" in recommended("parameters", False, False)
     with pytest.raises(RobustnessError, match="aim"):
         recommended("speed", False, False)
+
+
+def test_breakdown_table_rank_and_decision_tree_checks_on_a_handmade_sweep():
+    import pandas as pd
+
+    from roadload.estimators.robustness import SYNTHETIC_SWEEPS, breakdown_table, decision_tree_checks, rank
+
+    levels = [0.0, 0.05, 0.1, 0.2]
+    err = {"RLS": [0.30, 0.35, 0.45, 0.9], "RLM": [0.30, 0.30, 0.31, 0.32], "RRLM": [0.31, 0.31, 0.33, 0.5],
+           "KF": [0.2, 0.5, 0.6, 0.7]}
+    rows = [{"backend": "synthetic", "sweep": "outliers", "variant": "output/isolated", "model": "synthetic",
+             "estimator": e, "level": lv, "seed": s, "rel_error": v + 0.001 * s}
+            for e, vals in err.items() for lv, v in zip(levels, vals) for s in range(3)]
+    res = pd.DataFrame(rows)
+    bd = breakdown_table(res, bound=0.1).set_index("estimator")["breakdown"]
+    # excess over the level-0 error: RLS +0.15 at 0.1, RLM never, RRLM +0.19 at 0.2, KF +0.3 at 0.05
+    assert bd.to_dict() == {"KF": 0.05, "RLM": np.inf, "RLS": 0.1, "RRLM": 0.2}
+    ranking = rank(res, SYNTHETIC_SWEEPS["outliers"], bound=0.1)
+    assert list(ranking.sort_values("rank")["estimator"]) == ["RLM", "RRLM", "RLS", "KF"]
+    checks = decision_tree_checks(res, SYNTHETIC_SWEEPS["outliers"], bound=0.1)
+    group = [c for c in checks if c["metric"] == "breakdown"][0]
+    assert group["agrees"] is True and group["group_median"] > group["others_median"]
+    pairs = {c["metric"]: c["agrees"] for c in checks if " vs " in c["metric"]}
+    assert pairs == {"RLM vs RLS": True, "RRLM vs RLS": True}
+    tie = res.copy()
+    tie.loc[tie["estimator"] == "RLS", "rel_error"] = 0.3      # RLS never breaks down either: a tie
+    pairs = {c["metric"]: c["agrees"] for c in decision_tree_checks(tie, SYNTHETIC_SWEEPS["outliers"], 0.1)
+             if " vs " in c["metric"]}
+    assert pairs["RLM vs RLS"] is None and pairs["RRLM vs RLS"] is False

@@ -184,8 +184,9 @@ def _tire_warmup(model, shape):
 
 
 def _friction_brake(model, shape):
-    # measured side subtracts the nominal brake force; a pad friction off by a factor (1 + k) leaves -k F_B
-    return (Term("-F_brake", "pad friction error k", "1", lambda s: -np.nan_to_num(_c(s, BRAKE_FORCE)),
+    # the measured side subtracts the nominal brake force F_B; with the pad friction X_B = (1 + k) X_B0 the wheels
+    # brake with (1 + k) F_B, so the motion needs k F_B less drive force than measured: residual = +k F_B
+    return (Term("F_brake", "pad friction error k", "1", lambda s: np.nan_to_num(_c(s, BRAKE_FORCE)),
                  (BRAKE_FORCE,), lambda n: 0.0),)
 
 

@@ -209,3 +209,17 @@ def test_selftest_scoring():
     assert res.excess_shrinkage(res.cases[0]) == pytest.approx(1 - np.sqrt(100 - 36) / np.sqrt(2500 - 36))
     conf = res.confusion()
     assert conf.loc["a", "mass_offset"] == 1 and conf.loc["b", "unexplained"] == 1 and conf.values.sum() == 4
+
+
+def test_friction_brake_gain_sign_and_simulator_mapping():
+    tab = synth(lambda t: np.zeros(len(t)), duration=400.0)
+    rng = np.random.default_rng(5)
+    fb = np.clip(rng.normal(0, 1500, len(tab)), 0, None) * (np.arange(len(tab)) % 200 < 40)
+    tab["brake_force"] = fb
+    # real pads grip 20 % more than the sim's nominal: the measured balance (drive - nominal F_B) shows +0.2 F_B
+    tab["tractive_force"] = tab["tractive_force"] + 0.2 * fb
+    tab["residual"] = tab.tractive_force - tab.sim_force
+    _, ranked, steps = diagnose_table(tab, candidates=("friction_brake", "mass_offset", "torque_scale"))
+    top = ranked[0]
+    assert top.name == "friction_brake" and top.parameters["pad friction error k"] == pytest.approx(0.2, abs=0.02)
+    assert top.sim_parameters == {"factor": pytest.approx(1.0 + top.parameters["pad friction error k"])}

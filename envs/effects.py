@@ -104,16 +104,24 @@ EFFECTS: dict[str, EffectDef] = {e.name: e for e in [
                "offset": EffectParam(10.0, "N*m", "torque offset", -500.0, 500.0)}),
     EffectDef("sensor_outliers", "Outliers: each sample of the selected channels is hit with probability rate; "
               "x += +-magnitude outlier_scale (1 + |N(0,1)|) (outlier_scale per channel in the sensor spec). "
-              "inputs = speeds, accelerations, yaw rate, steering; outputs = drive torque, brake pressures.",
+              "inputs = speeds, accelerations, yaw rate, steering; outputs = drive torque, brake pressures. "
+              "burst_length > 1: rate is the probability per sample that a burst STARTS; a burst hits "
+              "burst_length consecutive samples with one sign (drawn independently per channel; bursts may "
+              "overlap and then add). channel: one channel name or several joined by '+' (overrides channels).",
               {"rate": EffectParam(1e-3, "1", "probability per sample", 0.0, 0.5),
                "magnitude": EffectParam(1.0, "1", "multiplier of the channel's outlier_scale", 0.0, 1000.0),
-               "channels": EffectParam("all", "", "which channels", choices=("all", "inputs", "outputs"))}),
+               "channels": EffectParam("all", "", "which channels", choices=("all", "inputs", "outputs")),
+               "burst_length": EffectParam(1.0, "samples", "samples per outlier burst (1 = isolated outliers; "
+                                           "seconds = burst_length / sample_rate)", 1.0, 4096.0),
+               "channel": EffectParam("", "", "channel name(s) joined by '+' ('' = use channels)")}),
     EffectDef("sensor_dropouts", "Dropouts: Poisson events (rate per hour) of exponential length (mean_duration); "
               "mode 'nan' sets the selected channels to NaN, 'missing' removes the samples (rows) entirely.",
               {"rate": EffectParam(30.0, "1/h", "dropout events per hour", 0.0, 36000.0),
                "mean_duration": EffectParam(0.5, "s", "mean dropout length", 0.01, 60.0),
                "mode": EffectParam("nan", "", "'nan' runs or 'missing' samples", choices=("nan", "missing")),
-               "channels": EffectParam("all", "", "which channels (mode nan)", choices=("all", "inputs", "outputs"))}),
+               "channels": EffectParam("all", "", "which channels (mode nan)", choices=("all", "inputs", "outputs")),
+               "channel": EffectParam("", "", "channel name(s) joined by '+' (mode nan; overrides channels; "
+                                      "'' = use channels)")}),
     EffectDef("sensor_bias", "Random constant sensor biases: bias ~ N(0, (scale b_ref)^2) per channel, b_ref from "
               "sensors.BIAS_REFERENCE (e.g. 0.05 m/s^2 for accelerometers).",
               {"scale": EffectParam(1.0, "1", "multiplier of the reference bias", 0.0, 100.0)}),
@@ -134,6 +142,10 @@ def _parse_value(effect: str, name: str, raw: Any, p: EffectParam) -> float | st
         if raw not in p.choices:
             raise EffectsError(f"{where}: must be one of {list(p.choices)}, got {raw!r}")
         return str(raw)
+    if isinstance(p.default, str):  # free text (e.g. channel names), checked where it is used
+        if not isinstance(raw, str):
+            raise EffectsError(f"{where}: expected text, got {raw!r}")
+        return raw.strip()
     try:
         value = float(raw)
     except (TypeError, ValueError):

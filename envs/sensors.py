@@ -87,7 +87,14 @@ class SensorModel:
             p = effects.params("torque_model_error")
             self.gain_error, self.offset = float(p["gain_error"]), float(p["offset"])
 
-        def group(which: str) -> np.ndarray:
+        def group(which: str, explicit: str = "", effect: str = "") -> np.ndarray:
+            if explicit:
+                wanted = [w.strip() for w in explicit.split("+") if w.strip()]
+                unknown = [w for w in wanted if w not in self.names]
+                if unknown or not wanted:
+                    raise SensorConfigError(f"effect {effect!r} parameter 'channel': unknown or disabled channel(s) "
+                                            f"{unknown or [explicit]}; enabled channels: {self.names}")
+                return np.array([n in wanted for n in self.names], dtype=bool)
             if which == "inputs":
                 sel = INPUT_CHANNELS
             elif which == "outputs":
@@ -98,12 +105,22 @@ class SensorModel:
 
         self.outliers = effects.params("sensor_outliers") if effects.enabled("sensor_outliers") else None
         if self.outliers is not None:
-            self.outlier_on = group(str(self.outliers["channels"]))
+            self.outlier_on = group(str(self.outliers["channels"]), str(self.outliers.get("channel", "")),
+                                    "sensor_outliers")
             self.outlier_size = np.array([c.outlier_scale for c in cs]) * float(self.outliers["magnitude"])
+            burst = float(self.outliers.get("burst_length", 1.0))
+            if burst != round(burst):
+                raise SensorConfigError(f"effect 'sensor_outliers' parameter 'burst_length': must be a whole number "
+                                        f"of samples, got {burst!r}")
+            self.burst_length = int(burst)
         self.dropouts = effects.params("sensor_dropouts") if effects.enabled("sensor_dropouts") else None
         if self.dropouts is not None:
-            self.dropout_on = group(str(self.dropouts["channels"]))
+            self.dropout_on = group(str(self.dropouts["channels"]), str(self.dropouts.get("channel", "")),
+                                    "sensor_dropouts")
             self.missing_mode = self.dropouts["mode"] == "missing"
+            if self.missing_mode and self.dropouts.get("channel", ""):
+                raise SensorConfigError("effect 'sensor_dropouts': parameter 'channel' needs mode 'nan' (mode "
+                                        "'missing' removes whole samples of every channel)")
         self._cache: OrderedDict[int, tuple[np.ndarray, np.ndarray | None, np.ndarray | None]] = OrderedDict()
         st = vehicle.steering
         self._steer_x = np.asarray(st.wheel_angle, float)
@@ -142,6 +159,15 @@ class SensorModel:
         lengths = np.minimum(np.ceil(g.exponential(float(p["mean_duration"]) / dt_meas, size=n)), CHUNK)
         return list(zip(starts.tolist(), lengths.astype(int).tolist()))
 
+    def _outlier_bursts(self, j: int, c: int) -> list[tuple[int, float, np.ndarray]]:
+        """(start, sign, sizes) of the outlier bursts of channel j that begin in chunk c (absolute sample index;
+        sizes: burst_length values magnitude outlier_scale (1 + |N(0,1)|))."""
+        go = np.random.default_rng([self.seed, 2, j, c])
+        starts = np.flatnonzero(go.random(CHUNK) < float(self.outliers["rate"]))
+        signs = np.where(go.random(starts.size) < 0.5, -1.0, 1.0)
+        mags = self.outlier_size[j] * (1.0 + np.abs(go.standard_normal((starts.size, self.burst_length))))
+        return [(c * CHUNK + int(st), float(sg), m) for st, sg, m in zip(starts, signs, mags)]
+
     def _chunk(self, c: int) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
         hit = self._cache.get(c)
         if hit is not None:
@@ -151,7 +177,17 @@ class SensorModel:
         for j in range(nch):
             g = np.random.default_rng([self.seed, 1, j, c])
             add[j] = self.bias[j] + self.noise[j] * g.standard_normal(CHUNK) if self.noise[j] > 0 else self.bias[j]
-            if self.outliers is not None and self.outlier_on[j]:
+            if self.outliers is not None and self.outlier_on[j] and self.burst_length > 1:
+                for cc in (c - 1, c):
+                    if cc < 0:
+                        continue
+                    for start, sign, mags in self._outlier_bursts(j, cc):
+                        a = max(start - c * CHUNK, 0)
+                        b = min(start + mags.size - c * CHUNK, CHUNK)
+                        if b > a:
+                            off = a - (start - c * CHUNK)
+                            add[j, a:b] += sign * mags[off:off + b - a]
+            elif self.outliers is not None and self.outlier_on[j]:
                 go = np.random.default_rng([self.seed, 2, j, c])
                 u = go.random(CHUNK)
                 idx = np.flatnonzero(u < float(self.outliers["rate"]))

@@ -203,6 +203,15 @@ def _torque_scale(model, shape):
                  lambda n: 0.0),)
 
 
+def _drive_efficiency(model, shape):
+    # efficiency off differently when motoring and when regenerating: F_meas = (1 + e_m) F in traction,
+    # (1 + e_r) F in regen
+    return (Term("max(F_drive, 0)", "traction scale error e_m", "1",
+                 lambda s: np.clip(_c(s, DRIVE_FORCE), 0.0, None), (DRIVE_FORCE,), lambda n: 0.0),
+            Term("min(F_drive, 0)", "regen scale error e_r", "1",
+                 lambda s: np.clip(_c(s, DRIVE_FORCE), None, 0.0), (DRIVE_FORCE,), lambda n: 0.0))
+
+
 def _latency(model, shape):
     # a torque signal late by tau: F_meas(t) = F(t - tau) ~ F(t) - tau dF/dt
     return (Term("-dF_drive/dt", "latency tau", "s", lambda s: -_c(s, DRIVE_FORCE_RATE), (DRIVE_FORCE_RATE,),
@@ -319,6 +328,9 @@ for _cand in (
                     (DRIVE_FORCE,), "spec:sensors.drive_torque_gain_error",
                     lambda p, sh, m: {"delta": _p(p, "torque scale error epsilon")},
                     regime_hint="mode", sim_aliases=("torque_model_error",)),
+    CandidateEffect("drive_efficiency", "drive-train / motor efficiency off, separately in traction and in regen",
+                    _drive_efficiency, (DRIVE_FORCE,), None, None, regime_hint="mode",
+                    sim_aliases=("spec:sensors.drive_torque_gain_error", "torque_model_error")),
     CandidateEffect("latency", "drive-torque signal latency", _latency, (DRIVE_FORCE_RATE,),
                     "spec:sensors.channels.drive_torque.latency",
                     lambda p, sh, m: {"delta": max(_p(p, "latency tau"), 0.0)}, regime_hint="acceleration"),

@@ -109,8 +109,20 @@ def figure_residual_map(diag: Diagnosis, path: Path) -> Path:
     return path
 
 
+def _time_profile(f: pd.DataFrame, r: np.ndarray, valid: np.ndarray, sel: np.ndarray):
+    """Per 1-min bin of time since start: median over trips of each trip's median residual, and the IQR."""
+    minute = np.floor(f["time_since_start"].to_numpy() / 60.0)
+    g = pd.DataFrame({"trip": f["trip"].to_numpy(), "m": minute, "r": r})[valid & sel]
+    per_trip = g.groupby(["m", "trip"])["r"].median().reset_index()
+    q = per_trip.groupby("m")["r"].quantile([0.25, 0.5, 0.75]).unstack()
+    n = per_trip.groupby("m")["trip"].nunique()
+    q = q[n >= 3]
+    return q.index.to_numpy() + 0.5, q[0.25].to_numpy(), q[0.5].to_numpy(), q[0.75].to_numpy()
+
+
 def figure_residual_time(diag: Diagnosis, path: Path) -> Path:
-    """Residual over time since start per trip (30 s rolling median), before and after."""
+    """Residual over time since start: per trip (30 s rolling median) for up to 8 trips; for more, the median
+    over trips of the per-minute residual with its IQR, per season."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -118,7 +130,25 @@ def figure_residual_time(diag: Diagnosis, path: Path) -> Path:
     f = diag.table.frame
     valid = f["valid"].to_numpy(bool)
     fig, axes = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
-    trips = list(pd.unique(f["trip"]))[:12]
+    trips = list(pd.unique(f["trip"]))
+    if len(trips) > 8:
+        seasons = f["season"].to_numpy() if "season" in f.columns else np.full(len(f), "all")
+        for season in pd.unique(seasons):
+            sel = seasons == season
+            for ax, r in zip(axes, (f["residual"].to_numpy(), diag.residual_after)):
+                x, lo, med, hi = _time_profile(f, r, valid, sel)
+                n_trips = f["trip"][sel].nunique()
+                line, = ax.plot(x, med, lw=1.5, label=f"{season} ({n_trips} trips)")
+                ax.fill_between(x, lo, hi, color=line.get_color(), alpha=0.2)
+        axes[0].set_title("force residual: median over trips per minute since start (band: IQR), before")
+        axes[1].set_title("after the identified effects")
+        for ax in axes:
+            ax.axhline(0, color="k", lw=0.6)
+            ax.set_ylabel("N")
+        axes[1].set_xlabel("time since start [min]")
+        axes[0].legend(fontsize=8)
+        _save(fig, path)
+        return path
     for k in trips:
         sel = valid & (f["trip"] == k).to_numpy()
         if sel.sum() < 50:
@@ -132,8 +162,7 @@ def figure_residual_time(diag: Diagnosis, path: Path) -> Path:
         ax.axhline(0, color="k", lw=0.6)
         ax.set_ylabel("N")
     axes[1].set_xlabel("time since start [min]")
-    if len(trips) <= 8:
-        axes[0].legend(fontsize=7, ncol=4)
+    axes[0].legend(fontsize=7, ncol=4)
     _save(fig, path)
     return path
 

@@ -40,6 +40,12 @@ class EffectDef:
 
 
 _INF = math.inf
+_RAMP_TIMING = {
+    "onset": EffectParam(600.0, "s or m", "start of the ramp (time or distance, see onset_unit)", 0.0, 1e7),
+    "ramp": EffectParam(60.0, "s or m", "ramp length in the unit of onset (0 = a step)", 0.0, 1e7),
+    "onset_unit": EffectParam("s", "", "'s': onset/ramp in seconds of trip time; 'm': metres driven",
+                              choices=("s", "m")),
+}
 EFFECTS: dict[str, EffectDef] = {e.name: e for e in [
     EffectDef("wind", "Wind with gusts (eq. 2.7-2.8a): v_w = max(0, mean + g(t)), g an Ornstein-Uhlenbeck process "
               "(std gust_std, time constant gust_time_constant); direction psi_w0 + d(t) in the road frame at s=0 "
@@ -127,6 +133,25 @@ EFFECTS: dict[str, EffectDef] = {e.name: e for e in [
               {"scale": EffectParam(1.0, "1", "multiplier of the reference bias", 0.0, 100.0)}),
     EffectDef("sensor_latency", "Extra latency on every channel.",
               {"extra": EffectParam(0.05, "s", "added latency", 0.0, 5.0)}),
+    EffectDef("wind_ramp", "Wind onset (envs/schedules.py): the mean wind speed and direction go linearly from "
+              "start to final over [onset, onset + ramp] (time or distance, onset_unit; ramp = 0: a step). Direction "
+              "as for 'wind' (pi = headwind at the start). With 'wind' on, its gusts and wander ride on top and its "
+              "mean_speed/direction are replaced; without it the wind is exactly the schedule.",
+              {**_RAMP_TIMING,
+               "start_speed": EffectParam(0.0, "m/s", "mean wind speed before the onset", 0.0, 40.0),
+               "final_speed": EffectParam(8.0, "m/s", "mean wind speed after the ramp", 0.0, 40.0),
+               "start_direction": EffectParam(math.pi, "rad", "direction before the onset", -10.0, 10.0),
+               "final_direction": EffectParam(math.pi, "rad", "direction after the ramp", -10.0, 10.0)}),
+    EffectDef("mass_ramp", "Mass (payload) ramp/step (envs/schedules.py): m_V + magnitude clip((x - onset) / ramp, "
+              "0, 1), x = t or s (onset_unit); payload changes at stops stay on top.",
+              {**_RAMP_TIMING, "magnitude": EffectParam(200.0, "kg", "mass added by the end of the ramp",
+                                                        -1000.0, 5000.0)}),
+    EffectDef("drag_area_ramp", "Drag-area ramp/step (envs/schedules.py): c_x A_V x (1 + magnitude clip((x - "
+              "onset) / ramp, 0, 1)) (eq. 2.7), on top of the 'drag_area' toggles.",
+              {**_RAMP_TIMING, "magnitude": EffectParam(0.2, "1", "relative drag-area change", -0.9, 5.0)}),
+    EffectDef("rolling_resistance_ramp", "Rolling-resistance ramp/step (envs/schedules.py): f_r0, f_r1, f_r4 x (1 + "
+              "magnitude clip((x - onset) / ramp, 0, 1)) (eq. 2.10), on top of the other f_r effects.",
+              {**_RAMP_TIMING, "magnitude": EffectParam(0.2, "1", "relative f_r change", -0.9, 5.0)}),
     EffectDef("poor_excitation", "Poor excitation (section 5.1): stretches of stretch_length covering fraction of "
               "the road where the driver cruises at constant speed (no speed variation).",
               {"fraction": EffectParam(0.5, "1", "share of the road in cruise stretches", 0.0, 1.0),

@@ -29,6 +29,7 @@ from .layout import *  # noqa: F401,F403 - index constants
 from .numerics import road_value_at
 from .packing import pack_vehicle
 from .presets import get_preset
+from .schedules import Schedules
 from .sensors import SensorModel
 
 DT = 0.01  # s, physics step (100 Hz)
@@ -164,6 +165,7 @@ class Simulator:
 
         self.P, self.tabs, self.ti = pack_vehicle(self.vehicle, DT)
         self._pack_effects()
+        self._schedules = Schedules(self.effects, self.P)
         rho_nom = float(air_density(self.effects.ambient_temperature, self.effects.ambient_pressure))
         pack_driver(self.P, self.driver, self.vehicle.understeer_gradient(), rho_nom)
         self.P[P_ROAD_LEN] = road.length
@@ -259,6 +261,7 @@ class Simulator:
         self._rng = np.array([np.random.default_rng([self.seed, 100]).integers(0, 2 ** 63)], dtype=np.uint64)
         self.sensor_model = SensorModel(self.vehicle, self.sensors, self.effects, self.seed, DT)
         P = self.P
+        self._schedules.restore(P)
         P[P_T_END] = np.inf
         P[P_S_END] = np.inf
         X = np.zeros(N_STATE)
@@ -288,6 +291,8 @@ class Simulator:
             else:
                 X[S_MODE], X[S_OMEGA_E] = MODE_OPEN, P[P_IDLE]
         self.X = X
+        if self._schedules.active:
+            self._schedules.apply(X, P)
         self._log = np.zeros((N_LOG, 1 << 14))
         self._warned = False
         self._last_energy = 0.0
@@ -333,8 +338,14 @@ class Simulator:
             raise SimulationError(f"n_substeps: must be >= 1, got {n_substeps!r}")
         if int(self.X[S_NLOG]) + n_substeps > self._log.shape[1]:
             self._ensure_capacity(n_substeps)
-        physics.advance(self.X, self.P, self.tabs, self.ti, self._road, self._stops, self._cycle, self._rng, cmd,
-                        self._log, n_substeps)
+        if self._schedules.active:
+            for _ in range(n_substeps):
+                self._schedules.apply(self.X, self.P)
+                physics.advance(self.X, self.P, self.tabs, self.ti, self._road, self._stops, self._cycle, self._rng,
+                                cmd, self._log, 1)
+        else:
+            physics.advance(self.X, self.P, self.tabs, self.ti, self._road, self._stops, self._cycle, self._rng, cmd,
+                            self._log, n_substeps)
         if self.X[S_AY_WARN_N] > 0 and not self._warned:
             self._warn_lateral()
         e = self.X[S_E_SOURCE]
@@ -407,8 +418,11 @@ class Simulator:
         while done < max_steps and not physics.is_done(X, P):
             n = min(chunk, max_steps - done)
             self._ensure_capacity(n)
-            done += physics.run(X, P, self.tabs, self.ti, self._road, self._stops, self._cycle, self._rng,
-                                self._cmd, self._log, n)
+            if self._schedules.active:
+                done += self._run_scheduled(n)
+            else:
+                done += physics.run(X, P, self.tabs, self.ti, self._road, self._stops, self._cycle, self._rng,
+                                    self._cmd, self._log, n)
             if progress is not None:
                 frac = (X[S_T] - t0) / horizon if P[P_T_END] < np.inf else (
                     (X[S_POS] - (P[P_S_END] - distance if distance else 0.0)) / max(dist if distance is None
@@ -424,6 +438,33 @@ class Simulator:
         e = X[S_E_SOURCE]
         self._result = self._make_result(e - self._last_energy)
         self._last_energy = e
+
+    def _run_scheduled(self, n: int) -> int:
+        """Up to n substeps with the scheduled effects: whole chunks while every schedule is constant (stopping
+        at the next onset), the schedule applied before every substep while a ramp is under way."""
+        X, P = self.X, self.P
+        done = 0
+        while done < n and not physics.is_done(X, P):
+            lim = self._schedules.limits(X)
+            self._schedules.apply(X, P)
+            if lim is None:
+                done += physics.run(X, P, self.tabs, self.ti, self._road, self._stops, self._cycle, self._rng,
+                                    self._cmd, self._log, 1)
+                continue
+            t_end, s_end = P[P_T_END], P[P_S_END]
+            P[P_T_END], P[P_S_END] = min(t_end, lim[0]), min(s_end, lim[1])
+            try:
+                k = physics.run(X, P, self.tabs, self.ti, self._road, self._stops, self._cycle, self._rng,
+                                self._cmd, self._log, n - done)
+            finally:
+                P[P_T_END], P[P_S_END] = t_end, s_end
+            if k == 0:  # at an onset: one substep with the schedule applied
+                k = physics.run(X, P, self.tabs, self.ti, self._road, self._stops, self._cycle, self._rng,
+                                self._cmd, self._log, 1)
+                if k == 0:
+                    break
+            done += k
+        return done
 
     # ------------------------------------------------------------------ queries
     @property

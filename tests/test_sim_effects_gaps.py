@@ -62,3 +62,55 @@ def test_dropouts_on_a_single_channel_and_clear_errors():
         Simulator("gt_rwd", road(), effects="sensor_outliers:burst_length=2.5")
     with pytest.raises(EffectsError, match="burst_length"):
         Simulator("gt_rwd", road(), effects="sensor_outliers:burst_length=0")
+
+
+def test_headwind_ramp_in_truth_and_tractive_force():
+    r = road(6000.0)
+    t = simulate("gt_rwd", r, effects="wind_ramp:onset=100,ramp=30,final_speed=8", seed=6, duration=180.0)
+    tr = t.truth
+    time, w = tr["t"].to_numpy(), tr["wind_speed"].to_numpy()
+    assert np.all(w[time <= 100.0 - 0.01] == 0.0)
+    assert np.allclose(w[time >= 130.01], 8.0)
+    mid = (time > 101.0) & (time < 129.0)  # linear in between (one substep late: applied at the substep start)
+    assert np.allclose(w[mid], 8.0 * (time[mid] - 0.01 - 100.0) / 30.0, atol=1e-9)
+    assert np.allclose(np.cos(tr["wind_angle"].to_numpy()[time > 131]), -1.0, atol=1e-3)  # straight road: headwind
+    # the aerodynamic force is the analytic headwind drag 0.5 rho c_x A (v + v_w)^2 ...
+    v_prev = np.concatenate([[0.0], tr["speed"].to_numpy()[:-1]])
+    drag = 0.5 * tr["air_density"] * tr["drag_area"] * (v_prev + w) ** 2
+    after = time > 131.0
+    np.testing.assert_allclose(tr["aero_force"][after], drag[after], rtol=1e-9)
+    # ... and the tractive force rises by the drag difference of the wind (driver holds the speed)
+    before = (time > 60.0) & (time < 98.0)
+    late = (time > 140.0) & (time < 178.0)
+    fx = tr["tractive_force"].to_numpy()
+    rise = fx[late].mean() - fx[before].mean()
+    calm = 0.5 * tr["air_density"] * tr["drag_area"] * v_prev ** 2
+    expected = drag[late].mean() - calm[before].mean()
+    assert expected > 150.0 and rise == pytest.approx(expected, rel=0.1)
+
+
+def test_parameter_ramps_in_truth_and_step_api_equals_run():
+    eff = ("mass_ramp:onset=1000,onset_unit=m,ramp=500,magnitude=300;drag_area_ramp:onset=40,ramp=0,magnitude=0.25;"
+           "rolling_resistance_ramp:onset=20,ramp=40,magnitude=-0.3")
+    sim = Simulator("gt_rwd", road(3000.0), effects=eff, seed=7)
+    sim.run(duration=100.0)
+    tr = sim.to_trip().truth
+    m0 = sim.vehicle.body.mass
+    pos, time = tr["position"].to_numpy(), tr["t"].to_numpy()
+    m = tr["mass"].to_numpy()
+    assert np.all(m[pos < 999.0] == m0) and np.allclose(m[pos > 1502.0], m0 + 300.0)
+    mid = (pos > 1100) & (pos < 1400)
+    pos_prev = np.concatenate([[0.0], pos[:-1]])
+    np.testing.assert_allclose(m[mid], m0 + 300.0 * (pos_prev[mid] - 1000.0) / 500.0)
+    cxa = tr["drag_area"].to_numpy()
+    assert np.all(cxa[time < 39.99] == cxa[0]) and np.allclose(cxa[time > 40.02], 1.25 * cxa[0])
+    f0 = tr["rolling_resistance_f0"].to_numpy()
+    assert np.allclose(f0[time > 60.02], 0.7 * f0[0]) and np.isclose(f0[np.searchsorted(time, 40.01)], 0.85 * f0[0])
+    # the step API applies the same schedule: identical truth
+    step = Simulator("gt_rwd", road(3000.0), effects=eff, seed=7)
+    for _ in range(1000):
+        step.step(None)
+    np.testing.assert_array_equal(step.to_trip().truth.to_numpy(), tr.to_numpy())
+    # reset restores the unscheduled parameters
+    step.reset()
+    assert step.true_parameters()["mass"] == m0 and step.true_parameters()["drag_area"] == pytest.approx(cxa[0])

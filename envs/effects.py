@@ -153,9 +153,13 @@ EFFECTS: dict[str, EffectDef] = {e.name: e for e in [
               "magnitude clip((x - onset) / ramp, 0, 1)) (eq. 2.10), on top of the other f_r effects.",
               {**_RAMP_TIMING, "magnitude": EffectParam(0.2, "1", "relative f_r change", -0.9, 5.0)}),
     EffectDef("poor_excitation", "Poor excitation (section 5.1): stretches of stretch_length covering fraction of "
-              "the road where the driver cruises at constant speed (no speed variation).",
+              "the road where the driver cruises at constant speed (no speed variation). hold_speed 'yes': in "
+              "each stretch the driver holds ONE speed, the lowest planned speed of the stretch (limits and "
+              "curves), regardless of speed-limit changes, and skips the stops inside it; a stretch then lasts "
+              "stretch_length / that speed (e.g. 15 km at 25 m/s = 600 s). 'no': the speed follows the plan.",
               {"fraction": EffectParam(0.5, "1", "share of the road in cruise stretches", 0.0, 1.0),
-               "stretch_length": EffectParam(3000.0, "m", "length of one cruise stretch", 50.0, 1e6)}),
+               "stretch_length": EffectParam(3000.0, "m", "length of one cruise stretch", 50.0, 1e6),
+               "hold_speed": EffectParam("no", "", "hold one speed over each whole stretch", choices=("no", "yes"))}),
 ]}
 
 SENSOR_EFFECTS = ("torque_model_error", "sensor_outliers", "sensor_dropouts", "sensor_bias", "sensor_latency")

@@ -180,6 +180,8 @@ class Simulator:
             self._cycle[0, 1] = 1.0
         self._cmd = np.zeros(N_CMD)
         self._log = np.zeros((N_LOG, 1 << 14))  # column-major: one contiguous array per channel
+        self._vplan_base = self._road[R_VPLAN].copy()
+        self._stops_all = self._stops
         self.reset(seed)
 
     # ------------------------------------------------------------------ setup
@@ -258,6 +260,7 @@ class Simulator:
                                                     float(p["stretch_length"]), scen)
         else:
             self._road[R_CRUISE] = 0.0
+        self._hold_cruise_speed()
         self._rng = np.array([np.random.default_rng([self.seed, 100]).integers(0, 2 ** 63)], dtype=np.uint64)
         self.sensor_model = SensorModel(self.vehicle, self.sensors, self.effects, self.seed, DT)
         P = self.P
@@ -298,6 +301,27 @@ class Simulator:
         self._last_energy = 0.0
         self._result = self._make_result(0.0)
         return self._result
+
+    def _hold_cruise_speed(self) -> None:
+        """poor_excitation with hold_speed 'yes': one constant planned speed per cruise stretch (the lowest of the
+        stretch), re-planned with the driver's deceleration into it; stops inside the stretches are skipped."""
+        rd = self._road
+        rd[R_VPLAN] = self._vplan_base
+        self._stops = self._stops_all
+        if not (self.effects.enabled("poor_excitation")
+                and self.effects.params("poor_excitation")["hold_speed"] == "yes") or self.cycle is not None:
+            return
+        on = rd[R_CRUISE] > 0.5
+        if not on.any():
+            return
+        edges = np.diff(np.concatenate([[0], on.astype(int), [0]]))
+        limit = self.road.speed_limit.astype(float).copy()
+        keep = np.ones(self._stops.size, dtype=bool)
+        for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+            limit[a:b] = float(self._vplan_base[a:b].min()) / self.driver.speed_limit_factor
+            keep &= ~((self._stops >= rd[R_S, a]) & (self._stops <= rd[R_S, b - 1]))
+        rd[R_VPLAN] = speed_plan(self.road.distance, self.road.curvature, limit, self.driver)
+        self._stops = np.ascontiguousarray(self._stops[keep])
 
     def _ensure_capacity(self, extra: int) -> None:
         n = int(self.X[S_NLOG])

@@ -114,3 +114,24 @@ def test_parameter_ramps_in_truth_and_step_api_equals_run():
     # reset restores the unscheduled parameters
     step.reset()
     assert step.true_parameters()["mass"] == m0 and step.true_parameters()["drag_area"] == pytest.approx(cxa[0])
+
+
+def longest_steady(trip, a_max=0.05):
+    """Longest time [s] with |dv/dt| < a_max (truth acceleration) at speed > 5 m/s."""
+    tr = trip.truth
+    ok = (np.abs(tr["acceleration"].to_numpy()) < a_max) & (tr["speed"].to_numpy() > 5.0)
+    return runs(ok).max() * 0.01 if ok.any() else 0.0
+
+
+def test_cruise_holds_one_speed_for_600_s_despite_limit_changes():
+    limits = lambda s: np.where((s // 2000) % 2 == 0, 22.0, 27.0)  # noqa: E731 - limit changes every 2 km
+    r = road(17000.0, limit=limits, stops=(9000.0,))
+    eff = "poor_excitation:fraction=1,stretch_length=16000,hold_speed=yes"
+    held = simulate("gt_rwd", r, effects=eff, seed=8, duration=760.0)
+    plain = simulate("gt_rwd", r, effects="poor_excitation:fraction=1,stretch_length=16000", seed=8, duration=760.0)
+    assert longest_steady(held) >= 600.0
+    assert longest_steady(plain) < 250.0
+    tr = held.truth
+    steady = (tr["t"] > 60.0) & (tr["t"] < 660.0)
+    assert tr["speed"][steady].std() < 0.1 and tr["speed"][steady].min() > 20.0  # no stop at 9 km
+    assert abs(tr["speed"][steady].mean() - (22.0 - 0.5)) < 0.3  # lowest limit minus the driver's margin

@@ -179,12 +179,12 @@ class ControllerBase:
     def _guard(self, obs: Observation, force: float) -> float:
         """Clip the command so the speed stays under the safety envelope (module docstring of .safety)."""
         v_env = float(self.envelope(obs.s))
-        excess = obs.v - (v_env - 0.2)
+        excess = obs.v - (v_env - 0.3)
         if excess <= 0:
             return force
         params = self.params()
         env_decel = max(0.0, -self.envelope.slope(obs.s) * obs.v)
-        limit = self.resistance(obs.v, obs.s, params) - params.inertial_mass * (env_decel + 2.0 * excess)
+        limit = self.resistance(obs.v, obs.s, params) - params.inertial_mass * (env_decel + 5.0 * excess)
         if force > limit:
             self.events["guard_active_steps"] += 1
             return limit

@@ -3,8 +3,10 @@
 Reference: the set speed v_set(s) = fraction * min(limit, sqrt(a_y,max/|kappa|)) (stops: 0), preceded by a
 braking envelope at ``decel`` [m/s^2] so the car slows down *before* a lower limit (map-based cruise control),
 and rate-limited to ``accel`` [m/s^2] when speeding up. Control law:
-F = F_ff(v) + m (k_p e + integral k_i e dt), e = v_ref - v, with the flat-road feed-forward
-F_ff = a_V + b_V v + c_V v^2 of the nominal coast-down coefficients and a clamped (anti-windup) integrator.
+F = F_ff(v) + m (dv_ref/dt + k_p e + integral k_i e dt), e = v_ref - v, with the flat-road feed-forward
+F_ff = a_V + b_V v + c_V v^2 of the nominal coast-down coefficients, the reference's own acceleration as
+feed-forward (low-pass filtered; no tracking lag when the reference slows down before a lower limit), a clamped
+(anti-windup) integrator and the same jerk limit on the command as the MPC (|dF/dt| <= m j_max).
 """
 
 from __future__ import annotations
@@ -29,6 +31,8 @@ class CruiseSettings:
     accel: float = 1.0  # [m/s^2] reference rate when speeding up
     decel: float = 1.0  # [m/s^2] reference braking envelope before lower limits
     integral_limit: float = 2.0  # [m/s^2] anti-windup clamp of the integral term
+    jerk_max: float = 2.0  # [m/s^3] comfort: |dF/dt| <= m j_max on the command (as the MPC's)
+    accel_filter: float = 0.5  # [s] time constant of the reference-acceleration feed-forward filter
 
     def __post_init__(self) -> None:
         if not 0 < self.fraction <= 1:
@@ -51,6 +55,8 @@ class CruiseLaw:
                                        cap_fraction=settings.fraction, cap_margin=settings.margin)
         self.v_ref: float | None = None
         self.integral = 0.0
+        self.a_ref = 0.0
+        self.last_force: float | None = None
 
     def serve_stop(self, index: int) -> None:
         self.reference.serve(index)
@@ -59,17 +65,28 @@ class CruiseLaw:
         """Bumpless start from the current speed (reference = v, integral cleared)."""
         self.v_ref = v
         self.integral = 0.0
+        self.a_ref = 0.0
+        self.last_force = None
 
     def force(self, obs: Observation) -> float:
         st, dt = self.settings, self.ctx.dt
         target = float(self.reference(obs.s))
         if self.v_ref is None:
             self.v_ref = obs.v
+        previous = self.v_ref
         self.v_ref = min(target, max(self.v_ref, obs.v - 0.5) + st.accel * dt)
+        a_raw = float(np.clip((self.v_ref - previous) / dt, -3.0, st.accel))  # the reference's own acceleration
+        self.a_ref += (a_raw - self.a_ref) * min(dt / st.accel_filter, 1.0)
         err = self.v_ref - obs.v
         self.integral = float(np.clip(self.integral + st.ki * err * dt, -st.integral_limit, st.integral_limit))
         ff = float(resistance_force(obs.v, 0.0, 0.0, self.ff))
-        return ff + self.ff.inertial_mass * (st.kp * err + self.integral)
+        m = self.ff.inertial_mass
+        force = ff + m * (self.a_ref + st.kp * err + self.integral)
+        if self.last_force is not None:
+            step = m * st.jerk_max * dt
+            force = float(np.clip(force, self.last_force - step, self.last_force + step))
+        self.last_force = force
+        return force
 
 
 class CruiseController(ControllerBase):

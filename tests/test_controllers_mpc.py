@@ -169,3 +169,13 @@ def test_time_matching_interpolates_energy_to_the_target_time():
     assert not bad.matched
     with pytest.raises(ValueError, match="target_time"):
         match_trip_time(run, float("nan"))
+
+
+def test_cruise_baseline_respects_limits_and_stops():
+    road = scripted_road(length=2600.0, stops=[2400.0])
+    res = drive(CruiseController(), road)
+    m = res.metrics
+    assert m["arrived"] and m["speed_violations"] == 0 and m["ctl_stops_served"] == 1
+    # it holds 90 % of the allowed speed on the flat 50 km/h stretch (PI with integral action)
+    flat = res.log[(res.log.s > 1700) & (res.log.s < 1950)]
+    assert np.allclose(flat.v, 0.9 * 50 / 3.6 - 0.3, atol=0.3)

@@ -264,6 +264,37 @@ def step_recovery_time(t: np.ndarray, X_hat: np.ndarray, X_true: np.ndarray, t_e
     return recovery_time(t, e, t_event, tolerance, hold)
 
 
+def prediction_recovery_time(t: np.ndarray, A: np.ndarray, B: np.ndarray, X_hat: np.ndarray, t_event: float,
+                             tolerance: float = 0.3, hold: float = 10.0, window: float = 30.0) -> float:
+    """Recovery time [s] of the one-step-ahead prediction after an event the model has no parameter for (e.g. a
+    headwind onset: M3/M4 have no wind term, so the true X̄ does not change and :func:`step_recovery_time` is
+    undefined). r_t = |B_t - A_t X̂_{t-1}|, m(t) its running median over the last ``window`` s; recovered when
+    m(t) <= (1 + tolerance) x the median of r over the 20 % of the record before the event, held ``hold`` s.
+    0 when the prediction never degraded; inf when it never recovers."""
+    import pandas as pd
+
+    t = np.asarray(t, dtype=float)
+    if not (t.size == len(A) == len(B) == len(X_hat)) or t.size < 2:
+        raise RobustnessError(f"t, A, B, X_hat must have the same length >= 2, got {t.size}, {len(A)}, {len(B)}, "
+                              f"{len(X_hat)}")
+    pre = t < t_event
+    if not pre.any():
+        raise RobustnessError(f"no samples before the event at {t_event} s")
+    with np.errstate(over="ignore", invalid="ignore"):
+        r = np.abs(np.asarray(B, float)[1:] - np.einsum("ij,ij->i", np.asarray(A, float)[1:],
+                                                        np.asarray(X_hat, float)[:-1]))
+    r = np.where(np.isfinite(r), r, np.inf)
+    tt = t[1:]
+    m = pd.Series(r, index=pd.to_timedelta(tt, unit="s")).rolling(f"{window}s").median().to_numpy()
+    pre_win = (tt < t_event) & (tt >= t_event - 0.2 * (t[-1] - t[0]))
+    if not pre_win.any():
+        raise RobustnessError(f"no samples before the event at {t_event} s")
+    base = float(np.median(r[pre_win]))
+    if not (np.isfinite(base) and base > 0):
+        return float("nan")
+    return recovery_time(tt, m / base - 1.0, t_event, tolerance, hold)
+
+
 def windup_indicators(P: np.ndarray, window: np.ndarray | None = None) -> dict[str, float]:
     """Wind-up indicators of a covariance history P (T×n×n full matrices, or T×n diagonals).
 
@@ -441,21 +472,33 @@ SYNTHETIC_SWEEPS: dict[str, SweepSpec] = {s.name: s for s in (
 # 'sensor_dropouts', 'poor_excitation', 'payload' and its per-channel SensorSpec (bias, latency, outlier scale) —
 # and A/B from the chapter-5 pipeline. Outliers target one channel by zeroing the outlier scale of the others;
 # variant '<channel>/x<k>': outlier size k × the channel's outlier scale of the preset (drive torque 80 N m,
-# accelerometer 2 m/s², speed 3 m/s, steering 0.3 rad), rate per 100 Hz sample. The simulator draws isolated
-# outliers only: burst outliers are covered by the A/B-level sweep. Variants 'output/ab' and 'input/ab' put
-# isolated outliers (±10 σ, rate per 10 Hz triggered sample) into B or A after the pipeline (the A/B-level
-# layer), to separate the estimators' robustness from what the preprocessing does to sensor outliers. Bias and latency levels are multiples of the reference bias
-# (0.05 m/s² accelerometer, 5 N m drive torque, 0.05 m/s speed) and seconds added to the channel's latency.
+# accelerometer 2 m/s², speed 3 m/s, steering 0.3 rad), rate per 100 Hz sample; '<channel>/x<k>/burst': the
+# same share of samples hit in bursts of OUTLIER_BURST_LENGTH samples (simulator 'burst_length'). Variants
+# 'output/ab' and 'input/ab' put isolated outliers (±10 σ, rate per 10 Hz triggered sample) into B or A after the
+# pipeline (the A/B-level layer), to separate the estimators' robustness from what the preprocessing does to
+# sensor outliers. Dropout variants 'outputs' | 'inputs' | 'all' are channel groups, a channel name drops that
+# channel only. Excitation: 'poor_excitation' with hold_speed, so a stretch really is one constant speed for
+# (level × typical motorway speed) m — at least level s, longer where the held speed is below the typical one.
+# Bias and latency levels are multiples of the reference bias (0.05 m/s² accelerometer, 5 N m drive torque,
+# 0.05 m/s speed) and seconds added to the channel's latency. 'wind': a headwind (against the road's initial
+# heading) from calm to level m/s at mid-record, as a step or a RAMP_DURATION ramp ('wind_ramp'); the models
+# have no wind term, so the recovery is judged on the prediction from the onset (prediction_recovery_time). 'ramps': mass
+# (relative to the preset's), drag area or rolling resistance changed by the relative level at mid-record
+# (step or ramp; simulator 'mass_ramp' | 'drag_area_ramp' | 'rolling_resistance_ramp'); recovery time as drift.
 VEHICLE_SWEEPS: dict[str, SweepSpec] = {s.name: s for s in (
     SweepSpec("outliers", "outlier rate per sample", "1", OUTLIER_FRACTIONS,
               ("drive_torque/x1", "drive_torque/x10", "accel_x/x1", "vehicle_speed/x1", "steering_wheel_angle/x1",
-               "output/ab", "input/ab"),
+               "drive_torque/x10/burst", "accel_x/x1/burst", "output/ab", "input/ab"),
               breakdown=True, tree="outliers"),
     SweepSpec("dropouts", "share of samples in NaN dropouts", "1", (0.0, 0.01, 0.05, 0.1, 0.2, 0.3),
-              ("outputs", "inputs", "all"), breakdown=True),
+              ("outputs", "inputs", "all", "drive_torque", "accel_x"), breakdown=True),
     SweepSpec("excitation", "constant-speed cruise stretch length", "s", (0.0, 60.0, 120.0, 300.0, 600.0),
               ("cruise",), tree="poor_excitation"),
     SweepSpec("drift", "payload step", "kg", (0.0, 100.0, 250.0, 500.0), ("payload/step",)),
+    SweepSpec("wind", "final headwind speed", "m/s", (0.0, 3.0, 6.0, 10.0), ("step", "ramp")),
+    SweepSpec("ramps", "relative parameter change", "1", (0.0, 0.1, 0.2, 0.4),
+              ("mass/step", "mass/ramp", "drag_area/step", "drag_area/ramp", "rolling_resistance/step",
+               "rolling_resistance/ramp")),
     SweepSpec("bias", "constant sensor bias (multiples of the reference bias)", "1", (0.0, 1.0, 2.0, 4.0, 10.0),
               ("accel_x", "drive_torque", "vehicle_speed"), breakdown=True),
     SweepSpec("latency", "extra sensor latency", "s", (0.0, 0.05, 0.1, 0.2, 0.5),
@@ -466,7 +509,7 @@ VEHICLE_SWEEPS: dict[str, SweepSpec] = {s.name: s for s in (
 SWEEP_FAMILIES: dict[str, tuple[str, ...]] = {
     "outliers": ("outliers", "dropouts"),
     "excitation": ("excitation",),
-    "drift": ("drift",),
+    "drift": ("drift", "ramps", "wind"),
     "bias": ("bias", "latency"),
     "input_noise": ("input_noise",),
 }
@@ -564,10 +607,20 @@ OUTLIER_MAGNITUDES = {"x1": 1.0, "x10": 10.0}  # multiples of the channel's outl
 DROPOUT_MEAN_DURATION = 0.5     # s, mean length of one NaN dropout
 CRUISE_SHARE = 0.5              # share of the road in cruise stretches in the excitation sweep
 MIN_STRETCH = 30.0              # s, shortest true constant-speed run counted as an unexcited stretch
+OUTLIER_BURST_LENGTH = 50       # samples (0.5 s at 100 Hz) of one outlier burst ('<channel>/<size>/burst')
+EVENT_AT = 0.5                  # share of the record at which a headwind / parameter ramp starts
+RAMP_DURATION = 120.0           # s, length of the '.../ramp' variants (steps: 0)
 
 
 def _road_kind(scenario: Scenario) -> str:
     return EXCITATION_ROAD if scenario.sweep == "excitation" else VEHICLE_ROAD
+
+
+def event_times(scenario: Scenario) -> tuple[float, float]:
+    """(onset, end) [s] of the scheduled change of a 'wind' or 'ramps' scenario: onset at mid-record, end =
+    onset + RAMP_DURATION for '.../ramp' variants, = onset for steps."""
+    onset = EVENT_AT * scenario.duration
+    return onset, onset + (RAMP_DURATION if scenario.variant.endswith("ramp") else 0.0)
 
 
 def _typical_speed(road: str = VEHICLE_ROAD) -> float:
@@ -593,13 +646,31 @@ def vehicle_effects(scenario: Scenario) -> dict[str, dict[str, Any]]:
     if sw == "outliers":
         if var.endswith("/ab"):
             return {}
-        return {"sensor_outliers": {"rate": lv, "magnitude": OUTLIER_MAGNITUDES[var.split("/")[1]],
-                                    "channels": "all"}}
+        channel, size, *burst = var.split("/")
+        if burst:  # level = share of samples hit: bursts start at rate level / burst length
+            return {"sensor_outliers": {"rate": lv / OUTLIER_BURST_LENGTH, "magnitude": OUTLIER_MAGNITUDES[size],
+                                        "channels": "all", "channel": channel,
+                                        "burst_length": float(OUTLIER_BURST_LENGTH)}}
+        return {"sensor_outliers": {"rate": lv, "magnitude": OUTLIER_MAGNITUDES[size], "channels": "all"}}
     if sw == "dropouts":   # share of samples ≈ rate [1/h] / 3600 s × mean duration
+        groups = {"outputs": {"channels": "outputs"}, "inputs": {"channels": "inputs"}, "all": {"channels": "all"}}
         return {"sensor_dropouts": {"rate": lv * 3600.0 / DROPOUT_MEAN_DURATION,
-                                    "mean_duration": DROPOUT_MEAN_DURATION, "mode": "nan", "channels": var}}
-    if sw == "excitation":
-        return {"poor_excitation": {"fraction": CRUISE_SHARE, "stretch_length": lv * _typical_speed(EXCITATION_ROAD)}}
+                                    "mean_duration": DROPOUT_MEAN_DURATION, "mode": "nan",
+                                    **groups.get(var, {"channels": "all", "channel": var})}}
+    if sw == "excitation":  # hold_speed: one speed over each whole stretch, whatever the speed limits do
+        return {"poor_excitation": {"fraction": CRUISE_SHARE, "stretch_length": lv * _typical_speed(EXCITATION_ROAD),
+                                    "hold_speed": "yes"}}
+    if sw in ("wind", "ramps"):
+        onset, end = event_times(scenario)
+        timing = {"onset": onset, "ramp": end - onset, "onset_unit": "s"}
+        if sw == "wind":   # headwind (against the road's initial heading) rising from calm to lv m/s
+            return {"wind_ramp": {**timing, "start_speed": 0.0, "final_speed": lv, "start_direction": np.pi,
+                                  "final_direction": np.pi}}
+        quantity = var.split("/")[0]
+        if quantity == "mass":  # relative to the preset's mass
+            from roadload.envs import get_preset
+            return {"mass_ramp": {**timing, "magnitude": lv * get_preset(VEHICLE_PRESET).body.mass}}
+        return {f"{quantity}_ramp": {**timing, "magnitude": lv}}
     # drift: the payload jumps to lv at the first stop (min = max clips the random change to lv)
     return {"payload": {"initial_payload": 0.0, "min_payload": lv, "max_payload": lv, "change_std": 1.0}}
 
@@ -724,6 +795,9 @@ def build_vehicle(scenario: Scenario) -> list[tuple[str, ABData, Any]]:
         changed = np.flatnonzero(np.abs(mass - mass[0]) > 0.5)
         if changed.size:
             meta["event_time"] = float(trip.true("t")[changed[0]])
+    if scenario.sweep in ("wind", "ramps") and scenario.level > 0:
+        # parameter ramps: recovery counted from the end of the change; wind: the prediction from the onset
+        meta["event_time"] = event_times(scenario)[0 if scenario.sweep == "wind" else 1]
     if scenario.sweep == "excitation":  # the same detection at every level (the driver cruises at level 0 too)
         meta["stretches"] = _cruise_stretches(trip, MIN_STRETCH)
         meta["longest_stretch"] = max([b - a for a, b in meta["stretches"]], default=0.0)
@@ -831,6 +905,8 @@ def evaluate(data: ABData, estimators: Sequence[str], settings, *, burn_in: floa
         if "event_time" in data.meta:
             row["recovery_time"] = step_recovery_time(t, X, X_true, data.meta["event_time"], recover_tolerance,
                                                       hold)
+            row["prediction_recovery_time"] = prediction_recovery_time(
+                t, data.A[:n_train], data.B[:n_train], X, data.meta["event_time"], recover_tolerance, hold)
         if window.any():
             wu = windup_indicators(P_diag, window)
             ck = window[ends]
@@ -935,8 +1011,8 @@ def run_sweep_results(tasks: Sequence[Scenario], estimators: Sequence[str] | Non
 
 
 # ====================================================================================== aggregation and report
-METRICS = ("rel_error", "excess_error", "sevn", "medse", "recovery_time", "trace_P_max", "cond_P_max",
-           "trace_P_growth", "longest_stretch")
+METRICS = ("rel_error", "excess_error", "sevn", "medse", "recovery_time", "prediction_recovery_time",
+           "trace_P_max", "cond_P_max", "trace_P_growth", "longest_stretch")
 _KEYS = ["backend", "sweep", "variant", "model", "estimator"]
 
 
@@ -1010,9 +1086,13 @@ def _score(results, spec: SweepSpec, bound: float):
         bd = breakdown_table(results, bound)
         table = bd.merge(med, on=_KEYS)
         return table, ["breakdown", "rel_error_at_max"], [False, True]
-    if spec.name == "drift":
+    if spec.name in ("drift", "ramps"):
         rec = top.groupby(_KEYS)["recovery_time"].median().rename("recovery_time_at_max").reset_index()
         return rec.merge(med, on=_KEYS), ["recovery_time_at_max", "rel_error_at_max"], [True, True]
+    if spec.name == "wind":
+        rec = (top.groupby(_KEYS)["prediction_recovery_time"].median().rename("prediction_recovery_time_at_max")
+               .reset_index())
+        return rec.merge(med, on=_KEYS), ["prediction_recovery_time_at_max", "rel_error_at_max"], [True, True]
     if spec.name == "excitation":
         tr = top.groupby(_KEYS)["trace_P_growth"].median().rename("trace_P_growth_at_max").reset_index()
         return med.merge(tr, on=_KEYS), ["rel_error_at_max", "trace_P_growth_at_max"], [True, True]

@@ -24,7 +24,7 @@ def test_fault_specs_map_onto_the_simulator_sensor_layer():
     assert vehicle_effects(Scenario("vehicle", "outliers", "accel_x/x1", 0.0, 0, DURATION)) == {}
     with pytest.raises(RobustnessError, match="variant"):
         vehicle_effects(Scenario("vehicle", "outliers", "yaw_rate/x1", 0.1, 0, DURATION))
-    assert set(VEHICLE_SWEEPS) == {"outliers", "dropouts", "excitation", "drift", "bias", "latency"}
+    assert set(VEHICLE_SWEEPS) == {"outliers", "dropouts", "excitation", "drift", "bias", "latency", "wind", "ramps"}
 
 
 def test_outliers_hit_only_the_target_channel_and_truth_parameters_are_the_presets():

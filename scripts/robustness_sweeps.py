@@ -30,6 +30,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--backend", default="synthetic", choices=("synthetic", "vehicle"))
     ap.add_argument("--sweeps", nargs="*", default=None, help="sweep names (default: all of the backend)")
+    ap.add_argument("--variants", nargs="*", default=None,
+                    help="only these variants (of the sweeps that have them; other sweeps run all variants)")
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--duration", type=float, default=None)
     ap.add_argument("--bound", type=float, default=DEFAULT_BOUND)
@@ -49,7 +51,13 @@ def main() -> None:
     else:
         names = args.sweeps or list(specs)
         duration = args.duration or DURATION[args.backend]
-        tasks = [sc for name in names for sc in scenarios(args.backend, name, args.seeds, duration)]
+        def chosen(name: str):
+            if not args.variants:
+                return None
+            own = [v for v in args.variants if v in specs[name].variants]
+            return own or None
+        tasks = [sc for name in names
+                 for sc in scenarios(args.backend, name, args.seeds, duration, variants=chosen(name))]
         t0 = time.perf_counter()
         results, failed = run_sweep_results(tasks, scheduler=args.scheduler, workers=args.workers)
         wall = time.perf_counter() - t0

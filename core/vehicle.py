@@ -20,7 +20,6 @@ import dataclasses
 import json
 import math
 import os
-import tempfile
 import types
 import typing
 from dataclasses import dataclass, field
@@ -29,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from .fileio import write_json
 from .units import G, air_density
 
 __all__ = [
@@ -688,15 +688,4 @@ def load_vehicle(path: str | os.PathLike) -> VehicleSpec:
 
 def save_vehicle(spec: VehicleSpec, path: str | os.PathLike) -> Path:
     """Write a vehicle spec as JSON atomically."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(spec.to_dict(), fh, indent=1)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+    return write_json(path, spec.to_dict())

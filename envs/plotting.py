@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import os
-import tempfile
 import textwrap
 from pathlib import Path
 
 import numpy as np
 
 from roadload.trip import Trip
+from roadload.fileio import save_figure
 
 
 def _distance(trip: Trip) -> tuple[np.ndarray, np.ndarray | None]:
@@ -93,19 +93,5 @@ def plot_trip(trip: Trip, out: str | os.PathLike) -> Path:
         title += f"  (effects: {', '.join(trip.meta.get('effects', {}).get('effects', {})) or 'none'})"
     fig.suptitle("\n".join(textwrap.wrap(title, 130)), fontsize=9)
     fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".png", dir=out.parent)
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=90)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the PNG ordinary permissions
-        os.replace(tmp, out)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    finally:
-        plt.close(fig)
+    save_figure(fig, out, dpi=90)
     return out

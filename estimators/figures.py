@@ -8,7 +8,6 @@ atomically.
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -21,6 +20,7 @@ import pandas as pd  # noqa: E402
 
 from .evaluation import Estimate  # noqa: E402
 from .pipeline import PipelineError, PipelineResult  # noqa: E402
+from roadload.fileio import save_figure
 
 STAGE_DEFAULT_CHANNELS = {
     "measured": ["vehicle_speed", "accel_x", "drive_torque", "steering_wheel_angle"],
@@ -32,20 +32,7 @@ STAGE_DEFAULT_CHANNELS = {
 
 def save(fig: plt.Figure, path: str | os.PathLike, dpi: int = 110) -> Path:
     """Write a figure as PNG atomically and close it."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png", dir=path.parent)
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    finally:
-        plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=dpi, bbox_inches="tight")
 
 
 def _robust_ylim(ax: plt.Axes, values: np.ndarray, spread: float = 1.0) -> None:

@@ -17,7 +17,6 @@ import functools
 import hashlib
 import json
 import os
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,6 +25,7 @@ from typing import Any, Sequence
 import numpy as np
 import pandas as pd
 
+from roadload.fileio import write_json, write_text
 from roadload.trip import Trip
 
 from .evaluation import (ESTIMATORS, GRAY_BOX_MODELS, HORIZONS, MIN_TRAINING, P_MAX, combination_name,
@@ -125,19 +125,6 @@ def simulate_planned_trip(entry: dict[str, Any]) -> Trip:
     return trip
 
 
-def _write_json(path: Path, data: Any) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(data, fh, indent=1)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def _generate_one(task: tuple[dict[str, Any], str]) -> str:
     entry, folder = task
     path = Path(folder) / f"{entry['name']}.parquet"
@@ -162,7 +149,7 @@ def generate_fleet(folder: str | os.PathLike, n_trips: int = 84, seed: int = 201
         if old.get("digest") != plan_digest(plan):
             raise FleetError(f"{folder} holds a different fleet (plan digest {old.get('digest')}); "
                              f"use another folder or delete it")
-    _write_json(manifest, {"version": FLEET_VERSION, "digest": plan_digest(plan), "seed": seed,
+    write_json(manifest, {"version": FLEET_VERSION, "digest": plan_digest(plan), "seed": seed,
                            "n_trips": n_trips, "total_hours": total_hours, "plan": plan})
     outcomes = run_sweep(_generate_one, [(e, str(folder)) for e in plan], scheduler=scheduler, workers=workers,
                          progress=progress, description="simulating fleet")
@@ -435,21 +422,8 @@ def _markdown_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
     return "\n".join(lines)
 
 
-def _write_text(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def _write_csv(path: Path, df: pd.DataFrame) -> None:
-    _write_text(path, df.to_csv(index=False))
+    write_text(path, df.to_csv(index=False))
 
 
 def write_report(result: BenchmarkResult, out_dir: str | os.PathLike, horizons: Sequence[int] = HORIZONS,
@@ -503,5 +477,5 @@ def write_report(result: BenchmarkResult, out_dir: str | os.PathLike, horizons: 
         verdict = {True: "reproduced", False: "NOT reproduced", None: "undecided"}[f["reproduced"]]
         md += [f"- **{f['finding']}**: {verdict}. {f['evidence']}"]
     report = out / "report.md"
-    _write_text(report, "\n".join(md) + "\n")
+    write_text(report, "\n".join(md) + "\n")
     return report

@@ -12,12 +12,13 @@ from __future__ import annotations
 import io
 import json
 import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
+
+from roadload.fileio import write_text
 
 from .profile import DriveCycle, RoadProfile, RoadProfileError
 from .tracks import latlon_to_xy, haversine_distance, profile_from_track
@@ -43,19 +44,6 @@ class ProfileFileError(RoadProfileError):
 
 
 # --------------------------------------------------------------------------------------------- atomic write
-
-def _write_atomic(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as handle:
-            handle.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
 
 def _jsonable(value: Any) -> Any:
     if isinstance(value, dict):
@@ -102,7 +90,7 @@ def save_profile(profile: RoadProfile | DriveCycle, path: str | os.PathLike) -> 
         buffer.write(f"# {kind} {json.dumps(header, allow_nan=False)}\n")
         pd.DataFrame(arrays).to_csv(buffer, index=False, float_format="%.17g", lineterminator="\n")
         text = buffer.getvalue()
-    _write_atomic(path, text)
+    write_text(path, text, newline="")
     return path
 
 

@@ -14,8 +14,6 @@ Usage: python scripts/reproduce_ch3.py [--seeds 20] [--out out/ch3] [--only 3.3,
 from __future__ import annotations
 
 import argparse
-import os
-import tempfile
 import time
 from pathlib import Path
 
@@ -28,6 +26,7 @@ from scipy.signal import savgol_filter  # noqa: E402
 
 import roadload.estimators as E  # noqa: E402
 from roadload.estimators.synthetic import linear_miso, straight_line  # noqa: E402
+from roadload.fileio import save_figure
 
 ROBUST = dict(robust_scale=True, scale0=1.0, quantile0=1.0, learn_rate=0.01, p0=100.0)
 LAMBDA = 0.995
@@ -42,12 +41,7 @@ def q(values) -> str:
 
 def save(fig, path: Path) -> None:
     """Atomic PNG write."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(suffix=".png", dir=path.parent)
-    os.close(fd)
-    fig.savefig(tmp, dpi=110)
-    os.replace(tmp, path)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 # ------------------------------------------------------------------------------------------ 3.1 / 3.2

@@ -15,8 +15,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -24,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..channels import MEASURED
+from ..fileio import write_text
 from ..trip import Trip
 from .frames import CanFrames, write_can_log
 from .report import LogImportError
@@ -117,7 +116,7 @@ def write_project_dbc(preset: str, folder: str | Path = PROJECT_DBC_DIR) -> Path
     spec = get_preset(preset)
     path = Path(folder) / f"roadload_{preset}.dbc"
     path.parent.mkdir(parents=True, exist_ok=True)
-    _atomic_text(path, project_dbc(spec.sensors, spec.name))
+    write_text(path, project_dbc(spec.sensors, spec.name))
     return path
 
 
@@ -229,18 +228,6 @@ def mapping_for(channels: list[ExportChannel], dbc_name: str, fmt: str, sample_r
                           "required": c.rate == top_rate} for c in channels]}
 
 
-def _atomic_text(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 _SUFFIX = {"candump": ".log", "blf": ".blf", "mf4": ".mf4", "asc": ".asc"}
 _IMPORT_FORMAT = {"candump": "candump", "blf": "blf", "asc": "asc", "mf4": "dbc-mf4"}
 
@@ -266,9 +253,9 @@ def export_trip(trip: Trip, path: str | Path, fmt: str, *, sensors: Any | None =
     map_path = path.with_name(path.stem + ".mapping.json")
     vehicle = trip.meta.get("vehicle", {}).get("name", "vehicle") if isinstance(trip.meta.get("vehicle"), dict) \
         else str(trip.meta.get("vehicle", "vehicle"))
-    _atomic_text(dbc_path, dbc_text(chans, vehicle))
+    write_text(dbc_path, dbc_text(chans, vehicle))
     mapping = mapping_for(chans, dbc_path.name, _IMPORT_FORMAT[fmt], trip.sample_rate)
-    _atomic_text(map_path, json.dumps(mapping, indent=1))
+    write_text(map_path, json.dumps(mapping, indent=1))
     write_can_log(frames, path, fmt)
     return {"log": path, "dbc": dbc_path, "mapping": map_path}
 

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import os
 import re
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterable
@@ -23,6 +22,7 @@ from typing import Callable, Iterable
 import numpy as np
 
 from .report import LogImportError
+from ..fileio import atomic_path
 
 CAN_FORMATS = ("candump", "blf", "asc", "mf4")
 _SUFFIX = {"candump": ".log", "blf": ".blf", "asc": ".asc", "mf4": ".mf4"}
@@ -303,11 +303,8 @@ def write_can_log(frames: CanFrames, path: str | os.PathLike, fmt: str | None = 
         raise LogImportError(f"{path.name}: a {fmt} log must end in {_SUFFIX[fmt]}")
     writer_cls = {"candump": can.CanutilsLogWriter, "blf": can.BLFWriter, "asc": can.ASCWriter,
                   "mf4": can.MF4Writer}[fmt]
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=_SUFFIX[fmt], dir=path.parent)
-    os.close(fd)
-    try:
-        writer = writer_cls(tmp)
+    with atomic_path(path) as tmp:
+        writer = writer_cls(str(tmp))
         t_abs = frames.start_time + frames.t
         fd_frames = frames.length > 8
         for i in range(len(frames)):
@@ -318,9 +315,4 @@ def write_can_log(frames: CanFrames, path: str | os.PathLike, fmt: str | None = 
                 is_extended_id=bool(frames.is_extended[i]), data=frames.data[i, :n].tobytes(), channel=channel,
                 is_fd=bool(fd_frames[i]), is_rx=True))
         writer.stop()
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
     return path

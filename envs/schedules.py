@@ -91,6 +91,8 @@ class Schedules:
         return bool(self.ramps)
 
     def restore(self, P: np.ndarray) -> None:
+        if not self.active:  # nothing scheduled: P is left exactly as packed
+            return
         for i, v in self.base.items():
             P[i] = v
         self.mass_applied = 0.0

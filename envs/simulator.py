@@ -305,12 +305,12 @@ class Simulator:
     def _hold_cruise_speed(self) -> None:
         """poor_excitation with hold_speed 'yes': one constant planned speed per cruise stretch (the lowest of the
         stretch), re-planned with the driver's deceleration into it; stops inside the stretches are skipped."""
+        if not (self.effects.enabled("poor_excitation")
+                and self.effects.params("poor_excitation")["hold_speed"] == "yes") or self.cycle is not None:
+            return  # the plan and the stops stay as built
         rd = self._road
         rd[R_VPLAN] = self._vplan_base
         self._stops = self._stops_all
-        if not (self.effects.enabled("poor_excitation")
-                and self.effects.params("poor_excitation")["hold_speed"] == "yes") or self.cycle is not None:
-            return
         on = rd[R_CRUISE] > 0.5
         if not on.any():
             return

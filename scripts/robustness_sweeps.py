@@ -32,6 +32,7 @@ def main() -> None:
     ap.add_argument("--sweeps", nargs="*", default=None, help="sweep names (default: all of the backend)")
     ap.add_argument("--variants", nargs="*", default=None,
                     help="only these variants (of the sweeps that have them; other sweeps run all variants)")
+    ap.add_argument("--estimators", nargs="*", default=None, help="estimators (default: every catalog estimator)")
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--duration", type=float, default=None)
     ap.add_argument("--bound", type=float, default=DEFAULT_BOUND)
@@ -59,7 +60,7 @@ def main() -> None:
         tasks = [sc for name in names
                  for sc in scenarios(args.backend, name, args.seeds, duration, variants=chosen(name))]
         t0 = time.perf_counter()
-        results, failed = run_sweep_results(tasks, scheduler=args.scheduler, workers=args.workers)
+        results, failed = run_sweep_results(tasks, args.estimators, scheduler=args.scheduler, workers=args.workers)
         wall = time.perf_counter() - t0
         report = write_report(results, args.out, args.bound, failed)
         print(f"{len(tasks)} scenarios ({args.seeds} seeds, {duration:g} s records), {len(results)} estimator "

@@ -42,6 +42,7 @@ DRIVE_FORCE_RATE = "sim_drive_force_rate"
 BRAKE_FORCE = "brake_force"
 GEAR = "gear"
 HEADING = "heading"
+TIME_SINCE_BRAKE = "time_since_brake"
 POWER_RESIDUAL = "power_residual"
 AUX_LOGGED = "aux_power_logged"
 
@@ -190,6 +191,14 @@ def _friction_brake(model, shape):
                  (BRAKE_FORCE,), lambda n: 0.0),)
 
 
+def _brake_drag(model, shape):
+    # pads that keep rubbing after the brake is released: a drag F_d fading with tau after each brake application
+    tau = float(shape)
+    return (Term(f"exp(-t_since_brake/{tau:g} s)", "residual brake drag F_d", "N",
+                 lambda s: np.nan_to_num(np.exp(-np.asarray(s[TIME_SINCE_BRAKE], dtype=float) / tau)),
+                 (TIME_SINCE_BRAKE,), lambda n: 0.0),)
+
+
 def _rotational_inertia(model, shape):
     def per_gear(g):
         return Term(f"dv/dt [gear {g}]", f"delta I_red/r_W^2 (gear {g})", "kg",
@@ -322,6 +331,9 @@ for _cand in (
                     (BRAKE_FORCE,), "spec:brakes.pad_friction",
                     lambda p, sh, m: {"factor": 1.0 + _p(p, "pad friction error k")}, regime_hint="mode",
                     sim_aliases=("brake_pad_drift",)),
+    CandidateEffect("brake_drag", "friction-brake drag: pads still rubbing after release (fades with tau)",
+                    _brake_drag, (BRAKE_FORCE, TIME_SINCE_BRAKE), None, None, shape_grid=(5.0, 15.0, 30.0, 60.0),
+                    shape_name="tau", shape_unit="s", regime_hint="mode"),
     CandidateEffect("rotational_inertia", "rotational inertia per gear off", _rotational_inertia,
                     (ACCELERATION, GEAR), None, None, regime_hint="gear"),
     CandidateEffect("torque_scale", "drive-torque scale error (efficiency, torque model)", _torque_scale,

@@ -16,7 +16,7 @@ sim_force              sim_balance + the sim's floor (:mod:`.floor`) [N]
 residual               tractive_force - sim_force [N]
 sim_drive_force(_rate) sim_force + brake_force [N] and its time derivative [N/s]
 lateral_acceleration   v² / r [m/s²]; heading: integrated yaw rate [rad] (NaN without yaw rate)
-mode                   'traction' / 'coast' / 'regen' / 'braking'
+mode                   'traction' / 'coast' / 'regen' / 'braking'; time_since_brake [s] (0 while braking)
 ambient_temperature, heating_power, payload [kg] (metadata), season
 electric_power, sim_electric_power, power_residual, aux_power_logged: the energy side [W] (:mod:`.energy`)
 valid                  moving (v > 1 m/s), smoothers settled, drive-train engaged, finite; on trips without
@@ -107,6 +107,13 @@ def _sample(trip: Trip, name: str, t: np.ndarray) -> np.ndarray:
     return np.interp(t, tt[ok], x[ok])
 
 
+def time_since(flag: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Seconds since ``flag`` was last true (0 while it is, NaN before it ever was)."""
+    last = np.where(np.asarray(flag, bool), t, np.nan)
+    last = pd.Series(last).ffill().to_numpy()
+    return t - last
+
+
 def brake_force_from_pressure(vehicle, p_front: np.ndarray, p_rear: np.ndarray) -> np.ndarray:
     """F_B = 2 (p_f A_f r_f + p_r A_r r_r) X_B / r_W [N] (two wheels per axle, nominal pad friction X_B)."""
     b = vehicle.brakes
@@ -189,6 +196,7 @@ def build_table(trips: Sequence[Trip], sim: SimConfig, settings: PipelineSetting
             braking = ~s["trigger_no_brake"].to_numpy(dtype=bool)
         f["drive_force"] = s["tractive_force"].to_numpy(dtype=float)
         f["tractive_force"] = f["drive_force"] - f["brake_force"]
+        f["time_since_brake"] = time_since(braking, t)
         f["lateral_acceleration"] = v ** 2 * f["path_curvature"].to_numpy(dtype=float)
         if not np.isfinite(f["path_curvature"].to_numpy(dtype=float)).any():
             # no steering signal: the balance goes without cornering resistance (lateral regime stays NaN)

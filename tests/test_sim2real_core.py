@@ -103,7 +103,7 @@ def test_all_catalog_candidates_fit_on_a_full_table():
     _, ranked, _ = diagnose_table(tab, candidates=DEFAULT_CANDIDATES)
     names = {r.name for r in ranked}
     force_side = {n for n in DEFAULT_CANDIDATES if get_candidate(n).side == "force"}
-    assert names == force_side - {"friction_brake"}   # no braking in the synthetic trips
+    assert names == force_side - {"friction_brake", "brake_drag"}   # no braking in the synthetic trips
     assert ranked[0].name == "mass_offset"
 
 
@@ -223,3 +223,22 @@ def test_friction_brake_gain_sign_and_simulator_mapping():
     top = ranked[0]
     assert top.name == "friction_brake" and top.parameters["pad friction error k"] == pytest.approx(0.2, abs=0.02)
     assert top.sim_parameters == {"factor": pytest.approx(1.0 + top.parameters["pad friction error k"])}
+
+
+def test_brake_drag_after_release_is_found_with_its_time_constant():
+    from roadload.sim2real.table import time_since
+
+    tab = synth(lambda t: np.zeros(len(t)), duration=600.0)
+    brake = (np.arange(len(tab)) % 600) < 30                  # 3 s of braking every minute
+    tab["brake_force"] = np.where(brake, 800.0, 0.0)
+    tsb = np.concatenate([time_since(brake[(tab.trip == k).to_numpy()], tab.t[tab.trip == k].to_numpy())
+                          for k in pd.unique(tab.trip)])
+    tab["time_since_brake"] = tsb
+    drag = np.where(np.isfinite(tsb), 120.0 * np.exp(-np.nan_to_num(tsb, nan=1e9) / 15.0), 0.0)
+    tab["tractive_force"] = tab["tractive_force"] + drag     # the motion needs more drive force than the sim says
+    tab["residual"] = tab.tractive_force - tab.sim_force
+    _, ranked, steps = diagnose_table(tab, candidates=("brake_drag", "friction_brake", "mass_offset"))
+    assert ranked[0].name == "brake_drag" and ranked[0].shape == 15.0
+    assert ranked[0].parameters["residual brake drag F_d"] == pytest.approx(120.0, rel=0.1)
+    assert steps[0]["accepted"]
+    assert np.isnan(time_since(np.array([False, True, False]), np.array([0.0, 1.0, 3.0]))[0])

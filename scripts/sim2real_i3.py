@@ -11,7 +11,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from roadload.data import require_shared_data
 from roadload.io import import_log

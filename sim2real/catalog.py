@@ -20,7 +20,7 @@ SI; signs follow "measured minus sim".
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np

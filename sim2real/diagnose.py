@@ -35,7 +35,7 @@ from .regimes import DEFAULT_REGIMES, get_regime, localise, residual_analysis, s
 from .selection import Selector, make_split
 from .simconfig import SimConfig
 from .stats import block_bootstrap_mean_difference
-from .table import DiagnosisTable, build_table, sim_force_model
+from .table import DiagnosisTable, build_table
 
 SCHEMA_VERSION = 1
 FLOOR_ROADS: tuple[tuple[str, int], ...] = (("hilly", 9101), ("city", 9102), ("motorway", 9103))

@@ -37,7 +37,6 @@ def simulator_replay(frame: pd.DataFrame, rows: np.ndarray, sim: SimConfig, wind
 
     t_all = frame["t"].to_numpy(dtype=float)
     trip = frame["trip"].to_numpy()
-    sq, n, ends = 0.0, 0, []
     with warnings.catch_warnings():
         return _replay(frame, rows, sim, window, seed, t_all, trip, DT, Action, LateralValidityWarning, Simulator,
                        S_POS, RoadProfile)

@@ -24,6 +24,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from roadload.fileio import save_figure, write_text
+
 
 class RobustnessError(ValueError):
     """Bad robustness-testbed input (unknown sweep, infeasible fault spec, malformed arrays); names what."""
@@ -1186,41 +1188,10 @@ def _pairwise_checks(spec: SweepSpec, model: str, variant: str, score, note: str
     return rows
 
 
-def _publish(tmp: str, path) -> None:
-    """Give a finished temporary file the usual permissions (mkstemp makes it 0600) and move it into place."""
-    import os
-
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
-    os.replace(tmp, path)
-
-
-def _atomic_write_text(path, text: str) -> None:
-    import os
-    import tempfile
-    from pathlib import Path
-
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        _publish(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def plot_curves(agg, spec: SweepSpec, path, bound: float = DEFAULT_BOUND) -> None:
     """Breakdown curves: median excess error (relative parameter error above the fault-free one of the same
     seed; IQR band) over the swept level, one line per estimator (solid: robust, dashed: non-robust), one panel
     per (model, variant); the breakdown bound dotted. Clipped to [1e-4, 1e3] for the log axis. Atomic PNG."""
-    import os
-    import tempfile
-    from pathlib import Path
-
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -1255,18 +1226,7 @@ def plot_curves(agg, spec: SweepSpec, path, bound: float = DEFAULT_BOUND) -> Non
         ax.axis("off")
     axes.flat[0].legend(fontsize=6, ncol=2)
     fig.tight_layout()
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".png", dir=path.parent)
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=110)
-        _publish(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    finally:
-        plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def _fmt(x: float) -> str:
@@ -1300,7 +1260,7 @@ def write_report(results, out_dir, bound: float = DEFAULT_BOUND,
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     files = []
-    _atomic_write_text(out / "results.csv", results.to_csv(index=False))
+    write_text(out / "results.csv", results.to_csv(index=False))
     files.append(out / "results.csv")
     rankings, checks = {}, []
     summary = ["# Estimator robustness: summary", "",
@@ -1316,14 +1276,14 @@ def write_report(results, out_dir, bound: float = DEFAULT_BOUND,
                             "rel_error_q75", "excess_error", "sevn", "medse", "recovery_time", "trace_P_max", "cond_P_max",
                             "trace_P_growth", "longest_stretch", "n_skipped", "n_pipeline_dropped", "runs_p_blowup",
                             "runs_nonfinite"] if c in agg]
-        _atomic_write_text(out / f"table_{stem}.csv", agg[cols].to_csv(index=False))
-        _atomic_write_text(out / f"table_{stem}.md", f"# {backend} sweep '{sweep}' ({spec.parameter} "
+        write_text(out / f"table_{stem}.csv", agg[cols].to_csv(index=False))
+        write_text(out / f"table_{stem}.md", f"# {backend} sweep '{sweep}' ({spec.parameter} "
                            f"[{spec.unit}])\n\n" + _markdown(agg, cols) + "\n")
         plot_curves(agg, spec, out / f"curves_{stem}.png", bound)
         files += [out / f"table_{stem}.csv", out / f"table_{stem}.md", out / f"curves_{stem}.png"]
         ranking = rank(res, spec, bound)
         rankings[(backend, sweep)] = ranking
-        _atomic_write_text(out / f"ranking_{stem}.csv", ranking.to_csv(index=False))
+        write_text(out / f"ranking_{stem}.csv", ranking.to_csv(index=False))
         files.append(out / f"ranking_{stem}.csv")
         n_seeds = int(res["seed"].nunique())
         summary += [f"## {backend} / {sweep} — {spec.parameter} [{spec.unit}], {n_seeds} seeds", ""]
@@ -1355,6 +1315,6 @@ def write_report(results, out_dir, bound: float = DEFAULT_BOUND,
     if failed:
         summary += ["", f"## Failed scenarios ({len(failed)})", ""]
         summary += [f"- {task}: {err}" for task, err in failed]
-    _atomic_write_text(out / "summary.md", "\n".join(summary) + "\n")
+    write_text(out / "summary.md", "\n".join(summary) + "\n")
     files.append(out / "summary.md")
     return {"rankings": rankings, "checks": checks, "files": files}

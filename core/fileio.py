@@ -51,9 +51,9 @@ def write_text(path: str | os.PathLike, text: str, newline: str | None = None) -
     return Path(path)
 
 
-def write_json(path: str | os.PathLike, data: Any, indent: int | None = 1) -> Path:
+def write_json(path: str | os.PathLike, data: Any, indent: int | None = 1, **dumps_kw) -> Path:
     """Serialise to JSON first (a TypeError leaves nothing behind), then write atomically."""
-    return write_text(path, json.dumps(data, indent=indent))
+    return write_text(path, json.dumps(data, indent=indent, **dumps_kw))
 
 
 def save_figure(fig, path: str | os.PathLike, dpi: int = 110, close: bool = True, **savefig_kw) -> Path:

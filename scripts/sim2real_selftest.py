@@ -7,14 +7,12 @@ out unexplained and localised. Prints the confusion matrix, top-1 accuracy and g
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import tempfile
 import time
 from pathlib import Path
 
 import pandas as pd
 
+from roadload.fileio import write_json
 from roadload.sim2real.selftest import run_selftest
 
 
@@ -46,11 +44,7 @@ def main() -> None:
           + (f" ({res.outside.unexplained_where})" if res.outside else ""))
     print(f"wall time {time.perf_counter() - t0:.0f} s")
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=out, suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        json.dump(res.to_dict(), fh, indent=1, default=float)
-    os.replace(tmp, out / "selftest.json")
+    write_json(out / "selftest.json", res.to_dict(), default=float)
     print(f"wrote {out / 'selftest.json'}")
 
 

@@ -20,7 +20,7 @@ def trained(tmp_path_factory):
     return res
 
 
-def test_short_ppo_run_beats_random_policy(trained):
+def test_short_ppo_run_beats_random_policy_and_reloads(trained):
     import gymnasium as gym
 
     seeds = (50_000, 50_001, 50_002)  # roads outside the training range [0, 10000)
@@ -33,9 +33,7 @@ def test_short_ppo_run_beats_random_policy(trained):
     assert np.mean([m["distance"] for m in ppo]) > 0.6 * CONFIG["route_length"]
     # the learning curve recorded finished training episodes
     assert (trained.curve.kind == "train").sum() >= 3
-
-
-def test_saved_policy_reloads_identically(trained):
+    # the saved policy reloads and acts identically (one test: under xdist a module fixture trains per worker)
     model = rl_cli.load_policy(trained.model_path)
     obs = np.linspace(-1, 1, model.observation_space.shape[0]).astype(np.float32)
     a1 = trained.extra["model"].predict(obs, deterministic=True)[0]

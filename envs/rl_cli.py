@@ -137,7 +137,8 @@ CONTROLLER_BASELINES = {"cruise": ("cruise", "abc"), "mpc": ("mpc", "oracle"), "
 """Baseline name -> (controller, force model) of roadload.controllers.drive."""
 
 
-def run_controller(name: str, env_config: dict[str, Any], road_seed: int, seed: int = 0) -> dict[str, Any]:
+def run_controller(name: str, env_config: dict[str, Any], road_seed: int, seed: int = 0,
+                   logs: dict[str, pd.DataFrame] | None = None) -> dict[str, Any]:
     """A controllers baseline on the same road (cut to route_length), vehicle and effects, in the controllers'
     closed loop on the simulator (:func:`roadload.controllers.drive.drive`): 'cruise' (PI cruise control, abc
     force model), 'mpc' (the spatial MPC with the oracle force model) or 'mpc_online' (the MPC with the online
@@ -155,6 +156,8 @@ def run_controller(name: str, env_config: dict[str, Any], road_seed: int, seed: 
     settings = DriveSettings(controller=controller, force_model=force_model, time_weight=cfg.reward.time,
                              dt=cfg.control_period)
     result, _ = drive(cfg.vehicle, road, effects=cfg.effects, seed=seed, settings=settings)
+    if logs is not None:
+        logs[name] = result.log
     m = dict(result.metrics)
     return {k: m.get(k) for k in ("arrived", "energy_kWh", "trip_time", "speed_violations", "violation_time",
                                   "max_excess_kmh", "rms_jerk", "max_abs_accel", "distance", "mean_speed_kmh")}
@@ -281,6 +284,40 @@ def plot_learning_curves(results: list[TrainResult], path: Path) -> Path:
     return Path(path)
 
 
+def plot_speed_profiles(logs: dict[str, pd.DataFrame], env_config: dict[str, Any], road_seed: int,
+                        path: Path) -> Path:
+    """PNG: speed over distance of every controller on one road, with the speed limit and the elevation."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from roadload.envs.gym_config import EcoDriveConfig, make_config
+    from roadload.envs.gym_ecodrive import cut_profile
+    from roadload.road_profiles import load_profile
+
+    cfg = make_config(EcoDriveConfig, env_config)
+    road = cut_profile(load_profile(cfg.road, seed=int(road_seed)), cfg.route_length)
+    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(9, 6), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    ax.plot(road.distance, road.speed_limit * 3.6, "k--", lw=1, label="speed limit")
+    for name, log in logs.items():
+        if name == "random":
+            continue
+        ax.plot(log["s"], log["v"] * 3.6, lw=1.3, label=name)
+    ax.set_ylabel("speed [km/h]")
+    ax.set_title(f"{cfg.vehicle} on {cfg.road} road {road_seed} (held out), first {road.length:.0f} m")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    ax2.plot(road.distance, road.elevation(), color="0.4")
+    ax2.set_ylabel("elevation [m]")
+    ax2.set_xlabel("distance [m]")
+    ax2.grid(alpha=0.3)
+    fig.tight_layout()
+    _atomic_write_bytes(Path(path), lambda tmp: fig.savefig(tmp, dpi=120, format="png"))
+    plt.close(fig)
+    return Path(path)
+
+
 # --------------------------------------------------------------------------------------------- evaluation
 TABLE_COLUMNS = ["controller", "road_seed", "arrived", "energy_kWh", "trip_time", "cost_kJ", "speed_violations",
                  "violation_time", "max_excess_kmh", "stop_violations", "rms_jerk", "episode_return"]
@@ -290,20 +327,24 @@ the objective both the RL reward (up to its penalty and shaping terms) and the M
 
 def evaluation_table(policies: dict[str, Callable[[np.ndarray], np.ndarray]], env_config: dict[str, Any],
                      road_seeds=HELD_OUT_SEEDS, controllers: tuple[str, ...] = ("cruise", "mpc"),
-                     progress: Callable[[str], None] | None = None) -> tuple[pd.DataFrame, list[str]]:
+                     progress: Callable[[str], None] | None = None,
+                     logs: dict[str, pd.DataFrame] | None = None) -> tuple[pd.DataFrame, list[str]]:
     """Per-road rows for every policy (run in EcoDrive-v0) and controller (controllers' closed loop on the
-    simulator, same road/vehicle/effects); returns (table, notes) where notes say what could not run."""
+    simulator, same road/vehicle/effects); returns (table, notes) where notes say what could not run. ``logs``
+    (optional dict) receives each controller's time series on the first road."""
     rows, notes = [], []
     for name, policy in policies.items():
         for seed in road_seeds:
-            m, _ = run_policy(policy, env_config, seed)
+            m, log = run_policy(policy, env_config, seed)
+            if logs is not None and seed == road_seeds[0]:
+                logs[name] = log
             rows.append({"controller": name, "road_seed": seed, **m})
             if progress:
                 progress(f"{name} road {seed}")
     for name in controllers:
         for seed in road_seeds:
             try:
-                m = run_controller(name, env_config, seed)
+                m = run_controller(name, env_config, seed, logs=logs if seed == road_seeds[0] else None)
             except Exception as exc:  # a baseline that fails is reported, not fatal for the RL table
                 notes.append(f"{name} on road {seed}: failed ({type(exc).__name__}: {exc})")
                 continue
@@ -518,14 +559,16 @@ def train_and_evaluate(algos: list[str], timesteps: int, out_dir: Path, n_envs: 
 
         space = gym.make("roadload/EcoDrive-v0", config=env_config).action_space
         policies["random"] = random_policy(space, seed)
+        logs: dict[str, pd.DataFrame] = {}
         table, notes = evaluation_table(policies, env_config, road_seeds, controllers,
-                                        progress=lambda _m: bar.advance(task))
+                                        progress=lambda _m: bar.advance(task), logs=logs)
+        profiles_png = plot_speed_profiles(logs, env_config, road_seeds[0], out_dir / "speed_profiles.png")
     table_path = out_dir / "evaluation.csv"
     summary = summarise(table)
     _atomic_write_bytes(table_path, lambda tmp: table.to_csv(tmp, index=False))
     _atomic_write_bytes(out_dir / "evaluation_summary.csv", lambda tmp: summary.to_csv(tmp, index=False))
     return {"results": results, "curve_png": curve_png, "table": table, "summary": summary, "notes": notes,
-            "table_path": table_path}
+            "table_path": table_path, "profiles_png": profiles_png}
 
 
 def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
@@ -576,6 +619,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         for n in res["notes"]:
             console.print(f"[yellow]{n}")
         console.print(f"learning curve: {res['curve_png']}\nper-road table: {res['table_path']}")
+        if res.get("profiles_png"):
+            console.print(f"speed profiles on the first held-out road: {res['profiles_png']}")
 
     @benchmark_app.command("gym")
     def bench_cmd(

@@ -105,7 +105,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         driver over roads x conditions at equal trip time; writes a Markdown/CSV table and PNG figures."""
         from roadload.sweep import run_sweep
 
-        from .comparison import CONDITIONS, ROADS, ComparisonTask, run_comparison_task, write_outputs
+        from .comparison import CONDITIONS, ComparisonTask, run_comparison_task, write_outputs
 
         cond_list = list(CONDITIONS) if conditions == "all" else [c.strip() for c in conditions.split(",") if c]
         bad = [c for c in cond_list if c not in CONDITIONS]
@@ -129,4 +129,6 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         table, summary = write_outputs(results, failures, out)
         typer.echo((out / "comparison.md").read_text())
         typer.echo(f"wrote {out}/comparison.md, comparison.csv, summary.csv and figures")
-        (out / "tasks.json").write_text(json.dumps([t.__dict__ for t in tasks], default=str, indent=1))
+        from .report import write_text_atomic
+
+        write_text_atomic(out / "tasks.json", json.dumps([t.__dict__ for t in tasks], default=str, indent=1))

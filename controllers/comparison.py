@@ -20,7 +20,7 @@ of the logged speed over +-500 m rounded up to 10 km/h -- the same convention as
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +31,6 @@ from roadload.road_profiles import RoadProfile
 
 from .cruise import CruiseSettings
 from .drive import DriveSettings, drive
-from .mpc import MpcSettings
 from .time_matching import match_trip_time
 
 KMH = 1 / 3.6

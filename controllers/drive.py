@@ -9,7 +9,6 @@ oracle) and the controller (mpc / cruise / human), runs :func:`~.closed_loop.run
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 from roadload.road_profiles import RoadProfile
 

@@ -121,7 +121,8 @@ class SourceEnergyModel:
         """P_loss(omega, T) [W] of the fitted polynomial."""
         l0, l1, l2, l3, l4 = self.loss
         p_mech = shaft_torque * shaft_speed
-        return l0 + l1 * shaft_speed + l2 * shaft_speed * shaft_speed + l3 * shaft_torque * shaft_torque + l4 * p_mech * p_mech
+        return (l0 + l1 * shaft_speed + l2 * shaft_speed * shaft_speed + l3 * shaft_torque * shaft_torque
+                + l4 * p_mech * p_mech)
 
     def brake_force_limit(self, mass: float) -> float:
         return self.max_brake_deceleration * mass
@@ -147,6 +148,7 @@ def fit_loss_polynomial(shaft_speed, shaft_torque, loss_power) -> tuple[float, f
 def generic_ev(mass: float = 1420.0) -> SourceEnergyModel:
     """An i3-like EV (125 kW, 250 N m, single ratio 9.665, r_W 0.35 m), loss coefficients chosen for
     ~90-93 % motor+inverter efficiency at part load. Used when no simulator spec is at hand (tests, benches)."""
-    return SourceEnergyModel(kind="ev", wheel_radius=0.35, gear_ratios=(9.665,), loss=(300.0, 0.5, 2.0e-3, 0.06, 1.5e-7),
+    return SourceEnergyModel(kind="ev", wheel_radius=0.35, gear_ratios=(9.665,),
+                             loss=(300.0, 0.5, 2.0e-3, 0.06, 1.5e-7),
                              max_power=125e3, max_torque=250.0, max_regen_power=50e3, max_regen_torque=150.0,
                              auxiliary_power=300.0, max_brake_deceleration=0.8 * G, name="generic_ev")

@@ -196,7 +196,8 @@ class OcpSolver:
         self._energy_fun = ca.Function("energy", [x, p], [energy * 1000.0])
         opts = {"expand": True, "print_time": False, "error_on_fail": False,
                 "ipopt": {"print_level": 0, "sb": "yes", "max_iter": st.max_iterations, "tol": 1e-6,
-                          "acceptable_tol": 1e-4, "acceptable_iter": 5, "mu_strategy": "adaptive", "mumps_permuting_scaling": 0, "mumps_scaling": 0}}
+                          "acceptable_tol": 1e-4, "acceptable_iter": 5, "mu_strategy": "adaptive",
+                          "mumps_permuting_scaling": 0, "mumps_scaling": 0}}
         warm = {**opts, "ipopt": {**opts["ipopt"], "tol": st.warm_tol, "warm_start_init_point": "yes", "mu_init": 1e-5,
                                    "warm_start_bound_push": 1e-7, "warm_start_mult_bound_push": 1e-7,
                                    "warm_start_slack_bound_push": 1e-7, "mu_strategy": "monotone"}}
@@ -248,7 +249,8 @@ class OcpSolver:
         """Per-node speed cap [m/s] used as a bound: the preview cap less the margin, floored at the speed
         floor, and raised only where the car cannot get below it from v0 even braking at decel_max from here on
         (optimistic, so the relaxation never applies to a cap the plan could still meet), so a problem started
-        above a cap stays feasible (up to the jerk ramp; a failure then falls back); the safety envelope of the closed loop handles the actual limit."""
+        above a cap stays feasible (up to the jerk ramp; a failure then falls back); the safety envelope of the
+        closed loop handles the actual limit."""
         st = self.settings
         cap = np.maximum(np.asarray(preview.speed_cap, float) - st.speed_margin, st.speed_floor)
         dist = np.asarray(preview.s, float) - float(preview.s[0])

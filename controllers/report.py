@@ -53,7 +53,9 @@ def markdown_table(frame: pd.DataFrame, digits: int = 3) -> str:
         if isinstance(x, (float, np.floating)):
             if not np.isfinite(x):
                 return "-"
-            return f"{x:.{digits}g}" if abs(x) >= 1e4 or (abs(x) < 1e-2 and x != 0) else f"{x:.{digits}f}".rstrip("0").rstrip(".")
+            if abs(x) >= 1e4 or (abs(x) < 1e-2 and x != 0):
+                return f"{x:.{digits}g}"
+            return f"{x:.{digits}f}".rstrip("0").rstrip(".")
         return str(x)
 
     cols = list(frame.columns)

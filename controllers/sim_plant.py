@@ -11,7 +11,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
 import pandas as pd
 
 from roadload.road_profiles import RoadProfile
@@ -88,11 +87,3 @@ class HumanDriver:
     def stats(self) -> dict[str, Any]:
         return {}
 
-
-def true_parameter_source(plant: SimulatorPlant):
-    """Callable for :class:`~.force_model.OracleForceModel`."""
-    return plant.true_parameters
-
-
-def _finite(x: float) -> bool:
-    return bool(np.isfinite(x))

@@ -96,7 +96,8 @@ def _fit_energy(spec: VehicleSpec) -> SourceEnergyModel:
         _record_fit(spec.name, w_list, t_list, loss, coef)
         return SourceEnergyModel(kind="ev", wheel_radius=r, gear_ratios=(ratio,), loss=coef,
                                  max_power=float(m.max_power), max_torque=float(m.max_torque),
-                                 max_regen_power=float(m.regen_power_limit), max_regen_torque=float(m.regen_torque_limit),
+                                 max_regen_power=float(m.regen_power_limit),
+                                 max_regen_torque=float(m.regen_torque_limit),
                                  auxiliary_power=aux, max_brake_deceleration=0.8 * G, name=spec.name)
     e = d.engine
     ratios = tuple(float(g * d.final_drive) for g in d.gear_ratios)

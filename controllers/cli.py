@@ -129,6 +129,6 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         table, summary = write_outputs(results, failures, out)
         typer.echo((out / "comparison.md").read_text())
         typer.echo(f"wrote {out}/comparison.md, comparison.csv, summary.csv and figures")
-        from .report import write_text_atomic
+        from roadload.fileio import write_text
 
-        write_text_atomic(out / "tasks.json", json.dumps([t.__dict__ for t in tasks], default=str, indent=1))
+        write_text(out / "tasks.json", json.dumps([t.__dict__ for t in tasks], default=str, indent=1))

@@ -191,13 +191,14 @@ def summarise(table: pd.DataFrame) -> pd.DataFrame:
 
 def write_outputs(results: list[dict[str, Any]], failures: list[str], out: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
     """comparison.csv / comparison.md / summary.csv and the figures into ``out`` (atomic file writes)."""
-    from .report import markdown_table, write_text_atomic, write_figures
+    from roadload.fileio import write_text
+    from .report import markdown_table, write_figures
 
     out.mkdir(parents=True, exist_ok=True)
     table = pd.DataFrame([r for res in results for r in res["rows"]])
     summary = summarise(table) if len(table) else pd.DataFrame()
-    write_text_atomic(out / "comparison.csv", table.to_csv(index=False))
-    write_text_atomic(out / "summary.csv", summary.to_csv(index=False))
+    write_text(out / "comparison.csv", table.to_csv(index=False))
+    write_text(out / "summary.csv", summary.to_csv(index=False))
     md = ["# Controller comparison (closed loop, simulator)", "",
           "Energy at the source (battery) per run; MPC runs time-matched to cruise control (|time error| <= "
           "tolerance, column `matched`); the human driver keeps its own pace (not time-matched).", "",
@@ -205,6 +206,6 @@ def write_outputs(results: list[dict[str, Any]], failures: list[str], out: Path)
           markdown_table(summary)]
     if failures:
         md += ["", "## Failed tasks", ""] + [f"- {f}" for f in failures]
-    write_text_atomic(out / "comparison.md", "\n".join(md) + "\n")
+    write_text(out / "comparison.md", "\n".join(md) + "\n")
     write_figures(results, table, out)
     return table, summary

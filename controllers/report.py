@@ -3,45 +3,18 @@ and limits, energy bars per condition. All files are written atomically (tempora
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
+from roadload.fileio import save_figure
+
 LABELS = {"cruise": "cruise control (PI)", "human": "human-like driver", "mpc_oracle": "MPC oracle",
           "mpc_abc": "MPC abc (M0)", "mpc_online": "MPC online (M4-RRLM)"}
 COLORS = {"cruise": "tab:gray", "human": "tab:brown", "mpc_oracle": "tab:green", "mpc_abc": "tab:red",
           "mpc_online": "tab:blue"}
-
-
-def write_text_atomic(path: Path, text: str) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
-
-
-def _save_figure(fig, path: Path) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".png", dir=path.parent)
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=110)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def markdown_table(frame: pd.DataFrame, digits: int = 3) -> str:
@@ -100,8 +73,7 @@ def write_figures(results: list[dict[str, Any]], table: pd.DataFrame, out: Path)
         fig.suptitle(f"{road} / {cond}: speed and wheel force over distance")
         fig.tight_layout()
         path = out / f"speed_force_{road}_{cond}.png"
-        _save_figure(fig, path)
-        plt.close(fig)
+        save_figure(fig, path, dpi=110)
         paths.append(path)
     if len(table):
         t = table.copy()
@@ -127,7 +99,6 @@ def write_figures(results: list[dict[str, Any]], table: pd.DataFrame, out: Path)
             ax.legend(fontsize=8, ncol=5)
             fig.tight_layout()
             path = out / f"energy_bars_{road}.png"
-            _save_figure(fig, path)
-            plt.close(fig)
+            save_figure(fig, path, dpi=110)
             paths.append(path)
     return paths

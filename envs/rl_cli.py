@@ -362,11 +362,27 @@ def evaluation_table(policies: dict[str, Callable[[np.ndarray], np.ndarray]], en
     return table[TABLE_COLUMNS], notes
 
 
-def summarise(table: pd.DataFrame) -> pd.DataFrame:
-    """Mean over roads per controller (arrived = share of roads finished)."""
-    num = table.drop(columns=["road_seed"]).copy()
-    num["arrived"] = num["arrived"].astype(float)
-    return num.groupby("controller", sort=False).mean(numeric_only=True).reset_index()
+def summarise(table: pd.DataFrame, outside_common: tuple[str, ...] = ("random",)) -> pd.DataFrame:
+    """Mean per controller. Energy, trip time and cost are averaged over the *common* roads only -- the roads every
+    controller except ``outside_common`` finished -- so the numbers compare like with like (NaN for a controller
+    that did not finish one of them); the other columns are averaged over all roads; ``arrived`` is the share of
+    roads finished and ``common_roads`` how many roads the like-for-like means use."""
+    t = table.copy()
+    t["arrived"] = t["arrived"].astype(bool)
+    ranked = t[~t.controller.isin(outside_common)]
+    common = sorted(set(ranked.road_seed) - set(ranked.loc[~ranked.arrived, "road_seed"]))
+    out = []
+    for name, g in t.groupby("controller", sort=False):
+        row = {"controller": name, "arrived": float(g.arrived.mean()), "common_roads": len(common)}
+        c = g[g.road_seed.isin(common)]
+        finished = bool(len(c) == len(common) and c.arrived.all()) and len(common) > 0
+        for col in ("energy_kWh", "trip_time", "cost_kJ"):
+            row[col] = float(c[col].astype(float).mean()) if finished else float("nan")
+        for col in ("speed_violations", "violation_time", "max_excess_kmh", "stop_violations", "rms_jerk",
+                    "episode_return"):
+            row[col] = float(g[col].astype(float).mean())
+        out.append(row)
+    return pd.DataFrame(out)
 
 
 # --------------------------------------------------------------------------------------------- speed benchmark

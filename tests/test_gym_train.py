@@ -71,7 +71,26 @@ def test_evaluation_table_uses_the_controllers_metrics_and_baselines():
     cruise = table.iloc[1]
     assert cruise.arrived and np.isfinite(cruise.energy_kWh) and np.isnan(cruise.episode_return)
     summary = rl_cli.summarise(table)
-    assert list(summary.controller) == ["p", "cruise"]
+    assert list(summary.controller) == ["p", "cruise"] and (summary.common_roads == 1).all()
+    assert summary.energy_kWh.iloc[1] == pytest.approx(cruise.energy_kWh)
+
+
+def test_summary_compares_energy_on_common_roads_only():
+    import pandas as pd
+
+    rows = [("a", 1, True, 1.0, 100.0), ("a", 2, True, 3.0, 100.0), ("b", 1, True, 2.0, 90.0),
+            ("b", 2, False, 0.1, float("nan")), ("random", 1, False, 0.5, float("nan")),
+            ("random", 2, False, 0.5, float("nan"))]
+    table = pd.DataFrame(rows, columns=["controller", "road_seed", "arrived", "energy_kWh", "trip_time"])
+    for col in rl_cli.TABLE_COLUMNS:
+        if col not in table:
+            table[col] = 0.0
+    table["cost_kJ"] = table.energy_kWh * 3600 + 3.0 * table.trip_time
+    s = rl_cli.summarise(table).set_index("controller")
+    # road 2 is not common (b did not finish it): a's energy is its road-1 value, not the mean over both roads
+    assert s.loc["a", "energy_kWh"] == 1.0 and s.loc["b", "energy_kWh"] == 2.0
+    assert s.loc["b", "arrived"] == 0.5 and np.isnan(s.loc["random", "energy_kWh"])
+    assert (s.common_roads == 1).all()
 
 
 def test_bench_single_counts_steps():

@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,6 +19,8 @@ from typing import Any, Callable
 import numpy as np
 import pandas as pd
 import typer
+
+from roadload.fileio import atomic_path
 
 ENV_ID = "roadload:roadload/EcoDrive-v0"
 VALIDATION_SEEDS = (40_000, 40_001, 40_002)
@@ -45,19 +45,8 @@ class RLError(ValueError):
 
 # --------------------------------------------------------------------------------------------- helpers
 def _atomic_write_bytes(path: Path, writer: Callable[[Path], None]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
-        writer(Path(tmp))
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp's 0600 -> what a plain open() would have given
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_path(path) as tmp:
+        writer(tmp)
 
 
 def _algo_class(algo: str):

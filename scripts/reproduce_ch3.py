@@ -228,6 +228,12 @@ def _exp_3_4(seeds: int, out: Path, frac: float) -> dict:
                 for d in datas]
         X = np.stack([r.X for r in runs])
         print(f"{label:<16s} SEVN t>=100: {q(E.sevn(Xt, X)[:, t_all(datas) >= 100].mean(axis=1))}")
+    _two_estimator_figure(res, t, Xt, out / f"fig_3_14_rrlm_rrivm_{int(frac * 100)}pct.png")
+    return summary
+
+
+def _two_estimator_figure(res, t, Xt, path) -> None:
+    """Seed-0 parameter traces of two estimators against the truth, and their median SEVN over seeds."""
     fig, axes = plt.subplots(1, 3, figsize=(16, 4))
     for ax, (k, r) in zip(axes, res.items()):
         ax.plot(t, r.X[0], lw=0.8)
@@ -238,8 +244,7 @@ def _exp_3_4(seeds: int, out: Path, frac: float) -> dict:
         axes[2].semilogy(t, np.median(E.sevn(Xt, r.X), axis=0), label=k, lw=0.8)
     axes[2].legend()
     axes[2].set_title("median SEVN")
-    save(fig, out / f"fig_3_14_rrlm_rrivm_{int(frac * 100)}pct.png")
-    return summary
+    save(fig, path)
 
 
 # ------------------------------------------------------------------------------------------ 3.6
@@ -272,16 +277,7 @@ def exp_3_6(seeds: int, out: Path) -> dict:
           f"{int(np.sum(a['sevn3'][ok] < b['sevn3'][ok]))}")
     drift = np.abs(Xt[:, -1, 2] - Xt[:, 0, 2])
     print(f"|X̄3(end) - X̄3(start)| of the random walk: {q(drift)}")
-    fig, axes = plt.subplots(1, 3, figsize=(16, 4))
-    for ax, (k, r) in zip(axes, res.items()):
-        ax.plot(t, r.X[0], lw=0.8)
-        ax.plot(t, Xt[0], "k-", lw=0.8)
-        ax.set_ylim(-2, 5)
-        ax.set_title(f"{k} (seed 0)")
-    for k, r in res.items():
-        axes[2].semilogy(t, np.median(E.sevn(Xt, r.X), axis=0), label=k, lw=0.8)
-    axes[2].legend()
-    save(fig, out / "fig_3_15_rrivm_rivmkf.png")
+    _two_estimator_figure(res, t, Xt, out / "fig_3_15_rrivm_rivmkf.png")
     return summary
 
 

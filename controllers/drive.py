@@ -20,6 +20,11 @@ from .mpc import MpcSettings
 from .mpc_controller import MpcController, MpcControllerSettings
 from .sim_plant import HumanDriver, SimulatorPlant
 from .vehicle_models import abc_parameters, energy_model_from_spec
+from roadload.estimators.knowledge import knowledge_for_preset
+from roadload.estimators.models import coast_down_coefficients
+from roadload.estimators.pipeline import knowledge_from_spec
+from roadload.road_profiles import load_profile
+from .online import OnlineForceModel
 
 CONTROLLERS = ("mpc", "cruise", "human")
 
@@ -46,9 +51,6 @@ class DriveSettings:
 
 
 def _knowledge(vehicle):
-    from roadload.estimators.fleet import knowledge_for_preset
-    from roadload.estimators.models import coast_down_coefficients
-    from roadload.estimators.pipeline import knowledge_from_spec
 
     if isinstance(vehicle, str):
         return knowledge_for_preset(vehicle)
@@ -58,7 +60,6 @@ def _knowledge(vehicle):
 def resolve_road(road: RoadProfile | str, seed: int = 0) -> RoadProfile:
     if isinstance(road, RoadProfile):
         return road
-    from roadload.road_profiles import load_profile
 
     try:
         prof = load_profile(road, seed=seed)
@@ -82,7 +83,6 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
     if st.controller == "mpc" and st.force_model == "oracle":
         force_model = OracleForceModel(plant.true_parameters)
     elif st.controller == "mpc" and st.force_model == "online":
-        from .online import OnlineForceModel
 
         force_model = OnlineForceModel(_knowledge(vehicle if isinstance(vehicle, str) else spec), model=st.model,
                                        estimator=st.estimator)

@@ -23,6 +23,9 @@ from roadload.trip import Trip
 from roadload.units import G
 
 from .force_model import ForceModelError, ForceParameters
+from roadload.estimators import chapter5_settings, make_estimator
+from roadload.estimators.models import get_model
+from roadload.estimators.pipeline import PipelineError, model_data, run_pipeline
 
 # estimator parameter name -> (ForceParameters field, factor)
 _MAPPING = {"m_V f_r0": ("c0", G), "m_V": ("mass", 1.0), "rho_a/2 A_V c_x": ("c2", 1.0),
@@ -36,8 +39,6 @@ class OnlineForceModel:
 
     def __init__(self, knowledge, model: str = "M4", estimator: str = "RRLM", update_period: float = 10.0,
                  margin: float = 3.0, estimator_settings: dict[str, Any] | None = None) -> None:
-        from roadload.estimators import chapter5_settings, make_estimator
-        from roadload.estimators.models import get_model
 
         self.knowledge = knowledge
         self.structure = get_model(model)
@@ -81,7 +82,6 @@ class OnlineForceModel:
 
     def update(self) -> int:
         """Feed the triggered rows since the last update; returns how many rows were used."""
-        from roadload.estimators.pipeline import PipelineError, model_data, run_pipeline
 
         if self.can_source is None:
             raise ForceModelError("online force model: no CAN source attached (call attach())")

@@ -20,6 +20,8 @@ from .base import Command, Observation
 from .force_model import ForceParameters
 from .plant import PlantStep
 from .vehicle_models import oracle_parameters
+from roadload.envs import Simulator
+from roadload.envs import Action
 
 SIM_DT = 0.01  # the simulator's substep [s]
 
@@ -28,7 +30,6 @@ class SimulatorPlant:
     """Closed-loop adapter around ``roadload.envs.Simulator`` (module docstring)."""
 
     def __init__(self, vehicle, road: RoadProfile, effects=None, seed: int = 0, dt: float = 0.1) -> None:
-        from roadload.envs import Simulator
 
         self.substeps = int(round(dt / SIM_DT))
         if self.substeps < 1 or abs(self.substeps * SIM_DT - dt) > 1e-9:
@@ -46,7 +47,6 @@ class SimulatorPlant:
         return Observation(t=float(r.t), s=float(r.s), v=float(r.v), a=float(r.a), gear=int(r.gear), sample=sample)
 
     def step(self, cmd: Command | None) -> PlantStep:
-        from roadload.envs import Action
 
         action = None if cmd is None else Action(cmd.traction, cmd.regen, cmd.brake)
         r = self.sim.step(action, n_substeps=self.substeps)

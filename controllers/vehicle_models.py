@@ -21,11 +21,15 @@ from roadload.vehicle import VehicleSpec
 
 from .energy import SourceEnergyModel, fit_loss_polynomial
 from .force_model import ForceParameters
+from roadload.envs.drivetrain import (battery_current, fuel_power, inverse_wheel_torque, motor_electric_power,
+                                          speed_ratio, torque_limits)
+from roadload.envs.packing import pack_vehicle
+from roadload.envs import get_preset
+from roadload.estimators.models import coast_down_coefficients
 
 
 def _spec(vehicle: VehicleSpec | str) -> VehicleSpec:
     if isinstance(vehicle, str):
-        from roadload.envs import get_preset
 
         return get_preset(vehicle)
     return vehicle
@@ -64,9 +68,6 @@ def energy_model_from_spec(vehicle: VehicleSpec | str) -> SourceEnergyModel:
 
 
 def _fit_energy(spec: VehicleSpec) -> SourceEnergyModel:
-    from roadload.envs.drivetrain import (battery_current, fuel_power, inverse_wheel_torque, motor_electric_power,
-                                          speed_ratio, torque_limits)
-    from roadload.envs.packing import pack_vehicle
 
     P, tabs, ti = pack_vehicle(spec)
     d = spec.drivetrain
@@ -139,8 +140,6 @@ def _fit_energy(spec: VehicleSpec) -> SourceEnergyModel:
 
 @lru_cache(maxsize=16)
 def _coast_down(name: str) -> tuple[float, float, float]:
-    from roadload.envs import get_preset
-    from roadload.estimators.models import coast_down_coefficients
 
     return coast_down_coefficients(get_preset(name))
 
@@ -152,7 +151,6 @@ def abc_parameters(vehicle: VehicleSpec | str) -> ForceParameters:
     if isinstance(vehicle, str):
         a, b, c = _coast_down(vehicle)
     else:
-        from roadload.estimators.models import coast_down_coefficients
 
         a, b, c = coast_down_coefficients(spec)
     return ForceParameters(mass=float(spec.body.mass), c0=float(a), c1=float(b), c2=float(c),

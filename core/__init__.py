@@ -14,8 +14,8 @@ __all__ = ["Trip", "TripError", "__version__"]
 def _register_gym_envs() -> None:
     import gymnasium
 
-    for env_id, entry_point in (("roadload/EcoDrive-v0", "roadload.envs.gym_ecodrive:EcoDriveEnv"),
-                                ("roadload/EcoHighway-v0", "roadload.envs.gym_highway:EcoHighwayEnv")):
+    for env_id, entry_point in (("roadload/EcoDrive-v0", "roadload.gym.ecodrive:EcoDriveEnv"),
+                                ("roadload/EcoHighway-v0", "roadload.gym.highway:EcoHighwayEnv")):
         if env_id not in gymnasium.registry:
             gymnasium.register(id=env_id, entry_point=entry_point, disable_env_checker=False)
 

@@ -30,6 +30,7 @@ import numpy as np
 
 from .fileio import write_json
 from .units import G, air_density
+from .channels import MEASURED
 
 __all__ = [
     "VehicleSpecError", "Curve", "Map2D", "BodySpec", "AeroSpec", "TireSpec", "EngineSpec", "MotorSpec",
@@ -494,7 +495,6 @@ class SensorSpec:
     speed_scale_error: float = 0.0
 
     def validate(self, path: str) -> None:
-        from .channels import MEASURED
 
         _between(f"{path}.sample_rate", self.sample_rate, 1.0, 1000.0)
         for name, ch in self.channels.items():
@@ -560,27 +560,6 @@ class VehicleSpec:
         inv = (b.cg_to_rear_axle ** 2 / t.cornering_stiffness_front
                + b.cg_to_front_axle ** 2 / t.cornering_stiffness_rear) / b.wheelbase ** 2
         return 1.0 / (4.0 * inv)
-
-    def road_load(self, speed, rho: float = STANDARD_AIR_DENSITY, mass: float | None = None):
-        """Steady flat-road resistance [N] at the wheels in neutral / zero drive torque: rolling (eq. 2.9/2.10),
-        aero (eq. 2.7, no wind), toe-in (section 2.4.5) and the drive-train's zero-load spin losses (warm oil)."""
-        from roadload.envs.drivetrain import neutral_drag_force  # one implementation of the loss maps
-
-        m = self.body.mass if mass is None else mass
-        v = np.asarray(speed, dtype=float)
-        t = self.tires
-        toe = t.cornering_stiffness_front * t.toe_in * math.sin(t.toe_in)
-        return (m * G * t.rolling_resistance_coefficient(v) + 0.5 * rho * self.aero.drag_area * v ** 2 + toe
-                + neutral_drag_force(self, v))
-
-    def road_load_coefficients(self, v_min: float = 15 / 3.6, v_max: float = 130 / 3.6,
-                               rho: float = STANDARD_AIR_DENSITY, speeds=None) -> tuple[float, float, float]:
-        """Coast-down coefficients (a [N], b [N s/m], c [N s^2/m^2]): least-squares fit of a + b v + c v^2 to
-        ``road_load`` at 200 speeds over [v_min, v_max] or at the given ``speeds`` [m/s] (the f_r4 v^4 term and the
-        drive-train drag fold into a, b, c)."""
-        v = np.linspace(v_min, v_max, 200) if speeds is None else np.asarray(speeds, dtype=float)
-        coef = np.polyfit(v, self.road_load(v, rho), 2)
-        return float(coef[2]), float(coef[1]), float(coef[0])
 
     # ------------------------------------------------------------------ validation and I/O
     def validate(self, path: str = "vehicle") -> None:

@@ -52,7 +52,7 @@ accelerations above ~4 m/s^2 raise a ``LateralValidityWarning`` (single-track mo
 
 from .driver import DriverConfig
 from .effects import EFFECTS, EffectsConfig, EffectsError, describe_effects
-from .presets import PRESETS, get_preset
+from roadload.presets import PRESETS, get_preset
 from .sensors import SensorConfigError
 from .simulator import Action, LateralValidityWarning, SimulationError, Simulator, StepResult, simulate
 

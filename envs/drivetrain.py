@@ -19,6 +19,7 @@ from ._jit import jit
 
 from .layout import *  # noqa: F401,F403 - index constants
 from .numerics import invert_through_map, table1, table2
+from .packing import pack_vehicle
 
 
 @jit
@@ -175,7 +176,6 @@ def allocate(force, capacity):
 def neutral_drag_force(spec, speed) -> np.ndarray:
     """Drive-train drag [N] at the wheels with zero drive torque, warm oil: ICE in neutral (differential spin loss),
     BEV with zero motor torque (single-speed gearbox + differential). Used for the coast-down road load."""
-    from .packing import pack_vehicle
 
     P, tabs, ti = pack_vehicle(spec)
     r = spec.tires.dynamic_radius

@@ -28,9 +28,10 @@ from .effects import EffectsConfig
 from .layout import *  # noqa: F401,F403 - index constants
 from .numerics import road_value_at
 from .packing import pack_vehicle
-from .presets import get_preset
+from roadload.presets import get_preset
 from .schedules import Schedules
 from .sensors import SensorModel
+from .drivetrain import source_side_inertia, wheel_side_mass
 
 DT = 0.01  # s, physics step (100 Hz)
 
@@ -507,7 +508,6 @@ class Simulator:
 
     def kinetic_energy(self) -> float:
         """Translational + rotational kinetic energy [J] of the longitudinal model now."""
-        from .drivetrain import source_side_inertia, wheel_side_mass
 
         X, P = self.X, self.P
         gear = int(X[S_GEAR])

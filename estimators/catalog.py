@@ -15,6 +15,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from .config import EstimatorConfig, EstimatorConfigError, check_setting_names
+from .recursive import RecursiveEstimator
+from .rgtls import RecursiveGTLS
+from .pks import PolynomialKalmanSmoother
 
 
 @dataclass(frozen=True)
@@ -83,12 +86,9 @@ def make_estimator(name: str, **overrides: Any):
     robust_scale=True)``. Unknown settings or out-of-range values raise EstimatorConfigError."""
     key = name.upper()
     if key == "RGTLS":
-        from .rgtls import RecursiveGTLS
         return RecursiveGTLS(**overrides)
     if key == "PKS":
-        from .pks import PolynomialKalmanSmoother
         return PolynomialKalmanSmoother(**overrides)
-    from .recursive import RecursiveEstimator
     return RecursiveEstimator(make_config(name, **overrides))
 
 

@@ -23,6 +23,10 @@ from roadload.trip import Trip
 
 from .models import ModelStructure, get_model
 from .pipeline import PipelineResult, PipelineSettings, VehicleKnowledge, model_data, run_pipeline
+from . import chapter5_settings
+from . import run
+from .metrics import medse
+from .metrics import nmse
 
 HORIZONS: tuple[int, ...] = (300, 900, 1200, 1500, 1800)   # k, triggered samples at 10 Hz (section 5.8)
 ESTIMATORS: tuple[str, ...] = ("RLS", "RRLM", "SGMKF", "RGTLS", "SGIVMKF")  # section 5.5
@@ -56,7 +60,6 @@ def estimator_settings(model: str | ModelStructure, estimator: str, initial: np.
 
     M3/M4 take the library's chapter-5 settings; a user-registered structure takes the M3 settings with its own
     number of parameters and its terms' random-walk variances as P_d."""
-    from . import chapter5_settings
 
     m = get_model(model)
     if m.white_box:
@@ -114,7 +117,6 @@ def estimate(t: np.ndarray, A: np.ndarray, B: np.ndarray, model: str | ModelStru
             raise EvaluationError(f"gray-box model {m.name!r} needs an estimator")
         X = np.broadcast_to(initial, A.shape).copy()
         return Estimate(m.name, None, t, A, B, X, None, B - A @ initial, m.parameter_names)
-    from . import run
 
     res = run(estimator, A, B, **estimator_settings(m, estimator, initial))
     X = res.X
@@ -127,7 +129,6 @@ def cross_validate(est: Estimate, horizons: Sequence[int] = HORIZONS,
     """MEDSE (eq. 5.7) of the k-step prediction of the last k triggered samples with X̂ frozen at the split.
 
     Horizons whose split would leave fewer than `min_training` training samples give NaN (trip too short)."""
-    from .metrics import medse
 
     n = est.B.size
     out: dict[int, float] = {}
@@ -153,7 +154,6 @@ def convergence_index(P_diag: np.ndarray | None, p_max: float = P_MAX) -> int:
 
 def mass_nmse(mass_estimates: np.ndarray, true_mass: float | np.ndarray) -> float:
     """NMSE (eq. 3.3b) of the mass estimates against the true mass: 1 - ||m - m̂||² / ||m||²."""
-    from .metrics import nmse
 
     m_hat = np.asarray(mass_estimates, dtype=float)
     truth = np.broadcast_to(np.asarray(true_mass, dtype=float), m_hat.shape)

@@ -21,6 +21,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
+from roadload.envs.coast_down import neutral_road_load
 from roadload.units import G
 
 # Names of the preprocessed vehicle states the built-in regressors read (columns of the pipeline's "states" stage).
@@ -295,14 +296,14 @@ def simulate_coast_down(spec, v_start: float = 130 / 3.6, v_end: float = 15 / 3.
     """A coast-down of the nominal vehicle (no effects, flat road, no wind, neutral) as a manufacturer runs it.
 
     Integrates m_eff dv/dt = -F_road(v) with the simulator's road load of the spec (rolling resistance, drag and
-    the drive-train's spin losses in neutral; :meth:`roadload.vehicle.VehicleSpec.road_load`) by RK4 from
+    the drive-train's spin losses in neutral; :func:`roadload.envs.coast_down.neutral_road_load`) by RK4 from
     v_start to v_end [m/s]; returns (t [s], v [m/s], m_eff [kg]) sampled every dt [s]."""
     m_eff = float(spec.effective_mass(0))
     if not (v_start > v_end > 0 and dt > 0):
         raise ModelError(f"coast-down needs v_start > v_end > 0 and dt > 0, got {v_start}, {v_end}, {dt}")
 
     v_grid = np.linspace(0.9 * v_end, 1.05 * v_start, 300)
-    force = np.asarray(spec.road_load(v_grid), dtype=float)   # the simulator's road load, evaluated once
+    force = np.asarray(neutral_road_load(spec, v_grid), dtype=float)   # the simulator's road load, evaluated once
     if force.shape != v_grid.shape or not np.all(np.isfinite(force)):
         raise ModelError(f"the road load of vehicle {getattr(spec, 'name', '?')!r} is not finite on "
                          f"[{v_grid[0]:.3g}, {v_grid[-1]:.3g}] m/s")

@@ -33,6 +33,8 @@ from roadload.units import G
 
 from .models import (ACCELERATION, GRADIENT_ANGLE, PATH_CURVATURE, SPEED, TRACTIVE_FORCE, ModelStructure,
                      NominalParameters, get_model)
+from roadload.vehicle import STANDARD_AIR_DENSITY
+from .pks import pks_bank
 
 STAGES = ("measured", "smoothed", "decimated", "states")
 
@@ -189,7 +191,6 @@ def knowledge_from_spec(spec, coast_down: tuple[float, float, float] | None = No
     loss tables are simplified from the spec's maps (warm oil, one speed; the same structure for rear- and
     all-wheel drive, as in section 5.9). coast_down: (a_V, b_V, c_V) for M0 (see
     :func:`roadload.estimators.models.simulate_coast_down`)."""
-    from roadload.vehicle import STANDARD_AIR_DENSITY
 
     d = spec.drivetrain
     eff, drag = zip(*[_fit_loss_table(m, r) for m, r in zip(d.gearbox_loss, d.gear_ratios)])
@@ -289,7 +290,6 @@ def _smoother_bank(values: dict[str, np.ndarray], rate: float, settings: Pipelin
 
     The smoother settings are given for settings.smoother_rate (100 Hz); at another input rate the window is
     scaled with the rate and the forgetting factor λ to the same memory in seconds (λ^(smoother_rate/rate))."""
-    from .pks import pks_bank  # the estimator library's bank: one PKS configuration for all channels
 
     cfg = dict(settings.smoother)
     scale = rate / settings.smoother_rate

@@ -15,7 +15,7 @@ import os
 import time
 from pathlib import Path
 
-from roadload.estimators.fleet import (check_findings, generate_fleet, run_benchmark, stored_trips,
+from roadload.experiments.fleet import (check_findings, generate_fleet, run_benchmark, stored_trips,
                                        write_report)
 
 

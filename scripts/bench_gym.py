@@ -11,7 +11,7 @@ import os
 
 from rich.console import Console
 
-from roadload.envs.rl_cli import print_table, run_benchmark, speed_ratio
+from roadload.experiments.rl import print_table, run_benchmark, speed_ratio
 
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

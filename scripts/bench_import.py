@@ -19,6 +19,7 @@ from roadload.io.frames import read_mf4
 from roadload.io.loaders import check_mapping_against_dbc, resolve_dbcs
 from roadload.io.mapping import apply_mapping, load_mapping
 from roadload.io.report import ImportReport
+from roadload.io.dbc import decode_frames
 
 
 def run_once(folder, mapping):
@@ -28,7 +29,6 @@ def run_once(folder, mapping):
     report = ImportReport()
     db = load_dbc(resolve_dbcs(mapping, folder), report)
     needed = check_mapping_against_dbc(mapping, db, report)
-    from roadload.io.dbc import decode_frames
 
     signals = decode_frames(frames, db, report, wanted_messages=needed)
     t2 = time.perf_counter()
@@ -79,7 +79,6 @@ def main() -> int:
 
 def compare_cantools(folder, mapping) -> None:
     """Reference: decoding the same frames one at a time with cantools' decode_message (no mapping stage)."""
-    from roadload.io.dbc import decode_frames
 
     frames = read_mf4(folder)
     report = ImportReport()

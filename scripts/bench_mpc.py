@@ -18,6 +18,14 @@ import time
 
 import numpy as np
 import pandas as pd
+from roadload.controllers.base import DriveContext
+from roadload.controllers.closed_loop import run_closed_loop
+from roadload.controllers.force_model import FixedForceModel
+from roadload.controllers.mpc import MpcSettings
+from roadload.controllers.mpc_controller import MpcController, MpcControllerSettings
+from roadload.controllers.plant import ModelPlant
+from roadload.controllers.vehicle_models import abc_parameters, energy_model_from_spec
+from roadload.road_profiles import city, hilly
 
 
 def main() -> None:
@@ -28,14 +36,6 @@ def main() -> None:
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
 
-    from roadload.controllers.base import DriveContext
-    from roadload.controllers.closed_loop import run_closed_loop
-    from roadload.controllers.force_model import FixedForceModel
-    from roadload.controllers.mpc import MpcSettings
-    from roadload.controllers.mpc_controller import MpcController, MpcControllerSettings
-    from roadload.controllers.plant import ModelPlant
-    from roadload.controllers.vehicle_models import abc_parameters, energy_model_from_spec
-    from roadload.road_profiles import city, hilly
 
     energy = energy_model_from_spec(args.vehicle)
     params = abc_parameters(args.vehicle)

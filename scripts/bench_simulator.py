@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import argparse
 
-from roadload.envs.benchmark import report
+from roadload.experiments.bench_simulator import report
 
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

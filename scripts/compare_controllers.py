@@ -7,7 +7,7 @@ Prints the Markdown table and writes comparison.md/.csv, summary.csv and PNG fig
 
 import sys
 
-from roadload.cli import main
+from roadload.experiments.cli import main
 
 if __name__ == "__main__":
     sys.argv = ["roadload", "benchmark", "controllers", *sys.argv[1:]]

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from roadload.data import shared_data_dir
-from roadload.io.loaders import import_log
+from roadload.io.importer import import_log
 from roadload.io.mapping import load_mapping
 from roadload.io.profiles import profile_from_trip, save_trip_profile
 

@@ -25,8 +25,13 @@ import pandas as pd
 from roadload.data import require_shared_data
 from roadload.estimators.evaluation import (ESTIMATORS, HORIZONS, MIN_TRAINING, combination_name, common_trips,
                                             evaluate_trip, notch_table)
-from roadload.estimators.fleet import _markdown_table, _write_csv, _write_text, knowledge_for_trip
+from roadload.estimators.knowledge import knowledge_for_trip
+from roadload.fileio import write_text
+from roadload.tables import markdown_table, write_csv
 from roadload.estimators.pipeline import PipelineSettings, accelerometer_gravity_slope, run_pipeline
+from roadload.io import import_log
+from roadload.estimators.figures import plot_notched_boxplot, save
+from roadload.sweep import run_sweep
 
 GRADIENT_SOURCES = ("accelerometer", "grade_channel")
 COMBINATIONS = [("M0", None)] + [("M3", e) for e in ESTIMATORS]
@@ -37,7 +42,6 @@ def evaluate_i3_trip(path: str) -> dict:
     """Sweep task: import one i3 CSV and evaluate M0 and M3 x 5 estimators, once with the gradient angle of
     eq. 5.2 (accelerometer) and once with the grade channel derived from elevation (the data set leaves open
     whether the accelerometer sees g sin θ; Munich is too flat for the test to decide on most trips)."""
-    from roadload.io import import_log
 
     trip = import_log(path, "bmw-i3")
     knowledge = knowledge_for_trip(trip, "bmw_i3")
@@ -71,8 +75,6 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--limit", type=int, default=None)
     args = ap.parse_args()
-    from roadload.estimators.figures import plot_notched_boxplot, save
-    from roadload.sweep import run_sweep
 
     folder = require_shared_data("bmw_i3_tum/data")
     files = sorted(str(p) for p in folder.glob("Trip*.csv"))[: args.limit]
@@ -86,8 +88,8 @@ def main() -> None:
     info = pd.DataFrame([v["info"] for v in ok])
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
-    _write_csv(out / "medse_per_trip.csv", medse)
-    _write_csv(out / "trips.csv", info)
+    write_csv(out / "medse_per_trip.csv", medse)
+    write_csv(out / "trips.csv", info)
     order = [combination_name(m, e) for m, e in COMBINATIONS]
     slopes = info["accelerometer_gravity_slope"]
     md = ["# Chapter 5 on the BMW i3 trips (real data)", "",
@@ -109,9 +111,9 @@ def main() -> None:
             tab = notch_table(d)
             tab["o"] = tab["combination"].map({c: i for i, c in enumerate(order)})
             tab = tab.sort_values("o").drop(columns="o")
-            _write_csv(out / f"medse_{source}_k{k}.csv", tab)
+            write_csv(out / f"medse_{source}_k{k}.csv", tab)
             md += [f"## MEDSE, k = {k} (m = {int(tab['m'].max())} trips with ≥ {MIN_TRAINING} training samples)",
-                   "", _markdown_table(tab), ""]
+                   "", markdown_table(tab, floatfmt=".4g"), ""]
             save(plot_notched_boxplot(d, "medse", order=order, ylabel="MEDSE [N²]",
                                       title=f"BMW i3 ({source}), MEDSE, k = {k}, m = {int(tab['m'].max())}"),
                  out / f"medse_boxplot_{source}_k{k}.png")
@@ -130,23 +132,23 @@ def main() -> None:
                                                                 - np.nanmedian(est[~noted & winter])),
                          "noted_payload_median": float(np.median(info.loc[noted, "payload_kg"]))})
         mass_tab = pd.DataFrame(rows)
-        _write_csv(out / f"mass_vs_payload_{source}.csv", mass_tab)
+        write_csv(out / f"mass_vs_payload_{source}.csv", mass_tab)
         noted_trips = set(info.loc[noted, "trip"])
         nm = mass_rows[(mass_rows["gradient"] == source) & mass_rows["trip"].isin(noted_trips)]
         nmse_tab = notch_table(nm, value="nmse") if not nm.empty else pd.DataFrame()
         md += ["## Mass against the payload notes", "",
                f"{int(noted.sum())} trips carry a payload note ({sorted(info.loc[noted, 'payload_kg'].tolist())} kg); "
                f"reference mass = {NOMINAL_MASS:.0f} kg (preset, with driver) + payload. Mass estimate per trip = "
-               f"median over the second half of the trip.", "", _markdown_table(mass_tab, ".5g"), ""]
+               f"median over the second half of the trip.", "", markdown_table(mass_tab, floatfmt=".5g"), ""]
         print(f"\nmass vs payload notes, gradient from {source}")
         print(mass_tab.to_string(index=False, float_format=lambda x: f"{x:.1f}"))
         if not nmse_tab.empty:
             md += ["NMSE of the mass estimates (after the convergence test) on the noted trips:", "",
-                   _markdown_table(nmse_tab, ".5g"), ""]
+                   markdown_table(nmse_tab, floatfmt=".5g"), ""]
             print(nmse_tab[["combination", "m", "median", "notch_low", "notch_high"]].to_string(
                 index=False, float_format=lambda x: f"{x:.5f}"))
-    md += ["# Trips", "", _markdown_table(info.drop(columns=["notes"]), ".4g"), ""]
-    _write_text(out / "report.md", "\n".join(md) + "\n")
+    md += ["# Trips", "", markdown_table(info.drop(columns=["notes"]), floatfmt=".4g"), ""]
+    write_text(out / "report.md", "\n".join(md) + "\n")
     print(f"report: {out / 'report.md'}")
 
 

@@ -15,7 +15,7 @@ import time
 import numpy as np
 import pandas as pd
 
-from roadload.estimators.robustness import (
+from roadload.experiments.robustness import (
     DEFAULT_BOUND, breakdown_table, scenarios, sweep_specs, write_report, run_sweep_results,
 )
 

@@ -17,15 +17,16 @@ from roadload.io import import_log
 from roadload.sim2real.diagnose import DiagnosisSettings, diagnose
 from roadload.sim2real.report import write_report
 from roadload.sim2real.simconfig import SimConfig
+from roadload.estimators.models import Term
+from roadload.sim2real.catalog import CandidateEffect, register_candidate
+from roadload.units import G
+from roadload.sim2real.catalog import DEFAULT_CANDIDATES
 
 
 def register_cold_rolling() -> str:
     """A user-added candidate (not in the catalog): rolling resistance rising in the cold,
     f_r(v, T_a) = f_r(v) (1 + k max(293.15 K - T_a, 0) / 10 K); regressor m_V g cos(theta) f_r(v) max(...)/10 K,
     parameter k (relative rise per 10 K below 20 degC). The simulator has no such switch (sim_effect None)."""
-    from roadload.estimators.models import Term
-    from roadload.sim2real.catalog import CandidateEffect, register_candidate
-    from roadload.units import G
 
     def terms(model, shape):
         def build(s):
@@ -64,7 +65,6 @@ def main() -> None:
             skipped.append(f"{f.stem}: {exc}")
     print(f"loaded {len(trips)} trips in {time.perf_counter() - t0:.0f} s; skipped {skipped or 'none'}")
     sim = SimConfig.load("bmw_i3")
-    from roadload.sim2real.catalog import DEFAULT_CANDIDATES
     cands = DEFAULT_CANDIDATES + ((register_cold_rolling(),) if args.user_candidate else ())
     diag = diagnose(trips, sim, DiagnosisSettings(seed=args.seed, candidates=cands),
                     progress=lambda what, frac: print(f"  [{time.perf_counter() - t0:5.0f} s] {what}"))

@@ -13,7 +13,7 @@ from pathlib import Path
 import pandas as pd
 
 from roadload.fileio import write_json
-from roadload.sim2real.selftest import run_selftest
+from roadload.experiments.sim2real_selftest import run_selftest
 
 
 def main() -> None:

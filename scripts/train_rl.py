@@ -9,7 +9,7 @@ All options: python scripts/train_rl.py --help (the same as ``roadload train``).
 
 import typer
 
-from roadload.envs.rl_cli import register
+from roadload.experiments.rl import register
 
 if __name__ == "__main__":
     app = typer.Typer(add_completion=False)

@@ -5,7 +5,7 @@ much of the gap disappears once the effect is switched on in the simulator.
   :func:`write_report` writes ``report.md``, ``diagnosis.json`` and PNG figures;
 - the candidate catalog: :class:`CandidateEffect`, :func:`register_candidate`, :func:`candidate_names`;
 - regimes: :class:`Regime`, :func:`register_regime`;
-- the selftest on withheld effects: :func:`run_selftest`.
+- the selftest on withheld effects: :func:`roadload.experiments.sim2real_selftest.run_selftest`.
 
 Modules: ``forcemodel`` (the sim's force balance on the model registry), ``floor`` (the sim against its own trips),
 ``table`` (trips -> diagnosis table), ``energy`` (battery-power side), ``stats`` (block bootstrap, notches,
@@ -19,9 +19,8 @@ from .diagnose import Diagnosis, DiagnosisSettings, diagnose
 from .errors import DiagnosisError
 from .regimes import Regime, register_regime
 from .report import write_report
-from .selftest import run_selftest
 from .simconfig import SimConfig
 
 __all__ = ["CandidateEffect", "Diagnosis", "DiagnosisError", "DiagnosisSettings", "Regime", "SimConfig",
-           "candidate_names", "diagnose", "get_candidate", "register_candidate", "register_regime", "run_selftest",
+           "candidate_names", "diagnose", "get_candidate", "register_candidate", "register_regime",
            "write_report"]

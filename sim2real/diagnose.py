@@ -36,6 +36,11 @@ from .selection import Selector, make_split
 from .simconfig import SimConfig
 from .stats import block_bootstrap_mean_difference
 from .table import DiagnosisTable, build_table
+from roadload.envs.simulator import simulate
+from roadload.road_profiles import load_profile
+from .energy import POWER_RESIDUAL, SIM_ELECTRIC_POWER, ELECTRIC_POWER, electric_energy_per_distance
+from .selection import Split
+from .stats import robust_summary
 
 SCHEMA_VERSION = 1
 FLOOR_ROADS: tuple[tuple[str, int], ...] = (("hilly", 9101), ("city", 9102), ("motorway", 9103))
@@ -152,8 +157,6 @@ def _jsonable(x):
 def sim_trips(sim: SimConfig, roads: Sequence[tuple[str, int]], duration: float,
               effects=None) -> list[Trip]:
     """Trips the sim itself drives on the given (profile, seed) roads (``effects`` overrides the sim's)."""
-    from roadload.envs.simulator import simulate
-    from roadload.road_profiles import load_profile
 
     out = []
     for name, seed in roads:
@@ -235,8 +238,6 @@ def _unexplained(table: pd.DataFrame, residual_after: np.ndarray, split, setting
 def _energy_side(table: pd.DataFrame, split, settings: DiagnosisSettings, model) -> dict | None:
     """The battery-power residual (:mod:`.energy`): gap before/after, ranking and forward selection of the
     power-side candidates on the same split; None without battery power."""
-    from .energy import POWER_RESIDUAL, SIM_ELECTRIC_POWER, ELECTRIC_POWER, electric_energy_per_distance
-    from .selection import Split
 
     pr = table[POWER_RESIDUAL].to_numpy(dtype=float)
     ok = np.isfinite(pr)
@@ -268,7 +269,6 @@ def _energy_side(table: pd.DataFrame, split, settings: DiagnosisSettings, model)
     e_meas = electric_energy_per_distance(table, measured, test)
     e_before = electric_energy_per_distance(table, sim_p, test)
     e_after = electric_energy_per_distance(table, measured - after, test)
-    from .stats import robust_summary
     return {"power_residual_before": robust_summary(pr[test]), "power_residual_after": robust_summary(after[test]),
             "electric_energy_per_distance": {"measured": e_meas, "sim_before": e_before, "sim_after": e_after,
                                              "unit": "kWh/100 km (while moving)"},

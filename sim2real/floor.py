@@ -20,6 +20,10 @@ from roadload.trip import Trip
 from roadload.units import G
 
 from .errors import DiagnosisError
+from .catalog import get_candidate
+from .forcemodel import columns_of
+from .selection import design
+from .energy import power_basis
 
 BASIS: tuple[str, ...] = ("1", "v", "v^2", "dv/dt", "g sin(theta)", "F_sim,drive", "|F_sim,drive|",
                           "dF_sim,drive/dt", "v^4/r^2", "F_brake")
@@ -45,9 +49,6 @@ def basis(frame: pd.DataFrame, sim_force: np.ndarray) -> np.ndarray:
 def _extra_columns(frame: pd.DataFrame, extra, model) -> np.ndarray:
     if not extra:
         return np.zeros((len(frame), 0))
-    from .catalog import get_candidate
-    from .forcemodel import columns_of
-    from .selection import design
 
     return design([(get_candidate(n), sh) for n, sh in extra], model, columns_of(frame)).A
 
@@ -96,7 +97,6 @@ class SimFloor:
         """The energy floor [W] (0 when the sim trips had no battery power)."""
         if self.power_coefficients is None or "motor_speed" not in frame.columns:
             return np.zeros(len(frame))
-        from .energy import power_basis
         return power_basis(frame) @ self.power_coefficients
 
     def to_dict(self) -> dict:
@@ -110,7 +110,6 @@ class SimFloor:
 def _fit_power_floor(frame: pd.DataFrame, valid: np.ndarray) -> np.ndarray | None:
     if "power_residual" not in frame.columns:
         return None
-    from .energy import power_basis
     y = frame["power_residual"].to_numpy(dtype=float)
     ok = np.asarray(valid, bool) & np.isfinite(y)
     if ok.sum() < 100:

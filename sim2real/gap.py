@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 
 from .stats import robust_summary
+from .replay import simulator_replay
 
 J_PER_M_TO_KWH_PER_100KM = 100e3 / 3.6e6
 
@@ -68,7 +69,6 @@ def gap_measures(frame: pd.DataFrame, residual: np.ndarray, mass: float, rows: n
     e_sim = energy_per_distance(frame, measured - r, rows)
     out_replay = None
     if replay_sim is not None:
-        from .replay import simulator_replay
         out_replay = simulator_replay(frame, rows, replay_sim)
     return {"force_residual": robust_summary(r[rows]),
             "replay_speed_error": replay_speed_error(frame, r, mass, rows),

@@ -17,6 +17,9 @@ import numpy as np
 import pandas as pd
 
 from .simconfig import SimConfig
+from roadload.envs.layout import S_POS
+from roadload.envs.simulator import DT, Action, LateralValidityWarning, Simulator
+from roadload.road_profiles import RoadProfile
 
 
 MAX_GRADE = float(np.arctan(0.29))   # rad, the simulator's road profiles stop at 30 %
@@ -31,9 +34,6 @@ def _windows(t: np.ndarray, window: float) -> np.ndarray:
 def simulator_replay(frame: pd.DataFrame, rows: np.ndarray, sim: SimConfig, window: float = 20.0,
                      seed: int = 0) -> dict[str, float]:
     """Replay speed error of the simulator configured as ``sim`` on the table rows ``rows`` (see module doc)."""
-    from roadload.envs.layout import S_POS
-    from roadload.envs.simulator import DT, Action, LateralValidityWarning, Simulator
-    from roadload.road_profiles import RoadProfile
 
     t_all = frame["t"].to_numpy(dtype=float)
     trip = frame["trip"].to_numpy()

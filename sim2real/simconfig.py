@@ -21,6 +21,7 @@ from roadload.envs.effects import EffectsConfig, EffectsError
 from roadload.vehicle import VehicleSpec, VehicleSpecError, load_vehicle
 
 from .errors import DiagnosisError
+from roadload.presets import PRESETS, get_preset
 
 _KEYS = {"vehicle", "effects", "name"}
 
@@ -91,7 +92,6 @@ class SimConfig:
 
 def load_sim_vehicle(vehicle: str | dict, base: Path | None) -> VehicleSpec:
     """A preset name, a spec file (relative to ``base``) or a spec dict -> VehicleSpec (DiagnosisError otherwise)."""
-    from roadload.envs.presets import PRESETS, get_preset
 
     try:
         if isinstance(vehicle, dict):

@@ -7,7 +7,7 @@ importer drops or repairs is counted in ``trip.meta["import_report"]``.
 """
 
 from .frames import CanFrames, read_can_log, read_mf4, write_can_log
-from .loaders import import_log
+from .importer import import_log
 from .mapping import Mapping, apply_mapping, load_mapping
 from .report import ImportReport, LogImportError
 

@@ -11,6 +11,9 @@ from typing import Any
 
 import numpy as np
 
+from roadload.presets import get_preset
+from roadload.road_profiles.tracks import profile_from_track
+
 from ..trip import Trip
 from .report import ImportReport, LogImportError
 from .validate import MAX_GRADE_RAD
@@ -35,8 +38,6 @@ def distance_from_speed(t, speed) -> np.ndarray:
 
 
 def _profile(distance, *, name: str, report: ImportReport, what: str, **kwargs):
-    from roadload.road_profiles.tracks import profile_from_track
-
     kwargs.setdefault("max_grade", float(np.tan(MAX_GRADE_RAD)))
     prof = profile_from_track(distance, name=name, **kwargs)
     for key, count in prof.meta.get("repairs", {}).items():
@@ -101,10 +102,6 @@ def curvature_from_yaw_rate_track(t, speed, yaw_rate, report: ImportReport, *, w
 
 def vehicle_spec(preset: str):
     """A roadload.envs vehicle preset (VehicleSpec) by name; LogImportError when it does not exist."""
-    try:
-        from roadload.envs.presets import get_preset
-    except ImportError as exc:
-        raise LogImportError(f"vehicle presets (roadload.envs.presets) unavailable: {exc}") from None
     try:
         return get_preset(preset)
     except (KeyError, ValueError) as exc:

@@ -26,6 +26,8 @@ from ..fileio import write_text
 from ..trip import Trip
 from .frames import CanFrames, write_can_log
 from .report import LogImportError
+from roadload.presets import get_preset
+from ..vehicle import ChannelSensorSpec, SensorSpec
 
 FIRST_ID = 0x100
 # physical ranges [SI] that size the DBC signals; channels not listed use +-DEFAULT_RANGE
@@ -111,7 +113,6 @@ PROJECT_DBC_DIR = Path(__file__).parent / "dbc"
 def write_project_dbc(preset: str, folder: str | Path = PROJECT_DBC_DIR) -> Path:
     """Write ``roadload_<preset>.dbc``: the project DBC of a roadload.envs vehicle preset's sensor set (atomic).
     The packaged copies are regenerated with this function (a test checks they are up to date)."""
-    from roadload.envs.presets import get_preset
 
     spec = get_preset(preset)
     path = Path(folder) / f"roadload_{preset}.dbc"
@@ -263,7 +264,6 @@ def export_trip(trip: Trip, path: str | Path, fmt: str, *, sensors: Any | None =
 def sensors_from_meta(meta: dict[str, Any]):
     """The SensorSpec a simulated trip was measured with: ``meta["sensors"]`` (the simulator's record), else
     ``meta["vehicle"]["sensors"]``; None for trips without one (real logs)."""
-    from ..vehicle import ChannelSensorSpec, SensorSpec
 
     raw = meta.get("sensors")
     if not isinstance(raw, dict):

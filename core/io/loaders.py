@@ -11,7 +11,7 @@ bmw-i3         TUM BMW i3 trip CSV (csv + i3 vehicle spec: rim torque, grade, pa
 openxc         OpenXC JSON trace, lines ``<unix time>: {"name": ..., "value": ...}``
 =============  ==========================================================================================
 
-`import_log` is the single entry point (CLI ``roadload import``): read -> mapping -> derived channels ->
+`roadload.io.importer.import_log` is the single entry point (CLI ``roadload import``): read -> mapping -> derived channels ->
 Trip with ``meta["import_report"]`` listing every repair and drop.
 """
 
@@ -253,35 +253,5 @@ def load_openxc(source: str | Path, mapping: Mapping, *, progress: Progress | No
 
 
 # ------------------------------------------------------------------------------------------ entry point
-def import_log(source: str | Path, fmt: str, mapping: str | Path | Mapping | None = None, *,
-               dbc: list[str | Path] = (), progress: Progress | None = None) -> Trip:
-    """Import a log of the given format through a mapping (file, packaged name, or default for the format)."""
-    if mapping is None:
-        if fmt not in DEFAULT_MAPPINGS:
-            raise LogImportError(f"format {fmt!r} needs a mapping file (--mapping)")
-        mapping = DEFAULT_MAPPINGS[fmt]
-    m = mapping if isinstance(mapping, Mapping) else load_mapping(mapping)
-    if fmt in CAN_LOG_FORMATS:
-        trip = load_can_log(source, m, dbc=dbc, progress=progress, fmt=fmt)
-    elif fmt == "csv":
-        trip = load_csv_log(source, m, progress=progress)
-    elif fmt == "bmw-i3":
-        from .bmw_i3 import load_bmw_i3
-        trip = load_bmw_i3(source, m, progress=progress)
-    elif fmt == "openxc":
-        trip = load_openxc(source, m, progress=progress)
-    else:
-        raise LogImportError(f"unknown import format {fmt!r}; choose one of "
-                             f"{sorted(set(CAN_LOG_FORMATS) | {'csv', 'bmw-i3', 'openxc'})}")
-    if m.derived:
-        if progress:
-            progress("derive", 0.9)
-        from .derived import add_derived
-        trip = add_derived(trip, m.derived, ImportReport.from_dict(trip.meta["import_report"]), m.vehicle)
-    if progress:
-        progress("done", 1.0)
-    return trip
-
-
-__all__ = ["import_log", "load_can_log", "load_csv_log", "load_openxc", "read_csv_signals", "read_openxc_signals",
+__all__ = ["load_can_log", "load_csv_log", "load_openxc", "read_csv_signals", "read_openxc_signals",
            "split_header", "CAN_LOG_FORMATS"]

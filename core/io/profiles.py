@@ -25,6 +25,8 @@ import numpy as np
 from ..trip import Trip
 from .derived import distance_from_speed, freeze_elevation_at_standstill
 from .report import ImportReport, LogImportError
+from roadload.road_profiles.tracks import profile_from_track
+from roadload.road_profiles.files import save_profile
 
 MAX_PROFILE_GRADE = 0.30  # |tan theta| above 30 % is clipped (and counted) like every import
 
@@ -55,7 +57,6 @@ def profile_from_trip(trip: Trip, *, name: str, source: str, licence: str, grade
     grade_source: 'elevation' | 'pitch' | None (grade 0). curvature_source: 'yaw_rate' | 'heading' | None.
     The speed limit is not in the logs: ``default_speed_limit`` everywhere (marked in meta).
     """
-    from roadload.road_profiles.tracks import profile_from_track
 
     t = trip.t
     speed_name, v = _speed(trip)
@@ -109,6 +110,5 @@ def profile_from_trip(trip: Trip, *, name: str, source: str, licence: str, grade
 
 def save_trip_profile(profile, folder: str | Path) -> Path:
     """Write the profile as ``<folder>/<name>.json`` in the road-profiles file format (atomic)."""
-    from roadload.road_profiles.files import save_profile
 
     return save_profile(profile, Path(folder) / f"{profile.name}.json")

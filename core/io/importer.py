@@ -1,0 +1,43 @@
+"""``import_log``: the single entry point of the importers (CLI ``roadload import``): read -> mapping -> derived
+channels -> Trip with ``meta["import_report"]`` listing every repair and drop."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..trip import Trip
+from .bmw_i3 import load_bmw_i3
+from .derived import add_derived
+from .loaders import CAN_LOG_FORMATS, DEFAULT_MAPPINGS, Progress, load_can_log, load_csv_log, load_openxc
+from .mapping import Mapping, load_mapping
+from .report import ImportReport, LogImportError
+
+__all__ = ["import_log"]
+
+
+def import_log(source: str | Path, fmt: str, mapping: str | Path | Mapping | None = None, *,
+               dbc: list[str | Path] = (), progress: Progress | None = None) -> Trip:
+    """Import a log of the given format through a mapping (file, packaged name, or default for the format)."""
+    if mapping is None:
+        if fmt not in DEFAULT_MAPPINGS:
+            raise LogImportError(f"format {fmt!r} needs a mapping file (--mapping)")
+        mapping = DEFAULT_MAPPINGS[fmt]
+    m = mapping if isinstance(mapping, Mapping) else load_mapping(mapping)
+    if fmt in CAN_LOG_FORMATS:
+        trip = load_can_log(source, m, dbc=dbc, progress=progress, fmt=fmt)
+    elif fmt == "csv":
+        trip = load_csv_log(source, m, progress=progress)
+    elif fmt == "bmw-i3":
+        trip = load_bmw_i3(source, m, progress=progress)
+    elif fmt == "openxc":
+        trip = load_openxc(source, m, progress=progress)
+    else:
+        raise LogImportError(f"unknown import format {fmt!r}; choose one of "
+                             f"{sorted(set(CAN_LOG_FORMATS) | {'csv', 'bmw-i3', 'openxc'})}")
+    if m.derived:
+        if progress:
+            progress("derive", 0.9)
+        trip = add_derived(trip, m.derived, ImportReport.from_dict(trip.meta["import_report"]), m.vehicle)
+    if progress:
+        progress("done", 1.0)
+    return trip

@@ -1,0 +1,134 @@
+"""``roadload drive`` (one closed-loop drive with a controller) and ``roadload benchmark controllers`` (the
+comparison: table + figures)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from roadload.experiments.controller_comparison import road_by_name
+from roadload.controllers.cruise import CruiseSettings
+from roadload.controllers.drive import DriveSettings, drive
+from roadload.sweep import run_sweep
+from roadload.experiments.controller_comparison import CONDITIONS, ComparisonTask, run_comparison_task, write_outputs
+from roadload.fileio import write_text
+
+
+def _fail(msg: str) -> None:
+    typer.secho(f"error: {msg}", fg=typer.colors.RED, err=True)
+    raise typer.Exit(code=2)
+
+
+def _jsonable(d):
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out[k] = _jsonable(v)
+        elif isinstance(v, (bool, int, str)) or v is None:
+            out[k] = v
+        else:
+            try:
+                f = float(v)
+                out[k] = f if math.isfinite(f) else None
+            except (TypeError, ValueError):
+                out[k] = str(v)
+    return out
+
+
+def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
+    @app.command("drive")
+    def drive_cmd(
+        controller: str = typer.Option("mpc", help="mpc | cruise | human"),
+        force_model: str = typer.Option("online", "--force-model", help="MPC force model: abc | online | oracle"),
+        road: str = typer.Option("hilly", help="road profile name (hilly, motorway, city, i3_munich, any "
+                                 "roadload profile name or file)"),
+        vehicle: str = typer.Option("bmw_i3", help="vehicle preset (bmw_i3, gt_rwd, gt_awd)"),
+        effects: list[str] = typer.Option([], "--effects", help="simulator effects, e.g. winter_tires or "
+                                          "'wind:mean_speed=6' (repeatable; see roadload effects)"),
+        out: Path = typer.Option(None, help="write the simulated trip (.parquet) with the run's metrics in meta"),
+        seed: int = typer.Option(0, help="simulation seed"),
+        solver: str = typer.Option("ipopt", help="MPC solve path: ipopt | osqp"),
+        time_weight: float = typer.Option(8000.0, help="MPC time weight lambda [J/s]"),
+        model: str = typer.Option("M4", help="online model structure (M3, M4, M0)"),
+        estimator: str = typer.Option("RRLM", help="online estimator (catalog name)"),
+        cruise_fraction: float = typer.Option(0.9, help="cruise control set speed as a fraction of the limit"),
+    ) -> None:
+        """Drive a road once in closed loop on the simulator and print energy, time, violations, jerk, solver
+        time and fallbacks."""
+
+        if out is not None and out.suffix != ".parquet":
+            _fail(f"--out: trip files end in .parquet, got {out.name!r}")
+        try:
+            settings = DriveSettings(controller=controller, force_model=force_model, solver=solver,
+                                     time_weight=time_weight, model=model, estimator=estimator,
+                                     cruise=CruiseSettings(fraction=cruise_fraction))
+            profile = road_by_name(road)
+            with Progress(TextColumn("[bold]driving[/bold] {task.description}"), BarColumn(),
+                          TextColumn("{task.percentage:>5.1f}%"), TimeElapsedColumn(),
+                          console=Console(stderr=True), transient=True) as bar:
+                task = bar.add_task(f"{controller}/{force_model} on {profile.name}", total=1.0)
+                res, plant = drive(vehicle, profile, effects=list(effects) or None, seed=seed, settings=settings,
+                                   progress=lambda f: bar.update(task, completed=f))
+        except typer.Exit:
+            raise
+        except (ValueError, FileNotFoundError, KeyError) as exc:
+            _fail(str(exc))
+        m = res.metrics
+        keys = ("arrived", "energy_kWh", "trip_time", "speed_violations", "max_excess_kmh", "rms_jerk",
+                "solve_time_median", "solve_time_p99", "fallbacks")
+        for k in keys:
+            typer.echo(f"{k:>20}: {m.get(k)}")
+        if "online" in m:
+            typer.echo(f"{'online estimate':>20}: {m['online']['estimate']}")
+        if out is not None:
+            trip = plant.sim.to_trip()
+            trip.meta["controller"] = _jsonable({k: v for k, v in m.items()})
+            typer.echo(f"wrote {trip.save(out)}")
+
+    @benchmark_app.command("controllers")
+    def bench_controllers_cmd(
+        out: Path = typer.Option(..., help="output folder for comparison.md/.csv, summary.csv and PNG figures"),
+        roads: str = typer.Option("hilly,motorway,city,i3_munich", help="comma-separated road names"),
+        conditions: str = typer.Option("all", help="comma-separated conditions or 'all' (nominal, payload_300kg, "
+                                       "winter_tires, headwind_6ms, roof_box, drift)"),
+        vehicle: str = typer.Option("bmw_i3", help="vehicle preset"),
+        force_models: str = typer.Option("oracle,abc,online", help="MPC force models to compare"),
+        solver: str = typer.Option("ipopt", help="MPC solve path: ipopt | osqp"),
+        tol: float = typer.Option(0.01, help="equal-time tolerance (relative)"),
+        cruise_fraction: float = typer.Option(0.9, help="cruise set speed as a fraction of the allowed speed"),
+        scheduler: str = typer.Option(None, help="Dask scheduler address (default: local processes)"),
+        workers: int = typer.Option(None, help="local worker processes (default: CPU count)"),
+        seed: int = typer.Option(0, help="simulation seed"),
+    ) -> None:
+        """Closed-loop comparison of MPC (oracle / abc / online) against cruise control and the human-like
+        driver over roads x conditions at equal trip time; writes a Markdown/CSV table and PNG figures."""
+
+
+        cond_list = list(CONDITIONS) if conditions == "all" else [c.strip() for c in conditions.split(",") if c]
+        bad = [c for c in cond_list if c not in CONDITIONS]
+        if bad:
+            _fail(f"--conditions: unknown {bad}; known: {list(CONDITIONS)}")
+        road_list = [r.strip() for r in roads.split(",") if r.strip()]
+        fms = tuple(f.strip() for f in force_models.split(",") if f.strip())
+        if any(f not in ("oracle", "abc", "online") for f in fms):
+            _fail(f"--force-models: choose from oracle, abc, online; got {fms}")
+        tasks = [ComparisonTask(road=r, condition=c, vehicle=vehicle, seed=seed, tol=tol,
+                                cruise_fraction=cruise_fraction, solver=solver, force_models=fms)
+                 for r in road_list for c in cond_list]
+        outcomes = run_sweep(run_comparison_task, tasks, scheduler=scheduler, workers=workers,
+                             description="controller comparison")
+        results = [o.value for o in outcomes if o.ok]
+        failures = [f"{o.task.road}/{o.task.condition}: {o.error}" for o in outcomes if not o.ok]
+        for f in failures:
+            typer.secho(f"failed: {f}", fg=typer.colors.YELLOW, err=True)
+        if not results:
+            _fail("every task failed")
+        table, summary = write_outputs(results, failures, out)
+        typer.echo((out / "comparison.md").read_text())
+        typer.echo(f"wrote {out}/comparison.md, comparison.csv, summary.csv and figures")
+
+        write_text(out / "tasks.json", json.dumps([t.__dict__ for t in tasks], default=str, indent=1))

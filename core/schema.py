@@ -117,7 +117,10 @@ def format_errors(exc: pydantic.ValidationError, model: type[BaseModel] | None =
             text += f" (unit: {unit})"
         if "input" in err:
             value = err["input"]
-            text += ", got an object" if isinstance(value, dict) else f", got {value!r}"
+            if not isinstance(value, dict):
+                text += f", got {value!r}"
+            elif err["type"] != "value_error":
+                text += ", got an object"
         lines.append(text)
     if len(errors) > limit:
         lines.append(f"... and {len(errors) - limit} more problems")

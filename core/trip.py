@@ -28,6 +28,7 @@ import pyarrow.parquet as pq
 
 from .channels import unit_of
 from .fileio import atomic_path
+from .trip_schema import TripMetadataError, parse_trip_payload
 
 TRUTH_PREFIX = "truth/"
 _META_KEY = b"roadload"
@@ -236,7 +237,10 @@ class Trip:
         raw = (table.schema.metadata or {}).get(_META_KEY)
         if raw is None:
             raise TripError(f"{path}: Parquet file without roadload metadata (not a Trip)")
-        payload = json.loads(raw)
+        try:
+            payload = parse_trip_payload(raw, path, table.num_rows)
+        except TripMetadataError as exc:
+            raise TripError(str(exc)) from None
         df = table.to_pandas()
         truth_cols = [c for c in df.columns if c.startswith(TRUTH_PREFIX)]
         measured = df.drop(columns=truth_cols).iloc[: payload["n_measured"]]

@@ -11,6 +11,8 @@ feed-forward (low-pass filtered; no tracking lag when the reference slows down b
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,6 +37,9 @@ class CruiseSettings:
     accel_filter: float = 0.5  # [s] time constant of the reference-acceleration feed-forward filter
 
     def __post_init__(self) -> None:
+        for name, value in self.__dict__.items():
+            if isinstance(value, float) and not math.isfinite(value):
+                raise ControllerError(f"cruise {name}: must be a finite number, got {value}")
         if not 0 < self.fraction <= 1:
             raise ControllerError(f"cruise fraction must be in (0, 1], got {self.fraction}")
         for name in ("kp", "accel", "decel", "integral_limit"):

@@ -86,15 +86,57 @@ def _expected(err: dict[str, Any]) -> str:
     return ""
 
 
+def _clean_loc(loc: tuple[Any, ...], model: type[BaseModel] | None) -> tuple[tuple[Any, ...], bool]:
+    """Drop union member tags ('str', 'dict[str,any]', 'function-after[...]') from an error location; returns
+    the location and whether a tag was dropped."""
+    out: list[Any] = []
+    owner: Any = model
+    dropped = False
+    for part in loc:
+        if isinstance(part, int):
+            out.append(part)
+            continue
+        fields = getattr(owner, "model_fields", None) if isinstance(owner, type) else None
+        if fields is not None and part in fields:
+            out.append(part)
+            nxt = None
+            for tp in _types_of(fields[part].annotation):
+                if isinstance(tp, type) and issubclass(tp, BaseModel):
+                    nxt = tp
+            owner = nxt
+        elif fields is None and not any(c in part for c in "[],") and part not in ("str", "int", "float", "bool"):
+            out.append(part)  # a dict key
+        else:
+            if isinstance(owner, type) and part == getattr(owner, "__name__", None):
+                continue
+            dropped = True
+    return tuple(out), dropped
+
+
+def _merge_unions(errors: list[dict[str, Any]], model: type[BaseModel] | None) -> list[dict[str, Any]]:
+    """One error per location: the alternatives of a union become one 'expected X or Y' error."""
+    merged: dict[tuple[Any, ...], dict[str, Any]] = {}
+    order = []
+    for err in errors:
+        loc, dropped = _clean_loc(tuple(err["loc"]), model)
+        err = dict(err, loc=loc)
+        if loc in merged and dropped:
+            prev = merged[loc]
+            prev["msg"] = prev["msg"] + " or " + err["msg"].removeprefix("Input should be ")
+            continue
+        if loc not in merged:
+            order.append(loc)
+        merged[loc] = err
+    return [merged[loc] for loc in order]
+
+
 def format_errors(exc: pydantic.ValidationError, model: type[BaseModel] | None = None, root: str = "",
                   limit: int = 5) -> str:
     """One line per error: ``<root>.<field>: <problem>, got <value>; expected <bound> [unit]`` (at most `limit`)."""
     lines = []
-    errors = exc.errors(include_url=False)
+    errors = _merge_unions(exc.errors(include_url=False), model)
     for err in errors[:limit]:
-        loc = tuple(p for p in err["loc"] if not (isinstance(p, str) and "[" in p and p.endswith("]")
-                                                  and p.split("[")[0] in ("function-after", "function-before",
-                                                                         "function-wrap", "union", "tagged-union")))
+        loc = err["loc"]
         where = loc_text(loc, root) or root or "input"
         owner, info = _model_at(model, loc)
         unit = field_unit(info) if info is not None else None

@@ -52,8 +52,8 @@ def parse_trip_payload(raw: bytes | str, path: str | os.PathLike, n_rows: int | 
     try:
         data = json.loads(raw)
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise TripMetadataError(f"{path}: trip metadata is not valid JSON ({exc}); the file was not written by roadload "
-                        f"or is corrupt") from None
+        raise TripMetadataError(f"{path}: trip metadata is not valid JSON ({exc}); the file was not written by "
+                                f"roadload or is corrupt") from None
     if not isinstance(data, dict):
         raise TripMetadataError(f"{path}: trip metadata must be a JSON object, got {type(data).__name__}")
     try:

@@ -11,8 +11,8 @@ bmw-i3         TUM BMW i3 trip CSV (csv + i3 vehicle spec: rim torque, grade, pa
 openxc         OpenXC JSON trace, lines ``<unix time>: {"name": ..., "value": ...}``
 =============  ==========================================================================================
 
-`roadload.io.importer.import_log` is the single entry point (CLI ``roadload import``): read -> mapping -> derived channels ->
-Trip with ``meta["import_report"]`` listing every repair and drop.
+`roadload.io.importer.import_log` is the single entry point (CLI ``roadload import``): read -> mapping -> derived
+channels -> Trip with ``meta["import_report"]`` listing every repair and drop.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from ..trip import Trip
 from ..units import to_si
 from .dbc import DbcSource, Database, decode_frames, find_dbc, load_dbc
 from .frames import CanFrames, describe_lines, read_can_log, read_comma2k19, read_mf4, read_python_can
-from .mapping import Mapping, apply_mapping, load_mapping
+from .mapping import Mapping, apply_mapping
 from .report import ImportReport, LogImportError
 from .signals import Signal, SignalSet
 
@@ -244,7 +244,8 @@ def read_csv_signals(path: str | Path, mapping: Mapping, report: ImportReport) -
             numeric = pd.to_numeric(df[col], errors="coerce").to_numpy(dtype=float)
             bad = np.isnan(numeric) & df[col].notna().to_numpy()
             if bad.any() and not bad.all():
-                report.drop(col, "non-numeric cell", int(bad.sum()), describe_lines(_file_lines(np.flatnonzero(bad), bad_lines)))
+                report.drop(col, "non-numeric cell", int(bad.sum()),
+                            describe_lines(_file_lines(np.flatnonzero(bad), bad_lines)))
             if not bad.all():
                 values = numeric
         out[col] = Signal(t, values, unit)

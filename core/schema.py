@@ -118,7 +118,12 @@ def _merge_unions(errors: list[dict[str, Any]], model: type[BaseModel] | None) -
     merged: dict[tuple[Any, ...], dict[str, Any]] = {}
     order = []
     for err in errors:
-        loc, dropped = _clean_loc(tuple(err["loc"]), model)
+        raw = tuple(err["loc"])
+        if err["type"] == "extra_forbidden" and raw:  # the unknown key itself is no field: keep it
+            loc, dropped = _clean_loc(raw[:-1], model)
+            loc = loc + raw[-1:]
+        else:
+            loc, dropped = _clean_loc(raw, model)
         err = dict(err, loc=loc)
         if loc in merged and dropped:
             prev = merged[loc]

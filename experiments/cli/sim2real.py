@@ -16,6 +16,8 @@ from roadload.sim2real.simconfig import SimConfig
 from roadload.experiments.sim2real_selftest import run_selftest
 from roadload.io import import_log
 
+from .errors import describe, fail
+
 
 def load_trips(paths: list[Path], fmt: str | None) -> list:
     """Trips from Trip Parquet files, or raw logs through ``roadload.io.import_log`` when ``fmt`` is given
@@ -76,8 +78,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                                 progress=lambda what, frac: bar.update(task, completed=frac, description=what))
             paths = write_report(diag, out)
         except (DiagnosisError, ValueError) as exc:
-            console.print(f"[red]error:[/red] {exc}")
-            raise typer.Exit(2) from None
+            fail(describe(exc))
         eff = ", ".join(diag.identified) or "none"
         console.print(f"identified: {eff}; held-out force RMSE {diag.gap_before['force_residual']['rmse']:.1f} -> "
                       f"{diag.gap_after['force_residual']['rmse']:.1f} N; unexplained: "

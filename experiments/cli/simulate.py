@@ -20,10 +20,15 @@ from roadload.envs.effects import describe_effects
 from roadload.experiments.bench_simulator import report
 from roadload.vehicle import _build
 
+from .errors import fail
+
+
+#: ambient temperatures the simulator's air-density and tire/oil models are meant for [degC]
+AMBIENT_RANGE_C = (-60.0, 60.0)
+
 
 def _fail(msg: str) -> None:
-    typer.secho(f"error: {msg}", fg=typer.colors.RED, err=True)
-    raise typer.Exit(code=2)
+    fail(msg)
 
 
 def _load_vehicle(text: str):
@@ -64,6 +69,12 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
 
         if out.suffix != ".parquet":
             _fail(f"--out: trip files end in .parquet, got {out.name!r}")
+        if not AMBIENT_RANGE_C[0] <= ambient_temperature <= AMBIENT_RANGE_C[1]:
+            _fail(f"--ambient-temperature: must lie in [{AMBIENT_RANGE_C[0]:g}, {AMBIENT_RANGE_C[1]:g}] [degC], "
+                  f"got {ambient_temperature:g}")
+        for opt, value, unit in (("--duration", duration, "s"), ("--distance", distance, "km")):
+            if value is not None and not value > 0:
+                _fail(f"{opt}: must be > 0 [{unit}], got {value:g}")
         try:
             spec = _load_vehicle(vehicle)
             profile = _load_road(road, seed if road_seed is None else road_seed)

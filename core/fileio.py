@@ -115,7 +115,6 @@ def check_output_path(path: str | os.PathLike, kind: Literal["file", "dir"] = "f
                       what: str = "--out") -> Path:
     """Refuse an output path before work starts: a file path that is a directory, a folder path that is a file,
     an ancestor that is a file, or an existing folder (or file) without write permission. Returns the path."""
-    path = Path(path)
     if str(path).strip() == "":
         raise OutputPathError(f"{what}: empty path; expected a {'file' if kind == 'file' else 'folder'} path")
     if path.exists():

@@ -117,6 +117,7 @@ def check_output_path(path: str | os.PathLike, kind: Literal["file", "dir"] = "f
     an ancestor that is a file, or an existing folder (or file) without write permission. Returns the path."""
     if str(path).strip() == "":
         raise OutputPathError(f"{what}: empty path; expected a {'file' if kind == 'file' else 'folder'} path")
+    path = Path(path)
     if path.exists():
         if kind == "file" and path.is_dir():
             raise OutputPathError(f"{what} {path}: is a directory; expected a file path (e.g. {path / 'out'}"

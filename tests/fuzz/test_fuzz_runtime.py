@@ -148,7 +148,7 @@ def test_box_actions_fuzz(action, ledger):
     ok_shape = action.shape in ((1,), ())
     ok_bounds = bool(np.all(np.abs(action) <= 1.0))
     if ok_shape and ok_bounds:
-        np.testing.assert_allclose(validate_action(action, BOX1), action.reshape(1), rtol=1e-6)
+        np.testing.assert_allclose(validate_action(action, BOX1), action.reshape(1), rtol=1e-6, atol=1e-7)
         return
     with pytest.raises(ValueError, match=r"expected a float array of shape \(1,\) with values in \[-1, 1\]"):
         validate_action(action, BOX1)

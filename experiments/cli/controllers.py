@@ -76,7 +76,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                                  "roadload profile name or file)"),
         vehicle: str = typer.Option("bmw_i3", help="vehicle preset (bmw_i3, gt_rwd, gt_awd)"),
         effects: list[str] = typer.Option([], "--effects", help="simulator effects, e.g. winter_tires or "
-                                          "'wind:mean_speed=6' (repeatable; see roadload effects)"),
+                                          "'wind:mean_speed=6' (comma-separated and/or repeatable; see "
+                                          "roadload effects)"),
         out: Path = typer.Option(None, help="write the simulated trip (.parquet) with the run's metrics in meta"),
         seed: int = typer.Option(0, help="simulation seed"),
         solver: str = typer.Option("ipopt", help="MPC solve path: ipopt | osqp"),
@@ -99,7 +100,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                           TextColumn("{task.percentage:>5.1f}%"), TimeElapsedColumn(),
                           console=Console(stderr=True), transient=True) as bar:
                 task = bar.add_task(f"{controller}/{force_model} on {profile.name}", total=1.0)
-                res, plant = drive(vehicle, profile, effects=list(effects) or None, seed=seed, settings=settings,
+                res, plant = drive(vehicle, profile, effects=",".join(effects) or None, seed=seed, settings=settings,
                                    progress=lambda f: bar.update(task, completed=f))
         except typer.Exit:
             raise

@@ -14,6 +14,7 @@ is a file, one without is a folder).
 from __future__ import annotations
 
 import functools
+import inspect
 import math
 import os
 from pathlib import Path
@@ -25,6 +26,8 @@ import typer
 
 from roadload.fileio import check_output_path
 
+#: typer >= 0.2x vendors its own click: its usage errors (typer.BadParameter) derive from this class
+_TYPER_CLICK_EXCEPTION = next(c for c in typer.BadParameter.__mro__ if c.__name__ == "ClickException")
 BAD_INPUT_EXIT = 2
 INTERNAL_EXIT = 1
 _STATE = {"debug": os.environ.get("ROADLOAD_DEBUG", "") not in ("", "0")}
@@ -102,7 +105,8 @@ def guarded(fn: Callable[..., Any]) -> Callable[..., Any]:
         try:
             check_arguments(kwargs)
             return fn(*args, **kwargs)
-        except (typer.Exit, typer.Abort, click.exceptions.ClickException, click.exceptions.Exit, KeyboardInterrupt):
+        except (typer.Exit, typer.Abort, click.exceptions.ClickException, click.exceptions.Exit, KeyboardInterrupt,
+                _TYPER_CLICK_EXCEPTION):
             raise
         except Exception as exc:  # the one place that turns errors into exit codes
             if debug():
@@ -116,11 +120,20 @@ def guarded(fn: Callable[..., Any]) -> Callable[..., Any]:
     return wrapper
 
 
+def _uppercase_argument_metavars(fn: Callable[..., Any]) -> None:
+    """One style for positional arguments in help texts: ``TRIP``, ``SOURCE`` (as click's default)."""
+    for name, param in inspect.signature(fn).parameters.items():
+        info = param.default
+        if isinstance(info, typer.models.ArgumentInfo) and info.metavar is None:
+            info.metavar = name.upper()
+
+
 def guard_app(app: typer.Typer) -> None:
     """Wrap every command of ``app`` and its sub-apps; show help texts without markup so ``[unit]`` stays."""
     app.rich_markup_mode = None
     for cmd in app.registered_commands:
         if cmd.callback is not None:
+            _uppercase_argument_metavars(cmd.callback)
             cmd.callback = guarded(cmd.callback)
     for group in app.registered_groups:
         if group.typer_instance is not None:

@@ -37,7 +37,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                                     "them out and list their line numbers in the import report)"),
     ) -> None:
         """Import a real log into a Trip (SI channels on a uniform time base, import report in the metadata)."""
-        console = Console(stderr=True, markup=False, highlight=False)
+        console = Console(stderr=True, markup=False, highlight=False, soft_wrap=True)
         try:
             with Progress(TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn(),
                           console=console, transient=True) as bar:

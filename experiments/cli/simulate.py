@@ -54,8 +54,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                                  ".json/.csv/.gpx file"),
         out: Path = typer.Option(..., help="output trip file (.parquet)"),
         seed: int = typer.Option(0, help="seed of the simulation (noise, disturbances, driver)"),
-        effects: str = typer.Option("", help="effects, e.g. 'wind:mean_speed=5,payload,tire_warmup' or 'all' "
-                                    "(roadload effects lists them)"),
+        effects: list[str] = typer.Option([], help="effects, e.g. 'wind:mean_speed=5,payload,tire_warmup' or 'all' "
+                                          "(comma-separated and/or repeatable; roadload effects lists them)"),
         distance: float = typer.Option(None, help="stop after this distance [km]"),
         duration: float = typer.Option(None, help="stop after this duration [s]"),
         road_seed: int = typer.Option(None, help="seed of generated roads (default: --seed)"),
@@ -83,7 +83,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                 driver = _load_road(cycle, 0)
                 if not isinstance(driver, DriveCycle):
                     _fail(f"--cycle: {cycle!r} is a road profile, not a drive cycle")
-            cfg = EffectsConfig.parse(effects or None)
+            cfg = EffectsConfig.parse(",".join(effects) or None)
             cfg = EffectsConfig.from_dict({**cfg.to_dict(), "ambient_temperature": ambient_temperature + 273.15})
             sensor_spec = None
             if sensors is not None:

@@ -57,8 +57,9 @@ def pytest_sessionfinish(session, exitstatus):
     folder = _ledger_dir(config)
     worker = getattr(config, "workerinput", {}).get("workerid", "main") if hasattr(config, "workerinput") else "main"
     if _LEDGER:
-        (folder / f"ledger-{worker}.json").write_text(json.dumps({"outcomes": dict(_LEDGER),
-                                                                  "surfaces": dict(_SURFACES)}))
+        (folder / f"ledger-{worker}.json").write_text(
+            json.dumps({"outcomes": dict(_LEDGER), "surfaces": dict(_SURFACES)})
+        )
 
 
 def fuzz_totals(folder: Path) -> tuple[Counter, Counter]:
@@ -80,13 +81,24 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
     total = sum(outcomes.values())
     tr = terminalreporter
     tr.write_sep("-", "roadload fuzz ledger")
-    tr.write_line(f"malformed inputs: {total} (clean errors {outcomes['error']}, reported repairs "
-                  f"{outcomes['repair']}); failing fuzz tests (traceback or silent acceptance): {failed}")
+    tr.write_line(
+        f"malformed inputs: {total} (clean errors {outcomes['error']}, reported repairs "
+        f"{outcomes['repair']}); failing fuzz tests (traceback or silent acceptance): {failed}"
+    )
     tr.write_line("per surface: " + ", ".join(f"{k} {v}" for k, v in sorted(surfaces.items())))
     out = os.environ.get("ROADLOAD_FUZZ_SUMMARY")
     if out:
-        Path(out).write_text(json.dumps({"inputs": total, "clean_errors": outcomes["error"],
-                                         "repairs": outcomes["repair"], "failed_tests": failed,
-                                         "surfaces": dict(surfaces)}, indent=1))
+        Path(out).write_text(
+            json.dumps(
+                {
+                    "inputs": total,
+                    "clean_errors": outcomes["error"],
+                    "repairs": outcomes["repair"],
+                    "failed_tests": failed,
+                    "surfaces": dict(surfaces),
+                },
+                indent=1,
+            )
+        )
     if total < MIN_INPUTS and config.getoption("-k", None) in (None, "") and not config.args[1:]:
         tr.write_line(f"WARNING: fewer than {MIN_INPUTS} fuzz inputs ran")

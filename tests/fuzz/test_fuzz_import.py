@@ -17,9 +17,15 @@ from roadload.io.importer import import_log
 from roadload.io.report import LogImportError
 
 FUZZ = settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-MAPPING = {"name": "fuzz_csv", "format": "csv", "csv": {"sep": ";", "time": "Time [s]", "time_unit": "s"},
-           "channels": [{"source": "Velocity [km/h]", "channel": "vehicle_speed", "unit": "km/h", "required": True},
-                        {"source": "Elevation [m]", "channel": "elevation", "unit": "m"}]}
+MAPPING = {
+    "name": "fuzz_csv",
+    "format": "csv",
+    "csv": {"sep": ";", "time": "Time [s]", "time_unit": "s"},
+    "channels": [
+        {"source": "Velocity [km/h]", "channel": "vehicle_speed", "unit": "km/h", "required": True},
+        {"source": "Elevation [m]", "channel": "elevation", "unit": "m"},
+    ],
+}
 
 
 def _csv_lines(n=600, dt=0.1, scale=1.0):
@@ -36,12 +42,20 @@ def _write(tmp_path, lines, mapping=None, name="log.csv"):
 
 
 def _dropped_lines(trip):
-    return [d for d in trip.meta["import_report"]["dropped"] if d["what"].endswith(" lines")
-            or d["reason"] == "non-numeric cell"]
+    return [
+        d
+        for d in trip.meta["import_report"]["dropped"]
+        if d["what"].endswith(" lines") or d["reason"] == "non-numeric cell"
+    ]
 
 
-CORRUPTIONS = {"extra_field": "1;2;3;4;5", "missing_fields_ok": None, "text_time": "abc;50;500",
-               "empty_time": ";50;500", "nan_value": None}
+CORRUPTIONS = {
+    "extra_field": "1;2;3;4;5",
+    "missing_fields_ok": None,
+    "text_time": "abc;50;500",
+    "empty_time": ";50;500",
+    "nan_value": None,
+}
 
 
 @pytest.mark.parametrize("bad", ["1;2;3;4;5", "x;y;z;w", ";;;;", "1.0;2.0;3.0;4.0"])
@@ -95,11 +109,14 @@ def test_csv_corrupt_lines_fuzz(tmp_path_factory, positions, ledger):
     ledger.record("import_csv", "error")
 
 
-TIME_BASE_CASES = [(0.1, 1000.0, "s", "looks like ms"),     # ms declared as s: 60 s -> 60,000 s
-                   (0.01, 1000.0, "s", "looks like ms"),
-                   (0.02, 1.0, "ms", "looks like s"),        # s declared as ms: 20 us steps
-                   (0.01, 1.0, "ms", "looks like s"),
-                   (10.0, 1.0, "s", "interval"), (200.0, 1.0, "s", "1 day")]
+TIME_BASE_CASES = [
+    (0.1, 1000.0, "s", "looks like ms"),  # ms declared as s: 60 s -> 60,000 s
+    (0.01, 1000.0, "s", "looks like ms"),
+    (0.02, 1.0, "ms", "looks like s"),  # s declared as ms: 20 us steps
+    (0.01, 1.0, "ms", "looks like s"),
+    (10.0, 1.0, "s", "interval"),
+    (200.0, 1.0, "s", "1 day"),
+]
 
 
 @pytest.mark.parametrize("dt,scale,unit,needle", TIME_BASE_CASES)
@@ -113,11 +130,15 @@ def test_csv_time_unit_implausible(tmp_path, dt, scale, unit, needle, ledger):
     ledger.record("import_csv", "error")
 
 
-@pytest.mark.parametrize("lines,needle", [
-    ([], "unreadable CSV"), (["Time [s];Velocity [km/h];Elevation [m]"], "no numbers"),
-    (["t;v"] + ["1;2"] * 3, "time column 'Time [s]' missing"),
-    (["Time [s];Velocity [km/h];Elevation [m]", "a;b;c", "d;e;f"], "no numbers"),
-])
+@pytest.mark.parametrize(
+    "lines,needle",
+    [
+        ([], "unreadable CSV"),
+        (["Time [s];Velocity [km/h];Elevation [m]"], "no numbers"),
+        (["t;v"] + ["1;2"] * 3, "time column 'Time [s]' missing"),
+        (["Time [s];Velocity [km/h];Elevation [m]", "a;b;c", "d;e;f"], "no numbers"),
+    ],
+)
 def test_csv_unusable(tmp_path, lines, needle, ledger):
     src, mp = _write(tmp_path, lines)
     with pytest.raises(LogImportError) as err:
@@ -134,21 +155,39 @@ UNITS = {"t": "s", "vehicle_speed": "m/s", "drive_torque": "N*m"}
 def can_logs(tmp_path_factory):
     folder = tmp_path_factory.mktemp("can")
     t = np.arange(0, 10, 0.01)
-    trip = Trip(pd.DataFrame({"t": t, "vehicle_speed": np.round((10 + np.sin(t)) / 0.01) * 0.01,
-                              "drive_torque": np.round(50 * np.cos(t) / 0.5) * 0.5}), dict(UNITS),
-                {"name": "sim", "t0_unix": 1.7e9})
+    trip = Trip(
+        pd.DataFrame(
+            {
+                "t": t,
+                "vehicle_speed": np.round((10 + np.sin(t)) / 0.01) * 0.01,
+                "drive_torque": np.round(50 * np.cos(t) / 0.5) * 0.5,
+            }
+        ),
+        dict(UNITS),
+        {"name": "sim", "t0_unix": 1.7e9},
+    )
     out = {}
     for fmt in ("candump", "asc"):
         out[fmt] = export_trip(trip, folder / f"sim_{fmt}", fmt)
     return out
 
 
-GARBAGE = {"candump": ["garbage line", "(1700000000.5) can0 12G#0102", "(1700000000.5) can0 123#01020",
-                       "(abc) can0 123#0102", "can0 123#0102", "(1700000000.5) can0 123#0102 extra words"],
-           "asc": [" 0.015000 1  1Z3             Rx   d 8 00 01 02 03 04 05 06 07",
-                   " 0.015000 1  123             Rx   d 8 00 01 0",
-                   " 0.0x5 1  123             Rx   d 8 00 01 02 03 04 05 06 07",
-                   " 0.015000 1  123             Rx   d 8 00 01 02 03 04 05 06 ZZ"]}
+GARBAGE = {
+    "candump": [
+        "garbage line",
+        "(1700000000.5) can0 12G#0102",
+        "(1700000000.5) can0 123#01020",
+        "(abc) can0 123#0102",
+        "can0 123#0102",
+        "(1700000000.5) can0 123#0102 extra words",
+    ],
+    "asc": [
+        " 0.015000 1  1Z3             Rx   d 8 00 01 02 03 04 05 06 07",
+        " 0.015000 1  123             Rx   d 8 00 01 0",
+        " 0.0x5 1  123             Rx   d 8 00 01 02 03 04 05 06 07",
+        " 0.015000 1  123             Rx   d 8 00 01 02 03 04 05 06 ZZ",
+    ],
+}
 
 
 def _inject(paths, tmp_path, fmt, positions, garbage):
@@ -176,12 +215,15 @@ def test_can_log_corrupt_line_reported(can_logs, tmp_path, fmt, garbage, ledger)
 
 
 @FUZZ
-@given(positions=st.lists(st.integers(min_value=10, max_value=1500), min_size=1, max_size=4, unique=True),
-       junk=st.lists(st.text(alphabet="abcxyz#()0123456789 .", min_size=1, max_size=30), min_size=4, max_size=4))
+@given(
+    positions=st.lists(st.integers(min_value=10, max_value=1500), min_size=1, max_size=4, unique=True),
+    junk=st.lists(st.text(alphabet="abcxyz#()0123456789 .", min_size=1, max_size=30), min_size=4, max_size=4),
+)
 def test_candump_random_garbage_fuzz(can_logs, tmp_path_factory, positions, junk, ledger):
     junk = [j for j in junk if j.strip()] or ["x"]
-    junk = (junk * 4)[:len(positions)]
+    junk = (junk * 4)[: len(positions)]
     from roadload.io.frames import _CANDUMP_LINE  # the grammar: a random line that parses is not garbage
+
     if any(_CANDUMP_LINE.match(j) for j in junk):
         return
     paths = can_logs["candump"]

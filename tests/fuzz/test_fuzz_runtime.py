@@ -30,23 +30,34 @@ NON_FINITE = [float("nan"), float("inf"), float("-inf")]
 # ----------------------------------------------------------------------------------------------- controller settings
 MPC_FLOATS = [f.name for f in dataclasses.fields(MpcSettings) if isinstance(f.default, float)]
 CRUISE_FLOATS = [f.name for f in dataclasses.fields(CruiseSettings) if isinstance(f.default, float)]
-SETTING_CASES = ([(MpcSettings, name, v, MpcError) for name in MPC_FLOATS for v in NON_FINITE]
-                 + [(CruiseSettings, name, v, ControllerError) for name in CRUISE_FLOATS for v in NON_FINITE]
-                 + [(DriveSettings, "time_weight", v, ControllerError) for v in NON_FINITE + [-1.0]]
-                 + [(DriveSettings, "dt", v, ControllerError) for v in NON_FINITE + [0.0, -0.1]]
-                 + [(MpcSettings, "speed_margin", -50.0, MpcError), (MpcSettings, "speed_margin", -1e-3, MpcError),
-                    (MpcSettings, "accel_weight", -1.0, MpcError), (MpcSettings, "qp_tolerance", 0.0, MpcError),
-                    (MpcSettings, "max_iterations", 0, MpcError), (MpcSettings, "sqp_iterations", 0, MpcError),
-                    (MpcSettings, "n_nodes", 1, MpcError), (MpcSettings, "decel_max", 0.0, MpcError),
-                    (MpcSettings, "time_weight", -1.0, MpcError), (MpcSettings, "solver", "cplex", MpcError),
-                    (MpcSettings, "warm_tol", 2.0, MpcError), (CruiseSettings, "fraction", 1.5, ControllerError),
-                    (CruiseSettings, "ki", -0.1, ControllerError), (DriveSettings, "controller", "teleport",
-                                                                      ControllerError),
-                    (DriveSettings, "force_model", "crystal_ball", ControllerError)])
+SETTING_CASES = (
+    [(MpcSettings, name, v, MpcError) for name in MPC_FLOATS for v in NON_FINITE]
+    + [(CruiseSettings, name, v, ControllerError) for name in CRUISE_FLOATS for v in NON_FINITE]
+    + [(DriveSettings, "time_weight", v, ControllerError) for v in NON_FINITE + [-1.0]]
+    + [(DriveSettings, "dt", v, ControllerError) for v in NON_FINITE + [0.0, -0.1]]
+    + [
+        (MpcSettings, "speed_margin", -50.0, MpcError),
+        (MpcSettings, "speed_margin", -1e-3, MpcError),
+        (MpcSettings, "accel_weight", -1.0, MpcError),
+        (MpcSettings, "qp_tolerance", 0.0, MpcError),
+        (MpcSettings, "max_iterations", 0, MpcError),
+        (MpcSettings, "sqp_iterations", 0, MpcError),
+        (MpcSettings, "n_nodes", 1, MpcError),
+        (MpcSettings, "decel_max", 0.0, MpcError),
+        (MpcSettings, "time_weight", -1.0, MpcError),
+        (MpcSettings, "solver", "cplex", MpcError),
+        (MpcSettings, "warm_tol", 2.0, MpcError),
+        (CruiseSettings, "fraction", 1.5, ControllerError),
+        (CruiseSettings, "ki", -0.1, ControllerError),
+        (DriveSettings, "controller", "teleport", ControllerError),
+        (DriveSettings, "force_model", "crystal_ball", ControllerError),
+    ]
+)
 
 
-@pytest.mark.parametrize("cls,name,value,error", SETTING_CASES,
-                         ids=[f"{c.__name__}.{n}={v!r}" for c, n, v, _ in SETTING_CASES])
+@pytest.mark.parametrize(
+    "cls,name,value,error", SETTING_CASES, ids=[f"{c.__name__}.{n}={v!r}" for c, n, v, _ in SETTING_CASES]
+)
 def test_controller_setting_refused(cls, name, value, error, ledger):
     with pytest.raises(error) as err:
         cls(**{name: value})
@@ -67,15 +78,22 @@ def small_ocp():
     energy = generic_ev()
     params = ForceParameters.from_physical(1420.0, 0.009, 0.0, 0.0, 0.7, 1.2, 60000.0)
     out = {}
-    for name, st_ in {"nominal": MpcSettings(n_nodes=20, ds=10.0),
-                      "weak_brakes": MpcSettings(n_nodes=20, ds=10.0, decel_max=0.01)}.items():
+    for name, st_ in {
+        "nominal": MpcSettings(n_nodes=20, ds=10.0),
+        "weak_brakes": MpcSettings(n_nodes=20, ds=10.0, decel_max=0.01),
+    }.items():
         out[name] = get_solver(st_, energy)
     return out, energy, params
 
 
 def _preview(energy, cap, n=20, ds=10.0):
-    return Preview(s=ds * np.arange(n + 1), grade=np.zeros(n), curvature=np.zeros(n), speed_cap=cap,
-                   ratio=energy.ratio_for_speed(np.full(n, 15.0)))
+    return Preview(
+        s=ds * np.arange(n + 1),
+        grade=np.zeros(n),
+        curvature=np.zeros(n),
+        speed_cap=cap,
+        ratio=energy.ratio_for_speed(np.full(n, 15.0)),
+    )
 
 
 def test_relaxed_plans_carry_a_flag(small_ocp, ledger):
@@ -99,14 +117,31 @@ BOX1 = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
 BOX2 = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
 DICT = spaces.Dict({"force": BOX1, "lane_change": spaces.Discrete(3)})
 ACTION_CASES = [
-    (BOX1, np.zeros((2, 2)), "shape (2, 2)"), (BOX1, np.zeros(0), "shape (0,)"), (BOX1, "full", "str"),
-    (BOX1, None, "NoneType"), (BOX1, np.zeros(3), "shape (3,)"), (BOX1, [0.1, 0.2], "shape (2,)"),
-    (BOX1, [float("nan")], "non-finite"), (BOX1, [float("inf")], "non-finite"), (BOX1, [2.0], "outside"),
-    (BOX1, [-1.5], "outside"), (BOX1, {"a": 1}, "dict"), (BOX1, [object()], "dtype"), (BOX1, [[0.1]], "shape (1, 1)"),
-    (BOX1, np.array(["a"]), "dtype"), (BOX1, b"x", "bytes"), (BOX1, [True], "dtype"), (BOX1, [1 + 2j], "dtype"),
-    (BOX2, [0.1], "shape (1,)"), (BOX2, 0.3, "shape ()"), (BOX2, [0.1, 5.0], "outside"),
-    (DICT, [0.1, 1], "dict"), (DICT, {"force": [0.1]}, "keys"), (DICT, {"force": [0.1], "lane_change": 5}, "lane_change"),
-    (DICT, {"force": [0.1], "lane_change": 0.5}, "lane_change"), (DICT, {"force": [9.0], "lane_change": 1}, "force"),
+    (BOX1, np.zeros((2, 2)), "shape (2, 2)"),
+    (BOX1, np.zeros(0), "shape (0,)"),
+    (BOX1, "full", "str"),
+    (BOX1, None, "NoneType"),
+    (BOX1, np.zeros(3), "shape (3,)"),
+    (BOX1, [0.1, 0.2], "shape (2,)"),
+    (BOX1, [float("nan")], "non-finite"),
+    (BOX1, [float("inf")], "non-finite"),
+    (BOX1, [2.0], "outside"),
+    (BOX1, [-1.5], "outside"),
+    (BOX1, {"a": 1}, "dict"),
+    (BOX1, [object()], "dtype"),
+    (BOX1, [[0.1]], "shape (1, 1)"),
+    (BOX1, np.array(["a"]), "dtype"),
+    (BOX1, b"x", "bytes"),
+    (BOX1, [True], "dtype"),
+    (BOX1, [1 + 2j], "dtype"),
+    (BOX2, [0.1], "shape (1,)"),
+    (BOX2, 0.3, "shape ()"),
+    (BOX2, [0.1, 5.0], "outside"),
+    (DICT, [0.1, 1], "dict"),
+    (DICT, {"force": [0.1]}, "keys"),
+    (DICT, {"force": [0.1], "lane_change": 5}, "lane_change"),
+    (DICT, {"force": [0.1], "lane_change": 0.5}, "lane_change"),
+    (DICT, {"force": [9.0], "lane_change": 1}, "force"),
     (DICT, {"force": [0.1], "lane_change": 1, "x": 0}, "keys"),
 ]
 
@@ -127,8 +162,11 @@ def ecodrive():
     env.close()
 
 
-@pytest.mark.parametrize("action", [np.zeros((2, 2)), np.zeros(0), "full", None, np.zeros(3), [float("nan")], [3.0]],
-                         ids=["2x2", "empty", "str", "None", "3", "nan", "3.0"])
+@pytest.mark.parametrize(
+    "action",
+    [np.zeros((2, 2)), np.zeros(0), "full", None, np.zeros(3), [float("nan")], [3.0]],
+    ids=["2x2", "empty", "str", "None", "3", "nan", "3.0"],
+)
 def test_ecodrive_step_refuses(ecodrive, action, ledger):
     with pytest.raises(ValueError, match=r"action: expected a float array of shape \(1,\) with values in \[-1, 1\]"):
         ecodrive.step(action)
@@ -141,8 +179,7 @@ def test_ecodrive_step_accepts_scalar_and_array(ecodrive):
 
 
 @FUZZ
-@given(action=hnp.arrays(np.float64, hnp.array_shapes(min_dims=0, max_dims=3, max_side=4),
-                         elements=st.floats(-3, 3)))
+@given(action=hnp.arrays(np.float64, hnp.array_shapes(min_dims=0, max_dims=3, max_side=4), elements=st.floats(-3, 3)))
 def test_box_actions_fuzz(action, ledger):
     """Any array either is a valid (1,)-action (then returned as is) or is refused naming shape and bounds."""
     ok_shape = action.shape in ((1,), ())
@@ -155,8 +192,10 @@ def test_box_actions_fuzz(action, ledger):
     ledger.record("gym", "error")
 
 
-@pytest.mark.parametrize("actions,n", [(np.zeros((3, 2)), 3), (np.zeros((2, 1)), 3), (np.zeros(4), 3),
-                                       ([[0.1], [5.0]], 2), ("x", 2), (None, 2)])
+@pytest.mark.parametrize(
+    "actions,n",
+    [(np.zeros((3, 2)), 3), (np.zeros((2, 1)), 3), (np.zeros(4), 3), ([[0.1], [5.0]], 2), ("x", 2), (None, 2)],
+)
 def test_batch_actions_refused(actions, n, ledger):
     with pytest.raises(ValueError, match="actions: expected"):
         validate_actions(actions, BOX1, n)
@@ -172,9 +211,14 @@ def test_batch_actions_accepted():
 def _cases(tmp_path):
     (tmp_path / "adir").mkdir()
     (tmp_path / "afile").write_text("x")
-    return [(tmp_path / "adir", "file", "is a directory"), (tmp_path / "afile" / "out.parquet", "file", "is a file"),
-            (tmp_path / "afile" / "deeper" / "out.parquet", "file", "is a file"), (tmp_path / "afile", "dir", "is a file"),
-            (tmp_path / "afile" / "sub", "dir", "is a file"), ("", "file", "empty path")]
+    return [
+        (tmp_path / "adir", "file", "is a directory"),
+        (tmp_path / "afile" / "out.parquet", "file", "is a file"),
+        (tmp_path / "afile" / "deeper" / "out.parquet", "file", "is a file"),
+        (tmp_path / "afile", "dir", "is a file"),
+        (tmp_path / "afile" / "sub", "dir", "is a file"),
+        ("", "file", "empty path"),
+    ]
 
 
 def test_output_paths_refused(tmp_path, ledger):
@@ -188,7 +232,7 @@ def test_output_paths_refused(tmp_path, ledger):
 
 def test_interrupted_write_leftover_is_removed(tmp_path, ledger):
     target = write_text(tmp_path / "out.json", "old")
-    dead_pid = 2 ** 22 + 12345  # above the default pid_max: no such process
+    dead_pid = 2**22 + 12345  # above the default pid_max: no such process
     leftover = tmp_path / f".out.json{TMP_MARK}{dead_pid}-abc.json"
     leftover.write_text("half")
     alive = tmp_path / f".out.json{TMP_MARK}{os.getpid()}-xyz.json"  # our own (a concurrent write): kept
@@ -199,3 +243,6 @@ def test_interrupted_write_leftover_is_removed(tmp_path, ledger):
             raise RuntimeError("writer died")
     assert not leftover.exists() and alive.exists() and target.read_text() == "old"
     ledger.record("output_path", "repair")
+
+
+TABLE_INPUTS = len(SETTING_CASES) + 2 + len(ACTION_CASES) + 7 + 6 + 6 + 1

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import tempfile
 from collections import Counter
 from pathlib import Path
@@ -100,5 +101,7 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
                 indent=1,
             )
         )
+    if not os.environ.get("ROADLOAD_FUZZ_DIR"):
+        shutil.rmtree(_ledger_dir(config), ignore_errors=True)
     if total < MIN_INPUTS and config.getoption("-k", None) in (None, "") and not config.args[1:]:
         tr.write_line(f"WARNING: fewer than {MIN_INPUTS} fuzz inputs ran")

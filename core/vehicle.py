@@ -31,17 +31,16 @@ from pydantic import Field
 from pydantic.fields import FieldInfo
 
 from .fileio import write_json
-from .units import G, air_density
+from .units import G, STANDARD_AIR_DENSITY
 from .channels import MEASURED
 
 __all__ = [
     "VehicleSpecError", "Curve", "Map2D", "BodySpec", "AeroSpec", "TireSpec", "EngineSpec", "MotorSpec",
     "BatterySpec", "ShiftSpec", "DrivetrainSpec", "BrakeSpec", "SteeringSpec", "ChannelSensorSpec", "SensorSpec",
-    "VehicleSpec", "load_vehicle", "save_vehicle", "STANDARD_AIR_DENSITY", "check_declared", "check_physics",
+    "VehicleSpec", "load_vehicle", "save_vehicle", "check_declared", "check_physics",
     "MASS_MIN", "MASS_MAX", "TOP_SPEED_MIN",
 ]
 
-STANDARD_AIR_DENSITY = float(air_density(293.15, 101325.0))  # kg/m^3 at 20 degC, 1013.25 hPa
 
 
 class VehicleSpecError(ValueError):

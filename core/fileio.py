@@ -94,7 +94,7 @@ def _pid_alive(pid: int) -> bool:
 def remove_stale_temporaries(path: str | os.PathLike) -> list[Path]:
     """Remove temporaries of interrupted writes to ``path`` whose writing process no longer runs; returns them."""
     path = Path(path)
-    removed = []
+    removed: list[Path] = []
     prefix = f".{path.name}{TMP_MARK}"
     try:
         candidates = [p for p in path.parent.iterdir() if p.name.startswith(prefix)]

@@ -139,7 +139,7 @@ def format_errors(exc: pydantic.ValidationError, model: type[BaseModel] | None =
                   limit: int = 5) -> str:
     """One line per error: ``<root>.<field>: <problem>, got <value>; expected <bound> [unit]`` (at most `limit`)."""
     lines = []
-    errors = _merge_unions(exc.errors(include_url=False), model)
+    errors = _merge_unions([dict(e) for e in exc.errors(include_url=False)], model)
     for err in errors[:limit]:
         loc = err["loc"]
         where = loc_text(loc, root) or root or "input"

@@ -78,7 +78,7 @@ def check_declared(obj: Any, path: str) -> None:
     hints = _HINTS[tp]
     for f in dataclasses.fields(obj):
         value = getattr(obj, f.name)
-        hint = hints.get(f.name)
+        hint: Any = hints.get(f.name)
         if typing.get_origin(hint) is Annotated:
             for info in hint.__metadata__:
                 if isinstance(info, FieldInfo):
@@ -88,7 +88,7 @@ def check_declared(obj: Any, path: str) -> None:
 
 
 def _check_quantity(path: str, value: Any, info: FieldInfo) -> None:
-    extra = info.json_schema_extra if isinstance(info.json_schema_extra, dict) else {}
+    extra: dict[str, Any] = dict(info.json_schema_extra) if isinstance(info.json_schema_extra, dict) else {}
     unit = extra.get("unit", "")
     if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
         raise VehicleSpecError(f"{path}: must be a finite number [{unit}], got {value!r}")
@@ -97,7 +97,7 @@ def _check_quantity(path: str, value: Any, info: FieldInfo) -> None:
         if gt is not None and not value > gt:
             raise VehicleSpecError(f"{path}: must be > {gt:g} [{unit}], got {value!r}")
     if "plausible" in extra:
-        lo, hi = extra["plausible"]
+        lo, hi = (float(b) for b in extra["plausible"])
         if not lo <= value <= hi:
             raise VehicleSpecError(f"{path}: {value!r} {unit} is outside the plausible range [{lo:g}, {hi:g}] "
                                    f"{unit} of a road vehicle ({info.description})")
@@ -128,13 +128,15 @@ def check_physics(spec: "VehicleSpec", path: str = "vehicle") -> None:
         k = int(np.flatnonzero(steps >= 0)[0])
         raise VehicleSpecError(f"{path}.drivetrain.gear_ratios: must be strictly decreasing from first gear up, "
                                f"got {d.gear_ratios[k]!r} then {d.gear_ratios[k + 1]!r} at gears {k + 1}, {k + 2}")
-    if d.kind == "ice":
+    if d.engine is not None and d.kind == "ice":
         shaft_max = d.engine.max_speed
         x, y = np.asarray(d.engine.full_load.x, float), np.asarray(d.engine.full_load.y, float)
         power = float(np.max(x * y))
-    else:
+    elif d.motor is not None:
         shaft_max = d.motor.max_speed
         power = d.motor.max_power
+    else:  # validated before: an ICE has an engine, a BEV a motor
+        return
     r = spec.tires.dynamic_radius
     v_shaft = shaft_max * r / (min(d.gear_ratios) * d.final_drive)
     v_power = _flat_road_speed(power, spec.body.mass, spec.tires, spec.aero.drag_area)

@@ -27,7 +27,7 @@ import typer
 from roadload.fileio import check_output_path
 
 #: typer >= 0.2x vendors its own click: its usage errors (typer.BadParameter) derive from this class
-_TYPER_CLICK_EXCEPTION = next(c for c in typer.BadParameter.__mro__ if c.__name__ == "ClickException")
+_TYPER_CLICK_EXCEPTION: type[Exception] = next(c for c in typer.BadParameter.__mro__ if c.__name__ == "ClickException")
 BAD_INPUT_EXIT = 2
 INTERNAL_EXIT = 1
 _STATE = {"debug": os.environ.get("ROADLOAD_DEBUG", "") not in ("", "0")}

@@ -202,3 +202,16 @@ def test_import_report_keeps_brackets_and_lists_bad_lines(world, tmp_path, ledge
 
 
 TABLE_INPUTS = len(CASES) + 1
+
+
+def test_drive_metrics_are_rounded_with_units():
+    from roadload.experiments.cli.controllers import metric_lines
+
+    lines = metric_lines({"arrived": True, "energy_kWh": 1.23456789, "trip_time": 362.3999999998154,
+                          "speed_violations": 0, "max_excess_kmh": 0.0, "rms_jerk": 0.41234,
+                          "solve_time_median": 0.0123456, "solve_time_p99": float("nan"), "fallbacks": 3,
+                          "ctl_relaxed_plans": 2})
+    text = "\n".join(lines)
+    assert "trip time: 362.4 [s]" in text and "energy: 1.235 [kWh]" in text
+    assert "solve time median: 12.3 [ms]" in text and "solve time p99: -" in text
+    assert "relaxed plans: 2" in text and "362.39999" not in text

@@ -18,7 +18,7 @@ from roadload.controllers.base import ControllerError
 from roadload.controllers.cruise import CruiseSettings
 from roadload.controllers.drive import DriveSettings
 from roadload.controllers.energy import generic_ev
-from roadload.controllers.force_model import ForceParameters
+from roadload.road_load import RoadLoadParameters
 from roadload.controllers.mpc import MpcError, MpcSettings, Preview
 from roadload.controllers.mpc_controller import get_solver
 from roadload.fileio import TMP_MARK, OutputPathError, atomic_path, check_output_path, write_text
@@ -76,7 +76,7 @@ def test_time_weight_fuzz(weight, ledger):
 @pytest.fixture(scope="module")
 def small_ocp():
     energy = generic_ev()
-    params = ForceParameters.from_physical(1420.0, 0.009, 0.0, 0.0, 0.7, 1.2, 60000.0)
+    params = RoadLoadParameters.from_physical(1420.0, 0.009, 0.0, 0.0, 0.7, 1.2, 60000.0)
     out = {}
     for name, st_ in {
         "nominal": MpcSettings(n_nodes=20, ds=10.0),

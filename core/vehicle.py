@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, TypeAdapter
 from pydantic.fields import FieldInfo
 
 from .fileio import write_json
@@ -38,7 +38,7 @@ __all__ = [
     "VehicleSpecError", "Curve", "Map2D", "BodySpec", "AeroSpec", "TireSpec", "EngineSpec", "MotorSpec",
     "BatterySpec", "ShiftSpec", "DrivetrainSpec", "BrakeSpec", "SteeringSpec", "ChannelSensorSpec", "SensorSpec",
     "VehicleSpec", "load_vehicle", "save_vehicle", "check_declared", "check_physics",
-    "MASS_MIN", "MASS_MAX", "TOP_SPEED_MIN",
+    "MASS_MIN", "MASS_MAX", "TOP_SPEED_MIN", "vehicle_json_schema",
 ]
 
 
@@ -753,6 +753,11 @@ def _build(tp: Any, data: Any, path: str) -> Any:
             raise VehicleSpecError(f"{path}: expected a string, got {data!r}")
         return data
     raise VehicleSpecError(f"{path}: unsupported type {tp!r}")  # pragma: no cover - programming error
+
+
+def vehicle_json_schema() -> dict[str, Any]:
+    """The JSON schema of a vehicle spec file (pydantic): fields with units, lower bounds and plausible ranges."""
+    return TypeAdapter(VehicleSpec).json_schema()
 
 
 def load_vehicle(path: str | os.PathLike) -> VehicleSpec:

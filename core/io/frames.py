@@ -230,11 +230,18 @@ _ASC_TIMED = re.compile(r"^\s*\d+\.\d+\s")
 _ASC_TIMESTAMP_LIKE = re.compile(r"^\s*[0-9.]+[^0-9.\s]")
 
 
+#: ASC lines without a time stamp that belong to the format (header, trigger blocks, comments)
+_ASC_HEADER_PREFIXES = ("date", "base", "internal events", "no internal events", "begin triggerblock",
+                        "end triggerblock", "//", "version", "start of measurement")
+
+
 def _asc_line_ok(line: str) -> bool:
     if _ASC_TIMESTAMP_LIKE.match(line):
         return False  # a mangled time stamp, e.g. '0.0x5 1 123 ...'
+    if not _ASC_TIMED.match(line):
+        return line.strip().lower().startswith(_ASC_HEADER_PREFIXES)  # free text is no ASC line
     if not _ASC_FRAME.match(line):
-        return True  # header, events, error frames, CAN FD lines: left to python-can
+        return True  # events, error frames, CAN FD lines: left to python-can
     m = _ASC_DATA.match(line)
     if m is None:
         return False

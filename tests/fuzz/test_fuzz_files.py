@@ -22,7 +22,7 @@ from roadload.sim2real.errors import DiagnosisError
 from roadload.sim2real.simconfig import SimConfig
 from roadload.trip import Trip, TripError
 from roadload.trip_schema import TripMetadataError, parse_trip_payload
-from roadload.vehicle import VehicleSpec, VehicleSpecError, load_vehicle
+from roadload.vehicle import VehicleSpec, VehicleSpecError, load_vehicle, vehicle_json_schema
 
 FUZZ = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 
@@ -507,3 +507,9 @@ def test_sim_config(data, needle, ledger):
 
 
 TABLE_INPUTS = len(MAPPING_CASES) + 8 + len(VEHICLE_CASES) + 5 + len(TRIP_CASES) + 6 + 3 + len(SIMCONFIG_CASES)
+
+
+def test_vehicle_json_schema_carries_units_and_bounds():
+    body = vehicle_json_schema()["$defs"]["BodySpec"]["properties"]
+    assert body["mass"]["unit"] == "kg" and body["mass"]["plausible"] == [250.0, 60000.0]
+    assert body["mass"]["exclusiveMinimum"] == 0.0 and "[m]" in body["wheelbase"]["description"]

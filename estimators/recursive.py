@@ -29,7 +29,9 @@ class EstimatorState:
     x: X̂ (n,); p: P (n×n); scale: σ̂ [unit of B]; quantile: Q̂ (recursive quantile of ΔB², [unit of B]²);
     t: samples processed; n_skipped: non-finite samples skipped; n_rolled_back: updates that produced a
     non-finite X̂ or P and were undone; blowup_at: first sample index with max diag P above the blow-up level
-    (-1: never); p_diag_max: largest diag P seen; ring/ring_pos/ring_fill: delayed-instrument buffer.
+    (-1: never, also set by the first covariance reset); p_diag_max: largest |diag P| an update produced;
+    ring/ring_pos/ring_fill: delayed-instrument buffer; n_p_resets: covariance resets P ← P_0 of the safety
+    net (P above the bound, non-finite or not positive definite; see :mod:`.kernel`).
     """
 
     x: np.ndarray
@@ -44,8 +46,9 @@ class EstimatorState:
     ring: np.ndarray
     ring_pos: int
     ring_fill: int
+    n_p_resets: int = 0
 
-    def copy(self) -> "EstimatorState":
+    def copy(self) -> EstimatorState:
         return copy.deepcopy(self)
 
 
@@ -57,7 +60,8 @@ class EstimationResult:
     B_t - A_t X̂_t; weights: W_t,t; scale: σ̂_t after the update [unit of B]; skipped: True where the sample
     was non-finite and skipped (residuals and weight are NaN there); n_skipped; n_rolled_back;
     p_blowup: max diag P exceeded the blow-up level (poor excitation without regularisation);
-    p_blowup_at: first such sample index (-1: never); p_diag_max: largest diag P seen; state: final state.
+    p_blowup_at: first such sample index (-1: never); p_diag_max: largest diag P seen; state: final state;
+    n_p_resets: covariance resets P ← P_0 by the safety net in this run (any reset also sets p_blowup).
     Arrays not requested (``store='x'`` or ``'final'``) are None.
     """
 
@@ -74,6 +78,7 @@ class EstimationResult:
     p_blowup_at: int | np.ndarray
     p_diag_max: float | np.ndarray
     state: EstimatorState | list[EstimatorState] = field(repr=False)
+    n_p_resets: int | np.ndarray = 0
 
 
 _STORE = {"final": K.STORE_FINAL, "x": K.STORE_X, "full": K.STORE_FULL}
@@ -128,6 +133,7 @@ class RecursiveEstimator:
         self._empty_out = (np.empty((0, n)), np.empty(0))
         self._no_instruments = np.empty((0, n))
         self._tag = K.size_tag(n)
+        self._scratch = K.scratch(n)
 
     @property
     def n_params(self) -> int:
@@ -161,7 +167,8 @@ class RecursiveEstimator:
             t=int(self._ct[K.CT_T]), n_skipped=int(self._ct[K.CT_SKIPPED]),
             n_rolled_back=int(self._ct[K.CT_ROLLED_BACK]), blowup_at=int(self._ct[K.CT_BLOWUP_AT]),
             p_diag_max=float(self._sc[K.SC_PMAX]), ring=self._ring.copy(),
-            ring_pos=int(self._ct[K.CT_RING_POS]), ring_fill=int(self._ct[K.CT_RING_FILL]))
+            ring_pos=int(self._ct[K.CT_RING_POS]), ring_fill=int(self._ct[K.CT_RING_FILL]),
+            n_p_resets=int(self._ct[K.CT_P_RESETS]))
 
     def set_state(self, state: EstimatorState) -> None:
         """Restore a state taken with :attr:`state` (same configuration)."""
@@ -173,9 +180,9 @@ class RecursiveEstimator:
         self._sc = np.array([state.scale ** 2, state.quantile, state.p_diag_max])
         self._ring = np.array(state.ring, dtype=float)
         self._ct = np.array([state.n_skipped, state.n_rolled_back, state.blowup_at, state.t,
-                             state.ring_pos, state.ring_fill], dtype=np.int64)
+                             state.ring_pos, state.ring_fill, state.n_p_resets], dtype=np.int64)
 
-    def copy(self) -> "RecursiveEstimator":
+    def copy(self) -> RecursiveEstimator:
         """An independent estimator with the same configuration and state."""
         other = RecursiveEstimator.__new__(RecursiveEstimator)
         other.config = self.config
@@ -235,8 +242,8 @@ class RecursiveEstimator:
         arr = self.config.kernel_arrays
         e2, e1 = self._empty_out
         K.run_record(kernel_array(a), kernel_array(b), Z, self._ip_final, arr["fp"], arr["Q"], arr["Pd"],
-                     arr["F"], arr["xmin"], arr["xmax"], self._x, self._p, self._sc, self._ring, self._ct,
-                     e2, e2, e1, e1, e1, e1, self._tag)
+                     arr["F"], arr["xmin"], arr["xmax"], arr["P0"], self._x, self._p, self._sc, self._ring, self._ct,
+                     e2, e2, e1, e1, e1, e1, *self._scratch, self._tag)
         return self._x.copy()
 
     def _process(self, A, B, Z, store):
@@ -248,8 +255,9 @@ class RecursiveEstimator:
         out_X = np.empty((T, n)) if store >= K.STORE_X else np.empty((0, n))
         out_Pd = np.empty((T, n)) if full else np.empty((0, n))
         vecs = [np.empty(T) if full else np.empty(0) for _ in range(4)]
-        K.run_record(A, B, Z, ip, arr["fp"], arr["Q"], arr["Pd"], arr["F"], arr["xmin"], arr["xmax"],
-                     self._x, self._p, self._sc, self._ring, self._ct, out_X, out_Pd, *vecs, self._tag)
+        K.run_record(A, B, Z, ip, arr["fp"], arr["Q"], arr["Pd"], arr["F"], arr["xmin"], arr["xmax"], arr["P0"],
+                     self._x, self._p, self._sc, self._ring, self._ct, out_X, out_Pd, *vecs,
+                     *K.scratch(n), self._tag)
         return out_X, out_Pd, vecs
 
     def run(self, A, B, instruments=None, store: str = "full") -> EstimationResult:
@@ -261,6 +269,7 @@ class RecursiveEstimator:
         A, B, Z = self._check(A, B, instruments)
         skipped_before = int(self._ct[K.CT_SKIPPED])
         rolled_before = int(self._ct[K.CT_ROLLED_BACK])
+        resets_before = int(self._ct[K.CT_P_RESETS])
         out_X, out_Pd, vecs = self._process(kernel_array(A), kernel_array(B), kernel_array(Z), _STORE[store])
         full = store == "full"
         skipped = np.isnan(vecs[0]) if full else None
@@ -270,7 +279,8 @@ class RecursiveEstimator:
             residual_prior=vecs[0] if full else None, residual_post=vecs[1] if full else None,
             weights=vecs[2] if full else None, scale=vecs[3] if full else None, skipped=skipped,
             n_skipped=st.n_skipped - skipped_before, n_rolled_back=st.n_rolled_back - rolled_before,
-            p_blowup=st.blowup_at >= 0, p_blowup_at=st.blowup_at, p_diag_max=st.p_diag_max, state=st)
+            p_blowup=st.blowup_at >= 0, p_blowup_at=st.blowup_at, p_diag_max=st.p_diag_max, state=st,
+            n_p_resets=st.n_p_resets - resets_before)
 
 
 def run_many(config: EstimatorConfig, A, B, instruments=None, store: str = "full",
@@ -327,7 +337,8 @@ def run_many(config: EstimatorConfig, A, B, instruments=None, store: str = "full
         # neighbouring rows every sample (false sharing) ran no faster on two cores than on one
         state = [X[r].copy(), P[r].copy(), sc[r].copy(), ring[r].copy(), ct[r].copy()]
         K.run_record(A[r], B[r], Z[r], ip, arr["fp"], arr["Q"], arr["Pd"], arr["F"], arr["xmin"], arr["xmax"],
-                     *state, out_X[r], out_Pd[r], vecs[0][r], vecs[1][r], vecs[2][r], vecs[3][r], tag)
+                     arr["P0"], *state, out_X[r], out_Pd[r], vecs[0][r], vecs[1][r], vecs[2][r], vecs[3][r],
+                     *K.scratch(n), tag)
         X[r], P[r], sc[r], ring[r], ct[r] = state
     workers = (os.cpu_count() or 1) if n_threads is None else int(n_threads)
     if workers < 1:
@@ -350,4 +361,5 @@ def run_many(config: EstimatorConfig, A, B, instruments=None, store: str = "full
         weights=vecs[2] if full else None, scale=vecs[3] if full else None,
         skipped=np.isnan(vecs[0]) if full else None,
         n_skipped=ct[:, K.CT_SKIPPED].copy(), n_rolled_back=ct[:, K.CT_ROLLED_BACK].copy(),
-        p_blowup=blow >= 0, p_blowup_at=blow.copy(), p_diag_max=sc[:, K.SC_PMAX].copy(), state=states)
+        p_blowup=blow >= 0, p_blowup_at=blow.copy(), p_diag_max=sc[:, K.SC_PMAX].copy(), state=states,
+        n_p_resets=ct[:, K.CT_P_RESETS].copy())

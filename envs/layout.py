@@ -11,7 +11,6 @@ ruff and mypy resolve every name): ``S_*`` state, ``P_*`` parameters, ``L_*`` lo
 
 from __future__ import annotations
 
-
 # ---------------------------------------------------------------------------------------------------- state X
 STATE = [
     "T", "POS", "V", "A", "NLOG",

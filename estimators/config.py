@@ -233,33 +233,33 @@ class EstimatorConfig:
         constrain = bool(np.any(np.isfinite(xmin)) or np.any(np.isfinite(xmax)))
         x0 = np.clip(x0, xmin, xmax)
 
-        ip = np.zeros(K.N_IP, dtype=np.int64)
-        ip[K.IP_PSI] = psi_code(self.psi)
-        ip[K.IP_COV] = COVARIANCE_KINDS[self.covariance]
-        ip[K.IP_REG] = REGULARISATION_KINDS[self.regularisation]
-        ip[K.IP_IV] = INSTRUMENT_KINDS[self.instruments]
-        ip[K.IP_DELAY] = self.instrument_delay if self.instrument_delay is not None else 1
-        ip[K.IP_ROBUST_SCALE] = int(bool(self.robust_scale))
-        ip[K.IP_MAX_ITER] = self.scale_iterations
-        ip[K.IP_JOSEPH] = int(bool(self.joseph))
-        ip[K.IP_SYMMETRIC] = int(bool(self.symmetrize) and self.instruments == "none")
-        ip[K.IP_CONSTRAIN] = int(constrain)
-        ip[K.IP_TRANSITION] = int(self.transition is not None)
-        fp = np.zeros(K.N_FP)
-        fp[K.FP_C1], fp[K.FP_C2], fp[K.FP_C3] = self.psi_params
-        fp[K.FP_LAMBDA] = self.forgetting if self.forgetting is not None else 1.0  # 1.0: not used
-        fp[K.FP_R] = self.output_noise if self.output_noise is not None else 1.0
-        fp[K.FP_KAPPA] = self.kappa
-        fp[K.FP_ETA] = self.learn_rate
-        fp[K.FP_P] = self.quantile_p
-        fp[K.FP_LAMBDA_SCALE] = self.scale_forgetting
-        fp[K.FP_SCALE_FACTOR] = self.scale_factor
-        fp[K.FP_TOL] = self.iteration_tol
-        fp[K.FP_MIN_SCALE] = self.min_scale
-        fp[K.FP_BLOWUP_LEVEL] = self.blowup_ratio * float(np.max(np.diag(P0)))
-        fp[K.FP_P_BOUND] = self.covariance_bound_ratio * float(np.max(np.diag(P0)))
+        codes = np.zeros(K.N_IP, dtype=np.int64)  # integer codes of the parts
+        codes[K.IP_PSI] = psi_code(self.psi)
+        codes[K.IP_COV] = COVARIANCE_KINDS[self.covariance]
+        codes[K.IP_REG] = REGULARISATION_KINDS[self.regularisation]
+        codes[K.IP_IV] = INSTRUMENT_KINDS[self.instruments]
+        codes[K.IP_DELAY] = self.instrument_delay if self.instrument_delay is not None else 1
+        codes[K.IP_ROBUST_SCALE] = int(bool(self.robust_scale))
+        codes[K.IP_MAX_ITER] = self.scale_iterations
+        codes[K.IP_JOSEPH] = int(bool(self.joseph))
+        codes[K.IP_SYMMETRIC] = int(bool(self.symmetrize) and self.instruments == "none")
+        codes[K.IP_CONSTRAIN] = int(constrain)
+        codes[K.IP_TRANSITION] = int(self.transition is not None)
+        values = np.zeros(K.N_FP)  # float settings
+        values[K.FP_C1], values[K.FP_C2], values[K.FP_C3] = self.psi_params
+        values[K.FP_LAMBDA] = self.forgetting if self.forgetting is not None else 1.0  # 1.0: not used
+        values[K.FP_R] = self.output_noise if self.output_noise is not None else 1.0
+        values[K.FP_KAPPA] = self.kappa
+        values[K.FP_ETA] = self.learn_rate
+        values[K.FP_P] = self.quantile_p
+        values[K.FP_LAMBDA_SCALE] = self.scale_forgetting
+        values[K.FP_SCALE_FACTOR] = self.scale_factor
+        values[K.FP_TOL] = self.iteration_tol
+        values[K.FP_MIN_SCALE] = self.min_scale
+        values[K.FP_BLOWUP_LEVEL] = self.blowup_ratio * float(np.max(np.diag(P0)))
+        values[K.FP_P_BOUND] = self.covariance_bound_ratio * float(np.max(np.diag(P0)))
         self._arrays = {
-            "ip": ip, "fp": fp,
+            "ip": codes, "fp": values,
             "Q": Q if Q is not None else np.zeros((n, n)),
             "Pd": Pd if Pd is not None else np.zeros((n, n)),
             "F": np.ascontiguousarray(F), "xmin": xmin, "xmax": xmax, "x0": x0, "P0": P0,

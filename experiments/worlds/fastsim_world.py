@@ -264,7 +264,8 @@ def matched_vehicle() -> VehicleSpec:
         description="roadload spec matched to FASTSim 3's 2022 Renault Zoe ZE50 R135 resource (calibrated road "
                     "load, transmission 0.92, FASTSim motor-efficiency curve, logger ratio 9.3)",
         body=BodySpec(mass=cal["mass"], wheelbase=wb, cg_to_front_axle=wb * (1 - front),
-                      cg_height=float(ch["cg_height_meters"]), yaw_inertia=2200.0),
+                      cg_height=float(ch["cg_height_meters"]), yaw_inertia=2200.0,
+                      pitch_gradient=0.0, roll_gradient=0.0),   # FASTSim has no body motion
         aero=AeroSpec(drag_coefficient=cal["drag_area"] / float(ch["frontal_area_square_meters"]),
                       frontal_area=float(ch["frontal_area_square_meters"]), yaw_drag_factor=0.0),
         tires=TireSpec(dynamic_radius=r, rolling_resistance_f0=cal["f_r0"], rolling_resistance_f1=0.0,

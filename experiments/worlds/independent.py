@@ -65,6 +65,7 @@ from .common import (
 )
 
 DT = 0.01
+PITCH_GRADIENT = 0.004     # rad per m/s², body pitch under longitudinal acceleration
 AIR_PRESSURE = 101325.0
 
 
@@ -408,7 +409,7 @@ def log_channels(out: np.ndarray, prof, ambient: np.ndarray, rng: np.random.Gene
         kmh = v * 3.6
         torque = torque + np.where((kmh >= p["low_kmh"]) & (kmh < p["high_kmh"]), p["offset_nm"], 0.0)
     bias = EFFECTS["accel_bias"].params["bias_m_s2"] if withheld == "accel_bias" else 0.0
-    pitch = -0.004 * a     # body pitch under acceleration (nose up when braking is negative a -> +pitch)
+    pitch = PITCH_GRADIENT * a     # body pitch: nose up under acceleration, down when braking
     delta_w = ka * (veh.wheelbase + veh.understeer_gradient() * v ** 2)
     n = t.size
     gnss = prof.elevation()
@@ -489,7 +490,7 @@ def matched_vehicle(veh: IndependentVehicle = BASE) -> VehicleSpec:
         name="independent_bev",
         description="roadload spec with the base parameters of the independent test world (chapter-2 model)",
         body=BodySpec(mass=veh.mass, wheelbase=veh.wheelbase, cg_to_front_axle=veh.l12, yaw_inertia=2600.0,
-                      pitch_gradient=0.004, roll_gradient=0.006),
+                      pitch_gradient=PITCH_GRADIENT, roll_gradient=0.0),
         aero=AeroSpec(drag_coefficient=0.28, frontal_area=veh.drag_area / 0.28, yaw_drag_factor=0.0),
         tires=TireSpec(dynamic_radius=veh.r_w, rolling_resistance_f0=veh.f_r0, rolling_resistance_f1=veh.f_r1,
                        rolling_resistance_f4=veh.f_r4, cornering_stiffness_front=veh.x12,

@@ -168,3 +168,27 @@ def run_world_selftest(world: str, seeds: Sequence[int] = (0,), effects: Sequenc
         if tmp is not None:
             tmp.cleanup()
     return result
+
+
+def plot_confusion(table: pd.DataFrame, path: Path | str, title: str) -> Path:
+    """The confusion table as a PNG heat map (counts written in the cells)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from roadload.fileio import save_figure
+
+    fig, ax = plt.subplots(figsize=(1.2 + 0.75 * table.shape[1], 1.0 + 0.45 * table.shape[0]))
+    ax.imshow(table.to_numpy(dtype=float), cmap="Blues", aspect="auto")
+    ax.set_xticks(range(table.shape[1]), table.columns, rotation=40, ha="right")
+    ax.set_yticks(range(table.shape[0]), table.index)
+    for i in range(table.shape[0]):
+        for j in range(table.shape[1]):
+            if table.iat[i, j]:
+                ax.text(j, i, str(table.iat[i, j]), ha="center", va="center")
+    ax.set_xlabel("first identified effect")
+    ax.set_ylabel("withheld effect")
+    ax.set_title(title)
+    fig.tight_layout()
+    return save_figure(fig, path)
+

@@ -178,7 +178,7 @@ def plot_confusion(table: pd.DataFrame, path: Path | str, title: str) -> Path:
     import matplotlib.pyplot as plt
     from roadload.fileio import save_figure
 
-    fig, ax = plt.subplots(figsize=(1.2 + 0.75 * table.shape[1], 1.0 + 0.45 * table.shape[0]))
+    fig, ax = plt.subplots(figsize=(max(6.0, 2.5 + 0.75 * table.shape[1]), max(3.5, 1.8 + 0.45 * table.shape[0])))
     ax.imshow(table.to_numpy(dtype=float), cmap="Blues", aspect="auto")
     ax.set_xticks(range(table.shape[1]), table.columns, rotation=40, ha="right")
     ax.set_yticks(range(table.shape[0]), table.index)
@@ -188,7 +188,7 @@ def plot_confusion(table: pd.DataFrame, path: Path | str, title: str) -> Path:
                 ax.text(j, i, str(table.iat[i, j]), ha="center", va="center")
     ax.set_xlabel("first identified effect")
     ax.set_ylabel("withheld effect")
-    ax.set_title(title)
+    ax.set_title(title, fontsize=10)
     fig.tight_layout()
     return save_figure(fig, path)
 

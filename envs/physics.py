@@ -34,6 +34,8 @@ from __future__ import annotations
 
 import math
 
+from roadload.units import G, R_AIR
+
 from ._jit import jit, stage
 from .driver import driver_force, steering_law
 from .drivetrain import (
@@ -268,8 +270,6 @@ from .layout import (
 )
 from .numerics import rng_normal, rng_uniform, road_locate, road_value
 
-GRAVITY = 9.80665
-R_AIR = 287.058
 LATERAL_VALIDITY_LIMIT = 4.0  # m/s^2, single-track model validity (section 2.5.1)
 
 
@@ -434,7 +434,7 @@ def lateral_single_track(X, P, steer, v, mass, c_f, c_r, bank, cth, dt):
     lf = P[P_LF]
     lr = P[P_LR]
     wb = P[P_L]
-    g_lat = GRAVITY * math.sin(bank) * cth
+    g_lat = G * math.sin(bank) * cth
     if v < 1.0:
         beta = lr / wb * delta
         yaw = v * math.tan(delta) / wb
@@ -598,7 +598,7 @@ def brakes(X, P, friction, r, dt):
 @stage
 def climbing_force(mass, sth):
     """F_cl = m_V g sin(theta) [N] (eq. 2.5)."""
-    return mass * GRAVITY * sth
+    return mass * G * sth
 
 
 @stage
@@ -606,7 +606,7 @@ def rolling_resistance(fr0, fr1, fr4, v, mass, cth, bank):
     """F_r = f_r(v) m_V g cos(theta) cos(phi_r) tanh(v / 0.1 m/s) [N] with f_r(v) = f_r0 + f_r1 v + f_r4 v^4
     (eq. 2.9, 2.10), smoothed at standstill. Returns (f_r(v), F_r)."""
     fr = fr0 + fr1 * v + fr4 * v * v * v * v
-    return fr, fr * mass * GRAVITY * cth * math.cos(bank) * math.tanh(v / 0.1)
+    return fr, fr * mass * G * cth * math.cos(bank) * math.tanh(v / 0.1)
 
 
 @stage
@@ -737,7 +737,7 @@ def slow_states(X, P, road, stops, rng, bev, mass, v, v_new, v_avg, f_b, f_hold,
                 new_payload = 2.0 * P[P_PAYLOAD_MAX] - new_payload
             new_payload = _clip(new_payload, P[P_PAYLOAD_MIN], P[P_PAYLOAD_MAX])
             X[S_MASS] = P[P_MASS0] + new_payload
-            X[S_E_PAYLOAD_PE] += (new_payload - payload) * GRAVITY * road_value(road, R_ELEV, ridx, s_now)
+            X[S_E_PAYLOAD_PE] += (new_payload - payload) * G * road_value(road, R_ELEV, ridx, s_now)
             kst += 1
         X[S_PAYLOAD_STOP] = kst
 
@@ -773,7 +773,7 @@ def log_longitudinal(row, X, P, t_new, v_new, a_act, mass, f_cl, f_roll, f_aero,
     row[L_FCORNER] = f_corner
     row[L_DRAGF] = X[S_DRAGF]
     pitch = P[P_PITCH_GRAD] * a_act
-    row[L_ACC_X_SENS] = a_act + GRAVITY * math.sin(theta + pitch)
+    row[L_ACC_X_SENS] = a_act + G * math.sin(theta + pitch)
 
 
 @stage
@@ -789,7 +789,7 @@ def log_lateral(row, X, P, v_new, kappa, yaw, delta, beta, bank, wind_s, wind_a,
     row[L_CSR] = c_r
     row[L_AY] = a_y
     roll = P[P_ROLL_GRAD] * a_y
-    row[L_ACC_Y_SENS] = spec_fy + GRAVITY * math.sin(roll)
+    row[L_ACC_Y_SENS] = spec_fy + G * math.sin(roll)
     row[L_YAW] = yaw
     row[L_BETA] = beta
     row[L_DELTA] = delta

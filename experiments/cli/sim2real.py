@@ -15,27 +15,53 @@ from roadload.sim2real.report import write_report
 from roadload.sim2real.simconfig import SimConfig
 from roadload.experiments.sim2real_selftest import run_selftest
 from roadload.io import import_log
+from roadload.io.report import LogImportError
 
 
-def load_trips(paths: list[Path], fmt: str | None) -> list:
-    """Trips from Trip Parquet files, or raw logs through ``roadload.io.import_log`` when ``fmt`` is given
-    (e.g. 'bmw-i3'); a folder expands to its files."""
+# file endings of trip files per import format (a folder given to --real yields these only)
+TRIP_SUFFIXES = {None: (".parquet",), "csv": (".csv",), "bmw-i3": (".csv",), "openxc": (".json", ".txt"),
+                 "dbc-mf4": (".mf4",), "candump": (".log", ".txt"), "blf": (".blf",), "asc": (".asc",),
+                 "comma2k19": (".log", ".bz2")}
+DEFAULT_CSV_MAPPING = "plain_csv"
 
 
+def _is_trip_file(path: Path, fmt: str | None) -> bool:
+    suffixes = TRIP_SUFFIXES.get(fmt, (".parquet", ".csv", ".mf4", ".log", ".blf", ".asc", ".json", ".txt"))
+    if path.suffix.lower() not in suffixes:
+        return False
+    if path.suffix.lower() == ".json":     # mapping / vehicle / truth JSON beside the logs are no trips
+        head = path.read_text(encoding="utf-8", errors="replace")[:64].lstrip()
+        return not head.startswith(("{", "["))
+    return True
+
+
+def load_trips(paths: list[Path], fmt: str | None, mapping: str | None = None) -> list:
+    """Trips from Trip Parquet files, or raw logs through ``roadload.io.import_log`` when ``fmt`` is given (e.g.
+    'csv' with ``mapping``, default the packaged plain_csv mapping; 'bmw-i3'). A folder yields its trip files
+    only (:data:`TRIP_SUFFIXES` of the format; JSON documents such as mappings or vehicle files are skipped)."""
     files: list[Path] = []
     for p in paths:
         if p.is_dir():
-            files += sorted(q for q in p.iterdir() if q.suffix.lower() in (".parquet", ".csv", ".json", ".mf4"))
+            files += sorted(q for q in p.iterdir() if q.is_file() and _is_trip_file(q, fmt))
         elif p.exists():
             files.append(p)
         else:
             raise DiagnosisError(f"no trip file at {p}")
     if not files:
-        raise DiagnosisError(f"no trip files in {[str(p) for p in paths]}")
+        want = ", ".join(TRIP_SUFFIXES.get(fmt, ()))
+        raise DiagnosisError(f"no trip files ({want}) in {[str(p) for p in paths]}"
+                             + ("" if fmt else "; raw logs need --format (and --mapping for csv)"))
+    if mapping is not None and not fmt:
+        raise DiagnosisError("--mapping needs --format (the import format of the raw logs, e.g. csv)")
+    if fmt == "csv" and mapping is None:
+        mapping = DEFAULT_CSV_MAPPING
     trips = []
     for f in files:
         if fmt:
-            trips.append(import_log(f, fmt))
+            try:
+                trips.append(import_log(f, fmt, mapping))
+            except LogImportError as exc:
+                raise DiagnosisError(f"{f}: {exc}") from None
         else:
             trips.append(Trip.load(f))
     return trips
@@ -53,7 +79,10 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         out: Path = typer.Option(..., "--out", help="output folder: report.md, diagnosis.json, PNG figures"),
         candidates: Optional[str] = typer.Option(None, "--candidates", help="comma-separated candidate effects "
                                                                             "(default: the whole catalog)"),
-        fmt: Optional[str] = typer.Option(None, "--format", help="import format of raw logs, e.g. bmw-i3"),
+        fmt: Optional[str] = typer.Option(None, "--format", "-f", help="import format of raw logs, as for "
+                                                                       "'roadload import' (csv, bmw-i3, ...)"),
+        mapping: Optional[str] = typer.Option(None, "--mapping", "-m",
+                                              help="mapping JSON file or packaged name (csv default: plain_csv)"),
         seed: int = typer.Option(0, help="seed of the split and the bootstrap"),
         resimulate: bool = typer.Option(True, help="re-run the sim with the identified effects switched on"),
         more: Optional[list[Path]] = typer.Argument(None, help="further trips (so '--real A B C' works)"),
@@ -66,7 +95,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         console = Console()
         try:
             cfg = SimConfig.load(sim)
-            trips = load_trips(list(real) + list(more or []), fmt)
+            trips = load_trips(list(real) + list(more or []), fmt, mapping)
             cands = tuple(c.strip() for c in candidates.split(",") if c.strip()) if candidates else DEFAULT_CANDIDATES
             settings = DiagnosisSettings(candidates=cands, seed=seed, resimulate=resimulate,
                                          strict_candidates=candidates is not None)
@@ -78,6 +107,12 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         except (DiagnosisError, ValueError) as exc:
             console.print(f"[red]error:[/red] {exc}")
             raise typer.Exit(2) from None
+        for imp in diag.notes.get("implausible", []):
+            console.print(f"[yellow]not accepted, implausible:[/yellow] {imp['effect']}: {imp['reason']}")
+        base = diag.notes.get("base_calibration") or {}
+        for row in base.get("parameters", []):
+            console.print(f"base: {row['name']} {row['value']:+.4g} ± {row['std_error']:.2g} {row['unit']}"
+                          + ("  (significant)" if row.get("significant") else ""))
         eff = ", ".join(diag.identified) or "none"
         console.print(f"identified: {eff}; held-out force RMSE {diag.gap_before['force_residual']['rmse']:.1f} -> "
                       f"{diag.gap_after['force_residual']['rmse']:.1f} N; unexplained: "

@@ -89,13 +89,12 @@ def regime_cells(table: pd.DataFrame) -> np.ndarray:
 
 
 def braking_rows(table: pd.DataFrame, brake_hold: float = 1.0) -> np.ndarray:
-    """Rows in friction braking (mode 'braking' or a positive brake force) or within ``brake_hold`` [s] after."""
+    """Rows in friction braking (mode 'braking': brake pressure above the threshold of :mod:`.table`) or within
+    ``brake_hold`` [s] after."""
     n = len(table)
     out = np.zeros(n, dtype=bool)
     if "mode" in table.columns:
         out |= (table["mode"] == "braking").to_numpy()
-    if "brake_force" in table.columns:
-        out |= np.nan_to_num(table["brake_force"].to_numpy(dtype=float)) > 1.0
     if "time_since_brake" in table.columns:
         tsb = table["time_since_brake"].to_numpy(dtype=float)
         out |= np.isfinite(tsb) & (tsb < brake_hold)

@@ -194,7 +194,8 @@ class CandidateResult:
     size: float = float("nan")
 
     def to_dict(self) -> dict:
-        return {"null_p": self.null_p, "size_rms": self.size, "name": self.name, "description": self.description, "shape": self.shape,
+        return {"null_p": self.null_p, "size_rms": self.size, "name": self.name,
+                "description": self.description, "shape": self.shape,
                 "shape_name": self.shape_name, "parameters": self.parameters, "std_errors": self.std_errors,
                 "units": self.units, "cv_mse": self.cv_mse, "baseline_cv_mse": self.baseline_cv_mse,
                 "heldout_improvement": self.improvement, "heldout_gain": list(self.gain),

@@ -219,7 +219,7 @@ def build_table(trips: Sequence[Trip], sim: SimConfig, settings: PipelineSetting
             pr_s = smoothed_pressure(trip, "brake_pressure_rear", t, st) if trip.has("brake_pressure_rear") \
                 else 0.0 * v
             f["brake_force"] = brake_force_from_pressure(sim.vehicle, pf_s, pr_s)
-            braking |= f["brake_force"].to_numpy(dtype=float) > 1.0
+            braking |= np.maximum(np.nan_to_num(pf_s), np.nan_to_num(pr_s)) > BRAKE_PRESSURE_ON
         else:
             f["brake_force"] = 0.0
             braking = ~s["trigger_no_brake"].to_numpy(dtype=bool)

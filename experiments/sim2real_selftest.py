@@ -268,6 +268,7 @@ class WorldCaseResult:
     unexplained_where: str
     seconds: float
     error: str = ""
+    cpu_seconds: float = float("nan")
 
     def to_dict(self) -> dict:
         return dict(self.__dict__)
@@ -306,6 +307,9 @@ class WorldRun:
                 "median_shrinkage_identified": float(np.median(shr)) if shr else float("nan"),
                 "median_shrinkage_all": float(np.nanmedian([r.shrinkage for r in cat])) if cat else float("nan"),
                 "median_seconds": float(np.median([r.seconds for r in self.results])) if self.results else 0.0,
+                "median_cpu_seconds": float(np.nanmedian([r.cpu_seconds for r in self.results]))
+                if self.results else 0.0,
+                "max_cpu_seconds": float(np.nanmax([r.cpu_seconds for r in self.results])) if self.results else 0.0,
                 "errors": sum(bool(r.error) for r in self.results)}
 
     def to_dict(self) -> dict:
@@ -393,9 +397,10 @@ def run_world(world: str, seeds: Sequence[int] = (0, 1, 2), effects: Sequence[st
                         w = ROADLOAD_WORLD_EFFECTS[name]
                         real = sim_trips(sim.with_effect(w.switch, w.params), roads, duration)
                         accepted = tuple(c for c in candidate_names() if w.switch in get_candidate(c).explains)
-                    t1 = time.perf_counter()
+                    t1, c1 = time.perf_counter(), time.process_time()
                     diag = diagnose(real, sim, settings, floor=floor)
                     res = _world_result(world, seed, name, diag, accepted, time.perf_counter() - t1)
+                    res.cpu_seconds = time.process_time() - c1
                 except Exception as exc:      # reported in the table, never dropped
                     res = _failed(world, seed, name, exc, time.perf_counter() - t0)
                 results.append(res)
@@ -415,12 +420,14 @@ def run_world(world: str, seeds: Sequence[int] = (0, 1, 2), effects: Sequence[st
                     sim = SimConfig.load(vehicle) if vehicle else SimConfig(load_vehicle(case.vehicle_path))
                     if floor is None:
                         floor = fit_floor(sim, set(trips[0].channels), settings)
-                    t1 = time.perf_counter()
+                    t1, c1 = time.perf_counter(), time.process_time()
                     diag = diagnose(trips, sim, settings, floor=floor)
+                    cpu = time.process_time() - c1
                     band = case.truth["parameters"] if name == OUTSIDE_WORLD else {}
                     res = _world_result(world, seed, name, diag, tuple(case.truth.get("accepted", ())),
                                         time.perf_counter() - t1,
                                         (band.get("low_kmh", 50.0), band.get("high_kmh", 70.0)))
+                    res.cpu_seconds = cpu
                 except Exception as exc:      # reported in the table, never dropped
                     res = _failed(world, seed, name, exc, time.perf_counter() - t0)
                 results.append(res)
@@ -435,4 +442,5 @@ def _line(r: WorldCaseResult) -> str:
     return (f"{r.world:11s} seed {r.seed} {r.withheld:16s} -> {r.identified:18s} {'ok  ' if r.correct else 'MISS'} "
             f"accepted {','.join(r.accepted) or '-':30s} base {','.join(r.base_departures) or '-':24s} "
             f"RMSE {r.rmse_before:7.1f} -> {r.rmse_after:7.1f} ({100 * r.shrinkage:5.1f} %) {r.seconds:5.1f} s "
+            f"(cpu {r.cpu_seconds:5.1f} s) "
             f"{r.unexplained_where}")

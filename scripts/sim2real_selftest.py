@@ -53,7 +53,8 @@ def main(argv: list[str] | None = None) -> int:
               f"{s['false_acceptances_none']}/{s['none_cases']}, out-of-catalog {s['false_acceptances_outside']}/"
               f"{s['outside_cases']}; median held-out shrinkage (identified cases) "
               f"{100 * s['median_shrinkage_identified']:.1f} % (all catalog cases "
-              f"{100 * s['median_shrinkage_all']:.1f} %); median diagnosis {s['median_seconds']:.1f} s; "
+              f"{100 * s['median_shrinkage_all']:.1f} %); median diagnosis {s['median_seconds']:.1f} s wall, "
+              f"{s['median_cpu_seconds']:.1f} s cpu (max {s['max_cpu_seconds']:.1f} s); "
               f"errors {s['errors']}")
         dump[world] = run.to_dict()
     if args.json:

@@ -77,7 +77,7 @@ class DiagnosisSettings:
     block_length: float = 10.0
     seed: int = 0
     robust: bool = True
-    n_boot: int = 300
+    n_boot: int = 200
     min_gain: float = 0.02
     min_explained: float = 0.5
     max_effects: int = 3

@@ -23,7 +23,8 @@ the raw residual is then decided by those few samples (any regressor that is lar
 The held-out gain of a candidate is the out-of-fold reduction of Σ w (r_w - A X)² on the training segments (fits:
 weighted least squares of r_w on the candidate's regressors, folds by whole segments as in :mod:`.selection`),
 relative to the loss of the model before the step. Its null distribution comes from the **wild bootstrap over
-segments** (Rademacher signs, one per segment): under "the candidate adds nothing" the residual of the model
+blocks** (Rademacher signs, one per 10 s block of the training segments; blocks nest in the split's 60 s segments, so
+each lies in one CV fold): under "the candidate adds nothing" the residual of the model
 before the step is sign-flipped segment by segment, r⁽ᵇ⁾ = r̂₀ + ε_seg (r_w - r̂₀), which keeps its heavy tails and
 its autocorrelation within a segment but breaks any systematic link to the regressors. The step's statistic is
 the largest relative gain over the candidates in the pool (a max-statistic, so taking the best of many

@@ -245,7 +245,9 @@ class Selector:
         self.residual = y
         self.baseline_loss = np.where(self.split.train, y ** 2, np.nan)
         self.rng = np.random.default_rng(self.seed)
-        self.target = robust_target(self.table, y, self.split.train, self.split.segments, self.split.fold,
+        # the null's resampling unit: the 10 s bootstrap blocks (nested in the 60 s split segments, so every block
+        # lies in one fold); segments would leave too few sign patterns on short trips
+        self.target = robust_target(self.table, y, self.split.train, self.split.blocks, self.split.fold,
                                     self.split.n_folds, clip=self.clip)
         self.signs = rademacher(self.n_null, self.target.n_segments, self.rng)
 
@@ -319,7 +321,15 @@ class Selector:
         return np.hstack([self.candidate_columns(c, sh) for c, sh in chosen])
 
     def _reference_loss(self, chosen: Sequence[tuple[CandidateEffect, float | None]]) -> float:
-        """Robust out-of-fold loss (relative to the sim as is) of the chosen effects plus the flexible reference."""
+        """Robust out-of-fold loss (relative to the sim as is) of the chosen effects plus the flexible reference
+        (cached per set of chosen effects)."""
+        key = tuple((c.name, sh) for c, sh in chosen)
+        cache = self.__dict__.setdefault("_ref_cache", {})
+        if key not in cache:
+            cache[key] = self._reference_loss_uncached(chosen)
+        return cache[key]
+
+    def _reference_loss_uncached(self, chosen: Sequence[tuple[CandidateEffect, float | None]]) -> float:
         A = design(list(chosen), self.model, self.cols).A if chosen else None
         pred = cv_predict(A, self.residual, self.table, self.split, self.robust, reference=True)
         t = self.target

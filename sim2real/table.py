@@ -246,7 +246,16 @@ def build_table(trips: Sequence[Trip], sim: SimConfig, settings: PipelineSetting
         payload = trip.meta.get("extra_payload_kg")
         f["payload"] = float(payload) if payload is not None else (0.0 if trip.meta.get("overview") else np.nan)
         f["season"] = _season(trip, amb)
-        valid = (v > MIN_SPEED) & (t >= t[0] + st.warmup) & s["trigger_no_slip"].to_numpy(dtype=bool)
+        no_slip = s["trigger_no_slip"].to_numpy(dtype=bool)
+        moving = v > MIN_SPEED
+        if moving.sum() > 100 and no_slip[moving].mean() < 0.1:
+            # "slip" on (nearly) every moving sample: the logged motor speed does not fit the sim vehicle's drive
+            # ratio (a preset that is not the car) — the slip check says nothing then and is left out
+            no_slip = np.ones_like(no_slip)
+            notes[name].append("wheel-slip check left out: the logged engine/motor speed does not fit the sim "
+                               "vehicle's drive ratio on >= 90 % of the moving samples (check the vehicle's gear "
+                               "ratios and wheel radius)")
+        valid = moving & (t >= t[0] + st.warmup) & no_slip
         valid &= s["trigger_rim_torque_available"].to_numpy(dtype=bool)
         if not has_brakes:
             torque_floor = max(st.drive_torque_floor, knowledge.drive_torque_floor)

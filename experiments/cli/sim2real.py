@@ -39,6 +39,8 @@ def load_trips(paths: list[Path], fmt: str | None, mapping: str | None = None) -
     """Trips from Trip Parquet files, or raw logs through ``roadload.io.import_log`` when ``fmt`` is given (e.g.
     'csv' with ``mapping``, default the packaged plain_csv mapping; 'bmw-i3'). A folder yields its trip files
     only (:data:`TRIP_SUFFIXES` of the format; JSON documents such as mappings or vehicle files are skipped)."""
+    if mapping is not None and not fmt:
+        raise DiagnosisError("--mapping needs --format (the import format of the raw logs, e.g. csv)")
     files: list[Path] = []
     for p in paths:
         if p.is_dir():
@@ -51,8 +53,6 @@ def load_trips(paths: list[Path], fmt: str | None, mapping: str | None = None) -
         want = ", ".join(TRIP_SUFFIXES.get(fmt, ()))
         raise DiagnosisError(f"no trip files ({want}) in {[str(p) for p in paths]}"
                              + ("" if fmt else "; raw logs need --format (and --mapping for csv)"))
-    if mapping is not None and not fmt:
-        raise DiagnosisError("--mapping needs --format (the import format of the raw logs, e.g. csv)")
     if fmt == "csv" and mapping is None:
         mapping = DEFAULT_CSV_MAPPING
     trips = []
@@ -85,6 +85,11 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                                               help="mapping JSON file or packaged name (csv default: plain_csv)"),
         seed: int = typer.Option(0, help="seed of the split and the bootstrap"),
         resimulate: bool = typer.Option(True, help="re-run the sim with the identified effects switched on"),
+        base_first: bool = typer.Option(False, "--base-first", help="select effects over the calibrated base "
+                                                                   "(mass, drag area, rolling resistance, "
+                                                                   "drive-train efficiency, brake gain): for a "
+                                                                   "preset that does not match the car"),
+        floor_duration: float = typer.Option(900.0, help="seconds of the sim's own trips per floor road"),
         more: Optional[list[Path]] = typer.Argument(None, help="further trips (so '--real A B C' works)"),
     ) -> None:
         """Diagnose where a sim departs from recorded trips, which effect explains it, how far the gap shrinks."""
@@ -97,8 +102,11 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
             cfg = SimConfig.load(sim)
             trips = load_trips(list(real) + list(more or []), fmt, mapping)
             cands = tuple(c.strip() for c in candidates.split(",") if c.strip()) if candidates else DEFAULT_CANDIDATES
-            settings = DiagnosisSettings(candidates=cands, seed=seed, resimulate=resimulate,
-                                         strict_candidates=candidates is not None)
+            if not floor_duration >= 60.0:
+                raise DiagnosisError(f"--floor-duration must be at least 60 s, got {floor_duration} s")
+            settings = DiagnosisSettings(candidates=cands, seed=seed, resimulate=resimulate, replay=resimulate,
+                                         strict_candidates=candidates is not None, base_first=base_first,
+                                         floor_duration=floor_duration)
             with Progress(console=console) as bar:
                 task = bar.add_task("diagnosis", total=1.0)
                 diag = diagnose(trips, cfg, settings,

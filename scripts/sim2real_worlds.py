@@ -20,9 +20,34 @@ from roadload.experiments.worlds import (
     run_world_selftest,
     supported_effects,
 )
+from roadload.experiments.worlds.selftest import (
+    WorldResult,
+    WorldSelftest,
+    plot_confusion,
+)
 from roadload.fileio import write_text
 
 QUICK_EFFECTS = ("payload", "none")
+
+
+def report(world: str, res: WorldSelftest, seeds: list[int], png: Path | None, seconds: float | None = None
+           ) -> dict:
+    """Print the confusion table and summary of one world (and write its heat map to ``png``)."""
+    took = f", {seconds:.0f} s" if seconds is not None else ""
+    print(f"\n== world {world}: confusion (withheld x first identified), {len(seeds)} seed(s){took}")
+    print(res.confusion(world).to_string())
+    s = res.summary(world)
+    print(f"top-1 {s['catalog_correct']}/{s['catalog_cases']} = {100 * s['top1']:.1f} %; out-of-catalog "
+          f"unexplained and localised {s['outside_ok']}; nothing withheld -> nothing identified "
+          f"{s['none_clean']}; median held-out RMSE shrinkage {100 * s['median_shrinkage']:.1f} %")
+    if len(seeds) > 1:
+        for seed in seeds:
+            print(f"  seed {seed}: top-1 {100 * res.top1(world, seed):.1f} %")
+    if png:
+        path = plot_confusion(res.confusion(world), png / f"confusion_{world}.png",
+                              f"{world}: top-1 {s['catalog_correct']}/{s['catalog_cases']} catalog effects")
+        print(f"wrote {path}")
+    return s
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -35,7 +60,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="tiny run: 1 seed, 240 s trips, payload + none")
     ap.add_argument("--out", type=Path, default=None, help="keep the generated logs here")
     ap.add_argument("--json", type=Path, default=None, help="write all results as JSON")
+    ap.add_argument("--png", type=Path, default=None, help="folder for the confusion heat maps (PNG per world)")
+    ap.add_argument("--from-json", type=Path, default=None, help="print (and plot) the tables of a saved --json "
+                                                                  "run instead of running")
     args = ap.parse_args(argv)
+    if args.from_json:
+        dump = json.loads(args.from_json.read_text())
+        for world, d in dump.items():
+            res = WorldSelftest([WorldResult(**r) for r in d["results"]])
+            report(world, res, sorted({r.seed for r in res.results}), args.png)
+        return 0
     worlds = sorted(WORLDS) if args.world == "all" else [args.world]
     seeds = range(1 if args.quick else args.seeds)
     duration = 240.0 if args.quick else args.duration
@@ -52,16 +86,7 @@ def main(argv: list[str] | None = None) -> int:
         res = run_world_selftest(world, seeds, effects, duration_s=duration, settings=settings,
                                  out_dir=args.out / world if args.out else None,
                                  progress=lambda msg: print(msg, flush=True))
-        print(f"\n== world {world}: confusion (withheld x first identified), {len(list(seeds))} seed(s), "
-              f"{time.perf_counter() - t0:.0f} s")
-        print(res.confusion(world).to_string())
-        s = res.summary(world)
-        print(f"top-1 {s['catalog_correct']}/{s['catalog_cases']} = {100 * s['top1']:.1f} %; out-of-catalog "
-              f"unexplained and localised {s['outside_ok']}; nothing withheld -> nothing identified "
-              f"{s['none_clean']}; median held-out RMSE shrinkage {100 * s['median_shrinkage']:.1f} %")
-        if len(list(seeds)) > 1:
-            for seed in seeds:
-                print(f"  seed {seed}: top-1 {100 * res.top1(world, seed):.1f} %")
+        s = report(world, res, list(seeds), args.png, time.perf_counter() - t0)
         dump[world] = {"summary": s, "results": [r.to_dict() for r in res.results],
                        "confusion": res.confusion(world).to_dict()}
     if args.json:

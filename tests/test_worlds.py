@@ -23,6 +23,7 @@ from roadload.experiments.worlds.selftest import (
     WorldSelftest,
     score,
 )
+from roadload.sim2real import SimConfig
 from roadload.units import R_AIR, G
 from roadload.vehicle import load_vehicle
 
@@ -187,6 +188,8 @@ def test_matched_vehicle_json_is_the_world_base(independent_case):
     assert spec.tires.rolling_resistance_f1 == b.f_r1 and spec.wheel_radius == b.r_w
     # eq. 2.15's c_yW of the spec is the equivalent of the world's eq. 2.14 (same cornering resistance)
     assert b.mass ** 2 / (4 * spec.equivalent_cornering_stiffness()) == pytest.approx(b.cornering_factor(), rel=1e-9)
+    sim = SimConfig.load(independent_case.out_dir / "independent_sim.json")     # for `roadload diagnose --sim`
+    assert sim.vehicle.name == "independent_bev"
 
 
 # ------------------------------------------------------------------------------------------ fastsim world
@@ -231,6 +234,28 @@ def test_fastsim_case_imports_and_torque_reproduces_the_wheel_force(tmp_path):
     assert np.median(tq[sel] * fw.RATIO * eta / r / f[sel]) == pytest.approx(1.0, abs=0.01)
     spec = load_vehicle(case.vehicle_path)
     assert spec.drag_area == pytest.approx(fw.calibration()["drag_area"])   # base vehicle, not the withheld one
+
+
+def test_fastsim_conventional_car_brakes_by_friction_and_logs_gears(tmp_path):
+    """The Ford Fusion: braking power reaches the logged brake pressure (F_B from the brake geometry equals
+    P_trans,out - P_tractive over v), gears from the logger's schedule, engine torque below the peak."""
+    from roadload.experiments.worlds import fastsim_world as fw
+    from roadload.sim2real.table import brake_force_from_pressure
+
+    case = generate_case("fastsim_conv", NONE, 1, n_trips=2, duration_s=300.0, out_dir=tmp_path)
+    trip = case.import_trips()[1]                                         # city
+    sim = fw.simulate_trip("city", 101, np.random.default_rng([1, 1]), 300.0, NONE, fw.CONV_VARIANT)
+    spec = load_vehicle(case.vehicle_path)
+    fb = brake_force_from_pressure(spec, trip.channel("brake_pressure_front"), trip.channel("brake_pressure_rear"))
+    fb_true = np.interp(trip.t, sim["truth"]["t"], sim["truth"]["brake_force"])
+    braking = fb_true > 500.0
+    assert braking.mean() > 0.05
+    assert np.median(fb[braking] / fb_true[braking]) == pytest.approx(1.0, abs=0.01)
+    g = trip.channel("gear")
+    assert set(np.unique(g)) >= {0.0, 1.0, 2.0, 3.0} and g.max() <= 6
+    assert trip.channel("drive_torque").max() < fw.T_PEAK * 1.05
+    with pytest.raises(WorldError, match="no traction battery"):
+        generate_case("fastsim_conv", "auxiliary_load", 0, out_dir=tmp_path)
 
 
 # ------------------------------------------------------------------------------------------ cases and scoring

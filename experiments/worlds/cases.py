@@ -1,5 +1,6 @@
 """One entry point for both worlds: :func:`generate_case` writes a case's trip CSVs, mapping JSON, matched vehicle
-JSON and truth JSON into ``out_dir`` and returns the :class:`~.common.WorldCase`."""
+JSON (plus a sim config ``<world>_sim.json`` pointing at it, for ``roadload diagnose --sim``) and truth JSON into
+``out_dir`` and returns the :class:`~.common.WorldCase`."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from roadload.fileio import write_json
 from . import fastsim_world, independent
 from .common import NONE, ROADS, Column, Withheld, WorldCase, WorldError, write_mapping
 
-WORLDS: dict[str, Any] = {"fastsim": fastsim_world, "independent": independent}
+WORLDS: dict[str, Any] = {"fastsim": fastsim_world.BEV, "fastsim_conv": fastsim_world.CONV, "independent": independent}
 
 
 def world_module(world: str):
@@ -65,6 +66,8 @@ def generate_case(world: str, withheld: str | None, seed: int, n_trips: int = 3,
                             extra=getattr(mod, "MAPPING_EXTRA", None))
     vehicle = mod.matched_vehicle()
     vpath = write_json(out / f"{world}_vehicle.json", vehicle.to_dict())
+    # `roadload diagnose --sim` takes a sim config (a bare vehicle spec JSON is rejected): one next to it
+    write_json(out / f"{world}_sim.json", {"vehicle": vpath.name, "name": f"{world} world, matched vehicle"})
     w = mod.EFFECTS[withheld]
     truth = {"world": world, "withheld": withheld, "accepted": list(w.accepted), "parameters": w.params,
              "description": w.description, "seed": seed, "duration_s": duration_s,

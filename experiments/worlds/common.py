@@ -132,7 +132,7 @@ def speed_trace(profile: RoadProfile, v_plan: np.ndarray, duration: float, dt: f
                 dwell: float = 8.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(t, v, s): the planned speed driven in time at step dt [s] with a dwell [s] at each stop, smoothed over 1 s
     (bounded jerk); s re-integrated from v."""
-    n = int(round(duration / dt)) + 1
+    n = round(duration / dt) + 1
     v = np.zeros(n)
     s_now = 0.0
     stops = np.concatenate([profile.stops, [np.inf]])
@@ -156,7 +156,7 @@ def speed_trace(profile: RoadProfile, v_plan: np.ndarray, duration: float, dt: f
             continue
         v[k] = vk
         s_now = min(s_now + vk * dt, L - 1.0)
-    w = max(1, int(round(1.0 / dt)))
+    w = max(1, round(1.0 / dt))
     v = np.convolve(np.pad(v, (w // 2, w - 1 - w // 2), mode="edge"), np.ones(w) / w, mode="valid")
     v[0] = 0.0
     t = np.arange(n) * dt

@@ -188,7 +188,7 @@ def _drive(n, dt, ds, grade, kappa, v_plan, v_free, stops, taps, p, eff, ambient
     ambient: T_a(t) [K]; v_plan / v_free: target speeds over distance with / without the stops; stops [m];
     dwell [s] at each stop. Returns an array of states per step."""
     (m0, fr0, fr1, fr4, cxa, rw, iw, ratio, eta, tdrag, im, tmax, pmax, treg, preg, kcu, kfe, p0, u0, u1, rbat,
-     cap, aux, brake_gain, front_share, l, l34, l12, x12, x34) = p
+     cap, aux, brake_gain, _front_share, l, l34, l12, x12, x34) = p
     m = m0 + eff[0]
     x12e = x12 * eff[6]
     x34e = x34 * eff[6]
@@ -378,7 +378,7 @@ def simulate_trip(road_name: str, road_seed: int, rng: np.random.Generator, dura
     v_plan = planned_speed(prof, np.random.default_rng(plan_seed), accel=1.8, power_to_mass=45.0, decel=2.3,
                            brake_power_to_mass=80.0)
     kappa = prof.curvature + (lane_changes(prof, v_plan, rng) if road_name != "city" else 0.0)
-    n = int(round(duration / DT)) + 1
+    n = round(duration / DT) + 1
     n_s = int(duration) + 2
     taps = np.zeros(n_s)
     if road_name != "city":

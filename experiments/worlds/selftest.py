@@ -157,7 +157,7 @@ def run_world_selftest(world: str, seeds: Sequence[int] = (0,), effects: Sequenc
                     case = generate_case(world, name, seed, n_trips=n_trips, duration_s=duration_s,
                                          out_dir=work / f"seed{seed}")
                     _, res = diagnose_case(case, settings, floor)
-                except Exception as exc:   # reported in the table, never dropped
+                except Exception as exc:  # noqa: BLE001 - a failed case is reported in the table, never dropped
                     res = WorldResult(world, seed, name, f"error: {type(exc).__name__}: {exc}"[:120], [], False,
                                       float("nan"), float("nan"), float("nan"), "", time.perf_counter() - t0,
                                       str(exc))
@@ -168,3 +168,27 @@ def run_world_selftest(world: str, seeds: Sequence[int] = (0,), effects: Sequenc
         if tmp is not None:
             tmp.cleanup()
     return result
+
+
+def plot_confusion(table: pd.DataFrame, path: Path | str, title: str) -> Path:
+    """The confusion table as a PNG heat map (counts written in the cells)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from roadload.fileio import save_figure
+
+    fig, ax = plt.subplots(figsize=(max(6.0, 2.5 + 0.75 * table.shape[1]), max(3.5, 1.8 + 0.45 * table.shape[0])))
+    ax.imshow(table.to_numpy(dtype=float), cmap="Blues", aspect="auto")
+    ax.set_xticks(range(table.shape[1]), table.columns, rotation=40, ha="right")
+    ax.set_yticks(range(table.shape[0]), table.index)
+    for i in range(table.shape[0]):
+        for j in range(table.shape[1]):
+            if table.iat[i, j]:
+                ax.text(j, i, str(table.iat[i, j]), ha="center", va="center")
+    ax.set_xlabel("first identified effect")
+    ax.set_ylabel("withheld effect")
+    ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    return save_figure(fig, path)
+

@@ -244,7 +244,7 @@ def run_selftest(vehicle: str = "bmw_i3", effects: Sequence[WithheldEffect] = SE
 
 
 # ============================================================================================ the three worlds
-WORLD_NAMES = ("roadload", "fastsim", "independent")
+WORLD_NAMES = ("roadload", "fastsim", "independent", "fastsim_conv")
 
 
 @dataclass

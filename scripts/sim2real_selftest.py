@@ -49,7 +49,8 @@ def main(argv: list[str] | None = None) -> int:
         s = run.summary()
         print(f"\n== {world} ({s['vehicle']}), seeds {s['seeds']}, {time.perf_counter() - t0:.0f} s")
         print(f"top-1 {s['top1_correct']}/{s['catalog_cases']}; withheld among the accepted "
-              f"{s['among_accepted']}/{s['catalog_cases']}; false acceptances: nothing withheld "
+              f"{s['among_accepted']}/{s['catalog_cases']} (or a significant base departure standing for it: "
+              f"{s['among_accepted_or_base']}/{s['catalog_cases']}); false acceptances: nothing withheld "
               f"{s['false_acceptances_none']}/{s['none_cases']}, out-of-catalog {s['false_acceptances_outside']}/"
               f"{s['outside_cases']}; median held-out shrinkage (identified cases) "
               f"{100 * s['median_shrinkage_identified']:.1f} % (all catalog cases "

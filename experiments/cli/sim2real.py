@@ -144,13 +144,11 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
 
         console = Console()
         if world not in WORLD_NAMES:
-            console.print(f"[red]error:[/red] unknown world {world!r}; choose one of {', '.join(WORLD_NAMES)}")
-            raise typer.Exit(2)
+            fail(f"--world: unknown world {world!r}; choose one of {', '.join(WORLD_NAMES)}")
         try:
             seed_list = [int(x) for x in seeds.split(",") if x.strip()]
         except ValueError:
-            console.print(f"[red]error:[/red] --seeds must be comma-separated integers, got {seeds!r}")
-            raise typer.Exit(2) from None
+            fail(f"--seeds must be comma-separated integers, got {seeds!r}")
         names = [e.strip() for e in effects.split(",") if e.strip()] if effects else None
         run = run_world(world, seed_list, names, duration, vehicle=vehicle, say=console.print)
         for sd in seed_list:

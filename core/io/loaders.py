@@ -11,8 +11,8 @@ bmw-i3         TUM BMW i3 trip CSV (csv + i3 vehicle spec: rim torque, grade, pa
 openxc         OpenXC JSON trace, lines ``<unix time>: {"name": ..., "value": ...}``
 =============  ==========================================================================================
 
-`roadload.io.importer.import_log` is the single entry point (CLI ``roadload import``): read -> mapping -> derived channels ->
-Trip with ``meta["import_report"]`` listing every repair and drop.
+`roadload.io.importer.import_log` is the single entry point (CLI ``roadload import``): read -> mapping -> derived
+channels -> Trip with ``meta["import_report"]`` listing every repair and drop.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from __future__ import annotations
 import json
 import re
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import pandas as pd
@@ -29,7 +29,7 @@ from ..trip import Trip
 from ..units import to_si
 from .dbc import DbcSource, Database, decode_frames, find_dbc, load_dbc
 from .frames import CanFrames, read_can_log, read_comma2k19, read_mf4, read_python_can
-from .mapping import Mapping, apply_mapping, load_mapping
+from .mapping import Mapping, apply_mapping
 from .report import ImportReport, LogImportError
 from .signals import Signal, SignalSet
 
@@ -41,7 +41,7 @@ CAN_LOG_FORMATS = ("dbc-mf4", "candump", "blf", "asc", "comma2k19")
 
 
 # ------------------------------------------------------------------------------------------ CAN logs
-def resolve_dbcs(mapping: Mapping, source: Path, extra: list[str | Path] = ()) -> list[DbcSource]:
+def resolve_dbcs(mapping: Mapping, source: Path, extra: Sequence[str | Path] = ()) -> list[DbcSource]:
     """The mapping's DBC entries (searched next to the source, the mapping file and in the package) + extras."""
     roots = [source] + ([Path(mapping.path).parent] if mapping.path else [])
     out = [DbcSource(find_dbc(str(entry["file"]), roots), entry.get("bus")) for entry in mapping.dbc]
@@ -90,7 +90,7 @@ def signals_from_frames(frames: CanFrames, mapping: Mapping, dbcs: list[DbcSourc
     return decode_frames(frames, db, report, wanted_messages=needed)
 
 
-def load_can_log(source: str | Path, mapping: Mapping, *, dbc: list[str | Path] = (),
+def load_can_log(source: str | Path, mapping: Mapping, *, dbc: Sequence[str | Path] = (),
                  progress: Progress | None = None, fmt: str = "dbc-mf4") -> Trip:
     """A CAN bus log (MF4 file/folder, candump/asc/blf, comma2k19 raw_can) decoded with DBCs into a Trip."""
     source = Path(source)

@@ -3,8 +3,9 @@
 Drives a closed loop (the controller's own force model as plant, so only the solver is timed) over a generated
 hilly road and a city route and records every solve: wall-clock time (time.perf_counter) and process CPU time
 (time.process_time, robust when other jobs load the machine), iterations and failures. Prints a table and, with
---out, writes it as CSV. Targets (issue): IPOPT warm median <= 5 ms and p99 <= 20 ms; QP median <= 2 ms. IPOPT runs at the default warm-start
-tolerance (1e-4) and at 1e-6 for reference: the closed-loop energies show what the looser tolerance costs.
+--out, writes it as CSV. Targets (issue): IPOPT warm median <= 5 ms and p99 <= 20 ms; QP median <= 2 ms. IPOPT
+runs at the default warm-start tolerance (1e-4) and at 1e-6 for reference: the closed-loop energies show what
+the looser tolerance costs.
 
 Usage: python scripts/bench_mpc.py [--roads hilly,city] [--length 6000] [--out bench_mpc.csv]
 """
@@ -76,7 +77,8 @@ def main() -> None:
                          "run_wall_s": wall_run})
     table = pd.DataFrame(rows)
     load = os.getloadavg()
-    print(f"# MPC per-step solve time, N=100 nodes x 20 m, {args.vehicle}; {platform.processor() or platform.machine()}, "
+    cpu = platform.processor() or platform.machine()
+    print(f"# MPC per-step solve time, N=100 nodes x 20 m, {args.vehicle}; {cpu}, "
           f"{os.cpu_count()} CPUs, load average {load[0]:.1f} (1 min) during the run")
     with pd.option_context("display.width", 200, "display.max_columns", 30):
         print(table.round(3).to_string(index=False))

@@ -57,7 +57,9 @@ class OnlineForceModel:
         self._make = lambda: make_estimator(self.estimator_name, x0=self.x0, **estimator_settings)
         self.update_period, self.margin = float(update_period), float(margin)
         self.can_source: Callable[[float], Trip | None] | None = None
-        self.rotational_mass = 0.0  # M3/M4 lump the rotating parts into m_V
+        # the pipeline removes (I_red + I_W) dv/dt / r_W from F_xV before the estimator sees it, so the estimated
+        # m_V is the body mass alone: the MPC's inertial mass needs the rotating parts added back
+        self.rotational_mass = knowledge.drivetrain.rotational_mass()
         self.reset()
 
     def attach(self, can_source: Callable[[float], Trip | None]) -> None:

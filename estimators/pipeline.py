@@ -97,8 +97,10 @@ class DrivetrainModel:
     def rotational_mass(self, gear: int | None = None) -> float:
         """(I_red(G) + I_W) / r_W^2 [kg]: the equivalent mass of the rotating parts that :meth:`rim_torque` and
         :meth:`tractive_force` take out of F_xV (eq. 2.16b/2.17), so a model fitted to F_xV does NOT contain it.
-        gear None: the single gear, or the middle gear of a multi-speed box (1-based)."""
-        g = gear if gear is not None else (1 if self.n_gears == 1 else self.n_gears // 2 + 1)
+        gear None: the single gear, the middle gear of a multi-speed box (1-based), the top gear of a truck's box
+        of >= 10 gears (where a long-haul truck spends its time)."""
+        g = gear if gear is not None else (1 if self.n_gears == 1 else self.n_gears if self.n_gears >= 10
+                                           else self.n_gears // 2 + 1)
         if not 1 <= g <= self.n_gears:
             raise PipelineError(f"gear must be in 1..{self.n_gears}, got {g}")
         return float((self.reduced_inertia[g - 1] + self.wheel_inertia) / self.wheel_radius ** 2)

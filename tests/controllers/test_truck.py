@@ -7,7 +7,8 @@ import pytest
 from roadload.controllers.cruise import CruiseSettings
 from roadload.controllers.drive import DriveSettings, drive
 from roadload.controllers.energy import EnergyModelError, with_loss_error
-from roadload.controllers.force_model import ErroredForceModel, FixedForceModel, ForceModelError, ForceParameters
+from roadload.controllers.force_model import ErroredForceModel, FixedForceModel, ForceModelError
+from roadload.road_load import RoadLoadParameters
 from roadload.controllers.base import split_wheel_force
 from roadload.controllers.vehicle_models import abc_parameters, energy_model_from_spec
 from roadload.presets import TRUCK_MASS_RANGE, get_preset, truck_spec
@@ -83,7 +84,7 @@ def test_speed_band_cruise_lets_the_truck_roll_downhill():
 
 
 def test_errored_force_model_scales_the_right_terms():
-    p = ForceParameters(mass=1000.0, c0=100.0, c1=2.0, c2=0.4, c4=1e-5, k_corner=30.0, rotational_mass=50.0)
+    p = RoadLoadParameters(mass=1000.0, c0=100.0, c1=2.0, c2=0.4, c4=1e-5, k_corner=30.0, rotational_mass=50.0)
     wrong = ErroredForceModel(FixedForceModel(p), {"mass": 0.2, "rolling": -0.5, "drag_area": 0.3,
                                                    "grade_bias": 0.01})
     q = wrong.parameters()

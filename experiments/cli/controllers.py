@@ -154,8 +154,8 @@ def register_headline(benchmark_app: typer.Typer) -> None:
         out: Path = typer.Option(..., help="output folder: runs.json, summary.csv, headline.md, headline.png"),
         vehicles: str = typer.Option("car,truck_15t,truck_25t,truck_40t", help="vehicle cases (car = bmw_i3, "
                                      "truck_<m>t = tractor-semitrailer at m t gross, abc at 27.5 t)"),
-        car_roads: str = typer.Option("hilly", help="car roads (hilly = 4 km generated, one per seed)"),
-        truck_roads: str = typer.Option("long_grades", help="truck roads: long_grades (6 km, 3-6 %), "
+        car_roads: str = typer.Option("hilly", help="car roads (hilly = 2.5 km generated, one per seed)"),
+        truck_roads: str = typer.Option("long_grades", help="truck roads: long_grades (4 km, 3-6 %), "
                                         "longhaul_real (10 km windows of the real long-haul cycle)"),
         conditions: str = typer.Option("nominal", help="car conditions (see benchmark controllers)"),
         seeds: int = typer.Option(10, help="seeds (= roads) per vehicle, road and condition"),

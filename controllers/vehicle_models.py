@@ -106,6 +106,8 @@ def _fit_energy(spec: VehicleSpec) -> SourceEnergyModel:
                                  max_regen_torque=float(m.regen_torque_limit),
                                  auxiliary_power=aux, max_brake_deceleration=0.8 * G, name=spec.name)
     e = d.engine
+    if e is None or d.shift is None:
+        raise ValueError(f"{spec.name}: an ICE drive-train needs an engine and a shift spec")
     ratios = tuple(float(g * d.final_drive) for g in d.gear_ratios)
     # the eco-driving operating region: up to 80 kW for a car, up to 80 % of rated power for a heavy vehicle
     rated = float(np.max(np.asarray(e.full_load.x) * np.asarray(e.full_load.y)))

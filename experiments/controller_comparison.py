@@ -288,11 +288,13 @@ def paired_road(name: str, seed: int) -> RoadProfile:
     because the shared machine gives each run a fraction of a core."""
     if name == "hilly":
         return hilly(seed=seed, length=2500.0)
+    if name == "hilly_short":  # smoke runs (--quick)
+        return hilly(seed=seed, length=1200.0)
     if name == "long_grades":
         return long_grades(seed=seed, length=4000.0)
     if name == "longhaul_real":
         return _longhaul_window(seed)
-    raise ValueError(f"unknown paired road {name!r}; known: hilly, long_grades, longhaul_real")
+    raise ValueError(f"unknown paired road {name!r}; known: hilly, hilly_short, long_grades, longhaul_real")
 
 
 def parse_force_model(spec: str) -> tuple[str, dict[str, float] | None]:

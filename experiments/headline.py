@@ -39,19 +39,25 @@ def sensitivity_models() -> tuple[str, ...]:
     return ("oracle", *one, _spec(JOINT_ERROR))
 
 
+QUICK = {"max_search_runs": 2, "weight_factors": ()}  # smoke runs: 2 oracle runs, 1 run per other model
+
+
 def headline_tasks(cases: list[str], roads: dict[str, list[str]], seeds: int, conditions: list[str] | None = None,
-                   human: bool = True) -> list[PairedTask]:
+                   human: bool = True, quick: bool = False) -> list[PairedTask]:
     """One task per (case, road, condition, seed); roads: {case: [road, ...]}."""
     conds = conditions or ["nominal"]
-    return [PairedTask(case, road, seed, condition=c, human=human)
+    extra: dict = dict(QUICK) if quick else {}
+    return [PairedTask(case, road, seed, condition=c, human=human, **extra)
             for case in cases for road in roads[case] for c in (conds if case == "car" else ["nominal"])
             for seed in range(seeds)]
 
 
-def sensitivity_tasks(cases: dict[str, str], seeds: int) -> list[PairedTask]:
+def sensitivity_tasks(cases: dict[str, str], seeds: int, quick: bool = False) -> list[PairedTask]:
     """cases: {vehicle case: road}; each wrong model at the oracle's matched lambda only (the joint fit takes
     slope and curvature from the oracle's search runs)."""
-    return [PairedTask(case, road, seed, force_models=sensitivity_models(), weight_factors=())
+    models = ("oracle", "wrong:mass=0.2") if quick else sensitivity_models()
+    return [PairedTask(case, road, seed, force_models=models, weight_factors=(),
+                       max_search_runs=2 if quick else PairedTask.max_search_runs)
             for case, road in cases.items() for seed in range(seeds)]
 
 

@@ -2,7 +2,7 @@
 simulator's TRUE forces, with the CAN drive-torque bias and the body pitch in eq. 5.2 switched off one by one.
 
 Prints the table (mean over seeds, difference to the truth LS in %) and writes measurement_bias.csv/.md/.png to
---out. Usage: python scripts/measurement_bias.py --out DIR [--seeds 3] [--length 20000] [--quick]
+--out. Usage: python scripts/measurement_bias.py [--out DIR] [--seeds 3] [--length 20000] [--quick]
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from roadload.fileio import write_text
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--out", type=Path, default=Path("measurement_bias"), help="output folder")
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--length", type=float, default=20_000.0, help="hilly road length [m] per trip")
     ap.add_argument("--preset", default="bmw_i3")

@@ -159,7 +159,7 @@ def register_headline(benchmark_app: typer.Typer) -> None:
                                         "longhaul_real (10 km windows of the real long-haul cycle)"),
         conditions: str = typer.Option("nominal", help="car conditions (see benchmark controllers)"),
         seeds: int = typer.Option(10, help="seeds (= roads) per vehicle, road and condition"),
-        quick: bool = typer.Option(False, "--quick", help="tiny run: car only, 2 seeds"),
+        quick: bool = typer.Option(False, "--quick", help="tiny run: car only, 2 seeds on a 1.2 km road"),
         scheduler: str = typer.Option(None, help="Dask scheduler address (default: local processes)"),
         workers: int = typer.Option(None, help="local worker processes (default: CPU count)"),
     ) -> None:
@@ -171,11 +171,13 @@ def register_headline(benchmark_app: typer.Typer) -> None:
             _fail(f"--seeds: need at least 2 for a confidence interval, got {seeds}")
         roads = {c: [r.strip() for r in (car_roads if c == "car" else truck_roads).split(",") if r.strip()]
                  for c in cases}
+        if quick:
+            roads = {"car": ["hilly_short"]}
         conds = [c.strip() for c in conditions.split(",") if c.strip()]
         bad = [c for c in conds if c not in CONDITIONS]
         if bad:
             _fail(f"--conditions: unknown {bad}; known: {list(CONDITIONS)}")
-        tasks = headline_tasks(cases, roads, seeds, conds, human=True)
+        tasks = headline_tasks(cases, roads, seeds, conds, human=True, quick=quick)
         summary, failures = run_paired(tasks, out, scheduler=scheduler, workers=workers, description="headline")
         if summary.empty:
             _fail("every task failed: " + "; ".join(failures[:3]))
@@ -190,7 +192,7 @@ def register_headline(benchmark_app: typer.Typer) -> None:
         out: Path = typer.Option(..., help="output folder: sensitivity.md/.csv, sensitivity.png, runs.json"),
         vehicles: str = typer.Option("car,truck_40t", help="vehicle cases"),
         seeds: int = typer.Option(4, help="seeds (= roads) per vehicle"),
-        quick: bool = typer.Option(False, "--quick", help="tiny run: car only, 2 seeds"),
+        quick: bool = typer.Option(False, "--quick", help="tiny run: car only, 2 seeds, mass +20 % only"),
         scheduler: str = typer.Option(None, help="Dask scheduler address (default: local processes)"),
         workers: int = typer.Option(None, help="local worker processes (default: CPU count)"),
     ) -> None:
@@ -200,9 +202,9 @@ def register_headline(benchmark_app: typer.Typer) -> None:
         seeds = 2 if quick else seeds
         if seeds < 2:
             _fail(f"--seeds: need at least 2 for a confidence interval, got {seeds}")
-        road = {c: ("hilly" if c == "car" else "long_grades") for c in cases}
-        summary, failures = run_paired(sensitivity_tasks(road, seeds), out, scheduler=scheduler, workers=workers,
-                                       description="sensitivity")
+        road = {c: ("hilly_short" if quick else "hilly" if c == "car" else "long_grades") for c in cases}
+        summary, failures = run_paired(sensitivity_tasks(road, seeds, quick=quick), out, scheduler=scheduler,
+                                       workers=workers, description="sensitivity")
         if summary.empty:
             _fail("every task failed: " + "; ".join(failures[:3]))
         table = sensitivity_table(summary)

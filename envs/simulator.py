@@ -137,7 +137,13 @@ class Simulator:
 
     def __init__(self, vehicle: VehicleSpec | str, road: RoadProfile | DriveCycle,
                  effects: EffectsConfig | list[str] | str | dict | None = None, sensors: SensorSpec | None = None,
-                 seed: int = 0, driver: DriverConfig | DriveCycle | None = None, initial_speed: float = 0.0) -> None:
+                 seed: int = 0, driver: DriverConfig | DriveCycle | None = None, initial_speed: float = 0.0,
+                 log_capacity: int = 1 << 14) -> None:
+        """``log_capacity``: substeps the truth log holds before it grows (a user that only steps and reads the
+        state, like the native vector env, passes a small number and saves the 7 MB allocation per reset)."""
+        if isinstance(log_capacity, bool) or not isinstance(log_capacity, (int, np.integer)) or log_capacity < 1:
+            raise SimulationError(f"log_capacity: expected an integer >= 1 substeps, got {log_capacity!r}")
+        self._log_capacity = int(log_capacity)
         self.vehicle = _check_vehicle(vehicle)
         self.effects = EffectsConfig.parse(effects)
         if sensors is not None and not isinstance(sensors, SensorSpec):
@@ -180,7 +186,7 @@ class Simulator:
             self._cycle = np.zeros((2, 2))
             self._cycle[0, 1] = 1.0
         self._cmd = np.zeros(N_CMD)
-        self._log = np.zeros((N_LOG, 1 << 14))  # column-major: one contiguous array per channel
+        self._log = np.zeros((N_LOG, 0))  # column-major: one contiguous array per channel (allocated by reset)
         self._vplan_base = self._road[R_VPLAN].copy()
         self._stops_all = self._stops
         self.reset(seed)
@@ -297,7 +303,7 @@ class Simulator:
         self.X = X
         if self._schedules.active:
             self._schedules.apply(X, P)
-        self._log = np.zeros((N_LOG, 1 << 14))
+        self._log = np.zeros((N_LOG, self._log_capacity))
         self._warned = False
         self._last_energy = 0.0
         self._result = self._make_result(0.0)

@@ -63,17 +63,31 @@ def _algo_class(algo: str):
     return classes[algo.lower()]
 
 
+VEC_MODES = ("native", "dummy", "subproc")
+
+
 def make_vec_env(n_envs: int, seed: int, env_config: dict[str, Any] | None = None, vec: str = "subproc",
-                 start_method: str | None = None):
-    """n_envs EcoDrive-v0 copies (Monitor-wrapped) in a DummyVecEnv ('dummy') or SubprocVecEnv ('subproc'; the
-    workers resolve the id through the "roadload:" prefix, so spawn / forkserver work)."""
+                 start_method: str | None = None, threads: int = 1):
+    """n_envs EcoDrive-v0 copies for stable-baselines3: 'native' = the batched vector env
+    (roadload.gym.vector, one compiled call per step, ``threads`` numba threads) behind the SB3 adapter
+    (roadload.gym.sb3; observation 'state' only), or Monitor-wrapped copies in a DummyVecEnv ('dummy') or
+    SubprocVecEnv ('subproc'; the workers resolve the id through the "roadload:" prefix, so spawn / forkserver
+    work)."""
     from stable_baselines3.common.env_util import make_vec_env as sb3_make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     if n_envs < 1:
         raise RLError(f"n_envs must be >= 1, got {n_envs}")
-    if vec not in ("dummy", "subproc"):
-        raise RLError(f"vec must be 'dummy' or 'subproc', got {vec!r}")
+    if vec not in VEC_MODES:
+        raise RLError(f"vec must be one of {VEC_MODES}, got {vec!r}")
+    if vec == "native":
+        from roadload.gym.sb3 import SB3VecEnv  # needs stable-baselines3 (optional dependency), hence here
+        from roadload.gym.vector import EcoDriveVectorEnv
+
+        venv = SB3VecEnv(EcoDriveVectorEnv(n_envs, config=dict(env_config or {}), autoreset_mode="same_step",
+                                           threads=threads))
+        venv.seed(seed)
+        return venv
     cls = SubprocVecEnv if vec == "subproc" else DummyVecEnv
     kwargs = {"start_method": start_method} if (vec == "subproc" and start_method) else None
     return sb3_make_vec_env(ENV_ID, n_envs=n_envs, seed=seed, env_kwargs={"config": dict(env_config or {})},
@@ -211,6 +225,9 @@ def train_policy(algo: str, timesteps: int, out_dir: Path, n_envs: int = 2, seed
     env_config = dict(env_config or {})
     venv = make_vec_env(n_envs, seed, env_config, vec=vec)
     params = {**ALGO_DEFAULTS[algo], **(hyperparams or {})}
+    if algo == "ppo" and vec == "native" and "n_steps" not in (hyperparams or {}):
+        # many batched envs: keep a rollout of ~4096 samples (as 2 envs x 2048) rather than n_envs x 1024
+        params["n_steps"] = max(64, 4096 // n_envs)
     if algo == "ppo":
         params["n_steps"] = max(16, min(params["n_steps"], max(timesteps // n_envs, 16)))
         params["batch_size"] = min(params["batch_size"], params["n_steps"] * n_envs)
@@ -577,7 +594,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         algo: str = typer.Option("ppo,sac", help="algorithms, comma-separated: ppo, sac"),
         timesteps: int = typer.Option(200_000, help="environment steps per algorithm (0.1 s of driving each)"),
         n_envs: int = typer.Option(2, help="vectorised environments"),
-        vec: str = typer.Option("subproc", help="'subproc' (one process per env) or 'dummy' (in-process)"),
+        vec: str = typer.Option("native", help="'native' (batched vector env, observation 'state'), 'subproc' "
+                                "(one process per env) or 'dummy' (in-process)"),
         seed: int = typer.Option(0, help="training seed"),
         config: str = typer.Option(None, help="EcoDrive-v0 config as JSON text or a .json file, e.g. "
                                    "'{\"vehicle\": \"gt_rwd\", \"road\": \"city\"}'"),

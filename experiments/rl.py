@@ -447,6 +447,90 @@ def bench_vectorised(n_envs: int = 2, seconds: float = 5.0, vec: str = "subproc"
             "steps": n * n_envs, "episodes": None}
 
 
+def _rates(step: Callable[[], None], seconds: float) -> tuple[float, float, int]:
+    """(calls per wall second, calls per CPU second of this process, calls): CPU seconds make runs on a machine
+    shared with other jobs comparable (wall rates there measure the share the scheduler gave us)."""
+    n = 0
+    t0, c0 = time.perf_counter(), time.process_time()
+    while True:
+        step()
+        n += 1
+        if n % 8 == 0 and time.perf_counter() - t0 >= seconds:
+            break
+    return n / (time.perf_counter() - t0), n / max(time.process_time() - c0, 1e-9), n
+
+
+def bench_native(n_envs: int = 256, seconds: float = 5.0, threads: int = 1, bare: bool = False,
+                 env_config: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Env steps/s (summed over sub-envs, wall and per CPU second) of the native vector env under random actions
+    in [-1, 1] (autoresets included), or with ``bare`` only its batched physics (no reward / observation / info /
+    autoreset): the reference the env step is compared with."""
+    from roadload.gym.vector import EcoDriveVectorEnv
+
+    venv = EcoDriveVectorEnv(n_envs, config=dict(env_config or {}), threads=threads)
+    venv.reset(seed=0)
+    acts = np.random.default_rng(0).uniform(-1, 1, (256, n_envs, 1)).astype(np.float32)
+    k = [0]
+    fn = venv.bare_physics_step if bare else venv.step
+
+    def step() -> None:
+        fn(acts[k[0] % 256])
+        k[0] += 1
+
+    for _ in range(3):
+        step()
+    wall, cpu, n = _rates(step, seconds)
+    mode = f"{'bare batched physics' if bare else 'native vector env'} x{n_envs}, {threads} thread(s)"
+    return {"env": "roadload/EcoDrive-v0", "mode": mode, "steps_per_s": wall * n_envs,
+            "steps_per_cpu_s": cpu * n_envs, "steps": n * n_envs}
+
+
+def run_native_benchmark(seconds: float = 5.0, n_envs: int = 256, n_dummy: int = 16,
+                         progress: Callable[[str], None] | None = None) -> pd.DataFrame:
+    """The batched-env table (same run): single env, SB3 DummyVecEnv x n_dummy, the native vector env x n_envs
+    (1 and 2 threads) and its bare batched physics, as wall and per-CPU-second rates."""
+    rows = []
+
+    def add(row: dict[str, Any]) -> None:
+        rows.append(row)
+        if progress:
+            progress(row["mode"])
+
+    import gymnasium as gym
+
+    env = gym.make("roadload/EcoDrive-v0")
+    env.reset(seed=0)
+    env.action_space.seed(0)
+
+    def single() -> None:
+        _, _, te, tr, _ = env.step(env.action_space.sample())
+        if te or tr:
+            env.reset()
+
+    wall, cpu, n = _rates(single, seconds)
+    add({"env": "roadload/EcoDrive-v0", "mode": "single process", "steps_per_s": wall, "steps_per_cpu_s": cpu,
+         "steps": n})
+    venv = make_vec_env(n_dummy, 0, None, vec="dummy")
+    try:
+        venv.reset()
+        acts = np.random.default_rng(0).uniform(-1, 1, (256, n_dummy, 1)).astype(np.float32)
+        k = [0]
+
+        def dummy() -> None:
+            venv.step(acts[k[0] % 256])
+            k[0] += 1
+
+        wall, cpu, n = _rates(dummy, seconds)
+    finally:
+        venv.close()
+    add({"env": "roadload/EcoDrive-v0", "mode": f"dummy x{n_dummy}", "steps_per_s": wall * n_dummy,
+         "steps_per_cpu_s": cpu * n_dummy, "steps": n * n_dummy})
+    for threads in (1, 2):
+        add(bench_native(n_envs, seconds, threads))
+    add(bench_native(n_envs, seconds, 1, bare=True))
+    return pd.DataFrame(rows)
+
+
 def run_benchmark(seconds: float = 5.0, n_envs: int = 2, include_highway: bool = True,
                   progress: Callable[[str], None] | None = None) -> pd.DataFrame:
     """The speed table: EcoDrive-v0 (state and can observations) single process, vectorised (dummy and subproc

@@ -315,8 +315,10 @@ def _wanted_columns(names: list[str], channels: list[str] | None, truth_channels
         return None
     want = ["t", _ROWS] + list(channels if channels is not None else
                                [c for c in names if not c.startswith(TRUTH_PREFIX) and c != "t"])
-    want += [TRUTH_PREFIX + c for c in (["t"] + list(truth_channels) if truth_channels is not None
-                                        else [c[len(TRUTH_PREFIX):] for c in names if c.startswith(TRUTH_PREFIX)])]
+    if truth_channels is None or len(truth_channels) > 0:  # [] = no truth at all
+        want += [TRUTH_PREFIX + c for c in (["t"] + list(truth_channels) if truth_channels is not None
+                                            else [c[len(TRUTH_PREFIX):] for c in names
+                                                  if c.startswith(TRUTH_PREFIX)])]
     wanted = set(want)
     return [c for c in names if c in wanted]
 

@@ -695,7 +695,7 @@ def simulate(vehicle: VehicleSpec | str, road: RoadProfile | DriveCycle,
              seed: int = 0, duration: float | None = None, distance: float | None = None,
              driver: DriverConfig | DriveCycle | None = None, progress: Callable[[float], None] | None = None,
              initial_speed: float = 0.0, out: str | os.PathLike | None = None, precision: str = "compact",
-             chunk_seconds: float = 120.0) -> Trip | Path:
+             chunk_seconds: float = 300.0) -> Trip | Path:
     """Run the built-in driver (or a drive cycle) over a road and return the Trip (measured + truth + meta).
 
     With ``out`` (a .parquet path) the trip is streamed to that file instead, one Parquet row group per

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from .fileio import write_json
-from .units import G, air_density
+from .units import air_density
 from .channels import MEASURED
 
 __all__ = [

@@ -16,10 +16,11 @@ from typing import Any
 
 import numpy as np
 
+from roadload.road_load import RoadLoadParameters
 from roadload.road_profiles import RoadProfile
 
 from .energy import SourceEnergyModel
-from .force_model import ForceModel, ForceParameters, resistance_force
+from .force_model import ForceModel, resistance_force
 from .safety import SpeedEnvelope
 
 
@@ -107,10 +108,10 @@ class ControllerBase:
         return dict(self.events)
 
     # ------------------------------------------------------------------ helpers
-    def params(self) -> ForceParameters:
+    def params(self) -> RoadLoadParameters:
         return self.ctx.force_model.parameters()
 
-    def resistance(self, v: float, s: float, params: ForceParameters | None = None) -> float:
+    def resistance(self, v: float, s: float, params: RoadLoadParameters | None = None) -> float:
         """F_resist [N] at the current position under the controller's force model."""
         at = self.ctx.road.at(s)
         return float(resistance_force(v, at["grade"], at["curvature"], params or self.params()))

@@ -15,8 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from roadload.road_load import RoadLoadParameters
 from .base import ControllerBase, ControllerError, DriveContext, Observation
-from .force_model import ForceParameters, resistance_force
+from .force_model import resistance_force
 from .safety import SpeedEnvelope
 
 
@@ -47,7 +48,7 @@ class CruiseSettings:
 class CruiseLaw:
     """The PI law with its speed reference; used by :class:`CruiseController` and as the MPC's fallback."""
 
-    def __init__(self, settings: CruiseSettings, ctx: DriveContext, feedforward: ForceParameters) -> None:
+    def __init__(self, settings: CruiseSettings, ctx: DriveContext, feedforward: RoadLoadParameters) -> None:
         self.settings = settings
         self.ctx = ctx
         self.ff = feedforward

@@ -1,13 +1,8 @@
 """Force models for the eco-driving MPC: the resistance ``F_resist(v, grade, curvature; params)`` plus the mass.
 
-One polynomial form covers the text's white-box and gray-box models (eq. 5.4-5.6, 2.10, 2.15):
-
-    F_resist = (c0 + c1 v + c4 v^4) cos(theta) + c2 (v + w)^2 + m g sin(theta) + k_c v^4 kappa^2 / 4
-
-with c0 = m g f_r0 = a_V [N], c1 = m g f_r1 = b_V [N s/m], c4 = m g f_r4 [N s^4/m^4],
-c2 = rho_a/2 A_V c_x = c_V [kg/m], w the headwind component [m/s] (0 when unknown), m = m_V [kg] and
-k_c = m_V^2 / c_yW [kg^2/N] (M4's fourth parameter). The wheel force balances F_resist + (m + m_rot) dv/dt,
-m_rot the equivalent mass of the rotating parts (0 where the model lumps it into m, as M3/M4 do).
+The resistance and the wheel force are :func:`roadload.road_load.road_load` and
+:func:`~roadload.road_load.tractive_force` on the lumped :class:`~roadload.road_load.RoadLoadParameters`
+(eq. 2.5-2.16, 5.4-5.6), evaluated numerically or as CasADi expressions.
 
 Three sources of parameters sit behind one interface (:class:`ForceModel`), re-read by the controller every
 step: ``abc`` (fixed coast-down coefficients, M0), ``oracle`` (the simulator's true current parameters) and
@@ -16,12 +11,11 @@ step: ``abc`` (fixed coast-down coefficients, M0), ``oracle`` (the simulator's t
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from roadload.units import G
+from roadload.road_load import RoadLoadParameters, road_load, tractive_force
 
 try:  # casadi is a hard dependency, but keep numpy-only callers importable without it loaded
     import casadi as ca
@@ -30,87 +24,25 @@ except ImportError:  # pragma: no cover
 
 
 class ForceModelError(ValueError):
-    """Invalid force-model parameters or an unknown force-model name."""
-
-
-PARAMETER_NAMES = ("mass", "c0", "c1", "c2", "c4", "k_corner", "headwind", "rotational_mass")
-
-
-@dataclass(frozen=True)
-class ForceParameters:
-    """Parameters of the resistance polynomial (SI). See the module docstring for the symbols."""
-
-    mass: float  # m_V [kg]
-    c0: float  # a_V = m g f_r0 [N]
-    c1: float = 0.0  # b_V = m g f_r1 [N s/m]
-    c2: float = 0.0  # c_V = rho_a/2 A_V c_x [kg/m]
-    c4: float = 0.0  # m g f_r4 [N s^4/m^4]
-    k_corner: float = 0.0  # m_V^2 / c_yW [kg^2/N]
-    headwind: float = 0.0  # w [m/s], positive against the direction of travel
-    rotational_mass: float = 0.0  # (I_red + 4 I_W) / r_W^2 [kg]: adds to m in the acceleration term only
-
-    def __post_init__(self) -> None:
-        for name in PARAMETER_NAMES:
-            value = getattr(self, name)
-            if not np.isfinite(value):
-                raise ForceModelError(f"force parameter {name} is not finite ({value})")
-        if self.mass <= 0:
-            raise ForceModelError(f"force parameter mass must be positive, got {self.mass} kg")
-        if self.rotational_mass < 0:
-            raise ForceModelError(f"force parameter rotational_mass must be >= 0, got {self.rotational_mass} kg")
-
-    @property
-    def inertial_mass(self) -> float:
-        """m_V + rotational equivalent mass [kg] (multiplies dv/dt)."""
-        return self.mass + self.rotational_mass
-
-    def as_vector(self) -> np.ndarray:
-        return np.array([getattr(self, n) for n in PARAMETER_NAMES], dtype=float)
-
-    @classmethod
-    def from_vector(cls, x) -> "ForceParameters":
-        x = np.asarray(x, dtype=float).ravel()
-        if x.size != len(PARAMETER_NAMES):
-            raise ForceModelError(f"expected {len(PARAMETER_NAMES)} force parameters {PARAMETER_NAMES}, got {x.size}")
-        return cls(**dict(zip(PARAMETER_NAMES, map(float, x))))
-
-    @classmethod
-    def from_physical(cls, mass: float, f_r0: float, f_r1: float, f_r4: float, drag_area: float,
-                      air_density: float, cornering_stiffness: float | None = None,
-                      headwind: float = 0.0) -> "ForceParameters":
-        """From the physical quantities of chapter 2: f_r(v) = f_r0 + f_r1 v + f_r4 v^4 (eq. 2.10),
-        c_x A_V [m^2], rho_a [kg/m^3], c_yW [N/rad] (None: no cornering resistance)."""
-        k = 0.0 if not cornering_stiffness else mass ** 2 / float(cornering_stiffness)
-        return cls(mass=mass, c0=mass * G * f_r0, c1=mass * G * f_r1, c2=0.5 * air_density * drag_area,
-                   c4=mass * G * f_r4, k_corner=k, headwind=headwind)
-
-    def to_dict(self) -> dict[str, float]:
-        return asdict(self)
-
-    def with_(self, **changes: float) -> "ForceParameters":
-        return replace(self, **changes)
+    """An unknown force-model name or a force model that returns no road-load parameters."""
 
 
 def resistance_force(v, grade, curvature, p):
-    """F_resist [N] (module docstring) for speed v [m/s], grade theta [rad], curvature 1/r [1/m].
-
-    ``p`` is a parameter vector in PARAMETER_NAMES order (numpy array or CasADi expression) or a
-    :class:`ForceParameters`. Works elementwise on numpy arrays and symbolically on CasADi SX/MX.
-    """
-    if isinstance(p, ForceParameters):
-        p = p.as_vector()
-    symbolic = ca is not None and any(isinstance(x, (ca.SX, ca.MX, ca.DM)) for x in (v, grade, curvature, p))
-    cos, sin = (ca.cos, ca.sin) if symbolic else (np.cos, np.sin)
-    m, c0, c1, c2, c4, k, w = (p[i] for i in range(7))
-    v2 = v * v
-    return ((c0 + c1 * v + c4 * v2 * v2) * cos(grade) + c2 * (v + w) * (v + w) + m * G * sin(grade)
-            + k * v2 * v2 * curvature * curvature / 4.0)
+    """F_resist [N] of :func:`roadload.road_load.road_load` for speed v [m/s], grade theta [rad], curvature
+    1/r [1/m]; numeric (numpy) or symbolic (CasADi SX/MX/DM) depending on the arguments."""
+    return road_load(v, grade, curvature, p, xp=_namespace(v, grade, curvature, p))
 
 
 def wheel_force(v, acceleration, grade, curvature, p):
     """Wheel (tractive) force F_xV [N] needed for acceleration dv/dt [m/s^2]: F_resist + (m + m_rot) dv/dt."""
-    m = p.inertial_mass if isinstance(p, ForceParameters) else p[0] + p[7]
-    return resistance_force(v, grade, curvature, p) + m * acceleration
+    return tractive_force(v, acceleration, grade, curvature, p, xp=_namespace(v, grade, curvature, p))
+
+
+def _namespace(*args):
+    """casadi for symbolic arguments, numpy otherwise."""
+    if ca is not None and any(isinstance(x, (ca.SX, ca.MX, ca.DM)) for x in args):
+        return ca
+    return np
 
 
 @runtime_checkable
@@ -124,7 +56,7 @@ class ForceModel(Protocol):
     def observe(self, sample: dict[str, float]) -> None:
         """Feed the latest CAN sample (channel name -> SI value); models that do not learn ignore it."""
 
-    def parameters(self) -> ForceParameters: ...
+    def parameters(self) -> RoadLoadParameters: ...
 
     def describe(self) -> dict[str, Any]: ...
 
@@ -134,7 +66,7 @@ class FixedForceModel:
 
     name = "abc"
 
-    def __init__(self, params: ForceParameters) -> None:
+    def __init__(self, params: RoadLoadParameters) -> None:
         self._params = params
 
     def reset(self) -> None:
@@ -143,7 +75,7 @@ class FixedForceModel:
     def observe(self, sample: dict[str, float]) -> None:
         pass
 
-    def parameters(self) -> ForceParameters:
+    def parameters(self) -> RoadLoadParameters:
         return self._params
 
     def describe(self) -> dict[str, Any]:
@@ -151,13 +83,13 @@ class FixedForceModel:
 
 
 class OracleForceModel:
-    """The ``oracle`` model: the simulator's true current parameters (``truth()`` returns a ForceParameters)."""
+    """The ``oracle`` model: the simulator's true current parameters (``truth()`` returns a RoadLoadParameters)."""
 
     name = "oracle"
 
     def __init__(self, truth) -> None:
         if not callable(truth):
-            raise ForceModelError("oracle force model needs a callable returning the true ForceParameters")
+            raise ForceModelError("oracle force model needs a callable returning the true RoadLoadParameters")
         self._truth = truth
 
     def reset(self) -> None:
@@ -166,10 +98,10 @@ class OracleForceModel:
     def observe(self, sample: dict[str, float]) -> None:
         pass
 
-    def parameters(self) -> ForceParameters:
+    def parameters(self) -> RoadLoadParameters:
         p = self._truth()
-        if not isinstance(p, ForceParameters):
-            raise ForceModelError(f"oracle truth source returned {type(p).__name__}, expected ForceParameters")
+        if not isinstance(p, RoadLoadParameters):
+            raise ForceModelError(f"oracle truth source returned {type(p).__name__}, expected RoadLoadParameters")
         return p
 
     def describe(self) -> dict[str, Any]:

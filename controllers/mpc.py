@@ -35,7 +35,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from .energy import SourceEnergyModel
-from .force_model import PARAMETER_NAMES, ForceParameters, resistance_force
+from roadload.road_load import RoadLoadParameters
+
+from .force_model import resistance_force
 
 
 class MpcError(ValueError):
@@ -165,7 +167,7 @@ class OcpSolver:
         grade = ca.SX.sym("grade", n)
         curv = ca.SX.sym("curv", n)
         ratio = ca.SX.sym("ratio", n)
-        fp = ca.SX.sym("fp", len(PARAMETER_NAMES))
+        fp = ca.SX.sym("fp", len(RoadLoadParameters.FIELDS))
         lam = ca.SX.sym("lam")
         p = ca.vertcat(a_prev, grade, curv, ratio, fp, lam)
         m = fp[0]
@@ -258,7 +260,7 @@ class OcpSolver:
         reach = np.sqrt(np.maximum(v0 ** 2 - 2.0 * st.decel_max * dist, 0.0))
         return np.where(reach > cap, reach + 0.1, cap)
 
-    def _bounds(self, v0: float, preview: Preview, params: ForceParameters, a_prev: float = 0.0):
+    def _bounds(self, v0: float, preview: Preview, params: RoadLoadParameters, a_prev: float = 0.0):
         st, en, n = self.settings, self.energy, self.n
         inf = np.inf
         e_floor = 0.5 * st.speed_floor ** 2
@@ -285,7 +287,7 @@ class OcpSolver:
                               np.full(n, (en.max_regen_power if en.regenerates else 0.0) / 1000.0)])
         return lbx, ubx, lbg, ubg
 
-    def _params(self, a_prev: float, preview: Preview, params: ForceParameters) -> np.ndarray:
+    def _params(self, a_prev: float, preview: Preview, params: RoadLoadParameters) -> np.ndarray:
         return np.concatenate([[a_prev], preview.grade, preview.curvature, preview.ratio, params.as_vector(),
                                [self.settings.time_weight]])
 
@@ -302,7 +304,7 @@ class OcpSolver:
             if not np.all(np.isfinite(arr)):
                 raise MpcError(f"preview.{name} contains NaN/inf")
 
-    def initial_guess(self, v0: float, preview: Preview, params: ForceParameters, a_prev: float = 0.0) -> np.ndarray:
+    def initial_guess(self, v0: float, preview: Preview, params: RoadLoadParameters, a_prev: float = 0.0) -> np.ndarray:
         """A feasible-ish cold start: speed ramps (comfortably) from v0 towards the cap, quasi-static forces."""
         st, n, ds = self.settings, self.n, self.settings.ds
         cap = self.reachable_cap(v0, preview, a_prev)
@@ -349,12 +351,12 @@ class OcpSolver:
                     x=x.copy(), lam_x=None if lam_x is None else lam_x.copy(),
                     lam_g=None if lam_g is None else lam_g.copy())
 
-    def source_energy(self, plan: Plan, a_prev: float, preview: Preview, params: ForceParameters) -> float:
+    def source_energy(self, plan: Plan, a_prev: float, preview: Preview, params: RoadLoadParameters) -> float:
         """Source energy [J] of a plan under the model (for reporting and tests)."""
         return float(self._energy_fun(plan.x, self._params(a_prev, preview, params)))
 
     # ------------------------------------------------------------------ solve
-    def solve(self, v0: float, a_prev: float, preview: Preview, params: ForceParameters,
+    def solve(self, v0: float, a_prev: float, preview: Preview, params: RoadLoadParameters,
               warm: Plan | None = None) -> Plan:
         """Solve from speed v0 [m/s] with the previous commanded acceleration a_prev [m/s^2]."""
         self._check(v0, a_prev, preview)

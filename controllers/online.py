@@ -19,15 +19,16 @@ from typing import Any, Callable
 
 import numpy as np
 
+from roadload.road_load import RoadLoadParameters
 from roadload.trip import Trip
 from roadload.units import G
 
-from .force_model import ForceModelError, ForceParameters
+from .force_model import ForceModelError
 from roadload.estimators import chapter5_settings, make_estimator
 from roadload.estimators.models import get_model
 from roadload.estimators.pipeline import PipelineError, model_data, run_pipeline
 
-# estimator parameter name -> (ForceParameters field, factor)
+# estimator parameter name -> (RoadLoadParameters field, factor)
 _MAPPING = {"m_V f_r0": ("c0", G), "m_V": ("mass", 1.0), "rho_a/2 A_V c_x": ("c2", 1.0),
             "m_V^2/c_yW": ("k_corner", 1.0), "a_V": ("c0", 1.0), "b_V": ("c1", 1.0), "c_V": ("c2", 1.0)}
 
@@ -108,7 +109,7 @@ class OnlineForceModel:
         """Current X̂ of the model structure (parameter order of ``structure.parameter_names``)."""
         return np.asarray(self.estimator.x, dtype=float).copy()
 
-    def parameters(self) -> ForceParameters:
+    def parameters(self) -> RoadLoadParameters:
         x = self.estimate()
         nominal = dict(zip(self.structure.parameter_names, self.x0))
         values: dict[str, float] = {"mass": float(self.knowledge.nominal.mass), "c0": 0.0}
@@ -120,7 +121,7 @@ class OnlineForceModel:
                 value = float(np.clip(value, lo, hi)) if np.isfinite(value) else ref
             field, factor = _MAPPING[name]
             values[field] = float(value) * factor
-        return ForceParameters(rotational_mass=self.rotational_mass, **values)
+        return RoadLoadParameters(rotational_mass=self.rotational_mass, **values)
 
     def describe(self) -> dict[str, Any]:
         return {"force_model": self.name, "model": self.model_name, "estimator": self.estimator_name,

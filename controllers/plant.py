@@ -13,12 +13,13 @@ from typing import Callable
 
 import numpy as np
 
+from roadload.road_load import RoadLoadParameters
 from roadload.road_profiles import RoadProfile
 from roadload.units import G
 
 from .base import Command, Observation
 from .energy import SourceEnergyModel
-from .force_model import ForceParameters, resistance_force
+from .force_model import resistance_force
 
 
 @dataclass
@@ -29,16 +30,16 @@ class PlantStep:
 
 
 class ModelPlant:
-    """Point-mass plant (module docstring). ``params`` is fixed or a function (t, s) -> ForceParameters (drift)."""
+    """Point-mass plant (module docstring). ``params`` is fixed or a function (t, s) -> RoadLoadParameters (drift)."""
 
-    def __init__(self, road: RoadProfile, params: ForceParameters | Callable[[float, float], ForceParameters],
+    def __init__(self, road: RoadProfile, params: RoadLoadParameters | Callable[[float, float], RoadLoadParameters],
                  energy: SourceEnergyModel, dt: float = 0.1, substeps: int = 10, v0: float = 0.0) -> None:
         if dt <= 0 or substeps < 1:
             raise ValueError(f"dt must be > 0 and substeps >= 1, got dt={dt}, substeps={substeps}")
         self.road, self.energy, self.dt, self.substeps, self.v0 = road, energy, dt, substeps, v0
         self._params = params if callable(params) else (lambda t, s, p=params: p)
 
-    def true_parameters(self) -> ForceParameters:
+    def true_parameters(self) -> RoadLoadParameters:
         return self._params(self.t, self.s)
 
     def reset(self) -> Observation:

@@ -13,11 +13,12 @@ from typing import Any
 
 import pandas as pd
 
+from roadload.road_load import RoadLoadParameters
 from roadload.road_profiles import RoadProfile
 from roadload.trip import Trip
 
 from .base import Command, Observation
-from .force_model import ForceParameters
+
 from .plant import PlantStep
 from .vehicle_models import oracle_parameters
 from roadload.envs import Simulator
@@ -52,7 +53,7 @@ class SimulatorPlant:
         r = self.sim.step(action, n_substeps=self.substeps)
         return PlantStep(self._obs(r), float(r.source_energy), bool(r.done))
 
-    def true_parameters(self) -> ForceParameters:
+    def true_parameters(self) -> RoadLoadParameters:
         return oracle_parameters(self.sim.true_parameters(), self.spec)
 
     def can_window(self, t_from: float) -> Trip | None:

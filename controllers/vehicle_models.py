@@ -6,21 +6,21 @@
 - :func:`abc_parameters`: M0 (eq. 5.4) with the coast-down coefficients of the nominal vehicle
   (:func:`roadload.estimators.models.coast_down_coefficients`, a simulated coast-down) and the nominal mass.
 - :func:`oracle_parameters`: the simulator's current true parameters (``Simulator.true_parameters()``) as
-  :class:`~.force_model.ForceParameters` (wind: its component along the current heading).
+  :class:`~roadload.road_load.RoadLoadParameters` (wind: its component along the current heading).
 """
 
 from __future__ import annotations
 
-import math
 from functools import lru_cache
 
 import numpy as np
 
+from roadload.road_load import RoadLoadParameters
 from roadload.units import G
 from roadload.vehicle import VehicleSpec
 
 from .energy import SourceEnergyModel, fit_loss_polynomial
-from .force_model import ForceParameters
+
 from roadload.envs.drivetrain import (battery_current, fuel_power, inverse_wheel_torque, motor_electric_power,
                                           speed_ratio, torque_limits)
 from roadload.envs.packing import pack_vehicle
@@ -144,7 +144,7 @@ def _coast_down(name: str) -> tuple[float, float, float]:
     return coast_down_coefficients(get_preset(name))
 
 
-def abc_parameters(vehicle: VehicleSpec | str) -> ForceParameters:
+def abc_parameters(vehicle: VehicleSpec | str) -> RoadLoadParameters:
     """M0 (eq. 5.4): a_V, b_V, c_V of the nominal vehicle's simulated coast-down, nominal mass m_V and the
     rotational equivalent mass (preset vehicles: cached by name)."""
     spec = _spec(vehicle)
@@ -153,17 +153,10 @@ def abc_parameters(vehicle: VehicleSpec | str) -> ForceParameters:
     else:
 
         a, b, c = coast_down_coefficients(spec)
-    return ForceParameters(mass=float(spec.body.mass), c0=float(a), c1=float(b), c2=float(c),
-                           rotational_mass=rotational_mass(spec))
+    return RoadLoadParameters.from_coast_down(a, b, c, mass=float(spec.body.mass),
+                                              rotational_mass=rotational_mass(spec))
 
 
-def oracle_parameters(truth: dict[str, float], spec: VehicleSpec) -> ForceParameters:
-    """ForceParameters from ``Simulator.true_parameters()``: a, b, m g f_r4, rho/2 c_x A, m^2/c_yW, the wind's
-    headwind component -v_w cos(psi_w) (psi_w = 0 is a tailwind) and the effective mass of the engaged gear."""
-    m = float(truth["mass"])
-    headwind = -float(truth.get("wind_speed", 0.0)) * math.cos(float(truth.get("wind_angle", 0.0)))
-    c_y = float(truth.get("cornering_stiffness", 0.0))
-    return ForceParameters(mass=m, c0=float(truth["a"]), c1=float(truth["b"]),
-                           c2=float(truth["aero_coefficient"]), c4=m * G * float(truth["rolling_resistance_f4"]),
-                           k_corner=m * m / c_y if c_y > 0 else 0.0, headwind=headwind,
-                           rotational_mass=max(float(truth.get("effective_mass", m)) - m, 0.0))
+def oracle_parameters(truth: dict[str, float], spec: VehicleSpec) -> RoadLoadParameters:
+    """RoadLoadParameters from ``Simulator.true_parameters()`` (:meth:`RoadLoadParameters.from_truth`)."""
+    return RoadLoadParameters.from_truth(truth)

@@ -47,6 +47,9 @@ def air_density(temperature_k, pressure_pa):
     return np.asarray(pressure_pa, dtype=float) / (R_AIR * np.asarray(temperature_k, dtype=float))
 
 
+STANDARD_AIR_DENSITY = float(air_density(293.15, 101325.0))  # kg/m^3, dry air at 20 degC and 1013.25 hPa
+
+
 # Conversions from a unit string to SI: factor and offset, value_si = value * factor + offset.
 _TO_SI: dict[str, tuple[str, float, float]] = {
     "m/s": ("m/s", 1.0, 0.0),

@@ -29,16 +29,15 @@ from typing import Any
 import numpy as np
 
 from .fileio import write_json
-from .units import air_density
+
 from .channels import MEASURED
 
 __all__ = [
     "VehicleSpecError", "Curve", "Map2D", "BodySpec", "AeroSpec", "TireSpec", "EngineSpec", "MotorSpec",
     "BatterySpec", "ShiftSpec", "DrivetrainSpec", "BrakeSpec", "SteeringSpec", "ChannelSensorSpec", "SensorSpec",
-    "VehicleSpec", "load_vehicle", "save_vehicle", "STANDARD_AIR_DENSITY",
+    "VehicleSpec", "load_vehicle", "save_vehicle",
 ]
 
-STANDARD_AIR_DENSITY = float(air_density(293.15, 101325.0))  # kg/m^3 at 20 degC, 1013.25 hPa
 
 
 class VehicleSpecError(ValueError):

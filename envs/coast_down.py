@@ -12,8 +12,8 @@ import math
 
 import numpy as np
 
-from roadload.units import G
-from roadload.vehicle import STANDARD_AIR_DENSITY, VehicleSpec
+from roadload.units import G, STANDARD_AIR_DENSITY
+from roadload.vehicle import VehicleSpec
 
 from .drivetrain import neutral_drag_force
 

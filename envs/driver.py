@@ -22,6 +22,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from ._jit import jit
 
+from roadload.units import G
+
 from .layout import *  # noqa: F401,F403 - index constants
 from .numerics import rng_normal, rng_uniform, road_value, road_value_at
 
@@ -130,7 +132,7 @@ def steering_law(X, P, road, s, v):
 @jit
 def driver_force(X, P, road, stops, cycle, rng, ridx, s, v, theta, dt):
     """Signed wheel-force demand [N] of the built-in driver (road mode or drive-cycle mode)."""
-    g = 9.80665
+    g = G
     m = P[P_MASS0]
     t = X[S_T]
     a_ff = 0.0

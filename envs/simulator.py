@@ -17,7 +17,7 @@ import pandas as pd
 from roadload.channels import TRUTH
 from roadload.road_profiles import DriveCycle, RoadProfile
 from roadload.trip import Trip
-from roadload.units import G, air_density
+from roadload.units import G, R_AIR, air_density
 from roadload.vehicle import SensorSpec, VehicleSpec
 
 from . import physics
@@ -523,7 +523,7 @@ class Simulator:
         mass = X[S_MASS]
         if row is None:  # before the first step: nominal values
             fr0, fr1, fr4 = P[P_FR0], P[P_FR1], P[P_FR4]
-            rho = P[P_P_AMB] / (287.058 * P[P_T_AMB])
+            rho = P[P_P_AMB] / (R_AIR * P[P_T_AMB])
             cxa = P[P_CW] * P[P_AREA] * X[S_DRAGF]
             csf, csr, ws, wa, mu, grade, curv, bank = P[P_CF], P[P_CR], 0.0, 0.0, P[P_MU0], 0.0, 0.0, 0.0
         else:

@@ -22,7 +22,8 @@ from typing import Callable, Mapping
 import numpy as np
 
 from roadload.envs.coast_down import neutral_road_load
-from roadload.units import G
+from roadload.road_load import RoadLoadParameters
+from roadload.units import G, STANDARD_AIR_DENSITY
 
 # Names of the preprocessed vehicle states the built-in regressors read (columns of the pipeline's "states" stage).
 SPEED = "speed"                    # v_V [m/s]
@@ -31,44 +32,72 @@ GRADIENT_ANGLE = "gradient_angle"  # θ [rad]
 PATH_CURVATURE = "path_curvature"  # 1/r [1/m]
 TRACTIVE_FORCE = "tractive_force"  # F_xV [N], eq. 5.5c
 
-AIR_DENSITY_NOMINAL = 1.2041  # kg/m^3, dry air at 20 °C and 101.325 kPa (ρ_a = p_a/(R_a T_a))
-
-
 class ModelError(ValueError):
     """Unknown model name, duplicate registration, or states that lack what a model needs."""
 
 
 @dataclass(frozen=True)
 class NominalParameters:
-    """What the estimating side knows about the vehicle before driving (spec sheet and coast-down).
+    """What the estimating side knows about the vehicle before driving: the spec sheet's road load
+    (:class:`roadload.road_load.RoadLoadParameters` at the air density ρ_a [kg/m^3] it assumes) and, when one was
+    measured, the coast-down (a_V [N], b_V [N s/m], c_V [N s²/m²]) of eq. 5.4 (M0 is unavailable without it).
 
-    mass: m_V [kg] (nominal, e.g. curb mass + driver); rolling_resistance_coefficient: f_r0 [1];
-    drag_area: c_x A_V [m^2]; air_density: ρ_a [kg/m^3]; cornering_stiffness: c_yW [N/rad] as it enters
-    eq. 2.15 (F_Wc = m_V² v⁴ / (4 r² c_yW)); coast_down: (a_V [N], b_V [N s/m], c_V [N s²/m²]) of eq. 5.4, or
-    None when no coast-down is known (M0 is then unavailable).
+    Views: mass m_V [kg]; rolling_resistance_coefficient f_r0 [1]; drag_area c_x A_V [m^2]; cornering_stiffness
+    c_yW [N/rad] as it enters eq. 2.15 (F_Wc = m_V² v⁴ / (4 r² c_yW)); drag_coefficient ρ_a/2 c_x A_V [kg/m].
     """
 
-    mass: float
-    rolling_resistance_coefficient: float
-    drag_area: float
-    cornering_stiffness: float
-    air_density: float = AIR_DENSITY_NOMINAL
+    road_load: RoadLoadParameters
+    air_density: float = STANDARD_AIR_DENSITY
     coast_down: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
-        for name in ("mass", "rolling_resistance_coefficient", "drag_area", "cornering_stiffness", "air_density"):
-            value = getattr(self, name)
-            if not np.isfinite(value) or value <= 0:
-                raise ModelError(f"NominalParameters.{name} must be a positive finite number, got {value!r}")
+        if not np.isfinite(self.air_density) or self.air_density <= 0:
+            raise ModelError(f"NominalParameters.air_density must be a positive finite number [kg/m^3], "
+                             f"got {self.air_density!r}")
+        for name, value, unit in (("rolling resistance a_V", self.road_load.c0, "N"),
+                                  ("drag c_V", self.road_load.c2, "kg/m"),
+                                  ("cornering k = m_V^2/c_yW", self.road_load.k_corner, "kg^2/N")):
+            if value <= 0:
+                raise ModelError(f"NominalParameters.road_load: {name} must be > 0 {unit}, got {value!r}")
         if self.coast_down is not None:
             if len(self.coast_down) != 3 or not all(np.isfinite(c) for c in self.coast_down):
                 raise ModelError(f"NominalParameters.coast_down must be three finite numbers (a_V, b_V, c_V), "
                                  f"got {self.coast_down!r}")
 
+    @classmethod
+    def from_physical(cls, mass: float, rolling_resistance_coefficient: float, drag_area: float,
+                      cornering_stiffness: float, air_density: float = STANDARD_AIR_DENSITY,
+                      coast_down: tuple[float, float, float] | None = None) -> "NominalParameters":
+        """From m_V [kg], f_r0 [1], c_x A_V [m^2], c_yW [N/rad] and ρ_a [kg/m^3]."""
+        for name, value in (("mass", mass), ("rolling_resistance_coefficient", rolling_resistance_coefficient),
+                            ("drag_area", drag_area), ("cornering_stiffness", cornering_stiffness),
+                            ("air_density", air_density)):
+            if not np.isfinite(value) or value <= 0:
+                raise ModelError(f"NominalParameters.{name} must be a positive finite number, got {value!r}")
+        road = RoadLoadParameters.from_physical(mass, rolling_resistance_coefficient, drag_area=drag_area,
+                                                air_density=air_density, cornering_stiffness=cornering_stiffness)
+        return cls(road, float(air_density), coast_down)
+
+    @property
+    def mass(self) -> float:
+        return self.road_load.mass
+
+    @property
+    def rolling_resistance_coefficient(self) -> float:
+        return self.road_load.rolling_resistance_f0()
+
+    @property
+    def drag_area(self) -> float:
+        return self.road_load.drag_area(self.air_density)
+
+    @property
+    def cornering_stiffness(self) -> float:
+        return self.road_load.mass ** 2 / self.road_load.k_corner
+
     @property
     def drag_coefficient(self) -> float:
         """ρ_a/2 A_V c_x [kg/m] — the third parameter of M3/M4."""
-        return 0.5 * self.air_density * self.drag_area
+        return self.road_load.c2
 
 
 @dataclass(frozen=True)
@@ -331,9 +360,7 @@ def coast_down_coefficients(spec) -> tuple[float, float, float]:
     return fit_coast_down(t, v, m_eff)
 
 
-def published_coast_down(spec, air_density: float = AIR_DENSITY_NOMINAL) -> tuple[float, float, float]:
+def published_coast_down(spec, air_density: float = STANDARD_AIR_DENSITY) -> tuple[float, float, float]:
     """(a_V, b_V, c_V) of eq. 5.4 from spec-sheet values alone: a_V = m_V g f_r0, b_V = m_V g f_r1,
     c_V = ρ_a/2 c_x A_V (section 5.4.1) — for vehicles whose coast-down is not measured (real logs)."""
-    m = float(spec.body.mass)
-    return (m * G * float(spec.tires.rolling_resistance_f0), m * G * float(spec.tires.rolling_resistance_f1),
-            0.5 * air_density * float(spec.aero.drag_area))
+    return RoadLoadParameters.from_spec(spec, air_density=air_density).coast_down

@@ -33,7 +33,8 @@ from roadload.units import G
 
 from .models import (ACCELERATION, GRADIENT_ANGLE, PATH_CURVATURE, SPEED, TRACTIVE_FORCE, ModelStructure,
                      NominalParameters, get_model)
-from roadload.vehicle import STANDARD_AIR_DENSITY
+from roadload.road_load import RoadLoadParameters
+from roadload.units import STANDARD_AIR_DENSITY
 from .pks import pks_bank
 
 STAGES = ("measured", "smoothed", "decimated", "states")
@@ -205,11 +206,8 @@ def knowledge_from_spec(spec, coast_down: tuple[float, float, float] | None = No
                                 rear_axle_distance=float(spec.body.cg_to_rear_axle),
                                 steering_wheel_angle=tuple(map(float, spec.steering.steering_wheel_angle)),
                                 wheel_angle=tuple(map(float, spec.steering.wheel_angle)))
-    nominal = NominalParameters(mass=float(spec.body.mass),
-                                rolling_resistance_coefficient=float(spec.tires.rolling_resistance_f0),
-                                drag_area=float(spec.aero.drag_area),
-                                cornering_stiffness=float(spec.equivalent_cornering_stiffness()),
-                                air_density=float(air_density or STANDARD_AIR_DENSITY), coast_down=coast_down)
+    rho = float(air_density or STANDARD_AIR_DENSITY)
+    nominal = NominalParameters(RoadLoadParameters.from_spec(spec, air_density=rho), rho, coast_down)
     floor = -np.inf
     if d.kind == "bev" and d.motor is not None:
         floor = -0.92 * float(d.motor.regen_torque_limit)

@@ -11,6 +11,7 @@ the wall-clock time, the k = 900 MEDSE table and the findings of the text.
 from __future__ import annotations
 
 import argparse
+import tempfile
 import os
 import time
 from pathlib import Path
@@ -31,7 +32,12 @@ def main() -> None:
     ap.add_argument("--output-outliers", default=None, metavar="RATE,SIZE",
                     help="sensitivity experiment: outlier events of SIZE N (1 s bursts) starting with probability "
                          "RATE per triggered sample, added to F_xV after preprocessing (not part of the simulator)")
+    ap.add_argument("--quick", action="store_true", help="tiny run for CI: 3 trips, 0.3 h, in a temporary cache")
     args = ap.parse_args()
+    if args.quick:
+        args.trips, args.hours, args.workers = 3, 8.4, 1
+        args.cache = args.cache or Path(tempfile.mkdtemp(prefix="roadload-fleet-"))
+        args.out = args.cache / "report"
     extra = {}
     if args.output_outliers:
         rate, size = (float(x) for x in args.output_outliers.split(","))

@@ -44,13 +44,16 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--cantools", action="store_true", help="also time cantools' per-frame decoding")
+    ap.add_argument("--quick", action="store_true", help="tiny run for CI: one session, one repetition")
     args = ap.parse_args()
+    if args.quick:
+        args.repeat = 1
     base = shared_data_dir()
     if base is None or not (base / "css_canedge_gnss_obd").is_dir():
         print("skipped: needs ../shared/data/css_canedge_gnss_obd (set ROADLOAD_DATA)")
         return 0
     mapping = load_mapping("canedge_gnss_obd")
-    sessions = sorted((base / "css_canedge_gnss_obd" / "raw_mf4").iterdir())
+    sessions = sorted((base / "css_canedge_gnss_obd" / "raw_mf4").iterdir())[: 1 if args.quick else None]
     print(f"MF4 + DBC import, mapping {mapping.name}, best of {args.repeat} (first run in brackets)")
     header = (f"{'session':<20}{'MB':>7}{'frames':>9}{'read s':>8}{'decode s':>9}{'map s':>7}{'total s':>9}"
               f"{'MB/s':>8}{'frames/s':>11}{'sig samp/s':>12}{'out samp/s':>12}")

@@ -16,6 +16,7 @@ JSON format, with source and licence in their metadata. Load one with
 from __future__ import annotations
 
 import argparse
+import tempfile
 import sys
 from pathlib import Path
 
@@ -31,10 +32,10 @@ CANEDGE_SOURCE = ("CSS-Electronics/api-examples examples/other/matlab-basics/LOG
                   "(snapshot f7932bac), session {session}, via ../shared/data/css_canedge_gnss_obd")
 
 
-def canedge_profiles(base: Path, out: Path) -> list[Path]:
+def canedge_profiles(base: Path, out: Path, limit: int | None = None) -> list[Path]:
     licence = load_mapping("canedge_gnss_obd").licence
     written = []
-    for folder in sorted((base / "css_canedge_gnss_obd" / "raw_mf4").iterdir()):
+    for folder in sorted((base / "css_canedge_gnss_obd" / "raw_mf4").iterdir())[:limit]:
         session = folder.name.split("_")[-1].lstrip("0")
         trip = import_log(folder, "dbc-mf4")
         source = CANEDGE_SOURCE.format(session=folder.name)
@@ -83,12 +84,16 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=ROOT / "road-profiles" / "real")
     ap.add_argument("--bmw", nargs="*", default=["TripA01", "TripA06"], help="BMW i3 trips to convert")
+    ap.add_argument("--quick", action="store_true",
+                    help="tiny run for CI: one BMW trip, written to a temporary folder (not the package's real/)")
     args = ap.parse_args()
+    if args.quick:
+        args.out, args.bmw = Path(tempfile.mkdtemp(prefix="roadload-profiles-")), args.bmw[:1]
     base = shared_data_dir()
     if base is None:
         print("needs the shared data folder (../shared/data or $ROADLOAD_DATA)", file=sys.stderr)
         return 1
-    files = canedge_profiles(base, args.out) + bmw_profiles(base, args.out, args.bmw)
+    files = canedge_profiles(base, args.out, 1 if args.quick else None) + bmw_profiles(base, args.out, args.bmw)
     print(f"wrote {len(files)} profiles to {args.out}")
     return 0
 

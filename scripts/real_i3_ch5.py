@@ -16,6 +16,7 @@ driver) and M3 with the five estimators of section 5.5. Prints and writes:
 from __future__ import annotations
 
 import argparse
+import tempfile
 import os
 from pathlib import Path
 
@@ -74,7 +75,11 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("out/real_i3"))
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--limit", type=int, default=None)
+    ap.add_argument("--quick", action="store_true", help="tiny run for CI: 3 trips, 1 worker, temporary output")
     args = ap.parse_args()
+    if args.quick:
+        args.limit, args.workers = 3, 1
+        args.out = Path(tempfile.mkdtemp(prefix="roadload-i3-"))
 
     folder = require_shared_data("bmw_i3_tum/data")
     files = sorted(str(p) for p in folder.glob("Trip*.csv"))[: args.limit]

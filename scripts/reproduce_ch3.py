@@ -14,6 +14,7 @@ Usage: python scripts/reproduce_ch3.py [--seeds 20] [--out out/ch3] [--only 3.3,
 from __future__ import annotations
 
 import argparse
+import tempfile
 import time
 from pathlib import Path
 
@@ -323,7 +324,10 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--out", type=Path, default=Path("out/ch3"))
     ap.add_argument("--only", type=str, default=",".join(EXPERIMENTS))
+    ap.add_argument("--quick", action="store_true", help="tiny run for CI: 1 seed, temporary output folder")
     args = ap.parse_args()
+    if args.quick:
+        args.seeds, args.out = 1, Path(tempfile.mkdtemp(prefix="roadload-ch3-"))
     print(f"settings not given by the text: X̂_0 = 0, P_0 = 100 I, σ̂_0 = 1, Q̂_0 = 1, η = 0.01, "
           f"σ̂² forgetting = λ; figures in {args.out}/")
     for key in args.only.split(","):

@@ -10,6 +10,7 @@ decision tree (figure 3.17) and the wall time; the tables, PNG curves and summar
 from __future__ import annotations
 
 import argparse
+import tempfile
 import time
 
 import numpy as np
@@ -38,11 +39,20 @@ def main() -> None:
     ap.add_argument("--bound", type=float, default=DEFAULT_BOUND)
     ap.add_argument("--workers", type=int, default=None)
     ap.add_argument("--scheduler", default=None)
-    ap.add_argument("--out", required=True)
+    ap.add_argument("--out", default=None, help="report folder (required unless --quick)")
     ap.add_argument("--from-results", default=None,
                     help="rebuild the report from a results.csv of an earlier run instead of sweeping")
+    ap.add_argument("--quick", action="store_true",
+                    help="tiny run for CI: the first sweep, 2 seeds, 2 estimators, short records, temporary output")
     args = ap.parse_args()
     specs = sweep_specs(args.backend)
+    if args.quick:
+        args.sweeps = args.sweeps or list(specs)[:1]
+        args.seeds, args.estimators, args.workers = 2, args.estimators or ["RLS", "RRLM"], 1
+        args.duration = args.duration or DURATION[args.backend] / 10
+        args.out = args.out or tempfile.mkdtemp(prefix="roadload-robustness-")
+    if args.out is None:
+        ap.error("--out is required (or --quick)")
     if args.from_results:
         results, failed = pd.read_csv(args.from_results), []
         names = [n for n in (args.sweeps or list(specs)) if n in set(results["sweep"])]

@@ -20,7 +20,8 @@ import pandas as pd
 
 from roadload.estimators.models import (ACCELERATION, GRADIENT_ANGLE, PATH_CURVATURE, SPEED, ModelStructure,
                                         Term, register_model)
-from roadload.units import G
+from roadload.road_load import RoadLoadParameters, rolling_resistance_coefficient
+from roadload.units import G, STANDARD_AIR_DENSITY
 
 from .errors import DiagnosisError
 
@@ -38,17 +39,13 @@ def columns_of(table: pd.DataFrame) -> dict[str, np.ndarray]:
 
 @dataclass(frozen=True)
 class SimForceModel:
-    """Parameters of the sim's force balance (SI): m_V [kg], f_r0 [1], f_r1 [s/m], f_r4 [s⁴/m⁴], c_x A_V [m²],
-    c_yW [N/rad] as in eq. 2.15, drive-train efficiency η (for converting loss fractions), r_W [m], number of
+    """Parameters of the sim's force balance: the vehicle's road load (:class:`roadload.road_load.RoadLoadParameters`
+    at the standard air density, from which m_V [kg], f_r0 [1], f_r1 [s/m], f_r4 [s⁴/m⁴], c_x A_V [m²] and c_yW
+    [N/rad] of eq. 2.15 are read), drive-train efficiency η (for converting loss fractions), r_W [m], number of
     gears, the drive-train oil's warm temperature [K], cold loss factor φ_cold and time constant [s]."""
 
     vehicle: str
-    mass: float
-    rolling_resistance_f0: float
-    rolling_resistance_f1: float
-    rolling_resistance_f4: float
-    drag_area: float
-    cornering_stiffness: float
+    road_load: RoadLoadParameters
     drivetrain_efficiency: float = 0.93
     wheel_radius: float = 0.3
     n_gears: int = 1
@@ -57,28 +54,60 @@ class SimForceModel:
     oil_time_constant: float = 1200.0
 
     def __post_init__(self) -> None:
-        for name in ("mass", "drag_area", "cornering_stiffness", "wheel_radius"):
-            if not (np.isfinite(getattr(self, name)) and getattr(self, name) > 0):
-                raise DiagnosisError(f"SimForceModel.{name} must be a positive number, got {getattr(self, name)!r}")
+        for name, value in (("drag area", self.road_load.c2), ("cornering k", self.road_load.k_corner),
+                            ("wheel_radius", self.wheel_radius)):
+            if not (np.isfinite(value) and value > 0):
+                raise DiagnosisError(f"SimForceModel: {name} must be a positive number, got {value!r}")
+
+    @classmethod
+    def from_physical(cls, vehicle: str, mass: float, rolling_resistance_f0: float, rolling_resistance_f1: float,
+                      rolling_resistance_f4: float, drag_area: float, cornering_stiffness: float,
+                      **drivetrain: float) -> "SimForceModel":
+        """From m_V [kg], f_r0, f_r1, f_r4, c_x A_V [m²], c_yW [N/rad] and the drive-train fields."""
+        if not (np.isfinite(mass) and mass > 0):
+            raise DiagnosisError(f"SimForceModel: mass must be a positive number [kg], got {mass!r}")
+        road = RoadLoadParameters.from_physical(mass, rolling_resistance_f0, rolling_resistance_f1,
+                                                rolling_resistance_f4, drag_area,
+                                                cornering_stiffness=cornering_stiffness)
+        return cls(vehicle, road, **drivetrain)
 
     @classmethod
     def from_spec(cls, spec, mass: float | None = None) -> "SimForceModel":
         """From a :class:`roadload.vehicle.VehicleSpec` (mass overrides m_V, e.g. with a payload)."""
-        tires = spec.tires
-        return cls(vehicle=spec.name, mass=float(mass if mass is not None else spec.mass),
-                   rolling_resistance_f0=tires.rolling_resistance_f0,
-                   rolling_resistance_f1=tires.rolling_resistance_f1,
-                   rolling_resistance_f4=tires.rolling_resistance_f4,
-                   drag_area=spec.drag_area, cornering_stiffness=float(spec.equivalent_cornering_stiffness()),
-                   wheel_radius=spec.wheel_radius, n_gears=int(spec.drivetrain.n_gears),
-                   oil_warm_temperature=float(spec.drivetrain.oil_warm_temperature),
-                   oil_cold_loss_factor=float(spec.drivetrain.oil_cold_loss_factor),
-                   oil_time_constant=float(spec.drivetrain.oil_time_constant))
+        d = spec.drivetrain
+        return cls(vehicle=spec.name, road_load=RoadLoadParameters.from_spec(spec, mass=mass),
+                   wheel_radius=spec.wheel_radius, n_gears=int(d.n_gears),
+                   oil_warm_temperature=float(d.oil_warm_temperature),
+                   oil_cold_loss_factor=float(d.oil_cold_loss_factor), oil_time_constant=float(d.oil_time_constant))
+
+    @property
+    def mass(self) -> float:
+        return self.road_load.mass
+
+    @property
+    def rolling_resistance_f0(self) -> float:
+        return self.road_load.c0 / (self.mass * G)
+
+    @property
+    def rolling_resistance_f1(self) -> float:
+        return self.road_load.c1 / (self.mass * G)
+
+    @property
+    def rolling_resistance_f4(self) -> float:
+        return self.road_load.c4 / (self.mass * G)
+
+    @property
+    def drag_area(self) -> float:
+        return self.road_load.drag_area(STANDARD_AIR_DENSITY)
+
+    @property
+    def cornering_stiffness(self) -> float:
+        return self.mass ** 2 / self.road_load.k_corner
 
     def rolling_resistance_coefficient(self, speed: np.ndarray) -> np.ndarray:
         """f_r(v) (eq. 2.10)."""
-        v = np.asarray(speed, dtype=float)
-        return self.rolling_resistance_f0 + self.rolling_resistance_f1 * v + self.rolling_resistance_f4 * v ** 4
+        return rolling_resistance_coefficient(np.asarray(speed, dtype=float), self.rolling_resistance_f0,
+                                              self.rolling_resistance_f1, self.rolling_resistance_f4)
 
     def structure(self) -> ModelStructure:
         """The white-box structure ``sim:<vehicle>`` (registered, replacing an older one of that name)."""

@@ -27,6 +27,8 @@ valid                  moving (v > 1 m/s), smoothers settled, drive-train engage
 
 from __future__ import annotations
 
+import dataclasses
+
 import re
 from dataclasses import dataclass, field
 from typing import Sequence
@@ -146,7 +148,7 @@ def sim_force_model(sim: SimConfig) -> SimForceModel:
     d = know.drivetrain
     eta = float(np.mean(d.gearbox_efficiency)) * float(d.differential_efficiency)
     base = SimForceModel.from_spec(spec, mass=mass)
-    return SimForceModel(**{**base.__dict__, "drivetrain_efficiency": eta})
+    return dataclasses.replace(base, drivetrain_efficiency=eta)
 
 
 def build_table(trips: Sequence[Trip], sim: SimConfig, settings: PipelineSettings | None = None,

@@ -2,14 +2,14 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from roadload.road_load import RoadLoadError, RoadLoadParameters
 from roadload.controllers.energy import EnergyModelError, SourceEnergyModel, fit_loss_polynomial, generic_ev
-from roadload.controllers.force_model import (ForceModelError, ForceParameters, OracleForceModel,
-                                              resistance_force, wheel_force)
+from roadload.controllers.force_model import ForceModelError, OracleForceModel, resistance_force, wheel_force
 from roadload.units import G
 
 
 def test_resistance_matches_the_physics_terms():
-    p = ForceParameters.from_physical(mass=1500.0, f_r0=0.01, f_r1=2e-4, f_r4=1e-9, drag_area=0.6,
+    p = RoadLoadParameters.from_physical(mass=1500.0, f_r0=0.01, f_r1=2e-4, f_r4=1e-9, drag_area=0.6,
                                       air_density=1.2, cornering_stiffness=80000.0, headwind=3.0)
     v, theta, kappa = 20.0, 0.03, 1 / 200.0
     rolling = 1500 * G * (0.01 + 2e-4 * v + 1e-9 * v ** 4) * np.cos(theta)
@@ -22,7 +22,7 @@ def test_resistance_matches_the_physics_terms():
 
 
 def test_symbolic_and_numeric_resistance_agree():
-    p = ForceParameters(mass=1400.0, c0=130.0, c1=2.0, c2=0.38, c4=1e-5, k_corner=30.0, headwind=-2.0)
+    p = RoadLoadParameters(mass=1400.0, c0=130.0, c1=2.0, c2=0.38, c4=1e-5, k_corner=30.0, headwind=-2.0)
     v = ca.SX.sym("v")
     f = ca.Function("f", [v], [resistance_force(v, 0.02, 0.004, p.as_vector())])
     for speed in (1.0, 13.0, 33.0):
@@ -30,15 +30,15 @@ def test_symbolic_and_numeric_resistance_agree():
 
 
 def test_force_parameters_reject_bad_values():
-    with pytest.raises(ForceModelError, match="mass"):
-        ForceParameters(mass=-1.0, c0=100.0)
-    with pytest.raises(ForceModelError, match="c2"):
-        ForceParameters(mass=1000.0, c0=100.0, c2=float("nan"))
-    with pytest.raises(ForceModelError, match="expected 8"):
-        ForceParameters.from_vector([1, 2, 3])
-    p = ForceParameters(mass=1000.0, c0=100.0, c2=0.3)
-    assert ForceParameters.from_vector(p.as_vector()) == p
-    with pytest.raises(ForceModelError, match="ForceParameters"):
+    with pytest.raises(RoadLoadError, match="mass must be > 0 kg"):
+        RoadLoadParameters(mass=-1.0, c0=100.0)
+    with pytest.raises(RoadLoadError, match="c2"):
+        RoadLoadParameters(mass=1000.0, c0=100.0, c2=float("nan"))
+    with pytest.raises(RoadLoadError, match="expected 8"):
+        RoadLoadParameters.from_vector([1, 2, 3])
+    p = RoadLoadParameters(mass=1000.0, c0=100.0, c2=0.3)
+    assert RoadLoadParameters.from_vector(p.as_vector()) == p
+    with pytest.raises(ForceModelError, match="RoadLoadParameters"):
         OracleForceModel(lambda: 3.0).parameters()
 
 

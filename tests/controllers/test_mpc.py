@@ -1,18 +1,19 @@
 import numpy as np
 import pytest
 
+from roadload.road_load import RoadLoadParameters
 from roadload.controllers.base import ControllerError, DriveContext, Observation
 from roadload.controllers.closed_loop import VIOLATION_TOLERANCE, run_closed_loop
 from roadload.controllers.cruise import CruiseController
 from roadload.controllers.energy import generic_ev
-from roadload.controllers.force_model import FixedForceModel, ForceParameters
+from roadload.controllers.force_model import FixedForceModel
 from roadload.controllers.mpc import MpcError, MpcSettings, Preview
 from roadload.controllers.mpc_controller import MpcController, MpcControllerSettings, get_solver
 from roadload.controllers.plant import ModelPlant
 from roadload.experiments.time_matching import match_trip_time
 from roadload.road_profiles import RoadProfile
 
-PARAMS = ForceParameters.from_physical(1420.0, 0.009, 0.0, 0.0, 0.7, 1.2, 60000.0)
+PARAMS = RoadLoadParameters.from_physical(1420.0, 0.009, 0.0, 0.0, 0.7, 1.2, 60000.0)
 ENERGY = generic_ev()
 
 

@@ -8,7 +8,7 @@ import pytest
 from roadload.estimators.models import (M0, M3, M4, ModelError, NominalParameters, Term, fit_coast_down,
                                         get_model, model_names, register_model)
 from roadload.estimators.pipeline import DrivetrainModel, PipelineError, SteeringGeometry
-from roadload.units import G
+from roadload.units import G, air_density
 
 
 def _states(T=4000, seed=0):
@@ -50,21 +50,21 @@ def test_least_squares_recovers_m4_parameters_from_exact_force():
 
 
 def test_nominal_parameters_give_initial_x_and_m0_needs_coast_down():
-    nom = NominalParameters(mass=1900.0, rolling_resistance_coefficient=0.01, drag_area=0.62,
+    nom = NominalParameters.from_physical(mass=1900.0, rolling_resistance_coefficient=0.01, drag_area=0.62,
                             cornering_stiffness=5e4, air_density=1.2)
     np.testing.assert_allclose(M4.nominal_parameters(nom), [19.0, 1900.0, 0.372, 1900 ** 2 / 5e4])
     with pytest.raises(ModelError, match="coast-down"):
         M0.nominal_parameters(nom)
-    nom0 = NominalParameters(1900.0, 0.01, 0.62, 5e4, coast_down=(180.0, 2.0, 0.4))
+    nom0 = NominalParameters.from_physical(1900.0, 0.01, 0.62, 5e4, coast_down=(180.0, 2.0, 0.4))
     np.testing.assert_allclose(M0.nominal_parameters(nom0), [180.0, 2.0, 0.4, 1900.0])
     assert M0.white_box and not M3.white_box
     with pytest.raises(ModelError, match="mass"):
-        NominalParameters(mass=-1.0, rolling_resistance_coefficient=0.01, drag_area=0.6, cornering_stiffness=1.0)
+        NominalParameters.from_physical(mass=-1.0, rolling_resistance_coefficient=0.01, drag_area=0.6, cornering_stiffness=1.0)
 
 
 def test_m0_prediction_is_eq_5_4():
     s = _states()
-    nom = NominalParameters(1900.0, 0.01, 0.62, 5e4, coast_down=(180.0, 2.0, 0.4))
+    nom = NominalParameters.from_physical(1900.0, 0.01, 0.62, 5e4, coast_down=(180.0, 2.0, 0.4))
     st = s | {"tractive_force": 0 * s["t"]}
     th, v, dv = s["gradient_angle"], s["speed"], s["acceleration"]
     expected = 180 * np.cos(th) + 2.0 * np.cos(th) * v + 0.4 * v ** 2 + (G * np.sin(th) + dv) * 1900
@@ -174,7 +174,7 @@ def test_knowledge_from_a_preset_spec_and_its_simulated_coast_down():
     assert all(0.9 < e <= 1.0 for e in k.drivetrain.gearbox_efficiency)
     a0, b0, c0 = published_coast_down(spec)
     assert a0 == pytest.approx(spec.body.mass * G * spec.tires.rolling_resistance_f0)
-    assert c0 == pytest.approx(0.5 * 1.2041 * spec.aero.drag_area)
+    assert c0 == pytest.approx(0.5 * air_density(293.15, 101325.0) * spec.aero.drag_area)  # 20 degC, 1013.25 hPa
 
 
 def test_trip_load_selected_channels(tmp_path):

@@ -21,7 +21,7 @@ def _knowledge():
                          differential_efficiency=1.0)
     steer = SteeringGeometry(wheelbase=2.95, rear_axle_distance=1.45, steering_wheel_angle=(-9.0, 0.0, 9.0),
                              wheel_angle=(-0.6, 0.0, 0.6))
-    nom = NominalParameters(mass=1800.0, rolling_resistance_coefficient=0.012, drag_area=0.6,
+    nom = NominalParameters.from_physical(mass=1800.0, rolling_resistance_coefficient=0.012, drag_area=0.6,
                             cornering_stiffness=45000.0, coast_down=(200.0, 1.0, 0.4))
     return VehicleKnowledge("handmade", nom, dt, steer)
 

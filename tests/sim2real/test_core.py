@@ -16,7 +16,7 @@ from roadload.sim2real.stats import (block_bootstrap_mean_difference, block_boot
                                      cluster_covariance)
 from roadload.units import G
 
-MODEL = SimForceModel("toy", 1500.0, 0.01, 0.0, 0.0, 0.6, 8e4)
+MODEL = SimForceModel.from_physical("toy", 1500.0, 0.01, 0.0, 0.0, 0.6, 8e4)
 
 
 def synth(extra_fn, n_trips=2, duration=500.0, noise=30.0, seed=0) -> pd.DataFrame:

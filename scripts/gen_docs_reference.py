@@ -2,7 +2,7 @@
 
     python scripts/gen_docs_reference.py            # rewrite the generated blocks in docs/reference/*.md
     python scripts/gen_docs_reference.py --check    # exit 1 naming the stale pages (CI; tests/experiments)
-    python scripts/gen_docs_reference.py --quick    # same as without (the run takes ~2 s)
+    python scripts/gen_docs_reference.py --quick    # = --check (the CI smoke run of every script; writes nothing)
 
 A generated block sits between ``<!-- BEGIN generated: NAME -->`` and ``<!-- END generated: NAME -->`` in a page;
 everything outside the markers is hand-written. Blocks: the estimator catalogue (roadload.estimators.CATALOG),
@@ -178,8 +178,9 @@ def render(page: Path, blocks: dict) -> str:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--check", action="store_true", help="only check; exit 1 if a page is stale")
-    parser.add_argument("--quick", action="store_true", help="accepted for the scripts/ convention (no effect)")
+    parser.add_argument("--quick", action="store_true", help="the CI smoke run: same as --check")
     args = parser.parse_args()
+    args.check = args.check or args.quick
     stale = []
     for page_name, blocks in BLOCKS.items():
         page = REFERENCE / page_name

@@ -4,7 +4,7 @@
     python examples/custom_force_model.py             # 6 km
 
 The custom model here is the nominal car's coast-down coefficients (M0) with a mass error you choose
-(``--mass-error`` [kg]); any object with ``reset()``, ``observe(sample)``, ``parameters() -> ForceParameters``
+(``--mass-error`` [kg]); any object with ``reset()``, ``observe(sample)``, ``parameters() -> RoadLoadParameters``
 and ``describe()`` works (the ``ForceModel`` protocol of roadload.controllers.force_model). Prints energy
 [kWh], trip time [s], violations and fallbacks per force model, on the same road and seed.
 """
@@ -15,7 +15,7 @@ import argparse
 
 import pandas as pd
 
-from roadload.controllers import (DriveContext, FixedForceModel, ForceParameters, MpcController,
+from roadload.controllers import (DriveContext, FixedForceModel, RoadLoadParameters, MpcController,
                                   MpcControllerSettings, MpcSettings, OracleForceModel)
 from roadload.controllers.closed_loop import run_closed_loop
 from roadload.controllers.sim_plant import SimulatorPlant
@@ -29,7 +29,7 @@ class MassErrorModel:
 
     name = "mass_error"
 
-    def __init__(self, base: ForceParameters, mass_error: float) -> None:
+    def __init__(self, base: RoadLoadParameters, mass_error: float) -> None:
         self.params = base.with_(mass=base.mass + mass_error)
 
     def reset(self) -> None:
@@ -38,7 +38,7 @@ class MassErrorModel:
     def observe(self, sample: dict[str, float]) -> None:
         pass  # an online model would update its parameters from the latest CAN sample here
 
-    def parameters(self) -> ForceParameters:
+    def parameters(self) -> RoadLoadParameters:
         return self.params
 
     def describe(self) -> dict:

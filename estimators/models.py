@@ -22,6 +22,7 @@ from typing import Callable, Mapping
 import numpy as np
 
 from roadload.envs.coast_down import neutral_road_load
+from roadload.registry import Registry
 from roadload.road_load import RoadLoadParameters
 from roadload.units import G, STANDARD_AIR_DENSITY
 
@@ -261,31 +262,23 @@ M3 = ModelStructure(name="M3", terms=(ROLLING, INERTIA, AERO),
                     description="longitudinal gray-box model (eq. 5.5)")
 M4 = M3.extend("M4", CORNERING, description="longitudinal and lateral gray-box model (eq. 5.6)")
 
-_REGISTRY: dict[str, ModelStructure] = {}
+_MODELS: Registry[ModelStructure] = Registry("model", ModelStructure, ModelError)
 
 
 def register_model(model: ModelStructure, replace_existing: bool = False) -> ModelStructure:
     """Add a model structure to the registry (ModelError if the name is taken and replace_existing is False)."""
     if not isinstance(model, ModelStructure):
         raise ModelError(f"register_model expects a ModelStructure, got {type(model).__name__}")
-    if model.name in _REGISTRY and not replace_existing:
-        raise ModelError(f"a model named {model.name!r} is already registered; pass replace_existing=True")
-    _REGISTRY[model.name] = model
-    return model
+    return _MODELS.register(model.name, model, replace_existing)
 
 
 def get_model(name: str | ModelStructure) -> ModelStructure:
     """The registered model structure of that name (ModelError listing the known names otherwise)."""
-    if isinstance(name, ModelStructure):
-        return name
-    try:
-        return _REGISTRY[name]
-    except KeyError:
-        raise ModelError(f"unknown model {name!r}; registered: {sorted(_REGISTRY)}") from None
+    return _MODELS.get(name)
 
 
 def model_names() -> list[str]:
-    return list(_REGISTRY)
+    return _MODELS.names()
 
 
 for _m in (M0, M3, M4):

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from roadload.registry import Registry
+
 from . import cycles, generate, real_routes
 from .files import load_profile_file
 from .profile import DriveCycle, RoadProfile, RoadProfileError
@@ -37,7 +39,7 @@ class ProfileEntry:
     seeded: bool  # the factory takes ``seed``
 
 
-_REGISTRY: dict[str, ProfileEntry] = {}
+_REGISTRY: Registry[ProfileEntry] = Registry("road profile", ProfileEntry, ValueError, normalise=str.lower)
 _SUFFIXES = (".json", ".csv", ".gpx")
 
 
@@ -52,11 +54,8 @@ def register_profile(name: str, factory: Factory, *, description: str = "", kind
         raise ValueError(f"profile name {name!r}: must be non-empty and not look like a file path")
     if kind not in ("road", "cycle"):
         raise ValueError(f"kind must be 'road' or 'cycle', got {kind!r}")
-    if key in _REGISTRY and not overwrite:
-        raise ValueError(f"profile name {name!r} is already registered ({_REGISTRY[key].description}); "
-                         "pass overwrite=True to replace it")
     seeded = "seed" in inspect.signature(factory).parameters
-    _REGISTRY[key] = ProfileEntry(key, factory, description, kind, seeded)
+    _REGISTRY.register(key, ProfileEntry(key, factory, description, kind, seeded), replace_existing=overwrite)
 
 
 def register_profile_file(name: str, path: str | os.PathLike, *, description: str = "",
@@ -97,7 +96,7 @@ def load_profile(name_or_path: str | os.PathLike, seed: int = 0, **kw) -> RoadPr
     file loader (e.g. column names for a track CSV). Unknown name -> UnknownProfileError listing the names.
     """
     text = os.fspath(name_or_path)
-    entry = _REGISTRY.get(text.lower())
+    entry = _REGISTRY.find(text)
     if entry is not None:
         return entry.factory(seed=seed, **kw) if entry.seeded else entry.factory(**kw)
     path = Path(text)

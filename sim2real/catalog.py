@@ -27,6 +27,7 @@ import numpy as np
 
 from roadload.estimators.models import ACCELERATION, GRADIENT_ANGLE, PATH_CURVATURE, SPEED, ModelStructure, \
     Term, register_model
+from roadload.registry import Registry
 from roadload.units import G
 
 from .errors import DiagnosisError
@@ -67,6 +68,11 @@ class CandidateEffect:
     regime_hint: str = ""
     sim_aliases: tuple[str, ...] = ()
     side: str = "force"
+
+    @property
+    def is_brake(self) -> bool:
+        """About the friction brake: the only candidates that braking rows fit and judge (:mod:`.robust`)."""
+        return BRAKE_FORCE in self.needs or TIME_SINCE_BRAKE in self.needs
 
     @property
     def explains(self) -> tuple[str, ...]:
@@ -240,30 +246,22 @@ def _p(params, key):
     return float(params[key])
 
 
-_CATALOG: dict[str, CandidateEffect] = {}
+_CATALOG: Registry[CandidateEffect] = Registry("candidate effect", CandidateEffect, DiagnosisError)
 
 
 def register_candidate(candidate: CandidateEffect, replace_existing: bool = False) -> CandidateEffect:
     """Add a candidate effect (DiagnosisError if the name is taken and replace_existing is False)."""
     if not isinstance(candidate, CandidateEffect):
         raise DiagnosisError(f"register_candidate expects a CandidateEffect, got {type(candidate).__name__}")
-    if candidate.name in _CATALOG and not replace_existing:
-        raise DiagnosisError(f"a candidate effect named {candidate.name!r} exists; pass replace_existing=True")
-    _CATALOG[candidate.name] = candidate
-    return candidate
+    return _CATALOG.register(candidate.name, candidate, replace_existing)
 
 
 def get_candidate(name: str | CandidateEffect) -> CandidateEffect:
-    if isinstance(name, CandidateEffect):
-        return name
-    try:
-        return _CATALOG[name]
-    except KeyError:
-        raise DiagnosisError(f"unknown candidate effect {name!r}; known: {sorted(_CATALOG)}") from None
+    return _CATALOG.get(name)
 
 
 def candidate_names() -> list[str]:
-    return list(_CATALOG)
+    return _CATALOG.names()
 
 
 _TAU_GRID = (150.0, 300.0, 600.0, 1200.0, 2400.0, 4800.0)

@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 
 from roadload.estimators.metrics import residual_correlation as _residual_correlation
+from roadload.registry import Registry
 from roadload.units import KELVIN
 
 from .errors import DiagnosisError
@@ -76,27 +77,19 @@ class Regime:
 
 
 _KMH = 1 / 3.6
-_REGIMES: dict[str, Regime] = {}
+_REGIMES: Registry[Regime] = Registry("regime", Regime, DiagnosisError)
 
 
 def register_regime(regime: Regime, replace_existing: bool = False) -> Regime:
-    if regime.name in _REGIMES and not replace_existing:
-        raise DiagnosisError(f"a regime named {regime.name!r} exists; pass replace_existing=True")
-    _REGIMES[regime.name] = regime
-    return regime
+    return _REGIMES.register(regime.name, regime, replace_existing)
 
 
 def get_regime(name: str | Regime) -> Regime:
-    if isinstance(name, Regime):
-        return name
-    try:
-        return _REGIMES[name]
-    except KeyError:
-        raise DiagnosisError(f"unknown regime {name!r}; known: {sorted(_REGIMES)}") from None
+    return _REGIMES.get(name)
 
 
 def regime_names() -> list[str]:
-    return list(_REGIMES)
+    return _REGIMES.names()
 
 
 for _r in (

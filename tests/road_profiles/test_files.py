@@ -15,10 +15,9 @@ FIELDS = ("distance", "grade", "curvature", "bank", "speed_limit", "stops")
 
 @pytest.fixture
 def clean_registry():
-    saved = dict(registry._REGISTRY)
+    saved = registry._REGISTRY.snapshot()
     yield
-    registry._REGISTRY.clear()
-    registry._REGISTRY.update(saved)
+    registry._REGISTRY.restore(saved)
 
 
 @pytest.mark.parametrize("suffix", [".json", ".csv"])

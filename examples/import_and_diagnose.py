@@ -94,6 +94,8 @@ def main() -> None:
                              "fit": ", ".join(f"{k} = {v:.4g}" for k, v in r["parameters"].items())}
                             for r in diagnosis.ranking[:6]])
     print(markdown_table(ranking, floatfmt=".3f"))
+    for step in diagnosis.selection:
+        print(f"forward selection step {step['step']}: {step['effect']} -> {step['reason']}")
     written = write_report(diagnosis, args.out)
     print("report:", ", ".join(str(p) for p in written.values()))
 

@@ -6,9 +6,9 @@
 
 A generated block sits between ``<!-- BEGIN generated: NAME -->`` and ``<!-- END generated: NAME -->`` in a page;
 everything outside the markers is hand-written. Blocks: the estimator catalogue (roadload.estimators.CATALOG),
-the chapter-5 settings, the tractive-force model registry, the simulator effects (roadload.envs.EFFECTS), the
-sim-to-real candidate catalogue, the gym configuration fields (roadload.gym.config) and the import-linter layers
-(pyproject.toml).
+the chapter-5 settings, the vehicle presets, the tractive-force model registry, the simulator effects
+(roadload.envs.EFFECTS), the sim-to-real candidate catalogue, the gym configuration fields (roadload.gym.config)
+and the import-linter layers (pyproject.toml).
 """
 
 from __future__ import annotations
@@ -97,6 +97,17 @@ def effects() -> str:
     return "\n\n".join(out)
 
 
+def presets() -> str:
+    from roadload.presets import PRESETS, get_preset
+
+    rows = []
+    for name in PRESETS:
+        spec = get_preset(name)
+        rows.append([f"`{name}`", spec.description, f"{spec.body.mass:g}", spec.drivetrain.kind,
+                     len(spec.drivetrain.gear_ratios)])
+    return table(["preset", "vehicle", "mass [kg]", "drive-train", "gears"], rows)
+
+
 def sim2real_candidates() -> str:
     from roadload.sim2real import candidate_names, get_candidate
 
@@ -157,7 +168,7 @@ def layers() -> str:
 BLOCKS = {
     "estimators.md": {"catalog": estimator_catalog, "chapter5": chapter5},
     "force_models.md": {"models": force_models},
-    "effects.md": {"effects": effects},
+    "effects.md": {"presets": presets, "effects": effects},
     "sim2real.md": {"candidates": sim2real_candidates},
     "gym.md": {"config": gym_config},
     "architecture.md": {"layers": layers},

@@ -125,7 +125,9 @@ def _config_rows(cls) -> list[list]:
             default = "(see below)" if hasattr(f.default_factory, "model_fields") else str(f.default_factory())
         else:
             default = repr(f.default)
-        rows.append([f"`{name}`", f"`{default}`", f.description or ""])
+        kind = getattr(f.annotation, "__name__", None) if not getattr(f.annotation, "__args__", None) else None
+        kind = (kind or str(f.annotation).replace("typing.", "")).replace(" | ", " or ")
+        rows.append([f"`{name}`", f"`{kind}`", f"`{default}`", f.description or ""])
     return rows
 
 
@@ -135,7 +137,7 @@ def gym_config() -> str:
     out = []
     for title, cls in (("EcoDriveConfig", EcoDriveConfig), ("EcoDriveReward (`reward=`)", EcoDriveReward),
                        ("EcoHighwayConfig", EcoHighwayConfig), ("EcoHighwayReward (`reward=`)", EcoHighwayReward)):
-        out.append(f"**{title}**\n\n" + table(["field", "default", "meaning"], _config_rows(cls)))
+        out.append(f"**{title}**\n\n" + table(["field", "type", "default", "meaning"], _config_rows(cls)))
     return "\n\n".join(out)
 
 

@@ -76,7 +76,7 @@ CT_SKIPPED, CT_ROLLED_BACK, CT_BLOWUP_AT, CT_T, CT_RING_POS, CT_RING_FILL, CT_P_
 N_CT = 7
 #: samples between two positive-definiteness checks (LDLᵀ factorisation) of a symmetric P; finiteness, the
 #: diagonal and the bound are checked every sample
-PD_CHECK_INTERVAL = 8
+PD_CHECK_INTERVAL = 16  # a power of two
 #: scratch buffers run_record works in (allocated by the caller: the kernel runs without reference counting)
 N_SCRATCH_VECTORS, N_SCRATCH_MATRICES = 11, 2
 
@@ -493,6 +493,7 @@ def run_record(regressors, outputs, instruments, codes, settings, process_noise,
     row = vectors[10]
     P_prev = matrices[0]
     work = matrices[1]
+    t0 = counters[CT_T]  # samples before this record (sample indices are global: online == batch)
 
     for t in range(T):
         b, valid = read_sample(regressors, outputs, instruments, t, a, z, instrument_ring, counters, iv, delay, n)
@@ -549,7 +550,7 @@ def run_record(regressors, outputs, instruments, codes, settings, process_noise,
             if it > 0 and converged(X, X_iter, tol, n):
                 break
         # diagonal, finiteness and bound every sample; the LDLᵀ factorisation every PD_CHECK_INTERVAL samples
-        health, pmax = covariance_health(X, P, work, p_bound, n, sym, (counters[CT_T] + t) % PD_CHECK_INTERVAL == 0)
+        health, pmax = covariance_health(X, P, work, p_bound, n, sym, ((t0 + t) & (PD_CHECK_INTERVAL - 1)) == 0)
         if not ok:
             health = P_CORRUPT
         if health != P_CORRUPT and pmax > scalars[SC_PMAX]:
@@ -562,9 +563,9 @@ def run_record(regressors, outputs, instruments, codes, settings, process_noise,
             counters[CT_P_RESETS] += 1
             pmax = reset_covariance(P, P0, n)
             if counters[CT_BLOWUP_AT] < 0:
-                counters[CT_BLOWUP_AT] = counters[CT_T] + t
+                counters[CT_BLOWUP_AT] = t0 + t
         if pmax > blowup_level and counters[CT_BLOWUP_AT] < 0:
-            counters[CT_BLOWUP_AT] = counters[CT_T] + t
+            counters[CT_BLOWUP_AT] = t0 + t
         r_post = b
         if robust or store == STORE_FULL:
             for i in range(n):

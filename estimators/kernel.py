@@ -16,8 +16,9 @@ A time step is the composition of interchangeable parts, selected by small integ
    P - L a P + Q_t(P_d) (Stenlund-Gustafsson); optional Joseph form in the Kalman family;
 6. :func:`regularise`: P ← P (I + κP)⁻¹ (eq. 3.34) and the Levenberg-Marquardt or Tikhonov parameter update;
 7. :func:`saturate`: parameter saturation X_min ≤ X̂ ≤ X_max (section 3.10.1);
-8. :func:`covariance_health` — the safety net of every composition: P must stay finite, positive definite
-   (LDLᵀ pivots > 0; for instruments, where P is not symmetric, a positive diagonal) and bounded,
+8. :func:`covariance_health` — the safety net of every composition: P must stay finite, with a positive
+   diagonal (every sample), positive definite (LDLᵀ pivots > 0, every ``PD_CHECK_INTERVAL`` = 16 samples; not
+   for instruments, where P is not symmetric) and bounded,
    max diag P ≤ ``p_bound`` (``FP_P_BOUND`` = ``covariance_bound_ratio`` × max diag P_0). An update that
    leaves P non-finite or indefinite is rolled back (X̂ as before the sample) and P is reset to P_0; a P above
    the bound is reset to P_0 (covariance resetting, the remedy against wind-up the text lists in section

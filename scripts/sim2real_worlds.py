@@ -23,6 +23,7 @@ from roadload.experiments.worlds import (
 from roadload.experiments.worlds.selftest import (
     WorldResult,
     WorldSelftest,
+    markdown_table,
     plot_confusion,
 )
 from roadload.fileio import write_text
@@ -30,12 +31,12 @@ from roadload.fileio import write_text
 QUICK_EFFECTS = ("payload", "none")
 
 
-def report(world: str, res: WorldSelftest, seeds: list[int], png: Path | None, seconds: float | None = None
-           ) -> dict:
+def report(world: str, res: WorldSelftest, seeds: list[int], png: Path | None, seconds: float | None = None,
+           markdown: bool = False) -> dict:
     """Print the confusion table and summary of one world (and write its heat map to ``png``)."""
     took = f", {seconds:.0f} s" if seconds is not None else ""
     print(f"\n== world {world}: confusion (withheld x first identified), {len(seeds)} seed(s){took}")
-    print(res.confusion(world).to_string())
+    print(markdown_table(res.confusion(world)) if markdown else res.confusion(world).to_string())
     s = res.summary(world)
     print(f"top-1 {s['catalog_correct']}/{s['catalog_cases']} = {100 * s['top1']:.1f} %; out-of-catalog "
           f"unexplained and localised {s['outside_ok']}; nothing withheld -> nothing identified "
@@ -63,12 +64,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--png", type=Path, default=None, help="folder for the confusion heat maps (PNG per world)")
     ap.add_argument("--from-json", type=Path, default=None, help="print (and plot) the tables of a saved --json "
                                                                   "run instead of running")
+    ap.add_argument("--markdown", action="store_true", help="print the confusion tables as markdown")
     args = ap.parse_args(argv)
     if args.from_json:
         dump = json.loads(args.from_json.read_text())
         for world, d in dump.items():
             res = WorldSelftest([WorldResult(**r) for r in d["results"]])
-            report(world, res, sorted({r.seed for r in res.results}), args.png)
+            report(world, res, sorted({r.seed for r in res.results}), args.png, markdown=args.markdown)
         return 0
     worlds = sorted(WORLDS) if args.world == "all" else [args.world]
     seeds = range(1 if args.quick else args.seeds)
@@ -86,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
         res = run_world_selftest(world, seeds, effects, duration_s=duration, settings=settings,
                                  out_dir=args.out / world if args.out else None,
                                  progress=lambda msg: print(msg, flush=True))
-        s = report(world, res, list(seeds), args.png, time.perf_counter() - t0)
+        s = report(world, res, list(seeds), args.png, time.perf_counter() - t0, args.markdown)
         dump[world] = {"summary": s, "results": [r.to_dict() for r in res.results],
                        "confusion": res.confusion(world).to_dict()}
     if args.json:

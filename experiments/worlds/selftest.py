@@ -192,3 +192,13 @@ def plot_confusion(table: pd.DataFrame, path: Path | str, title: str) -> Path:
     fig.tight_layout()
     return save_figure(fig, path)
 
+
+def markdown_table(table: pd.DataFrame, index_name: str = "withheld \\ identified") -> str:
+    """A DataFrame as a GitHub markdown table (zeros left blank)."""
+    cols = [str(c) for c in table.columns]
+    lines = ["| " + " | ".join([index_name] + cols) + " |", "|" + "---|" * (len(cols) + 1)]
+    for idx, row in table.iterrows():
+        cells = ["" if (isinstance(v, (int, np.integer)) and v == 0) else str(v) for v in row.tolist()]
+        lines.append("| " + " | ".join([str(idx)] + cells) + " |")
+    return "\n".join(lines)
+

@@ -40,7 +40,8 @@ def report(world: str, res: WorldSelftest, seeds: list[int], png: Path | None, s
     s = res.summary(world)
     print(f"top-1 {s['catalog_correct']}/{s['catalog_cases']} = {100 * s['top1']:.1f} %; out-of-catalog "
           f"unexplained and localised {s['outside_ok']}; nothing withheld -> nothing identified "
-          f"{s['none_clean']}; median held-out RMSE shrinkage {100 * s['median_shrinkage']:.1f} %")
+          f"{s['none_clean']}; median held-out RMSE shrinkage {100 * s['median_shrinkage']:.1f} %; withheld "
+          f"effect among all identified (force + energy side) {s['found_anywhere']}/{s['catalog_cases']}")
     if len(seeds) > 1:
         for seed in seeds:
             print(f"  seed {seed}: top-1 {100 * res.top1(world, seed):.1f} %")

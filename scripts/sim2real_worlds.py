@@ -55,7 +55,8 @@ def report(world: str, res: WorldSelftest, seeds: list[int], png: Path | None, s
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--world", default="all", choices=sorted(WORLDS) + ["all"])
-    ap.add_argument("--seeds", type=int, default=1, help="number of seeds (0 .. N-1)")
+    ap.add_argument("--seeds", type=int, default=1, help="number of seeds (first-seed .. first-seed + N - 1)")
+    ap.add_argument("--first-seed", type=int, default=0, help="first seed")
     ap.add_argument("--effects", default=None, help="comma-separated withheld effects (default: all the world "
                                                     "supports)")
     ap.add_argument("--duration", type=float, default=900.0, help="seconds per trip (3 trips per case)")
@@ -74,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
             report(world, res, sorted({r.seed for r in res.results}), args.png, markdown=args.markdown)
         return 0
     worlds = sorted(WORLDS) if args.world == "all" else [args.world]
-    seeds = range(1 if args.quick else args.seeds)
+    seeds = range(args.first_seed, args.first_seed + (1 if args.quick else args.seeds))
     duration = 240.0 if args.quick else args.duration
     settings = default_settings(quick=args.quick)
     dump = {}

@@ -87,6 +87,7 @@ class WorldSelftest:
         out = [r for r in rows if r.withheld == OUTSIDE]
         none = [r for r in rows if r.withheld == NONE]
         cat = [r for r in rows if r.withheld not in (NONE, OUTSIDE)]
+        shrink = [r.shrinkage for r in cat if np.isfinite(r.shrinkage)]
         anywhere = sum(bool(set(r.all_identified) & set(supported_effects(r.world)[r.withheld].accepted))
                        for r in cat if r.withheld in supported_effects(r.world))
         return {"cases": len(rows), "top1": self.top1(world), "found_anywhere": anywhere,
@@ -94,8 +95,7 @@ class WorldSelftest:
                 "catalog_cases": sum(r.withheld not in (NONE, OUTSIDE) for r in rows),
                 "outside_ok": f"{sum(r.correct for r in out)}/{len(out)}",
                 "none_clean": f"{sum(r.correct for r in none)}/{len(none)}",
-                "median_shrinkage": float(np.nanmedian([r.shrinkage for r in rows
-                                                        if r.withheld not in (NONE, OUTSIDE)] or [np.nan]))}
+                "median_shrinkage": float(np.median(shrink)) if shrink else float("nan")}
 
 
 def default_settings(quick: bool = False) -> DiagnosisSettings:

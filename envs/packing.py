@@ -6,7 +6,16 @@ import numpy as np
 
 from roadload.vehicle import Curve, Map2D, VehicleSpec
 
-from .layout import *  # noqa: F401,F403 - index constants
+from .layout import (
+    N_P_TOTAL, N_TABLES, P_AB_F, P_AB_R, P_AREA, P_AUX_P, P_BAT_CAP, P_BAT_R, P_BAT_VOC, P_BRAKE_SHARE, P_BRAKE_TAU,
+    P_CF, P_CR, P_CW, P_CX_SLIP, P_DISC_C, P_DISC_H, P_DISC_HV, P_DN_HI, P_DN_LO, P_DRIVEN, P_DT, P_FR0, P_FR1,
+    P_FR4, P_ID, P_IDLE, P_IGEAR0, P_IW4, P_IZ, P_I_CLUTCH, P_I_DIFF, P_I_SOURCE, P_KIND_BEV, P_L, P_LAUNCH, P_LF,
+    P_LOCK_SLIP, P_LR, P_MASS0, P_MAX_POWER, P_MAX_SLIP, P_MAX_SPEED, P_MAX_TORQUE, P_MU0, P_N_GEARS,
+    P_OIL_COLD_FACTOR, P_OIL_TAU, P_OIL_WARM, P_PITCH_GRAD, P_P_AMB, P_P_MAX, P_RATIO0, P_RB_F, P_RB_R, P_REGEN_P,
+    P_REGEN_T, P_ROLL_GRAD, P_RW, P_SHIFT_MIN, P_STEER_MAX, P_SYNC_TAU, P_S_END, P_TOE, P_TRACK_F, P_TRACK_R,
+    P_T_AMB, P_T_END, P_UP_HI, P_UP_LO, P_YAW_DRAG, T_DIFFLOSS, T_DRAG, T_FUEL, T_FULLLOAD, T_GBLOSS, T_MOTORLOSS,
+    T_STEER,
+)
 
 _DRIVEN = {"rear": 0.0, "front": 1.0, "all": 2.0}
 _DUMMY_MAP = Map2D(x=[0.0, 1.0], y=[0.0, 1.0], values=[[0.0, 0.0], [0.0, 0.0]])

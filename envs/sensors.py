@@ -23,7 +23,10 @@ from roadload.channels import MEASURED
 from roadload.vehicle import SensorSpec, VehicleSpec
 
 from .effects import EffectsConfig
-from .layout import *  # noqa: F401,F403 - log column constants
+from .layout import (
+    L_ACC_X_SENS, L_ACC_Y_SENS, L_CLUTCH, L_DELTA, L_ELEV, L_GEAR, L_IBAT, L_PBF, L_PBR, L_T, L_TAMB, L_TE, L_V,
+    L_VBAT, L_WE, L_WFL, L_WFR, L_WRL, L_WRR, L_YAW,
+)
 
 INPUT_CHANNELS = ("vehicle_speed", "wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr",
                   "accel_x", "accel_y", "yaw_rate", "steering_wheel_angle")

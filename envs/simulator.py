@@ -25,7 +25,24 @@ from .driver import DriverConfig, cruise_stretches, pack_driver, speed_plan
 from .drivetrain import regen_capacity as _regen_capacity
 from .drivetrain import oil_loss_factor, speed_ratio
 from .effects import EffectsConfig
-from .layout import *  # noqa: F401,F403 - index constants
+from .layout import (
+    C_FRICTION, C_GEAR_REQ, C_REGEN, C_STEER, C_TRACTION, C_USE_DRIVER, L_A, L_ACC_X_SENS, L_ACC_Y_SENS, L_AY,
+    L_BANK, L_BETA, L_CLUTCH, L_CSF, L_CSR, L_CURV, L_CXA, L_DELTA, L_DISC_T, L_DRAGF, L_ELEV, L_ESRC, L_FAERO,
+    L_FBRAKE, L_FCLIMB, L_FCORNER, L_FR, L_FR0, L_FR1, L_FR4, L_FROLL, L_FX, L_GEAR, L_GRADE, L_HEAD, L_IBAT,
+    L_LOSSF, L_MASS, L_MU, L_OIL, L_PAMB, L_PATHCURV, L_PBF, L_PBR, L_POS, L_PSRC, L_RHO, L_RIM, L_SOC, L_T, L_TAMB,
+    L_TE, L_V, L_VBAT, L_WE, L_WFL, L_WFR, L_WIND_A, L_WIND_S, L_WRL, L_WRR, L_YAW, MODE_LOCKED, MODE_OPEN,
+    MODE_SLIP, N_CMD, N_LOG, N_ROAD, N_STATE, P_AREA, P_AUX_EXTRA, P_AUX_ON, P_BANK_GAIN, P_BANK_MAX, P_BANK_ON,
+    P_BANK_SCALE, P_BARO_H, P_BARO_ON, P_CF, P_CR, P_CW, P_CYCLE_MODE, P_DN_LO, P_DRAG_ON, P_DRAG_RATE,
+    P_DRAG_ROOFBOX, P_DRAG_SUN, P_DRAG_WIN, P_FR0, P_FR1, P_FR4, P_IDLE, P_KIND_BEV, P_L, P_LF, P_LR, P_MU0,
+    P_N_GEARS, P_OIL_ON, P_OIL_START, P_OIL_WARM, P_PAD_ON, P_PAD_RW_STD, P_PAD_TCOEF, P_PAD_TREF, P_PAYLOAD_MAX,
+    P_PAYLOAD_MIN, P_PAYLOAD_ON, P_PAYLOAD_STD, P_P_AMB, P_ROAD_LEN, P_RW, P_S_END, P_T_AMB, P_T_END, P_WARM_DIST,
+    P_WARM_FACTOR, P_WARM_ON, P_WET_F1, P_WET_FACTOR, P_WET_ON, P_WIND_DIR, P_WIND_DIR_STD, P_WIND_GUST_STD,
+    P_WIND_GUST_TAU, P_WIND_MEAN, P_WIND_ON, P_WINTER_CS, P_WINTER_ON, P_WINTER_RR, R_BANK, R_CRUISE, R_CURV,
+    R_ELEV, R_GRADE, R_HEAD, R_S, R_VLIM, R_VPLAN, S_A, S_AY, S_AY_MAX, S_AY_WARN_N, S_DISC_T, S_DRAGF, S_D_AERO,
+    S_D_BRAKE, S_D_CLUTCH, S_D_CORNER, S_D_DIFF, S_D_GEARBOX, S_D_ROLL, S_E_PAYLOAD_PE, S_E_SOURCE, S_GEAR,
+    S_LAST_SHIFT, S_MASS, S_MODE, S_NLOG, S_OIL_T, S_OMEGA_E, S_POS, S_RIDX, S_SOC, S_T, S_TE, S_V, S_W_CLIMB,
+    S_W_SHAFT,
+)
 from .numerics import road_value_at
 from .packing import pack_vehicle
 from roadload.presets import get_preset

@@ -602,8 +602,11 @@ def synthetic_settings(name: str, n_params: int = 3, output_noise_var: float = S
     if key not in CATALOG:
         raise RobustnessError(f"unknown estimator {name!r}")
     parts = CATALOG[key].parts
-    s: dict[str, Any] = dict(n_params=n_params, forgetting=0.995, output_noise=output_noise_var,
-                             scale0=float(np.sqrt(output_noise_var)), quantile0=output_noise_var)
+    s: dict[str, Any] = dict(n_params=n_params, scale0=float(np.sqrt(output_noise_var)), quantile0=output_noise_var)
+    if parts.get("covariance", "forgetting") == "forgetting":   # λ for forgetting, R¹ for the Kalman family
+        s["forgetting"] = 0.995
+    else:
+        s["output_noise"] = output_noise_var
     if parts.get("regularisation", "none") != "none":
         s["kappa"] = 0.1
     if parts.get("instruments", "none") == "delayed":

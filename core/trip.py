@@ -28,6 +28,7 @@ import pyarrow.parquet as pq
 
 from .channels import unit_of
 from .fileio import atomic_path
+from .trip_schema import TripMetadataError, parse_trip_payload
 
 TRUTH_PREFIX = "truth/"
 _META_KEY = b"roadload"
@@ -338,7 +339,10 @@ def _open(path: Path) -> tuple[pq.ParquetFile, dict[str, Any]]:
         raw = (pf.schema_arrow.metadata or {}).get(_META_KEY)
     if raw is None:
         raise TripError(f"{path}: Parquet file without roadload metadata (not a Trip)")
-    return pf, json.loads(raw)
+    try:
+        return pf, parse_trip_payload(raw, path, pf.metadata.num_rows)
+    except TripMetadataError as exc:
+        raise TripError(str(exc)) from None
 
 
 class TripWriter:

@@ -24,8 +24,8 @@ from roadload.fileio import atomic_path
 from roadload.controllers.closed_loop import run_metrics
 from roadload.controllers.drive import DriveSettings, drive
 from roadload.gym.config import EcoDriveConfig, make_config
-from roadload.gym.ecodrive import cut_profile
-from roadload.road_profiles import load_profile
+from roadload.gym.ecodrive import EcoDriveEnv, cut_profile
+from roadload.road_profiles import RoadProfile, load_profile
 
 ENV_ID = "roadload:roadload/EcoDrive-v0"
 VALIDATION_SEEDS = (40_000, 40_001, 40_002)
@@ -49,9 +49,17 @@ class RLError(ValueError):
 
 
 # --------------------------------------------------------------------------------------------- helpers
-def _atomic_write_bytes(path: Path, writer: Callable[[Path], None]) -> None:
+def _atomic_write_bytes(path: Path, writer: Callable[[Path], object]) -> None:
     with atomic_path(path) as tmp:
         writer(tmp)
+
+
+def _route(cfg: EcoDriveConfig, road_seed: int) -> RoadProfile:
+    """The environment's route: the first ``cfg.route_length`` m of road profile ``cfg.road``."""
+    profile = load_profile(cfg.road, seed=int(road_seed))
+    if not isinstance(profile, RoadProfile):
+        raise RLError(f"road: {cfg.road!r} is a drive cycle, not a road profile")
+    return cut_profile(profile, cfg.route_length)
 
 
 def _algo_class(algo: str):
@@ -112,15 +120,18 @@ def run_policy(policy: Callable[[np.ndarray], np.ndarray], env_config: dict[str,
     while not done:
         t0, s0, v0, lim0 = info["t"], info["s"], info["v"], info["speed_limit"]
         obs, r, terminated, truncated, info = env.step(policy(obs))
-        ret += r
+        ret += float(r)
         energy += info["terms"]["energy"]
         rows.append((t0, s0, v0, info["a"], lim0, energy))
         done = terminated or truncated
     log = pd.DataFrame(rows, columns=["t", "s", "v", "a", "speed_limit", "energy"])
-    metrics = _metrics(log, env.unwrapped.config.control_period, arrived=not truncated)
+    eco_env = env.unwrapped
+    if not isinstance(eco_env, EcoDriveEnv):
+        raise RLError(f"roadload/EcoDrive-v0 made a {type(eco_env).__name__}, expected EcoDriveEnv")
+    metrics = _metrics(log, eco_env.config.control_period, arrived=not truncated)
     metrics.update(energy_J=float(energy), energy_kWh=float(energy) / 3.6e6,
                    trip_time=float(info["t"]) if not truncated else float("nan"), episode_return=float(ret),
-                   stop_violations=int(round(info["return_costs"]["stop"] / max(env.unwrapped.config.reward.stop,
+                   stop_violations=int(round(info["return_costs"]["stop"] / max(eco_env.config.reward.stop,
                                                                                  1e-300))))
     env.close()
     return metrics, log
@@ -155,7 +166,7 @@ def run_controller(name: str, env_config: dict[str, Any], road_seed: int, seed: 
         raise RLError(f"unknown baseline {name!r}; choose from {sorted(CONTROLLER_BASELINES)}")
     controller, force_model = CONTROLLER_BASELINES[name]
     cfg = make_config(EcoDriveConfig, env_config, road_seed=int(road_seed))
-    road = cut_profile(load_profile(cfg.road, seed=int(road_seed)), cfg.route_length)
+    road = _route(cfg, road_seed)
     settings = DriveSettings(controller=controller, force_model=force_model, time_weight=cfg.reward.time,
                              dt=cfg.control_period)
     result, _ = drive(cfg.vehicle, road, effects=cfg.effects, seed=seed, settings=settings)
@@ -300,7 +311,7 @@ def plot_speed_profiles(logs: dict[str, pd.DataFrame], env_config: dict[str, Any
 
 
     cfg = make_config(EcoDriveConfig, env_config)
-    road = cut_profile(load_profile(cfg.road, seed=int(road_seed)), cfg.route_length)
+    road = _route(cfg, road_seed)
     fig, (ax, ax2) = plt.subplots(2, 1, figsize=(9, 6), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
     ax.plot(road.distance, road.speed_limit * 3.6, "k--", lw=1, label="speed limit")
     for name, log in logs.items():
@@ -645,9 +656,9 @@ def train_and_evaluate(algos: list[str], timesteps: int, out_dir: Path, n_envs: 
                 task = bar.add_task(f"training {algo.upper()}", total=timesteps)
                 res = train_policy(algo, timesteps, out_dir, n_envs=n_envs, seed=seed, env_config=env_config,
                                    vec=vec, eval_every=eval_every,
-                                   progress=lambda n, t=task: bar.update(t, completed=n))
-                _atomic_write_bytes(out_dir / f"{algo}_learning_curve.csv",
-                                    lambda tmp, c=res.curve: c.to_csv(tmp, index=False))
+                                   progress=lambda n: bar.update(task, completed=n))
+                curve = res.curve
+                _atomic_write_bytes(out_dir / f"{algo}_learning_curve.csv", lambda tmp: curve.to_csv(tmp, index=False))
             results.append(res)
         curve_png = plot_learning_curves(results, out_dir / "learning_curve.png")
         if skip_evaluation:

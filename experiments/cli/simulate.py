@@ -20,10 +20,15 @@ from roadload.envs.effects import describe_effects
 from roadload.experiments.bench_simulator import report
 from roadload.vehicle import _build
 
+from .errors import fail
+
+
+#: ambient temperatures the simulator's air-density and tire/oil models are meant for [degC]
+AMBIENT_RANGE_C = (-60.0, 60.0)
+
 
 def _fail(msg: str) -> None:
-    typer.secho(f"error: {msg}", fg=typer.colors.RED, err=True)
-    raise typer.Exit(code=2)
+    fail(msg)
 
 
 def _load_vehicle(text: str):
@@ -49,8 +54,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                                  ".json/.csv/.gpx file"),
         out: Path = typer.Option(..., help="output trip file (.parquet)"),
         seed: int = typer.Option(0, help="seed of the simulation (noise, disturbances, driver)"),
-        effects: str = typer.Option("", help="effects, e.g. 'wind:mean_speed=5,payload,tire_warmup' or 'all' "
-                                    "(roadload effects lists them)"),
+        effects: list[str] = typer.Option([], help="effects, e.g. 'wind:mean_speed=5,payload,tire_warmup' or 'all' "
+                                          "(comma-separated and/or repeatable; roadload effects lists them)"),
         distance: float = typer.Option(None, help="stop after this distance [km]"),
         duration: float = typer.Option(None, help="stop after this duration [s]"),
         road_seed: int = typer.Option(None, help="seed of generated roads (default: --seed)"),
@@ -66,6 +71,12 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
 
         if out.suffix != ".parquet":
             _fail(f"--out: trip files end in .parquet, got {out.name!r}")
+        if not AMBIENT_RANGE_C[0] <= ambient_temperature <= AMBIENT_RANGE_C[1]:
+            _fail(f"--ambient-temperature: must lie in [{AMBIENT_RANGE_C[0]:g}, {AMBIENT_RANGE_C[1]:g}] [degC], "
+                  f"got {ambient_temperature:g}")
+        for opt, value, unit in (("--duration", duration, "s"), ("--distance", distance, "km")):
+            if value is not None and not value > 0:
+                _fail(f"{opt}: must be > 0 [{unit}], got {value:g}")
         try:
             spec = _load_vehicle(vehicle)
             profile = _load_road(road, seed if road_seed is None else road_seed)
@@ -74,7 +85,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                 driver = _load_road(cycle, 0)
                 if not isinstance(driver, DriveCycle):
                     _fail(f"--cycle: {cycle!r} is a road profile, not a drive cycle")
-            cfg = EffectsConfig.parse(effects or None)
+            cfg = EffectsConfig.parse(",".join(effects) or None)
             cfg = EffectsConfig.from_dict({**cfg.to_dict(), "ambient_temperature": ambient_temperature + 273.15})
             sensor_spec = None
             if sensors is not None:

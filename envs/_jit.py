@@ -49,12 +49,16 @@ def jit(fn=None, *, refcount: bool = True):
     atomic increment / decrement pair per call."""
     if fn is None:
         return lambda f: jit(f, refcount=refcount)
-    old = config.CACHE_DIR
-    config.CACHE_DIR = CACHE_DIR
+    # numba.core.config creates its settings (CACHE_DIR, ...) at runtime from the environment: getattr/setattr
+    old = getattr(config, "CACHE_DIR")
+    setattr(config, "CACHE_DIR", CACHE_DIR)
     try:
-        return numba.njit(cache=True)(fn) if refcount else numba.njit(cache=True, _nrt=False)(fn)
+        if refcount:
+            return numba.njit(cache=True)(fn)
+        # _nrt is numba's private switch for reference counting; its njit overloads do not list it
+        return numba.njit(cache=True, _nrt=False)(fn)  # type: ignore[call-overload]
     finally:
-        config.CACHE_DIR = old
+        setattr(config, "CACHE_DIR", old)
 
 
 def stage(fn):

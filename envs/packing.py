@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from roadload.vehicle import Curve, Map2D, VehicleSpec
+from roadload.vehicle import Curve, Map2D, VehicleSpec, VehicleSpecError
 
 from .layout import (
     N_P_TOTAL, N_TABLES, P_AB_F, P_AB_R, P_AREA, P_AUX_P, P_BAT_CAP, P_BAT_R, P_BAT_VOC, P_BRAKE_SHARE, P_BRAKE_TAU,
@@ -86,8 +86,10 @@ def pack_vehicle(spec: VehicleSpec, dt: float = 0.01) -> tuple[np.ndarray, np.nd
     for g, (ratio, inertia) in enumerate(zip(d.gear_ratios, d.gearbox_inertia)):
         P[P_RATIO0 + g] = ratio
         P[P_IGEAR0 + g] = inertia
+    e, sh, m, bat = d.engine, d.shift, d.motor, d.battery
     if d.kind == "ice":
-        e, sh = d.engine, d.shift
+        if e is None or sh is None:
+            raise VehicleSpecError("drivetrain.engine and drivetrain.shift: required for kind 'ice', got None")
         P[P_IDLE] = e.idle_speed
         P[P_MAX_SPEED] = e.max_speed
         P[P_MAX_TORQUE] = max(e.full_load.y)
@@ -99,7 +101,8 @@ def pack_vehicle(spec: VehicleSpec, dt: float = 0.01) -> tuple[np.ndarray, np.nd
         P[P_LAUNCH] = sh.launch_speed
         P[P_LOCK_SLIP] = sh.lock_slip_speed
     else:
-        m, bat = d.motor, d.battery
+        if m is None or bat is None:
+            raise VehicleSpecError("drivetrain.motor and drivetrain.battery: required for kind 'bev', got None")
         P[P_MAX_SPEED] = m.max_speed
         P[P_MAX_TORQUE] = m.max_torque
         P[P_MAX_POWER] = m.max_power
@@ -128,19 +131,19 @@ def pack_vehicle(spec: VehicleSpec, dt: float = 0.01) -> tuple[np.ndarray, np.nd
     P[P_STEER_MAX] = 0.6
 
     tp = _TablePacker()
-    if d.kind == "ice":
-        tp.curve(T_FULLLOAD, d.engine.full_load)
-        tp.curve(T_DRAG, d.engine.drag)
-        tp.map2(T_FUEL, d.engine.fuel_power)
+    if e is not None and d.kind == "ice":
+        tp.curve(T_FULLLOAD, e.full_load)
+        tp.curve(T_DRAG, e.drag)
+        tp.map2(T_FUEL, e.fuel_power)
         tp.map2(T_MOTORLOSS, _DUMMY_MAP)
-    else:
+    elif m is not None:
         tp.curve(T_FULLLOAD, _DUMMY_CURVE)
         tp.curve(T_DRAG, _DUMMY_CURVE)
         tp.map2(T_FUEL, _DUMMY_MAP)
-        tp.map2(T_MOTORLOSS, d.motor.loss_map)
+        tp.map2(T_MOTORLOSS, m.loss_map)
     tp.map2(T_DIFFLOSS, d.differential_loss)
     tp.curve(T_STEER, Curve(spec.steering.steering_wheel_angle, spec.steering.wheel_angle))
-    for g, m in enumerate(d.gearbox_loss):
-        tp.map2(T_GBLOSS + g, m)
+    for g, loss_map in enumerate(d.gearbox_loss):
+        tp.map2(T_GBLOSS + g, loss_map)
     tabs, ti = tp.result()
     return P, tabs, ti

@@ -104,7 +104,7 @@ class Schedules:
 
     def apply(self, X: np.ndarray, P: np.ndarray) -> None:
         t, s = float(X[S_T]), float(X[S_POS])
-        if self.wind_speed is not None:
+        if self.wind_speed is not None and self.wind_direction is not None:  # set together by 'wind_ramp'
             P[P_WIND_MEAN] = self.wind_speed.value(t, s)
             P[P_WIND_DIR] = self.wind_direction.value(t, s)
         if self.mass is not None:

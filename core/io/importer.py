@@ -4,6 +4,7 @@ channels -> Trip with ``meta["import_report"]`` listing every repair and drop.""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Sequence
 
 from ..trip import Trip
 from .bmw_i3 import load_bmw_i3
@@ -16,7 +17,7 @@ __all__ = ["import_log"]
 
 
 def import_log(source: str | Path, fmt: str, mapping: str | Path | Mapping | None = None, *,
-               dbc: list[str | Path] = (), progress: Progress | None = None, strict: bool = False) -> Trip:
+               dbc: Sequence[str | Path] = (), progress: Progress | None = None, strict: bool = False) -> Trip:
     """Import a log of the given format through a mapping (file, packaged name, or default for the format).
 
     Malformed lines of text logs (candump, ASC, CSV) are left out and reported with their line numbers in

@@ -21,7 +21,7 @@ import json
 import re
 import warnings
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import pandas as pd
@@ -42,7 +42,7 @@ CAN_LOG_FORMATS = ("dbc-mf4", "candump", "blf", "asc", "comma2k19")
 
 
 # ------------------------------------------------------------------------------------------ CAN logs
-def resolve_dbcs(mapping: Mapping, source: Path, extra: list[str | Path] = ()) -> list[DbcSource]:
+def resolve_dbcs(mapping: Mapping, source: Path, extra: Sequence[str | Path] = ()) -> list[DbcSource]:
     """The mapping's DBC entries (searched next to the source, the mapping file and in the package) + extras."""
     roots = [source] + ([Path(mapping.path).parent] if mapping.path else [])
     out = [DbcSource(find_dbc(str(entry["file"]), roots), entry.get("bus")) for entry in mapping.dbc]
@@ -91,7 +91,7 @@ def signals_from_frames(frames: CanFrames, mapping: Mapping, dbcs: list[DbcSourc
     return decode_frames(frames, db, report, wanted_messages=needed)
 
 
-def load_can_log(source: str | Path, mapping: Mapping, *, dbc: list[str | Path] = (),
+def load_can_log(source: str | Path, mapping: Mapping, *, dbc: Sequence[str | Path] = (),
                  progress: Progress | None = None, fmt: str = "dbc-mf4") -> Trip:
     """A CAN bus log (MF4 file/folder, candump/asc/blf, comma2k19 raw_can) decoded with DBCs into a Trip."""
     source = Path(source)

@@ -63,6 +63,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         ambient_temperature: float = typer.Option(20.0, help="ambient temperature [degC]"),
         sensors: Path = typer.Option(None, help="sensor spec JSON (default: the vehicle's sensors)"),
         plot: bool = typer.Option(False, help="also write a PNG next to the trip"),
+        precision: str = typer.Option("compact", help="'compact' (quantised channels as scaled integers, truth "
+                                      "float32; ~4x smaller) or 'exact' (float64)"),
     ) -> None:
         """Simulate a trip (100 Hz CAN-like channels + ground truth) and write it as Parquet."""
 
@@ -99,25 +101,30 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                           TextColumn("{task.percentage:>5.1f}%"), TimeElapsedColumn(),
                           console=Console(stderr=True), transient=True) as bar:
                 task = bar.add_task(f"{spec.name} on {profile.name}", total=1.0)
-                trip = simulate(spec, profile, effects=cfg, sensors=sensor_spec, seed=seed,
+                # streamed: one Parquet row group per 2 min of driving, memory bounded by one chunk
+                path = simulate(spec, profile, effects=cfg, sensors=sensor_spec, seed=seed,
                                 duration=duration, distance=None if distance is None else distance * 1000.0,
-                                driver=driver, progress=lambda f: bar.update(task, completed=f))
-            path = trip.save(out)
+                                driver=driver, progress=lambda f: bar.update(task, completed=f), out=out,
+                                precision=precision)
+            info = Trip.read_info(path)
         except typer.Exit:
             raise
         except (ValueError, VehicleSpecError, FileNotFoundError) as exc:
             _fail(str(exc))
-        tr = trip.truth
-        km = tr["position"].iloc[-1] / 1000.0
-        e = trip.meta["energy"]["source"]
+        t_first = None
+        for last in Trip.iter_chunks(path, channels=[], truth_channels=["position"]):  # bounded memory
+            t_first = last.t[0] if t_first is None else t_first
+        km = float(last.truth["position"].iloc[-1]) / 1000.0
+        duration_s = float(last.t[-1] - t_first)
+        e = info["meta"]["energy"]["source"]
         use = (f"{e / 3.6e6 / km * 100:.1f} kWh/100 km" if spec.drivetrain.kind == "bev"
                else f"{e / 32.0e6 / km * 100:.1f} l/100 km (fuel at 32 MJ/l)") if km > 0 else "-"
-        typer.echo(f"wrote {path}: {trip.duration:.0f} s, {km:.2f} km, {len(trip)} samples, {use}")
-        for w in trip.meta["warnings"]:
+        typer.echo(f"wrote {path}: {duration_s:.0f} s, {km:.2f} km, {info['n_measured']} samples, {use}")
+        for w in info["meta"]["warnings"]:
             typer.secho(f"warning: {w}", fg=typer.colors.YELLOW, err=True)
         if plot:
 
-            typer.echo(f"wrote {plot_trip(trip, out.with_suffix('.png'))}")
+            typer.echo(f"wrote {plot_trip(Trip.load(path), out.with_suffix('.png'))}")
 
     @app.command("plot")
     def plot_cmd(trip: Path = typer.Argument(..., help="trip file (.parquet)"),

@@ -297,25 +297,28 @@ def matched_vehicle(variant: Variant = BEV_VARIANT) -> VehicleSpec:
     r = float(ch["wheel_radius_meters"])
     eta_tr = float(pt["transmission"]["eff_interp"])
     gears = list(variant.gears)
+    engine: EngineSpec | None = None
+    shift: ShiftSpec | None = None
+    motor: MotorSpec | None = None
+    battery: BatterySpec | None = None
     if variant.kind == "bev":
         _, _, p_max = _eff_curve(d)
         motor = MotorSpec(max_torque=245.0, max_power=p_max, max_speed=1190.0, regen_torque_limit=245.0,
                           regen_power_limit=p_max, inertia=1e-4, loss_map=_motor_loss_map(d))
-        extra = {"motor": motor, "battery": BatterySpec(capacity=float(pt["res"]["energy_capacity_joules"]),
-                                                        open_circuit_voltage=380.0, internal_resistance=0.0,
-                                                        auxiliary_power=float(d["pwr_aux_base_watts"]),
-                                                        initial_soc=0.9)}
+        battery = BatterySpec(capacity=float(pt["res"]["energy_capacity_joules"]), open_circuit_voltage=380.0,
+                              internal_resistance=0.0, auxiliary_power=float(d["pwr_aux_base_watts"]),
+                              initial_soc=0.9)
         kind = "bev"
     else:
-        extra = {"engine": _engine(d),
-                 "shift": ShiftSpec(upshift_speed_low=2300 * RPM, upshift_speed_high=4500 * RPM,
-                                    downshift_speed_low=1200 * RPM, downshift_speed_high=2500 * RPM,
-                                    launch_speed=1300 * RPM)}
+        engine = _engine(d)
+        shift = ShiftSpec(upshift_speed_low=2300 * RPM, upshift_speed_high=4500 * RPM,
+                          downshift_speed_low=1200 * RPM, downshift_speed_high=2500 * RPM, launch_speed=1300 * RPM)
         kind = "ice"
     dt = DrivetrainSpec(kind=kind, driven_axle="front", gear_ratios=gears, final_drive=variant.final_drive,
                         gearbox_inertia=[0.0] * len(gears), clutch_inertia=0.0, differential_inertia=0.0,
                         gearbox_loss=[_loss_table(g, eta_tr, 400.0, 1250.0) for g in gears],
-                        differential_loss=_loss_table(variant.final_drive, 1.0, 3000.0, 300.0), **extra)
+                        differential_loss=_loss_table(variant.final_drive, 1.0, 3000.0, 300.0),
+                        engine=engine, motor=motor, battery=battery, shift=shift)
     wb = float(ch["wheel_base_meters"])
     front = float(ch["drive_axle_weight_frac"])
     sw = np.radians(np.linspace(-540.0, 540.0, 13))

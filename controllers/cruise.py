@@ -7,9 +7,13 @@ F = F_ff(v) + m (dv_ref/dt + k_p e + integral k_i e dt), e = v_ref - v, with the
 F_ff = a_V + b_V v + c_V v^2 of the nominal coast-down coefficients, the reference's own acceleration as
 feed-forward (low-pass filtered; no tracking lag when the reference slows down before a lower limit), a clamped
 (anti-windup) integrator and the same jerk limit on the command as the MPC (|dF/dt| <= m j_max).
+A truck's cruise control (``overspeed`` > 0) has a speed band: where the law would brake (downhill) it coasts
+instead and brakes only above v_ref + overspeed ("downhill speed control").
 """
 
 from __future__ import annotations
+
+import math
 
 from dataclasses import dataclass
 
@@ -34,8 +38,12 @@ class CruiseSettings:
     integral_limit: float = 2.0  # [m/s^2] anti-windup clamp of the integral term
     jerk_max: float = 2.0  # [m/s^3] comfort: |dF/dt| <= m j_max on the command (as the MPC's)
     accel_filter: float = 0.5  # [s] time constant of the reference-acceleration feed-forward filter
+    overspeed: float = 0.0  # [m/s] truck speed band: downhill, no braking below v_ref + overspeed (0 = off)
 
     def __post_init__(self) -> None:
+        for name, value in self.__dict__.items():
+            if isinstance(value, float) and not math.isfinite(value):
+                raise ControllerError(f"cruise {name}: must be a finite number, got {value}")
         if not 0 < self.fraction <= 1:
             raise ControllerError(f"cruise fraction must be in (0, 1], got {self.fraction}")
         for name in ("kp", "accel", "decel", "integral_limit"):
@@ -43,6 +51,8 @@ class CruiseSettings:
                 raise ControllerError(f"cruise {name} must be positive, got {getattr(self, name)}")
         if self.ki < 0:
             raise ControllerError(f"cruise ki must be >= 0, got {self.ki}")
+        if self.overspeed < 0:
+            raise ControllerError(f"cruise overspeed must be >= 0 m/s, got {self.overspeed}")
 
 
 class CruiseLaw:
@@ -83,6 +93,11 @@ class CruiseLaw:
         ff = float(resistance_force(obs.v, 0.0, 0.0, self.ff))
         m = self.ff.inertial_mass
         force = ff + m * (self.a_ref + st.kp * err + self.integral)
+        if st.overspeed > 0 and force < 0 and self.a_ref >= 0:
+            # speed band [v_ref, v_ref + overspeed]: coast downhill (no traction, no brake) and let the speed rise;
+            # above the band a P law on v_ref + overspeed brakes (engine brake / retarder first); no wind-up
+            self.integral = min(self.integral, 0.0)
+            force = min(0.0, ff + m * st.kp * (self.v_ref + st.overspeed - obs.v))
         if self.last_force is not None:
             step = m * st.jerk_max * dt
             force = float(np.clip(force, self.last_force - step, self.last_force + step))

@@ -8,6 +8,8 @@ oracle) and the controller (mpc / cruise / human), runs :func:`~.closed_loop.run
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 
 from roadload.road_profiles import RoadProfile
@@ -15,14 +17,15 @@ from roadload.road_profiles import RoadProfile
 from .base import ControllerError, DriveContext
 from .closed_loop import RunResult, run_closed_loop
 from .cruise import CruiseController, CruiseSettings
-from .force_model import FORCE_MODEL_NAMES, FixedForceModel, OracleForceModel
+from .energy import with_loss_error
+from .force_model import FORCE_MODEL_NAMES, ErroredForceModel, FixedForceModel, OracleForceModel
 from .mpc import MpcSettings
 from .mpc_controller import MpcController, MpcControllerSettings
 from .sim_plant import HumanDriver, SimulatorPlant
 from .vehicle_models import abc_parameters, energy_model_from_spec
 from roadload.estimators.knowledge import knowledge_for_preset
 from roadload.estimators.models import coast_down_coefficients
-from roadload.estimators.pipeline import knowledge_from_spec
+from roadload.estimators.pipeline import PipelineSettings, knowledge_from_spec
 from roadload.road_profiles import load_profile
 from .online import OnlineForceModel
 
@@ -42,12 +45,21 @@ class DriveSettings:
     mpc: MpcSettings = field(default_factory=MpcSettings)
     cruise: CruiseSettings = field(default_factory=CruiseSettings)
     dt: float = 0.1
+    # the vehicle the abc model and the online model's prior come from (a fleet operator's nominal vehicle, e.g.
+    # a half-loaded truck); None: the driven vehicle itself
+    nominal_vehicle: object = None
+    pipeline: PipelineSettings | None = None  # online model: preprocessing settings (None: the defaults)
+    wrong_model: dict | None = None  # sensitivity: {"mass": 0.2, ...} relative errors on the oracle (see .errors)
 
     def __post_init__(self) -> None:
         if self.controller not in CONTROLLERS:
             raise ControllerError(f"unknown controller {self.controller!r}; choose one of {CONTROLLERS}")
         if self.force_model not in FORCE_MODEL_NAMES:
             raise ControllerError(f"unknown force model {self.force_model!r}; choose one of {FORCE_MODEL_NAMES}")
+        if not (math.isfinite(self.time_weight) and self.time_weight >= 0):
+            raise ControllerError(f"time_weight: must be a finite number >= 0 [J/s], got {self.time_weight}")
+        if not (math.isfinite(self.dt) and self.dt > 0):
+            raise ControllerError(f"dt: must be a finite number > 0 [s], got {self.dt}")
 
 
 def _knowledge(vehicle):
@@ -79,13 +91,20 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
     plant = SimulatorPlant(vehicle, road, effects=effects, seed=seed, dt=st.dt)
     spec = plant.spec
     energy = energy_model_from_spec(vehicle if isinstance(vehicle, str) else spec)
-    abc = abc_parameters(vehicle if isinstance(vehicle, str) else spec)
+    nominal = st.nominal_vehicle if st.nominal_vehicle is not None else (vehicle if isinstance(vehicle, str)
+                                                                         else spec)
+    abc = abc_parameters(nominal)
     if st.controller == "mpc" and st.force_model == "oracle":
         force_model = OracleForceModel(plant.true_parameters)
+    elif st.controller == "mpc" and st.force_model == "wrong":
+        errors = dict(st.wrong_model or {})
+        force_model = ErroredForceModel(OracleForceModel(plant.true_parameters), errors)
+        if errors.get("drivetrain_loss"):
+            energy = with_loss_error(energy, errors["drivetrain_loss"])
     elif st.controller == "mpc" and st.force_model == "online":
 
-        force_model = OnlineForceModel(_knowledge(vehicle if isinstance(vehicle, str) else spec), model=st.model,
-                                       estimator=st.estimator)
+        force_model = OnlineForceModel(_knowledge(nominal), model=st.model, estimator=st.estimator,
+                                       pipeline_settings=st.pipeline)
         force_model.attach(plant.can_window)
     else:
         force_model = FixedForceModel(abc)

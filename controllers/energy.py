@@ -8,7 +8,8 @@ Both powertrains use one smooth loss polynomial in shaft speed omega [rad/s] and
 - EV: battery power P_bat = F v + P_loss(omega_M, T_M) + P_aux, where F = F_trac - F_regen is the net wheel
   force of the motor, omega_M = v i / r_W, T_M = F r_W / i (motor/inverter map fitted by least squares).
 - ICE: fuel power P_fuel = (F_trac v + P_loss(omega_E, T_E)) / eta_i + P_idle (Willans line: indicated
-  efficiency eta_i plus speed-dependent friction), omega_E = v i_G(G) i_D / r_W, no regeneration. The gear G is
+  efficiency eta_i plus speed-dependent friction), omega_E = v i_G(G) i_D / r_W; braking through the engine's
+  drag (engine brake / retarder, fuel cut) is the ICE's ``regen`` force: limited, and free of fuel. The gear G is
   NOT optimised: it comes from a shift rule on speed (:meth:`SourceEnergyModel.gear_for_speed`), applied by
   the MPC as a smooth function of the planned speed (:meth:`SourceEnergyModel.smooth_ratio`).
 
@@ -17,7 +18,7 @@ The polynomial is convex in the forces and smooth in v > 0, which keeps the NLP 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -66,7 +67,9 @@ class SourceEnergyModel:
     # ------------------------------------------------------------------ gears
     @property
     def regenerates(self) -> bool:
-        return self.kind == "ev" and self.max_regen_power > 0
+        """True when the drive can brake without the friction brakes: EV regeneration, or an ICE's engine brake /
+        retarder in fuel cut (zero fuel, the ``regen`` force of an ICE costs nothing in :meth:`source_power`)."""
+        return self.max_regen_power > 0 and self.max_regen_torque > 0
 
     def gear_for_speed(self, v) -> np.ndarray:
         """Gear index (0-based) from the speed-based shift rule; always 0 for an EV."""
@@ -126,6 +129,14 @@ class SourceEnergyModel:
 
     def brake_force_limit(self, mass: float) -> float:
         return self.max_brake_deceleration * mass
+
+
+def with_loss_error(model: SourceEnergyModel, error: float) -> SourceEnergyModel:
+    """The energy model with every loss coefficient scaled by (1 + error) (sensitivity map: a wrong drive-train /
+    engine loss model in the MPC)."""
+    if not np.isfinite(error) or error <= -1.0:
+        raise EnergyModelError(f"loss error must be finite and > -1, got {error}")
+    return replace(model, loss=tuple(float(c) * (1.0 + error) for c in model.loss))
 
 
 def fit_loss_polynomial(shaft_speed, shaft_torque, loss_power) -> tuple[float, float, float, float, float]:

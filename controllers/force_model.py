@@ -16,6 +16,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from roadload.road_load import RoadLoadParameters, road_load, tractive_force
+from roadload.units import G
 
 try:  # casadi is a hard dependency, but keep numpy-only callers importable without it loaded
     import casadi as ca
@@ -108,4 +109,46 @@ class OracleForceModel:
         return {"force_model": self.name}
 
 
-FORCE_MODEL_NAMES = ("abc", "online", "oracle")
+MODEL_ERRORS = ("mass", "rolling", "drag_area", "grade_bias", "drivetrain_loss")
+"""Force-model errors of the sensitivity map: relative errors of m_V (with every mass-proportional term), of the
+rolling resistance (c0, c1, c4), of the drag area (c2), an absolute grade bias [rad] (a constant force
+m g sin(bias) ~ m g bias, added to c0) and a relative error of the drive-train/engine loss model (applied to the
+MPC's energy model, not to the forces; :func:`with_loss_error`)."""
+
+
+class ErroredForceModel:
+    """The oracle's true parameters with deliberate errors (sensitivity map): ``errors`` maps MODEL_ERRORS names
+    to relative errors (grade_bias: rad). ``drivetrain_loss`` is ignored here (see :func:`with_loss_error`)."""
+
+    name = "wrong"
+
+    def __init__(self, base: ForceModel, errors: dict[str, float]) -> None:
+        unknown = sorted(set(errors) - set(MODEL_ERRORS))
+        if unknown:
+            raise ForceModelError(f"unknown force-model errors {unknown}; known: {list(MODEL_ERRORS)}")
+        for k, e in errors.items():
+            if not np.isfinite(e) or (k != "grade_bias" and e <= -1.0):
+                raise ForceModelError(f"force-model error {k}={e}: relative errors must be finite and > -1")
+        self.base, self.errors = base, {k: float(v) for k, v in errors.items()}
+
+    def reset(self) -> None:
+        self.base.reset()
+
+    def observe(self, sample: dict[str, float]) -> None:
+        self.base.observe(sample)
+
+    def parameters(self) -> RoadLoadParameters:
+        p = self.base.parameters()
+        km = 1.0 + self.errors.get("mass", 0.0)
+        kr = 1.0 + self.errors.get("rolling", 0.0)
+        kc = 1.0 + self.errors.get("drag_area", 0.0)
+        mass = p.mass * km
+        return p.with_(mass=mass, c0=p.c0 * km * kr + mass * G * np.sin(self.errors.get("grade_bias", 0.0)),
+                       c1=p.c1 * km * kr, c4=p.c4 * km * kr, c2=p.c2 * kc, k_corner=p.k_corner * km * km,
+                       rotational_mass=p.rotational_mass)
+
+    def describe(self) -> dict[str, Any]:
+        return {"force_model": self.name, **{f"error_{k}": v for k, v in self.errors.items()}}
+
+
+FORCE_MODEL_NAMES = ("abc", "online", "oracle", "wrong")

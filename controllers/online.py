@@ -26,7 +26,7 @@ from roadload.units import G
 from .force_model import ForceModelError
 from roadload.estimators import chapter5_settings, make_estimator
 from roadload.estimators.models import get_model
-from roadload.estimators.pipeline import PipelineError, model_data, run_pipeline
+from roadload.estimators.pipeline import PipelineError, PipelineSettings, model_data, run_pipeline
 
 # estimator parameter name -> (RoadLoadParameters field, factor)
 _MAPPING = {"m_V f_r0": ("c0", G), "m_V": ("mass", 1.0), "rho_a/2 A_V c_x": ("c2", 1.0),
@@ -39,7 +39,8 @@ class OnlineForceModel:
     name = "online"
 
     def __init__(self, knowledge, model: str = "M4", estimator: str = "RRLM", update_period: float = 10.0,
-                 margin: float = 3.0, estimator_settings: dict[str, Any] | None = None) -> None:
+                 margin: float = 3.0, estimator_settings: dict[str, Any] | None = None,
+                 pipeline_settings: PipelineSettings | None = None) -> None:
 
         self.knowledge = knowledge
         self.structure = get_model(model)
@@ -57,8 +58,11 @@ class OnlineForceModel:
         estimator_settings = {**estimator_settings, "n_params": self.structure.n_params}
         self._make = lambda: make_estimator(self.estimator_name, x0=self.x0, **estimator_settings)
         self.update_period, self.margin = float(update_period), float(margin)
+        self.pipeline_settings = pipeline_settings
         self.can_source: Callable[[float], Trip | None] | None = None
-        self.rotational_mass = 0.0  # M3/M4 lump the rotating parts into m_V
+        # the pipeline removes (I_red + I_W) dv/dt / r_W from F_xV before the estimator sees it, so the estimated
+        # m_V is the body mass alone: the MPC's inertial mass needs the rotating parts added back
+        self.rotational_mass = knowledge.drivetrain.rotational_mass()
         self.reset()
 
     def attach(self, can_source: Callable[[float], Trip | None]) -> None:
@@ -91,7 +95,7 @@ class OnlineForceModel:
         if window is None:
             return 0
         try:
-            states = run_pipeline(window, self.knowledge).states
+            states = run_pipeline(window, self.knowledge, self.pipeline_settings).states
             t, A, B = model_data(states, self.structure)
         except PipelineError as exc:  # a too-short or unusable window: skip it, keep the estimate
             self.errors.append(str(exc))

@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import json
 from functools import lru_cache
 
 import numpy as np
@@ -36,13 +37,17 @@ def _spec(vehicle: VehicleSpec | str) -> VehicleSpec:
 
 
 def rotational_mass(spec: VehicleSpec, gear: int | None = None) -> float:
-    """(I_red(G) + 4 I_W) / r_W^2 [kg]; ICE without a gear: the middle gear."""
+    """(I_red(G) + 4 I_W) / r_W^2 [kg]; ICE without a gear: the middle gear (a truck's box of >= 10 gears: the
+    top gear, where a long-haul truck spends its time)."""
     d = spec.drivetrain
-    g = gear if gear is not None else (1 if d.n_gears == 1 else max(1, d.n_gears // 2 + 1))
+    g = gear if gear is not None else (1 if d.n_gears == 1 else d.n_gears if d.n_gears >= TRUCK_GEARBOX_GEARS
+                                       else max(1, d.n_gears // 2 + 1))
     return float(spec.effective_mass(g) - spec.body.mass)
 
 
 FIT_QUALITY: dict[str, dict[str, float]] = {}
+TRUCK_GEARBOX_GEARS = 10  # a gearbox with at least this many gears is a truck's (rotational mass: top gear)
+HEAVY_VEHICLE_MASS = 7500.0  # [kg]: above it the energy fit covers up to 80 % of rated power
 
 
 def _record_fit(name: str, w, t, loss, coef) -> None:
@@ -101,7 +106,12 @@ def _fit_energy(spec: VehicleSpec) -> SourceEnergyModel:
                                  max_regen_torque=float(m.regen_torque_limit),
                                  auxiliary_power=aux, max_brake_deceleration=0.8 * G, name=spec.name)
     e = d.engine
+    if e is None or d.shift is None:
+        raise ValueError(f"{spec.name}: an ICE drive-train needs an engine and a shift spec")
     ratios = tuple(float(g * d.final_drive) for g in d.gear_ratios)
+    # the eco-driving operating region: up to 80 kW for a car, up to 80 % of rated power for a heavy vehicle
+    rated = float(np.max(np.asarray(e.full_load.x) * np.asarray(e.full_load.y)))
+    power_cap = 80e3 if spec.body.mass < HEAVY_VEHICLE_MASS else 0.8 * rated
     rows, target = [], []
     for gear in range(1, d.n_gears + 1):
         for v in speeds:
@@ -110,7 +120,7 @@ def _fit_energy(spec: VehicleSpec) -> SourceEnergyModel:
                 continue
             t_drag, t_max = torque_limits(P, tabs, ti, omega, v)
             ratio = ratios[gear - 1]
-            for f in np.linspace(50.0, min(0.9 * t_max * ratio / r, 80e3 / v), 15):
+            for f in np.linspace(50.0, min(0.9 * t_max * ratio / r, power_cap / v), 15):
                 t_e = float(inverse_wheel_torque(P, tabs, ti, gear, f * r, omega, 1.0))
                 if not (t_drag < t_e <= t_max):
                     continue
@@ -132,10 +142,20 @@ def _fit_energy(spec: VehicleSpec) -> SourceEnergyModel:
     up = 0.5 * (d.shift.upshift_speed_low + d.shift.upshift_speed_high)
     shift = tuple(float(up * r / ratios[g]) for g in range(d.n_gears - 1))
     torque_max = float(np.max(e.full_load.y))
-    power_max = float(np.max(np.asarray(e.full_load.x) * np.asarray(e.full_load.y)))
+    power_max = rated
+    # engine brake (+ retarder) in fuel cut: the drag torque at the shift rule's cruising speed, and the largest
+    # drag power over the speed range, both at 90 % (the plant drops braking beyond its capacity)
+    w_drag = np.linspace(float(e.idle_speed), float(e.max_speed), 50)
+    drag = -np.interp(w_drag, e.drag.x, e.drag.y)
+    brake_torque = 0.9 * float(np.interp(up, e.drag.x, -np.asarray(e.drag.y)))
+    brake_power = 0.9 * float(np.max(drag * w_drag))
     return SourceEnergyModel(kind="ice", wheel_radius=r, gear_ratios=ratios, loss=loss, max_power=power_max,
-                             max_torque=torque_max, indicated_efficiency=float(min(max(eta, 0.05), 1.0)),
+                             max_torque=torque_max, max_regen_power=brake_power, max_regen_torque=brake_torque,
+                             indicated_efficiency=float(min(max(eta, 0.05), 1.0)),
                              auxiliary_power=0.0, max_brake_deceleration=0.8 * G, shift_speeds=shift, name=spec.name)
+
+
+_COAST_DOWN_BY_SPEC: dict[str, tuple[float, float, float]] = {}
 
 
 @lru_cache(maxsize=16)
@@ -151,8 +171,10 @@ def abc_parameters(vehicle: VehicleSpec | str) -> RoadLoadParameters:
     if isinstance(vehicle, str):
         a, b, c = _coast_down(vehicle)
     else:
-
-        a, b, c = coast_down_coefficients(spec)
+        key = json.dumps(spec.to_dict(), sort_keys=True)
+        if key not in _COAST_DOWN_BY_SPEC:
+            _COAST_DOWN_BY_SPEC[key] = coast_down_coefficients(spec)
+        a, b, c = _COAST_DOWN_BY_SPEC[key]
     return RoadLoadParameters.from_coast_down(a, b, c, mass=float(spec.body.mass),
                                               rotational_mass=rotational_mass(spec))
 

@@ -1,5 +1,6 @@
 """Vehicle presets: ``get_preset(name)`` for "gt_rwd", "gt_awd" (the text's two grand tourers, section 5.1) and
-"bmw_i3" (the battery-electric car of the shared real-data set).
+"bmw_i3" (the battery-electric car of the shared real-data set) and "truck_40t" (a 40 t long-haul
+tractor-semitrailer, :func:`truck_spec` for other gross masses).
 
 Values are published-like or typical, not manufacturer data: the two grand tourers follow section 5.1 (rear-drive
 228 kW V6 and all-wheel-drive 419 kW V8, 7-speed dual-clutch gearbox, ~1.9 t / ~2.1 t); the i3 uses published
@@ -198,7 +199,95 @@ def _bmw_i3() -> VehicleSpec:
     )
 
 
-_PRESETS = {"gt_rwd": _gt_rwd, "gt_awd": _gt_awd, "bmw_i3": _bmw_i3}
+TRUCK_RATIOS = [16.69, 12.92, 9.93, 7.67, 5.90, 4.57, 3.66, 2.83, 2.17, 1.68, 1.29, 1.00]  # 12-speed AMT
+TRUCK_MASS_RANGE = (15_000.0, 40_000.0)  # gross vehicle mass [kg]: empty tractor-semitrailer .. 40 t (EU)
+TRUCK_NOMINAL_MASS = 27_500.0  # half load: what a fleet operator's abc model assumes [kg]
+
+
+def truck_fuel_map(speed_axis, torque_axis, friction: Curve, peak_indicated_efficiency: float) -> Map2D:
+    """Diesel fuel power [W]: (T + T_fric(omega)) omega / eta_i(omega, T) (Willans form), T_fric = -friction(omega);
+    eta_i peaks around 1300 rpm and falls at low indicated torque; zero at or below the friction curve."""
+    w = np.asarray(speed_axis, float)[:, None]
+    t = np.asarray(torque_axis, float)[None, :]
+    t_fric = -np.interp(w, friction.x, friction.y)
+    indicated = np.maximum(t + t_fric, 0.0)
+    eta = (peak_indicated_efficiency * (1.0 - 0.2 * np.exp(-indicated / 400.0))
+           * (1.0 - 0.12 * ((w - 136.0) / 110.0) ** 2))
+    values = np.where(t > -t_fric, indicated * w / np.maximum(eta, 0.05), 0.0)
+    return Map2D(list(map(float, speed_axis)), list(map(float, torque_axis)), values.round(2).tolist())
+
+
+def truck_spec(gross_mass: float = 40_000.0) -> VehicleSpec:
+    """Long-haul tractor-semitrailer (4x2 tractor, 3-axle trailer) at ``gross_mass`` [kg] (15-40 t).
+
+    Typical published-like values, not one manufacturer's: 13 l diesel, 330 kW / 2300 N m (1000-1400 rpm), 12-speed
+    automated manual gearbox (16.69 .. 1.00) and axle 2.53 (85 km/h at ~1170 rpm in 12th), 315/70 R22.5 tyres
+    (r_W 0.49 m, f_r0 0.0055: low-rolling-resistance long-haul tyres), c_w A = 0.57 x 10 m^2 = 5.7 m^2. The
+    equivalent rotating inertia of all 12 wheel positions is lumped into the simulator's four wheels
+    (4 I_W = 200 kg m^2). Engine brake + hydraulic retarder: modelled as the engine's drag (motoring) curve, i.e.
+    the braking torque the drive-train can put on the wheels in fuel cut (the simulator's regen-capacity path of
+    an ICE): friction torque plus up to 2400 N m of combined engine-brake/retarder torque at 1800 rpm (~450 kW);
+    the fuel map uses the friction part only. Sensors: the car's CAN set with the drive-torque offset and noise
+    scaled by the engine size (10x: -20 N m offset, +2 % gain error).
+    """
+    lo, hi = TRUCK_MASS_RANGE
+    if not lo <= gross_mass <= hi:
+        raise VehicleSpecError(f"truck gross_mass: {gross_mass} kg outside {lo:.0f}..{hi:.0f} kg")
+    ratios = TRUCK_RATIOS
+    final_drive = 2.53
+    full_load_rpm = [600, 800, 1000, 1400, 1600, 1800, 1900, 2100]
+    full_load_nm = [1300, 1900, 2300, 2300, 2100, 1800, 1650, 900]
+    full = Curve([float(x * RPM) for x in full_load_rpm], list(map(float, full_load_nm)))
+    speed_axis = np.array([0, 400, 500, 600, 800, 1000, 1200, 1400, 1600, 1800, 2000, 2100, 2300]) * RPM
+    friction = Curve([float(x) for x in speed_axis], [float(-(60.0 + 0.55 * x)) for x in speed_axis])
+    # engine brake (decompression) + retarder, ramping in above 700 rpm, 2400 N m at 1800 rpm and above
+    brake = np.clip((speed_axis / RPM - 700.0) / 1100.0, 0.0, 1.0) * 2400.0
+    drag = Curve([float(x) for x in speed_axis], [float(f - b) for f, b in zip(friction.y, brake)])
+    torque_axis = np.linspace(-400.0, 2600.0, 31)
+    fuel = truck_fuel_map(speed_axis, torque_axis, friction, 0.49)
+    gb_torque = np.linspace(-3000.0, 2800.0, 9)
+    gb_speed = [0.0, 50.0, 100.0, 150.0, 200.0, 250.0]
+    gb_loss = [gear_loss_map(i, 0.99 if i == 1.0 else 0.98, 3.0, 0.01, gb_torque, gb_speed) for i in ratios]
+    d_torque = np.linspace(-3000.0 * ratios[0], 2800.0 * ratios[0], 9)
+    d_speed = [0.0, 25.0, 50.0, 100.0, 150.0, 200.0, 250.0]
+    diff = gear_loss_map(final_drive, 0.975, 6.0, 0.02, d_torque, d_speed)
+    engine = EngineSpec(idle_speed=600 * RPM, max_speed=2100 * RPM, full_load=full, drag=drag, fuel_power=fuel,
+                        inertia=3.5)
+    shift = ShiftSpec(upshift_speed_low=1150 * RPM, upshift_speed_high=1750 * RPM, downshift_speed_low=850 * RPM,
+                      downshift_speed_high=1250 * RPM, min_interval=1.5, sync_time_constant=0.25,
+                      max_slip_time=2.5, launch_speed=900 * RPM, lock_slip_speed=5.0)
+    drivetrain = DrivetrainSpec(kind="ice", driven_axle="rear", gear_ratios=list(ratios), final_drive=final_drive,
+                                gearbox_inertia=[0.25] * len(ratios), clutch_inertia=1.5, differential_inertia=1.0,
+                                gearbox_loss=gb_loss, differential_loss=diff, engine=engine, shift=shift,
+                                oil_warm_temperature=353.15, oil_cold_loss_factor=1.5, oil_time_constant=2400.0)
+    sensors = default_sensors("ice", with_elevation=True)
+    sensors.channels["drive_torque"] = ChannelSensorSpec(20.0, 0.0, 5.0, 0.03, 800.0)
+    sensors.drive_torque_offset = -20.0
+    yaw = gross_mass * 16.5 ** 2 / 12.0
+    return VehicleSpec(
+        name="truck_40t" if gross_mass == 40_000.0 else f"truck_{gross_mass / 1000:.4g}t",
+        description=f"long-haul tractor-semitrailer, {gross_mass / 1000:.4g} t gross, 330 kW 13 l diesel, "
+                    "12-speed AMT, engine brake + retarder",
+        body=BodySpec(mass=float(gross_mass), wheelbase=6.5, cg_to_front_axle=3.6, cg_height=1.6, track_front=2.05,
+                      track_rear=1.85, yaw_inertia=float(yaw), pitch_gradient=0.002, roll_gradient=0.02),
+        aero=AeroSpec(drag_coefficient=0.57, frontal_area=10.0, yaw_drag_factor=0.6),
+        tires=TireSpec(dynamic_radius=0.49, rolling_resistance_f0=0.0055, rolling_resistance_f1=1.0e-5,
+                       rolling_resistance_f4=0.0, cornering_stiffness_front=4.0e5,
+                       cornering_stiffness_rear=1.6e6, longitudinal_stiffness=1.2e6, wheel_inertia=50.0,
+                       toe_in=0.001),
+        drivetrain=drivetrain,
+        brakes=BrakeSpec(front_area=0.05, rear_area=0.05, front_radius=0.2, rear_radius=0.2, pad_friction=0.4,
+                         front_share=0.4, max_pressure=1.0e7, disc_heat_capacity=60000.0, disc_cooling=60.0),
+        steering=steering_table(20.0, 18.0),
+        sensors=sensors,
+    )
+
+
+def _truck_40t() -> VehicleSpec:
+    return truck_spec(40_000.0)
+
+
+_PRESETS = {"gt_rwd": _gt_rwd, "gt_awd": _gt_awd, "bmw_i3": _bmw_i3, "truck_40t": _truck_40t}
 _CACHE: dict[str, VehicleSpec] = {}
 PRESETS = tuple(_PRESETS)
 

@@ -6,8 +6,9 @@ Stages (each a DataFrame, inspectable and plottable, see :func:`run_pipeline` an
 ``measured``  the Trip's measured channels as recorded (e.g. 100 Hz);
 ``smoothed``  every continuous channel through a bank of polynomial Kalman smoothers with one configuration
               (section 5.3), so all smoothed channels carry the same, known delay; the smoothers also give the
-              derivatives dv_V/dt and the wheel angular acceleration (of the mean wheel speed 'wheel_speed'). Rows are aligned to the time the smoothed
-              value belongs to (t - delay); discrete channels (gear, clutch, brake pressure) are taken at that time;
+              derivatives dv_V/dt and the wheel angular acceleration (of the mean wheel speed 'wheel_speed').
+              Rows are aligned to the time the smoothed value belongs to (t - delay); discrete channels (gear,
+              clutch, brake pressure) are taken at that time;
 ``decimated`` every k-th row, k = sample rate / estimation rate (100 Hz -> 10 Hz);
 ``states``    v_V, dv_V/dt, gradient angle θ (eq. 5.2), path curvature 1/r (eq. 5.3 through the steering-ratio
               table), rim torque T_R from the estimating side's drive-train model (eq. 2.17), tractive force
@@ -21,9 +22,10 @@ drive-train model with its own loss tables, the steering-ratio table); it never 
 
 from __future__ import annotations
 
+import os
 import warnings
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Sequence
 
 import numpy as np
 import pandas as pd
@@ -94,6 +96,17 @@ class DrivetrainModel:
     @property
     def n_gears(self) -> int:
         return len(self.gear_ratios)
+
+    def rotational_mass(self, gear: int | None = None) -> float:
+        """(I_red(G) + I_W) / r_W^2 [kg]: the equivalent mass of the rotating parts that :meth:`rim_torque` and
+        :meth:`tractive_force` take out of F_xV (eq. 2.16b/2.17), so a model fitted to F_xV does NOT contain it.
+        gear None: the single gear, the middle gear of a multi-speed box (1-based), the top gear of a truck's box
+        of >= 10 gears (where a long-haul truck spends its time)."""
+        g = gear if gear is not None else (1 if self.n_gears == 1 else self.n_gears if self.n_gears >= 10
+                                           else self.n_gears // 2 + 1)
+        if not 1 <= g <= self.n_gears:
+            raise PipelineError(f"gear must be in 1..{self.n_gears}, got {g}")
+        return float((self.reduced_inertia[g - 1] + self.wheel_inertia) / self.wheel_radius ** 2)
 
     def _per_gear(self, values: Sequence[float], gear: np.ndarray) -> np.ndarray:
         table = np.concatenate([[np.nan], np.asarray(values, dtype=float)])
@@ -171,6 +184,7 @@ class VehicleKnowledge:
     drivetrain: DrivetrainModel
     steering: SteeringGeometry | None = None
     drive_torque_floor: float = -np.inf
+    pitch_gradient: float = 0.0  # body pitch per longitudinal acceleration [rad/(m/s^2)] (pitch-corrected eq. 5.2)
 
 
 def _fit_loss_table(loss_map, ratio: float) -> tuple[float, float]:
@@ -211,7 +225,8 @@ def knowledge_from_spec(spec, coast_down: tuple[float, float, float] | None = No
     floor = -np.inf
     if d.kind == "bev" and d.motor is not None:
         floor = -0.92 * float(d.motor.regen_torque_limit)
-    return VehicleKnowledge(spec.name, nominal, drivetrain, steering, floor)
+    return VehicleKnowledge(spec.name, nominal, drivetrain, steering, floor,
+                            pitch_gradient=float(spec.body.pitch_gradient))
 
 
 # ================================================================================ settings and result
@@ -225,7 +240,8 @@ class PipelineSettings:
     bandwidth comparable to the 1 Hz low-pass of the author's earlier work [134, 135] cited in section 5.3; the
     text's experiment-3.7 setting (w = 20, order 4, λ = 0.9) leaves dv/dt too noisy for eq. 5.2 at 100 Hz.
     Settings are rescaled to the same memory in seconds at other input rates. min_speed [m/s] (condition 2,
-    5.5 m/s); min_drive_torque [N m] (condition 4, 10 N m); brake_pressure_threshold [Pa] and brake_hold [s] (condition 1: no braking plus 0.5 s);
+    5.5 m/s); min_drive_torque [N m] (condition 4, 10 N m); brake_pressure_threshold [Pa] and brake_hold [s]
+    (condition 1: no braking plus 0.5 s);
     brake_deceleration [m/s^2]: when a trip logs no brake pressure, braking is assumed where dv/dt is below
     this (and the trip is flagged); warmup [s]: samples at the start excluded while the smoothers settle;
     smoother_rate [Hz]: the input rate the smoother settings are given for; drive_torque_floor [N m]: samples with
@@ -234,6 +250,10 @@ class PipelineSettings:
     default), 'grade_channel' (a logged / map grade channel named 'grade', e.g. from elevation) or 'auto'
     (eq. 5.2 unless the trip has a grade channel and :func:`accelerometer_gravity_slope` finds that the
     accelerometer does not see g sin θ: slope below 0.25; undecided on flat roads -> eq. 5.2).
+    pitch_correction: eq. 5.2 assumes the body-fixed accelerometer is level with the road; under acceleration the
+    body pitches by k dv/dt (k = the knowledge's pitch_gradient [rad/(m/s^2)]), so the sensor reads
+    dv/dt + g sin(θ + k dv/dt) and eq. 5.2 returns θ + k dv/dt: the force balance then sees m (1 + g k) dv/dt
+    (~5 % for the i3). True: θ = arcsin((a_x - dv/dt)/g) - k dv/dt. Default False (the text's eq. 5.2).
     """
 
     estimation_rate: float = 10.0
@@ -247,6 +267,7 @@ class PipelineSettings:
     smoother_rate: float = 100.0
     drive_torque_floor: float = -np.inf
     gradient: str = "accelerometer"
+    pitch_correction: bool = False
 
     def __post_init__(self) -> None:
         if self.gradient not in ("accelerometer", "grade_channel", "auto"):
@@ -398,6 +419,9 @@ def _stage_states(dec: pd.DataFrame, knowledge: VehicleKnowledge, settings: Pipe
     elif "accel_x" in dec:
         ratio = (dec["accel_x"].to_numpy(dtype=float) - dv) / G
         out[GRADIENT_ANGLE] = np.arcsin(np.clip(ratio, -1.0, 1.0))
+        if settings.pitch_correction:
+            out[GRADIENT_ANGLE] = out[GRADIENT_ANGLE] - knowledge.pitch_gradient * dv
+            notes.append(f"eq. 5.2 pitch-corrected (k = {knowledge.pitch_gradient:g} rad/(m/s^2))")
     else:
         out[GRADIENT_ANGLE] = np.full_like(v, np.nan)
         notes.append("no accel_x: gradient angle unavailable")
@@ -479,6 +503,16 @@ def _stage_states(dec: pd.DataFrame, knowledge: VehicleKnowledge, settings: Pipe
     trigger &= finite & (t >= t[0] + settings.warmup if t.size else True)
     out["trigger"] = trigger
     return pd.DataFrame(out)
+
+
+PIPELINE_CHANNELS = tuple(dict.fromkeys(SMOOTHED_CHANNELS + DISCRETE_CHANNELS))
+"""Every measured channel the pipeline reads (when present)."""
+
+
+def load_for_pipeline(path: str | os.PathLike) -> Trip:
+    """A trip file read for :func:`run_pipeline`: only ``PIPELINE_CHANNELS`` and no truth (a column-selective
+    Parquet read; a day at 100 Hz then costs ~10 of its channels instead of all of them plus the truth)."""
+    return Trip.load(path, channels=list(PIPELINE_CHANNELS), truth_channels=[])
 
 
 def run_pipeline(trip: Trip, knowledge: VehicleKnowledge, settings: PipelineSettings | None = None,

@@ -31,12 +31,14 @@ from roadload.road_profiles import RoadProfile
 
 from roadload.controllers.cruise import CruiseSettings
 from roadload.controllers.drive import DriveSettings, drive
-from roadload.experiments.time_matching import match_trip_time
+from roadload.experiments.time_matching import fit_energy_at_time, match_trip_time
 from roadload.data import require_shared_data
 from roadload.io.importer import import_log
 from roadload.io.profiles import profile_from_trip
 from roadload.io.derived import distance_from_speed
-from roadload.road_profiles import city, hilly, motorway
+from roadload.controllers.mpc import MpcSettings
+from roadload.presets import TRUCK_NOMINAL_MASS, truck_spec
+from roadload.road_profiles import city, cycle_to_profile, hilly, long_haul_truck, long_grades, motorway
 from roadload.controllers.drive import resolve_road
 from roadload.fileio import write_text
 from roadload.experiments.controller_report import markdown_table, write_figures
@@ -209,3 +211,240 @@ def write_outputs(results: list[dict[str, Any]], failures: list[str], out: Path)
     write_text(out / "comparison.md", "\n".join(md) + "\n")
     write_figures(results, table, out)
     return table, summary
+
+
+# ================================================================================ paired comparison (issue 14)
+# Per (vehicle case, road, condition, seed) every force model drives the SAME road (generated from the seed, or
+# the seed-th window of a real grade profile), seed and plant, at several time weights around the cruise-control
+# trip time; a joint local fit of energy over trip time (time_matching.fit_energy_at_time) gives each model's
+# energy at exactly the cruise time. Differences are paired per seed; mean, 1-sigma standard error and 95 % CI
+# over seeds are reported, and a difference whose CI contains 0 is "not resolved".
+
+TRUCK_MPC = MpcSettings(n_nodes=40, ds=50.0)  # 2 km horizon on a 50 m grid: long grades, < 10 ms per step
+TRUCK_CRUISE = CruiseSettings(fraction=0.95, overspeed=0.8)  # 85.5 km/h set on a 90 km/h limit, +2.9 km/h band
+
+
+@dataclass(frozen=True)
+class VehicleCase:
+    """A vehicle for the paired comparison: the driven vehicle (preset name or truck gross mass [kg]), the
+    fleet's nominal vehicle for abc / the online prior (None: the driven one), MPC and cruise settings and a
+    start value of the time weight lambda [J/s] for the search."""
+
+    name: str
+    preset: str = "bmw_i3"
+    gross_mass: float | None = None
+    nominal_mass: float | None = None
+    lam0: float = 8000.0
+    truck: bool = False
+
+    def vehicle(self):
+        return truck_spec(self.gross_mass) if self.gross_mass is not None else self.preset
+
+    def settings(self) -> DriveSettings:
+        nominal = truck_spec(self.nominal_mass) if self.nominal_mass is not None else None
+        if self.truck:  # a truck's slow dynamics: every controller acts every 0.2 s
+            return DriveSettings(controller="cruise", force_model="abc", mpc=TRUCK_MPC, cruise=TRUCK_CRUISE,
+                                 nominal_vehicle=nominal, dt=0.2)
+        return DriveSettings(controller="cruise", force_model="abc", nominal_vehicle=nominal)
+
+
+VEHICLE_CASES = {
+    "car": VehicleCase("car", "bmw_i3", lam0=8000.0),
+    **{f"truck_{m}t": VehicleCase(f"truck_{m}t", "truck_40t", gross_mass=1000.0 * m, nominal_mass=TRUCK_NOMINAL_MASS,
+                                  lam0=4.0e3 * m, truck=True) for m in (15, 25, 40)},
+}
+
+
+def _longhaul_window(seed: int, length: float = 10_000.0) -> RoadProfile:
+    """The seed-th 10 km window with real grades of the 805 km long-haul truck cycle (drive_cycles/, FASTSim),
+    windows taken where the grade range exceeds 2 % (its grades span -2.3..+2.9 %); speed limit 90 km/h (a
+    truck's limiter), no stops."""
+    prof = _longhaul_profile()
+    s, g = prof.distance, prof.grade
+    starts = np.arange(0.0, s[-1] - length, length)
+    good = [a for a in starts if np.ptp(np.tan(g[(s >= a) & (s <= a + length)])) > 0.02]
+    if not good:
+        raise RuntimeError("long-haul cycle: no 10 km window with a grade range above 2 %")
+    a = good[seed % len(good)]
+    keep = (s >= a) & (s <= a + length)
+    d = s[keep] - s[keep][0]
+    return RoadProfile("longhaul_real", d, g[keep], np.zeros(d.size), np.zeros(d.size), np.full(d.size, 25.0),
+                       stops=np.zeros(0), meta={"source": "FASTSim longHaulDriveCycle.csv (grade over distance)",
+                                                "window_start_m": float(a), "seed": int(seed)})
+
+
+_LONGHAUL: list[RoadProfile] = []
+
+
+def _longhaul_profile() -> RoadProfile:
+    if not _LONGHAUL:
+        _LONGHAUL.append(cycle_to_profile(long_haul_truck(), step=10.0))
+    return _LONGHAUL[0]
+
+
+def paired_road(name: str, seed: int) -> RoadProfile:
+    """Roads of the paired comparison, one per seed: 'hilly' (2.5 km generated country road), 'long_grades'
+    (4 km, 3-6 % grades of 2-4 km), 'longhaul_real' (10 km windows of the real long-haul truck cycle). Short,
+    because the shared machine gives each run a fraction of a core."""
+    if name == "hilly":
+        return hilly(seed=seed, length=2500.0)
+    if name == "hilly_short":  # smoke runs (--quick)
+        return hilly(seed=seed, length=1200.0)
+    if name == "long_grades":
+        return long_grades(seed=seed, length=4000.0)
+    if name == "longhaul_real":
+        return _longhaul_window(seed)
+    raise ValueError(f"unknown paired road {name!r}; known: hilly, hilly_short, long_grades, longhaul_real")
+
+
+def parse_force_model(spec: str) -> tuple[str, dict[str, float] | None]:
+    """'oracle' | 'abc' | 'online' | 'wrong:mass=0.2,rolling=-0.5' -> (force model, errors)."""
+    name, _, rest = spec.partition(":")
+    if name not in ("oracle", "abc", "online", "wrong"):
+        raise ValueError(f"force model {spec!r}: choose oracle, abc, online or wrong:<error>=<value>,...")
+    if name != "wrong":
+        return name, None
+    errors = {}
+    for item in filter(None, rest.split(",")):
+        k, _, v = item.partition("=")
+        errors[k.strip()] = float(v)
+    return name, errors
+
+
+@dataclass(frozen=True)
+class PairedTask:
+    case: str
+    road: str
+    seed: int
+    condition: str = "nominal"
+    force_models: tuple[str, ...] = ("oracle", "abc", "online")
+    weight_factors: tuple[float, ...] = (0.8, 1.25)
+    tol: float = 0.002
+    human: bool = False
+    max_search_runs: int = 4  # oracle runs spent on the lambda search; the local fit handles the rest
+
+
+def run_paired_task(task: PairedTask) -> dict[str, Any]:
+    """One seed of the paired comparison.
+
+    1. cruise control at its set-speed fraction f0 and at f0 +- 0.03, +- 0.06 (cheap runs) -> T_ref = the trip
+       time at f0, and E_cruise(T) by a local fit;
+    2. the oracle MPC matched to T_ref within ``tol`` (search over lambda). Where the closed-loop trip time
+       jumps over T_ref (a truck's time saturates at its power limit and can jump between local optima), T_ref
+       moves to the oracle run closest to it, and cruise control's energy comes from its local fit there;
+    3. every force model at lambda* x (1, weight_factors) on the same road, seed and plant;
+    4. the joint local fit of energy over trip time of the MPC runs (common slope/curvature) -> E_m(T_ref)."""
+    case = VEHICLE_CASES[task.case]
+    road = paired_road(task.road, task.seed)
+    effects = CONDITIONS[task.condition] if not case.truck else None
+    base = case.settings()
+    vehicle = case.vehicle()
+
+    def run(settings: DriveSettings):
+        res, _ = drive(vehicle, road, effects=effects, seed=task.seed, settings=settings)
+        return res
+
+    runs_out: list[dict[str, Any]] = []
+    f0 = base.cruise.fraction
+    cruise_pts: list[tuple[float, float]] = []
+    t_cruise = float("nan")
+    for df in (0.0, -0.03, 0.03, -0.06, 0.06):
+        f = f0 + df
+        if not 0.5 < f <= 1.0:
+            continue
+        m = run(replace(base, cruise=replace(base.cruise, fraction=f))).metrics
+        cruise_pts.append((m["trip_time"], m["energy_J"]))
+        runs_out.append({"force_model": "cruise", "cruise_fraction": f, "trip_time": m["trip_time"],
+                         "energy_J": m["energy_J"], "speed_violations": m.get("speed_violations")})
+        if df == 0.0:
+            t_cruise = m["trip_time"]
+    if not math.isfinite(t_cruise):
+        raise RuntimeError(f"cruise control did not arrive on {task.road} seed {task.seed}")
+    extra = {}
+    if task.human:
+        human = run(replace(base, controller="human"))
+        extra = {"human_energy_J": human.metrics["energy_J"], "human_time": human.metrics["trip_time"]}
+    points: dict[str, list[tuple[float, float]]] = {}
+
+    def mpc(spec: str, lam: float):
+        fm, errors = parse_force_model(spec)
+        res = run(replace(base, controller="mpc", force_model=fm, time_weight=lam, wrong_model=errors))
+        m = res.metrics
+        points.setdefault(spec, []).append((m["trip_time"], m["energy_J"]))
+        runs_out.append({"force_model": spec, "time_weight": lam, "trip_time": m["trip_time"],
+                         "energy_J": m["energy_J"], "solve_time_median": m.get("solve_time_median"),
+                         "fallbacks": m.get("fallbacks"), "speed_violations": m.get("speed_violations"),
+                         "online_estimate": m.get("online", {}).get("estimate")})
+        return res
+
+    matched = match_trip_time(lambda lam: mpc("oracle", lam), t_cruise, tol=task.tol, lam0=case.lam0,
+                              max_runs=task.max_search_runs, step=2.0)
+    lam_star = matched.time_weight
+    t_ref = t_cruise if matched.matched else float(matched.result.metrics["trip_time"])
+    for spec in task.force_models:
+        factors = task.weight_factors if spec == "oracle" else (1.0, *task.weight_factors)
+        for f in factors:
+            mpc(spec, lam_star * f)
+    fit = fit_energy_at_time(points, t_ref)
+    cruise_fit = fit_energy_at_time({"cruise": cruise_pts}, t_ref, window=0.08)
+    return {"task": task.__dict__, "t_ref": t_ref, "t_cruise": t_cruise, "t_ref_moved": not matched.matched,
+            "cruise_energy_J": cruise_fit.energy["cruise"], "cruise_nominal_energy_J": cruise_pts[0][1],
+            "cruise_spanned": cruise_fit.spanned["cruise"],
+            "lambda_star": lam_star, "oracle_time_error": matched.time_error, "oracle_matched": matched.matched,
+            "energy_at_tref_J": fit.energy, "nearest_time_error": fit.nearest, "spanned": fit.spanned,
+            "fit_residual_std": fit.residual_std, "fit_slope": fit.slope, "fit_curvature": fit.curvature,
+            "runs": runs_out, **extra}
+
+
+def _mean_ci(values: np.ndarray) -> tuple[float, float, float, float]:
+    """(mean, 1-sigma standard error, 95 % CI low, high) of per-seed values (Student t)."""
+    from scipy.stats import t as student_t
+
+    v = np.asarray(values, float)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return (float("nan"),) * 4
+    mean = float(v.mean())
+    if v.size < 2:
+        return mean, float("nan"), float("nan"), float("nan")
+    se = float(v.std(ddof=1) / np.sqrt(v.size))
+    h = float(student_t.ppf(0.975, v.size - 1)) * se
+    return mean, se, mean - h, mean + h
+
+
+def paired_summary(results: list[dict[str, Any]]) -> pd.DataFrame:
+    """Per (case, road, condition, force model): paired energy difference at equal time vs the oracle MPC and vs
+    cruise control [%] over seeds: mean, 1-sigma resolution (standard error), 95 % CI, and 'resolved' (CI
+    excludes 0)."""
+    rows = []
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for r in results:
+        t = r["task"]
+        groups.setdefault((t["case"], t["road"], t["condition"]), []).append(r)
+    for (case, road, cond), rs in groups.items():
+        models = list(dict.fromkeys(m for r in rs for m in r["energy_at_tref_J"]))
+        for m in models:
+            vs_oracle = np.array([100 * (r["energy_at_tref_J"][m] / r["energy_at_tref_J"]["oracle"] - 1) for r in rs])
+            vs_cruise = np.array([100 * (r["energy_at_tref_J"][m] / r["cruise_energy_J"] - 1) for r in rs])
+            mo, so, lo, hi = _mean_ci(vs_oracle)
+            mc, sc, lc, hc = _mean_ci(vs_cruise)
+            near = np.array([r["nearest_time_error"][m] for r in rs], float)
+            rows.append({"vehicle": case, "road": road, "condition": cond, "force_model": m,
+                         "seeds": int(np.isfinite(vs_oracle).sum()),
+                         "vs_oracle_pct": mo, "resolution_1sigma_pct": so, "ci95_lo_pct": lo, "ci95_hi_pct": hi,
+                         "resolved": bool(np.isfinite(lo) and (lo > 0 or hi < 0)) if m != "oracle" else False,
+                         "vs_cruise_pct": mc, "vs_cruise_1sigma_pct": sc, "vs_cruise_ci95_lo": lc,
+                         "vs_cruise_ci95_hi": hc,
+                         "nearest_run_time_error_pct_median": float(100 * np.nanmedian(near)),
+                         "fit_residual_std_pct": float(100 * np.nanmedian([r["fit_residual_std"] for r in rs]))})
+    return pd.DataFrame(rows)
+
+
+def format_difference(mean: float, se: float, lo: float, hi: float) -> str:
+    """'+0.42 % [+0.10, +0.74] (1σ 0.15)' or 'not resolved (-0.05 % [-0.30, +0.20], 1σ 0.12)'."""
+    if not np.isfinite(mean):
+        return "n/a"
+    if not np.isfinite(lo):
+        return f"{mean:+.2f} % (1 seed, no CI)"
+    text = f"{mean:+.2f} % [{lo:+.2f}, {hi:+.2f}] (1σ {se:.2f})"
+    return text if (lo > 0 or hi < 0) else f"not resolved ({text})"

@@ -71,17 +71,31 @@ def _algo_class(algo: str):
     return classes[algo.lower()]
 
 
+VEC_MODES = ("native", "dummy", "subproc")
+
+
 def make_vec_env(n_envs: int, seed: int, env_config: dict[str, Any] | None = None, vec: str = "subproc",
-                 start_method: str | None = None):
-    """n_envs EcoDrive-v0 copies (Monitor-wrapped) in a DummyVecEnv ('dummy') or SubprocVecEnv ('subproc'; the
-    workers resolve the id through the "roadload:" prefix, so spawn / forkserver work)."""
+                 start_method: str | None = None, threads: int = 1):
+    """n_envs EcoDrive-v0 copies for stable-baselines3: 'native' = the batched vector env
+    (roadload.gym.vector, one compiled call per step, ``threads`` numba threads) behind the SB3 adapter
+    (roadload.gym.sb3; observation 'state' only), or Monitor-wrapped copies in a DummyVecEnv ('dummy') or
+    SubprocVecEnv ('subproc'; the workers resolve the id through the "roadload:" prefix, so spawn / forkserver
+    work)."""
     from stable_baselines3.common.env_util import make_vec_env as sb3_make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     if n_envs < 1:
         raise RLError(f"n_envs must be >= 1, got {n_envs}")
-    if vec not in ("dummy", "subproc"):
-        raise RLError(f"vec must be 'dummy' or 'subproc', got {vec!r}")
+    if vec not in VEC_MODES:
+        raise RLError(f"vec must be one of {VEC_MODES}, got {vec!r}")
+    if vec == "native":
+        from roadload.gym.sb3 import SB3VecEnv  # needs stable-baselines3 (optional dependency), hence here
+        from roadload.gym.vector import EcoDriveVectorEnv
+
+        venv = SB3VecEnv(EcoDriveVectorEnv(n_envs, config=dict(env_config or {}), autoreset_mode="same_step",
+                                           threads=threads))
+        venv.seed(seed)
+        return venv
     cls = SubprocVecEnv if vec == "subproc" else DummyVecEnv
     kwargs = {"start_method": start_method} if (vec == "subproc" and start_method) else None
     return sb3_make_vec_env(ENV_ID, n_envs=n_envs, seed=seed, env_kwargs={"config": dict(env_config or {})},
@@ -222,6 +236,9 @@ def train_policy(algo: str, timesteps: int, out_dir: Path, n_envs: int = 2, seed
     env_config = dict(env_config or {})
     venv = make_vec_env(n_envs, seed, env_config, vec=vec)
     params = {**ALGO_DEFAULTS[algo], **(hyperparams or {})}
+    if algo == "ppo" and vec == "native" and "n_steps" not in (hyperparams or {}):
+        # many batched envs: keep a rollout of ~4096 samples (as 2 envs x 2048) rather than n_envs x 1024
+        params["n_steps"] = max(64, 4096 // n_envs)
     if algo == "ppo":
         params["n_steps"] = max(16, min(params["n_steps"], max(timesteps // n_envs, 16)))
         params["batch_size"] = min(params["batch_size"], params["n_steps"] * n_envs)
@@ -441,6 +458,90 @@ def bench_vectorised(n_envs: int = 2, seconds: float = 5.0, vec: str = "subproc"
             "steps": n * n_envs, "episodes": None}
 
 
+def _rates(step: Callable[[], None], seconds: float) -> tuple[float, float, int]:
+    """(calls per wall second, calls per CPU second of this process, calls): CPU seconds make runs on a machine
+    shared with other jobs comparable (wall rates there measure the share the scheduler gave us)."""
+    n = 0
+    t0, c0 = time.perf_counter(), time.process_time()
+    while True:
+        step()
+        n += 1
+        if n % 8 == 0 and time.perf_counter() - t0 >= seconds:
+            break
+    return n / (time.perf_counter() - t0), n / max(time.process_time() - c0, 1e-9), n
+
+
+def bench_native(n_envs: int = 256, seconds: float = 5.0, threads: int = 1, bare: bool = False,
+                 env_config: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Env steps/s (summed over sub-envs, wall and per CPU second) of the native vector env under random actions
+    in [-1, 1] (autoresets included), or with ``bare`` only its batched physics (no reward / observation / info /
+    autoreset): the reference the env step is compared with."""
+    from roadload.gym.vector import EcoDriveVectorEnv
+
+    venv = EcoDriveVectorEnv(n_envs, config=dict(env_config or {}), threads=threads)
+    venv.reset(seed=0)
+    acts = np.random.default_rng(0).uniform(-1, 1, (256, n_envs, 1)).astype(np.float32)
+    k = [0]
+    fn = venv.bare_physics_step if bare else venv.step
+
+    def step() -> None:
+        fn(acts[k[0] % 256])
+        k[0] += 1
+
+    for _ in range(3):
+        step()
+    wall, cpu, n = _rates(step, seconds)
+    mode = f"{'bare batched physics' if bare else 'native vector env'} x{n_envs}, {threads} thread(s)"
+    return {"env": "roadload/EcoDrive-v0", "mode": mode, "steps_per_s": wall * n_envs,
+            "steps_per_cpu_s": cpu * n_envs, "steps": n * n_envs}
+
+
+def run_native_benchmark(seconds: float = 5.0, n_envs: int = 256, n_dummy: int = 16,
+                         progress: Callable[[str], None] | None = None) -> pd.DataFrame:
+    """The batched-env table (same run): single env, SB3 DummyVecEnv x n_dummy, the native vector env x n_envs
+    (1 and 2 threads) and its bare batched physics, as wall and per-CPU-second rates."""
+    rows = []
+
+    def add(row: dict[str, Any]) -> None:
+        rows.append(row)
+        if progress:
+            progress(row["mode"])
+
+    import gymnasium as gym
+
+    env = gym.make("roadload/EcoDrive-v0")
+    env.reset(seed=0)
+    env.action_space.seed(0)
+
+    def single() -> None:
+        _, _, te, tr, _ = env.step(env.action_space.sample())
+        if te or tr:
+            env.reset()
+
+    wall, cpu, n = _rates(single, seconds)
+    add({"env": "roadload/EcoDrive-v0", "mode": "single process", "steps_per_s": wall, "steps_per_cpu_s": cpu,
+         "steps": n})
+    venv = make_vec_env(n_dummy, 0, None, vec="dummy")
+    try:
+        venv.reset()
+        acts = np.random.default_rng(0).uniform(-1, 1, (256, n_dummy, 1)).astype(np.float32)
+        k = [0]
+
+        def dummy() -> None:
+            venv.step(acts[k[0] % 256])
+            k[0] += 1
+
+        wall, cpu, n = _rates(dummy, seconds)
+    finally:
+        venv.close()
+    add({"env": "roadload/EcoDrive-v0", "mode": f"dummy x{n_dummy}", "steps_per_s": wall * n_dummy,
+         "steps_per_cpu_s": cpu * n_dummy, "steps": n * n_dummy})
+    for threads in (1, 2):
+        add(bench_native(n_envs, seconds, threads))
+    add(bench_native(n_envs, seconds, 1, bare=True))
+    return pd.DataFrame(rows)
+
+
 def run_benchmark(seconds: float = 5.0, n_envs: int = 2, include_highway: bool = True,
                   progress: Callable[[str], None] | None = None) -> pd.DataFrame:
     """The speed table: EcoDrive-v0 (state and can observations) single process, vectorised (dummy and subproc
@@ -588,7 +689,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         algo: str = typer.Option("ppo,sac", help="algorithms, comma-separated: ppo, sac"),
         timesteps: int = typer.Option(200_000, help="environment steps per algorithm (0.1 s of driving each)"),
         n_envs: int = typer.Option(2, help="vectorised environments"),
-        vec: str = typer.Option("subproc", help="'subproc' (one process per env) or 'dummy' (in-process)"),
+        vec: str = typer.Option("native", help="'native' (batched vector env, observation 'state'), 'subproc' "
+                                "(one process per env) or 'dummy' (in-process)"),
         seed: int = typer.Option(0, help="training seed"),
         config: str = typer.Option(None, help="EcoDrive-v0 config as JSON text or a .json file, e.g. "
                                    "'{\"vehicle\": \"gt_rwd\", \"road\": \"city\"}'"),

@@ -4,6 +4,9 @@ Trip time falls monotonically with lambda, so the search brackets lambda on a lo
 secant/bisection steps in (log lambda, time) until |T - T_target| <= tol * T_target. Runs that miss the
 tolerance within ``max_runs`` are returned flagged (``matched`` False) with the closest run, never silently.
 :meth:`MatchedRun.energy_at_target` interpolates the energy to exactly the target time between bracketing runs.
+That linear interpolation overstates the energy on the convex energy-time curve when the bracket is wide; the
+paired comparison (issue 14) uses :func:`fit_energy_at_time` instead: runs at several time weights around the
+match and a joint local quadratic fit of energy over trip time.
 """
 
 from __future__ import annotations
@@ -11,6 +14,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from typing import Callable
+
+import numpy as np
 
 from roadload.controllers.closed_loop import RunResult
 
@@ -45,7 +50,7 @@ class MatchedRun:
 
 def match_trip_time(run: Callable[[float], RunResult], target_time: float, tol: float = 0.01,
                     lam0: float = 8000.0, lam_min: float = 50.0, lam_max: float = 2e6,
-                    max_runs: int = 10) -> MatchedRun:
+                    max_runs: int = 10, step: float = 4.0) -> MatchedRun:
     """Closed-loop runs ``run(lambda)`` until the trip time is within ``tol`` of ``target_time`` [s]."""
     if not target_time > 0 or not math.isfinite(target_time):
         raise ValueError(f"target_time must be a positive finite number, got {target_time}")
@@ -71,8 +76,8 @@ def match_trip_time(run: Callable[[float], RunResult], target_time: float, tol: 
             lo = (x, t)
         else:
             hi = (x, t)
-        if lo is None or hi is None:  # expand the bracket by a factor 4 in lambda
-            x_new = x + (math.log(4.0) if hi is None else -math.log(4.0))
+        if lo is None or hi is None:  # expand the bracket by a factor ``step`` in lambda
+            x_new = x + (math.log(step) if hi is None else -math.log(step))
             if not math.log(lam_min) <= x_new <= math.log(lam_max):
                 break
         else:
@@ -87,3 +92,66 @@ def match_trip_time(run: Callable[[float], RunResult], target_time: float, tol: 
     ok = math.isfinite(best.metrics["trip_time"]) and done(best.metrics["trip_time"])
     trace = [(lam_i, r.metrics["trip_time"], r.metrics["energy_J"]) for lam_i, r in history]
     return MatchedRun(best, best_lam, target_time, ok, len(history), trace)
+
+
+# ------------------------------------------------------------------------------------------- local fit (issue 14)
+@dataclass
+class LocalFit:
+    """Energy at exactly the target time from a joint local fit over trip time (see :func:`fit_energy_at_time`).
+
+    energy: {force model: E(T_target) [J]}; nearest: {force model: |T/T_target - 1| of its run closest in time};
+    spanned: {force model: its runs bracket T_target}; residual_std: relative residual std of the fit [-];
+    slope: dE/dT relative, d(E/E_0)/d(T/T_target) [-]; n_points: runs used."""
+
+    energy: dict[str, float]
+    nearest: dict[str, float]
+    spanned: dict[str, bool]
+    residual_std: float
+    slope: float
+    curvature: float
+    n_points: int
+
+
+def fit_energy_at_time(runs: dict[str, list[tuple[float, float]]], target_time: float, window: float = 0.06,
+                       quadratic: bool = True) -> LocalFit:
+    """Energy of every force model at exactly ``target_time`` [s] from a JOINT local fit over trip time.
+
+    runs: {force model: [(trip time [s], energy [J]), ...]} of the same road, seed and plant at several time
+    weights around the match. Model: E_i / E_ref = alpha_m + beta x + gamma x^2 with x = T_i/T_target - 1, a level
+    alpha_m per force model and a common slope and curvature (the energy-time trade-off is a property of the
+    road and vehicle; sharing it turns 3 runs per model into a well-posed fit). Only runs within ``window``
+    (relative time) are used. E_m(T_target) = alpha_m E_ref. A model with no run inside the window gets NaN.
+    Unlike linear interpolation between two bracketing runs (which overstates the energy on a convex curve)
+    the common curvature is estimated from all runs."""
+    if not target_time > 0:
+        raise ValueError(f"target_time must be > 0 s, got {target_time}")
+    names, rows, y = [], [], []
+    for name, pts in runs.items():
+        keep = [(t, e) for t, e in pts if math.isfinite(t) and math.isfinite(e) and abs(t / target_time - 1) <= window]
+        if keep:
+            names.append(name)
+            rows += [(name, t / target_time - 1.0) for t, _ in keep]
+            y += [e for _, e in keep]
+    out_nan = {n: float("nan") for n in runs}
+    if not rows:
+        return LocalFit(out_nan, out_nan.copy(), {n: False for n in runs}, float("nan"), float("nan"),
+                        float("nan"), 0)
+    e_ref = float(np.median(y))
+    y_arr = np.asarray(y) / e_ref
+    x = np.array([r[1] for r in rows])
+    cols = [np.array([1.0 if r[0] == n else 0.0 for r in rows]) for n in names] + [x]
+    if quadratic and len(rows) >= len(names) + 3:
+        cols.append(x * x)
+    a = np.column_stack(cols)
+    coef, *_ = np.linalg.lstsq(a, y_arr, rcond=None)
+    resid = y_arr - a @ coef
+    dof = max(len(rows) - a.shape[1], 1)
+    energy = {n: float(coef[i] * e_ref) for i, n in enumerate(names)}
+    nearest, spanned = {}, {}
+    for n, pts in runs.items():
+        xs = [t / target_time - 1.0 for t, e in pts if math.isfinite(t) and math.isfinite(e)]
+        nearest[n] = float(min(abs(v) for v in xs)) if xs else float("nan")
+        spanned[n] = bool(xs) and min(xs) <= 0.0 <= max(xs)
+    return LocalFit({**out_nan, **energy}, nearest, spanned, float(np.sqrt(np.sum(resid ** 2) / dof)),
+                    float(coef[len(names)]), float(coef[len(names) + 1]) if a.shape[1] > len(names) + 1 else 0.0,
+                    len(rows))

@@ -7,7 +7,7 @@
 from .cycles import (cycle_position, cycle_stops, cycle_to_profile, ftp75, load_cycle, long_haul_truck,
                      speed_at_position, tsdc_trip)
 from .files import ProfileFileError, load_gpx, load_profile_file, load_track_csv, save_profile
-from .generate import city, hilly, motorway
+from .generate import city, hilly, long_grades, motorway
 from .profile import DriveCycle, RoadProfile, RoadProfileError
 from .real_routes import bus_route, bus_route_measured, gradeit_route, racetrack
 from .registry import (UnknownProfileError, known_profiles, load_profile, register_profile,
@@ -20,7 +20,7 @@ __all__ = [
     "DriveCycle", "RoadProfile", "RoadProfileError", "ProfileFileError", "UnknownProfileError",
     "load_profile", "save_profile", "load_profile_file", "register_profile", "register_profile_file",
     "register_profile_folder", "known_profiles",
-    "hilly", "motorway", "city",
+    "hilly", "motorway", "city", "long_grades",
     "load_cycle", "ftp75", "tsdc_trip", "long_haul_truck", "cycle_position", "speed_at_position", "cycle_stops",
     "cycle_to_profile",
     "load_gpx", "load_track_csv", "gradeit_route", "racetrack", "bus_route", "bus_route_measured",

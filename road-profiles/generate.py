@@ -284,4 +284,44 @@ def city(seed: int, length: float = 8_000.0, step: float = 5.0) -> RoadProfile:
                     {"road_class": "urban", "n_turns": turns})
 
 
-GENERATORS = {"hilly": hilly, "motorway": motorway, "city": city}
+def long_grades(seed: int, length: float = 12_000.0, step: float = 5.0, speed_limit_kmh: float = 90.0,
+                grade_range: tuple[float, float] = (0.03, 0.06),
+                grade_length: tuple[float, float] = (2_000.0, 4_000.0)) -> RoadProfile:
+    """Motorway with long grades for heavy trucks: alternating flat sections (500-2000 m, +-0.5 %) and climbs /
+    descents of 2-4 km at 3-6 % (sign random, at least one climb and one descent), grade changes smoothed over
+    ~200 m (vertical curves), curves of radius 1-3 km, speed limit ``speed_limit_kmh`` (a truck's limiter)."""
+    rng = np.random.default_rng(seed)
+    s = _grid(length, step)
+    knots_s, knots_g = [0.0], [0.0]
+    pos, sign = rng.uniform(500.0, 1500.0), float(rng.choice([-1.0, 1.0]))
+    while pos < length:
+        knots_s.append(pos)
+        knots_g.append(rng.uniform(-0.005, 0.005))
+        g = sign * rng.uniform(*grade_range)
+        end = pos + rng.uniform(*grade_length)
+        knots_s += [pos + 1.0, end]
+        knots_g += [g, g]
+        sign = -sign if rng.random() < 0.7 else sign
+        pos = end + 1.0
+        knots_s.append(pos)
+        knots_g.append(rng.uniform(-0.005, 0.005))
+        pos += rng.uniform(500.0, 2000.0)
+    tan_grade = np.interp(s, np.asarray(knots_s), np.asarray(knots_g), right=0.0)
+    tan_grade = gaussian_filter1d(tan_grade, 100.0 / step, mode="nearest")
+    grade = np.arctan(tan_grade)
+    curvature = np.zeros_like(s)
+    pos = rng.uniform(300.0, 1500.0)
+    while pos < length - 500.0:
+        r, arc = rng.uniform(1000.0, 3000.0), rng.uniform(200.0, 600.0)
+        curvature[(s >= pos) & (s < pos + arc)] = rng.choice([-1.0, 1.0]) / r
+        pos += arc + rng.uniform(800.0, 2500.0)
+    curvature = gaussian_filter1d(curvature, 40.0 / step, mode="nearest")
+    bank = -np.clip(0.4 * (80 * KMH) ** 2 * np.abs(curvature) / G, 0.0, 0.04) * np.sign(curvature)
+    meta = {"source": "roadload.road_profiles.long_grades", "licence": LICENCE, "seed": int(seed),
+            "generator": "long_grades", "road_class": "motorway (heavy truck)",
+            "max_grade_pct": float(100 * np.max(np.abs(tan_grade)))}
+    return RoadProfile(name="long_grades", distance=s, grade=grade, curvature=curvature, bank=bank,
+                       speed_limit=np.full_like(s, speed_limit_kmh * KMH), stops=np.zeros(0), meta=meta)
+
+
+GENERATORS = {"hilly": hilly, "motorway": motorway, "city": city, "long_grades": long_grades}

@@ -15,12 +15,17 @@ from roadload.controllers.cruise import CruiseSettings
 from roadload.controllers.drive import DriveSettings, drive
 from roadload.sweep import run_sweep
 from roadload.experiments.controller_comparison import CONDITIONS, ComparisonTask, run_comparison_task, write_outputs
+from roadload.experiments.controller_comparison import VEHICLE_CASES
+from roadload.experiments.controller_report import markdown_table
+from roadload.experiments.headline import (headline_figure, headline_markdown, headline_tasks, run_paired,
+                                           sensitivity_figure, sensitivity_table, sensitivity_tasks)
 from roadload.fileio import write_text
+
+from .errors import fail
 
 
 def _fail(msg: str) -> None:
-    typer.secho(f"error: {msg}", fg=typer.colors.RED, err=True)
-    raise typer.Exit(code=2)
+    fail(msg)
 
 
 def _jsonable(d):
@@ -39,7 +44,35 @@ def _jsonable(d):
     return out
 
 
+#: what ``roadload drive`` prints: metric key -> (label, unit, format)
+DRIVE_METRICS = {"arrived": ("arrived", "", "{}"), "energy_kWh": ("energy", "kWh", "{:.3f}"),
+                 "trip_time": ("trip time", "s", "{:.1f}"), "speed_violations": ("speed violations", "", "{:d}"),
+                 "max_excess_kmh": ("max excess", "km/h", "{:.2f}"), "rms_jerk": ("RMS jerk", "m/s^3", "{:.3f}"),
+                 "solve_time_median": ("solve time median", "ms", "{:.1f}"),
+                 "solve_time_p99": ("solve time p99", "ms", "{:.1f}"), "fallbacks": ("fallbacks", "", "{:d}"),
+                 "ctl_relaxed_plans": ("relaxed plans", "", "{:d}")}
+
+
+def metric_lines(m: dict) -> list[str]:
+    """The drive metrics rounded and with their units, e.g. ``   trip time: 362.4 [s]``."""
+    out = []
+    for key, (label, unit, fmt) in DRIVE_METRICS.items():
+        if key not in m and key != "ctl_relaxed_plans":
+            continue
+        value = m.get(key, 0)
+        if unit == "ms":
+            value = value * 1000.0
+        try:
+            text = fmt.format(value) if value is not None and not (isinstance(value, float) and math.isnan(value)) \
+                else "-"
+        except (ValueError, TypeError):
+            text = str(value)
+        out.append(f"{label:>20}: {text}" + (f" [{unit}]" if unit and text != "-" else ""))
+    return out
+
+
 def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
+    register_headline(benchmark_app)
     @app.command("drive")
     def drive_cmd(
         controller: str = typer.Option("mpc", help="mpc | cruise | human"),
@@ -48,11 +81,12 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                                  "roadload profile name or file)"),
         vehicle: str = typer.Option("bmw_i3", help="vehicle preset (bmw_i3, gt_rwd, gt_awd)"),
         effects: list[str] = typer.Option([], "--effects", help="simulator effects, e.g. winter_tires or "
-                                          "'wind:mean_speed=6' (repeatable; see roadload effects)"),
+                                          "'wind:mean_speed=6' (comma-separated and/or repeatable; see "
+                                          "roadload effects)"),
         out: Path = typer.Option(None, help="write the simulated trip (.parquet) with the run's metrics in meta"),
         seed: int = typer.Option(0, help="simulation seed"),
         solver: str = typer.Option("ipopt", help="MPC solve path: ipopt | osqp"),
-        time_weight: float = typer.Option(8000.0, help="MPC time weight lambda [J/s]"),
+        time_weight: float = typer.Option(8000.0, min=0.0, help="MPC time weight lambda [J/s]"),
         model: str = typer.Option("M4", help="online model structure (M3, M4, M0)"),
         estimator: str = typer.Option("RRLM", help="online estimator (catalog name)"),
         cruise_fraction: float = typer.Option(0.9, help="cruise control set speed as a fraction of the limit"),
@@ -71,23 +105,27 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                           TextColumn("{task.percentage:>5.1f}%"), TimeElapsedColumn(),
                           console=Console(stderr=True), transient=True) as bar:
                 task = bar.add_task(f"{controller}/{force_model} on {profile.name}", total=1.0)
-                res, plant = drive(vehicle, profile, effects=list(effects) or None, seed=seed, settings=settings,
+                res, plant = drive(vehicle, profile, effects=",".join(effects) or None, seed=seed, settings=settings,
                                    progress=lambda f: bar.update(task, completed=f))
         except typer.Exit:
             raise
         except (ValueError, FileNotFoundError, KeyError) as exc:
             _fail(str(exc))
         m = res.metrics
-        keys = ("arrived", "energy_kWh", "trip_time", "speed_violations", "max_excess_kmh", "rms_jerk",
-                "solve_time_median", "solve_time_p99", "fallbacks")
-        for k in keys:
-            typer.echo(f"{k:>20}: {m.get(k)}")
+        for line in metric_lines(m):
+            typer.echo(line)
         if "online" in m:
-            typer.echo(f"{'online estimate':>20}: {m['online']['estimate']}")
+            est = m["online"]["estimate"]
+            text = (", ".join(f"{k}={v:.4g}" for k, v in est.items()) if isinstance(est, dict) else str(est))
+            typer.echo(f"{'online estimate':>20}: {text}")
         if out is not None:
             trip = plant.sim.to_trip()
             trip.meta["controller"] = _jsonable({k: v for k, v in m.items()})
             typer.echo(f"wrote {trip.save(out)}")
+        solves, failed = int(m.get("ctl_solves", 0)), int(m.get("ctl_solver_failures", 0))
+        if controller == "mpc" and solves > 0 and failed >= solves:
+            fail(f"every one of the {solves} MPC solves failed (the drive ran on the fallback controller); check "
+                 f"the MPC settings (--time-weight [J/s], --solver)", code=1)
 
     @benchmark_app.command("controllers")
     def bench_controllers_cmd(
@@ -132,3 +170,84 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         typer.echo(f"wrote {out}/comparison.md, comparison.csv, summary.csv and figures")
 
         write_text(out / "tasks.json", json.dumps([t.__dict__ for t in tasks], default=str, indent=1))
+
+
+def _car_truck_cases(vehicles: str) -> list[str]:
+    cases = [v.strip() for v in vehicles.split(",") if v.strip()]
+    bad = [c for c in cases if c not in VEHICLE_CASES]
+    if bad:
+        _fail(f"--vehicles: unknown {bad}; known: {list(VEHICLE_CASES)}")
+    return cases
+
+
+def register_headline(benchmark_app: typer.Typer) -> None:
+    """``roadload benchmark headline`` and ``roadload benchmark sensitivity`` (issue 14)."""
+    @benchmark_app.command("headline")
+    def headline_cmd(
+        out: Path = typer.Option(..., help="output folder: runs.json, summary.csv, headline.md, headline.png"),
+        vehicles: str = typer.Option("car,truck_15t,truck_25t,truck_40t", help="vehicle cases (car = bmw_i3, "
+                                     "truck_<m>t = tractor-semitrailer at m t gross, abc at 27.5 t)"),
+        car_roads: str = typer.Option("hilly", help="car roads (hilly = 2.5 km generated, one per seed)"),
+        truck_roads: str = typer.Option("long_grades", help="truck roads: long_grades (4 km, 3-6 %), "
+                                        "longhaul_real (10 km windows of the real long-haul cycle)"),
+        conditions: str = typer.Option("nominal", help="car conditions (see benchmark controllers)"),
+        seeds: int = typer.Option(10, help="seeds (= roads) per vehicle, road and condition"),
+        quick: bool = typer.Option(False, "--quick", help="tiny run: car only, 2 seeds on a 1.2 km road"),
+        scheduler: str = typer.Option(None, help="Dask scheduler address (default: local processes)"),
+        workers: int = typer.Option(None, help="local worker processes (default: CPU count)"),
+    ) -> None:
+        """MPC with the oracle / abc / online force model against cruise control at equal trip time, paired over
+        seeds, with the 1-sigma resolution and 95 % CIs of every difference."""
+        cases = ["car"] if quick else _car_truck_cases(vehicles)
+        seeds = 2 if quick else seeds
+        if seeds < 2:
+            _fail(f"--seeds: need at least 2 for a confidence interval, got {seeds}")
+        roads = {c: [r.strip() for r in (car_roads if c == "car" else truck_roads).split(",") if r.strip()]
+                 for c in cases}
+        if quick:
+            roads = {"car": ["hilly_short"]}
+        conds = [c.strip() for c in conditions.split(",") if c.strip()]
+        bad = [c for c in conds if c not in CONDITIONS]
+        if bad:
+            _fail(f"--conditions: unknown {bad}; known: {list(CONDITIONS)}")
+        tasks = headline_tasks(cases, roads, seeds, conds, human=True, quick=quick)
+        summary, failures = run_paired(tasks, out, scheduler=scheduler, workers=workers, description="headline")
+        if summary.empty:
+            _fail("every task failed: " + "; ".join(failures[:3]))
+        md = headline_markdown(summary, failures)
+        write_text(out / "headline.md", "# Headline: eco-driving MPC force models at equal trip time\n\n" + md)
+        headline_figure(summary, out / "headline.png")
+        typer.echo(md)
+        typer.echo(f"wrote {out}/headline.md, summary.csv, runs.json, headline.png")
+
+    @benchmark_app.command("sensitivity")
+    def sensitivity_cmd(
+        out: Path = typer.Option(..., help="output folder: sensitivity.md/.csv, sensitivity.png, runs.json"),
+        vehicles: str = typer.Option("car,truck_40t", help="vehicle cases"),
+        seeds: int = typer.Option(4, help="seeds (= roads) per vehicle"),
+        quick: bool = typer.Option(False, "--quick", help="tiny run: car only, 2 seeds, mass +20 % only"),
+        scheduler: str = typer.Option(None, help="Dask scheduler address (default: local processes)"),
+        workers: int = typer.Option(None, help="local worker processes (default: CPU count)"),
+    ) -> None:
+        """Energy penalty at equal time vs force-model error (mass, rolling resistance, drag area, grade bias,
+        drive-train losses; one at a time and jointly) against the oracle MPC: table and figure per vehicle."""
+        cases = ["car"] if quick else _car_truck_cases(vehicles)
+        seeds = 2 if quick else seeds
+        if seeds < 2:
+            _fail(f"--seeds: need at least 2 for a confidence interval, got {seeds}")
+        road = {c: ("hilly_short" if quick else "hilly" if c == "car" else "long_grades") for c in cases}
+        summary, failures = run_paired(sensitivity_tasks(road, seeds, quick=quick), out, scheduler=scheduler,
+                                       workers=workers, description="sensitivity")
+        if summary.empty:
+            _fail("every task failed: " + "; ".join(failures[:3]))
+        table = sensitivity_table(summary)
+        write_text(out / "sensitivity.csv", table.to_csv(index=False))
+        md = ("Energy penalty of the MPC with a wrong force model vs the oracle MPC at equal trip time, paired per "
+              "seed; mean [95 % CI] (1σ resolution); 'not resolved': CI contains 0.\n\n"
+              + markdown_table(table[["vehicle", "road", "parameter", "error", "seeds", "result"]]) + "\n")
+        if failures:
+            md += "\nFailed tasks:\n\n" + "\n".join(f"- {f}" for f in failures) + "\n"
+        write_text(out / "sensitivity.md", "# Sensitivity map\n\n" + md)
+        sensitivity_figure(table, out / "sensitivity.png")
+        typer.echo(md)
+        typer.echo(f"wrote {out}/sensitivity.md, sensitivity.csv, sensitivity.png, runs.json")

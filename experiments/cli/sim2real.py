@@ -17,6 +17,8 @@ from roadload.fileio import write_json
 from roadload.io import import_log
 from roadload.io.report import LogImportError
 
+from .errors import describe, fail
+
 
 # file endings of trip files per import format (a folder given to --real yields these only)
 TRIP_SUFFIXES = {None: (".parquet",), "csv": (".csv",), "bmw-i3": (".csv",), "openxc": (".json", ".txt"),
@@ -104,7 +106,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
             cands = tuple(c.strip() for c in candidates.split(",") if c.strip()) if candidates else DEFAULT_CANDIDATES
             if not floor_duration >= 60.0:
                 raise DiagnosisError(f"--floor-duration must be at least 60 s, got {floor_duration} s")
-            settings = DiagnosisSettings(candidates=cands, seed=seed, resimulate=resimulate, replay=resimulate,
+            settings = DiagnosisSettings(candidates=cands, seed=seed, resimulate=resimulate,
                                          strict_candidates=candidates is not None, base_first=base_first,
                                          floor_duration=floor_duration)
             with Progress(console=console) as bar:
@@ -113,8 +115,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                                 progress=lambda what, frac: bar.update(task, completed=frac, description=what))
             paths = write_report(diag, out)
         except (DiagnosisError, ValueError) as exc:
-            console.print(f"[red]error:[/red] {exc}")
-            raise typer.Exit(2) from None
+            fail(describe(exc))
         for imp in diag.notes.get("implausible", []):
             console.print(f"[yellow]not accepted, implausible:[/yellow] {imp['effect']}: {imp['reason']}")
         base = diag.notes.get("base_calibration") or {}
@@ -143,13 +144,11 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
 
         console = Console()
         if world not in WORLD_NAMES:
-            console.print(f"[red]error:[/red] unknown world {world!r}; choose one of {', '.join(WORLD_NAMES)}")
-            raise typer.Exit(2)
+            fail(f"--world: unknown world {world!r}; choose one of {', '.join(WORLD_NAMES)}")
         try:
             seed_list = [int(x) for x in seeds.split(",") if x.strip()]
         except ValueError:
-            console.print(f"[red]error:[/red] --seeds must be comma-separated integers, got {seeds!r}")
-            raise typer.Exit(2) from None
+            fail(f"--seeds must be comma-separated integers, got {seeds!r}")
         names = [e.strip() for e in effects.split(",") if e.strip()] if effects else None
         run = run_world(world, seed_list, names, duration, vehicle=vehicle, say=console.print)
         for sd in seed_list:

@@ -1,0 +1,179 @@
+"""The headline comparison and the sensitivity map (issue 14): tasks, runs on the sweep runner, tables, figures.
+
+``headline_tasks`` / ``sensitivity_tasks`` build :class:`~roadload.experiments.controller_comparison.PairedTask`
+lists; :func:`run_paired` runs them through :func:`roadload.sweep.run_sweep` (local processes or Dask) and
+writes ``runs.json`` (every closed-loop run), ``summary.csv`` / ``summary.md`` (paired differences with 1-sigma
+resolution and 95 % CI) and PNG figures. Sensitivity: energy penalty at equal time of a force model with a
+deliberate error (:class:`roadload.controllers.force_model.ErroredForceModel`) against the oracle.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from roadload.experiments.controller_comparison import (PairedTask, format_difference, paired_summary,
+                                                        run_paired_task)
+from roadload.experiments.controller_report import markdown_table
+from roadload.fileio import write_text
+from roadload.sweep import run_sweep
+
+SENSITIVITY_ERRORS: dict[str, tuple[float, ...]] = {
+    "mass": (-0.2, 0.2), "rolling": (-0.5, 0.5), "drag_area": (-0.3, 0.3), "grade_bias": (-0.005, 0.005),
+    "drivetrain_loss": (-0.3, 0.3)}
+JOINT_ERROR = {"mass": 0.2, "rolling": 0.5, "drag_area": -0.3, "grade_bias": 0.005, "drivetrain_loss": 0.3}
+
+
+def _spec(errors: dict[str, float]) -> str:
+    return "wrong:" + ",".join(f"{k}={v:g}" for k, v in errors.items())
+
+
+def sensitivity_models() -> tuple[str, ...]:
+    """'wrong:<error>=<value>' force models: each error alone at both signs, and all jointly (JOINT_ERROR)."""
+    one = [_spec({k: v}) for k, vals in SENSITIVITY_ERRORS.items() for v in vals]
+    return ("oracle", *one, _spec(JOINT_ERROR))
+
+
+QUICK = {"max_search_runs": 2, "weight_factors": ()}  # smoke runs: 2 oracle runs, 1 run per other model
+
+
+def headline_tasks(cases: list[str], roads: dict[str, list[str]], seeds: int, conditions: list[str] | None = None,
+                   human: bool = True, quick: bool = False) -> list[PairedTask]:
+    """One task per (case, road, condition, seed); roads: {case: [road, ...]}."""
+    conds = conditions or ["nominal"]
+    extra: dict = dict(QUICK) if quick else {}
+    return [PairedTask(case, road, seed, condition=c, human=human, **extra)
+            for case in cases for road in roads[case] for c in (conds if case == "car" else ["nominal"])
+            for seed in range(seeds)]
+
+
+def sensitivity_tasks(cases: dict[str, str], seeds: int, quick: bool = False) -> list[PairedTask]:
+    """cases: {vehicle case: road}; each wrong model at the oracle's matched lambda only (the joint fit takes
+    slope and curvature from the oracle's search runs)."""
+    models = ("oracle", "wrong:mass=0.2") if quick else sensitivity_models()
+    return [PairedTask(case, road, seed, force_models=models, weight_factors=(),
+                       max_search_runs=2 if quick else PairedTask.max_search_runs)
+            for case, road in cases.items() for seed in range(seeds)]
+
+
+def run_paired(tasks: list[PairedTask], out: Path, scheduler: str | None = None, workers: int | None = None,
+               description: str = "paired comparison") -> tuple[pd.DataFrame, list[str]]:
+    """Run the tasks on the sweep runner, write runs.json and summary.csv/.md; returns (summary, failures)."""
+    out.mkdir(parents=True, exist_ok=True)
+    outcomes = run_sweep(run_paired_task, tasks, scheduler=scheduler, workers=workers, description=description)
+    results = [o.value for o in outcomes if o.ok]
+    failures = [f"{o.task.case}/{o.task.road}/{o.task.condition}/seed {o.task.seed}: {o.error}"
+                for o in outcomes if not o.ok]
+    write_text(out / "runs.json", json.dumps(results, default=_json_default, indent=1))
+    summary = paired_summary(results) if results else pd.DataFrame()
+    write_text(out / "summary.csv", summary.to_csv(index=False))
+    return summary, failures
+
+
+def _json_default(x: Any):
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    if isinstance(x, np.bool_):
+        return bool(x)
+    return str(x)
+
+
+def headline_markdown(summary: pd.DataFrame, failures: list[str]) -> str:
+    """The headline table: each MPC force model against the oracle and against cruise control at equal time."""
+    rows = []
+    for _, r in summary.iterrows():
+        rows.append({"vehicle": r.vehicle, "road": r.road, "condition": r.condition, "MPC force model": r.force_model,
+                     "seeds": r.seeds,
+                     "vs oracle MPC": "-" if r.force_model == "oracle" else format_difference(
+                         r.vs_oracle_pct, r.resolution_1sigma_pct, r.ci95_lo_pct, r.ci95_hi_pct),
+                     "vs cruise control": format_difference(r.vs_cruise_pct, r.vs_cruise_1sigma_pct,
+                                                            r.vs_cruise_ci95_lo, r.vs_cruise_ci95_hi),
+                     "nearest run |dT| [%]": round(float(r.nearest_run_time_error_pct_median), 3),
+                     "fit residual [%]": round(float(r.fit_residual_std_pct), 3)})
+    md = ["Energy at the source at exactly the cruise-control trip time (joint local fit over >= 3 time weights "
+          "per model), paired per seed (same road, seed and plant for every force model); mean [95 % CI] "
+          "(1σ = standard error of the paired mean = the resolution). 'not resolved': the CI contains 0.", "",
+          markdown_table(pd.DataFrame(rows))]
+    if failures:
+        md += ["", "Failed tasks:", ""] + [f"- {f}" for f in failures]
+    return "\n".join(md) + "\n"
+
+
+def sensitivity_table(summary: pd.DataFrame) -> pd.DataFrame:
+    """Sensitivity rows: vehicle, parameter, error, penalty vs oracle [%] with 1-sigma and CI."""
+    rows = []
+    for _, r in summary.iterrows():
+        if not str(r.force_model).startswith("wrong:"):
+            continue
+        errs = dict(kv.split("=") for kv in str(r.force_model)[6:].split(","))
+        param = "joint" if len(errs) > 1 else next(iter(errs))
+        value = float("nan") if len(errs) > 1 else float(next(iter(errs.values())))
+        rows.append({"vehicle": r.vehicle, "road": r.road, "parameter": param, "error": value,
+                     "model": r.force_model, "seeds": r.seeds, "penalty_pct": r.vs_oracle_pct,
+                     "resolution_1sigma_pct": r.resolution_1sigma_pct, "ci95_lo_pct": r.ci95_lo_pct,
+                     "ci95_hi_pct": r.ci95_hi_pct,
+                     "result": format_difference(r.vs_oracle_pct, r.resolution_1sigma_pct, r.ci95_lo_pct,
+                                                 r.ci95_hi_pct)})
+    return pd.DataFrame(rows)
+
+
+def sensitivity_figure(table: pd.DataFrame, path: Path) -> Path:
+    """Bar chart per vehicle: penalty vs oracle [%] with 95 % CI per (parameter, error sign)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    vehicles = list(dict.fromkeys(table.vehicle))
+    fig, axes = plt.subplots(1, len(vehicles), figsize=(6.5 * len(vehicles), 4.2), squeeze=False)
+    for ax, veh in zip(axes[0], vehicles):
+        t = table[table.vehicle == veh].reset_index(drop=True)
+        labels = [("joint" if p == "joint" else f"{p} {e:+g}") for p, e in zip(t.parameter, t.error)]
+        y = t.penalty_pct.to_numpy(float)
+        err = np.vstack([y - t.ci95_lo_pct.to_numpy(float), t.ci95_hi_pct.to_numpy(float) - y])
+        colors = ["tab:red" if (lo > 0 or hi < 0) else "tab:gray" for lo, hi in zip(t.ci95_lo_pct, t.ci95_hi_pct)]
+        ax.barh(range(len(t)), y, xerr=np.nan_to_num(err), color=colors, capsize=3)
+        ax.set_yticks(range(len(t)), labels)
+        ax.axvline(0.0, color="k", lw=0.8)
+        ax.set_xlabel("energy penalty vs oracle MPC at equal time [%] (95 % CI)")
+        ax.set_title(f"{veh} ({t.road.iloc[0] if len(t) else ''}; grey: not resolved)")
+        ax.invert_yaxis()
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def headline_figure(summary: pd.DataFrame, path: Path) -> Path:
+    """Per (vehicle, road): abc / online MPC vs the oracle [%] with 95 % CI."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    s = summary[summary.force_model.isin(["abc", "online"])].reset_index(drop=True)
+    labels = [f"{v} {r} {c} {m}" for v, r, c, m in zip(s.vehicle, s.road, s.condition, s.force_model)]
+    y = s.vs_oracle_pct.to_numpy(float)
+    err = np.vstack([y - s.ci95_lo_pct.to_numpy(float), s.ci95_hi_pct.to_numpy(float) - y])
+    fig, ax = plt.subplots(figsize=(8, 0.45 * len(s) + 1.5))
+    ax.barh(range(len(s)), y, xerr=np.nan_to_num(err), capsize=3,
+            color=["tab:blue" if m == "online" else "tab:orange" for m in s.force_model])
+    ax.set_yticks(range(len(s)), labels)
+    ax.axvline(0, color="k", lw=0.8)
+    ax.set_xlabel("MPC energy vs oracle MPC at equal trip time [%] (95 % CI over seeds)")
+    ax.invert_yaxis()
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def finite(x: float) -> bool:
+    return isinstance(x, float) and math.isfinite(x)

@@ -1,0 +1,67 @@
+"""Equal-time matching by a joint local fit, paired CIs and the force-model spec parser (issue 14)."""
+
+import numpy as np
+import pytest
+
+from roadload.experiments.controller_comparison import _mean_ci, paired_summary, parse_force_model
+from roadload.experiments.time_matching import fit_energy_at_time
+
+
+def _curve(t, level, t_ref=400.0, slope=-2.0, curv=15.0):
+    x = t / t_ref - 1.0
+    return level * (1.0 + slope * x + curv * x * x)
+
+
+def test_joint_fit_recovers_levels_on_a_convex_curve():
+    t_ref = 400.0
+    runs = {"oracle": [(t, _curve(t, 1.0e6)) for t in (385.0, 398.0, 409.0, 420.0)],
+            "abc": [(t, _curve(t, 1.01e6)) for t in (388.0, 401.0, 414.0)]}
+    fit = fit_energy_at_time(runs, t_ref)
+    # the shared shape is additive in E/E_ref: exact for equal levels, 1e-4 for levels 1 % apart
+    assert fit.energy["oracle"] == pytest.approx(1.0e6, rel=2e-4)
+    assert fit.energy["abc"] == pytest.approx(1.01e6, rel=2e-4)
+    assert fit.energy["abc"] / fit.energy["oracle"] == pytest.approx(1.01, abs=2e-4)
+    assert fit.slope == pytest.approx(-2.0, rel=0.02)
+    assert fit.spanned == {"oracle": True, "abc": True}
+    assert fit.nearest["abc"] == pytest.approx(1.0 / 400.0)
+    # linear interpolation between the wide bracket (385, 420) overstates the energy on the convex curve
+    e1, e2 = _curve(385.0, 1.0e6), _curve(420.0, 1.0e6)
+    linear = e1 + (t_ref - 385.0) * (e2 - e1) / 35.0
+    assert linear > 1.0e6 * 1.001
+
+
+def test_fit_ignores_runs_outside_the_window_and_reports_missing_models():
+    runs = {"oracle": [(400.0, 1.0), (404.0, 0.99), (396.0, 1.01)], "far": [(600.0, 0.5)]}
+    fit = fit_energy_at_time(runs, 400.0)
+    assert np.isnan(fit.energy["far"]) and fit.spanned["far"] is False
+    assert fit.n_points == 3
+    with pytest.raises(ValueError, match="target_time"):
+        fit_energy_at_time(runs, 0.0)
+
+
+def test_mean_ci_matches_student_t():
+    mean, se, lo, hi = _mean_ci(np.array([1.0, 2.0, 3.0, 4.0]))
+    assert mean == pytest.approx(2.5)
+    assert se == pytest.approx(np.std([1, 2, 3, 4], ddof=1) / 2.0)
+    assert hi - mean == pytest.approx(3.182446 * se, rel=1e-5)  # t_{0.975, 3}
+    assert lo == pytest.approx(2 * mean - hi)
+
+
+def test_paired_summary_flags_unresolved_differences():
+    def result(seed, abc, online):
+        return {"task": {"case": "car", "road": "hilly", "condition": "nominal", "seed": seed},
+                "energy_at_tref_J": {"oracle": 100.0, "abc": abc, "online": online}, "cruise_energy_J": 110.0,
+                "nearest_time_error": {"oracle": 0.001, "abc": 0.002, "online": 0.003}, "fit_residual_std": 0.003}
+    rs = [result(0, 102.0, 100.2), result(1, 103.0, 99.7), result(2, 102.5, 100.1)]
+    s = paired_summary(rs).set_index("force_model")
+    assert s.loc["abc", "vs_oracle_pct"] == pytest.approx(2.5)
+    assert bool(s.loc["abc", "resolved"]) is True
+    assert bool(s.loc["online", "resolved"]) is False  # mean 0 within its CI
+    assert s.loc["oracle", "vs_cruise_pct"] == pytest.approx(100 * (100 / 110 - 1))
+
+
+def test_parse_force_model():
+    assert parse_force_model("abc") == ("abc", None)
+    assert parse_force_model("wrong:mass=0.2,grade_bias=-0.005") == ("wrong", {"mass": 0.2, "grade_bias": -0.005})
+    with pytest.raises(ValueError, match="force model"):
+        parse_force_model("magic")

@@ -11,7 +11,8 @@ __all__ = ["Trip", "TripError", "__version__"]
 # entry points (the env modules load only on ``gymnasium.make``). ``gymnasium.make("roadload:roadload/EcoDrive-v0")``
 # imports ``roadload`` first, which is what makes the ids resolve in SubprocVecEnv workers started with spawn or
 # forkserver. EcoDrive-v0 also has a native vector env
-# (``gymnasium.make_vec(..., vectorization_mode="vector_entry_point")``, roadload.gym.vector). The envs truncate at their own configured time limit, hence no max_episode_steps.
+# (``gymnasium.make_vec(..., vectorization_mode="vector_entry_point")``, roadload.gym.vector). The envs truncate at
+# their own configured time limit, hence no max_episode_steps.
 def _register_gym_envs() -> None:
     import gymnasium
 

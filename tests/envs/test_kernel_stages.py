@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from roadload.envs import layout
+from roadload.units import G
 from roadload.envs import physics as ph
 from roadload.estimators import kernel as K
 
@@ -28,7 +29,7 @@ def test_aero_drag_is_eq_2_7_with_the_approach_velocity_of_eq_2_8():
 def test_rolling_resistance_and_climbing_force_are_eq_2_9_2_10_and_2_5():
     fr, f_roll = ph.rolling_resistance(0.009, 1e-4, 1e-9, 20.0, 1500.0, math.cos(0.02), 0.03)
     assert fr == pytest.approx(0.009 + 1e-4 * 20.0 + 1e-9 * 20.0 ** 4, rel=1e-14)
-    assert f_roll == pytest.approx(fr * 1500.0 * ph.GRAVITY * math.cos(0.02) * math.cos(0.03) * math.tanh(200.0))
+    assert f_roll == pytest.approx(fr * 1500.0 * G * math.cos(0.02) * math.cos(0.03) * math.tanh(200.0))
     assert ph.rolling_resistance(0.009, 0.0, 0.0, 0.0, 1500.0, 1.0, 0.0)[1] == 0.0  # smoothed to 0 at standstill
     assert ph.climbing_force(1500.0, math.sin(0.05)) == pytest.approx(1500.0 * 9.80665 * math.sin(0.05))
 

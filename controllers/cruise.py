@@ -13,6 +13,8 @@ instead and brakes only above v_ref + overspeed ("downhill speed control").
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,6 +41,9 @@ class CruiseSettings:
     overspeed: float = 0.0  # [m/s] truck speed band: downhill, no braking below v_ref + overspeed (0 = off)
 
     def __post_init__(self) -> None:
+        for name, value in self.__dict__.items():
+            if isinstance(value, float) and not math.isfinite(value):
+                raise ControllerError(f"cruise {name}: must be a finite number, got {value}")
         if not 0 < self.fraction <= 1:
             raise ControllerError(f"cruise fraction must be in (0, 1], got {self.fraction}")
         for name in ("kp", "accel", "decel", "integral_limit"):

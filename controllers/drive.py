@@ -8,6 +8,8 @@ oracle) and the controller (mpc / cruise / human), runs :func:`~.closed_loop.run
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 
 from roadload.road_profiles import RoadProfile
@@ -54,6 +56,10 @@ class DriveSettings:
             raise ControllerError(f"unknown controller {self.controller!r}; choose one of {CONTROLLERS}")
         if self.force_model not in FORCE_MODEL_NAMES:
             raise ControllerError(f"unknown force model {self.force_model!r}; choose one of {FORCE_MODEL_NAMES}")
+        if not (math.isfinite(self.time_weight) and self.time_weight >= 0):
+            raise ControllerError(f"time_weight: must be a finite number >= 0 [J/s], got {self.time_weight}")
+        if not (math.isfinite(self.dt) and self.dt > 0):
+            raise ControllerError(f"dt: must be a finite number > 0 [s], got {self.dt}")
 
 
 def _knowledge(vehicle):

@@ -27,8 +27,9 @@ The CasADi functions are built once per (settings, powertrain) and reused every 
 
 from __future__ import annotations
 
+import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import casadi as ca
 import numpy as np
@@ -71,8 +72,20 @@ class MpcSettings:
     sqp_iterations: int = 1  # QP path: linearise-solve rounds per control step (1 = real-time iteration)
 
     def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, float) and not math.isfinite(value):
+                raise MpcError(f"MpcSettings.{f.name}: must be a finite number, got {value}")
         if self.n_nodes < 2:
             raise MpcError(f"n_nodes must be >= 2, got {self.n_nodes}")
+        if self.speed_margin < 0:
+            raise MpcError(f"MpcSettings.speed_margin: must be >= 0 [m/s] (a negative margin plans above the "
+                           f"limit), got {self.speed_margin}")
+        if self.accel_weight < 0:
+            raise MpcError(f"MpcSettings.accel_weight: must be >= 0, got {self.accel_weight}")
+        if not self.qp_tolerance > 0 or self.max_iterations < 1 or self.sqp_iterations < 1:
+            raise MpcError(f"MpcSettings: qp_tolerance must be > 0 and max_iterations, sqp_iterations >= 1, got "
+                           f"{self.qp_tolerance}, {self.max_iterations}, {self.sqp_iterations}")
         if self.ds <= 0:
             raise MpcError(f"ds must be positive, got {self.ds}")
         for name in ("accel_max", "decel_max", "jerk_max", "lateral_accel_max", "speed_floor", "stop_speed"):
@@ -127,6 +140,12 @@ class Plan:
     x: np.ndarray | None = field(default=None, repr=False)  # raw primal (for warm start)
     lam_x: np.ndarray | None = field(default=None, repr=False)
     lam_g: np.ndarray | None = field(default=None, repr=False)
+    relaxed_nodes: int = 0  # nodes whose speed cap was raised to what braking at decel_max can reach (0 = none)
+
+    @property
+    def relaxed(self) -> bool:
+        """True when the plan could not honour every speed cap / stop of the preview (caps were relaxed)."""
+        return self.relaxed_nodes > 0
 
     @property
     def accel(self) -> np.ndarray:
@@ -361,8 +380,17 @@ class OcpSolver:
         """Solve from speed v0 [m/s] with the previous commanded acceleration a_prev [m/s^2]."""
         self._check(v0, a_prev, preview)
         if self.settings.solver == "ipopt":
-            return self._solve_ipopt(v0, a_prev, preview, params, warm)
-        return self._solve_qp(v0, a_prev, preview, params, warm)
+            plan = self._solve_ipopt(v0, a_prev, preview, params, warm)
+        else:
+            plan = self._solve_qp(v0, a_prev, preview, params, warm)
+        plan.relaxed_nodes = self.relaxed_nodes(v0, preview)
+        return plan
+
+    def relaxed_nodes(self, v0: float, preview: Preview) -> int:
+        """Nodes whose cap :meth:`reachable_cap` had to raise (the car cannot brake below it from v0 in time)."""
+        st = self.settings
+        cap = np.maximum(np.asarray(preview.speed_cap, float) - st.speed_margin, st.speed_floor)
+        return int(np.sum(self.reachable_cap(v0, preview) > cap + 1e-9))
 
     def _solve_ipopt(self, v0, a_prev, preview, params, warm) -> Plan:
         lbx, ubx, lbg, ubg = self._bounds(v0, preview, params, a_prev)

@@ -142,6 +142,8 @@ class MpcController(ControllerBase):
         if plan is not None:
             self.iterations.append(plan.iterations)
         if ok:
+            if plan.relaxed:
+                self.events["relaxed_plans"] += 1  # counted in the run metrics (ctl_relaxed_plans)
             self.plan = plan
             if self.mode != "mpc":
                 self.mode = "mpc"

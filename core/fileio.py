@@ -2,7 +2,12 @@
 
 A writer gets a temporary path in the target's folder; only when it returns without error is the file moved into
 place (``os.replace`` is atomic on one file system), with the permissions a plain ``open()`` would have given.
-On any error the temporary file is removed and an existing target is left untouched.
+On any error the temporary file is removed and an existing target is left untouched. A write killed before it
+could clean up (SIGKILL, power loss) leaves ``.<name>.roadload-tmp-<pid>-<random><suffix>``; the next write to the
+same target removes such leftovers whose process is gone.
+
+:func:`check_output_path` validates an output path before any work starts (a directory where a file is expected,
+a parent that is a file, a folder that is not writable), so a long run never fails only at its last step.
 """
 
 from __future__ import annotations
@@ -13,7 +18,13 @@ import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
+
+TMP_MARK = ".roadload-tmp-"
+
+
+class OutputPathError(ValueError):
+    """An output path cannot be written; the message names the path and what is wrong with it."""
 
 
 def _default_mode() -> int:
@@ -30,8 +41,9 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
     (matplotlib, python-can)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix if suffix is None else suffix,
-                               dir=path.parent)
+    remove_stale_temporaries(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}{TMP_MARK}{os.getpid()}-",
+                               suffix=path.suffix if suffix is None else suffix, dir=path.parent)
     os.close(fd)
     try:
         yield Path(tmp)
@@ -67,3 +79,64 @@ def save_figure(fig, path: str | os.PathLike, dpi: int = 110, close: bool = True
 
             plt.close(fig)
     return Path(path)
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True
+    return True
+
+
+def remove_stale_temporaries(path: str | os.PathLike) -> list[Path]:
+    """Remove temporaries of interrupted writes to ``path`` whose writing process no longer runs; returns them."""
+    path = Path(path)
+    removed: list[Path] = []
+    prefix = f".{path.name}{TMP_MARK}"
+    try:
+        candidates = [p for p in path.parent.iterdir() if p.name.startswith(prefix)]
+    except OSError:
+        return removed
+    for p in candidates:
+        pid_text = p.name[len(prefix):].split("-", 1)[0]
+        if pid_text.isdigit() and int(pid_text) != os.getpid() and not _pid_alive(int(pid_text)):
+            try:
+                p.unlink()
+                removed.append(p)
+            except OSError:
+                pass
+    return removed
+
+
+def check_output_path(path: str | os.PathLike, kind: Literal["file", "dir"] = "file",
+                      what: str = "--out") -> Path:
+    """Refuse an output path before work starts: a file path that is a directory, a folder path that is a file,
+    an ancestor that is a file, or an existing folder (or file) without write permission. Returns the path."""
+    if str(path).strip() == "":
+        raise OutputPathError(f"{what}: empty path; expected a {'file' if kind == 'file' else 'folder'} path")
+    path = Path(path)
+    if path.exists():
+        if kind == "file" and path.is_dir():
+            raise OutputPathError(f"{what} {path}: is a directory; expected a file path (e.g. {path / 'out'}"
+                                  f"{path.suffix or '.parquet'})")
+        if kind == "dir" and not path.is_dir():
+            raise OutputPathError(f"{what} {path}: is a file; expected a folder path")
+        if not os.access(path, os.W_OK):
+            raise OutputPathError(f"{what} {path}: exists and is not writable")
+    parent = path if kind == "dir" and path.is_dir() else path.parent
+    ancestor = parent
+    while not ancestor.exists():
+        if ancestor.is_symlink():  # a dangling link
+            raise OutputPathError(f"{what} {path}: {ancestor} is a broken symbolic link")
+        if ancestor == ancestor.parent:
+            break
+        ancestor = ancestor.parent
+    if ancestor.exists() and not ancestor.is_dir():
+        raise OutputPathError(f"{what} {path}: {ancestor} is a file, so it cannot hold "
+                              f"{'the output file' if kind == 'file' else 'the output folder'}")
+    if ancestor.exists() and not os.access(ancestor, os.W_OK | os.X_OK):
+        raise OutputPathError(f"{what} {path}: folder {ancestor} is not writable")
+    return path

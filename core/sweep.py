@@ -81,9 +81,9 @@ def run_sweep(fn: Callable[[Any], Any], tasks: Iterable[Any], scheduler: str | N
             own = isinstance(scheduler, str)
             client = Client(scheduler) if own else (scheduler if isinstance(scheduler, Client) else Client(scheduler))
             try:
-                futures = [client.submit(_call, fn, i, task, pure=False) for i, task in enumerate(tasks)]
-                for fut in dask_completed(futures):
-                    record(fut.result())
+                dask_futures = [client.submit(_call, fn, i, task, pure=False) for i, task in enumerate(tasks)]
+                for dask_fut in dask_completed(dask_futures):
+                    record(dask_fut.result())
             finally:
                 if own or not isinstance(scheduler, Client):
                     client.close()

@@ -24,24 +24,130 @@ import types
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
+from pydantic import Field, TypeAdapter
+from pydantic.fields import FieldInfo
 
 from .fileio import write_json
-
+from .units import G, STANDARD_AIR_DENSITY
 from .channels import MEASURED
 
 __all__ = [
     "VehicleSpecError", "Curve", "Map2D", "BodySpec", "AeroSpec", "TireSpec", "EngineSpec", "MotorSpec",
     "BatterySpec", "ShiftSpec", "DrivetrainSpec", "BrakeSpec", "SteeringSpec", "ChannelSensorSpec", "SensorSpec",
-    "VehicleSpec", "load_vehicle", "save_vehicle",
+    "VehicleSpec", "load_vehicle", "save_vehicle", "check_declared", "check_physics",
+    "MASS_MIN", "MASS_MAX", "TOP_SPEED_MIN", "vehicle_json_schema",
 ]
 
 
 
 class VehicleSpecError(ValueError):
     """A vehicle specification is invalid; the message names the field (``vehicle.body.mass: ...``)."""
+
+
+# ----------------------------------------------------------------------------------------------- declared bounds
+#: plausible road vehicles: a 250 kg quadricycle ... a 44 t truck (EU limit) with margin
+MASS_MIN, MASS_MAX = 250.0, 60_000.0
+#: gear ratios i_G of road-vehicle gearboxes (12-speed truck: ~16 ... 0.77; car overdrive ~0.6; BEV single ~10)
+GEAR_RATIO_MIN, GEAR_RATIO_MAX = 0.3, 25.0
+FINAL_DRIVE_MIN, FINAL_DRIVE_MAX = 0.5, 15.0
+#: the top speed (kinematic and power limit, flat road) a road vehicle must reach [m/s]
+TOP_SPEED_MIN = 20.0
+
+
+def _q(unit: str, doc: str, *, plausible: tuple[float, float] | None = None, gt: float | None = 0.0) -> FieldInfo:
+    """A declared physical quantity: > gt, inside the plausible range [lo, hi], in `unit` (pydantic Field
+    metadata read by :func:`check_declared`; also shows in the JSON schema of the spec)."""
+    extra: dict[str, Any] = {"unit": unit}
+    if plausible is not None:
+        extra["plausible"] = list(plausible)
+    return Field(gt=gt, description=f"{doc} [{unit}]", json_schema_extra=extra)
+
+
+_HINTS: dict[type, dict[str, Any]] = {}
+
+
+def check_declared(obj: Any, path: str) -> None:
+    """Check every field declared with :func:`_q` on a (nested) spec dataclass: finite, > bound, inside the
+    plausible range; the error names the field, the value, the bound and the unit."""
+    tp = type(obj)
+    if tp not in _HINTS:
+        _HINTS[tp] = typing.get_type_hints(tp, include_extras=True)
+    hints = _HINTS[tp]
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        hint: Any = hints.get(f.name)
+        if typing.get_origin(hint) is Annotated:
+            for info in hint.__metadata__:
+                if isinstance(info, FieldInfo):
+                    _check_quantity(f"{path}.{f.name}", value, info)
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            check_declared(value, f"{path}.{f.name}")
+
+
+def _check_quantity(path: str, value: Any, info: FieldInfo) -> None:
+    extra: dict[str, Any] = dict(info.json_schema_extra) if isinstance(info.json_schema_extra, dict) else {}
+    unit = extra.get("unit", "")
+    if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
+        raise VehicleSpecError(f"{path}: must be a finite number [{unit}], got {value!r}")
+    for m in info.metadata:
+        gt = getattr(m, "gt", None)
+        if gt is not None and not value > gt:
+            raise VehicleSpecError(f"{path}: must be > {gt:g} [{unit}], got {value!r}")
+    if "plausible" in extra:
+        lo, hi = (float(b) for b in extra["plausible"])
+        if not lo <= value <= hi:
+            raise VehicleSpecError(f"{path}: {value!r} {unit} is outside the plausible range [{lo:g}, {hi:g}] "
+                                   f"{unit} of a road vehicle ({info.description})")
+
+
+def _flat_road_speed(power: float, mass: float, tires: "TireSpec", drag_area: float, efficiency: float = 0.9) -> float:
+    """Speed [m/s] where P eta = (m g f_r(v) + rho/2 c_x A v^2) v on a flat road (bisection)."""
+    lo, hi = 0.0, 200.0
+    for _ in range(60):
+        v = 0.5 * (lo + hi)
+        need = (mass * G * float(tires.rolling_resistance_coefficient(v)) + 0.5 * STANDARD_AIR_DENSITY * drag_area
+                * v ** 2) * v
+        lo, hi = (v, hi) if need < power * efficiency else (lo, v)
+    return lo
+
+
+def check_physics(spec: "VehicleSpec", path: str = "vehicle") -> None:
+    """Cross-field checks of a complete spec: gear ratios in range and strictly decreasing, final drive in range,
+    and a reachable top speed (min of the shaft-speed limit in the top gear and the flat-road power limit)
+    above TOP_SPEED_MIN."""
+    d = spec.drivetrain
+    for k, r in enumerate(d.gear_ratios):
+        if not GEAR_RATIO_MIN <= r <= GEAR_RATIO_MAX:
+            raise VehicleSpecError(f"{path}.drivetrain.gear_ratios[{k}]: {r!r} is outside the plausible range "
+                                   f"[{GEAR_RATIO_MIN:g}, {GEAR_RATIO_MAX:g}] of a gearbox ratio [1]")
+    steps = np.diff(np.asarray(d.gear_ratios, dtype=float))
+    if np.any(steps >= 0):
+        k = int(np.flatnonzero(steps >= 0)[0])
+        raise VehicleSpecError(f"{path}.drivetrain.gear_ratios: must be strictly decreasing from first gear up, "
+                               f"got {d.gear_ratios[k]!r} then {d.gear_ratios[k + 1]!r} at gears {k + 1}, {k + 2}")
+    if d.engine is not None and d.kind == "ice":
+        shaft_max = d.engine.max_speed
+        x, y = np.asarray(d.engine.full_load.x, float), np.asarray(d.engine.full_load.y, float)
+        power = float(np.max(x * y))
+    elif d.motor is not None:
+        shaft_max = d.motor.max_speed
+        power = d.motor.max_power
+    else:  # validated before: an ICE has an engine, a BEV a motor
+        return
+    r = spec.tires.dynamic_radius
+    v_shaft = shaft_max * r / (min(d.gear_ratios) * d.final_drive)
+    v_power = _flat_road_speed(power, spec.body.mass, spec.tires, spec.aero.drag_area)
+    v_top = min(v_shaft, v_power)
+    if v_top < TOP_SPEED_MIN:
+        cause = (f"shaft speed limit {shaft_max:.0f} rad/s through ratio {min(d.gear_ratios):g} x "
+                 f"{d.final_drive:g} on {r:g} m wheels gives {v_shaft:.3g} m/s" if v_shaft <= v_power else
+                 f"peak power {power / 1e3:.3g} kW moves {spec.body.mass:g} kg at {v_power:.3g} m/s on a flat road")
+        where = "drivetrain.gear_ratios" if v_shaft <= v_power else "body.mass"
+        raise VehicleSpecError(f"{path}.{where}: top speed {v_top:.3g} m/s [{v_top * 3.6:.3g} km/h] is below "
+                               f"{TOP_SPEED_MIN:g} m/s [{TOP_SPEED_MIN * 3.6:g} km/h] ({cause})")
 
 
 # ----------------------------------------------------------------------------------------------- check helpers
@@ -136,13 +242,13 @@ class BodySpec:
     cg_to_front_axle l_12 [m]; yaw_inertia I_z [kg m^2]; pitch/roll gradients [rad per m/s^2] tilt the body-fixed
     accelerometers (eq. 4.4/5.2: nose up under acceleration, roll outward in corners)."""
 
-    mass: float
-    wheelbase: float
+    mass: Annotated[float, _q("kg", "nominal mass incl. driver", plausible=(MASS_MIN, MASS_MAX))]
+    wheelbase: Annotated[float, _q("m", "wheelbase l = l_12 + l_34", plausible=(1.0, 10.0))]
     cg_to_front_axle: float
-    cg_height: float = 0.55
-    track_front: float = 1.6
-    track_rear: float = 1.6
-    yaw_inertia: float = 3000.0
+    cg_height: Annotated[float, _q("m", "CG height", plausible=(0.1, 3.5))] = 0.55
+    track_front: Annotated[float, _q("m", "front track width", plausible=(0.5, 3.0))] = 1.6
+    track_rear: Annotated[float, _q("m", "rear track width", plausible=(0.5, 3.0))] = 1.6
+    yaw_inertia: Annotated[float, _q("kg m^2", "yaw inertia I_z", plausible=(10.0, 2.0e6))] = 3000.0
     pitch_gradient: float = 0.004
     roll_gradient: float = 0.006
 
@@ -165,8 +271,8 @@ class BodySpec:
 class AeroSpec:
     """Aerodynamics (eq. 2.7): c_x(psi_a) = c_w cos(psi_a) (1 + yaw_drag_factor sin^2 psi_a), frontal area A_V."""
 
-    drag_coefficient: float
-    frontal_area: float
+    drag_coefficient: Annotated[float, _q("1", "drag coefficient c_w", plausible=(1e-3, 2.0))]
+    frontal_area: Annotated[float, _q("m^2", "frontal area A_V", plausible=(0.3, 15.0))]
     yaw_drag_factor: float = 0.3
 
     @property
@@ -186,7 +292,7 @@ class TireSpec:
     f_r4 [s^4/m^4]); axle cornering stiffnesses X_12, X_34 [N/rad] (eq. 2.12); longitudinal slip stiffness c_xW
     per wheel [N] (eq. 2.3a); wheel inertia I_W per wheel incl. brake disc [kg m^2]; toe_in per front wheel [rad]."""
 
-    dynamic_radius: float
+    dynamic_radius: Annotated[float, _q("m", "dynamic tyre radius r_W", plausible=(0.1, 1.5))]
     rolling_resistance_f0: float
     rolling_resistance_f1: float
     rolling_resistance_f4: float
@@ -218,8 +324,8 @@ class EngineSpec:
     fuel_power map P_fuel(omega, T_E) [W] (x = speed, y = torque; zero below the drag curve = fuel cut);
     inertia I_E [kg m^2]."""
 
-    idle_speed: float
-    max_speed: float
+    idle_speed: Annotated[float, _q("rad/s", "idle speed", plausible=(20.0, 200.0))]
+    max_speed: Annotated[float, _q("rad/s", "maximum engine speed", plausible=(100.0, 1500.0))]
     full_load: Curve
     drag: Curve
     fuel_power: Map2D
@@ -248,9 +354,9 @@ class MotorSpec:
     [rad/s], rotor inertia [kg m^2], loss_map P_loss(omega, T) [W] >= 0 (x = speed, y = torque); electrical power
     P_el = T omega + P_loss (efficiency map: see ``MotorSpec.efficiency``)."""
 
-    max_torque: float
-    max_power: float
-    max_speed: float
+    max_torque: Annotated[float, _q("N*m", "maximum motor torque", plausible=(5.0, 1.0e5))]
+    max_power: Annotated[float, _q("W", "maximum motor power", plausible=(1.0e3, 2.0e6))]
+    max_speed: Annotated[float, _q("rad/s", "maximum motor speed", plausible=(50.0, 3000.0))]
     regen_torque_limit: float
     regen_power_limit: float
     inertia: float
@@ -279,7 +385,7 @@ class BatterySpec:
     """Traction battery: usable capacity [J], open-circuit voltage [V], internal resistance [Ohm],
     auxiliary (12 V, electronics) power [W], initial state of charge [-]."""
 
-    capacity: float
+    capacity: Annotated[float, _q("J", "usable battery capacity", plausible=(1.0e5, 1.0e10))]
     open_circuit_voltage: float
     internal_resistance: float
     auxiliary_power: float = 300.0
@@ -330,7 +436,7 @@ class DrivetrainSpec:
     kind: str
     driven_axle: str
     gear_ratios: list[float]
-    final_drive: float
+    final_drive: Annotated[float, _q("1", "final drive ratio i_D", plausible=(FINAL_DRIVE_MIN, FINAL_DRIVE_MAX))]
     gearbox_inertia: list[float]
     clutch_inertia: float
     differential_inertia: float
@@ -564,8 +670,10 @@ class VehicleSpec:
     def validate(self, path: str = "vehicle") -> None:
         if not isinstance(self.name, str) or not self.name:
             raise VehicleSpecError(f"{path}.name: must be a non-empty string")
+        check_declared(self, path)
         for part in ("body", "aero", "tires", "drivetrain", "brakes", "steering", "sensors"):
             getattr(self, part).validate(f"{path}.{part}")
+        check_physics(self, path)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -645,6 +753,11 @@ def _build(tp: Any, data: Any, path: str) -> Any:
             raise VehicleSpecError(f"{path}: expected a string, got {data!r}")
         return data
     raise VehicleSpecError(f"{path}: unsupported type {tp!r}")  # pragma: no cover - programming error
+
+
+def vehicle_json_schema() -> dict[str, Any]:
+    """The JSON schema of a vehicle spec file (pydantic): fields with units, lower bounds and plausible ranges."""
+    return TypeAdapter(VehicleSpec).json_schema()
 
 
 def load_vehicle(path: str | os.PathLike) -> VehicleSpec:

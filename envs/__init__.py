@@ -44,10 +44,11 @@ Step API (used by the MPC and the gym environments; stable)
 
 Throughput (``scripts/bench_simulator.py``, CPU time on one core): a one-hour 100 Hz trip with all sensors and
 effects in ~0.8 s (~4500x real time, ~430 MB peak); ``step`` with 10 substeps ~14 us (~70 000 steps/s);
-``observe`` ~13 us. The first import compiles the jitted core (~20-40 s) into a cache under ``__pycache__``. Effects: ``EFFECTS`` (names, equations, parameters with defaults); the scheduled ones (wind_ramp,
-mass_ramp, drag_area_ramp, rolling_resistance_ramp: onset / ramp in time or distance) are applied between substeps
-by ``schedules.py`` and show in the truth channels. Lateral
-accelerations above ~4 m/s^2 raise a ``LateralValidityWarning`` (single-track model validity, section 2.5.1).
+``observe`` ~13 us. The first import compiles the jitted core (~20-40 s) into a cache under ``__pycache__``.
+Effects: ``EFFECTS`` (names, equations, parameters with defaults); the scheduled ones (wind_ramp, mass_ramp,
+drag_area_ramp, rolling_resistance_ramp: onset / ramp in time or distance) are applied between substeps by
+``schedules.py`` and show in the truth channels. Lateral accelerations above ~4 m/s^2 raise a
+``LateralValidityWarning`` (single-track model validity, section 2.5.1).
 """
 
 from .driver import DriverConfig

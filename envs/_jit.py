@@ -41,11 +41,27 @@ def _cache_dir() -> str:
 CACHE_DIR = _cache_dir()
 
 
-def jit(fn):
-    """njit(cache=True) with the core's hashed cache directory."""
-    old = config.CACHE_DIR
-    config.CACHE_DIR = CACHE_DIR
+def jit(fn=None, *, refcount: bool = True):
+    """njit(cache=True) with the core's hashed cache directory.
+
+    ``refcount=False`` compiles without numba's reference counting (``_nrt=False``) — for a kernel that allocates
+    nothing and passes its arrays to inline stages: every array handed to an inlined stage would otherwise cost an
+    atomic increment / decrement pair per call."""
+    if fn is None:
+        return lambda f: jit(f, refcount=refcount)
+    # numba.core.config creates its settings (CACHE_DIR, ...) at runtime from the environment: getattr/setattr
+    old = getattr(config, "CACHE_DIR")
+    setattr(config, "CACHE_DIR", CACHE_DIR)
     try:
-        return numba.njit(cache=True)(fn)
+        if refcount:
+            return numba.njit(cache=True)(fn)
+        # _nrt is numba's private switch for reference counting; its njit overloads do not list it
+        return numba.njit(cache=True, _nrt=False)(fn)  # type: ignore[call-overload]
     finally:
-        config.CACHE_DIR = old
+        setattr(config, "CACHE_DIR", old)
+
+
+def stage(fn):
+    """``njit(inline="always")``: one named stage of a kernel, inlined into its caller in numba's IR, so a kernel
+    written as a short sequence of stage calls compiles to the same single loop body as one long function."""
+    return numba.njit(inline="always")(fn)

@@ -20,11 +20,15 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from ._jit import jit
-
 from roadload.units import G
 
-from .layout import *  # noqa: F401,F403 - index constants
+from ._jit import jit
+from .layout import (
+    P_AREA, P_CW, P_CYCLE_MODE, P_DRV_ALAT, P_DRV_AMAX, P_DRV_BMAX, P_DRV_BPLAN, P_DRV_DWELL_MAX, P_DRV_DWELL_MIN,
+    P_DRV_EG, P_DRV_KI, P_DRV_LOOKAHEAD, P_DRV_MARGIN, P_DRV_PEDAL_TAU, P_DRV_PREVIEW, P_DRV_RHO, P_DRV_TAU,
+    P_DRV_VAR_STD, P_DRV_VAR_TAU, P_FR0, P_L, P_MASS0, R_CRUISE, R_CURV, R_VPLAN, S_BETA, S_DRV_F, S_DRV_I,
+    S_DRV_VAR, S_DRV_VAR2, S_DWELL, S_DWELL_LEFT, S_EPSI, S_EY, S_STOP_IDX, S_T,
+)
 from .numerics import rng_normal, rng_uniform, road_value, road_value_at
 
 

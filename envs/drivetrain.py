@@ -17,7 +17,11 @@ import math
 import numpy as np
 from ._jit import jit
 
-from .layout import *  # noqa: F401,F403 - index constants
+from .layout import (
+    MODE_LOCKED, P_BAT_R, P_BAT_VOC, P_ID, P_IGEAR0, P_IW4, P_I_CLUTCH, P_I_DIFF, P_I_SOURCE, P_KIND_BEV,
+    P_MAX_POWER, P_MAX_SPEED, P_MAX_TORQUE, P_OIL_COLD_FACTOR, P_OIL_WARM, P_RATIO0, P_REGEN_P, P_REGEN_T, P_RW,
+    T_DIFFLOSS, T_DRAG, T_FUEL, T_FULLLOAD, T_GBLOSS, T_MOTORLOSS,
+)
 from .numerics import invert_through_map, table1, table2
 from .packing import pack_vehicle
 

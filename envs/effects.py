@@ -211,7 +211,7 @@ class EffectsConfig:
             if k not in spec.params:
                 raise EffectsError(f"effect {name!r} has no parameter {k!r}; its parameters: {sorted(spec.params)}")
             values[k] = _parse_value(name, k, raw, spec.params[k])
-        if name == "payload" and values["min_payload"] > values["max_payload"]:
+        if name == "payload" and float(values["min_payload"]) > float(values["max_payload"]):
             raise EffectsError("effect 'payload' parameter 'min_payload': must not exceed max_payload")
         self._on[name] = values
         return self

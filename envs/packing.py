@@ -4,9 +4,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from roadload.vehicle import Curve, Map2D, VehicleSpec
+from roadload.vehicle import Curve, Map2D, VehicleSpec, VehicleSpecError
 
-from .layout import *  # noqa: F401,F403 - index constants
+from .layout import (
+    N_P_TOTAL, N_TABLES, P_AB_F, P_AB_R, P_AREA, P_AUX_P, P_BAT_CAP, P_BAT_R, P_BAT_VOC, P_BRAKE_SHARE, P_BRAKE_TAU,
+    P_CF, P_CR, P_CW, P_CX_SLIP, P_DISC_C, P_DISC_H, P_DISC_HV, P_DN_HI, P_DN_LO, P_DRIVEN, P_DT, P_FR0, P_FR1,
+    P_FR4, P_ID, P_IDLE, P_IGEAR0, P_IW4, P_IZ, P_I_CLUTCH, P_I_DIFF, P_I_SOURCE, P_KIND_BEV, P_L, P_LAUNCH, P_LF,
+    P_LOCK_SLIP, P_LR, P_MASS0, P_MAX_POWER, P_MAX_SLIP, P_MAX_SPEED, P_MAX_TORQUE, P_MU0, P_N_GEARS,
+    P_OIL_COLD_FACTOR, P_OIL_TAU, P_OIL_WARM, P_PITCH_GRAD, P_P_AMB, P_P_MAX, P_RATIO0, P_RB_F, P_RB_R, P_REGEN_P,
+    P_REGEN_T, P_ROLL_GRAD, P_RW, P_SHIFT_MIN, P_STEER_MAX, P_SYNC_TAU, P_S_END, P_TOE, P_TRACK_F, P_TRACK_R,
+    P_T_AMB, P_T_END, P_UP_HI, P_UP_LO, P_YAW_DRAG, T_DIFFLOSS, T_DRAG, T_FUEL, T_FULLLOAD, T_GBLOSS, T_MOTORLOSS,
+    T_STEER,
+)
 
 _DRIVEN = {"rear": 0.0, "front": 1.0, "all": 2.0}
 _DUMMY_MAP = Map2D(x=[0.0, 1.0], y=[0.0, 1.0], values=[[0.0, 0.0], [0.0, 0.0]])
@@ -77,8 +86,10 @@ def pack_vehicle(spec: VehicleSpec, dt: float = 0.01) -> tuple[np.ndarray, np.nd
     for g, (ratio, inertia) in enumerate(zip(d.gear_ratios, d.gearbox_inertia)):
         P[P_RATIO0 + g] = ratio
         P[P_IGEAR0 + g] = inertia
+    e, sh, m, bat = d.engine, d.shift, d.motor, d.battery
     if d.kind == "ice":
-        e, sh = d.engine, d.shift
+        if e is None or sh is None:
+            raise VehicleSpecError("drivetrain.engine and drivetrain.shift: required for kind 'ice', got None")
         P[P_IDLE] = e.idle_speed
         P[P_MAX_SPEED] = e.max_speed
         P[P_MAX_TORQUE] = max(e.full_load.y)
@@ -90,7 +101,8 @@ def pack_vehicle(spec: VehicleSpec, dt: float = 0.01) -> tuple[np.ndarray, np.nd
         P[P_LAUNCH] = sh.launch_speed
         P[P_LOCK_SLIP] = sh.lock_slip_speed
     else:
-        m, bat = d.motor, d.battery
+        if m is None or bat is None:
+            raise VehicleSpecError("drivetrain.motor and drivetrain.battery: required for kind 'bev', got None")
         P[P_MAX_SPEED] = m.max_speed
         P[P_MAX_TORQUE] = m.max_torque
         P[P_MAX_POWER] = m.max_power
@@ -119,19 +131,19 @@ def pack_vehicle(spec: VehicleSpec, dt: float = 0.01) -> tuple[np.ndarray, np.nd
     P[P_STEER_MAX] = 0.6
 
     tp = _TablePacker()
-    if d.kind == "ice":
-        tp.curve(T_FULLLOAD, d.engine.full_load)
-        tp.curve(T_DRAG, d.engine.drag)
-        tp.map2(T_FUEL, d.engine.fuel_power)
+    if e is not None and d.kind == "ice":
+        tp.curve(T_FULLLOAD, e.full_load)
+        tp.curve(T_DRAG, e.drag)
+        tp.map2(T_FUEL, e.fuel_power)
         tp.map2(T_MOTORLOSS, _DUMMY_MAP)
-    else:
+    elif m is not None:
         tp.curve(T_FULLLOAD, _DUMMY_CURVE)
         tp.curve(T_DRAG, _DUMMY_CURVE)
         tp.map2(T_FUEL, _DUMMY_MAP)
-        tp.map2(T_MOTORLOSS, d.motor.loss_map)
+        tp.map2(T_MOTORLOSS, m.loss_map)
     tp.map2(T_DIFFLOSS, d.differential_loss)
     tp.curve(T_STEER, Curve(spec.steering.steering_wheel_angle, spec.steering.wheel_angle))
-    for g, m in enumerate(d.gearbox_loss):
-        tp.map2(T_GBLOSS + g, m)
+    for g, loss_map in enumerate(d.gearbox_loss):
+        tp.map2(T_GBLOSS + g, loss_map)
     tabs, ti = tp.result()
     return P, tabs, ti

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from roadload.units import G
+
 import os
 import textwrap
 from pathlib import Path
@@ -62,7 +64,7 @@ def plot_trip(trip: Trip, out: str | os.PathLike) -> Path:
     if tr is not None and "grade" in tr:
         ax.plot(km_t, np.tan(tr["grade"]) * 100.0, lw=0.8, label="grade (truth)")
     if trip.has("accel_x"):
-        ax.plot(km, trip.channel("accel_x") / 9.80665 * 100.0, lw=0.3, alpha=0.5, label="accel_x / g")
+        ax.plot(km, trip.channel("accel_x") / G * 100.0, lw=0.3, alpha=0.5, label="accel_x / g")
     ax.set_ylabel("grade [%]")
     ax.legend(loc="upper left", fontsize=8)
     elev = tr["elevation"].to_numpy() if tr is not None and "elevation" in tr else (

@@ -21,7 +21,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from .effects import EffectsConfig
-from .layout import *  # noqa: F401,F403 - index constants
+from .layout import (
+    P_CW, P_FR0, P_FR1, P_FR4, P_MASS0, P_WIND_DIR, P_WIND_DIR_STD, P_WIND_GUST_STD, P_WIND_MEAN, P_WIND_ON, S_MASS,
+    S_POS, S_T,
+)
 
 SCHEDULE_EFFECTS = ("wind_ramp", "mass_ramp", "drag_area_ramp", "rolling_resistance_ramp")
 
@@ -101,7 +104,7 @@ class Schedules:
 
     def apply(self, X: np.ndarray, P: np.ndarray) -> None:
         t, s = float(X[S_T]), float(X[S_POS])
-        if self.wind_speed is not None:
+        if self.wind_speed is not None and self.wind_direction is not None:  # set together by 'wind_ramp'
             P[P_WIND_MEAN] = self.wind_speed.value(t, s)
             P[P_WIND_DIR] = self.wind_direction.value(t, s)
         if self.mass is not None:

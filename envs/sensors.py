@@ -23,7 +23,10 @@ from roadload.channels import MEASURED
 from roadload.vehicle import SensorSpec, VehicleSpec
 
 from .effects import EffectsConfig
-from .layout import *  # noqa: F401,F403 - log column constants
+from .layout import (
+    L_ACC_X_SENS, L_ACC_Y_SENS, L_CLUTCH, L_DELTA, L_ELEV, L_GEAR, L_IBAT, L_PBF, L_PBR, L_T, L_TAMB, L_TE, L_V,
+    L_VBAT, L_WE, L_WFL, L_WFR, L_WRL, L_WRR, L_YAW,
+)
 
 INPUT_CHANNELS = ("vehicle_speed", "wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr",
                   "accel_x", "accel_y", "yaw_rate", "steering_wheel_angle")
@@ -220,29 +223,44 @@ class SensorModel:
         return np.round(values / res) * res if res > 0 else values
 
     # ------------------------------------------------------------------ whole trip / one sample
-    def measure(self, log: np.ndarray, n: int) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray]:
-        """(t, channels, keep) for the first n substeps of the column-major log (N_LOG, >= n): measured sample i
-        uses substep (i+1) m - 1 with the decimation m; ``keep`` is False for samples removed by 'missing'
-        dropouts."""
-        rows = np.arange(self.decimation - 1, n, self.decimation)
+    def measure(self, log: np.ndarray, n: int, start: int = 0, offset: int = 0
+                ) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray]:
+        """(t, channels, keep) for the substeps start..n-1 (absolute indices) of the column-major log (N_LOG, >=
+        n - offset) whose column 0 holds substep ``offset``: measured sample i uses substep (i+1) m - 1 with the
+        decimation m; ``keep`` is False for samples removed by 'missing' dropouts. The log must still hold the
+        substeps the latencies reach back to (start - max delay); a window gives exactly the rows the whole-trip
+        call gives for the same samples (randomness is keyed by absolute sample index)."""
+        m = self.decimation
+        i0 = (max(start, 0) + m) // m - 1  # first sample i with (i+1) m - 1 >= start
+        rows = np.arange((i0 + 1) * m - 1, n, m)
         n_meas = rows.size
-        t = log[L_T, rows].copy()
+        t = log[L_T, rows - offset].copy()
         out: dict[str, np.ndarray] = {}
         keep = np.ones(n_meas, dtype=bool)
-        n_chunks = (n_meas + CHUNK - 1) // CHUNK
-        perturb = [self._chunk(c) for c in range(n_chunks)]
+        c0 = i0 // CHUNK
+        c1 = (i0 + n_meas + CHUNK - 1) // CHUNK if n_meas else c0
+        perturb = [self._chunk(c) for c in range(c0, c1)]
+        lo = i0 - c0 * CHUNK
         for j, name in enumerate(self.names):
             src = np.maximum(rows - self.delay[j], 0)
-            val = self._true(name, log, src)
-            if n_chunks:
-                val = val + np.concatenate([p[0][j] for p in perturb])[:n_meas]
+            if n_meas and src.min() < offset:
+                raise ValueError(f"measure: channel {name!r} needs substep {int(src.min())}, the log starts at "
+                                 f"{offset}")
+            val = self._true(name, log, src - offset)
+            if perturb:
+                val = val + np.concatenate([p[0][j] for p in perturb])[lo:lo + n_meas]
             val = self._quantise(val, j)
-            if self.dropouts is not None and not self.missing_mode:
-                val[np.concatenate([p[1][j] for p in perturb])[:n_meas]] = np.nan
+            if self.dropouts is not None and not self.missing_mode and perturb:
+                val[np.concatenate([p[1][j] for p in perturb])[lo:lo + n_meas]] = np.nan
             out[name] = val
-        if self.dropouts is not None and self.missing_mode and n_chunks:
-            keep = ~np.concatenate([p[2] for p in perturb])[:n_meas]
+        if self.dropouts is not None and self.missing_mode and perturb:
+            keep = ~np.concatenate([p[2] for p in perturb])[lo:lo + n_meas]
         return t, out, keep
+
+    @property
+    def max_delay(self) -> int:
+        """The longest latency [substeps]: how far back the log must reach for a window (see measure)."""
+        return int(self.delay.max(initial=0))
 
     def sample(self, log: np.ndarray, n: int) -> dict[str, float] | None:
         """The latest measured sample given n substeps (None before the first sample); values are NaN and

@@ -7,8 +7,10 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import warnings
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
@@ -16,7 +18,7 @@ import pandas as pd
 
 from roadload.channels import TRUTH
 from roadload.road_profiles import DriveCycle, RoadProfile
-from roadload.trip import Trip
+from roadload.trip import Trip, TripWriter
 from roadload.units import G, R_AIR, air_density
 from roadload.vehicle import SensorSpec, VehicleSpec
 
@@ -25,7 +27,24 @@ from .driver import DriverConfig, cruise_stretches, pack_driver, speed_plan
 from .drivetrain import regen_capacity as _regen_capacity
 from .drivetrain import oil_loss_factor, speed_ratio
 from .effects import EffectsConfig
-from .layout import *  # noqa: F401,F403 - index constants
+from .layout import (
+    C_FRICTION, C_GEAR_REQ, C_REGEN, C_STEER, C_TRACTION, C_USE_DRIVER, L_A, L_ACC_X_SENS, L_ACC_Y_SENS, L_AY,
+    L_BANK, L_BETA, L_CLUTCH, L_CSF, L_CSR, L_CURV, L_CXA, L_DELTA, L_DISC_T, L_DRAGF, L_ELEV, L_ESRC, L_FAERO,
+    L_FBRAKE, L_FCLIMB, L_FCORNER, L_FR, L_FR0, L_FR1, L_FR4, L_FROLL, L_FX, L_GEAR, L_GRADE, L_HEAD, L_IBAT,
+    L_LOSSF, L_MASS, L_MU, L_OIL, L_PAMB, L_PATHCURV, L_PBF, L_PBR, L_POS, L_PSRC, L_RHO, L_RIM, L_SOC, L_T, L_TAMB,
+    L_TE, L_V, L_VBAT, L_WE, L_WFL, L_WFR, L_WIND_A, L_WIND_S, L_WRL, L_WRR, L_YAW, MODE_LOCKED, MODE_OPEN,
+    MODE_SLIP, N_CMD, N_LOG, N_ROAD, N_STATE, P_AREA, P_AUX_EXTRA, P_AUX_ON, P_BANK_GAIN, P_BANK_MAX, P_BANK_ON,
+    P_BANK_SCALE, P_BARO_H, P_BARO_ON, P_CF, P_CR, P_CW, P_CYCLE_MODE, P_DN_LO, P_DRAG_ON, P_DRAG_RATE,
+    P_DRAG_ROOFBOX, P_DRAG_SUN, P_DRAG_WIN, P_FR0, P_FR1, P_FR4, P_IDLE, P_KIND_BEV, P_L, P_LF, P_LR, P_MU0,
+    P_N_GEARS, P_OIL_ON, P_OIL_START, P_OIL_WARM, P_PAD_ON, P_PAD_RW_STD, P_PAD_TCOEF, P_PAD_TREF, P_PAYLOAD_MAX,
+    P_PAYLOAD_MIN, P_PAYLOAD_ON, P_PAYLOAD_STD, P_P_AMB, P_ROAD_LEN, P_RW, P_S_END, P_T_AMB, P_T_END, P_WARM_DIST,
+    P_WARM_FACTOR, P_WARM_ON, P_WET_F1, P_WET_FACTOR, P_WET_ON, P_WIND_DIR, P_WIND_DIR_STD, P_WIND_GUST_STD,
+    P_WIND_GUST_TAU, P_WIND_MEAN, P_WIND_ON, P_WINTER_CS, P_WINTER_ON, P_WINTER_RR, R_BANK, R_CRUISE, R_CURV,
+    R_ELEV, R_GRADE, R_HEAD, R_S, R_VLIM, R_VPLAN, S_A, S_AY, S_AY_MAX, S_AY_WARN_N, S_DISC_T, S_DRAGF, S_D_AERO,
+    S_D_BRAKE, S_D_CLUTCH, S_D_CORNER, S_D_DIFF, S_D_GEARBOX, S_D_ROLL, S_E_PAYLOAD_PE, S_E_SOURCE, S_GEAR,
+    S_LAST_SHIFT, S_MASS, S_MODE, S_NLOG, S_OIL_T, S_OMEGA_E, S_POS, S_RIDX, S_SOC, S_T, S_TE, S_V, S_W_CLIMB,
+    S_W_SHAFT,
+)
 from .numerics import road_value_at
 from .packing import pack_vehicle
 from roadload.presets import get_preset
@@ -137,7 +156,13 @@ class Simulator:
 
     def __init__(self, vehicle: VehicleSpec | str, road: RoadProfile | DriveCycle,
                  effects: EffectsConfig | list[str] | str | dict | None = None, sensors: SensorSpec | None = None,
-                 seed: int = 0, driver: DriverConfig | DriveCycle | None = None, initial_speed: float = 0.0) -> None:
+                 seed: int = 0, driver: DriverConfig | DriveCycle | None = None, initial_speed: float = 0.0,
+                 log_capacity: int = 1 << 14) -> None:
+        """``log_capacity``: substeps the truth log holds before it grows (a user that only steps and reads the
+        state, like the native vector env, passes a small number and saves the 7 MB allocation per reset)."""
+        if isinstance(log_capacity, bool) or not isinstance(log_capacity, (int, np.integer)) or log_capacity < 1:
+            raise SimulationError(f"log_capacity: expected an integer >= 1 substeps, got {log_capacity!r}")
+        self._log_capacity = int(log_capacity)
         self.vehicle = _check_vehicle(vehicle)
         self.effects = EffectsConfig.parse(effects)
         if sensors is not None and not isinstance(sensors, SensorSpec):
@@ -180,7 +205,7 @@ class Simulator:
             self._cycle = np.zeros((2, 2))
             self._cycle[0, 1] = 1.0
         self._cmd = np.zeros(N_CMD)
-        self._log = np.zeros((N_LOG, 1 << 14))  # column-major: one contiguous array per channel
+        self._log = np.zeros((N_LOG, 0))  # column-major: one contiguous array per channel (allocated by reset)
         self._vplan_base = self._road[R_VPLAN].copy()
         self._stops_all = self._stops
         self.reset(seed)
@@ -297,7 +322,9 @@ class Simulator:
         self.X = X
         if self._schedules.active:
             self._schedules.apply(X, P)
-        self._log = np.zeros((N_LOG, 1 << 14))
+        self._log = np.zeros((N_LOG, self._log_capacity))
+        self._log_base = 0  # absolute substep of log column 0 (> 0 once a streamed run dropped old substeps)
+        self._flushed = 0  # substeps already written to a TripWriter
         self._warned = False
         self._last_energy = 0.0
         self._result = self._make_result(0.0)
@@ -405,9 +432,11 @@ class Simulator:
 
     # ------------------------------------------------------------------ whole trips
     def run(self, duration: float | None = None, distance: float | None = None,
-            progress: Callable[[float], None] | None = None, chunk_seconds: float = 120.0) -> None:
+            progress: Callable[[float], None] | None = None, chunk_seconds: float = 120.0,
+            writer: TripWriter | None = None) -> None:
         """Drive with the built-in driver (or the drive cycle) until the end of the road / cycle, or for the given
-        duration [s] / distance [m] from now, whichever comes first."""
+        duration [s] / distance [m] from now, whichever comes first. With a ``writer`` (see :meth:`trip_writer`)
+        every chunk of ``chunk_seconds`` is written to it and dropped from memory."""
         X, P = self.X, self.P
         if duration is not None and not (math.isfinite(duration) and duration > 0):
             raise SimulationError(f"duration: must be a positive number of seconds, got {duration!r}")
@@ -430,7 +459,9 @@ class Simulator:
         P[P_T_END] = t0 + horizon if (duration is not None or self.cycle is not None) else np.inf
         P[P_S_END] = X[S_POS] + distance if distance is not None else np.inf
         max_steps = int(math.ceil(horizon / DT)) + 1
-        if P[P_T_END] < np.inf:
+        if writer is not None:
+            pass  # the log holds one chunk at a time
+        elif P[P_T_END] < np.inf:
             self._ensure_capacity(max_steps)
         else:  # expected duration from the speed plan, so the log rarely has to grow
             rd = self._road
@@ -453,6 +484,10 @@ class Simulator:
                     (X[S_POS] - (P[P_S_END] - distance if distance else 0.0)) / max(dist if distance is None
                                                                                     else distance, 1e-9))
                 progress(min(1.0, max(0.0, float(frac))))
+            if writer is not None:
+                self._flush(writer)
+        if writer is not None:
+            self._flush(writer)
         if not physics.is_done(X, P):
             warnings.warn(f"trip stopped after {X[S_T] - t0:.0f} s at s={X[S_POS]:.0f} m without reaching the end "
                           f"of road {self.road.name!r} (vehicle too slow or stuck)", RuntimeWarning, stacklevel=2)
@@ -553,19 +588,33 @@ class Simulator:
 
     def observe(self) -> dict[str, float] | None:
         """The latest CAN-like sensor sample (measured channels, SI), None before the first step."""
+        self._check_whole_log("observe")
         return self.sensor_model.sample(self._log, int(self.X[S_NLOG]))
 
     def truth_log(self) -> np.ndarray:
         """The raw truth log so far (rows = 10-ms substeps, columns = ``layout.LOG``); a view, do not modify."""
+        self._check_whole_log("truth_log")
         return self._log[:, : int(self.X[S_NLOG])].T
 
-    def to_trip(self, name: str | None = None) -> Trip:
-        """The Trip of everything stepped since reset: measured channels (sensor model) + truth + metadata."""
-        n = int(self.X[S_NLOG])
-        if n == 0:
-            raise SimulationError("to_trip: nothing simulated yet (call step() or run() first)")
-        log = self._log
-        t, channels, keep = self.sensor_model.measure(log, n)
+    def _check_whole_log(self, what: str) -> None:
+        if self._log_base > 0:
+            raise SimulationError(f"{what}: this run was streamed to a file (run(writer=...)); the in-memory log "
+                                  f"holds only its last substeps -- read the trip file instead")
+
+    def _truth_map(self) -> dict[str, int]:
+        truth_map = dict(TRUTH_COLUMNS)
+        if self.vehicle.drivetrain.kind == "bev":
+            truth_map.update(_BEV_TRUTH)
+        return truth_map
+
+    def truth_units(self) -> dict[str, str]:
+        """SI unit of every truth channel of this simulator's trips (incl. 't')."""
+        return {c: TRUTH[c].unit for c in ["t", *self._truth_map(), "cornering_stiffness"]}
+
+    def _frames(self, start: int, stop: int) -> tuple[pd.DataFrame, pd.DataFrame]:
+        """Measured and truth frames of the absolute substeps start..stop-1 (the log holds substep _log_base on)."""
+        log, base = self._log, self._log_base
+        t, channels, keep = self.sensor_model.measure(log, stop, start=start, offset=base)
         block = np.empty((len(channels) + 1, t.size))  # one 2-D block: no column-by-column consolidation
         block[0] = t
         for i, arr in enumerate(channels.values()):
@@ -573,21 +622,20 @@ class Simulator:
         if not keep.all():
             block = block[:, keep]
         measured = pd.DataFrame(block.T, columns=["t", *channels], copy=False)
-        units = {"t": "s", **self.sensor_model.units}
-        truth_map = dict(TRUTH_COLUMNS)
-        if self.vehicle.drivetrain.kind == "bev":
-            truth_map.update(_BEV_TRUTH)
+        truth_map = self._truth_map()
         cols = [L_T, *truth_map.values()]
-        truth = pd.DataFrame(log[cols, :n].T, columns=["t", *truth_map], copy=False)
+        truth = pd.DataFrame(log[cols, start - base:stop - base].T, columns=["t", *truth_map], copy=False)
         truth["cornering_stiffness"] = 1.0 / (4.0 * (self.P[P_LR] ** 2 / truth["cornering_stiffness_front"]
                                                     + self.P[P_LF] ** 2 / truth["cornering_stiffness_rear"])
                                               / self.P[P_L] ** 2)
-        truth_units = {c: TRUTH[c].unit for c in truth.columns}
+        return measured, truth
+
+    def _trip_meta(self, name: str | None) -> dict[str, Any]:
         warn = []
         if self.X[S_AY_WARN_N] > 0:
             warn.append(f"lateral acceleration above 4 m/s^2 in {int(self.X[S_AY_WARN_N])} samples (max "
                         f"{self.X[S_AY_MAX]:.2f} m/s^2): single-track model outside its validity")
-        meta = {
+        return {
             "source": "sim",
             "name": name or f"sim-{self.vehicle.name}-{self.road.name}-{self.seed}",
             "vehicle": self.vehicle.to_dict(),
@@ -601,15 +649,65 @@ class Simulator:
             "initial_speed": self.initial_speed,
             "warnings": warn,
         }
-        return Trip(measured, units, meta, truth, truth_units)
+
+    def to_trip(self, name: str | None = None) -> Trip:
+        """The Trip of everything stepped since reset: measured channels (sensor model) + truth + metadata."""
+        n = int(self.X[S_NLOG])
+        if n == 0:
+            raise SimulationError("to_trip: nothing simulated yet (call step() or run() first)")
+        self._check_whole_log("to_trip")
+        measured, truth = self._frames(0, n)
+        units = {"t": "s", **self.sensor_model.units}
+        truth_units = {c: TRUTH[c].unit for c in truth.columns}
+        return Trip(measured, units, self._trip_meta(name), truth, truth_units)
+
+    # ------------------------------------------------------------------ streaming
+    def trip_writer(self, path: str | os.PathLike, precision: str = "compact") -> TripWriter:
+        """A :class:`roadload.trip.TripWriter` for this simulator's trip (channels, units, sensor resolutions);
+        pass it to ``run(writer=...)`` and close it with ``writer.close(sim.trip_meta())``."""
+        sm = self.sensor_model
+        shared = sm.decimation == 1 and not (sm.dropouts is not None and sm.missing_mode)
+        res = {n: float(c.resolution) for n, c in self.sensors.channels.items() if c.enabled and c.resolution > 0}
+        return TripWriter(path, {"t": "s", **sm.units}, self.truth_units(), precision, res, shared_time=shared)
+
+    def trip_meta(self, name: str | None = None) -> dict[str, Any]:
+        """The Trip metadata of the run so far (what ``to_trip`` puts in ``meta``)."""
+        return self._trip_meta(name)
+
+    def _flush(self, writer: TripWriter) -> None:
+        """Write the substeps simulated since the last flush to the writer, then drop all but the log history the
+        sensor latencies reach back to."""
+        n_rel = int(self.X[S_NLOG])
+        stop = self._log_base + n_rel
+        if stop > self._flushed:
+            measured, truth = self._frames(self._flushed, stop)
+            writer.write(measured, truth)
+            self._flushed = stop
+        keep = self.sensor_model.max_delay + self.sensor_model.decimation
+        if n_rel > keep:
+            self._log[:, :keep] = self._log[:, n_rel - keep:n_rel]
+            self.X[S_NLOG] = keep
+            self._log_base += n_rel - keep
 
 
 def simulate(vehicle: VehicleSpec | str, road: RoadProfile | DriveCycle,
              effects: EffectsConfig | list[str] | str | dict | None = None, sensors: SensorSpec | None = None,
              seed: int = 0, duration: float | None = None, distance: float | None = None,
              driver: DriverConfig | DriveCycle | None = None, progress: Callable[[float], None] | None = None,
-             initial_speed: float = 0.0) -> Trip:
-    """Run the built-in driver (or a drive cycle) over a road and return the Trip (measured + truth + meta)."""
+             initial_speed: float = 0.0, out: str | os.PathLike | None = None, precision: str = "compact",
+             chunk_seconds: float = 300.0) -> Trip | Path:
+    """Run the built-in driver (or a drive cycle) over a road and return the Trip (measured + truth + meta).
+
+    With ``out`` (a .parquet path) the trip is streamed to that file instead, one Parquet row group per
+    ``chunk_seconds`` of driving, holding only one chunk in memory (day-long trips in bounded memory), and the
+    path is returned; ``precision`` as for :meth:`roadload.trip.Trip.save` ('compact': quantised channels as
+    scaled integers, truth float32). Read it back with ``Trip.load`` / ``Trip.iter_chunks``."""
     sim = Simulator(vehicle, road, effects, sensors, seed, driver=driver, initial_speed=initial_speed)
-    sim.run(duration=duration, distance=distance, progress=progress)
-    return sim.to_trip()
+    if out is None:
+        sim.run(duration=duration, distance=distance, progress=progress, chunk_seconds=chunk_seconds)
+        return sim.to_trip()
+    with sim.trip_writer(out, precision) as writer:
+        sim.run(duration=duration, distance=distance, progress=progress, chunk_seconds=chunk_seconds,
+                writer=writer)
+        writer.close(sim.trip_meta())
+    return Path(out)

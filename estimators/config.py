@@ -71,16 +71,21 @@ class EstimatorConfig:
       (``iteration_tol``, relative) — the "optimal" variant;
     - gain direction: ``instruments`` 'none' (A_t), 'delayed' (𝔄_t = the regressor ``instrument_delay``
       valid samples earlier; the first ones use A_t itself) or 'user' (𝔄_t passed to update/run);
-    - covariance evolution: ``covariance`` 'forgetting' (``forgetting`` λ), 'kalman' (``process_noise`` Q,
-      ``output_noise`` R¹) or 'stenlund_gustafsson' (``desired_covariance`` P_d, R¹); ``joseph`` form in
-      the Kalman family without instruments;
+    - covariance evolution: ``covariance`` 'forgetting' (``forgetting`` λ, default 0.999), 'kalman'
+      (``process_noise`` Q, ``output_noise`` R¹, default 0.8) or 'stenlund_gustafsson' (``desired_covariance``
+      P_d, R¹); ``joseph`` form in the Kalman family without instruments. A setting the chosen parts do not
+      use (λ for the Kalman family, R¹ for forgetting, Q without 'kalman', P_d without 'stenlund_gustafsson',
+      ``instrument_delay`` without delayed instruments) is rejected, never silently ignored;
     - regularisation: ``regularisation`` 'none', 'levenberg_marquardt' or 'tikhonov' with ``kappa`` (κ),
       always with the P normalisation P(I+κP)⁻¹ (eq. 3.34);
     - constraints: ``x_min`` / ``x_max`` saturation (section 3.10.1);
     - initial state ``x0`` (default 0) and ``p0`` (scalar·I, diagonal or matrix; default 100 I, section 5.5);
     - ``transition`` F (n×n): prediction X' = F X, P' = F P Fᵀ before each update (used by the PKS);
     - numerics: ``symmetrize`` keeps P symmetric (only where it is symmetric in exact arithmetic, i.e.
-      without instruments); ``blowup_ratio``: max diag P above this × max diag P0 is reported as blow-up.
+      without instruments); ``blowup_ratio``: max diag P above this × max diag P0 is reported as blow-up;
+      ``covariance_bound_ratio``: the safety net of every composition resets P to P_0 (counted, reported as
+      blow-up) when max diag P exceeds this × max diag P0, or when an update leaves P non-finite or not
+      positive definite (that update is also rolled back).
     """
 
     n_params: int
@@ -98,15 +103,15 @@ class EstimatorConfig:
     iteration_tol: float = 1e-10
     min_scale: float = 1e-12
     covariance: str = "forgetting"
-    forgetting: float = 0.999
+    forgetting: float | None = None
     process_noise: Any = None
-    output_noise: float = 0.8
+    output_noise: float | None = None
     desired_covariance: Any = None
     joseph: bool = False
     regularisation: str = "none"
     kappa: float = 0.0
     instruments: str = "none"
-    instrument_delay: int = 4
+    instrument_delay: int | None = None
     x_min: Any = None
     x_max: Any = None
     x0: Any = None
@@ -114,6 +119,7 @@ class EstimatorConfig:
     transition: Any = None
     symmetrize: bool = True
     blowup_ratio: float = 1e6
+    covariance_bound_ratio: float = 1e8
     _arrays: dict = field(default=None, init=False, repr=False, compare=False)
 
     # ------------------------------------------------------------------ validation
@@ -152,6 +158,7 @@ class EstimatorConfig:
             raise EstimatorConfigError(f"instruments {self.instruments!r} unknown; choose one of "
                                        f"{sorted(INSTRUMENT_KINDS)}")
         self.instruments = iv
+        self._check_unused_settings()
 
         def in_range(name: str, lo: float, hi: float, lo_open: bool, hi_open: bool) -> float:
             val = getattr(self, name)
@@ -168,7 +175,10 @@ class EstimatorConfig:
             return val
 
         inf = np.inf
-        in_range("forgetting", 0.0, 1.0, True, False)
+        if self.covariance == "forgetting":
+            in_range("forgetting", 0.0, 1.0, True, False)
+        else:
+            in_range("output_noise", 0.0, inf, True, True)
         in_range("scale_forgetting", 0.0, 1.0, False, False)
         in_range("quantile_p", 0.0, 1.0, True, True)
         in_range("learn_rate", 0.0, inf, True, True)
@@ -177,10 +187,10 @@ class EstimatorConfig:
         in_range("scale_factor", 0.0, inf, True, True)
         in_range("iteration_tol", 0.0, inf, False, True)
         in_range("min_scale", 0.0, inf, True, True)
-        in_range("output_noise", 0.0, inf, True, True)
         in_range("kappa", 0.0, inf, False, True)
         in_range("blowup_ratio", 1.0, inf, True, True)
-        for name in ("scale_iterations", "instrument_delay"):
+        in_range("covariance_bound_ratio", 1.0, inf, True, True)
+        for name in ("scale_iterations",) + (("instrument_delay",) if self.instruments == "delayed" else ()):
             val = getattr(self, name)
             if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1:
                 raise EstimatorConfigError(f"{name} must be an integer >= 1, got {val!r}")
@@ -223,36 +233,67 @@ class EstimatorConfig:
         constrain = bool(np.any(np.isfinite(xmin)) or np.any(np.isfinite(xmax)))
         x0 = np.clip(x0, xmin, xmax)
 
-        ip = np.zeros(K.N_IP, dtype=np.int64)
-        ip[K.IP_PSI] = psi_code(self.psi)
-        ip[K.IP_COV] = COVARIANCE_KINDS[self.covariance]
-        ip[K.IP_REG] = REGULARISATION_KINDS[self.regularisation]
-        ip[K.IP_IV] = INSTRUMENT_KINDS[self.instruments]
-        ip[K.IP_DELAY] = self.instrument_delay
-        ip[K.IP_ROBUST_SCALE] = int(bool(self.robust_scale))
-        ip[K.IP_MAX_ITER] = self.scale_iterations
-        ip[K.IP_JOSEPH] = int(bool(self.joseph))
-        ip[K.IP_SYMMETRIC] = int(bool(self.symmetrize) and self.instruments == "none")
-        ip[K.IP_CONSTRAIN] = int(constrain)
-        ip[K.IP_TRANSITION] = int(self.transition is not None)
-        fp = np.zeros(K.N_FP)
-        fp[K.FP_C1], fp[K.FP_C2], fp[K.FP_C3] = self.psi_params
-        fp[K.FP_LAMBDA] = self.forgetting
-        fp[K.FP_R] = self.output_noise
-        fp[K.FP_KAPPA] = self.kappa
-        fp[K.FP_ETA] = self.learn_rate
-        fp[K.FP_P] = self.quantile_p
-        fp[K.FP_LAMBDA_SCALE] = self.scale_forgetting
-        fp[K.FP_SCALE_FACTOR] = self.scale_factor
-        fp[K.FP_TOL] = self.iteration_tol
-        fp[K.FP_MIN_SCALE] = self.min_scale
-        fp[K.FP_BLOWUP_LEVEL] = self.blowup_ratio * float(np.max(np.diag(P0)))
+        codes = np.zeros(K.N_IP, dtype=np.int64)  # integer codes of the parts
+        codes[K.IP_PSI] = psi_code(self.psi)
+        codes[K.IP_COV] = COVARIANCE_KINDS[self.covariance]
+        codes[K.IP_REG] = REGULARISATION_KINDS[self.regularisation]
+        codes[K.IP_IV] = INSTRUMENT_KINDS[self.instruments]
+        codes[K.IP_DELAY] = self.instrument_delay if self.instrument_delay is not None else 1
+        codes[K.IP_ROBUST_SCALE] = int(bool(self.robust_scale))
+        codes[K.IP_MAX_ITER] = self.scale_iterations
+        codes[K.IP_JOSEPH] = int(bool(self.joseph))
+        codes[K.IP_SYMMETRIC] = int(bool(self.symmetrize) and self.instruments == "none")
+        codes[K.IP_CONSTRAIN] = int(constrain)
+        codes[K.IP_TRANSITION] = int(self.transition is not None)
+        values = np.zeros(K.N_FP)  # float settings
+        values[K.FP_C1], values[K.FP_C2], values[K.FP_C3] = self.psi_params
+        values[K.FP_LAMBDA] = self.forgetting if self.forgetting is not None else 1.0  # 1.0: not used
+        values[K.FP_R] = self.output_noise if self.output_noise is not None else 1.0
+        values[K.FP_KAPPA] = self.kappa
+        values[K.FP_ETA] = self.learn_rate
+        values[K.FP_P] = self.quantile_p
+        values[K.FP_LAMBDA_SCALE] = self.scale_forgetting
+        values[K.FP_SCALE_FACTOR] = self.scale_factor
+        values[K.FP_TOL] = self.iteration_tol
+        values[K.FP_MIN_SCALE] = self.min_scale
+        values[K.FP_BLOWUP_LEVEL] = self.blowup_ratio * float(np.max(np.diag(P0)))
+        values[K.FP_P_BOUND] = self.covariance_bound_ratio * float(np.max(np.diag(P0)))
         self._arrays = {
-            "ip": ip, "fp": fp,
+            "ip": codes, "fp": values,
             "Q": Q if Q is not None else np.zeros((n, n)),
             "Pd": Pd if Pd is not None else np.zeros((n, n)),
             "F": np.ascontiguousarray(F), "xmin": xmin, "xmax": xmax, "x0": x0, "P0": P0,
         }
+
+    def _check_unused_settings(self) -> None:
+        """Reject settings the chosen parts ignore; fill in the defaults of the ones they use."""
+        where = f"estimator {self.name!r} (covariance {self.covariance!r}, instruments {self.instruments!r})"
+        unused = []
+        if self.covariance == "forgetting":
+            if self.output_noise is not None:
+                unused.append(("output_noise", ("R¹ only enters the Kalman family ('kalman', "
+                                               "'stenlund_gustafsson')")))
+            if self.forgetting is None:
+                self.forgetting = 0.999
+        else:
+            if self.forgetting is not None:
+                unused.append(("forgetting", ("λ only enters covariance 'forgetting'; the Kalman family forgets "
+                                             "through process_noise Q or desired_covariance P_d")))
+            if self.output_noise is None:
+                self.output_noise = 0.8
+        if self.covariance != "kalman" and self.process_noise is not None:
+            unused.append(("process_noise", "Q only enters covariance 'kalman'"))
+        if self.covariance != "stenlund_gustafsson" and self.desired_covariance is not None:
+            unused.append(("desired_covariance", "P_d only enters covariance 'stenlund_gustafsson'"))
+        if self.instruments == "delayed":
+            if self.instrument_delay is None:
+                self.instrument_delay = 4
+        elif self.instrument_delay is not None:
+            unused.append(("instrument_delay", "the delay only enters instruments 'delayed'"))
+        if unused:
+            name, why = unused[0]
+            raise EstimatorConfigError(f"{name} = {getattr(self, name)!r} is not used by {where}: {why}; "
+                                       f"remove it or choose parts that use it")
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -260,7 +301,7 @@ class EstimatorConfig:
         """The code/setting arrays handed to the kernel (read-only by convention)."""
         return self._arrays
 
-    def replace(self, **changes: Any) -> "EstimatorConfig":
+    def replace(self, **changes: Any) -> EstimatorConfig:
         """A validated copy with some settings changed (unknown names raise EstimatorConfigError)."""
         check_setting_names(changes)
         return dataclasses.replace(self, **changes)

@@ -119,6 +119,8 @@ def estimate(t: np.ndarray, A: np.ndarray, B: np.ndarray, model: str | ModelStru
         return Estimate(m.name, None, t, A, B, X, None, B - A @ initial, m.parameter_names)
 
     res = run(estimator, A, B, **estimator_settings(m, estimator, initial))
+    if res.X is None:
+        raise EvaluationError(f"estimator {estimator!r} returned no parameter trajectory X (run with store='full')")
     X = res.X
     residual = res.residual_prior if res.residual_prior is not None else np.full(B.shape, np.nan)
     return Estimate(m.name, estimator.upper(), t, A, B, X, res.P_diag, residual, m.parameter_names)
@@ -183,7 +185,7 @@ def evaluate_states(name: str, states: pd.DataFrame, knowledge: VehicleKnowledge
     combos = list(combinations) if combinations is not None else default_combinations()
     ev = TripEvaluation(trip=name)
     t_est = t_eval = 0.0
-    data_cache: dict[str, tuple] = {}
+    data_cache: dict[str, tuple | ValueError] = {}  # model data, or why the model cannot be built
     estimates: dict[str, Estimate] = {}
     for model, estimator in combos:
         m = get_model(model)

@@ -155,7 +155,7 @@ def plot_notched_boxplot(values: pd.DataFrame, value: str, order: Sequence[str] 
         data.append(x[np.isfinite(x)])
     # notches median ± 1.57 IQR/√m computed linearly (as in the text); on a log axis a notch below zero is cut
     # at the smallest positive value shown
-    conf = []
+    conf: list[tuple[float, float] | None] = []  # notch (low, high) per combination
     floor = min((x[x > 0].min() for x in data if np.any(x > 0)), default=1.0) * 0.5
     for x in data:
         if x.size == 0:
@@ -182,7 +182,8 @@ def plot_notched_boxplot(values: pd.DataFrame, value: str, order: Sequence[str] 
         conf = [None if c is None else (float(np.clip(c[0], lo, hi)), float(np.clip(c[1], lo, hi))) for c in conf]
     fig, ax = plt.subplots(figsize=(max(6, 0.8 * len(order) + 2), 4.5))
     ax.boxplot([x if x.size else [np.nan] for x in data], notch=True, whis=1.5, tick_labels=order,
-               conf_intervals=conf, flierprops={"markersize": 2})
+               # matplotlib's stub says ArrayLike; its documented None rows (default notch) do not fit it
+               conf_intervals=conf, flierprops={"markersize": 2})  # type: ignore[arg-type]
     if off_scale:
         where = f"beyond {ceiling:.3g} drawn at that ceiling" if log else f"outside {ceiling} drawn at its edge"
         title = f"{title} ({off_scale} values {where})"

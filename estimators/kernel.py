@@ -1,26 +1,37 @@
 """The one numeric kernel of the recursive linear estimators of chapter 3 (Algorithms 3.1-3.4, 3.9-3.21).
 
-A time step is the composition of interchangeable parts, selected by small integer codes (``ip``) and float
-settings (``fp``); see :mod:`roadload.estimators.config` for the mapping from names to codes:
+A time step is the composition of interchangeable parts, selected by small integer codes (``codes``, the
+``IP_*`` indices) and float settings (``settings``, the ``FP_*`` indices); see
+:mod:`roadload.estimators.config` for the mapping from names to codes. Each step is one inline stage below:
 
-1. skip a non-finite sample (a_t, b_t or the instrument), count it, leave the state as it was (apart from the
-   prediction step X' = F X, P' = F P Fᵀ when a transition matrix is set, e.g. in the PKS);
-2. a priori output correction ΔB_t = b_t - a_t X̂_{t-1};
-3. weight W = ψ(ΔB/σ̂_{t-1})/(ΔB/σ̂_{t-1}) (``influence.weight_scalar``);
-4. gain L = W P 𝔄ᵀ / (c + W a P 𝔄ᵀ) with c = λ (forgetting family) or R (Kalman family), 𝔄 = a_t, a delayed
-   regressor or a user instrument;
-5. covariance P = (P - L a P)/λ, or P - L a P + Q, or P - L a P + Q_t(P_d) (Stenlund-Gustafsson); optional
-   Joseph form in the Kalman family;
-6. regularisation P ← P (I + κP)⁻¹ (eq. 3.34) and the Levenberg-Marquardt or Tikhonov parameter update;
-7. parameter saturation X_min ≤ X̂ ≤ X_max (section 3.10.1);
-8. robust recursive scale: recursive quantile of the a posteriori ΔB² (eq. 3.29) and σ̂² forgetting
-   (Algorithm 3.3 lines 10-12).
+1. :func:`read_sample` / :func:`predict`: skip a non-finite sample (a_t, b_t or the instrument), count it,
+   leave the state as it was (apart from the prediction step X' = F X, P' = F P Fᵀ when a transition matrix
+   is set, e.g. in the PKS);
+2. :func:`prior_products`: a priori output correction ΔB_t = b_t - a_t X̂_{t-1} and s = a_t P 𝔄ᵀ; a sample
+   whose products overflow (|a|, |b| ~ 1e200: s or ΔB not finite) is skipped and counted like a non-finite one;
+3. :func:`weight`: W = ψ(ΔB/σ̂_{t-1})/(ΔB/σ̂_{t-1}) (``influence.weight_scalar``);
+4. :func:`gain`: L = W P 𝔄ᵀ / (c + W a P 𝔄ᵀ) with c = λ (forgetting family) or R (Kalman family), 𝔄 = a_t,
+   a delayed regressor or a user instrument;
+5. :func:`covariance_forgetting` P = (P - L a P)/λ (eq. 3.4), :func:`covariance_kalman` P - L a P + Q, or
+   P - L a P + Q_t(P_d) (Stenlund-Gustafsson); optional Joseph form in the Kalman family;
+6. :func:`regularise`: P ← P (I + κP)⁻¹ (eq. 3.34) and the Levenberg-Marquardt or Tikhonov parameter update;
+7. :func:`saturate`: parameter saturation X_min ≤ X̂ ≤ X_max (section 3.10.1);
+8. :func:`covariance_health` — the safety net of every composition: P must stay finite, positive definite
+   (LDLᵀ pivots > 0; for instruments, where P is not symmetric, a positive diagonal) and bounded,
+   max diag P ≤ ``p_bound`` (``FP_P_BOUND`` = ``covariance_bound_ratio`` × max diag P_0). An update that
+   leaves P non-finite or indefinite is rolled back (X̂ as before the sample) and P is reset to P_0; a P above
+   the bound is reset to P_0 (covariance resetting, the remedy against wind-up the text lists in section
+   3.8.6). Every such event is counted (``CT_P_RESETS``) and flags the blow-up;
+9. :func:`scale`: robust recursive scale, recursive quantile of the a posteriori ΔB² (eq. 3.29) and σ̂²
+   forgetting (Algorithm 3.3 lines 10-12).
 
-Steps 3-6 can be iterated within a time step until X̂_t converges (the "optimal" variant of Algorithm 3.3).
+Steps 3-7 can be iterated within a time step until X̂_t converges (the "optimal" variant of Algorithm 3.3).
 
 :func:`run_record` processes a whole record and is what the online ``update()`` calls with a one-sample
 record, so online and batch results are the same numbers by construction. ``recursive.run_many`` runs
 independent records (trips) in parallel threads with the very same function (it releases the GIL).
+The stages are ``inline="always"`` numba functions: after inlining, ``run_record`` is the same single loop
+as one hand-written body (no array-passing calls per sample).
 """
 
 from __future__ import annotations
@@ -30,355 +41,538 @@ from numba import njit
 
 from .influence import PSI_L2, weight_scalar
 
-# ---- integer settings (ip) ----
+# ---- integer settings (``codes``) ----
 IP_PSI, IP_COV, IP_REG, IP_IV, IP_DELAY, IP_ROBUST_SCALE, IP_MAX_ITER, IP_JOSEPH, IP_SYMMETRIC, \
     IP_CONSTRAIN, IP_TRANSITION, IP_STORE = range(12)
 N_IP = 12
-# ---- float settings (fp) ----
+# ---- float settings (``settings``) ----
 FP_C1, FP_C2, FP_C3, FP_LAMBDA, FP_R, FP_KAPPA, FP_ETA, FP_P, FP_LAMBDA_SCALE, FP_SCALE_FACTOR, FP_TOL, \
-    FP_MIN_SCALE, FP_BLOWUP_LEVEL = range(13)
-N_FP = 13
+    FP_MIN_SCALE, FP_BLOWUP_LEVEL, FP_P_BOUND = range(14)
+N_FP = 14
 
 COV_FORGETTING, COV_KALMAN, COV_SG = 0, 1, 2
 REG_NONE, REG_LM, REG_TIKHONOV = 0, 1, 2
 IV_NONE, IV_DELAY, IV_USER = 0, 1, 2
 STORE_FINAL, STORE_X, STORE_FULL = 0, 1, 2
 
+#: health of P after an update (:func:`covariance_health`)
+P_HEALTHY, P_ABOVE_BOUND, P_CORRUPT = 0, 1, 2
+
+
+def scratch(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The ``vectors`` and ``matrices`` work buffers of :func:`run_record` for n parameters."""
+    return np.empty((N_SCRATCH_VECTORS, n)), np.empty((N_SCRATCH_MATRICES, n, n))
+
+
 def size_tag(n: int) -> tuple:
     """The ``size_tag`` argument of :func:`run_record` for n parameters."""
     return (0.0,) * int(n)
 
 
-# ---- scalar state (sc) and counters ----
+# ---- scalar state (``scalars``) and counters (``counters``) ----
 SC_SIGMA2, SC_QHAT, SC_PMAX = 0, 1, 2
 N_SC = 3
-CT_SKIPPED, CT_ROLLED_BACK, CT_BLOWUP_AT, CT_T, CT_RING_POS, CT_RING_FILL = range(6)
-N_CT = 6
+CT_SKIPPED, CT_ROLLED_BACK, CT_BLOWUP_AT, CT_T, CT_RING_POS, CT_RING_FILL, CT_P_RESETS = range(7)
+N_CT = 7
+#: samples between two positive-definiteness checks (LDLᵀ factorisation) of a symmetric P; finiteness, the
+#: diagonal and the bound are checked every sample
+PD_CHECK_INTERVAL = 8
+#: scratch buffers run_record works in (allocated by the caller: the kernel runs without reference counting)
+N_SCRATCH_VECTORS, N_SCRATCH_MATRICES = 11, 2
+
+_inline = njit(inline="always")
 
 
-@njit(cache=True, nogil=True)
-def run_record(A, B, Z, ip, fp, Qm, Pd, F, xmin, xmax, X, P, sc, ring, ct,
-               out_X, out_Pdiag, out_rprior, out_rpost, out_w, out_scale, size_tag):
-    """Process one record (T samples) in place on the state (X, P, sc, ring, ct).
-
-    A (T×n) regressors, B (T,) outputs, Z (T×n) user instruments (only read when ip[IP_IV] == IV_USER).
-    Outputs are written per sample when ip[IP_STORE] asks for them (STORE_X: out_X; STORE_FULL: all).
-    ``size_tag`` is a tuple of n zeros (:func:`size_tag`): its length is part of the argument type, so the
-    function is compiled once per number of parameters with n a compile-time constant (small loops unrolled;
-    about 1.5x faster than a run-time n). The body is one function without array-passing calls per sample.
-    """
-    T = B.shape[0]
-    n = len(size_tag)
-    store = ip[IP_STORE]
-    psi = ip[IP_PSI]
-    cov = ip[IP_COV]
-    reg = ip[IP_REG]
-    iv = ip[IP_IV]
-    k = ip[IP_DELAY]
-    max_iter = ip[IP_MAX_ITER]
-    robust = ip[IP_ROBUST_SCALE] != 0
-    joseph = ip[IP_JOSEPH] != 0
-    sym = ip[IP_SYMMETRIC] != 0
-    constrain = ip[IP_CONSTRAIN] != 0
-    transition = ip[IP_TRANSITION] != 0
-    c1 = fp[FP_C1]
-    c2 = fp[FP_C2]
-    c3 = fp[FP_C3]
-    lam = fp[FP_LAMBDA]
-    inv_lam = 1.0 / lam
-    R = fp[FP_R]
-    kappa = fp[FP_KAPPA]
-    regularise = reg != REG_NONE and kappa > 0.0
-    tikhonov = reg == REG_TIKHONOV and kappa > 0.0
-    c_gain = lam if cov == COV_FORGETTING else R
-    tol = fp[FP_TOL]
-    min_scale = fp[FP_MIN_SCALE]
-    blowup = fp[FP_BLOWUP_LEVEL]
-    eta = fp[FP_ETA]
-    step_up = eta * 2.0 * fp[FP_P]
-    step_down = -eta * 2.0 * (1.0 - fp[FP_P])
-    lam_s = fp[FP_LAMBDA_SCALE]
-    sfac = fp[FP_SCALE_FACTOR]
-
-    a = np.empty(n)
-    # without instruments the gain direction is the regressor itself: share the buffer (no per-sample copy)
-    z = a if iv == IV_NONE else np.empty(n)
-    Xp = np.empty(n)
-    Pp = np.empty((n, n))
-    Xit = np.empty(n)
-    Pz = np.empty(n)
-    aP = np.empty(n)
-    L = np.empty(n)
-    u = np.empty(n)
-    v = np.empty(n)
-    work = np.empty((n, n))
-    pc = np.empty(n)
-    pr = np.empty(n)
-
-    for t in range(T):
-        b = B[t]
-        # one test for all entries: x * 0 is 0 for finite x and NaN for inf/NaN
-        probe = b * 0.0
+# ============================================================================ stage 1: sample and prediction
+@_inline
+def read_sample(regressors, outputs, instruments, t, a, z, instrument_ring, counters, iv, delay, n):
+    """Copy a_t (and the instrument 𝔄_t) into ``a`` (``z``); returns (b_t, all entries finite)."""
+    b = outputs[t]
+    # one test for all entries: x * 0 is 0 for finite x and NaN for inf/NaN
+    probe = b * 0.0
+    for i in range(n):
+        a[i] = regressors[t, i]
+        probe += a[i] * 0.0
+    if iv == IV_USER:
         for i in range(n):
-            a[i] = A[t, i]
-            probe += a[i] * 0.0
-        if iv == IV_USER:
+            z[i] = instruments[t, i]
+            probe += z[i] * 0.0
+    elif iv == IV_DELAY and counters[CT_RING_FILL] >= delay:
+        pos = counters[CT_RING_POS]
+        for i in range(n):
+            z[i] = instrument_ring[pos, i]
+    elif iv != IV_NONE:
+        for i in range(n):
+            z[i] = a[i]
+    return b, probe == 0.0
+
+
+@_inline
+def symmetrise(P, n):
+    """P ← (P + Pᵀ)/2 (exact symmetry where it holds in exact arithmetic)."""
+    for i in range(n):
+        for j in range(i + 1, n):
+            m = 0.5 * (P[i, j] + P[j, i])
+            P[i, j] = m
+            P[j, i] = m
+
+
+@_inline
+def predict(transition, X, P, x_tmp, work, n, sym):
+    """Prediction X' = F X, P' = F P Fᵀ (random-walk / PKS shift model); also for skipped samples."""
+    for i in range(n):
+        acc = 0.0
+        for j in range(n):
+            acc += transition[i, j] * X[j]
+        x_tmp[i] = acc
+    for i in range(n):
+        for j in range(n):
+            acc = 0.0
+            for k in range(n):
+                acc += transition[i, k] * P[k, j]
+            work[i, j] = acc
+    for i in range(n):
+        X[i] = x_tmp[i]
+        for j in range(n):
+            acc = 0.0
+            for k in range(n):
+                acc += work[i, k] * transition[j, k]
+            P[i, j] = acc
+    if sym:
+        symmetrise(P, n)
+
+
+# ============================================================================ stage 2: a-priori products
+@_inline
+def backup_state(X, P, X_prev, P_prev, n, sym):
+    """X_prev ← X̂_{t-1}, P_prev ← P_{t-1} (upper triangle when P is symmetric), for iterations and roll-back."""
+    for i in range(n):
+        X_prev[i] = X[i]
+        for j in range(i if sym else 0, n):
+            P_prev[i, j] = P[i, j]
+
+
+@_inline
+def prior_products(P, X, a, z, b, P_z, a_P, n, sym, cov):
+    """ΔB_t = b_t - a_t X̂_{t-1} [unit of B], P𝔄ᵀ → P_z, a P → a_P (when needed); returns (ΔB_t, s = a P 𝔄ᵀ)."""
+    r_prior = b
+    for i in range(n):
+        r_prior -= a[i] * X[i]
+    s = 0.0
+    for i in range(n):
+        acc = 0.0
+        for j in range(n):
+            acc += P[i, j] * z[j]
+        P_z[i] = acc
+        s += a[i] * acc
+    if sym:
+        if cov != COV_FORGETTING:
+            for j in range(n):
+                a_P[j] = P_z[j]
+    else:
+        for j in range(n):
+            acc = 0.0
             for i in range(n):
-                z[i] = Z[t, i]
-                probe += z[i] * 0.0
-        elif iv == IV_DELAY and ct[CT_RING_FILL] >= k:
-            pos = ct[CT_RING_POS]
-            for i in range(n):
-                z[i] = ring[pos, i]
-        elif iv != IV_NONE:
-            for i in range(n):
-                z[i] = a[i]
-        valid = probe == 0.0
-        if transition:
-            # prediction X' = F X, P' = F P Fᵀ (also for skipped samples: time advances)
-            for i in range(n):
-                acc = 0.0
-                for j in range(n):
-                    acc += F[i, j] * X[j]
-                Xp[i] = acc
-            for i in range(n):
-                for j in range(n):
-                    acc = 0.0
-                    for kk in range(n):
-                        acc += F[i, kk] * P[kk, j]
-                    work[i, j] = acc
-            for i in range(n):
-                X[i] = Xp[i]
-                for j in range(n):
-                    acc = 0.0
-                    for kk in range(n):
-                        acc += work[i, kk] * F[j, kk]
-                    P[i, j] = acc
+                acc += a[i] * P[i, j]
+            a_P[j] = acc
+    return r_prior, s
+
+
+@_inline
+def desired_products(desired_cov, a, z, Pd_z, a_Pd, n):
+    """Stenlund-Gustafsson products P_d 𝔄ᵀ → Pd_z, a P_d → a_Pd; returns s_d = a P_d 𝔄ᵀ."""
+    for i in range(n):
+        acc = 0.0
+        acc2 = 0.0
+        for j in range(n):
+            acc += desired_cov[i, j] * z[j]
+            acc2 += a[j] * desired_cov[j, i]
+        Pd_z[i] = acc
+        a_Pd[i] = acc2
+    s_d = 0.0
+    for i in range(n):
+        s_d += a[i] * Pd_z[i]
+    return s_d
+
+
+# ============================================================================ stages 3-4: weight and gain
+@_inline
+def weight(psi, residual, sigma, c1, c2, c3):
+    """W = ψ(u)/u with u = ΔB/σ̂ (eq. 3.15-3.17); 1 for least squares."""
+    if psi == PSI_L2:
+        return 1.0
+    return weight_scalar(psi, residual / sigma, c1, c2, c3)
+
+
+@_inline
+def gain(P_z, w, s, c_gain, L, n):
+    """L = W P 𝔄ᵀ / (c + W s) (Algorithms 3.1/3.13); returns the denominator c + W s."""
+    den = c_gain + w * s
+    g = w / den
+    for i in range(n):
+        L[i] = g * P_z[i]
+    return den
+
+
+# ============================================================================ stage 5: covariance evolution
+@_inline
+def covariance_forgetting(P, P_prev, L, P_z, a_P, inv_lam, n, sym):
+    """Exponential forgetting P = (P - L a P)/λ (Algorithm 3.1)."""
+    if sym:
+        for i in range(n):
+            for j in range(i, n):
+                val = (P_prev[i, j] - L[i] * P_z[j]) * inv_lam
+                P[i, j] = val
+                P[j, i] = val
+    else:
+        for i in range(n):
+            for j in range(n):
+                P[i, j] = (P_prev[i, j] - L[i] * a_P[j]) * inv_lam
+
+
+@_inline
+def covariance_kalman(P, P_prev, L, P_z, a_P, s, r_joseph, process_noise, g_sg, Pd_z, a_Pd, n, sym, joseph,
+                      kalman):
+    """Kalman family: P - L a P + Q (Algorithm 3.13) or + Q_t = W P_d 𝔄ᵀ a P_d / (R + W a P_d 𝔄ᵀ)
+    (Stenlund-Gustafsson, Algorithm 3.16); Joseph form (I - L a) P (I - L a)ᵀ + L (R/W) Lᵀ on request."""
+    for i in range(n):
+        j0 = i if sym else 0
+        for j in range(j0, n):
+            if joseph:
+                # (I - L a) P (I - L a)ᵀ + L (R/W) Lᵀ, written without dividing by W
+                val = (P_prev[i, j] - L[i] * a_P[j] - P_z[i] * L[j] + s * L[i] * L[j]
+                       + r_joseph * P_z[i] * P_z[j])
+            else:
+                val = P_prev[i, j] - L[i] * a_P[j]
+            if kalman:
+                val += process_noise[i, j]
+            else:
+                val += g_sg * Pd_z[i] * a_Pd[j]
+            P[i, j] = val
             if sym:
-                for i in range(n):
-                    for j in range(i + 1, n):
-                        m = 0.5 * (P[i, j] + P[j, i])
-                        P[i, j] = m
-                        P[j, i] = m
-        if not valid:
-            ct[CT_SKIPPED] += 1
-            if store >= STORE_X:
-                for i in range(n):
-                    out_X[t, i] = X[i]
-            if store == STORE_FULL:
-                for i in range(n):
-                    out_Pdiag[t, i] = P[i, i]
-                out_rprior[t] = np.nan
-                out_rpost[t] = np.nan
-                out_w[t] = np.nan
-                out_scale[t] = np.sqrt(sc[SC_SIGMA2])
-            continue
-        # ---- quantities that do not depend on the weight
-        # backup of the state for iterations and roll-back (upper triangle suffices when P is symmetric)
-        r0 = b
+                P[j, i] = val
+
+
+# ============================================================================ stage 6: regularisation
+@_inline
+def regularise(P, kappa, col, row, n, sym):
+    """P ← P (I + κP)⁻¹ = (P⁻¹ + κ I)⁻¹ (eq. 3.34), as n Sherman-Morrison updates with κ e_k e_kᵀ:
+    P ← P - κ P e_k e_kᵀ P / (1 + κ P_kk); exact, no pivoting, keeps P symmetric. Returns False when a
+    normaliser 1 + κ P_kk is not a finite positive number."""
+    for k in range(n):
+        dd = 1.0 + kappa * P[k, k]
+        if not (dd > 0.0 and dd < np.inf):
+            return False
+        f = kappa / dd
+        if sym:
+            # work on the upper triangle only; mirrored once below
+            for i in range(k):
+                col[i] = P[i, k]
+            for i in range(k, n):
+                col[i] = P[k, i]
+            for i in range(n):
+                fi = f * col[i]
+                for j in range(i, n):
+                    P[i, j] -= fi * col[j]
+        else:
+            for i in range(n):
+                col[i] = P[i, k]
+                row[i] = P[k, i]
+            for i in range(n):
+                fi = f * col[i]
+                for j in range(n):
+                    P[i, j] -= fi * row[j]
+    if sym:
         for i in range(n):
-            Xp[i] = X[i]
-            r0 -= a[i] * X[i]
-            for j in range(i if sym else 0, n):
-                Pp[i, j] = P[i, j]
-        s = 0.0
+            for j in range(i + 1, n):
+                P[j, i] = P[i, j]
+    return True
+
+
+@_inline
+def update_parameters(X, X_prev, L, r_prior, P, kappa, tikhonov, n):
+    """X̂_t = X̂_{t-1} + L ΔB_t, minus κ P X̂_{t-1} for Tikhonov regularisation (eq. 3.8, Algorithm 3.4)."""
+    for i in range(n):
+        X[i] = X_prev[i] + L[i] * r_prior
+    if tikhonov:
         for i in range(n):
             acc = 0.0
             for j in range(n):
-                acc += P[i, j] * z[j]
-            Pz[i] = acc
-            s += a[i] * acc
-        if sym:
-            if cov != COV_FORGETTING:
-                for j in range(n):
-                    aP[j] = Pz[j]
-        else:
+                acc += P[i, j] * X_prev[j]
+            X[i] -= kappa * acc
+
+
+# ============================================================================ stage 7: saturation
+@_inline
+def saturate(X, xmin, xmax, n):
+    """X_min ≤ X̂ ≤ X_max element-wise (section 3.10.1)."""
+    for i in range(n):
+        if X[i] < xmin[i]:
+            X[i] = xmin[i]
+        elif X[i] > xmax[i]:
+            X[i] = xmax[i]
+
+
+@_inline
+def converged(X, X_iter, tol, n):
+    """max |X̂ - X̂_iter| ≤ tol (1 + max |X̂|) (relative convergence of the iterated time step)."""
+    dmax = 0.0
+    xmag = 0.0
+    for i in range(n):
+        d = abs(X[i] - X_iter[i])
+        dmax = max(dmax, d)
+        xmag = max(xmag, abs(X[i]))
+    return dmax <= tol * (1.0 + xmag)
+
+
+# ============================================================================ stage 8: covariance safety net
+@_inline
+def covariance_health(X, P, pivots, p_bound, n, sym, factorise):
+    """Classify P_t (and X̂_t) after an update; returns (P_HEALTHY | P_ABOVE_BOUND | P_CORRUPT, max |diag P|).
+
+    P_CORRUPT: any non-finite X̂_i or P_ij, a diagonal entry ≤ 0, or (P symmetric and ``factorise``) a
+    non-positive pivot of P = Uᵀ D U (i.e. P not positive definite). P_ABOVE_BOUND: healthy but max diag P > ``p_bound``.
+    For symmetric positive definite P, |P_ij| ≤ √(P_ii P_jj), so bounded diagonals bound every entry."""
+    probe = 0.0
+    pmax = 0.0
+    positive = True
+    for i in range(n):
+        d = P[i, i]
+        probe += X[i] * 0.0 + d * 0.0
+        if not d > 0.0:
+            positive = False
+        pmax = max(pmax, abs(d))
+    if sym and factorise:
+        # LDLᵀ pivots on the upper triangle (row-wise): D_j = P_jj - Σ_{k<j} U_kj² D_k, U_kj = P_kj / D_k
+        for j in range(n):
+            dj = P[j, j]
+            for k in range(j):
+                u = pivots[k, j]
+                dj -= u * u * pivots[k, k]
+            pivots[j, j] = dj
+            if not dj > 0.0:
+                positive = False
+                break
+            inv = 1.0 / dj
+            for i in range(j + 1, n):
+                acc = P[j, i]
+                for k in range(j):
+                    acc -= pivots[k, j] * pivots[k, i] * pivots[k, k]
+                pivots[j, i] = acc * inv
+    elif not sym:
+        for i in range(n):
             for j in range(n):
-                acc = 0.0
+                probe += P[i, j] * 0.0
+    if not (positive and probe == 0.0):
+        return P_CORRUPT, pmax
+    if pmax > p_bound:
+        return P_ABOVE_BOUND, pmax
+    return P_HEALTHY, pmax
+
+
+@_inline
+def restore_state(X, P, X_prev, P_prev, n, sym):
+    """Roll back to the backup of :func:`backup_state`."""
+    for i in range(n):
+        X[i] = X_prev[i]
+        for j in range(i if sym else 0, n):
+            P[i, j] = P_prev[i, j]
+            if sym:
+                P[j, i] = P_prev[i, j]
+
+
+@_inline
+def reset_covariance(P, P0, n):
+    """P ← P_0 (covariance resetting); returns max diag P_0."""
+    pmax = 0.0
+    for i in range(n):
+        for j in range(n):
+            P[i, j] = P0[i, j]
+        pmax = max(pmax, P0[i, i])
+    return pmax
+
+
+# ============================================================================ stage 9: robust scale
+@_inline
+def scale(scalars, r_post, step_up, step_down, lam_scale, scale_factor):
+    """Recursive quantile Q̂ of ΔB² (eq. 3.29) and σ̂² = λ_s σ̂² + (1-λ_s) f Q̂ (Algorithm 3.3, lines 10-12)."""
+    d = r_post * r_post - scalars[SC_QHAT]
+    if d > 0.0:
+        scalars[SC_QHAT] += step_up
+    elif d < 0.0:
+        scalars[SC_QHAT] += step_down
+        scalars[SC_QHAT] = max(scalars[SC_QHAT], 0.0)
+    scalars[SC_SIGMA2] = lam_scale * scalars[SC_SIGMA2] + (1.0 - lam_scale) * scale_factor * scalars[SC_QHAT]
+
+
+@_inline
+def push_instrument(a, instrument_ring, counters, delay, n):
+    """Append a_t to the ring buffer of the delayed instruments 𝔄_t = a_{t-k}."""
+    pos = counters[CT_RING_POS]
+    for i in range(n):
+        instrument_ring[pos, i] = a[i]
+    counters[CT_RING_POS] = (pos + 1) % delay
+    if counters[CT_RING_FILL] < delay:
+        counters[CT_RING_FILL] += 1
+
+
+@_inline
+def store_sample(t, X, P, r_prior, r_post, w, sigma2, out_X, out_Pdiag, out_rprior, out_rpost, out_w, out_scale,
+                 store, n):
+    """Write X̂_t (STORE_X) and diag P_t, ΔB prior/post, W, σ̂ (STORE_FULL) of sample t."""
+    if store >= STORE_X:
+        for i in range(n):
+            out_X[t, i] = X[i]
+    if store == STORE_FULL:
+        for i in range(n):
+            out_Pdiag[t, i] = P[i, i]
+        out_rprior[t] = r_prior
+        out_rpost[t] = r_post
+        out_w[t] = w
+        out_scale[t] = np.sqrt(sigma2)
+
+
+# ============================================================================ the record loop
+@njit(cache=True, nogil=True, _nrt=False)
+def run_record(regressors, outputs, instruments, codes, settings, process_noise, desired_cov, transition, xmin,
+               xmax, P0, X, P, scalars, instrument_ring, counters, out_X, out_Pdiag, out_rprior, out_rpost, out_w,
+               out_scale, vectors, matrices, size_tag):
+    """Process one record (T samples) in place on the state (X, P, scalars, instrument_ring, counters).
+
+    regressors A (T×n), outputs B (T,), instruments 𝔄 (T×n, only read when codes[IP_IV] == IV_USER);
+    codes/settings: the IP_*/FP_* arrays of :class:`~roadload.estimators.config.EstimatorConfig`; P0: the
+    initial covariance (target of a covariance reset); vectors/matrices: work buffers (:func:`scratch`) — the
+    function is compiled without numba's reference counting (``_nrt=False``: it allocates nothing), so the
+    inline stages pass arrays at no cost. Outputs are written per sample when codes[IP_STORE] asks
+    for them (STORE_X: out_X; STORE_FULL: all). ``size_tag`` is a tuple of n zeros (:func:`size_tag`): its
+    length is part of the argument type, so the function is compiled once per number of parameters with n a
+    compile-time constant (small loops unrolled; about 1.5x faster than a run-time n).
+    """
+    T = outputs.shape[0]
+    n = len(size_tag)
+    store = codes[IP_STORE]
+    psi = codes[IP_PSI]
+    cov = codes[IP_COV]
+    iv = codes[IP_IV]
+    delay = codes[IP_DELAY]
+    max_iter = codes[IP_MAX_ITER]
+    robust = codes[IP_ROBUST_SCALE] != 0
+    joseph = codes[IP_JOSEPH] != 0
+    sym = codes[IP_SYMMETRIC] != 0
+    constrain = codes[IP_CONSTRAIN] != 0
+    has_transition = codes[IP_TRANSITION] != 0
+    c1 = settings[FP_C1]
+    c2 = settings[FP_C2]
+    c3 = settings[FP_C3]
+    inv_lam = 1.0 / settings[FP_LAMBDA]
+    R = settings[FP_R]
+    kappa = settings[FP_KAPPA]
+    regularised = codes[IP_REG] != REG_NONE and kappa > 0.0
+    tikhonov = codes[IP_REG] == REG_TIKHONOV and kappa > 0.0
+    c_gain = settings[FP_LAMBDA] if cov == COV_FORGETTING else R
+    tol = settings[FP_TOL]
+    min_scale = settings[FP_MIN_SCALE]
+    blowup_level = settings[FP_BLOWUP_LEVEL]
+    p_bound = settings[FP_P_BOUND]
+    step_up = settings[FP_ETA] * 2.0 * settings[FP_P]
+    step_down = -settings[FP_ETA] * 2.0 * (1.0 - settings[FP_P])
+    lam_scale = settings[FP_LAMBDA_SCALE]
+    scale_factor = settings[FP_SCALE_FACTOR]
+
+    a = vectors[0]
+    # without instruments the gain direction is the regressor itself: share the buffer (no per-sample copy)
+    z = a if iv == IV_NONE else vectors[1]
+    X_prev = vectors[2]
+    X_iter = vectors[3]
+    P_z = vectors[4]
+    a_P = vectors[5]
+    L = vectors[6]
+    Pd_z = vectors[7]
+    a_Pd = vectors[8]
+    col = vectors[9]
+    row = vectors[10]
+    P_prev = matrices[0]
+    work = matrices[1]
+
+    for t in range(T):
+        b, valid = read_sample(regressors, outputs, instruments, t, a, z, instrument_ring, counters, iv, delay, n)
+        if has_transition:
+            predict(transition, X, P, X_prev, work, n, sym)
+        r_prior = np.nan
+        s = 0.0
+        s_d = 0.0
+        if valid:
+            backup_state(X, P, X_prev, P_prev, n, sym)
+            r_prior, s = prior_products(P, X, a, z, b, P_z, a_P, n, sym, cov)
+            if cov == COV_SG:
+                s_d = desired_products(desired_cov, a, z, Pd_z, a_Pd, n)
+            # overflow-scale samples (a P aᵀ, a P 𝔄ᵀ or ΔB beyond the float range) are skipped like non-finite ones
+            probe = r_prior * 0.0 + s * 0.0 + s_d * 0.0
+            if iv != IV_NONE:
+                # with instruments s = a P 𝔄ᵀ need not overflow for a huge a_t: test Σ a_i² P_ii ≥ a P aᵀ / n
                 for i in range(n):
-                    acc += a[i] * P[i, j]
-                aP[j] = acc
-        sd = 0.0
-        if cov == COV_SG:
-            for i in range(n):
-                acc = 0.0
-                acc2 = 0.0
-                for j in range(n):
-                    acc += Pd[i, j] * z[j]
-                    acc2 += a[j] * Pd[j, i]
-                u[i] = acc
-                v[i] = acc2
-            for i in range(n):
-                sd += a[i] * u[i]
+                    probe += a[i] * a[i] * P[i, i] * 0.0
+            valid = probe == 0.0
+        if not valid:
+            counters[CT_SKIPPED] += 1
+            store_sample(t, X, P, np.nan, np.nan, np.nan, scalars[SC_SIGMA2], out_X, out_Pdiag, out_rprior,
+                         out_rpost, out_w, out_scale, store, n)
+            continue
         sigma = 1.0
-        w = 1.0
         if psi != PSI_L2:
-            sigma = np.sqrt(sc[SC_SIGMA2])
-            if sigma < min_scale:
-                sigma = min_scale
-            w = weight_scalar(psi, r0 / sigma, c1, c2, c3)
+            sigma = np.sqrt(scalars[SC_SIGMA2])
+            sigma = max(sigma, min_scale)
+        w = weight(psi, r_prior, sigma, c1, c2, c3)
         ok = True
         for it in range(max_iter):
             if it > 0:
                 # iterate the weight with the current estimate until X̂_t converges ("optimal" variant)
                 r = b
                 for i in range(n):
-                    Xit[i] = X[i]
+                    X_iter[i] = X[i]
                     r -= a[i] * X[i]
-                w = weight_scalar(psi, r / sigma, c1, c2, c3)
-            den = c_gain + w * s
-            g = w / den
-            for i in range(n):
-                L[i] = g * Pz[i]
-            rr = R * w / (den * den)
-            gq = 0.0
-            if cov == COV_SG:
-                gq = w / (R + w * sd)
+                w = weight(psi, r, sigma, c1, c2, c3)
+            den = gain(P_z, w, s, c_gain, L, n)
             if cov == COV_FORGETTING:
-                if sym:
-                    for i in range(n):
-                        for j in range(i, n):
-                            val = (Pp[i, j] - L[i] * Pz[j]) * inv_lam
-                            P[i, j] = val
-                            P[j, i] = val
-                else:
-                    for i in range(n):
-                        for j in range(n):
-                            P[i, j] = (Pp[i, j] - L[i] * aP[j]) * inv_lam
+                covariance_forgetting(P, P_prev, L, P_z, a_P, inv_lam, n, sym)
             else:
-                for i in range(n):
-                    j0 = i if sym else 0
-                    for j in range(j0, n):
-                        if joseph:
-                            # (I - L a) P (I - L a)ᵀ + L (R/W) Lᵀ, written without dividing by W
-                            val = (Pp[i, j] - L[i] * aP[j] - Pz[i] * L[j] + s * L[i] * L[j]
-                                   + rr * Pz[i] * Pz[j])
-                        else:
-                            val = Pp[i, j] - L[i] * aP[j]
-                        if cov == COV_KALMAN:
-                            val += Qm[i, j]
-                        else:
-                            # Stenlund-Gustafsson: Q_t = W P_d 𝔄ᵀ a P_d / (R + W a P_d 𝔄ᵀ)
-                            val += gq * u[i] * v[j]
-                        P[i, j] = val
-                        if sym:
-                            P[j, i] = val
-            if regularise:
-                # P <- P (I + κP)⁻¹ = (P⁻¹ + κ I)⁻¹ (eq. 3.34), as n Sherman-Morrison updates with κ e_i e_iᵀ:
-                # P <- P - κ P e_i e_iᵀ P / (1 + κ P_ii); exact, no pivoting, keeps P symmetric.
-                for kk in range(n):
-                    dd = 1.0 + kappa * P[kk, kk]
-                    if not (dd > 0.0 and dd < np.inf):
-                        ok = False
-                        break
-                    f = kappa / dd
-                    if sym:
-                        # work on the upper triangle only; mirrored once below
-                        for i in range(kk):
-                            pc[i] = P[i, kk]
-                        for i in range(kk, n):
-                            pc[i] = P[kk, i]
-                        for i in range(n):
-                            fi = f * pc[i]
-                            for j in range(i, n):
-                                P[i, j] -= fi * pc[j]
-                    else:
-                        for i in range(n):
-                            pc[i] = P[i, kk]
-                            pr[i] = P[kk, i]
-                        for i in range(n):
-                            fi = f * pc[i]
-                            for j in range(n):
-                                P[i, j] -= fi * pr[j]
+                g_sg = w / (R + w * s_d) if cov == COV_SG else 0.0
+                covariance_kalman(P, P_prev, L, P_z, a_P, s, R * w / (den * den), process_noise, g_sg, Pd_z, a_Pd,
+                                  n, sym, joseph, cov == COV_KALMAN)
+            if regularised:
+                ok = regularise(P, kappa, col, row, n, sym)
                 if not ok:
                     break
-                if sym:
-                    for i in range(n):
-                        for j in range(i + 1, n):
-                            P[j, i] = P[i, j]
-            for i in range(n):
-                X[i] = Xp[i] + L[i] * r0
-            if tikhonov:
-                for i in range(n):
-                    acc = 0.0
-                    for j in range(n):
-                        acc += P[i, j] * Xp[j]
-                    X[i] -= kappa * acc
+            update_parameters(X, X_prev, L, r_prior, P, kappa, tikhonov, n)
             if constrain:
-                for i in range(n):
-                    if X[i] < xmin[i]:
-                        X[i] = xmin[i]
-                    elif X[i] > xmax[i]:
-                        X[i] = xmax[i]
-            if it > 0:
-                dmax = 0.0
-                xmag = 0.0
-                for i in range(n):
-                    d = abs(X[i] - Xit[i])
-                    if d > dmax:
-                        dmax = d
-                    if abs(X[i]) > xmag:
-                        xmag = abs(X[i])
-                if dmax <= tol * (1.0 + xmag):
-                    break
-        # a non-finite result (overflowing P, singular normalisation) is rolled back and counted
-        # with P symmetric positive semi-definite, |P_ij| <= sqrt(P_ii P_jj): X and diag P suffice
-        probe = 0.0
-        pmax = P[0, 0]
-        for i in range(n):
-            probe += X[i] * 0.0 + P[i, i] * 0.0
-            if P[i, i] > pmax:
-                pmax = P[i, i]
-        if not sym:
-            for i in range(n):
-                for j in range(n):
-                    probe += P[i, j] * 0.0
-        finite = ok and probe == 0.0
-        if not finite:
-            ct[CT_ROLLED_BACK] += 1
-            for i in range(n):
-                X[i] = Xp[i]
-                for j in range(i if sym else 0, n):
-                    P[i, j] = Pp[i, j]
-                    if sym:
-                        P[j, i] = Pp[i, j]
-            pmax = P[0, 0]
-            for i in range(1, n):
-                if P[i, i] > pmax:
-                    pmax = P[i, i]
-        if pmax > sc[SC_PMAX]:
-            sc[SC_PMAX] = pmax
-        if pmax > blowup and ct[CT_BLOWUP_AT] < 0:
-            ct[CT_BLOWUP_AT] = ct[CT_T] + t
-        rpost = b
+                saturate(X, xmin, xmax, n)
+            if it > 0 and converged(X, X_iter, tol, n):
+                break
+        # diagonal, finiteness and bound every sample; the LDLᵀ factorisation every PD_CHECK_INTERVAL samples
+        health, pmax = covariance_health(X, P, work, p_bound, n, sym, (counters[CT_T] + t) % PD_CHECK_INTERVAL == 0)
+        if not ok:
+            health = P_CORRUPT
+        if health != P_CORRUPT and pmax > scalars[SC_PMAX]:
+            scalars[SC_PMAX] = pmax  # the largest diag P an update produced (before a reset)
+        if health != P_HEALTHY:
+            if health == P_CORRUPT:
+                # a non-finite or indefinite result (overflow, singular normalisation) is undone
+                counters[CT_ROLLED_BACK] += 1
+                restore_state(X, P, X_prev, P_prev, n, sym)
+            counters[CT_P_RESETS] += 1
+            pmax = reset_covariance(P, P0, n)
+            if counters[CT_BLOWUP_AT] < 0:
+                counters[CT_BLOWUP_AT] = counters[CT_T] + t
+        if pmax > blowup_level and counters[CT_BLOWUP_AT] < 0:
+            counters[CT_BLOWUP_AT] = counters[CT_T] + t
+        r_post = b
         if robust or store == STORE_FULL:
             for i in range(n):
-                rpost -= a[i] * X[i]
+                r_post -= a[i] * X[i]
         if robust:
-            # recursive quantile of ΔB² (eq. 3.29) and σ̂² forgetting (Algorithm 3.3, lines 10-12)
-            d = rpost * rpost - sc[SC_QHAT]
-            if d > 0.0:
-                sc[SC_QHAT] += step_up
-            elif d < 0.0:
-                sc[SC_QHAT] += step_down
-                if sc[SC_QHAT] < 0.0:
-                    sc[SC_QHAT] = 0.0
-            sc[SC_SIGMA2] = lam_s * sc[SC_SIGMA2] + (1.0 - lam_s) * sfac * sc[SC_QHAT]
+            scale(scalars, r_post, step_up, step_down, lam_scale, scale_factor)
         if iv == IV_DELAY:
-            pos = ct[CT_RING_POS]
-            for i in range(n):
-                ring[pos, i] = a[i]
-            ct[CT_RING_POS] = (pos + 1) % k
-            if ct[CT_RING_FILL] < k:
-                ct[CT_RING_FILL] += 1
-        if store >= STORE_X:
-            for i in range(n):
-                out_X[t, i] = X[i]
-        if store == STORE_FULL:
-            for i in range(n):
-                out_Pdiag[t, i] = P[i, i]
-            out_rprior[t] = r0
-            out_rpost[t] = rpost
-            out_w[t] = w
-            out_scale[t] = np.sqrt(sc[SC_SIGMA2])
-    ct[CT_T] += T
+            push_instrument(a, instrument_ring, counters, delay, n)
+        store_sample(t, X, P, r_prior, r_post, w, scalars[SC_SIGMA2], out_X, out_Pdiag, out_rprior, out_rpost,
+                     out_w, out_scale, store, n)
+    counters[CT_T] += T

@@ -79,9 +79,9 @@ def residual_correlation(residual, other=None, max_lag: int = 20) -> np.ndarray:
     m = r.shape[0]
     if not (0 <= max_lag < m):
         raise MetricError(f"max_lag must lie in 0..{m - 1}")
-    out = []
+    lags = []
     for tau in range(max_lag + 1):
         prod = r[tau:, None] * (y[:m - tau] if y.ndim > 1 else y[:m - tau, None])
-        out.append(np.nansum(prod, axis=0) / m)
-    out = np.array(out)
+        lags.append(np.nansum(prod, axis=0) / m)
+    out = np.array(lags)
     return out[:, 0] if y.ndim == 1 else out

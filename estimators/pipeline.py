@@ -22,6 +22,7 @@ drive-train model with its own loss tables, the steering-ratio table); it never 
 
 from __future__ import annotations
 
+import os
 import warnings
 from dataclasses import dataclass, field
 from typing import Sequence
@@ -502,6 +503,16 @@ def _stage_states(dec: pd.DataFrame, knowledge: VehicleKnowledge, settings: Pipe
     trigger &= finite & (t >= t[0] + settings.warmup if t.size else True)
     out["trigger"] = trigger
     return pd.DataFrame(out)
+
+
+PIPELINE_CHANNELS = tuple(dict.fromkeys(SMOOTHED_CHANNELS + DISCRETE_CHANNELS))
+"""Every measured channel the pipeline reads (when present)."""
+
+
+def load_for_pipeline(path: str | os.PathLike) -> Trip:
+    """A trip file read for :func:`run_pipeline`: only ``PIPELINE_CHANNELS`` and no truth (a column-selective
+    Parquet read; a day at 100 Hz then costs ~10 of its channels instead of all of them plus the truth)."""
+    return Trip.load(path, channels=list(PIPELINE_CHANNELS), truth_channels=[])
 
 
 def run_pipeline(trip: Trip, knowledge: VehicleKnowledge, settings: PipelineSettings | None = None,

@@ -181,7 +181,6 @@ def pks_bank(values, dt: float = 1.0, derivatives: int = 1, *, window: int | Non
         raise EstimatorInputError(f"dt must be a positive sample period [s], got {dt}")
     if not (isinstance(derivatives, (int, np.integer)) and 0 <= derivatives < design.n_params):
         raise EstimatorInputError(f"derivatives must be an integer in 0..{design.n_params - 1}, got {derivatives!r}")
-    n = design.n_params
     A = np.tile(design.regressor, (T, 1))
     rows = design.evaluation_rows(derivatives)
     cfg = design.config()

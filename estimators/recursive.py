@@ -29,7 +29,9 @@ class EstimatorState:
     x: X̂ (n,); p: P (n×n); scale: σ̂ [unit of B]; quantile: Q̂ (recursive quantile of ΔB², [unit of B]²);
     t: samples processed; n_skipped: non-finite samples skipped; n_rolled_back: updates that produced a
     non-finite X̂ or P and were undone; blowup_at: first sample index with max diag P above the blow-up level
-    (-1: never); p_diag_max: largest diag P seen; ring/ring_pos/ring_fill: delayed-instrument buffer.
+    (-1: never, also set by the first covariance reset); p_diag_max: largest |diag P| an update produced;
+    ring/ring_pos/ring_fill: delayed-instrument buffer; n_p_resets: covariance resets P ← P_0 of the safety
+    net (P above the bound, non-finite or not positive definite; see :mod:`.kernel`).
     """
 
     x: np.ndarray
@@ -44,8 +46,9 @@ class EstimatorState:
     ring: np.ndarray
     ring_pos: int
     ring_fill: int
+    n_p_resets: int = 0
 
-    def copy(self) -> "EstimatorState":
+    def copy(self) -> EstimatorState:
         return copy.deepcopy(self)
 
 
@@ -57,7 +60,8 @@ class EstimationResult:
     B_t - A_t X̂_t; weights: W_t,t; scale: σ̂_t after the update [unit of B]; skipped: True where the sample
     was non-finite and skipped (residuals and weight are NaN there); n_skipped; n_rolled_back;
     p_blowup: max diag P exceeded the blow-up level (poor excitation without regularisation);
-    p_blowup_at: first such sample index (-1: never); p_diag_max: largest diag P seen; state: final state.
+    p_blowup_at: first such sample index (-1: never); p_diag_max: largest diag P seen; state: final state;
+    n_p_resets: covariance resets P ← P_0 by the safety net in this run (any reset also sets p_blowup).
     Arrays not requested (``store='x'`` or ``'final'``) are None.
     """
 
@@ -74,6 +78,7 @@ class EstimationResult:
     p_blowup_at: int | np.ndarray
     p_diag_max: float | np.ndarray
     state: EstimatorState | list[EstimatorState] = field(repr=False)
+    n_p_resets: int | np.ndarray = 0
 
 
 _STORE = {"final": K.STORE_FINAL, "x": K.STORE_X, "full": K.STORE_FULL}
@@ -113,21 +118,22 @@ class RecursiveEstimator:
         n = self.config.n_params
         self._x = arr["x0"].copy()
         self._p = arr["P0"].copy()
-        self._sc = np.array([self.config.scale0 ** 2, self.config.quantile0, float(np.max(np.diag(arr["P0"])))])
+        self._scalars = np.array([self.config.scale0 ** 2, self.config.quantile0, float(np.max(np.diag(arr["P0"])))])
         k = self.config.instrument_delay if self.config.instruments == "delayed" else 1
-        self._ring = np.zeros((k, n))
-        self._ct = np.zeros(K.N_CT, dtype=np.int64)
-        self._ct[K.CT_BLOWUP_AT] = -1
+        self._instrument_ring = np.zeros((k, n))
+        self._counters = np.zeros(K.N_CT, dtype=np.int64)
+        self._counters[K.CT_BLOWUP_AT] = -1
         self._init_online()
 
     def _init_online(self) -> None:
         """Per-estimator constants of the one-sample path (kept to make update() cheap)."""
         n = self.config.n_params
-        self._ip_final = self.config.kernel_arrays["ip"].copy()
-        self._ip_final[K.IP_STORE] = K.STORE_FINAL
+        self._codes_final = self.config.kernel_arrays["ip"].copy()
+        self._codes_final[K.IP_STORE] = K.STORE_FINAL
         self._empty_out = (np.empty((0, n)), np.empty(0))
         self._no_instruments = np.empty((0, n))
         self._tag = K.size_tag(n)
+        self._scratch = K.scratch(n)
 
     @property
     def n_params(self) -> int:
@@ -146,44 +152,45 @@ class RecursiveEstimator:
     @property
     def scale(self) -> float:
         """σ̂_t [unit of B]."""
-        return float(np.sqrt(self._sc[K.SC_SIGMA2]))
+        return float(np.sqrt(self._scalars[K.SC_SIGMA2]))
 
     @property
     def quantile(self) -> float:
         """Q̂_t, the recursive quantile of the squared a posteriori correction."""
-        return float(self._sc[K.SC_QHAT])
+        return float(self._scalars[K.SC_QHAT])
 
     @property
     def state(self) -> EstimatorState:
         """A copy of the full state."""
         return EstimatorState(
             x=self._x.copy(), p=self._p.copy(), scale=self.scale, quantile=self.quantile,
-            t=int(self._ct[K.CT_T]), n_skipped=int(self._ct[K.CT_SKIPPED]),
-            n_rolled_back=int(self._ct[K.CT_ROLLED_BACK]), blowup_at=int(self._ct[K.CT_BLOWUP_AT]),
-            p_diag_max=float(self._sc[K.SC_PMAX]), ring=self._ring.copy(),
-            ring_pos=int(self._ct[K.CT_RING_POS]), ring_fill=int(self._ct[K.CT_RING_FILL]))
+            t=int(self._counters[K.CT_T]), n_skipped=int(self._counters[K.CT_SKIPPED]),
+            n_rolled_back=int(self._counters[K.CT_ROLLED_BACK]), blowup_at=int(self._counters[K.CT_BLOWUP_AT]),
+            p_diag_max=float(self._scalars[K.SC_PMAX]), ring=self._instrument_ring.copy(),
+            ring_pos=int(self._counters[K.CT_RING_POS]), ring_fill=int(self._counters[K.CT_RING_FILL]),
+            n_p_resets=int(self._counters[K.CT_P_RESETS]))
 
     def set_state(self, state: EstimatorState) -> None:
         """Restore a state taken with :attr:`state` (same configuration)."""
         n = self.config.n_params
-        if state.x.shape != (n,) or state.p.shape != (n, n) or state.ring.shape != self._ring.shape:
+        if state.x.shape != (n,) or state.p.shape != (n, n) or state.ring.shape != self._instrument_ring.shape:
             raise EstimatorInputError("state does not fit this estimator's configuration")
         self._x = np.array(state.x, dtype=float)
         self._p = np.array(state.p, dtype=float)
-        self._sc = np.array([state.scale ** 2, state.quantile, state.p_diag_max])
-        self._ring = np.array(state.ring, dtype=float)
-        self._ct = np.array([state.n_skipped, state.n_rolled_back, state.blowup_at, state.t,
-                             state.ring_pos, state.ring_fill], dtype=np.int64)
+        self._scalars = np.array([state.scale ** 2, state.quantile, state.p_diag_max])
+        self._instrument_ring = np.array(state.ring, dtype=float)
+        self._counters = np.array([state.n_skipped, state.n_rolled_back, state.blowup_at, state.t,
+                             state.ring_pos, state.ring_fill, state.n_p_resets], dtype=np.int64)
 
-    def copy(self) -> "RecursiveEstimator":
+    def copy(self) -> RecursiveEstimator:
         """An independent estimator with the same configuration and state."""
         other = RecursiveEstimator.__new__(RecursiveEstimator)
         other.config = self.config
         other._x = self._x.copy()
         other._p = self._p.copy()
-        other._sc = self._sc.copy()
-        other._ring = self._ring.copy()
-        other._ct = self._ct.copy()
+        other._scalars = self._scalars.copy()
+        other._instrument_ring = self._instrument_ring.copy()
+        other._counters = self._counters.copy()
         other._init_online()
         return other
 
@@ -234,22 +241,23 @@ class RecursiveEstimator:
                 raise EstimatorInputError(f"instrument must have {n} entries, got {Z.shape[1]}")
         arr = self.config.kernel_arrays
         e2, e1 = self._empty_out
-        K.run_record(kernel_array(a), kernel_array(b), Z, self._ip_final, arr["fp"], arr["Q"], arr["Pd"],
-                     arr["F"], arr["xmin"], arr["xmax"], self._x, self._p, self._sc, self._ring, self._ct,
-                     e2, e2, e1, e1, e1, e1, self._tag)
+        K.run_record(kernel_array(a), kernel_array(b), Z, self._codes_final, arr["fp"], arr["Q"], arr["Pd"],
+                     arr["F"], arr["xmin"], arr["xmax"], arr["P0"], self._x, self._p, self._scalars, self._instrument_ring, self._counters,
+                     e2, e2, e1, e1, e1, e1, *self._scratch, self._tag)
         return self._x.copy()
 
     def _process(self, A, B, Z, store):
         arr = self.config.kernel_arrays
         T, n = A.shape
-        ip = arr["ip"].copy()
-        ip[K.IP_STORE] = store
+        codes = arr["ip"].copy()
+        codes[K.IP_STORE] = store
         full = store == K.STORE_FULL
         out_X = np.empty((T, n)) if store >= K.STORE_X else np.empty((0, n))
         out_Pd = np.empty((T, n)) if full else np.empty((0, n))
         vecs = [np.empty(T) if full else np.empty(0) for _ in range(4)]
-        K.run_record(A, B, Z, ip, arr["fp"], arr["Q"], arr["Pd"], arr["F"], arr["xmin"], arr["xmax"],
-                     self._x, self._p, self._sc, self._ring, self._ct, out_X, out_Pd, *vecs, self._tag)
+        K.run_record(A, B, Z, codes, arr["fp"], arr["Q"], arr["Pd"], arr["F"], arr["xmin"], arr["xmax"], arr["P0"],
+                     self._x, self._p, self._scalars, self._instrument_ring, self._counters, out_X, out_Pd, *vecs,
+                     *K.scratch(n), self._tag)
         return out_X, out_Pd, vecs
 
     def run(self, A, B, instruments=None, store: str = "full") -> EstimationResult:
@@ -259,8 +267,9 @@ class RecursiveEstimator:
         if store not in _STORE:
             raise EstimatorInputError(f"store must be one of {sorted(_STORE)}, got {store!r}")
         A, B, Z = self._check(A, B, instruments)
-        skipped_before = int(self._ct[K.CT_SKIPPED])
-        rolled_before = int(self._ct[K.CT_ROLLED_BACK])
+        skipped_before = int(self._counters[K.CT_SKIPPED])
+        rolled_before = int(self._counters[K.CT_ROLLED_BACK])
+        resets_before = int(self._counters[K.CT_P_RESETS])
         out_X, out_Pd, vecs = self._process(kernel_array(A), kernel_array(B), kernel_array(Z), _STORE[store])
         full = store == "full"
         skipped = np.isnan(vecs[0]) if full else None
@@ -270,7 +279,8 @@ class RecursiveEstimator:
             residual_prior=vecs[0] if full else None, residual_post=vecs[1] if full else None,
             weights=vecs[2] if full else None, scale=vecs[3] if full else None, skipped=skipped,
             n_skipped=st.n_skipped - skipped_before, n_rolled_back=st.n_rolled_back - rolled_before,
-            p_blowup=st.blowup_at >= 0, p_blowup_at=st.blowup_at, p_diag_max=st.p_diag_max, state=st)
+            p_blowup=st.blowup_at >= 0, p_blowup_at=st.blowup_at, p_diag_max=st.p_diag_max, state=st,
+            n_p_resets=st.n_p_resets - resets_before)
 
 
 def run_many(config: EstimatorConfig, A, B, instruments=None, store: str = "full",
@@ -308,14 +318,14 @@ def run_many(config: EstimatorConfig, A, B, instruments=None, store: str = "full
     proto = RecursiveEstimator(config)
     X = np.repeat(proto._x[None], Kt, axis=0)
     P = np.repeat(proto._p[None], Kt, axis=0)
-    sc = np.repeat(proto._sc[None], Kt, axis=0)
-    ring = np.repeat(proto._ring[None], Kt, axis=0)
-    ct = np.repeat(proto._ct[None], Kt, axis=0)
+    scalars = np.repeat(proto._scalars[None], Kt, axis=0)
+    rings = np.repeat(proto._instrument_ring[None], Kt, axis=0)
+    counters = np.repeat(proto._counters[None], Kt, axis=0)
     code = _STORE[store]
     full = code == K.STORE_FULL
     arr = config.kernel_arrays
-    ip = arr["ip"].copy()
-    ip[K.IP_STORE] = code
+    codes = arr["ip"].copy()
+    codes[K.IP_STORE] = code
     out_X = np.empty((Kt, T, n)) if code >= K.STORE_X else np.empty((Kt, 0, n))
     out_Pd = np.empty((Kt, T, n)) if full else np.empty((Kt, 0, n))
     vecs = [np.empty((Kt, T)) if full else np.empty((Kt, 0)) for _ in range(4)]
@@ -325,10 +335,11 @@ def run_many(config: EstimatorConfig, A, B, instruments=None, store: str = "full
     def one(r: int) -> None:
         # per-trip state in its own allocations: rows of X, P, ... share cache lines, and threads writing
         # neighbouring rows every sample (false sharing) ran no faster on two cores than on one
-        state = [X[r].copy(), P[r].copy(), sc[r].copy(), ring[r].copy(), ct[r].copy()]
-        K.run_record(A[r], B[r], Z[r], ip, arr["fp"], arr["Q"], arr["Pd"], arr["F"], arr["xmin"], arr["xmax"],
-                     *state, out_X[r], out_Pd[r], vecs[0][r], vecs[1][r], vecs[2][r], vecs[3][r], tag)
-        X[r], P[r], sc[r], ring[r], ct[r] = state
+        state = [X[r].copy(), P[r].copy(), scalars[r].copy(), rings[r].copy(), counters[r].copy()]
+        K.run_record(A[r], B[r], Z[r], codes, arr["fp"], arr["Q"], arr["Pd"], arr["F"], arr["xmin"], arr["xmax"],
+                     arr["P0"], *state, out_X[r], out_Pd[r], vecs[0][r], vecs[1][r], vecs[2][r], vecs[3][r],
+                     *K.scratch(n), tag)
+        X[r], P[r], scalars[r], rings[r], counters[r] = state
     workers = (os.cpu_count() or 1) if n_threads is None else int(n_threads)
     if workers < 1:
         raise EstimatorInputError(f"n_threads must be >= 1, got {n_threads}")
@@ -341,13 +352,14 @@ def run_many(config: EstimatorConfig, A, B, instruments=None, store: str = "full
     states = []
     for r in range(Kt):
         e = proto.copy()
-        e._x, e._p, e._sc, e._ring, e._ct = X[r], P[r], sc[r], ring[r], ct[r]
+        e._x, e._p, e._scalars, e._instrument_ring, e._counters = X[r], P[r], scalars[r], rings[r], counters[r]
         states.append(e.state)
-    blow = ct[:, K.CT_BLOWUP_AT]
+    blow = counters[:, K.CT_BLOWUP_AT]
     return EstimationResult(
         X=out_X if code >= K.STORE_X else None, P_diag=out_Pd if full else None,
         residual_prior=vecs[0] if full else None, residual_post=vecs[1] if full else None,
         weights=vecs[2] if full else None, scale=vecs[3] if full else None,
         skipped=np.isnan(vecs[0]) if full else None,
-        n_skipped=ct[:, K.CT_SKIPPED].copy(), n_rolled_back=ct[:, K.CT_ROLLED_BACK].copy(),
-        p_blowup=blow >= 0, p_blowup_at=blow.copy(), p_diag_max=sc[:, K.SC_PMAX].copy(), state=states)
+        n_skipped=counters[:, K.CT_SKIPPED].copy(), n_rolled_back=counters[:, K.CT_ROLLED_BACK].copy(),
+        p_blowup=blow >= 0, p_blowup_at=blow.copy(), p_diag_max=scalars[:, K.SC_PMAX].copy(), state=states,
+        n_p_resets=counters[:, K.CT_P_RESETS].copy())

@@ -181,7 +181,7 @@ class RecursiveGTLS:
         self._ct = np.array([0, 0, -1, 0], dtype=np.int64)
         self._sc = np.array([float(np.max(np.diag(self.p0)))])
         self._smoothers = [PolynomialKalmanSmoother(**self._pks_kwargs()) for _ in range(q)]
-        self._raw = deque(maxlen=self._pks_proto.delay + 1)
+        self._raw: deque[np.ndarray] = deque(maxlen=self._pks_proto.delay + 1)
 
     def _pks_kwargs(self) -> dict:
         d = self._pks_proto.design

@@ -1,0 +1,1 @@
+"""roadload.experiments: experiment harnesses (selftests and their test worlds, campaigns, benchmarks)."""

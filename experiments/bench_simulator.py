@@ -31,6 +31,8 @@ def trip_speed(duration: float = 3600.0, vehicle: str = "gt_rwd", repeats: int =
         trip = simulate(vehicle, road, effects="all", seed=seed + r, duration=duration)
         walls.append(time.perf_counter() - w0)
         cpus.append(time.process_time() - c0)
+    if trip.truth is None:
+        raise ValueError(f"simulate({vehicle!r}) returned a trip without ground-truth channels; cannot count samples")
     sim_s = trip.duration
     n_rows = len(trip.truth)
     del trip
@@ -38,8 +40,9 @@ def trip_speed(duration: float = 3600.0, vehicle: str = "gt_rwd", repeats: int =
     trip = simulate(vehicle, road, effects="all", seed=seed, duration=duration)
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
+    n_truth = 0 if trip.truth is None else trip.truth.shape[1] - 1
     return {"vehicle": vehicle, "simulated_s": sim_s, "samples": n_rows, "measured_channels": len(trip.channels),
-            "truth_channels": trip.truth.shape[1] - 1, "wall_s": min(walls), "cpu_s": min(cpus),
+            "truth_channels": n_truth, "wall_s": min(walls), "cpu_s": min(cpus),
             "realtime_factor_wall": sim_s / min(walls), "realtime_factor_cpu": sim_s / min(cpus),
             "peak_traced_MB": peak / 1e6, "max_rss_MB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3}
 

@@ -13,7 +13,6 @@ aggregates MEDSE and mass tables with McGill notches, checks the text's findings
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import json
 import os
@@ -29,20 +28,20 @@ from roadload.fileio import write_json, write_text
 from roadload.tables import markdown_table, write_csv
 from roadload.trip import Trip
 
-from roadload.estimators.evaluation import (ESTIMATORS, GRAY_BOX_MODELS, HORIZONS, MIN_TRAINING, P_MAX, combination_name,
-                         common_trips, default_combinations, evaluate_trip, notch_table, significantly_different)
-from roadload.estimators.models import coast_down_coefficients, published_coast_down
+from roadload.estimators.evaluation import (ESTIMATORS, GRAY_BOX_MODELS, HORIZONS, MIN_TRAINING, P_MAX,
+                                            combination_name, common_trips, default_combinations, evaluate_trip,
+                                            notch_table, significantly_different)
 from roadload.estimators.knowledge import knowledge_for_preset, knowledge_for_trip, trip_vehicle
-from roadload.estimators.pipeline import PIPELINE_CHANNELS, PipelineSettings, VehicleKnowledge, knowledge_from_spec
+from roadload.estimators.pipeline import PIPELINE_CHANNELS, PipelineSettings
 from roadload.envs import simulate
 from roadload.presets import get_preset
 from roadload.road_profiles import load_profile
 from roadload.sweep import run_sweep
 from roadload.estimators.evaluation import evaluate_states
 from roadload.estimators.pipeline import run_pipeline
-from roadload.estimators.figures import (plot_correction_histograms, plot_cv_single_trip, plot_output_corrections,
-                          plot_parameter_traces, plot_scatter, plot_stage, save)
-from roadload.estimators.figures import plot_notched_boxplot, save
+from roadload.estimators.figures import (plot_correction_histograms, plot_cv_single_trip, plot_notched_boxplot,
+                                         plot_output_corrections, plot_parameter_traces, plot_scatter, plot_stage,
+                                         save)
 
 FLEET_VERSION = 1
 ROAD_KINDS = ("city", "hilly", "motorway")
@@ -266,7 +265,7 @@ def run_benchmark(paths: Sequence[str | os.PathLike], scheduler: str | None = No
         for k in timing:
             timing[k] += o.value["timing"].get(k, 0.0)
     timing["wall"] = wall
-    failed = [(Path(o.task.path).stem, o.error) for o in outcomes if not o.ok]
+    failed = [(Path(o.task.path).stem, o.error) for o in outcomes if o.error is not None]
     cols_m = ["trip", "model", "estimator", "combination", "horizon", "medse", "n_triggered"]
     return BenchmarkResult(pd.DataFrame(medse, columns=cols_m) if not medse else pd.DataFrame(medse),
                            pd.DataFrame(mass), pd.DataFrame(infos), failed, timing)
@@ -343,7 +342,7 @@ def check_findings(result: BenchmarkResult, horizon: int = 900) -> list[dict[str
                 fail_out = float((ratio[mask] > 2.0).mean()) if mask.any() else float("nan")
             rows.append((c, e, fail, fail_out))
     if rows:
-        share = {e: np.nanmean([r[2] for r in rows if r[1] == e]) for e in ESTIMATORS if e != "RRLM"}
+        share = {e: float(np.nanmean([r[2] for r in rows if r[1] == e])) for e in ESTIMATORS if e != "RRLM"}
         nonrobust = [share.get("RLS", np.nan), share.get("RGTLS", np.nan)]
         robust = [share.get("SGMKF", np.nan), share.get("SGIVMKF", np.nan)]
         tails = ""
@@ -366,10 +365,11 @@ def single_trip_figures(path: str | os.PathLike, out_dir: str | os.PathLike, mod
     trip = Trip.load(path)
     knowledge = knowledge_for_trip(trip)
     res = run_pipeline(trip, knowledge)
-    ev = evaluate_trip(trip, knowledge, keep_estimates=True, true_mass=true_mass(trip))
+    mass_true = true_mass(trip)
+    ev = evaluate_trip(trip, knowledge, keep_estimates=True, true_mass=mass_true)
     ests = {k: v for k, v in ev.estimates.items() if k.startswith(model + "-") and not k.endswith("SGIVMKF")}
     out = Path(out_dir)
-    truth = {"m_V": true_mass(trip)} if true_mass(trip) else None
+    truth = {"m_V": mass_true} if mass_true else None
     files = [save(plot_stage(res, "states"), out / f"{res.name}_states.png"),
              save(plot_parameter_traces(ests, truth), out / f"{res.name}_fig5_4_parameters.png"),
              save(plot_output_corrections(ests), out / f"{res.name}_fig5_5_output_corrections.png"),
@@ -417,9 +417,9 @@ def write_report(result: BenchmarkResult, out_dir: str | os.PathLike, horizons: 
         md += [f"## Mass NMSE after the convergence test (P_t < P_max = {P_MAX} on SGMKF)", "",
                markdown_table(mt, floatfmt=".5g"), ""]
         if figures and mt["m"].max() > 0:
-
-            save(plot_notched_boxplot(result.mass, "nmse", order=[c for c in order if c in set(result.mass["combination"])],
-                                      log=False, ylabel="mass NMSE [-]", title="mass NMSE (best = 1)"),
+            mass_order = [c for c in order if c in set(result.mass["combination"])]
+            save(plot_notched_boxplot(result.mass, "nmse", order=mass_order, log=False, ylabel="mass NMSE [-]",
+                                      title="mass NMSE (best = 1)"),
                  out / "mass_nmse_boxplot.png")
     findings = check_findings(result)
     write_csv(out / "findings.csv", pd.DataFrame(findings))

@@ -24,8 +24,8 @@ from roadload.fileio import atomic_path
 from roadload.controllers.closed_loop import run_metrics
 from roadload.controllers.drive import DriveSettings, drive
 from roadload.gym.config import EcoDriveConfig, make_config
-from roadload.gym.ecodrive import cut_profile
-from roadload.road_profiles import load_profile
+from roadload.gym.ecodrive import EcoDriveEnv, cut_profile
+from roadload.road_profiles import RoadProfile, load_profile
 
 ENV_ID = "roadload:roadload/EcoDrive-v0"
 VALIDATION_SEEDS = (40_000, 40_001, 40_002)
@@ -49,9 +49,17 @@ class RLError(ValueError):
 
 
 # --------------------------------------------------------------------------------------------- helpers
-def _atomic_write_bytes(path: Path, writer: Callable[[Path], None]) -> None:
+def _atomic_write_bytes(path: Path, writer: Callable[[Path], object]) -> None:
     with atomic_path(path) as tmp:
         writer(tmp)
+
+
+def _route(cfg: EcoDriveConfig, road_seed: int) -> RoadProfile:
+    """The environment's route: the first ``cfg.route_length`` m of road profile ``cfg.road``."""
+    profile = load_profile(cfg.road, seed=int(road_seed))
+    if not isinstance(profile, RoadProfile):
+        raise RLError(f"road: {cfg.road!r} is a drive cycle, not a road profile")
+    return cut_profile(profile, cfg.route_length)
 
 
 def _algo_class(algo: str):
@@ -63,17 +71,31 @@ def _algo_class(algo: str):
     return classes[algo.lower()]
 
 
+VEC_MODES = ("native", "dummy", "subproc")
+
+
 def make_vec_env(n_envs: int, seed: int, env_config: dict[str, Any] | None = None, vec: str = "subproc",
-                 start_method: str | None = None):
-    """n_envs EcoDrive-v0 copies (Monitor-wrapped) in a DummyVecEnv ('dummy') or SubprocVecEnv ('subproc'; the
-    workers resolve the id through the "roadload:" prefix, so spawn / forkserver work)."""
+                 start_method: str | None = None, threads: int = 1):
+    """n_envs EcoDrive-v0 copies for stable-baselines3: 'native' = the batched vector env
+    (roadload.gym.vector, one compiled call per step, ``threads`` numba threads) behind the SB3 adapter
+    (roadload.gym.sb3; observation 'state' only), or Monitor-wrapped copies in a DummyVecEnv ('dummy') or
+    SubprocVecEnv ('subproc'; the workers resolve the id through the "roadload:" prefix, so spawn / forkserver
+    work)."""
     from stable_baselines3.common.env_util import make_vec_env as sb3_make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     if n_envs < 1:
         raise RLError(f"n_envs must be >= 1, got {n_envs}")
-    if vec not in ("dummy", "subproc"):
-        raise RLError(f"vec must be 'dummy' or 'subproc', got {vec!r}")
+    if vec not in VEC_MODES:
+        raise RLError(f"vec must be one of {VEC_MODES}, got {vec!r}")
+    if vec == "native":
+        from roadload.gym.sb3 import SB3VecEnv  # needs stable-baselines3 (optional dependency), hence here
+        from roadload.gym.vector import EcoDriveVectorEnv
+
+        venv = SB3VecEnv(EcoDriveVectorEnv(n_envs, config=dict(env_config or {}), autoreset_mode="same_step",
+                                           threads=threads))
+        venv.seed(seed)
+        return venv
     cls = SubprocVecEnv if vec == "subproc" else DummyVecEnv
     kwargs = {"start_method": start_method} if (vec == "subproc" and start_method) else None
     return sb3_make_vec_env(ENV_ID, n_envs=n_envs, seed=seed, env_kwargs={"config": dict(env_config or {})},
@@ -98,15 +120,18 @@ def run_policy(policy: Callable[[np.ndarray], np.ndarray], env_config: dict[str,
     while not done:
         t0, s0, v0, lim0 = info["t"], info["s"], info["v"], info["speed_limit"]
         obs, r, terminated, truncated, info = env.step(policy(obs))
-        ret += r
+        ret += float(r)
         energy += info["terms"]["energy"]
         rows.append((t0, s0, v0, info["a"], lim0, energy))
         done = terminated or truncated
     log = pd.DataFrame(rows, columns=["t", "s", "v", "a", "speed_limit", "energy"])
-    metrics = _metrics(log, env.unwrapped.config.control_period, arrived=not truncated)
+    eco_env = env.unwrapped
+    if not isinstance(eco_env, EcoDriveEnv):
+        raise RLError(f"roadload/EcoDrive-v0 made a {type(eco_env).__name__}, expected EcoDriveEnv")
+    metrics = _metrics(log, eco_env.config.control_period, arrived=not truncated)
     metrics.update(energy_J=float(energy), energy_kWh=float(energy) / 3.6e6,
                    trip_time=float(info["t"]) if not truncated else float("nan"), episode_return=float(ret),
-                   stop_violations=int(round(info["return_costs"]["stop"] / max(env.unwrapped.config.reward.stop,
+                   stop_violations=int(round(info["return_costs"]["stop"] / max(eco_env.config.reward.stop,
                                                                                  1e-300))))
     env.close()
     return metrics, log
@@ -141,7 +166,7 @@ def run_controller(name: str, env_config: dict[str, Any], road_seed: int, seed: 
         raise RLError(f"unknown baseline {name!r}; choose from {sorted(CONTROLLER_BASELINES)}")
     controller, force_model = CONTROLLER_BASELINES[name]
     cfg = make_config(EcoDriveConfig, env_config, road_seed=int(road_seed))
-    road = cut_profile(load_profile(cfg.road, seed=int(road_seed)), cfg.route_length)
+    road = _route(cfg, road_seed)
     settings = DriveSettings(controller=controller, force_model=force_model, time_weight=cfg.reward.time,
                              dt=cfg.control_period)
     result, _ = drive(cfg.vehicle, road, effects=cfg.effects, seed=seed, settings=settings)
@@ -211,6 +236,9 @@ def train_policy(algo: str, timesteps: int, out_dir: Path, n_envs: int = 2, seed
     env_config = dict(env_config or {})
     venv = make_vec_env(n_envs, seed, env_config, vec=vec)
     params = {**ALGO_DEFAULTS[algo], **(hyperparams or {})}
+    if algo == "ppo" and vec == "native" and "n_steps" not in (hyperparams or {}):
+        # many batched envs: keep a rollout of ~4096 samples (as 2 envs x 2048) rather than n_envs x 1024
+        params["n_steps"] = max(64, 4096 // n_envs)
     if algo == "ppo":
         params["n_steps"] = max(16, min(params["n_steps"], max(timesteps // n_envs, 16)))
         params["batch_size"] = min(params["batch_size"], params["n_steps"] * n_envs)
@@ -283,7 +311,7 @@ def plot_speed_profiles(logs: dict[str, pd.DataFrame], env_config: dict[str, Any
 
 
     cfg = make_config(EcoDriveConfig, env_config)
-    road = cut_profile(load_profile(cfg.road, seed=int(road_seed)), cfg.route_length)
+    road = _route(cfg, road_seed)
     fig, (ax, ax2) = plt.subplots(2, 1, figsize=(9, 6), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
     ax.plot(road.distance, road.speed_limit * 3.6, "k--", lw=1, label="speed limit")
     for name, log in logs.items():
@@ -430,6 +458,90 @@ def bench_vectorised(n_envs: int = 2, seconds: float = 5.0, vec: str = "subproc"
             "steps": n * n_envs, "episodes": None}
 
 
+def _rates(step: Callable[[], None], seconds: float) -> tuple[float, float, int]:
+    """(calls per wall second, calls per CPU second of this process, calls): CPU seconds make runs on a machine
+    shared with other jobs comparable (wall rates there measure the share the scheduler gave us)."""
+    n = 0
+    t0, c0 = time.perf_counter(), time.process_time()
+    while True:
+        step()
+        n += 1
+        if n % 8 == 0 and time.perf_counter() - t0 >= seconds:
+            break
+    return n / (time.perf_counter() - t0), n / max(time.process_time() - c0, 1e-9), n
+
+
+def bench_native(n_envs: int = 256, seconds: float = 5.0, threads: int = 1, bare: bool = False,
+                 env_config: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Env steps/s (summed over sub-envs, wall and per CPU second) of the native vector env under random actions
+    in [-1, 1] (autoresets included), or with ``bare`` only its batched physics (no reward / observation / info /
+    autoreset): the reference the env step is compared with."""
+    from roadload.gym.vector import EcoDriveVectorEnv
+
+    venv = EcoDriveVectorEnv(n_envs, config=dict(env_config or {}), threads=threads)
+    venv.reset(seed=0)
+    acts = np.random.default_rng(0).uniform(-1, 1, (256, n_envs, 1)).astype(np.float32)
+    k = [0]
+    fn = venv.bare_physics_step if bare else venv.step
+
+    def step() -> None:
+        fn(acts[k[0] % 256])
+        k[0] += 1
+
+    for _ in range(3):
+        step()
+    wall, cpu, n = _rates(step, seconds)
+    mode = f"{'bare batched physics' if bare else 'native vector env'} x{n_envs}, {threads} thread(s)"
+    return {"env": "roadload/EcoDrive-v0", "mode": mode, "steps_per_s": wall * n_envs,
+            "steps_per_cpu_s": cpu * n_envs, "steps": n * n_envs}
+
+
+def run_native_benchmark(seconds: float = 5.0, n_envs: int = 256, n_dummy: int = 16,
+                         progress: Callable[[str], None] | None = None) -> pd.DataFrame:
+    """The batched-env table (same run): single env, SB3 DummyVecEnv x n_dummy, the native vector env x n_envs
+    (1 and 2 threads) and its bare batched physics, as wall and per-CPU-second rates."""
+    rows = []
+
+    def add(row: dict[str, Any]) -> None:
+        rows.append(row)
+        if progress:
+            progress(row["mode"])
+
+    import gymnasium as gym
+
+    env = gym.make("roadload/EcoDrive-v0")
+    env.reset(seed=0)
+    env.action_space.seed(0)
+
+    def single() -> None:
+        _, _, te, tr, _ = env.step(env.action_space.sample())
+        if te or tr:
+            env.reset()
+
+    wall, cpu, n = _rates(single, seconds)
+    add({"env": "roadload/EcoDrive-v0", "mode": "single process", "steps_per_s": wall, "steps_per_cpu_s": cpu,
+         "steps": n})
+    venv = make_vec_env(n_dummy, 0, None, vec="dummy")
+    try:
+        venv.reset()
+        acts = np.random.default_rng(0).uniform(-1, 1, (256, n_dummy, 1)).astype(np.float32)
+        k = [0]
+
+        def dummy() -> None:
+            venv.step(acts[k[0] % 256])
+            k[0] += 1
+
+        wall, cpu, n = _rates(dummy, seconds)
+    finally:
+        venv.close()
+    add({"env": "roadload/EcoDrive-v0", "mode": f"dummy x{n_dummy}", "steps_per_s": wall * n_dummy,
+         "steps_per_cpu_s": cpu * n_dummy, "steps": n * n_dummy})
+    for threads in (1, 2):
+        add(bench_native(n_envs, seconds, threads))
+    add(bench_native(n_envs, seconds, 1, bare=True))
+    return pd.DataFrame(rows)
+
+
 def run_benchmark(seconds: float = 5.0, n_envs: int = 2, include_highway: bool = True,
                   progress: Callable[[str], None] | None = None) -> pd.DataFrame:
     """The speed table: EcoDrive-v0 (state and can observations) single process, vectorised (dummy and subproc
@@ -544,9 +656,9 @@ def train_and_evaluate(algos: list[str], timesteps: int, out_dir: Path, n_envs: 
                 task = bar.add_task(f"training {algo.upper()}", total=timesteps)
                 res = train_policy(algo, timesteps, out_dir, n_envs=n_envs, seed=seed, env_config=env_config,
                                    vec=vec, eval_every=eval_every,
-                                   progress=lambda n, t=task: bar.update(t, completed=n))
-                _atomic_write_bytes(out_dir / f"{algo}_learning_curve.csv",
-                                    lambda tmp, c=res.curve: c.to_csv(tmp, index=False))
+                                   progress=lambda n: bar.update(task, completed=n))
+                curve = res.curve
+                _atomic_write_bytes(out_dir / f"{algo}_learning_curve.csv", lambda tmp: curve.to_csv(tmp, index=False))
             results.append(res)
         curve_png = plot_learning_curves(results, out_dir / "learning_curve.png")
         if skip_evaluation:
@@ -577,7 +689,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         algo: str = typer.Option("ppo,sac", help="algorithms, comma-separated: ppo, sac"),
         timesteps: int = typer.Option(200_000, help="environment steps per algorithm (0.1 s of driving each)"),
         n_envs: int = typer.Option(2, help="vectorised environments"),
-        vec: str = typer.Option("subproc", help="'subproc' (one process per env) or 'dummy' (in-process)"),
+        vec: str = typer.Option("native", help="'native' (batched vector env, observation 'state'), 'subproc' "
+                                "(one process per env) or 'dummy' (in-process)"),
         seed: int = typer.Option(0, help="training seed"),
         config: str = typer.Option(None, help="EcoDrive-v0 config as JSON text or a .json file, e.g. "
                                    "'{\"vehicle\": \"gt_rwd\", \"road\": \"city\"}'"),

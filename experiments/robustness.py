@@ -23,6 +23,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from roadload.fileio import save_figure, write_text
 from roadload.tables import format_number, markdown_table
@@ -31,7 +32,7 @@ from roadload.experiments.fleet import TYPICAL_SPEED
 from roadload.envs import get_preset
 from roadload.envs.sensors import BIAS_REFERENCE
 from roadload.envs import simulate
-from roadload.road_profiles import load_profile
+from roadload.road_profiles import RoadProfile, load_profile
 from roadload.estimators.evaluation import estimator_settings
 from roadload.estimators.knowledge import knowledge_for_preset
 from roadload.estimators.models import get_model
@@ -81,7 +82,7 @@ def _am_sine(t: np.ndarray, f: float) -> np.ndarray:
 
 
 def synthetic_regression(duration: float = 10_000.0, seed: int = 0, *, dt: float = 1.0,
-                         x0: Sequence[float] = (1.0, 2.0, 3.0),
+                         x0: npt.ArrayLike = (1.0, 2.0, 3.0),
                          frequencies: Sequence[float] = (0.006, 0.012, 0.014),
                          unexcited: tuple[int, float, float] | None = None,
                          step: tuple[int, float, float] | None = None,
@@ -369,7 +370,7 @@ def excitation_condition(A: np.ndarray, window: int) -> np.ndarray:
     return np.r_[np.full(window - 1, np.nan), cond]
 
 
-def breakdown_point(levels: Sequence[float], errors: Sequence[float], bound: float, baseline: float = 0.0) -> float:
+def breakdown_point(levels: npt.ArrayLike, errors: npt.ArrayLike, bound: float, baseline: float = 0.0) -> float:
     """Empirical breakdown point: the smallest swept outlier fraction whose error exceeds ``baseline + bound``.
 
     levels must be increasing; errors are the parameter errors measured at those levels (NaN/inf count as
@@ -500,8 +501,8 @@ SYNTHETIC_SWEEPS: dict[str, SweepSpec] = {s.name: s for s in (
 # Bias and latency levels are multiples of the reference bias (0.05 m/s² accelerometer, 5 N m drive torque,
 # 0.05 m/s speed) and seconds added to the channel's latency. 'wind': a headwind (against the road's initial
 # heading) from calm to level m/s at mid-record, as a step or a RAMP_DURATION ramp ('wind_ramp'); the models
-# have no wind term, so the recovery is judged on the prediction from the onset (prediction_recovery_time). 'ramps': mass
-# (relative to the preset's), drag area or rolling resistance changed by the relative level at mid-record
+# have no wind term, so the recovery is judged on the prediction from the onset (prediction_recovery_time).
+# 'ramps': mass (relative to the preset's), drag area or rolling resistance changed by the relative level at mid-record
 # (step or ramp; simulator 'mass_ramp' | 'drag_area_ramp' | 'rolling_resistance_ramp'); recovery time as drift.
 VEHICLE_SWEEPS: dict[str, SweepSpec] = {s.name: s for s in (
     SweepSpec("outliers", "outlier rate per sample", "1", OUTLIER_FRACTIONS,
@@ -548,7 +549,8 @@ def build_synthetic(scenario: Scenario) -> ABData:
 
     outliers: Experiment-3.3 inputs, outliers of magnitude ±10 σ at the level's fraction (variant
     '<target>/<pattern>', bursts of 20 samples); excitation: column 2 unexcited for ``level`` s starting
-    at 1000 s (or 20 % of a shorter record) (variant 'column2+step' adds the text's +50 % step of X̄_1 mid-stretch); drift:
+    at 1000 s (or 20 % of a shorter record) (variant 'column2+step' adds the text's +50 % step of X̄_1
+    mid-stretch); drift:
     X̄_1 changes by the relative ``level`` at mid-record as a 'step' or a 'ramp' over 10 % of the record;
     input_noise: white noise of variance level and 2·level on inputs 2 and 3 (eq. 3.46 pattern), output
     noise variance 0.02.
@@ -602,8 +604,11 @@ def synthetic_settings(name: str, n_params: int = 3, output_noise_var: float = S
     if key not in CATALOG:
         raise RobustnessError(f"unknown estimator {name!r}")
     parts = CATALOG[key].parts
-    s: dict[str, Any] = dict(n_params=n_params, forgetting=0.995, output_noise=output_noise_var,
-                             scale0=float(np.sqrt(output_noise_var)), quantile0=output_noise_var)
+    s: dict[str, Any] = dict(n_params=n_params, scale0=float(np.sqrt(output_noise_var)), quantile0=output_noise_var)
+    if parts.get("covariance", "forgetting") == "forgetting":   # λ for forgetting, R¹ for the Kalman family
+        s["forgetting"] = 0.995
+    else:
+        s["output_noise"] = output_noise_var
     if parts.get("regularisation", "none") != "none":
         s["kappa"] = 0.1
     if parts.get("instruments", "none") == "delayed":
@@ -712,15 +717,14 @@ def vehicle_sensors(scenario: Scenario):
 
 def simulate_scenario(scenario: Scenario):
     """The simulated Trip of a vehicle scenario (same road and driver for every level of a seed)."""
-    from dataclasses import replace as dc_replace
-
-
     kind = _road_kind(scenario)
     v = _typical_speed(kind)
     length = float(np.round(scenario.duration * v * 1.6 + 2000.0, -2))
     road = load_profile(kind, seed=_sub_seed(scenario.seed, "road") % (2 ** 31), length=length)
+    if not isinstance(road, RoadProfile):
+        raise RobustnessError(f"road kind {kind!r} loaded a {type(road).__name__}, expected a RoadProfile")
     if scenario.sweep == "drift":  # one stop at about mid-trip: the payload step happens there
-        road = dc_replace(road, stops=np.array([0.5 * scenario.duration * v]))
+        road = replace(road, stops=np.array([0.5 * scenario.duration * v]))
     return simulate(VEHICLE_PRESET, road, vehicle_effects(scenario), vehicle_sensors(scenario), scenario.seed,
                     duration=scenario.duration)
 
@@ -746,7 +750,7 @@ def _cruise_stretches(trip, min_length: float, max_gap: float = 5.0) -> list[tup
     t = trip.true("t")
     flat = (np.abs(trip.true("acceleration")) < 0.02) & (trip.true("speed") > 5.0)
     edges = np.diff(np.r_[0, flat.astype(int), 0])
-    runs = list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1))
+    runs = list(zip(np.flatnonzero(edges == 1).tolist(), (np.flatnonzero(edges == -1) - 1).tolist()))
     merged: list[list[int]] = []
     for a, b in runs:
         if merged and t[a] - t[merged[-1][1]] <= max_gap:
@@ -1255,7 +1259,8 @@ def write_report(results, out_dir, bound: float = DEFAULT_BOUND,
         agg = aggregate(res)
         stem = f"{backend}_{sweep}"
         cols = [c for c in ["variant", "model", "level", "estimator", "n_seeds", "rel_error", "rel_error_q25",
-                            "rel_error_q75", "excess_error", "sevn", "medse", "recovery_time", "trace_P_max", "cond_P_max",
+                            "rel_error_q75", "excess_error", "sevn", "medse", "recovery_time", "trace_P_max",
+                            "cond_P_max",
                             "trace_P_growth", "longest_stretch", "n_skipped", "n_pipeline_dropped", "runs_p_blowup",
                             "runs_nonfinite"] if c in agg]
         write_text(out / f"table_{stem}.csv", agg[cols].to_csv(index=False))
@@ -1288,7 +1293,8 @@ def write_report(results, out_dir, bound: float = DEFAULT_BOUND,
         summary.append("|---|---|---|---|---|---|---|---|---|---|")
         for x in checks:
             summary.append(f"| {x['backend']} | {x['sweep']} | {x['model']} | {x['variant']} | {x['expected']} | "
-                           f"{x['metric']} | {format_number(x['group_median'])} | {format_number(x['others_median'])} | "
+                           f"{x['metric']} | {format_number(x['group_median'])} | "
+                           f"{format_number(x['others_median'])} | "
                            f"{_verdict(x['agrees'])} | {x['note']} |")
     else:
         summary.append("No sweep in this run exercises a question of the decision tree.")

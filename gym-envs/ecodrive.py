@@ -33,6 +33,7 @@ from roadload.road_profiles import RoadProfile, load_profile
 from roadload.units import G
 from roadload.vehicle import VehicleSpec
 
+from roadload.gym.actions import validate_action
 from roadload.gym.config import (SPACE_FIELDS_ECODRIVE, EcoDriveConfig, GymConfigError, make_config, updated_config)
 from roadload.presets import get_preset
 from roadload.envs.simulator import LateralValidityWarning, Simulator
@@ -289,9 +290,7 @@ class EcoDriveEnv(gym.Env):
 
     # ------------------------------------------------------------------ step
     def step(self, action):
-        u = float(action[0]) if np.ndim(action) else float(action)
-        if not math.isfinite(u):
-            raise ValueError(f"action: must be finite, got {action!r}")
+        u = float(validate_action(action, self.action_space)[0])
         u = -1.0 if u < -1.0 else (1.0 if u > 1.0 else u)
         cfg = self.config
         w = cfg.reward

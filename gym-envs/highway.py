@@ -40,6 +40,7 @@ from highway_env.vehicle.kinematics import Vehicle
 
 from roadload.road_profiles import RoadProfile, load_profile
 
+from roadload.gym.actions import validate_action
 from roadload.gym.config import SPACE_FIELDS_HIGHWAY, EcoHighwayConfig, GymConfigError, make_config, updated_config
 from roadload.gym.ecodrive import DriveScales, cut_profile
 from roadload.presets import get_preset
@@ -326,6 +327,7 @@ class EcoHighwayEnv(AbstractEnv):
             self.road.vehicles.append(other)
 
     def step(self, action):
+        action = validate_action(action, self.action_space)
         self.vehicle.reset_log()
         return super().step(action)
 

@@ -73,7 +73,8 @@ def load_cycle(name: str) -> DriveCycle:
     if key == "ftp75":
         return ftp75()
     if key not in STANDARD_CYCLES:
-        raise RoadProfileError(f"unknown drive cycle {name!r}; known: {sorted([*STANDARD_CYCLES, *CYCLE_ALIASES, 'ftp75'])}")
+        known = sorted([*STANDARD_CYCLES, *CYCLE_ALIASES, "ftp75"])
+        raise RoadProfileError(f"unknown drive cycle {name!r}; known: {known}")
     relpath, description = STANDARD_CYCLES[key]
     return _fastsim_cycle(key, relpath, description)
 
@@ -101,7 +102,8 @@ def ftp75(include_soak: bool = False) -> DriveCycle:
     meta = dict(udds.meta)
     meta.update(description="EPA FTP-75 composed from UDDS per 40 CFR 86: bag 1 cold 0-505 s, bag 2 505-1369 s, "
                             f"{'600 s hot soak, ' if include_soak else 'hot soak omitted, '}bag 3 hot = UDDS 0-505 s",
-                phases={"cold_transient": [0.0, float(FTP75_COLD_PHASE)], "stabilized": [float(FTP75_COLD_PHASE), float(end)],
+                phases={"cold_transient": [0.0, float(FTP75_COLD_PHASE)],
+                        "stabilized": [float(FTP75_COLD_PHASE), float(end)],
                         **({"soak": [float(end), float(offset)]} if include_soak else {}),
                         "hot_transient": [float(offset), float(offset + FTP75_COLD_PHASE)]})
     return DriveCycle(name="ftp75", time=np.concatenate(time), speed=np.concatenate(speed), meta=meta)

@@ -65,27 +65,28 @@ def save_profile(profile: RoadProfile | DriveCycle, path: str | os.PathLike) -> 
     suffix = path.suffix.lower()
     if suffix not in (".json", ".csv"):
         raise ProfileFileError(f"{path}: unsupported extension {suffix!r}; use .json or .csv")
-    is_cycle = isinstance(profile, DriveCycle)
-    if not is_cycle and not isinstance(profile, RoadProfile):
-        raise TypeError(f"save_profile: expected RoadProfile or DriveCycle, got {type(profile).__name__}")
-    kind = CYCLE_FORMAT if is_cycle else PROFILE_FORMAT
-    units = CYCLE_UNITS if is_cycle else PROFILE_UNITS
-    if is_cycle:
+    stops: list[float] | None = None  # only road profiles carry stop positions [m]
+    if isinstance(profile, DriveCycle):
+        kind, units = CYCLE_FORMAT, CYCLE_UNITS
         arrays = {"time": profile.time, "speed": profile.speed}
         if profile.grade is not None:
             arrays["grade"] = profile.grade
-    else:
+    elif isinstance(profile, RoadProfile):
+        kind, units = PROFILE_FORMAT, PROFILE_UNITS
         arrays = {c: getattr(profile, c) for c in PROFILE_COLUMNS}
+        stops = profile.stops.tolist()
+    else:
+        raise TypeError(f"save_profile: expected RoadProfile or DriveCycle, got {type(profile).__name__}")
     if suffix == ".json":
         doc = {"format": kind, "version": VERSION, "name": profile.name, "meta": _jsonable(profile.meta),
                "units": units, **{k: v.tolist() for k, v in arrays.items()}}
-        if not is_cycle:
-            doc["stops"] = profile.stops.tolist()
+        if stops is not None:
+            doc["stops"] = stops
         text = json.dumps(doc, allow_nan=False)
     else:
         header = {"version": VERSION, "name": profile.name, "meta": _jsonable(profile.meta), "units": units}
-        if not is_cycle:
-            header["stops"] = profile.stops.tolist()
+        if stops is not None:
+            header["stops"] = stops
         buffer = io.StringIO()
         buffer.write(f"# {kind} {json.dumps(header, allow_nan=False)}\n")
         pd.DataFrame(arrays).to_csv(buffer, index=False, float_format="%.17g", lineterminator="\n")
@@ -202,12 +203,13 @@ def _column(frame: pd.DataFrame, path: Path, role: str, given: str | None, requi
         name = given
     else:
         lower = {c.lower(): c for c in frame.columns}
-        name = next((lower[a] for a in _ALIASES[role] if a in lower), None)
-        if name is None:
+        found = next((lower[a] for a in _ALIASES[role] if a in lower), None)
+        if found is None:
             if required:
                 raise ProfileFileError(f"{path}: no {role} column (looked for {list(_ALIASES[role])}); "
                                        f"columns are {list(frame.columns)} - pass {role}=<column name>")
             return None
+        name = found
     values = pd.to_numeric(frame[name], errors="coerce").to_numpy(float)
     text_bad = np.flatnonzero(np.isnan(values) & frame[name].notna().to_numpy())
     if text_bad.size:
@@ -297,7 +299,7 @@ def load_gpx(path: str | os.PathLike, *, name: str | None = None, licence: str =
         gpx = gpxpy.parse(path.read_text(encoding="utf-8"))
     except (gpxpy.gpx.GPXException, ValueError) as exc:
         raise ProfileFileError(f"{path}: not a valid GPX file ({exc})") from exc
-    points = [p for t in gpx.tracks for seg in t.segments for p in seg.points]
+    points: list[gpxpy.geo.Location] = [p for t in gpx.tracks for seg in t.segments for p in seg.points]
     if not points:
         points = [p for r in gpx.routes for p in r.points] or list(gpx.waypoints)
     if len(points) < 2:

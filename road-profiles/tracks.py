@@ -100,8 +100,9 @@ def smooth_over_distance(distance, values, window: float, *, step: float | None 
     """Values smoothed over distance with a Gaussian kernel, sigma = window/4 [m]; returned at the input samples.
 
     distance [m] must be strictly increasing (may be non-uniform). The signal is interpolated onto a uniform grid
-    of ``step`` (default: the finer of window/20 and the median sample spacing, at least 0.25 m), filtered with point-symmetric end padding (straight lines
-    stay straight) and interpolated back. window <= 0 returns the values unchanged.
+    of ``step`` (default: the finer of window/20 and the median sample spacing, at least 0.25 m), filtered with
+    point-symmetric end padding (straight lines stay straight) and interpolated back. window <= 0 returns the
+    values unchanged.
     """
     distance = np.asarray(distance, dtype=float)
     values = np.asarray(values, dtype=float)
@@ -206,7 +207,8 @@ def _check_track(name: str, distance: np.ndarray) -> None:
     if bad.size:
         raise RoadProfileError(f"{name}: {bad.size} NaN/inf values, first at index {int(bad[0])}")
     if not np.all(np.diff(distance) > 0):
-        raise RoadProfileError(f"{name}: not strictly increasing at index {int(np.flatnonzero(np.diff(distance) <= 0)[0]) + 1}")
+        first = int(np.flatnonzero(np.diff(distance) <= 0)[0]) + 1
+        raise RoadProfileError(f"{name}: not strictly increasing at index {first}")
 
 
 def _thin(distance: np.ndarray, min_spacing: float) -> np.ndarray:
@@ -330,7 +332,7 @@ def profile_from_track(distance=None, elevation=None, heading=None, xy=None, *,
         psi[finite] = np.unwrap(psi[finite])  # unwrap before bridging gaps, so a gap across +-pi is not a turn
         psi = _fill_missing("heading", s, psi, repairs)
         curvature = curvature_from_heading(grid, np.interp(grid, s, psi), window=heading_window)
-    elif x is not None:
+    elif x is not None and y is not None:
         curvature = curvature_from_xy(grid, np.interp(grid, s, x[keep]), np.interp(grid, s, y[keep]),
                                       window=heading_window)
     else:
@@ -353,7 +355,10 @@ def profile_from_track(distance=None, elevation=None, heading=None, xy=None, *,
         limit = np.full_like(grid, float(default_speed_limit))
     if curve_lateral_acceleration is not None:
         limit = curve_speed_limit(curvature, base_limit=limit, lateral_acceleration=curve_lateral_acceleration)
-    bank_grid = np.interp(grid, s, _fill_missing("bank", s, phi[keep], repairs)) if phi is not None else np.zeros_like(grid)
+    if phi is not None:
+        bank_grid = np.interp(grid, s, _fill_missing("bank", s, phi[keep], repairs))
+    else:
+        bank_grid = np.zeros_like(grid)
 
     grid = grid - grid[0]
     stops_arr = np.asarray(stops, dtype=float)

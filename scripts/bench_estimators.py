@@ -10,19 +10,26 @@ inputs and a constant as regressors, output noise and 5 % outliers):
 - the online API (``update`` per sample);
 - the many-trips path ``run_many`` (trips x samples/s, store='x') with 1 and 2 worker threads.
 
-Usage: python scripts/bench_estimators.py [--samples 20000] [--repeats 30] [--trips 8]
+Usage: python scripts/bench_estimators.py [--samples 20000] [--repeats 30] [--trips 8] [--quick]
+       python scripts/bench_estimators.py --compare main [--rounds 3]   # old commit vs working tree
+
+``--compare REF`` exports commit REF (``git archive``) into a temporary package tree, runs this script on it and
+on the working tree interleaved ``--rounds`` times, and prints new/old ratios of each figure relative to the
+hand-written loop of its own run (> 1: the working tree is faster).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import statistics
 import time
+from pathlib import Path
 
 import numba
 import numpy as np
 from numba import njit
-
 from roadload.estimators import make_config, make_estimator, run_many
 
 
@@ -86,12 +93,31 @@ def best_rates(cases: dict, repeats: int) -> tuple[dict, dict]:
 
 
 ESTIMATORS = {
-    "RLS": dict(forgetting=0.999),
-    "RRLM": dict(forgetting=0.999, kappa=1e-5, scale0=0.5, quantile0=0.1),
-    "SGMKF": dict(output_noise=0.1, desired_covariance=[1e-5, 1e-6, 1e-6, 1e-6], scale0=0.5, quantile0=0.1),
-    "SGIVMKF": dict(output_noise=0.1, desired_covariance=[1e-5, 1e-6, 1e-6, 1e-6], instrument_delay=4,
-                    scale0=0.5, quantile0=0.1),
+    "RLS": {"forgetting": 0.999},
+    "RRLM": {"forgetting": 0.999, "kappa": 1e-5, "scale0": 0.5, "quantile0": 0.1},
+    "SGMKF": {"output_noise": 0.1, "desired_covariance": [1e-5, 1e-6, 1e-6, 1e-6], "scale0": 0.5, "quantile0": 0.1},
+    "SGIVMKF": {"output_noise": 0.1, "desired_covariance": [1e-5, 1e-6, 1e-6, 1e-6], "instrument_delay": 4,
+                    "scale0": 0.5, "quantile0": 0.1},
 }
+
+
+def print_comparison(old: list[dict], new: list[dict], ref: str) -> None:
+    """new/old of every figure relative to the hand-written loop of its own run (CPU clock), median of rounds."""
+    print(f"old = commit {ref}, new = working tree; {len(old)} interleaved rounds; each figure divided by the "
+          "hand-written RLS loop of its own run (CPU clock); new/old of the medians (> 1: new is faster)")
+    print(f"{'estimator':<9s} " + " ".join(f"{k:>10s}" for k in ("x", "full", "final", "online", "many1", "many2")))
+    for name in ESTIMATORS:
+        cells = []
+        for store in ("x", "full", "final", "online", "many1", "many2"):
+            key = f"{name}/{store}"
+            ref_key = "hand_long" if store.startswith("many") else "hand"
+            o = statistics.median(r["cpu"][key] / r["cpu"][ref_key] for r in old)
+            n = statistics.median(r["cpu"][key] / r["cpu"][ref_key] for r in new)
+            cells.append(f"{n / o:10.3f}")
+        print(f"{name:<9s} " + " ".join(cells))
+    o = statistics.median(r["cpu"]["hand"] for r in old) / 1e6
+    n = statistics.median(r["cpu"]["hand"] for r in new) / 1e6
+    print(f"hand-written loop: {o:.2f} (old runs) / {n:.2f} (new runs) M samples per CPU-second")
 
 
 def main() -> None:
@@ -100,7 +126,21 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=30)
     ap.add_argument("--trips", type=int, default=8)
     ap.add_argument("--online-samples", type=int, default=2_000)
+    ap.add_argument("--quick", action="store_true", help="tiny sizes for a smoke run (< 60 s)")
+    ap.add_argument("--json", type=Path, help="also write the figures as JSON here")
+    ap.add_argument("--compare", metavar="REF", help="git commit to compare against (same session, interleaved)")
+    ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds of --compare")
     args = ap.parse_args()
+    if args.quick:
+        args.samples, args.repeats, args.trips, args.online_samples = 2_000, 3, 2, 200
+    if args.compare:
+        from _refcompare import compare
+
+        sub = ["--samples", str(args.samples), "--repeats", str(args.repeats), "--trips", str(args.trips),
+               "--online-samples", str(args.online_samples)]
+        old, new = compare(Path(__file__).resolve(), sub, args.compare, args.rounds)
+        print_comparison(old, new, args.compare)
+        return
     T = args.samples
     A, B = make_data(T, 0)
     print(f"machine: {os.cpu_count()} cores, numba {numba.__version__}, record of {T} samples, "
@@ -160,6 +200,11 @@ def main() -> None:
             r = {k[1]: v for k, v in res.items() if isinstance(k, tuple) and k[0] == name}
             print(f"{name:<9s} {r['x'] / 1e6:9.2f} {r['full'] / 1e6:11.2f} {r['final'] / 1e6:11.2f} "
                   f"{r['online'] / 1e6:9.3f} {r['many1'] / 1e6:11.2f} {r['many2'] / 1e6:11.2f} {r['x'] / ref:9.2f}")
+    if args.json:
+        def keyed(res: dict) -> dict:
+            return {k if isinstance(k, str) else f"{k[0]}/{k[1]}": v for k, v in res.items()}
+        args.json.write_text(json.dumps({"cpu": keyed(cpu), "wall": keyed(wall)}))
+
 
 if __name__ == "__main__":
     main()

@@ -1,7 +1,14 @@
 """Simulator speed: simulated seconds per wall-clock (and CPU) second at 100 Hz with all sensors and effects on,
-peak memory of that run, and step-API throughput. Prints the figures (no files).
+peak memory of that run, step-API throughput, and the compiled core alone against a hand-written reference loop.
 
-    python scripts/bench_simulator.py [--duration 3600] [--repeats 3]
+    python scripts/bench_simulator.py [--duration 3600] [--repeats 3] [--quick]
+    python scripts/bench_simulator.py --compare main [--rounds 3] [--quick]
+
+Core figure: substeps per CPU-second of ``physics.run`` (built-in driver, all effects, the log written) on a
+prepared simulator state, divided by the rate of a hand-written compiled point-mass loop (road-load equations
+2.5-2.10, a PI speed controller, a 6-channel log) measured in the same run: a machine-independent ratio.
+``--compare REF`` exports commit REF (``git archive``) into a temporary package tree and runs this script on it
+and on the working tree, interleaved ``--rounds`` times, and prints old/new ratios of the core and trip figures.
 
 Target (issue 2): >= 1000x real time, i.e. a one-hour trip in under 3.6 s on one core.
 """
@@ -9,12 +16,154 @@ Target (issue 2): >= 1000x real time, i.e. a one-hour trip in under 3.6 s on one
 from __future__ import annotations
 
 import argparse
+import json
+import math
+import statistics
+import time
+import warnings
+from pathlib import Path
 
-from roadload.experiments.bench_simulator import report
+import numpy as np
+from numba import njit
+
+from roadload.units import G
+
+
+@njit(cache=True)
+def reference_loop(n, dt, mass, cxa, f_r, v_set, log):
+    """Hand-written reference: point-mass longitudinal model with a PI speed controller (eq. 2.5-2.10 road load,
+    sinusoidal grade), explicit Euler at dt [s], one 6-channel log row per step. Returns the final speed."""
+    g = G
+    v = 0.0
+    s = 0.0
+    integ = 0.0
+    for i in range(n):
+        theta = 0.03 * math.sin(s / 400.0)
+        f_cl = mass * g * math.sin(theta)
+        f_roll = f_r * mass * g * math.cos(theta) * math.tanh(v / 0.1)
+        f_aero = 0.5 * 1.2 * cxa * v * v
+        err = v_set - v
+        integ += err * dt
+        f_drive = mass * (0.8 * err + 0.05 * integ)
+        f_drive = min(max(f_drive, -8000.0), 6000.0)
+        a = (f_drive - f_cl - f_roll - f_aero) / mass
+        v = max(0.0, v + a * dt)
+        s += v * dt
+        j = i % log.shape[1]
+        log[0, j] = i * dt
+        log[1, j] = s
+        log[2, j] = v
+        log[3, j] = a
+        log[4, j] = f_drive
+        log[5, j] = f_aero + f_roll + f_cl
+    return v
+
+
+def reference_rate(n: int, repeats: int) -> float:
+    """Best substeps per CPU-second of :func:`reference_loop`."""
+    log = np.zeros((6, n))
+    reference_loop(10, 0.01, 1500.0, 0.6, 0.01, 25.0, log)
+    best = 0.0
+    for _ in range(repeats):
+        c0 = time.process_time()
+        reference_loop(n, 0.01, 1500.0, 0.6, 0.01, 25.0, log)
+        best = max(best, n / max(time.process_time() - c0, 1e-9))
+    return best
+
+
+def core_rate(vehicle: str, n: int, repeats: int) -> float:
+    """Best substeps per CPU-second of the compiled core ``physics.run`` (built-in driver, all effects) from a
+    prepared simulator state (the same start state for every repeat)."""
+    from roadload.envs import Simulator, physics
+    from roadload.envs.layout import C_USE_DRIVER
+    from roadload.road_profiles import load_profile
+
+    sim = Simulator(vehicle, load_profile("motorway", seed=1, length=max(60_000.0, n * 0.45)), effects="all",
+                    seed=1)
+    sim._ensure_capacity(n + 1)
+    sim._cmd[C_USE_DRIVER] = 1.0
+    X0, rng0 = sim.X.copy(), sim._rng.copy()
+    best = 0.0
+    for r in range(repeats + 1):  # the first run compiles / loads the cache
+        X, rng = X0.copy(), rng0.copy()
+        c0 = time.process_time()
+        done = physics.run(X, sim.P, sim.tabs, sim.ti, sim._road, sim._stops, sim._cycle, rng, sim._cmd, sim._log, n)
+        if r:
+            best = max(best, done / max(time.process_time() - c0, 1e-9))
+    return best
+
+
+def measure(duration: float, repeats: int, core_substeps: int) -> dict:
+    """All figures of one run (JSON-able)."""
+    from roadload.experiments.bench_simulator import step_speed, trip_speed
+    from roadload.envs.simulator import LateralValidityWarning
+
+    warnings.simplefilter("ignore", LateralValidityWarning)
+    ref = reference_rate(core_substeps, repeats)
+    out: dict = {"reference_substeps_per_s": ref}
+    for vehicle in ("gt_rwd", "bmw_i3"):
+        core = core_rate(vehicle, core_substeps, repeats)
+        trip = trip_speed(duration, vehicle, repeats)
+        out[vehicle] = {"core_substeps_per_s": core, "core_over_reference": core / ref,
+                        "trip_realtime_factor_cpu": trip["realtime_factor_cpu"],
+                        "trip_realtime_factor_wall": trip["realtime_factor_wall"],
+                        "trip_over_reference": trip["realtime_factor_cpu"] * 100.0 / ref,
+                        "peak_traced_MB": trip["peak_traced_MB"], "samples": trip["samples"]}
+    out["step_api"] = step_speed(n_steps=max(200, int(duration * 5)))
+    return out
+
+
+def print_figures(res: dict, duration: float, repeats: int) -> None:
+    ref = res["reference_substeps_per_s"]
+    print(f"hand-written reference loop (point mass, PI driver): {ref / 1e6:.2f} M substeps per CPU-second")
+    for vehicle in ("gt_rwd", "bmw_i3"):
+        r = res[vehicle]
+        print(f"{vehicle}: core {r['core_substeps_per_s'] / 1e6:.3f} M substeps/s = {r['core_over_reference']:.4f} "
+              f"x reference; trip of {duration:.0f} s ({r['samples']} samples, all effects and sensors): "
+              f"{r['trip_realtime_factor_cpu']:.0f}x real time (CPU), {r['trip_realtime_factor_wall']:.0f}x (wall), "
+              f"best of {repeats}; peak traced memory {r['peak_traced_MB']:.0f} MB")
+    print("step API (bmw_i3, 10 substeps = 0.1 s per step, CPU time): "
+          + ", ".join(f"{k} {v:.0f}" for k, v in res["step_api"].items()))
+
+
+def print_comparison(old: list[dict], new: list[dict], ref: str) -> None:
+    print(f"old = commit {ref}, new = working tree; {len(old)} interleaved rounds; figures relative to the "
+          "hand-written reference loop of the same run; ratio new/old of the medians (> 1: new is faster)")
+    print(f"{'figure':<44s} {'old':>10s} {'new':>10s} {'new/old':>8s}   per round new/old")
+    for vehicle in ("gt_rwd", "bmw_i3"):
+        for key in ("core_over_reference", "trip_over_reference"):
+            o = [r[vehicle][key] for r in old]
+            n = [r[vehicle][key] for r in new]
+            rounds = " ".join(f"{b / a:.3f}" for a, b in zip(o, n))
+            print(f"{vehicle + ' ' + key:<44s} {statistics.median(o):10.4f} {statistics.median(n):10.4f} "
+                  f"{statistics.median(n) / statistics.median(o):8.3f}   {rounds}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--duration", type=float, default=3600.0, help="simulated seconds per trip run")
+    ap.add_argument("--repeats", type=int, default=3, help="runs per figure (best is reported)")
+    ap.add_argument("--core-substeps", type=int, default=200_000, help="substeps per core / reference run")
+    ap.add_argument("--quick", action="store_true", help="tiny sizes for a smoke run (< 60 s)")
+    ap.add_argument("--json", type=Path, help="also write the figures as JSON here")
+    ap.add_argument("--compare", metavar="REF", help="git commit to compare against (same session, interleaved)")
+    ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds of --compare")
+    args = ap.parse_args()
+    if args.quick:
+        args.duration, args.repeats, args.core_substeps = 60.0, 2, 20_000
+    if args.compare:
+        from _refcompare import compare
+
+        sub = ["--duration", str(args.duration), "--repeats", str(args.repeats),
+               "--core-substeps", str(args.core_substeps)]
+        old, new = compare(Path(__file__).resolve(), sub, args.compare, args.rounds)
+        print_comparison(old, new, args.compare)
+        return
+    res = measure(args.duration, args.repeats, args.core_substeps)
+    print_figures(res, args.duration, args.repeats)
+    if args.json:
+        args.json.write_text(json.dumps(res))
+
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--duration", type=float, default=3600.0, help="simulated seconds per run")
-    ap.add_argument("--repeats", type=int, default=3, help="runs per vehicle (best is reported)")
-    args = ap.parse_args()
-    print(report(args.duration, args.repeats))
+    main()

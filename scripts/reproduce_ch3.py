@@ -142,7 +142,8 @@ def _exp_3_3(seeds: int, out: Path, literal: bool, label: str) -> dict:
         x2 = r.X[:, w_unex, 1].mean(axis=1)
         pmax = r.P_diag[:, :, 1].max(axis=1)
         summary[k] = dict(sevn=s_all, wind=s_w, x2=x2, pmax=pmax, blow=r.p_blowup)
-        print(f"{k:<18s} {q(s_all):>30s} {q(s_w):>30s} {q(x2):>30s} {np.median(pmax):14.3g} ({int(r.p_blowup.sum())}/{seeds})")
+        print(f"{k:<18s} {q(s_all):>30s} {q(s_w):>30s} {q(x2):>30s} {np.median(pmax):14.3g} "
+              f"({int(r.p_blowup.sum())}/{seeds})")
 
     def wins(a, b, key="sevn"):
         return int(np.sum(summary[a][key] < summary[b][key]))

@@ -82,7 +82,8 @@ def main() -> None:
             continue
         if spec.breakdown:
             bd = breakdown_table(res, args.bound)
-            print(f"\n## breakdown points — {name} ({spec.parameter} [{spec.unit}], error > fault-free + {args.bound:g}, "
+            print(f"\n## breakdown points — {name} ({spec.parameter} [{spec.unit}], "
+                  f"error > fault-free + {args.bound:g}, "
                   f"relative parameter error): median [q25, q75] over {args.seeds} seeds")
             for (model, variant), g in bd.groupby(["model", "variant"]):
                 g = g.sort_values(["breakdown"], ascending=False)

@@ -70,6 +70,11 @@ class CandidateEffect:
     side: str = "force"
 
     @property
+    def is_brake(self) -> bool:
+        """About the friction brake: the only candidates that braking rows fit and judge (:mod:`.robust`)."""
+        return BRAKE_FORCE in self.needs or TIME_SINCE_BRAKE in self.needs
+
+    @property
     def explains(self) -> tuple[str, ...]:
         """Simulator switches this candidate stands for (its own plus aliases), e.g. for the selftest."""
         return ((self.sim_effect,) if self.sim_effect else ()) + self.sim_aliases

@@ -33,6 +33,8 @@ from .gap import gap_measures
 from .reference import AdditiveRegimeModel
 from .regimes import DEFAULT_REGIMES, get_regime, localise, residual_analysis, strongest_departures
 from .selection import Selector, make_split
+from .base import base_calibration
+from .robust import robust_target
 from .simconfig import SimConfig
 from .stats import block_bootstrap_mean_difference
 from .table import DiagnosisTable, build_table
@@ -52,8 +54,14 @@ RESIDUAL_SIGNALS = ("speed", "acceleration", "gradient_angle", "sim_drive_force"
 class DiagnosisSettings:
     """Settings of :func:`diagnose`: candidate and regime names; split (segment_length [s], test_fraction,
     n_folds, block_length [s] of the bootstrap, seed); fitting (robust Huber fit, n_boot bootstrap draws);
-    acceptance (min_gain held-out gain as a share of the sim's original MSE, min_explained share of the reference-removable part,
-    max_effects); min_effect [N]: smallest bin median reported as a departure / unexplained residual;
+    acceptance (min_gain: robust out-of-fold gain as a share of the sim's original robust loss, :mod:`.robust`;
+    min_explained: share of the reference-removable part; n_null wild-bootstrap draws over segments and the
+    family-wise level alpha the gain must beat; clip: winsorising at clip MAD scales per regime cell;
+    min_size [N] / min_power_size [W]: smallest RMS of an accepted effect's fitted contribution — the robust
+    loss sees offsets of a few N where cruising scatters by a few N, which is no sim-to-real gap worth a switch;
+    max_effects); base_first: rank and select the effects over the calibrated base (mass, drag area, rolling
+    resistance, drive-train efficiency, brake gain; :mod:`.base`) — for a preset that does not match the car;
+    the base block is reported either way; min_effect [N]: smallest bin median reported as a departure / unexplained residual;
     floor roads (profile name, seed) and floor_duration [s] per road for the sim's own trips (none: no floor);
     resimulate: switch the identified effects on in the simulator with their fitted parameters, re-drive the
     floor trips and recompute the gap ("after, simulator"); replay: feed the recorded forces and road into the
@@ -69,11 +77,17 @@ class DiagnosisSettings:
     block_length: float = 10.0
     seed: int = 0
     robust: bool = True
-    n_boot: int = 300
+    n_boot: int = 200
     min_gain: float = 0.02
     min_explained: float = 0.5
     max_effects: int = 3
     min_effect: float = 20.0
+    n_null: int = 199
+    alpha: float = 0.01
+    clip: float = 5.0
+    min_size: float = 15.0
+    min_power_size: float = 100.0
+    base_first: bool = False
     floor_roads: tuple[tuple[str, int], ...] = FLOOR_ROADS
     floor_duration: float = 900.0
     resimulate: bool = True
@@ -191,6 +205,32 @@ def switched_on(sim: SimConfig, effects: Sequence[dict]) -> SimConfig | None:
     return out
 
 
+def plausibility_check(sim: SimConfig, model) -> Callable:
+    """(candidate, fitted parameters, shape) -> None when the simulator switch takes the fitted value, else the
+    reason (e.g. the spec field's physical range it leaves): such a fit is reported, never accepted, never an
+    abort."""
+
+    def check(cand, params: dict, shape) -> str | None:
+        if cand.sim_effect is None:
+            return None
+        try:
+            sp = cand.sim_parameters(params, shape, model)
+        except (KeyError, ValueError, ZeroDivisionError) as exc:
+            return f"no simulator setting for the fitted values ({exc})"
+        if sp is None:
+            return None
+        bad = {k: v for k, v in sp.items() if isinstance(v, float) and not np.isfinite(v)}
+        if bad:
+            return f"non-finite simulator parameters {bad}"
+        try:
+            sim.with_effect(cand.sim_effect, sp)
+        except (DiagnosisError, ValueError, TypeError) as exc:
+            return f"fitted {params} switch {cand.sim_effect} by {sp}: {exc}"
+        return None
+
+    return check
+
+
 def _per_regime(table: pd.DataFrame, before: np.ndarray, after: np.ndarray, rows: np.ndarray,
                 regimes: Sequence[str]) -> list[dict]:
     out = []
@@ -235,7 +275,7 @@ def _unexplained(table: pd.DataFrame, residual_after: np.ndarray, split, setting
             "rms_after": float(np.sqrt(np.nanmean(loss0)))}
 
 
-def _energy_side(table: pd.DataFrame, split, settings: DiagnosisSettings, model) -> dict | None:
+def _energy_side(table: pd.DataFrame, split, settings: DiagnosisSettings, model, plausible=None) -> dict | None:
     """The battery-power residual (:mod:`.energy`): gap before/after, ranking and forward selection of the
     power-side candidates on the same split; None without battery power."""
 
@@ -247,7 +287,9 @@ def _energy_side(table: pd.DataFrame, split, settings: DiagnosisSettings, model)
     sp = Split(split.valid & ok, split.test & ok, np.where(ok, split.fold, -1), split.n_folds, split.blocks,
                split.segments)
     sel = Selector(table, np.where(ok, pr, 0.0), sp, model, robust=settings.robust, n_boot=settings.n_boot,
-                   seed=settings.seed, min_gain=settings.min_gain, min_explained=settings.min_explained, side="power")
+                   seed=settings.seed, min_gain=settings.min_gain, min_explained=settings.min_explained, side="power",
+                   n_null=settings.n_null, alpha=settings.alpha, clip=settings.clip, plausible=plausible,
+                   min_size=settings.min_power_size)
     ranked, skipped = sel.rank(names)
     steps = sel.forward(ranked, max_effects=settings.max_effects)
     after = np.where(ok, pr, 0.0)
@@ -309,8 +351,20 @@ def diagnose(real: Sequence[Trip], sim: SimConfig, settings: DiagnosisSettings |
     signals = {c: table[c].to_numpy(dtype=float)[valid] for c in RESIDUAL_SIGNALS if c in table.columns}
     ra = residual_analysis(r[valid], signals, table["trip"].to_numpy()[valid], max_lag=20)
     step("ranking candidates", 0.45)
-    sel = Selector(table, np.nan_to_num(r), split, model, robust=settings.robust, n_boot=settings.n_boot,
-                   seed=settings.seed, min_gain=settings.min_gain, min_explained=settings.min_explained)
+    plausible = plausibility_check(sim, model)
+    step("base calibration", 0.42)
+    y_sel = np.nan_to_num(r)
+    target0 = robust_target(table, y_sel, split.train, split.segments, split.fold, split.n_folds,
+                            clip=settings.clip)
+    base, base_A = base_calibration(table, target0, split, model, min_size=settings.min_size)
+    base["used_for_effects"] = settings.base_first
+    if settings.base_first and base_A.shape[1]:
+        x_base = np.array([p_["value"] for p_ in base["parameters"]])
+        y_sel = y_sel - base_A @ x_base
+    sel = Selector(table, y_sel, split, model, robust=settings.robust, n_boot=settings.n_boot,
+                   seed=settings.seed, min_gain=settings.min_gain, min_explained=settings.min_explained,
+                   n_null=settings.n_null, alpha=settings.alpha, clip=settings.clip, plausible=plausible,
+                   min_size=settings.min_size)
     explicit = settings.strict_candidates
     ranked, skipped = sel.rank([n for n in settings.candidates if get_candidate(n).side == "force"])
     if explicit:
@@ -322,10 +376,10 @@ def diagnose(real: Sequence[Trip], sim: SimConfig, settings: DiagnosisSettings |
     steps = sel.forward(ranked, max_effects=settings.max_effects)
     chosen = sel.chosen
     effects: list[dict] = []
-    r_after = np.nan_to_num(r).copy()
+    r_after = y_sel.copy()
     if chosen:
         d, fit = sel.final_fit(chosen)
-        r_after = np.nan_to_num(r) - d.A @ fit.X
+        r_after = y_sel - d.A @ fit.X
         se = np.sqrt(np.clip(np.diag(fit.cov), 0, None)) if fit.cov is not None else np.full(fit.X.size, np.nan)
         for cand, shape in chosen:
             own = [i for i, o in enumerate(d.owner) if o == cand.name]
@@ -335,11 +389,11 @@ def diagnose(real: Sequence[Trip], sim: SimConfig, settings: DiagnosisSettings |
                             "shape_name": cand.shape_name, "shape_unit": cand.shape_unit, "parameters": params,
                             "std_errors": {d.names[i]: float(se[i]) for i in own},
                             "units": {d.names[i]: d.units[i] for i in own},
-                            "heldout_gain": step_info["relative_gain"],
+                            "heldout_gain": step_info["gain_of_original"], "null_p": step_info["null_p"],
                             "explained_fraction": step_info["explained_fraction"],
                             "sim_switch": cand.sim_effect,
                             "sim_parameters": cand.sim_parameters(params, shape, model)})
-    energy = _energy_side(table, split, settings, model)
+    energy = _energy_side(table, split, settings, model, plausible)
     power_asked = [n for n in settings.candidates if get_candidate(n).side == "power"]
     if explicit and power_asked and energy is None:
         raise DiagnosisError(f"requested energy-side candidates {power_asked} need battery_voltage and "
@@ -347,17 +401,28 @@ def diagnose(real: Sequence[Trip], sim: SimConfig, settings: DiagnosisSettings |
     step("gap after", 0.85)
     gap_after = gap_measures(table, r_after, model.mass, test)
     gap_after_sim = None
-    sim_after = switched_on(sim, effects) if effects else None
-    if settings.resimulate and sim_after is not None and not floor.is_none:
-        step("re-simulating with the effects on", 0.88)
-        extra = tuple((c.name, sh) for c, sh in chosen)
-        floor_after = fit_floor(sim_after, channels, settings, extra=extra)
-        t_after = build_table(real, sim_after, floor=floor_after).frame
-        if len(t_after) == len(table):
-            r_sim = np.where(split.valid, t_after["residual"].to_numpy(dtype=float), 0.0)
-            gap_after_sim = gap_measures(t_after, np.nan_to_num(r_sim), model.mass, test,
-                                         replay_sim=sim_after if settings.replay else None)
-            gap_after_sim["sim"] = sim_after.to_dict()
+    resim_note = "not asked (--no-resimulate)" if not settings.resimulate else ""
+    if settings.resimulate and effects and not floor.is_none:
+        # never abort here: the diagnosis above is complete; a failing re-simulation is a note in the report
+        try:
+            sim_after = switched_on(sim, effects)
+            if sim_after is None:
+                resim_note = "an accepted effect has no simulator switch"
+            else:
+                step("re-simulating with the effects on", 0.88)
+                extra = tuple((c.name, sh) for c, sh in chosen)
+                floor_after = fit_floor(sim_after, channels, settings, extra=extra)
+                t_after = build_table(real, sim_after, floor=floor_after).frame
+                if len(t_after) == len(table):
+                    r_sim = np.where(split.valid, t_after["residual"].to_numpy(dtype=float), 0.0)
+                    gap_after_sim = gap_measures(t_after, np.nan_to_num(r_sim), model.mass, test,
+                                                 replay_sim=sim_after if settings.replay else None)
+                    gap_after_sim["sim"] = sim_after.to_dict()
+                    resim_note = "done"
+                else:
+                    resim_note = "the re-simulated table differs in length; skipped"
+        except (DiagnosisError, ValueError) as exc:
+            resim_note = f"failed, diagnosis kept: {exc}"
     per_regime = _per_regime(table, np.nan_to_num(r), r_after, test, settings.regimes)
     unexplained = _unexplained(table, np.where(valid, r_after, np.nan), split, settings, rng,
                                float(gap_before["force_residual"]["rmse"]) ** 2)
@@ -368,7 +433,10 @@ def diagnose(real: Sequence[Trip], sim: SimConfig, settings: DiagnosisSettings |
         regimes_before=regimes_before,
         per_regime=per_regime, residual_analysis=ra, ranking=[c.to_dict() for c in ranked], skipped=skipped,
         selection=steps, effects=effects, unexplained=unexplained, energy=energy,
-        notes={"pipeline": dt.notes, "baseline": sel.baseline_info,
+        notes={"pipeline": dt.notes, "baseline": sel.baseline_info, "resimulation": resim_note,
+               "base_calibration": base,
+               "implausible": [{"effect": s_["effect"], "reason": s_["implausible"]} for s_ in steps
+                               if s_.get("implausible")],
                "strongest_departures_before": strongest_departures(regs, top=8)},
         table=dt, residual_after=r_after, test_rows=test)
     step("done", 1.0)

@@ -17,8 +17,9 @@ diagnosis.json (schema_version 1; SI units, forces in N, NaN written as null):
 - ``ranking``: candidates alone, best first: {name, description, parameters, std_errors, units, shape,
   cv_mse, baseline_cv_mse, heldout_improvement, heldout_gain [mean, low, high], significant, aic, bic,
   delta_aic, delta_bic, explained_fraction, sim_effect, sim_parameters}; ``skipped_candidates``: {name: reason};
-- ``forward_selection``: steps {step, effect, cv_mse_before, cv_mse_after, relative_gain, gain_of_original,
-  gain, reference_cv_mse, explained_fraction, accepted, reason};
+- ``forward_selection``: steps {step, effect, shape, robust_loss_before, robust_loss_after (shares of the sim's
+  original robust loss, :mod:`.robust`), relative_gain, gain_of_original, null_p, null_quantile, gain,
+  reference_robust_loss, explained_fraction, size_rms, implausible, accepted, reason};
 - ``effects``: the accepted effects {name, parameters, std_errors, units, shape, heldout_gain,
   explained_fraction, sim_switch, sim_parameters};
 - ``energy_side`` (battery-electric only, else null): {power_residual_before/after (robust summaries, W),
@@ -26,7 +27,10 @@ diagnosis.json (schema_version 1; SI units, forces in N, NaN written as null):
   forward_selection, effects} of the battery-power residual (:mod:`.energy`);
 - ``unexplained``: {present, departing_bins [regime bins as above], reference_gain {relative, interval,
   significant}, reference_importance [{column, std, strongest_bin, strongest_effect}], rms_after};
-- ``notes``: pipeline notes per trip, baseline CV/AIC/BIC, strongest departures before.
+- ``notes``: pipeline notes per trip, baseline robust loss/AIC/BIC with the null's settings, strongest departures
+  before, ``base_calibration`` {parameters [{name, candidate, parameter, unit, value, std_error, size_rms,
+  significant, physical {sim, calibrated, unit}}], used_for_effects}, ``implausible`` [{effect, reason}] (fits
+  outside the simulator's physical range: reported, never accepted), ``resimulation`` (done / skipped / why).
 """
 
 from __future__ import annotations
@@ -260,18 +264,40 @@ def markdown(diag: Diagnosis, figures: dict[str, str]) -> str:
     for key in ("residual_map", "residual_time"):
         if key in figures:
             L += [f"![{key}]({figures[key]})", ""]
-    L += ["## Which effect", "", "Candidates alone (fitted on training, judged out-of-fold):", "",
-          "| candidate | held-out gain | significant | ΔAIC | ΔBIC | explained share | parameters |",
-          "|---|---|---|---|---|---|---|"]
+    base = d.notes.get("base_calibration") or {}
+    if base.get("parameters"):
+        L += ["## Base calibration", "",
+              "The sim's base road load fitted to the trips (weighted least squares on the robust residual, "
+              "cluster-robust standard errors; significant: |value| >= 2.58 SE and RMS >= "
+              f"{_fmt(base.get('min_size'))} N). "
+              + ("The effects below are selected over this calibrated base." if base.get("used_for_effects")
+                 else "Effects are selected over the sim as is (use --base-first for a preset that is not the car)."),
+              "", "| base parameter | fitted change | SE | sim | calibrated | RMS [N] | significant |",
+              "|---|---|---|---|---|---|---|"]
+        for b in base["parameters"]:
+            ph = b["physical"]
+            L.append(f"| {b['name']} | {b['value']:+.4g} {b['unit']} | {b['std_error']:.2g} | {ph['sim']:.4g} | "
+                     f"{ph['calibrated']:.4g} {ph['unit']} | {_fmt(b['size_rms'])} | "
+                     f"{'yes' if b['significant'] else 'no'} |")
+        L += [""]
+    L += ["## Which effect", "", "Candidates alone (fitted on training, judged out-of-fold on the robust, "
+          "regime-normalised loss; null p from the wild block bootstrap):", "",
+          "| candidate | held-out gain | null p | significant | ΔAIC | ΔBIC | explained share | parameters |",
+          "|---|---|---|---|---|---|---|---|"]
     for r in d.ranking:
-        L.append(f"| {r['name']} | {100 * r['heldout_improvement']:.1f} % | {'yes' if r['significant'] else 'no'} | "
+        L.append(f"| {r['name']} | {100 * r['heldout_improvement']:.1f} % | {_fmt(r.get('null_p'), 3)} | "
+                 f"{'yes' if r['significant'] else 'no'} | "
                  f"{_fmt(r['delta_aic'], 0)} | {_fmt(r['delta_bic'], 0)} | {_fmt(r['explained_fraction'], 2)} | "
                  f"{_param_text(r['parameters'], r['std_errors'], r['units'])} |")
     if d.skipped:
         L += ["", "Not fitted: " + "; ".join(f"{k} ({v})" for k, v in d.skipped.items()) + "."]
     L += ["", "Greedy forward selection:", ""]
-    L += [f"{s['step']}. {s['effect']}: out-of-fold MSE {s['cv_mse_before']:.0f} → {s['cv_mse_after']:.0f} N² "
-          f"({100 * s['gain_of_original']:.1f} % of the original), {s['reason']}" for s in d.selection]
+    L += [f"{s['step']}. {s['effect']}: robust out-of-fold loss {s['robust_loss_before']:.3f} → "
+          f"{s['robust_loss_after']:.3f} of the sim as is ({100 * s['gain_of_original']:.1f} % gain; null p = "
+          f"{s['null_p']:.3f}, null {100 * (1 - d.settings['alpha']):.0f} % quantile {100 * s['null_quantile']:.1f} %; "
+          f"fitted effect RMS {_fmt(s['size_rms'])}), {s['reason']}" for s in d.selection]
+    for imp in d.notes.get("implausible", []):
+        L += [f"- not accepted, implausible fit: **{imp['effect']}**: {imp['reason']}"]
     if "ranking" in figures:
         L += ["", f"![ranking]({figures['ranking']})"]
     L += ["", "## Identified effects", ""]

@@ -17,7 +17,7 @@ remove, otherwise it is a partial fit and the rest is left unexplained, never fo
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 import pandas as pd
@@ -28,7 +28,8 @@ from .catalog import CandidateEffect, get_candidate
 from .errors import DiagnosisError
 from .forcemodel import SimForceModel, columns_of
 from .reference import AdditiveRegimeModel
-from .stats import block_bootstrap_mean_difference, block_ids, cluster_covariance
+from .robust import rademacher, robust_target, step_statistics
+from .stats import block_ids, cluster_covariance
 
 
 # ============================================================================================ split
@@ -189,9 +190,12 @@ class CandidateResult:
     sim_effect: str | None = None
     sim_parameters: dict[str, float] | None = None
     regime_hint: str = ""
+    null_p: float = float("nan")
+    size: float = float("nan")
 
     def to_dict(self) -> dict:
-        return {"name": self.name, "description": self.description, "shape": self.shape,
+        return {"null_p": self.null_p, "size_rms": self.size, "name": self.name,
+                "description": self.description, "shape": self.shape,
                 "shape_name": self.shape_name, "parameters": self.parameters, "std_errors": self.std_errors,
                 "units": self.units, "cv_mse": self.cv_mse, "baseline_cv_mse": self.baseline_cv_mse,
                 "heldout_improvement": self.improvement, "heldout_gain": list(self.gain),
@@ -222,6 +226,11 @@ class Selector:
     min_gain: float = 0.02
     min_explained: float = 0.5
     side: str = "force"
+    n_null: int = 199
+    alpha: float = 0.01
+    clip: float = 5.0
+    plausible: Callable[[CandidateEffect, dict, float | None], str | None] | None = None
+    min_size: float = 0.0
     cols: dict[str, np.ndarray] = field(init=False)
     baseline_loss: np.ndarray = field(init=False)
 
@@ -236,6 +245,11 @@ class Selector:
         self.residual = y
         self.baseline_loss = np.where(self.split.train, y ** 2, np.nan)
         self.rng = np.random.default_rng(self.seed)
+        # the null's resampling unit: the 10 s bootstrap blocks (nested in the 60 s split segments, so every block
+        # lies in one fold); segments would leave too few sign patterns on short trips
+        self.target = robust_target(self.table, y, self.split.train, self.split.blocks, self.split.fold,
+                                    self.split.n_folds, clip=self.clip)
+        self.signs = rademacher(self.n_null, self.target.n_segments, self.rng)
 
     # ---------------------------------------------------------------- helpers
     def _mse(self, pred: np.ndarray) -> tuple[float, np.ndarray]:
@@ -280,99 +294,192 @@ class Selector:
         return self._mse(pred)
 
     def final_fit(self, choices: list[tuple[CandidateEffect, float | None]]) -> tuple[Design, Fit]:
+        """Huber fit of the choices on the training rows; the regressors of candidates that are not about the
+        friction brake are zero on braking rows while fitting (those rows fit brake candidates only), the returned
+        design is the full one (for predicting everywhere)."""
         d = design(choices, self.model, self.cols)
-        return d, fit_linear(d.A, self.residual, self.split.train, self.robust, self.split.blocks)
+        A = d.A.copy()
+        brake = np.array([get_candidate(o).is_brake for o in d.owner], dtype=bool)
+        A[np.ix_(self.target.braking, ~brake)] = 0.0
+        return d, fit_linear(A, self.residual, self.split.train, self.robust, self.split.blocks)
+
+    # ---------------------------------------------------------------- robust design
+    def candidate_columns(self, cand: CandidateEffect, shape: float | None) -> np.ndarray:
+        """The candidate's regressors as the robust ranking sees them: zero on braking rows unless it is a
+        brake candidate (:mod:`.robust`, step 3)."""
+        A = design([(cand, shape)], self.model, self.cols).A
+        if not cand.is_brake:
+            A = np.where(self.target.braking[:, None], 0.0, A)
+        return A
+
+    def _variants(self, cand: CandidateEffect) -> list[np.ndarray]:
+        return [self.candidate_columns(cand, sh) for sh in cand.shapes()]
+
+    def _base(self, chosen: Sequence[tuple[CandidateEffect, float | None]]) -> np.ndarray:
+        if not chosen:
+            return np.zeros((len(self.table), 0))
+        return np.hstack([self.candidate_columns(c, sh) for c, sh in chosen])
+
+    def _reference_loss(self, chosen: Sequence[tuple[CandidateEffect, float | None]]) -> float:
+        """Robust out-of-fold loss (relative to the sim as is) of the chosen effects plus the flexible reference
+        (cached per set of chosen effects)."""
+        key = tuple((c.name, sh) for c, sh in chosen)
+        cache = self.__dict__.setdefault("_ref_cache", {})
+        if key not in cache:
+            cache[key] = self._reference_loss_uncached(chosen)
+        return cache[key]
+
+    def _reference_loss_uncached(self, chosen: Sequence[tuple[CandidateEffect, float | None]]) -> float:
+        A = design(list(chosen), self.model, self.cols).A if chosen else None
+        pred = cv_predict(A, self.residual, self.table, self.split, self.robust, reference=True)
+        t = self.target
+        rows = t.segment >= 0
+        norm = float(np.sum(t.weight[rows] * t.r_w[rows] ** 2))
+        loss = float(np.sum(t.weight[rows] * (t.r_w[rows] - np.nan_to_num(pred[rows])) ** 2))
+        return loss / norm if norm > 0 else float("nan")
+
+    def effect_size(self, d: Design, fit: Fit, name: str) -> float:
+        """RMS of one effect's fitted contribution over the training rows [N, or W on the power side]."""
+        own = [i for i, o in enumerate(d.owner) if o == name]
+        tr = self.split.train
+        contrib = d.A[np.ix_(tr, own)] @ fit.X[own]
+        return float(np.sqrt(np.mean(contrib ** 2))) if contrib.size else 0.0
 
     # ---------------------------------------------------------------- ranking
     def rank(self, names: Sequence[str]) -> tuple[list[CandidateResult], dict[str, str]]:
-        """Every usable candidate alone: fitted on training, judged out-of-fold; sorted by held-out MSE."""
+        """Every usable candidate alone over the sim as is: robust out-of-fold gain (:mod:`.robust`) with its
+        null p-value from the wild segment bootstrap; parameters from the Huber fit on the training rows
+        (braking rows only for brake candidates). Sorted by gain, largest first."""
         cands, skipped = self.usable(names)
-        base_mse = float(np.nanmean(self.baseline_loss))
-        ref_mse, _ = self.evaluate([], reference=True)
         tr = self.split.train
         m = int(tr.sum())
         aic0, bic0 = information_criteria(float(np.sum(self.residual[tr] ** 2)), m, 0)
-        results = []
+        ok: list[CandidateEffect] = []
+        variants: list[list[np.ndarray]] = []
         for cand in cands:
             try:
-                shape = self.choose_shape(cand)
-                mse, loss = self.evaluate([(cand, shape)])
+                variants.append(self._variants(cand))
+                ok.append(cand)
+            except DiagnosisError as exc:
+                skipped[cand.name] = str(exc)
+        stats = step_statistics(self._base([]), variants, self.target, self.signs)
+        ref_loss = self._reference_loss([])
+        results = []
+        for j, cand in enumerate(ok):
+            shape = cand.shapes()[int(stats.variant[j])]
+            try:
                 d, fit = self.final_fit([(cand, shape)])
             except DiagnosisError as exc:
                 skipped[cand.name] = str(exc)
                 continue
-            gain = block_bootstrap_mean_difference(self.baseline_loss, loss, self.split.blocks, self.rng,
-                                                   self.n_boot)
+            gain = float(stats.observed[j])
+            p = stats.marginal_p(j)
             sse = float(np.sum((self.residual[tr] - d.A[tr] @ fit.X) ** 2))
             o = d.A.shape[1] + (1 if cand.shape_grid else 0)
             aic, bic = information_criteria(sse, m, o)
             se = np.sqrt(np.clip(np.diag(fit.cov), 0, None)) if fit.cov is not None else np.full(fit.X.size, np.nan)
             params = {n: float(x) for n, x in zip(d.names, fit.X)}
-            improvement = (base_mse - mse) / base_mse if base_mse > 0 else 0.0
-            explainable = base_mse - min(ref_mse, mse)
-            frac = float(np.clip((base_mse - mse) / explainable, -np.inf, 1.0)) if explainable > 0 else 0.0
-            results.append(CandidateResult(
+            explainable = 1.0 - min(ref_loss, 1.0 - gain)
+            frac = float(np.clip(gain / explainable, -np.inf, 1.0)) if explainable > 0 else 0.0
+            res = CandidateResult(
                 cand.name, cand.description, shape, cand.shape_name, params,
-                {n: float(s) for n, s in zip(d.names, se)}, dict(zip(d.names, d.units)), mse, base_mse,
-                float(improvement), gain, bool(gain[1] > 0 and improvement >= self.min_gain), aic, bic,
+                {n: float(s) for n, s in zip(d.names, se)}, dict(zip(d.names, d.units)), 1.0 - gain, 1.0,
+                gain, (gain, float(np.quantile(stats.null[:, j], 1 - self.alpha)) if stats.null.size else gain,
+                       float(stats.null[:, j].max()) if stats.null.size else gain),
+                bool(p <= self.alpha and gain >= self.min_gain
+                     and self.effect_size(d, fit, cand.name) >= self.min_size), aic, bic,
                 explained_fraction=frac, sim_effect=cand.sim_effect,
-                sim_parameters=cand.sim_parameters(params, shape, self.model), regime_hint=cand.regime_hint))
-        results.sort(key=lambda r: r.cv_mse)
+                sim_parameters=_safe_sim_parameters(cand, params, shape, self.model), regime_hint=cand.regime_hint)
+            res.null_p = p
+            res.size = self.effect_size(d, fit, cand.name)
+            results.append(res)
+        results.sort(key=lambda r: -r.improvement)
         if results:
             amin = min([aic0] + [r.aic for r in results])
             bmin = min([bic0] + [r.bic for r in results])
             for r in results:
                 r.delta_aic, r.delta_bic = r.aic - amin, r.bic - bmin
-        self.baseline_info = {"cv_mse": base_mse, "reference_cv_mse": ref_mse, "aic": aic0, "bic": bic0,
+        self.baseline_info = {"robust_loss": 1.0, "reference_robust_loss": ref_loss, "aic": aic0, "bic": bic0,
                               "delta_aic": aic0 - min([aic0] + [r.aic for r in results]),
-                              "delta_bic": bic0 - min([bic0] + [r.bic for r in results])}
+                              "delta_bic": bic0 - min([bic0] + [r.bic for r in results]),
+                              "null": {"draws": int(self.signs.shape[0] - 1), "alpha": self.alpha,
+                                       "method": "wild bootstrap over training segments (Rademacher), "
+                                                 "max-statistic over the step's candidates"},
+                              "robust_target": self.target.describe()}
         return results, skipped
 
     # ---------------------------------------------------------------- greedy forward selection
     def forward(self, ranked: list[CandidateResult], max_effects: int = 4) -> list[dict]:
-        """Greedy forward selection over the ranked candidates (top 6 considered at each step).
+        """Greedy forward selection over the significant ranked candidates (top 6).
 
-        Each step adds the candidate with the smallest out-of-fold MSE given the ones already chosen and records
-        whether it is accepted: significant held-out gain, a gain of at least min_gain of the original
-        (sim as is) out-of-fold MSE, and an explained share of the reference-removable remainder >=
-        min_explained. Stops at the first step that is not accepted."""
+        Each step takes the candidate with the largest robust out-of-fold gain given the ones already chosen
+        and accepts it when (a) the family-wise null p of the step (max-statistic over the pool, wild segment
+        bootstrap) is <= alpha, (b) the gain is >= min_gain of the sim's original robust loss, (c) it removes
+        >= min_explained of what the flexible reference can remove, and (d) its fitted value maps to a
+        physically plausible simulator setting (``plausible``), and (e) its fitted contribution's RMS is >=
+        min_size. A candidate failing (c), (d) or (e) is reported with the reason and the next one is tried; the
+        selection stops at the first step failing (a) or (b)."""
         pool = [(get_candidate(r.name), r.shape) for r in ranked if r.significant][:6]
         chosen: list[tuple[CandidateEffect, float | None]] = []
-        cur_mse = base_mse = float(np.nanmean(self.baseline_loss))
-        cur_loss = self.baseline_loss
         steps: list[dict] = []
+        cur = 1.0
         while pool and len(chosen) < max_effects:
-            ref_mse, _ = self.evaluate(chosen, reference=True)
-            trials = []
-            for cand, _sh in pool:
-                shape = self.choose_shape(cand, chosen)
-                try:
-                    mse, loss = self.evaluate(chosen + [(cand, shape)])
-                except DiagnosisError:
-                    continue
-                trials.append((mse, cand, shape, loss))
-            if not trials:
-                break
-            mse, cand, shape, loss = min(trials, key=lambda x: x[0])
-            gain = block_bootstrap_mean_difference(cur_loss, loss, self.split.blocks, self.rng, self.n_boot)
-            rel = (cur_mse - mse) / cur_mse if cur_mse > 0 else 0.0
-            rel_base = (cur_mse - mse) / base_mse if base_mse > 0 else 0.0
-            explainable = cur_mse - min(ref_mse, mse)
-            frac = float(min((cur_mse - mse) / explainable, 1.0)) if explainable > 0 else 0.0
-            accepted = bool(gain[1] > 0 and rel_base >= self.min_gain and frac >= self.min_explained)
+            stats = step_statistics(self._base(chosen), [self._variants(c) for c, _ in pool], self.target,
+                                    self.signs)
+            j = int(np.argmax(stats.observed))
+            cand = pool[j][0]
+            shape = cand.shapes()[int(stats.variant[j])]
+            gain = float(stats.observed[j])
+            p = stats.p_value(j)
+            ref_loss = self._reference_loss(chosen)
+            after = stats.loss_before - gain
+            explainable = stats.loss_before - min(ref_loss, after)
+            frac = float(min(gain / explainable, 1.0)) if explainable > 0 else 0.0
+            accepted = bool(p <= self.alpha and gain >= self.min_gain and frac >= self.min_explained)
             reason = ("accepted" if accepted else
-                      "held-out gain not significant" if not gain[1] > 0 else
-                      f"gain {rel_base:.3f} of the original gap, below {self.min_gain}" if rel_base < self.min_gain else
+                      f"held-out gain not beyond the null (p = {p:.3f} > {self.alpha})" if p > self.alpha else
+                      f"gain {gain:.3f} of the original gap, below {self.min_gain}" if gain < self.min_gain else
                       f"partial fit: explains {frac:.2f} of the removable remainder (< {self.min_explained})")
-            steps.append({"step": len(steps) + 1, "effect": cand.name, "shape": shape, "cv_mse_before": cur_mse,
-                          "cv_mse_after": mse, "relative_gain": float(rel), "gain_of_original": float(rel_base),
-                          "gain": list(gain),
-                          "reference_cv_mse": ref_mse, "explained_fraction": frac, "accepted": accepted,
-                          "reason": reason})
+            implausible = None
+            size = float("nan")
+            try:
+                d, fit = self.final_fit(chosen + [(cand, shape)])
+                size = self.effect_size(d, fit, cand.name)
+                params = {d.names[i]: float(fit.X[i]) for i, o in enumerate(d.owner) if o == cand.name}
+                if accepted and self.plausible is not None:
+                    implausible = self.plausible(cand, params, shape)
+            except DiagnosisError as exc:
+                implausible = str(exc)
+            if accepted and not size >= self.min_size:
+                accepted = False
+                reason = f"too small: the fitted effect's RMS {size:.3g} is below {self.min_size:g}"
+            if accepted and implausible:
+                accepted = False
+                reason = f"implausible: {implausible}"
+            else:
+                implausible = None
+            null_q = float(np.quantile(stats.null.max(axis=1), 1 - self.alpha)) if stats.null.size else float("nan")
+            steps.append({"step": len(steps) + 1, "effect": cand.name, "shape": shape,
+                          "robust_loss_before": stats.loss_before, "robust_loss_after": after,
+                          "relative_gain": float(gain / stats.loss_before) if stats.loss_before > 0 else 0.0,
+                          "gain_of_original": gain, "null_p": p, "null_quantile": null_q,
+                          "gain": [gain, null_q, float("nan")],
+                          "reference_robust_loss": ref_loss, "explained_fraction": frac, "accepted": accepted,
+                          "size_rms": size, "implausible": implausible, "reason": reason})
+            pool = [(c, s) for c, s in pool if c.name != cand.name]
+            if implausible or (not accepted and reason.startswith(("too small", "partial fit"))):
+                continue      # the next candidate may still be a real one
             if not accepted:
                 break
             chosen.append((cand, shape))
-            pool = [(c, s) for c, s in pool if c.name != cand.name]
-            cur_mse, cur_loss = mse, loss
+            cur = after
         self.chosen = chosen
+        self.robust_loss_after = cur
         return steps
+
+
+def _safe_sim_parameters(cand: CandidateEffect, params: dict, shape, model) -> dict | None:
+    try:
+        return cand.sim_parameters(params, shape, model)
+    except (KeyError, ValueError, ZeroDivisionError):
+        return None

@@ -17,13 +17,24 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from pydantic import Field, ValidationError
+
 from roadload.envs.effects import EffectsConfig, EffectsError
+from roadload.schema import StrictModel, format_errors
 from roadload.vehicle import VehicleSpec, VehicleSpecError, load_vehicle
 
 from .errors import DiagnosisError
 from roadload.presets import PRESETS, get_preset
 
 _KEYS = {"vehicle", "effects", "name"}
+
+
+class SimConfigFile(StrictModel):
+    """Schema of a sim config JSON (see the module docstring)."""
+
+    vehicle: str | dict[str, Any] = Field(description="preset name, vehicle spec file or an inline spec object")
+    effects: str | dict[str, Any] | None = Field(None, description="EffectsConfig: 'wind,payload' or its dict form")
+    name: str = Field("", description="label used in reports")
 
 
 @dataclass
@@ -47,6 +58,12 @@ class SimConfig:
             raise DiagnosisError(f"sim config: unknown keys {sorted(unknown)}; allowed: {sorted(_KEYS)}")
         if "vehicle" not in data:
             raise DiagnosisError("sim config: missing 'vehicle' (a preset name such as 'bmw_i3' or a spec file)")
+        try:
+            SimConfigFile.model_validate(data)
+        except ValidationError as exc:
+            raise DiagnosisError(f"sim config: {format_errors(exc, SimConfigFile)}") from None
+        if isinstance(data["vehicle"], str) and not data["vehicle"].strip():
+            raise DiagnosisError("sim config: vehicle: empty; expected a preset name such as 'bmw_i3' or a spec file")
         vehicle = load_sim_vehicle(data["vehicle"], base)
         try:
             effects = EffectsConfig.parse(data.get("effects"))

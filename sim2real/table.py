@@ -8,7 +8,9 @@ knowledge of the sim's vehicle) gives v_V, v̇_V, θ, 1/r, gear and F_xV from th
 trip, t                trip name, time [s]
 time_since_start       t - t_0 [s]; distance [m] integrated speed
 air_density            ρ_a [kg/m³] from the trip's ambient temperature (else the sim's ambient)
-brake_force            F_B = Σ 2 p_B A_B r_B X_B / r_W [N] from the brake pressures with the sim's brakes
+brake_force            F_B = Σ 2 p_B A_B r_B X_B / r_W [N] from the brake pressures with the sim's brakes;
+                       the pressures pass the pipeline's smoother bank first (:func:`smoothed_pressure`), so
+                       F_B carries the same smoothing and delay as dv/dt and the drive force
 drive_force            F_xV from the drive torque (pipeline) [N]
 tractive_force         F_xV,measured = drive_force - brake_force [N]
 sim_balance            F_xV,sim of :class:`.forcemodel.SimForceModel` for the measured motion [N]
@@ -37,6 +39,7 @@ import numpy as np
 import pandas as pd
 
 from roadload.estimators.pipeline import PipelineError, PipelineSettings, knowledge_from_spec, run_pipeline
+from roadload.estimators.pks import pks_bank
 from roadload.trip import Trip
 from roadload.units import KELVIN, air_density
 
@@ -116,6 +119,25 @@ def time_since(flag: np.ndarray, t: np.ndarray) -> np.ndarray:
     return t - last
 
 
+def smoothed_pressure(trip: Trip, channel: str, t: np.ndarray, settings: PipelineSettings) -> np.ndarray:
+    """A brake-pressure channel [Pa] through the same polynomial Kalman smoother configuration as the pipeline's
+    continuous channels (window and forgetting scaled to the trip's rate), aligned like them (the smoothed value
+    belongs to t - delay) and sampled at ``t``. Without it F_B is a raw step while dv/dt and the drive force are
+    smoothed: every brake application then leaves a kN residual transient that no road-load effect explains."""
+    x = trip.channel(channel)
+    rate = trip.sample_rate
+    cfg = dict(settings.smoother)
+    scale = rate / settings.smoother_rate
+    if abs(scale - 1.0) > 1e-6:
+        cfg["window"] = max(1, int(round(cfg.get("window", 20) * scale)))
+        cfg["forgetting"] = float(cfg.get("forgetting", 0.9)) ** (1.0 / scale)
+    bank = pks_bank({channel: np.nan_to_num(np.asarray(x, dtype=float))}, dt=1.0 / rate, derivatives=1, **cfg)
+    d = int(bank.delay)
+    if len(x) <= d + 1:
+        return np.interp(t, trip.t, np.nan_to_num(x))
+    return np.interp(t, trip.t[:len(x) - d], bank.value[channel][d:])
+
+
 def brake_force_from_pressure(vehicle, p_front: np.ndarray, p_rear: np.ndarray) -> np.ndarray:
     """F_B = 2 (p_f A_f r_f + p_r A_r r_r) X_B / r_W [N] (two wheels per axle, nominal pad friction X_B)."""
     b = vehicle.brakes
@@ -191,8 +213,13 @@ def build_table(trips: Sequence[Trip], sim: SimConfig, settings: PipelineSetting
         if has_brakes:
             pf = dec["brake_pressure_front"].to_numpy(dtype=float) if "brake_pressure_front" in dec else 0.0 * v
             pr = dec["brake_pressure_rear"].to_numpy(dtype=float) if "brake_pressure_rear" in dec else 0.0 * v
-            f["brake_force"] = brake_force_from_pressure(sim.vehicle, pf, pr)
             braking = np.maximum(np.nan_to_num(pf), np.nan_to_num(pr)) > BRAKE_PRESSURE_ON
+            pf_s = smoothed_pressure(trip, "brake_pressure_front", t, st) if trip.has("brake_pressure_front") \
+                else 0.0 * v
+            pr_s = smoothed_pressure(trip, "brake_pressure_rear", t, st) if trip.has("brake_pressure_rear") \
+                else 0.0 * v
+            f["brake_force"] = brake_force_from_pressure(sim.vehicle, pf_s, pr_s)
+            braking |= np.maximum(np.nan_to_num(pf_s), np.nan_to_num(pr_s)) > BRAKE_PRESSURE_ON
         else:
             f["brake_force"] = 0.0
             braking = ~s["trigger_no_brake"].to_numpy(dtype=bool)
@@ -219,7 +246,16 @@ def build_table(trips: Sequence[Trip], sim: SimConfig, settings: PipelineSetting
         payload = trip.meta.get("extra_payload_kg")
         f["payload"] = float(payload) if payload is not None else (0.0 if trip.meta.get("overview") else np.nan)
         f["season"] = _season(trip, amb)
-        valid = (v > MIN_SPEED) & (t >= t[0] + st.warmup) & s["trigger_no_slip"].to_numpy(dtype=bool)
+        no_slip = s["trigger_no_slip"].to_numpy(dtype=bool)
+        moving = v > MIN_SPEED
+        if moving.sum() > 100 and no_slip[moving].mean() < 0.1:
+            # "slip" on (nearly) every moving sample: the logged motor speed does not fit the sim vehicle's drive
+            # ratio (a preset that is not the car) — the slip check says nothing then and is left out
+            no_slip = np.ones_like(no_slip)
+            notes[name].append("wheel-slip check left out: the logged engine/motor speed does not fit the sim "
+                               "vehicle's drive ratio on >= 90 % of the moving samples (check the vehicle's gear "
+                               "ratios and wheel radius)")
+        valid = moving & (t >= t[0] + st.warmup) & no_slip
         valid &= s["trigger_rim_torque_available"].to_numpy(dtype=bool)
         if not has_brakes:
             torque_floor = max(st.drive_torque_floor, knowledge.drive_torque_floor)

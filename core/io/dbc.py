@@ -11,12 +11,17 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 from .frames import CanFrames
 from .report import ImportReport, LogImportError
 from .signals import Signal, SignalSet
+
+if TYPE_CHECKING:  # cantools is imported lazily (only when a DBC is loaded)
+    from cantools.database.can import Message
+    from cantools.database.can import Signal as CanSignal
 
 
 @dataclass
@@ -31,7 +36,7 @@ class DbcSource:
 class Database:
     """Decoding tables: for each (bus or None, frame id, extended) the cantools message."""
 
-    messages: dict[tuple[int | None, int, bool], object] = field(default_factory=dict)
+    messages: dict[tuple[int | None, int, bool], Message] = field(default_factory=dict)
     files: list[str] = field(default_factory=list)
 
     def message_names(self) -> set[str]:
@@ -59,6 +64,8 @@ def load_dbc(sources: list[DbcSource], report: ImportReport | None = None) -> Da
             raise LogImportError(f"{path}: not a valid DBC file ({type(exc).__name__}: {exc})") from None
         finally:
             logger.setLevel(level)
+        if not isinstance(parsed, cantools.database.can.Database):
+            raise LogImportError(f"{path}: not a CAN DBC database (cantools parsed a {type(parsed).__name__})")
         names = [m.name for m in parsed.messages]
         dupes = sorted({n for n in names if names.count(n) > 1})
         if dupes and report is not None:
@@ -102,14 +109,14 @@ def raw_values(signal, le: np.ndarray, be: np.ndarray) -> np.ndarray:
     return raw
 
 
-def _signal_fits(signal, max_bytes: int) -> bool:
+def _signal_fits(signal: CanSignal, max_bytes: int) -> bool:
     if signal.byte_order == "little_endian":
         return signal.start + signal.length <= 8 * max_bytes
     msb = (7 - signal.start // 8) * 8 + signal.start % 8
     return msb - (signal.length - 1) >= 0 and signal.start // 8 < max_bytes
 
 
-def _decode_message(message, t: np.ndarray, data: np.ndarray, out: SignalSet, report: ImportReport) -> None:
+def _decode_message(message: Message, t: np.ndarray, data: np.ndarray, out: SignalSet, report: ImportReport) -> None:
     name = message.name
     if message.length > 8 or any(s.is_float for s in message.signals):
         _decode_message_slow(message, t, data, out, report)
@@ -117,7 +124,7 @@ def _decode_message(message, t: np.ndarray, data: np.ndarray, out: SignalSet, re
     le, be = _payload_words(data)
     valid: dict[str, np.ndarray] = {}  # rows where a signal is present (multiplexing)
 
-    def rows_of(sig) -> np.ndarray:
+    def rows_of(sig: CanSignal) -> np.ndarray:
         if sig.name in valid:
             return valid[sig.name]
         rows = np.ones(t.size, dtype=bool)
@@ -140,12 +147,16 @@ def _decode_message(message, t: np.ndarray, data: np.ndarray, out: SignalSet, re
         out[key] = Signal(t[rows], values, sig.unit or None)
 
 
-def _decode_message_slow(message, t, data, out: SignalSet, report: ImportReport) -> None:
+def _decode_message_slow(message: Message, t: np.ndarray, data: np.ndarray, out: SignalSet,
+                         report: ImportReport) -> None:
     cols: dict[str, tuple[list, list]] = {}
     bad = 0
     for i in range(t.size):
         try:
-            decoded = message.decode(bytes(data[i, : message.length]), decode_choices=False, scaling=True)
+            # decode_containers=False and decode_choices=False: a plain dict of scaled numbers (cantools' return
+            # type also covers container messages and choice names, which these flags rule out)
+            decoded = cast("dict[str, float]", message.decode(bytes(data[i, : message.length]),
+                                                              decode_choices=False, scaling=True))
         except Exception:
             bad += 1
             continue

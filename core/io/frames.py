@@ -17,11 +17,11 @@ import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterable
+from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from .report import LogImportError
+from .report import ImportReport, LogImportError
 from ..fileio import atomic_path
 
 CAN_FORMATS = ("candump", "blf", "asc", "mf4")
@@ -219,16 +219,91 @@ def _bus_number(channel) -> int:
     return int(m.group(1)) if m else 0
 
 
-def read_python_can(path: str | os.PathLike) -> CanFrames:
-    """Frames of a candump .log, .asc, .blf (or any python-can readable) log. Remote/error frames are skipped."""
+# a candump line: (time) interface id#data | id#R | id##<flags><data> (CAN FD)
+_CANDUMP_LINE = re.compile(r"^\(\s*\d+(?:\.\d+)?\s*\)\s+\S+\s+[0-9A-Fa-f]{1,8}"
+                           r"(?:#(?:R\d?|(?:[0-9A-Fa-f]{2})*)|##[0-9A-Fa-f](?:[0-9A-Fa-f]{2})*)(?:\s+[RT])?\s*$")
+# an ASC line that starts like a classic CAN frame: time channel id Rx|Tx d|r ...
+_ASC_FRAME = re.compile(r"^\s*\d+\.\d+\s+\d+\s+\S+\s+(?:Rx|Tx)\s+[dDrR]\b")
+_ASC_DATA = re.compile(r"^\s*\d+\.\d+\s+\d+\s+[0-9A-Fa-f]{1,8}x?\s+(?:Rx|Tx)\s+"
+                       r"(?:[rR]\b.*|[dD]\s+([0-9A-Fa-f])((?:\s+[0-9A-Fa-f]{2})*)(?:\s+[A-Za-z].*)?)\s*$")
+_ASC_TIMED = re.compile(r"^\s*\d+\.\d+\s")
+_ASC_TIMESTAMP_LIKE = re.compile(r"^\s*[0-9.]+[^0-9.\s]")
+
+
+#: ASC lines without a time stamp that belong to the format (header, trigger blocks, comments)
+_ASC_HEADER_PREFIXES = ("date", "base", "internal events", "no internal events", "begin triggerblock",
+                        "end triggerblock", "//", "version", "start of measurement")
+
+
+def _asc_line_ok(line: str) -> bool:
+    if _ASC_TIMESTAMP_LIKE.match(line):
+        return False  # a mangled time stamp, e.g. '0.0x5 1 123 ...'
+    if not _ASC_TIMED.match(line):
+        return line.strip().lower().startswith(_ASC_HEADER_PREFIXES)  # free text is no ASC line
+    if not _ASC_FRAME.match(line):
+        return True  # events, error frames, CAN FD lines: left to python-can
+    m = _ASC_DATA.match(line)
+    if m is None:
+        return False
+    if m.group(1) is None:  # remote frame
+        return True
+    dlc = int(m.group(1), 16)
+    return len(m.group(2).split()) == min(dlc, 8)
+
+
+def screen_log_lines(path: Path, fmt: str) -> tuple[str, list[int]]:
+    """Text of a candump/ASC log without its malformed lines, and the 1-based numbers of the lines left out.
+    A candump line must read ``(time) iface id#hexdata``; an ASC frame line needs as many data bytes as its DLC."""
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError as exc:
+        raise LogImportError(f"{path}: unreadable CAN log ({exc.strerror})") from None
+    keep, bad = [], []
+    for lineno, line in enumerate(text.splitlines(), 1):
+        if not line.strip():
+            continue
+        ok = _CANDUMP_LINE.match(line) is not None if fmt == "candump" else _asc_line_ok(line)
+        if ok:
+            keep.append(line)
+        else:
+            bad.append(lineno)
+    return "\n".join(keep) + "\n", bad
+
+
+def describe_lines(numbers: list[int], limit: int = 10) -> str:
+    """'lines 3, 7, 12' (the first `limit`, then '... (n more)')."""
+    head = ", ".join(str(n) for n in numbers[:limit])
+    more = f" ... ({len(numbers) - limit} more)" if len(numbers) > limit else ""
+    return f"line{'s' if len(numbers) > 1 else ''} {head}{more}"
+
+
+def read_python_can(path: str | os.PathLike, report: ImportReport | None = None) -> CanFrames:
+    """Frames of a candump .log, .asc, .blf (or any python-can readable) log. Remote/error frames are skipped.
+
+    Text logs (candump, ASC) are screened line by line first: malformed lines are left out and counted in
+    ``report`` with their line numbers (without a report, any malformed line is an error)."""
+    import io
+
     import can
 
     path = Path(path)
     if not path.is_file():
         raise LogImportError(f"{path}: no such CAN log file")
+    suffix = path.suffix.lower()
+    text_fmt = "candump" if suffix == ".log" else "asc" if suffix == ".asc" else None
+    source: Any = str(path)
+    if text_fmt is not None:
+        text, bad = screen_log_lines(path, text_fmt)
+        if bad:
+            if report is None:
+                raise LogImportError(f"{path}: {len(bad)} malformed {text_fmt} {describe_lines(bad)}")
+            report.drop(f"{path.name} lines", f"malformed {text_fmt} line", len(bad), describe_lines(bad))
+        source = io.StringIO(text)
     t, bus, ident, ext, length, rows = [], [], [], [], [], []
     try:
-        for msg in can.LogReader(str(path)):
+        reader = (can.CanutilsLogReader(source) if text_fmt == "candump" else can.ASCReader(source)
+                  if text_fmt == "asc" else can.LogReader(source))
+        for msg in reader:
             if msg.is_error_frame or msg.is_remote_frame:
                 continue
             t.append(msg.timestamp)

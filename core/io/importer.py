@@ -4,6 +4,7 @@ channels -> Trip with ``meta["import_report"]`` listing every repair and drop.""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Sequence
 
 from ..trip import Trip
 from .bmw_i3 import load_bmw_i3
@@ -16,8 +17,11 @@ __all__ = ["import_log"]
 
 
 def import_log(source: str | Path, fmt: str, mapping: str | Path | Mapping | None = None, *,
-               dbc: list[str | Path] = (), progress: Progress | None = None) -> Trip:
-    """Import a log of the given format through a mapping (file, packaged name, or default for the format)."""
+               dbc: Sequence[str | Path] = (), progress: Progress | None = None, strict: bool = False) -> Trip:
+    """Import a log of the given format through a mapping (file, packaged name, or default for the format).
+
+    Malformed lines of text logs (candump, ASC, CSV) are left out and reported with their line numbers in
+    ``meta["import_report"]``; ``strict=True`` makes any malformed line an error instead."""
     if mapping is None:
         if fmt not in DEFAULT_MAPPINGS:
             raise LogImportError(f"format {fmt!r} needs a mapping file (--mapping)")
@@ -34,6 +38,11 @@ def import_log(source: str | Path, fmt: str, mapping: str | Path | Mapping | Non
     else:
         raise LogImportError(f"unknown import format {fmt!r}; choose one of "
                              f"{sorted(set(CAN_LOG_FORMATS) | {'csv', 'bmw-i3', 'openxc'})}")
+    if strict:
+        bad = [d for d in trip.meta["import_report"].get("dropped", []) if str(d["what"]).endswith(" lines")]
+        if bad:
+            raise LogImportError(f"{source}: strict import refused: " + "; ".join(
+                f"{d['count']} x {d['reason']} ({d['detail']})" for d in bad))
     if m.derived:
         if progress:
             progress("derive", 0.9)

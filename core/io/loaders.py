@@ -11,16 +11,17 @@ bmw-i3         TUM BMW i3 trip CSV (csv + i3 vehicle spec: rim torque, grade, pa
 openxc         OpenXC JSON trace, lines ``<unix time>: {"name": ..., "value": ...}``
 =============  ==========================================================================================
 
-`roadload.io.importer.import_log` is the single entry point (CLI ``roadload import``): read -> mapping -> derived channels ->
-Trip with ``meta["import_report"]`` listing every repair and drop.
+`roadload.io.importer.import_log` is the single entry point (CLI ``roadload import``): read -> mapping -> derived
+channels -> Trip with ``meta["import_report"]`` listing every repair and drop.
 """
 
 from __future__ import annotations
 
 import json
 import re
+import warnings
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import pandas as pd
@@ -28,8 +29,8 @@ import pandas as pd
 from ..trip import Trip
 from ..units import to_si
 from .dbc import DbcSource, Database, decode_frames, find_dbc, load_dbc
-from .frames import CanFrames, read_can_log, read_comma2k19, read_mf4, read_python_can
-from .mapping import Mapping, apply_mapping, load_mapping
+from .frames import CanFrames, describe_lines, read_can_log, read_comma2k19, read_mf4, read_python_can
+from .mapping import Mapping, apply_mapping
 from .report import ImportReport, LogImportError
 from .signals import Signal, SignalSet
 
@@ -41,7 +42,7 @@ CAN_LOG_FORMATS = ("dbc-mf4", "candump", "blf", "asc", "comma2k19")
 
 
 # ------------------------------------------------------------------------------------------ CAN logs
-def resolve_dbcs(mapping: Mapping, source: Path, extra: list[str | Path] = ()) -> list[DbcSource]:
+def resolve_dbcs(mapping: Mapping, source: Path, extra: Sequence[str | Path] = ()) -> list[DbcSource]:
     """The mapping's DBC entries (searched next to the source, the mapping file and in the package) + extras."""
     roots = [source] + ([Path(mapping.path).parent] if mapping.path else [])
     out = [DbcSource(find_dbc(str(entry["file"]), roots), entry.get("bus")) for entry in mapping.dbc]
@@ -90,7 +91,7 @@ def signals_from_frames(frames: CanFrames, mapping: Mapping, dbcs: list[DbcSourc
     return decode_frames(frames, db, report, wanted_messages=needed)
 
 
-def load_can_log(source: str | Path, mapping: Mapping, *, dbc: list[str | Path] = (),
+def load_can_log(source: str | Path, mapping: Mapping, *, dbc: Sequence[str | Path] = (),
                  progress: Progress | None = None, fmt: str = "dbc-mf4") -> Trip:
     """A CAN bus log (MF4 file/folder, candump/asc/blf, comma2k19 raw_can) decoded with DBCs into a Trip."""
     source = Path(source)
@@ -104,7 +105,7 @@ def load_can_log(source: str | Path, mapping: Mapping, *, dbc: list[str | Path] 
     elif fmt == "dbc-mf4":
         frames = read_mf4(source, mf4_progress)
     elif fmt in ("candump", "blf", "asc"):
-        frames = read_python_can(source)
+        frames = read_python_can(source, report)
     else:
         frames = read_can_log(source, mf4_progress)
     if progress:
@@ -132,6 +133,52 @@ def split_header(column: str) -> tuple[str, str | None]:
     return m.group(1).strip(), m.group(2).strip()
 
 
+#: plausible logger sample intervals [s]: 10 kHz ... 0.2 Hz; a log longer than a day is refused
+MIN_SAMPLE_INTERVAL, MAX_SAMPLE_INTERVAL, MAX_LOG_DURATION = 1e-4, 5.0, 86400.0
+_TIME_UNITS = {"s": 1.0, "ms": 1e-3}  # the time units roadload.units knows
+
+
+def _file_lines(positions: np.ndarray, skipped: list[int]) -> list[int]:
+    """1-based file line numbers of data-frame rows (header on line 1, `skipped` malformed lines left out)."""
+    out = []
+    for pos in positions:
+        line = int(pos) + 2
+        for bad in skipped:
+            if bad <= line:
+                line += 1
+        out.append(line)
+    return out
+
+
+def check_time_base(t: np.ndarray, unit: str, where: str) -> None:
+    """Refuse a time column whose declared unit makes the log longer than a day or its sample interval unlike
+    any logger (median step outside [1e-4, 60] s), with a hint at the unit that would fit."""
+    if t.size < 2:
+        return
+    dt = np.diff(t)
+    dt = dt[np.isfinite(dt) & (dt > 0)]
+    if dt.size == 0:
+        return
+    step = float(np.median(dt))
+    span = float(np.nanmax(t) - np.nanmin(t))
+    if span <= MAX_LOG_DURATION and MIN_SAMPLE_INTERVAL <= step <= MAX_SAMPLE_INTERVAL:
+        return
+    factor = _TIME_UNITS.get(unit, 1.0)
+    hint = ""
+    for name, f in _TIME_UNITS.items():
+        s_step, s_span = step / factor * f, span / factor * f
+        if name != unit and MIN_SAMPLE_INTERVAL <= s_step <= MAX_SAMPLE_INTERVAL and s_span <= MAX_LOG_DURATION:
+            hint = (f"; the time column looks like {name} ({_UNIT_WORDS.get(name, name)}): set the mapping's "
+                    f"csv.time_unit to {name!r}")
+            break
+    raise LogImportError(f"{where} declared in {unit!r} gives a log of {span:.6g} s with a median sample interval "
+                         f"of {step:.3g} s; expected at most {MAX_LOG_DURATION:g} s [1 day] and an interval in "
+                         f"[{MIN_SAMPLE_INTERVAL:g}, {MAX_SAMPLE_INTERVAL:g}] s{hint}")
+
+
+_UNIT_WORDS = {"s": "seconds", "ms": "milliseconds"}
+
+
 def read_csv_signals(path: str | Path, mapping: Mapping, report: ImportReport) -> SignalSet:
     """Columns of a delimited log as signals on its time column. Column names are stripped; a name that occurs
     twice is kept as ``name#2`` (counted in the report); units come from ``[unit]`` in the header."""
@@ -143,10 +190,16 @@ def read_csv_signals(path: str | Path, mapping: Mapping, report: ImportReport) -
     if not time_col:
         raise LogImportError(f"mapping {mapping.name!r}: csv.time (the time column) is not set")
     try:
-        df = pd.read_csv(path, sep=opts.get("sep", ","), encoding=opts.get("encoding", "utf-8"),
-                         decimal=opts.get("decimal", "."), header=0, low_memory=False)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", pd.errors.ParserWarning)
+            df = pd.read_csv(path, sep=opts.get("sep", ","), encoding=opts.get("encoding", "utf-8"),
+                             decimal=opts.get("decimal", "."), header=0, low_memory=False, on_bad_lines="warn")
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, LookupError) as exc:
         raise LogImportError(f"{path}: unreadable CSV ({type(exc).__name__}: {exc})") from None
+    bad_lines = sorted(int(n) for w in caught for n in re.findall(r"Skipping line (\d+)", str(w.message)))
+    if bad_lines:
+        report.drop(f"{path.name} lines", "malformed CSV line (wrong number of fields)", len(bad_lines),
+                    describe_lines(bad_lines))
     # pandas renames duplicate headers 'x' -> 'x.1'; recover the raw header to name duplicates explicitly
     with open(path, encoding=opts.get("encoding", "utf-8"), newline="") as fh:
         header = fh.readline().rstrip("\r\n").split(opts.get("sep", ","))
@@ -171,6 +224,15 @@ def read_csv_signals(path: str | Path, mapping: Mapping, report: ImportReport) -
         raise LogImportError(f"{path}: time column {time_col!r} missing; columns are {names[:12]}...")
     t_unit = opts.get("time_unit", "s")
     t = to_si(pd.to_numeric(df[tkey], errors="coerce").to_numpy(dtype=float), t_unit)[0]
+    bad_t = ~np.isfinite(t)
+    if bad_t.all():
+        raise LogImportError(f"{path}: time column {tkey!r} holds no numbers")
+    if bad_t.any():  # rows without a time stamp cannot be placed on the time base
+        rows = _file_lines(np.flatnonzero(bad_t), bad_lines)
+        report.drop(f"{path.name} lines", f"time column {tkey!r} not numeric", int(bad_t.sum()), describe_lines(rows))
+        df = df.loc[~bad_t].reset_index(drop=True)
+        t = t[~bad_t]
+    check_time_base(t, t_unit, f"{path}: time column {tkey!r}")
     out: SignalSet = {}
     for col in df.columns:
         if col == tkey:
@@ -182,7 +244,8 @@ def read_csv_signals(path: str | Path, mapping: Mapping, report: ImportReport) -
             numeric = pd.to_numeric(df[col], errors="coerce").to_numpy(dtype=float)
             bad = np.isnan(numeric) & df[col].notna().to_numpy()
             if bad.any() and not bad.all():
-                report.drop(col, "non-numeric cell", int(bad.sum()))
+                report.drop(col, "non-numeric cell", int(bad.sum()),
+                            describe_lines(_file_lines(np.flatnonzero(bad), bad_lines)))
             if not bad.all():
                 values = numeric
         out[col] = Signal(t, values, unit)

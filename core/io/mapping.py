@@ -32,17 +32,20 @@ validates, resamples and builds the Trip; everything it drops or repairs is coun
 
 from __future__ import annotations
 
+import codecs
 import difflib
 import json
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
+from pydantic import Field, ValidationError, field_validator, model_validator
 
-from ..channels import unit_of
+from ..channels import MEASURED, unit_of
+from ..schema import StrictModel, format_errors
 from ..trip import Trip
 from ..units import si_unit_of, to_si
 from .report import ImportReport, LogImportError
@@ -63,10 +66,122 @@ UNIT_ALIASES = {"kph": "km/h", "kmh": "km/h", "km/hr": "km/h", "deg/sec": "deg/s
                 "rad/s": "rad/s", "n": "N", "kg": "kg", "g": "g"}
 
 _CHANNEL_KEYS = {"source", "channel", "unit", "scale", "offset", "resample", "valid", "required", "circular",
-                 "values", "range", "note", "plus", "event", "accuracy"}
+                 "values", "range", "note", "plus", "event", "accuracy", "extra"}
 _TOP_KEYS = {"name", "format", "description", "licence", "source_url", "sample_rate", "dbc", "clock", "csv",
              "vehicle", "derived", "channels", "note", "max_gap"}
 FORMATS = ("dbc-mf4", "candump", "blf", "asc", "comma2k19", "bmw-i3", "openxc", "csv")
+
+
+# ------------------------------------------------------------------------------------------ schema (pydantic)
+Finite = float  # StrictModel refuses NaN/inf
+
+
+class CsvOptions(StrictModel):
+    """``csv`` block: how to read a delimited log."""
+
+    time: str = Field(min_length=1, description="name of the time column, e.g. 'Time [s]'")
+    time_unit: Literal["s", "ms"] = Field("s", description="unit of the time column")
+    sep: str = Field(",", min_length=1, max_length=4, description="field separator")
+    encoding: str = Field("utf-8", min_length=1, description="text encoding, e.g. 'utf-8' or 'latin-1'")
+    decimal: str = Field(".", min_length=1, max_length=1, description="decimal mark")
+    time_alternatives: list[str] = Field(default_factory=list, description="other names of the time column")
+
+    @field_validator("encoding")
+    @classmethod
+    def _known_encoding(cls, v: str) -> str:
+        try:
+            codecs.lookup(v)
+        except LookupError:
+            raise ValueError(f"unknown text encoding {v!r} (e.g. 'utf-8', 'latin-1')") from None
+        return v
+
+
+class ClockOptions(StrictModel):
+    """``clock`` block: a reference time signal (e.g. a GNSS epoch) to align the logger clock to."""
+
+    source: str = Field(min_length=1)
+    valid: str | None = None
+    unit: Literal["s", "ms"] = "s"
+
+
+class DbcEntry(StrictModel):
+    file: str = Field(min_length=1, description="DBC file name (next to the log, the mapping or packaged)")
+    bus: int | None = Field(None, ge=0, le=255, description="CAN bus number")
+
+
+class DerivedStep(StrictModel):
+    kind: Literal["rim_torque", "distance", "grade", "curvature"]
+    efficiency: float = Field(0.97, gt=0.0, le=1.0, description="drive-train efficiency [1]")
+    window: float = Field(150.0, gt=0.0, le=5000.0, description="smoothing window [m]")
+    speed: str = Field("vehicle_speed", min_length=1, description="speed channel")
+
+
+class AccuracyOptions(StrictModel):
+    source: str = Field(min_length=1)
+    max: float = Field(ge=0.0, description="worst accepted reported accuracy (in the accuracy signal's unit)")
+
+
+class ChannelEntry(StrictModel):
+    """One ``channels`` entry (see the module docstring)."""
+
+    source: str | list[str]
+    channel: str = Field(min_length=1)
+    unit: str = Field(min_length=1)
+    scale: Finite = Field(1.0, description="raw * scale + offset, before the unit conversion (dimensionless, non-zero)")
+    offset: Finite = Field(0.0, description="added after scaling, in the mapping unit")
+    resample: str = "linear"
+    valid: str | None = None
+    required: bool = False
+    circular: bool = False
+    extra: bool = Field(False, description="a channel outside the roadload.channels catalogue (kept with its unit)")
+    values: dict[str, Finite] | None = None
+    range: list[Finite] | None = Field(None, min_length=2, max_length=2,
+                                        description="plausible [min, max] in the Trip (SI) unit")
+    note: str | None = None
+    plus: list[str] = Field(default_factory=list)
+    event: bool = False
+    accuracy: AccuracyOptions | None = None
+
+    @field_validator("source")
+    @classmethod
+    def _sources(cls, v: str | list[str]) -> str | list[str]:
+        if isinstance(v, list) and (not v or not all(x.strip() for x in v)):
+            raise ValueError("needs a signal name or a non-empty list of names")
+        if isinstance(v, str) and not v.strip():
+            raise ValueError("needs a signal name")
+        return v
+
+    @field_validator("scale")
+    @classmethod
+    def _nonzero_scale(cls, v: float) -> float:
+        if v == 0:
+            raise ValueError("scale 0 would erase the signal; expected a non-zero factor [1]")
+        return v
+
+    @model_validator(mode="after")
+    def _range_order(self) -> "ChannelEntry":
+        if self.range is not None and not self.range[0] < self.range[1]:
+            raise ValueError(f"range must be [min, max] with min < max, got {self.range}")
+        return self
+
+
+class MappingFile(StrictModel):
+    """The whole mapping JSON (see the module docstring)."""
+
+    name: str = Field(min_length=1)
+    format: str
+    description: str = ""
+    licence: str | None = None
+    source_url: str | None = None
+    note: str | None = None
+    sample_rate: float | None = Field(None, gt=0.0, le=10000.0, description="uniform time base rate [Hz]")
+    dbc: list[DbcEntry] = Field(default_factory=list)
+    clock: ClockOptions | None = None
+    csv: CsvOptions | None = None
+    vehicle: str | None = None
+    derived: list[DerivedStep] = Field(default_factory=list)
+    channels: list[ChannelEntry] = Field(min_length=1)
+    max_gap: float = Field(2.0, gt=0.0, le=3600.0, description="longest source gap bridged silently [s]")
 
 
 def normalise_unit(unit: str | None) -> str | None:
@@ -146,6 +261,21 @@ class Mapping:
                 raise LogImportError(f"{where}: mapping lacks {key!r}")
         if raw["format"] not in FORMATS:
             raise LogImportError(f"{where}: unknown format {raw['format']!r}; choose one of {list(FORMATS)}")
+        if isinstance(raw["channels"], list):
+            for i, entry in enumerate(raw["channels"]):
+                if isinstance(entry, dict):
+                    unknown = set(entry) - _CHANNEL_KEYS
+                    if unknown:
+                        raise LogImportError(f"{where}: channels[{i}]: unknown keys {sorted(unknown)}; "
+                                             f"allowed {sorted(_CHANNEL_KEYS)}")
+                    rule = entry.get("resample", "linear")
+                    if isinstance(rule, str) and rule not in RULES:
+                        raise LogImportError(f"{where}: channels[{i}] ({entry.get('channel')}): unknown resample "
+                                             f"rule {rule!r}; choose {list(RULES)}")
+        try:
+            MappingFile.model_validate(raw)
+        except ValidationError as exc:
+            raise LogImportError(f"{where}: {format_errors(exc, MappingFile)}") from None
         chans = []
         for i, entry in enumerate(raw["channels"]):
             chans.append(_parse_channel(entry, f"{where}: channels[{i}]"))
@@ -158,7 +288,7 @@ class Mapping:
             raise LogImportError(f"{where}: sample_rate must be a positive number of Hz or null, got {rate!r}")
         return cls(name=str(raw["name"]), format=raw["format"], channels=chans,
                    sample_rate=None if rate is None else float(rate), dbc=list(raw.get("dbc", [])),
-                   clock=raw.get("clock"), csv=dict(raw.get("csv", {})), vehicle=raw.get("vehicle"),
+                   clock=raw.get("clock"), csv=dict(raw.get("csv") or {}), vehicle=raw.get("vehicle"),
                    derived=list(raw.get("derived", [])), licence=raw.get("licence"),
                    description=raw.get("description", ""), max_gap=float(raw.get("max_gap", 2.0)))
 
@@ -202,6 +332,11 @@ def _parse_channel(entry: Any, where: str) -> ChannelMap:
         raise LogImportError(f"{where} ({cm.channel}): event channels (sent on change) must use resample 'hold'")
     if cm.circular and si_unit_of(cm.unit) != "rad":
         raise LogImportError(f"{where} ({cm.channel}): circular channels must be angles (rad/deg), got {cm.unit!r}")
+    if cm.channel not in MEASURED and not entry.get("extra", False):
+        close = difflib.get_close_matches(cm.channel, list(MEASURED), n=3, cutoff=0.6)
+        raise LogImportError(f"{where}: channel {cm.channel!r} is not in the roadload.channels catalogue"
+                             + (f" (did you mean {close}?)" if close else "")
+                             + "; for a signal outside the catalogue set \"extra\": true")
     expected = unit_of(cm.channel)
     if expected is not None and cm.unit != expected and si_unit_of(cm.unit) != expected:
         raise LogImportError(f"{where}: unit mismatch for channel {cm.channel!r}: the mapping gives {entry['unit']!r} "

@@ -21,10 +21,11 @@ from roadload.experiments.headline import (headline_figure, headline_markdown, h
                                            sensitivity_figure, sensitivity_table, sensitivity_tasks)
 from roadload.fileio import write_text
 
+from .errors import fail
+
 
 def _fail(msg: str) -> None:
-    typer.secho(f"error: {msg}", fg=typer.colors.RED, err=True)
-    raise typer.Exit(code=2)
+    fail(msg)
 
 
 def _jsonable(d):
@@ -43,6 +44,33 @@ def _jsonable(d):
     return out
 
 
+#: what ``roadload drive`` prints: metric key -> (label, unit, format)
+DRIVE_METRICS = {"arrived": ("arrived", "", "{}"), "energy_kWh": ("energy", "kWh", "{:.3f}"),
+                 "trip_time": ("trip time", "s", "{:.1f}"), "speed_violations": ("speed violations", "", "{:d}"),
+                 "max_excess_kmh": ("max excess", "km/h", "{:.2f}"), "rms_jerk": ("RMS jerk", "m/s^3", "{:.3f}"),
+                 "solve_time_median": ("solve time median", "ms", "{:.1f}"),
+                 "solve_time_p99": ("solve time p99", "ms", "{:.1f}"), "fallbacks": ("fallbacks", "", "{:d}"),
+                 "ctl_relaxed_plans": ("relaxed plans", "", "{:d}")}
+
+
+def metric_lines(m: dict) -> list[str]:
+    """The drive metrics rounded and with their units, e.g. ``   trip time: 362.4 [s]``."""
+    out = []
+    for key, (label, unit, fmt) in DRIVE_METRICS.items():
+        if key not in m and key != "ctl_relaxed_plans":
+            continue
+        value = m.get(key, 0)
+        if unit == "ms":
+            value = value * 1000.0
+        try:
+            text = fmt.format(value) if value is not None and not (isinstance(value, float) and math.isnan(value)) \
+                else "-"
+        except (ValueError, TypeError):
+            text = str(value)
+        out.append(f"{label:>20}: {text}" + (f" [{unit}]" if unit and text != "-" else ""))
+    return out
+
+
 def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
     register_headline(benchmark_app)
     @app.command("drive")
@@ -53,11 +81,12 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                                  "roadload profile name or file)"),
         vehicle: str = typer.Option("bmw_i3", help="vehicle preset (bmw_i3, gt_rwd, gt_awd)"),
         effects: list[str] = typer.Option([], "--effects", help="simulator effects, e.g. winter_tires or "
-                                          "'wind:mean_speed=6' (repeatable; see roadload effects)"),
+                                          "'wind:mean_speed=6' (comma-separated and/or repeatable; see "
+                                          "roadload effects)"),
         out: Path = typer.Option(None, help="write the simulated trip (.parquet) with the run's metrics in meta"),
         seed: int = typer.Option(0, help="simulation seed"),
         solver: str = typer.Option("ipopt", help="MPC solve path: ipopt | osqp"),
-        time_weight: float = typer.Option(8000.0, help="MPC time weight lambda [J/s]"),
+        time_weight: float = typer.Option(8000.0, min=0.0, help="MPC time weight lambda [J/s]"),
         model: str = typer.Option("M4", help="online model structure (M3, M4, M0)"),
         estimator: str = typer.Option("RRLM", help="online estimator (catalog name)"),
         cruise_fraction: float = typer.Option(0.9, help="cruise control set speed as a fraction of the limit"),
@@ -76,23 +105,27 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                           TextColumn("{task.percentage:>5.1f}%"), TimeElapsedColumn(),
                           console=Console(stderr=True), transient=True) as bar:
                 task = bar.add_task(f"{controller}/{force_model} on {profile.name}", total=1.0)
-                res, plant = drive(vehicle, profile, effects=list(effects) or None, seed=seed, settings=settings,
+                res, plant = drive(vehicle, profile, effects=",".join(effects) or None, seed=seed, settings=settings,
                                    progress=lambda f: bar.update(task, completed=f))
         except typer.Exit:
             raise
         except (ValueError, FileNotFoundError, KeyError) as exc:
             _fail(str(exc))
         m = res.metrics
-        keys = ("arrived", "energy_kWh", "trip_time", "speed_violations", "max_excess_kmh", "rms_jerk",
-                "solve_time_median", "solve_time_p99", "fallbacks")
-        for k in keys:
-            typer.echo(f"{k:>20}: {m.get(k)}")
+        for line in metric_lines(m):
+            typer.echo(line)
         if "online" in m:
-            typer.echo(f"{'online estimate':>20}: {m['online']['estimate']}")
+            est = m["online"]["estimate"]
+            text = (", ".join(f"{k}={v:.4g}" for k, v in est.items()) if isinstance(est, dict) else str(est))
+            typer.echo(f"{'online estimate':>20}: {text}")
         if out is not None:
             trip = plant.sim.to_trip()
             trip.meta["controller"] = _jsonable({k: v for k, v in m.items()})
             typer.echo(f"wrote {trip.save(out)}")
+        solves, failed = int(m.get("ctl_solves", 0)), int(m.get("ctl_solver_failures", 0))
+        if controller == "mpc" and solves > 0 and failed >= solves:
+            fail(f"every one of the {solves} MPC solves failed (the drive ran on the fallback controller); check "
+                 f"the MPC settings (--time-weight [J/s], --solver)", code=1)
 
     @benchmark_app.command("controllers")
     def bench_controllers_cmd(

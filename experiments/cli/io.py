@@ -15,10 +15,11 @@ from roadload.io.report import ImportReport, LogImportError
 from roadload.io.export import export_trip
 from roadload.presets import get_preset
 
+from .errors import describe, fail
+
 
 def _fail(exc: Exception) -> None:
-    Console(stderr=True).print(f"[red]error:[/red] {exc}")
-    raise typer.Exit(code=2)
+    fail(describe(exc))
 
 
 def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
@@ -31,10 +32,12 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                                          "dbc-mf4 -> canedge_gnss_obd, comma2k19 -> comma2k19_rav4, "
                                          "bmw-i3 -> bmw_i3, openxc -> openxc)"),
         out: Path = typer.Option(..., "--out", "-o", help="output trip .parquet"),
-        dbc: list[Path] = typer.Option([], "--dbc", help="extra DBC file(s) for CAN formats"),
+        dbc: list[Path] = typer.Option([], "--dbc", help="extra DBC file for CAN formats (repeatable)"),
+        strict: bool = typer.Option(False, "--strict", help="refuse a log with malformed lines (default: leave "
+                                    "them out and list their line numbers in the import report)"),
     ) -> None:
         """Import a real log into a Trip (SI channels on a uniform time base, import report in the metadata)."""
-        console = Console(stderr=True)
+        console = Console(stderr=True, markup=False, highlight=False, soft_wrap=True)
         try:
             with Progress(TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn(),
                           console=console, transient=True) as bar:
@@ -43,7 +46,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                 def progress(stage: str, fraction: float) -> None:
                     bar.update(task, completed=fraction, description=f"import {source.name}: {stage}")
 
-                trip = import_log(source, fmt, mapping, dbc=list(dbc), progress=progress)
+                trip = import_log(source, fmt, mapping, dbc=list(dbc), progress=progress, strict=strict)
             path = trip.save(out)
         except (LogImportError, TripError, FileNotFoundError) as exc:
             _fail(exc)

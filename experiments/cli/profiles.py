@@ -44,6 +44,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
     @profiles.command("list")
     def list_profiles(kind: str = typer.Option(None, help="only 'road' or 'cycle'")) -> None:
         """List the registered profile names."""
+        if kind not in (None, "road", "cycle"):
+            raise typer.BadParameter(f"must be 'road' or 'cycle', got {kind!r}", param_hint="--kind")
         table = Table("name", "description")
         for name, description in known_profiles(kind).items():
             table.add_row(name, description)

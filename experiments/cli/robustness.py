@@ -14,13 +14,14 @@ from roadload.experiments.robustness import (
     scenarios, sweep_specs, write_report,
 )
 
+from .errors import describe, fail
+
 #: record length per backend [s]: Experiment 3.3's 10 000 s for the synthetic data; 20 min simulated trips
 DEFAULT_DURATION = {"synthetic": 10_000.0, "vehicle": 1200.0}
 
 
 def _fail(exc: Exception) -> None:
-    Console(stderr=True).print(f"[red]error:[/red] {exc}")
-    raise typer.Exit(code=2)
+    fail(describe(exc))
 
 
 def _sweeps_of(backend: str, families: list[str]) -> list[str]:
@@ -56,7 +57,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         duration: float = typer.Option(None, "--duration", help="record length in s (default 10000 synthetic, "
                                                                "1200 vehicle)"),
         bound: float = typer.Option(DEFAULT_BOUND, "--bound",
-                                    help="breakdown: median relative parameter error this much above its fault-free value"),
+                                    help="breakdown: median relative parameter error this much above its "
+                                         "fault-free value [1]"),
         scheduler: str = typer.Option(None, "--scheduler", help="Dask scheduler address (default: local processes)"),
         workers: int = typer.Option(None, "--workers", help="local worker processes (default: CPU count)"),
     ) -> None:

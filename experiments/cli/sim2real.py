@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Optional
 
@@ -13,29 +12,58 @@ from roadload.sim2real.catalog import DEFAULT_CANDIDATES
 from roadload.sim2real.diagnose import DiagnosisSettings, diagnose
 from roadload.sim2real.report import write_report
 from roadload.sim2real.simconfig import SimConfig
-from roadload.experiments.sim2real_selftest import run_selftest
+from roadload.experiments.sim2real_selftest import WORLD_NAMES, run_world
+from roadload.fileio import write_json
 from roadload.io import import_log
+from roadload.io.report import LogImportError
+
+from .errors import describe, fail
 
 
-def load_trips(paths: list[Path], fmt: str | None) -> list:
-    """Trips from Trip Parquet files, or raw logs through ``roadload.io.import_log`` when ``fmt`` is given
-    (e.g. 'bmw-i3'); a folder expands to its files."""
+# file endings of trip files per import format (a folder given to --real yields these only)
+TRIP_SUFFIXES = {None: (".parquet",), "csv": (".csv",), "bmw-i3": (".csv",), "openxc": (".json", ".txt"),
+                 "dbc-mf4": (".mf4",), "candump": (".log", ".txt"), "blf": (".blf",), "asc": (".asc",),
+                 "comma2k19": (".log", ".bz2")}
+DEFAULT_CSV_MAPPING = "plain_csv"
 
 
+def _is_trip_file(path: Path, fmt: str | None) -> bool:
+    suffixes = TRIP_SUFFIXES.get(fmt, (".parquet", ".csv", ".mf4", ".log", ".blf", ".asc", ".json", ".txt"))
+    if path.suffix.lower() not in suffixes:
+        return False
+    if path.suffix.lower() == ".json":     # mapping / vehicle / truth JSON beside the logs are no trips
+        head = path.read_text(encoding="utf-8", errors="replace")[:64].lstrip()
+        return not head.startswith(("{", "["))
+    return True
+
+
+def load_trips(paths: list[Path], fmt: str | None, mapping: str | None = None) -> list:
+    """Trips from Trip Parquet files, or raw logs through ``roadload.io.import_log`` when ``fmt`` is given (e.g.
+    'csv' with ``mapping``, default the packaged plain_csv mapping; 'bmw-i3'). A folder yields its trip files
+    only (:data:`TRIP_SUFFIXES` of the format; JSON documents such as mappings or vehicle files are skipped)."""
+    if mapping is not None and not fmt:
+        raise DiagnosisError("--mapping needs --format (the import format of the raw logs, e.g. csv)")
     files: list[Path] = []
     for p in paths:
         if p.is_dir():
-            files += sorted(q for q in p.iterdir() if q.suffix.lower() in (".parquet", ".csv", ".json", ".mf4"))
+            files += sorted(q for q in p.iterdir() if q.is_file() and _is_trip_file(q, fmt))
         elif p.exists():
             files.append(p)
         else:
             raise DiagnosisError(f"no trip file at {p}")
     if not files:
-        raise DiagnosisError(f"no trip files in {[str(p) for p in paths]}")
+        want = ", ".join(TRIP_SUFFIXES.get(fmt, ()))
+        raise DiagnosisError(f"no trip files ({want}) in {[str(p) for p in paths]}"
+                             + ("" if fmt else "; raw logs need --format (and --mapping for csv)"))
+    if fmt == "csv" and mapping is None:
+        mapping = DEFAULT_CSV_MAPPING
     trips = []
     for f in files:
         if fmt:
-            trips.append(import_log(f, fmt))
+            try:
+                trips.append(import_log(f, fmt, mapping))
+            except LogImportError as exc:
+                raise DiagnosisError(f"{f}: {exc}") from None
         else:
             trips.append(Trip.load(f))
     return trips
@@ -53,9 +81,17 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         out: Path = typer.Option(..., "--out", help="output folder: report.md, diagnosis.json, PNG figures"),
         candidates: Optional[str] = typer.Option(None, "--candidates", help="comma-separated candidate effects "
                                                                             "(default: the whole catalog)"),
-        fmt: Optional[str] = typer.Option(None, "--format", help="import format of raw logs, e.g. bmw-i3"),
+        fmt: Optional[str] = typer.Option(None, "--format", "-f", help="import format of raw logs, as for "
+                                                                       "'roadload import' (csv, bmw-i3, ...)"),
+        mapping: Optional[str] = typer.Option(None, "--mapping", "-m",
+                                              help="mapping JSON file or packaged name (csv default: plain_csv)"),
         seed: int = typer.Option(0, help="seed of the split and the bootstrap"),
         resimulate: bool = typer.Option(True, help="re-run the sim with the identified effects switched on"),
+        base_first: bool = typer.Option(False, "--base-first", help="select effects over the calibrated base "
+                                                                   "(mass, drag area, rolling resistance, "
+                                                                   "drive-train efficiency, brake gain): for a "
+                                                                   "preset that does not match the car"),
+        floor_duration: float = typer.Option(900.0, help="seconds of the sim's own trips per floor road"),
         more: Optional[list[Path]] = typer.Argument(None, help="further trips (so '--real A B C' works)"),
     ) -> None:
         """Diagnose where a sim departs from recorded trips, which effect explains it, how far the gap shrinks."""
@@ -66,18 +102,26 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         console = Console()
         try:
             cfg = SimConfig.load(sim)
-            trips = load_trips(list(real) + list(more or []), fmt)
+            trips = load_trips(list(real) + list(more or []), fmt, mapping)
             cands = tuple(c.strip() for c in candidates.split(",") if c.strip()) if candidates else DEFAULT_CANDIDATES
-            settings = DiagnosisSettings(candidates=cands, seed=seed, resimulate=resimulate,
-                                         strict_candidates=candidates is not None)
+            if not floor_duration >= 60.0:
+                raise DiagnosisError(f"--floor-duration must be at least 60 s, got {floor_duration} s")
+            settings = DiagnosisSettings(candidates=cands, seed=seed, resimulate=resimulate, replay=resimulate,
+                                         strict_candidates=candidates is not None, base_first=base_first,
+                                         floor_duration=floor_duration)
             with Progress(console=console) as bar:
                 task = bar.add_task("diagnosis", total=1.0)
                 diag = diagnose(trips, cfg, settings,
                                 progress=lambda what, frac: bar.update(task, completed=frac, description=what))
             paths = write_report(diag, out)
         except (DiagnosisError, ValueError) as exc:
-            console.print(f"[red]error:[/red] {exc}")
-            raise typer.Exit(2) from None
+            fail(describe(exc))
+        for imp in diag.notes.get("implausible", []):
+            console.print(f"[yellow]not accepted, implausible:[/yellow] {imp['effect']}: {imp['reason']}")
+        base = diag.notes.get("base_calibration") or {}
+        for row in base.get("parameters", []):
+            console.print(f"base: {row['name']} {row['value']:+.4g} ± {row['std_error']:.2g} {row['unit']}"
+                          + ("  (significant)" if row.get("significant") else ""))
         eff = ", ".join(diag.identified) or "none"
         console.print(f"identified: {eff}; held-out force RMSE {diag.gap_before['force_residual']['rmse']:.1f} -> "
                       f"{diag.gap_after['force_residual']['rmse']:.1f} N; unexplained: "
@@ -86,24 +130,35 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
 
     @s2r.command("selftest")
     def selftest_cmd(
-        vehicle: str = typer.Option("bmw_i3", help="vehicle preset of the sim"),
-        duration: float = typer.Option(900.0, help="seconds per 'real' trip (3 roads)"),
-        workers: int = typer.Option(2, help="processes"),
+        world: str = typer.Option("roadload", "--world", help="roadload | fastsim | independent"),
+        seeds: str = typer.Option("0", "--seeds", help="comma-separated seeds"),
+        vehicle: Optional[str] = typer.Option(None, help="a shipped preset as the sim (unmatched); default: the "
+                                                         "vehicle matched to the world"),
+        duration: float = typer.Option(900.0, help="seconds per trip (3 trips per case)"),
+        effects: Optional[str] = typer.Option(None, help="comma-separated withheld effects (default: all)"),
         out: Optional[Path] = typer.Option(None, help="write selftest.json here"),
     ) -> None:
-        """Withheld catalog effects identified blind; an outside-catalog effect must stay unexplained."""
+        """Withheld effects identified blind on a test world; nothing withheld and an effect outside the catalog
+        must give no acceptance. Prints the confusion table per seed and the summary."""
         from rich.console import Console
 
-
         console = Console()
-        res = run_selftest(vehicle, duration=duration, workers=workers)
-        for c in res.cases + ([res.outside] if res.outside else []) + ([res.none] if res.none else []):
-            console.print(f"{c.label:34s} -> {c.identified:20s} {'ok ' if c.correct else 'MISS'} "
-                          f"shrinkage {100 * c.shrinkage:5.1f} % (re-sim {100 * c.shrinkage_simulator:5.1f} %) "
-                          f"{c.unexplained_where}")
-        console.print(res.confusion().to_string())
-        console.print(f"top-1 {100 * res.top1:.1f} %, median shrinkage {100 * res.median_shrinkage:.1f} % "
-                      f"(re-sim {100 * res.median_shrinkage_simulator:.1f} %), outside-catalog ok: {res.outside_ok}")
+        if world not in WORLD_NAMES:
+            fail(f"--world: unknown world {world!r}; choose one of {', '.join(WORLD_NAMES)}")
+        try:
+            seed_list = [int(x) for x in seeds.split(",") if x.strip()]
+        except ValueError:
+            fail(f"--seeds must be comma-separated integers, got {seeds!r}")
+        names = [e.strip() for e in effects.split(",") if e.strip()] if effects else None
+        run = run_world(world, seed_list, names, duration, vehicle=vehicle, say=console.print)
+        for sd in seed_list:
+            console.print(f"confusion, {world}, seed {sd} (rows withheld, columns first accepted):")
+            console.print(run.confusion(sd).to_string())
+        s = run.summary()
+        console.print(f"top-1 {s['top1_correct']}/{s['catalog_cases']}; withheld among the accepted "
+                      f"{s['among_accepted']}/{s['catalog_cases']}; false acceptances: nothing withheld "
+                      f"{s['false_acceptances_none']}/{s['none_cases']}, out-of-catalog "
+                      f"{s['false_acceptances_outside']}/{s['outside_cases']}; median held-out shrinkage "
+                      f"{100 * s['median_shrinkage_identified']:.1f} %")
         if out is not None:
-            out.mkdir(parents=True, exist_ok=True)
-            (out / "selftest.json").write_text(json.dumps(res.to_dict(), indent=1, default=float))
+            write_json(out / "selftest.json", run.to_dict(), default=float)

@@ -20,10 +20,15 @@ from roadload.envs.effects import describe_effects
 from roadload.experiments.bench_simulator import report
 from roadload.vehicle import _build
 
+from .errors import fail
+
+
+#: ambient temperatures the simulator's air-density and tire/oil models are meant for [degC]
+AMBIENT_RANGE_C = (-60.0, 60.0)
+
 
 def _fail(msg: str) -> None:
-    typer.secho(f"error: {msg}", fg=typer.colors.RED, err=True)
-    raise typer.Exit(code=2)
+    fail(msg)
 
 
 def _load_vehicle(text: str):
@@ -49,8 +54,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                                  ".json/.csv/.gpx file"),
         out: Path = typer.Option(..., help="output trip file (.parquet)"),
         seed: int = typer.Option(0, help="seed of the simulation (noise, disturbances, driver)"),
-        effects: str = typer.Option("", help="effects, e.g. 'wind:mean_speed=5,payload,tire_warmup' or 'all' "
-                                    "(roadload effects lists them)"),
+        effects: list[str] = typer.Option([], help="effects, e.g. 'wind:mean_speed=5,payload,tire_warmup' or 'all' "
+                                          "(comma-separated and/or repeatable; roadload effects lists them)"),
         distance: float = typer.Option(None, help="stop after this distance [km]"),
         duration: float = typer.Option(None, help="stop after this duration [s]"),
         road_seed: int = typer.Option(None, help="seed of generated roads (default: --seed)"),
@@ -58,12 +63,20 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         ambient_temperature: float = typer.Option(20.0, help="ambient temperature [degC]"),
         sensors: Path = typer.Option(None, help="sensor spec JSON (default: the vehicle's sensors)"),
         plot: bool = typer.Option(False, help="also write a PNG next to the trip"),
+        precision: str = typer.Option("compact", help="'compact' (quantised channels as scaled integers, truth "
+                                      "float32; ~4x smaller) or 'exact' (float64)"),
     ) -> None:
         """Simulate a trip (100 Hz CAN-like channels + ground truth) and write it as Parquet."""
 
 
         if out.suffix != ".parquet":
             _fail(f"--out: trip files end in .parquet, got {out.name!r}")
+        if not AMBIENT_RANGE_C[0] <= ambient_temperature <= AMBIENT_RANGE_C[1]:
+            _fail(f"--ambient-temperature: must lie in [{AMBIENT_RANGE_C[0]:g}, {AMBIENT_RANGE_C[1]:g}] [degC], "
+                  f"got {ambient_temperature:g}")
+        for opt, value, unit in (("--duration", duration, "s"), ("--distance", distance, "km")):
+            if value is not None and not value > 0:
+                _fail(f"{opt}: must be > 0 [{unit}], got {value:g}")
         try:
             spec = _load_vehicle(vehicle)
             profile = _load_road(road, seed if road_seed is None else road_seed)
@@ -72,7 +85,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                 driver = _load_road(cycle, 0)
                 if not isinstance(driver, DriveCycle):
                     _fail(f"--cycle: {cycle!r} is a road profile, not a drive cycle")
-            cfg = EffectsConfig.parse(effects or None)
+            cfg = EffectsConfig.parse(",".join(effects) or None)
             cfg = EffectsConfig.from_dict({**cfg.to_dict(), "ambient_temperature": ambient_temperature + 273.15})
             sensor_spec = None
             if sensors is not None:
@@ -88,25 +101,30 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                           TextColumn("{task.percentage:>5.1f}%"), TimeElapsedColumn(),
                           console=Console(stderr=True), transient=True) as bar:
                 task = bar.add_task(f"{spec.name} on {profile.name}", total=1.0)
-                trip = simulate(spec, profile, effects=cfg, sensors=sensor_spec, seed=seed,
+                # streamed: one Parquet row group per 2 min of driving, memory bounded by one chunk
+                path = simulate(spec, profile, effects=cfg, sensors=sensor_spec, seed=seed,
                                 duration=duration, distance=None if distance is None else distance * 1000.0,
-                                driver=driver, progress=lambda f: bar.update(task, completed=f))
-            path = trip.save(out)
+                                driver=driver, progress=lambda f: bar.update(task, completed=f), out=out,
+                                precision=precision)
+            info = Trip.read_info(path)
         except typer.Exit:
             raise
         except (ValueError, VehicleSpecError, FileNotFoundError) as exc:
             _fail(str(exc))
-        tr = trip.truth
-        km = tr["position"].iloc[-1] / 1000.0
-        e = trip.meta["energy"]["source"]
+        t_first = None
+        for last in Trip.iter_chunks(path, channels=[], truth_channels=["position"]):  # bounded memory
+            t_first = last.t[0] if t_first is None else t_first
+        km = float(last.truth["position"].iloc[-1]) / 1000.0
+        duration_s = float(last.t[-1] - t_first)
+        e = info["meta"]["energy"]["source"]
         use = (f"{e / 3.6e6 / km * 100:.1f} kWh/100 km" if spec.drivetrain.kind == "bev"
                else f"{e / 32.0e6 / km * 100:.1f} l/100 km (fuel at 32 MJ/l)") if km > 0 else "-"
-        typer.echo(f"wrote {path}: {trip.duration:.0f} s, {km:.2f} km, {len(trip)} samples, {use}")
-        for w in trip.meta["warnings"]:
+        typer.echo(f"wrote {path}: {duration_s:.0f} s, {km:.2f} km, {info['n_measured']} samples, {use}")
+        for w in info["meta"]["warnings"]:
             typer.secho(f"warning: {w}", fg=typer.colors.YELLOW, err=True)
         if plot:
 
-            typer.echo(f"wrote {plot_trip(trip, out.with_suffix('.png'))}")
+            typer.echo(f"wrote {plot_trip(Trip.load(path), out.with_suffix('.png'))}")
 
     @app.command("plot")
     def plot_cmd(trip: Path = typer.Argument(..., help="trip file (.parquet)"),

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from roadload.envs.coast_down import neutral_road_load, road_load_coefficients
+from roadload.envs.coast_down import neutral_road_load
 import pytest
 
 from roadload.estimators.models import (M0, M3, M4, ModelError, NominalParameters, Term, fit_coast_down,
@@ -11,8 +11,7 @@ from roadload.estimators.pipeline import DrivetrainModel, PipelineError, Steerin
 from roadload.units import G, air_density
 
 
-def _states(T=4000, seed=0):
-    rng = np.random.default_rng(seed)
+def _states(T=4000):
     t = np.arange(T) * 0.1
     v = 20 + 8 * np.sin(t / 23) + 3 * np.sin(t / 7)
     return {
@@ -59,7 +58,8 @@ def test_nominal_parameters_give_initial_x_and_m0_needs_coast_down():
     np.testing.assert_allclose(M0.nominal_parameters(nom0), [180.0, 2.0, 0.4, 1900.0])
     assert M0.white_box and not M3.white_box
     with pytest.raises(ModelError, match="mass"):
-        NominalParameters.from_physical(mass=-1.0, rolling_resistance_coefficient=0.01, drag_area=0.6, cornering_stiffness=1.0)
+        NominalParameters.from_physical(mass=-1.0, rolling_resistance_coefficient=0.01, drag_area=0.6,
+                                        cornering_stiffness=1.0)
 
 
 def test_m0_prediction_is_eq_5_4():
@@ -186,7 +186,8 @@ def test_trip_load_selected_channels(tmp_path):
     t = np.arange(5) * 0.01
     trip = Trip(pd.DataFrame({"t": t, "vehicle_speed": t + 1, "accel_x": t * 2, "gear": np.ones(5)}),
                 {"t": "s", "vehicle_speed": "m/s", "accel_x": "m/s^2", "gear": "1"}, {"name": "x"},
-                pd.DataFrame({"t": t, "mass": np.full(5, 1900.0), "grade": t}), {"t": "s", "mass": "kg", "grade": "rad"})
+                pd.DataFrame({"t": t, "mass": np.full(5, 1900.0), "grade": t}),
+                {"t": "s", "mass": "kg", "grade": "rad"})
     path = trip.save(tmp_path / "x.parquet")
     sub = Trip.load(path, channels=["gear", "vehicle_speed", "not_there"], truth_channels=["mass"])
     assert sub.channels == ["vehicle_speed", "gear"] and list(sub.truth.columns) == ["t", "mass"]

@@ -82,9 +82,12 @@ def test_no_estimator_returns_nan_or_inf_for_injected_faults_and_faults_are_repo
     res = run(name, A, B, **s)
     assert np.all(np.isfinite(res.X)), f"{name} returned non-finite estimates"
     assert np.all(np.isfinite(res.P_diag))
-    n_bad = int(np.sum(~np.all(np.isfinite(A), axis=1) | ~np.isfinite(B)))
-    assert res.n_skipped == n_bad == 52        # every non-finite sample is skipped and counted
-    assert np.array_equal(res.skipped, ~np.all(np.isfinite(A), axis=1) | ~np.isfinite(B))
+    # every non-finite sample is skipped and counted, and so is the 1e200 input in the recursive kernel's
+    # compositions: a P aᵀ overflows there (RGTLS has its own kernel)
+    bad = ~np.all(np.isfinite(A), axis=1) | ~np.isfinite(B)
+    bad[600] = name != "RGTLS"
+    assert res.n_skipped == int(bad.sum()) == 52 + (name != "RGTLS")
+    assert np.array_equal(res.skipped, bad)
 
 
 @pytest.mark.parametrize("name", ["RLM", "RRLM", "MKF"])

@@ -1,0 +1,174 @@
+"""Shared helpers for the pydantic schemas of user-facing files (mapping, vehicle, sim config, trip metadata).
+
+Every schema forbids unknown keys and declares bounds and units in its fields (``Field(..., description="[kg]")``
+or ``json_schema_extra={"unit": "kg"}``). :func:`format_errors` turns a pydantic ``ValidationError`` into one line
+per problem that names the field (dotted path), the value given, the expected value and its unit, and, for an
+unknown key, the known keys.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Any
+
+import pydantic
+from pydantic import BaseModel, ConfigDict
+
+__all__ = ["StrictModel", "format_errors", "field_unit", "loc_text"]
+
+
+class StrictModel(BaseModel):
+    """A schema model: unknown keys rejected, no silent type coercion ("abc" is not a number), NaN/inf refused."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False, frozen=False)
+
+
+def field_unit(info: Any) -> str | None:
+    """The unit of a pydantic FieldInfo: ``json_schema_extra["unit"]`` or a trailing ``[unit]`` in its description."""
+    extra = getattr(info, "json_schema_extra", None)
+    if isinstance(extra, dict) and extra.get("unit"):
+        return str(extra["unit"])
+    m = re.search(r"\[([^\]]+)\]\s*$", getattr(info, "description", None) or "")
+    return m.group(1) if m else None
+
+
+def _model_at(model: type[BaseModel] | None, loc: tuple[Any, ...]) -> tuple[type[BaseModel] | None, Any]:
+    """Walk a model along an error location; returns (model owning the last named field, that FieldInfo)."""
+    owner, info = model, None
+    for part in loc:
+        if owner is None or not isinstance(part, str):
+            continue
+        fields = getattr(owner, "model_fields", {})
+        if part not in fields:
+            return owner, None
+        info = fields[part]
+        nxt = None
+        for tp in _types_of(info.annotation):
+            if isinstance(tp, type) and issubclass(tp, BaseModel):
+                nxt = tp
+                break
+        if nxt is None:
+            return owner, info
+        owner = nxt
+    return owner, info
+
+
+def _types_of(tp: Any) -> list[Any]:
+    import typing
+
+    out = [tp]
+    for arg in typing.get_args(tp):
+        out += _types_of(arg)
+    return out
+
+
+def loc_text(loc: tuple[Any, ...], root: str = "") -> str:
+    text = root
+    for part in loc:
+        if isinstance(part, int):
+            text += f"[{part}]"
+        else:
+            text += ("." if text else "") + str(part)
+    return text
+
+
+def _expected(err: dict[str, Any]) -> str:
+    ctx = err.get("ctx") or {}
+    kind = err["type"]
+    if kind == "greater_than":
+        return f"> {ctx['gt']}"
+    if kind == "greater_than_equal":
+        return f">= {ctx['ge']}"
+    if kind == "less_than":
+        return f"< {ctx['lt']}"
+    if kind == "less_than_equal":
+        return f"<= {ctx['le']}"
+    return ""
+
+
+def _clean_loc(loc: tuple[Any, ...], model: type[BaseModel] | None) -> tuple[tuple[Any, ...], bool]:
+    """Drop union member tags ('str', 'dict[str,any]', 'function-after[...]') from an error location; returns
+    the location and whether a tag was dropped."""
+    out: list[Any] = []
+    owner: Any = model
+    dropped = False
+    for part in loc:
+        if isinstance(part, int):
+            out.append(part)
+            continue
+        fields = getattr(owner, "model_fields", None) if isinstance(owner, type) else None
+        if fields is not None and part in fields:
+            out.append(part)
+            nxt = None
+            for tp in _types_of(fields[part].annotation):
+                if isinstance(tp, type) and issubclass(tp, BaseModel):
+                    nxt = tp
+            owner = nxt
+        elif fields is None and not any(c in part for c in "[],") and part not in ("str", "int", "float", "bool"):
+            out.append(part)  # a dict key
+        else:
+            if isinstance(owner, type) and part == getattr(owner, "__name__", None):
+                continue
+            dropped = True
+    return tuple(out), dropped
+
+
+def _merge_unions(errors: list[dict[str, Any]], model: type[BaseModel] | None) -> list[dict[str, Any]]:
+    """One error per location: the alternatives of a union become one 'expected X or Y' error."""
+    merged: dict[tuple[Any, ...], dict[str, Any]] = {}
+    order = []
+    for err in errors:
+        raw = tuple(err["loc"])
+        if err["type"] == "extra_forbidden" and raw:  # the unknown key itself is no field: keep it
+            loc, dropped = _clean_loc(raw[:-1], model)
+            loc = loc + raw[-1:]
+        else:
+            loc, dropped = _clean_loc(raw, model)
+        err = dict(err, loc=loc)
+        if loc in merged and dropped:
+            prev = merged[loc]
+            prev["msg"] = prev["msg"] + " or " + err["msg"].removeprefix("Input should be ")
+            continue
+        if loc not in merged:
+            order.append(loc)
+        merged[loc] = err
+    return [merged[loc] for loc in order]
+
+
+def format_errors(exc: pydantic.ValidationError, model: type[BaseModel] | None = None, root: str = "",
+                  limit: int = 5) -> str:
+    """One line per error: ``<root>.<field>: <problem>, got <value>; expected <bound> [unit]`` (at most `limit`)."""
+    lines = []
+    errors = _merge_unions([dict(e) for e in exc.errors(include_url=False)], model)
+    for err in errors[:limit]:
+        loc = err["loc"]
+        where = loc_text(loc, root) or root or "input"
+        owner, info = _model_at(model, loc)
+        unit = field_unit(info) if info is not None else None
+        if err["type"] == "extra_forbidden":
+            parent_owner, _ = _model_at(model, loc[:-1]) if len(loc) > 1 else (model, None)
+            known = sorted(getattr(parent_owner, "model_fields", {})) if parent_owner is not None else []
+            lines.append(f"{where}: unknown key; known keys: {', '.join(known)}")
+            continue
+        if err["type"] == "missing":
+            lines.append(f"{where}: missing required field" + (f" [{unit}]" if unit else ""))
+            continue
+        msg = err["msg"]
+        msg = msg[0].lower() + msg[1:] if msg else msg
+        msg = msg.removeprefix("value error, ")
+        bound = _expected(err)
+        text = f"{where}: {msg}"
+        if bound and unit:
+            text = f"{where}: must be {bound} [{unit}]"
+        elif unit and "[" not in msg:
+            text += f" (unit: {unit})"
+        if "input" in err:
+            value = err["input"]
+            if not isinstance(value, dict):
+                text += f", got {value!r}"
+            elif err["type"] != "value_error":
+                text += ", got an object"
+        lines.append(text)
+    if len(errors) > limit:
+        lines.append(f"... and {len(errors) - limit} more problems")
+    return "; ".join(lines)

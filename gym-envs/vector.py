@@ -1,0 +1,525 @@
+"""``roadload/EcoDrive-v0`` as a native :class:`gymnasium.vector.VectorEnv`: N vehicles advanced in one compiled call.
+
+``gymnasium.make_vec("roadload/EcoDrive-v0", num_envs=N, vectorization_mode="vector_entry_point")`` builds
+:class:`EcoDriveVectorEnv`. Every sub-environment is the single env :class:`roadload.gym.ecodrive.EcoDriveEnv`
+in batch form: the same simulator core (``roadload.envs.physics.advance``, the jitted substeps, called per vehicle
+inside one compiled loop over the per-vehicle state arrays, optionally split over numba threads -- no second
+physics), the same action mapping,
+reward terms, observation (mode ``'state'``) and ``info`` keys. Episodes are set up exactly as the single env does
+(road drawn from the sub-env's RNG, simulator built from the preset), so with the same seeds every sub-env's
+trajectory equals the single env's (tests/gym/test_vector.py, to 1e-9).
+
+Autoreset: gymnasium 1.x next-step semantics by default (the step after a terminal / truncated step resets that
+sub-env, ignores its action and returns its first observation with reward 0); ``autoreset_mode='same_step'``
+resets in the same step and puts the final observation / info into ``info['final_obs']`` / ``info['final_info']``
+(used by the stable-baselines3 adapter, :mod:`roadload.gym.sb3`).
+
+Seeds: ``reset(seed=s)`` seeds sub-env i with ``s + i`` (as ``SyncVectorEnv``); a list gives one seed per sub-env.
+
+Not batched: observation modes ``'can'`` and ``'can+estimates'`` (the CAN sensor model and the online estimator
+are per-vehicle Python objects) and time-varying (scheduled) effects; use ``vectorization_mode='sync'`` for those.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from numba import njit, prange
+
+from roadload.envs import physics
+from roadload.envs.layout import (C_GEAR_REQ, C_STEER, C_TRACTION, C_USE_DRIVER, N_CMD, N_LOG, N_PARAMS, N_ROAD,
+                                  N_STATE, S_A, S_AY, S_E_SOURCE, S_GEAR, S_NLOG, S_POS, S_T, S_V)
+from roadload.envs.simulator import Simulator
+from roadload.gym.config import SPACE_FIELDS_ECODRIVE, EcoDriveConfig, GymConfigError, make_config, updated_config
+from roadload.gym.ecodrive import (PREVIEW_GRID, STOP_HORIZON, DriveScales, RouteTable, _look_ahead, cut_profile,
+                                   observation_layout)
+from roadload.presets import get_preset
+from roadload.road_profiles import RoadProfile, load_profile
+
+COST_NAMES = ("energy", "time", "speeding", "lateral", "stop", "jerk", "progress")
+"""Reward terms, in the order of ``info['terms']`` / ``info['costs']`` (EcoDriveEnv)."""
+INFO_SCALARS = ("t", "s", "v", "a", "gear", "speed_limit", "source_energy_total", "road_seed", "route_length",
+                "schedule_time")
+
+# per-env scalars of the episode bookkeeping (columns of the `E` array)
+E_LIMIT, E_U_PREV, E_A_PREV, E_LAST_ENERGY, E_TIME_LIMIT, E_LENGTH, E_ROUTE_TIME = range(7)
+N_E = 7
+_SCHEDULE = RouteTable.SCHEDULE
+_SPEED_LIMIT = RouteTable.SPEED_LIMIT
+
+
+def _validated_actions(actions: Any, num_envs: int) -> np.ndarray:
+    """(num_envs, 1) float64 commands; ValueError naming the first bad entry (NaN / inf, or wrong shape)."""
+    a = np.asarray(actions, dtype=np.float64)
+    if a.shape not in ((num_envs, 1), (num_envs,)):
+        raise ValueError(f"actions: expected shape ({num_envs}, 1) (one normalised command u in [-1, 1] per "
+                         f"sub-env), got {a.shape}")
+    a = a.reshape(num_envs, 1)
+    bad = ~np.isfinite(a[:, 0])
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"actions[{i}]: must be finite, got {a[i, 0]!r}")
+    return a
+
+
+# --------------------------------------------------------------------------------------------- compiled kernels
+@njit(cache=True)
+def _observe_one(X, E, table, preview, stops, n_stops, scale, low, high, buf, la, out):
+    """The single env's 'state' observation (EcoDriveEnv._observe) for one vehicle -> out (float32)."""
+    s = X[S_POS]
+    buf[0] = X[S_V]
+    buf[1] = X[S_A]
+    k = 2
+    _look_ahead(table, PREVIEW_GRID, preview, s, la)
+    m = la.shape[1]
+    for r in range(3):
+        for j in range(m):
+            buf[k + r * m + j] = la[r, j]
+    k += 3 * m
+    buf[k] = X[S_T] - la[_SCHEDULE, 0]
+    buf[k + 1] = max(E[E_LENGTH] - s, 0.0)
+    nxt = STOP_HORIZON
+    for j in range(n_stops):  # bisect_left: first stop >= s
+        if stops[j] >= s:
+            nxt = min(stops[j] - s, STOP_HORIZON)
+            break
+    buf[k + 2] = nxt
+    buf[k + 3] = E[E_U_PREV]
+    for j in range(buf.size):
+        o = buf[j] / scale[j]
+        if o < low[j]:
+            o = low[j]
+        elif o > high[j]:
+            o = high[j]
+        out[j] = np.float32(o)
+
+
+@njit(cache=True)
+def _speed_limit_at(table, s, zero, one):
+    _look_ahead(table, PREVIEW_GRID, zero, s, one)
+    return one[_SPEED_LIMIT, 0]
+
+
+@njit(cache=True)
+def advance_range(lo, hi, active, u, X, P, tabs, ti, road, road_n, stops, stops_n, cycle, rng, cmd, log, n_sub, F):
+    """The bare batched physics for vehicles lo..hi-1: for every active vehicle i, the wheel force of command u[i]
+    (DriveScales ``F = (peak traction force, peak power, full brake force)``) held for n_sub substeps of the
+    simulator core."""
+    for i in range(lo, hi):
+        if not active[i]:
+            continue
+        ui = u[i]
+        v = X[i, S_V]
+        if ui >= 0.0:
+            f = ui * min(F[0], F[1] / max(v, 1.0))
+        else:
+            f = ui * F[2]
+        c = cmd[i]
+        c[C_USE_DRIVER] = 2.0
+        c[C_TRACTION] = f
+        c[C_STEER] = np.nan
+        c[C_GEAR_REQ] = -1.0
+        X[i, S_NLOG] = 0.0  # the env reads the state, not the log: a window of n_sub rows suffices
+        physics.advance(X[i], P[i], tabs, ti, road[i, :, :road_n[i]], stops[i, :stops_n[i]], cycle, rng[i], c,
+                        log[i], n_sub)
+
+
+@njit(cache=True)
+def _step_range(lo, hi, active, u, X, P, tabs, ti, road, road_n, stops, stops_n, cycle, rng, cmd, log, n_sub, F,
+                E, table, table_n, preview, rstops, rstops_n, W, dt, lat_lim, stop_speed,
+                scale, low, high, obs, reward, terms, costs, ret_costs, term, trunc, buf, la, zero, one):
+    """One env step of every active vehicle: EcoDriveEnv.step (physics via advance_batch's loop body, reward terms,
+    'state' observation) for vehicles lo..hi-1. W = (energy, time, speeding, lateral, stop, jerk, progress, scale)
+    reward weights."""
+    for i in range(lo, hi):
+        if not active[i]:
+            continue
+        x = X[i]
+        e = E[i]
+        ui = u[i]
+        ui = -1.0 if ui < -1.0 else (1.0 if ui > 1.0 else ui)
+        s0 = x[S_POS]
+        v0 = x[S_V]
+        limit0 = e[E_LIMIT]
+        if ui >= 0.0:
+            f = ui * min(F[0], F[1] / max(v0, 1.0))
+        else:
+            f = ui * F[2]
+        c = cmd[i]
+        c[C_USE_DRIVER] = 2.0
+        c[C_TRACTION] = f
+        c[C_STEER] = np.nan
+        c[C_GEAR_REQ] = -1.0
+        x[S_NLOG] = 0.0
+        physics.advance(x, P[i], tabs, ti, road[i, :, :road_n[i]], stops[i, :stops_n[i]], cycle, rng[i], c,
+                        log[i], n_sub)
+        tab = table[i, :, :table_n[i]]
+        s1 = x[S_POS]
+        v1 = x[S_V]
+        limit = _speed_limit_at(tab, s1, zero[i], one[i])
+        e[E_LIMIT] = limit
+        length = e[E_LENGTH]
+        speeding = max(0.0, 0.5 * (v0 + v1 - limit0 - limit)) * dt
+        lateral = max(0.0, abs(x[S_AY]) - lat_lim) * dt
+        stop = 0.0
+        for j in range(rstops_n[i]):  # stops with s0 < stop <= s1
+            st = rstops[i, j]
+            if st > s0 and st <= s1:
+                frac = (st - s0) / max(s1 - s0, 1e-9)
+                if v0 + frac * (v1 - v0) > stop_speed:
+                    stop += 1.0
+        jerk = (x[S_A] - e[E_A_PREV]) / dt
+        terminated = s1 >= length - 1e-6
+        truncated = (not terminated) and x[S_T] >= e[E_TIME_LIMIT] - 1e-9
+        progress = min(s1, length) - min(s0, length)
+        energy = x[S_E_SOURCE] - e[E_LAST_ENERGY]
+        e[E_LAST_ENERGY] = x[S_E_SOURCE]
+        tm = terms[i]
+        tm[0] = energy
+        tm[1] = dt
+        tm[2] = speeding
+        tm[3] = lateral
+        tm[4] = stop
+        tm[5] = jerk * jerk * dt
+        tm[6] = progress
+        cs = costs[i]
+        total = 0.0
+        for k in range(7):
+            cs[k] = (-W[6] * tm[6]) if k == 6 else W[k] * tm[k]
+            total += cs[k]
+            ret_costs[i, k] += cs[k]
+        reward[i] = -W[7] * total
+        term[i] = terminated
+        trunc[i] = truncated
+        e[E_U_PREV] = ui
+        e[E_A_PREV] = x[S_A]
+        _observe_one(x, e, tab, preview, rstops[i], rstops_n[i], scale, low, high, buf[i], la[i], obs[i])
+
+
+@njit(parallel=True, cache=True)
+def _step_threads(n_chunks, active, u, X, P, tabs, ti, road, road_n, stops, stops_n, cycle, rng, cmd, log, n_sub,
+                  F, E, table, table_n, preview, rstops, rstops_n, W, dt, lat_lim, stop_speed, scale, low, high, obs,
+                  reward, terms, costs, ret_costs, term, trunc, buf, la, zero, one):
+    """_step_range over n_chunks contiguous blocks of vehicles, one numba thread each."""
+    n = X.shape[0]
+    for c in prange(n_chunks):
+        _step_range(c * n // n_chunks, (c + 1) * n // n_chunks, active, u, X, P, tabs, ti, road, road_n, stops,
+                    stops_n, cycle, rng, cmd, log, n_sub, F, E, table, table_n, preview, rstops, rstops_n, W, dt,
+                    lat_lim, stop_speed, scale, low, high, obs, reward, terms, costs, ret_costs, term, trunc, buf,
+                    la, zero, one)
+
+
+@njit(parallel=True, cache=True)
+def _advance_threads(n_chunks, active, u, X, P, tabs, ti, road, road_n, stops, stops_n, cycle, rng, cmd, log,
+                     n_sub, F):
+    n = X.shape[0]
+    for c in prange(n_chunks):
+        advance_range(c * n // n_chunks, (c + 1) * n // n_chunks, active, u, X, P, tabs, ti, road, road_n, stops,
+                      stops_n, cycle, rng, cmd, log, n_sub, F)
+
+
+# --------------------------------------------------------------------------------------------- the vector env
+class EcoDriveVectorEnv(gym.vector.VectorEnv):
+    """N EcoDrive-v0 sub-environments stepped in one compiled call (module docstring).
+
+    ``config`` / keyword overrides as for the single env (every sub-env shares them); ``autoreset_mode`` is
+    ``'next_step'`` (gymnasium's default) or ``'same_step'``; ``threads``: numba threads that split the vehicles
+    (default 1: on a machine shared with other jobs, handing work to a second thread costs a scheduler time slice
+    per step -- measured 5x slower at N=64 under load; use 2+ on idle cores)."""
+
+    metadata = {"render_modes": [], "autoreset_mode": gym.vector.AutoresetMode.NEXT_STEP}
+
+    def __init__(self, num_envs: int = 1, config: EcoDriveConfig | dict | None = None,
+                 autoreset_mode: str | gym.vector.AutoresetMode = "next_step", threads: int = 1,
+                 **overrides: Any) -> None:
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+            raise GymConfigError(f"num_envs: expected an integer >= 1, got {num_envs!r}")
+        modes = {"next_step": gym.vector.AutoresetMode.NEXT_STEP, "same_step": gym.vector.AutoresetMode.SAME_STEP}
+        mode = modes.get(str(autoreset_mode).lower(), autoreset_mode if autoreset_mode in modes.values() else None)
+        if mode is None:
+            raise GymConfigError(f"autoreset_mode: expected 'next_step' or 'same_step' (or the AutoresetMode), got "
+                                 f"{autoreset_mode!r}")
+        self.autoreset_mode = mode
+        if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
+            raise GymConfigError(f"threads: expected an integer >= 1, got {threads!r}")
+        self.threads = int(threads)
+        self.metadata = {**self.metadata, "autoreset_mode": mode}
+        self.config: EcoDriveConfig = make_config(EcoDriveConfig, config, **overrides)
+        self._check_batchable(self.config)
+        self.num_envs = int(num_envs)
+        n = self.num_envs
+        cfg = self.config
+        self.layout = observation_layout(cfg)
+        n_obs = len(self.layout)
+        self._scale = np.array([1.0 if cfg.obs_scaling == "si" else row[2] for row in self.layout])
+        self._low = np.array([row[3] for row in self.layout]) / self._scale
+        self._high = np.array([row[4] for row in self.layout]) / self._scale
+        self.single_observation_space = spaces.Box(self._low.astype(np.float32), self._high.astype(np.float32),
+                                                   shape=(n_obs,), dtype=np.float32)
+        self.single_action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, n)
+        self.action_space = gym.vector.utils.batch_space(self.single_action_space, n)
+        self._preview = np.array((0.0, *cfg.preview_distances))
+        # per-vehicle arrays (grown on demand where roads differ in length)
+        self._X = np.zeros((n, N_STATE))
+        self._P = np.zeros((n, N_PARAMS))
+        self._road = np.zeros((n, N_ROAD, 2))
+        self._road_n = np.zeros(n, dtype=np.int64)
+        self._stops = np.zeros((n, 1))
+        self._stops_n = np.zeros(n, dtype=np.int64)
+        self._rng = np.zeros((n, 1), dtype=np.uint64)
+        self._cmd = np.zeros((n, N_CMD))
+        self._n_sub = cfg.n_substeps
+        self._log = np.zeros((n, N_LOG, self._n_sub))
+        self._E = np.zeros((n, N_E))
+        self._table = np.zeros((n, 4, 2))
+        self._table_n = np.zeros(n, dtype=np.int64)
+        self._rstops = np.zeros((n, 1))
+        self._rstops_n = np.zeros(n, dtype=np.int64)
+        self._obs = np.zeros((n, n_obs), dtype=np.float32)
+        self._reward = np.zeros(n)
+        self._terms = np.zeros((n, 7))
+        self._costs = np.zeros((n, 7))
+        self._ret_costs = np.zeros((n, 7))
+        self._term = np.zeros(n, dtype=bool)
+        self._trunc = np.zeros(n, dtype=bool)
+        self._buf = np.zeros((n, n_obs))
+        self._la = np.zeros((n, 4, self._preview.size))
+        self._zero = np.zeros(1)
+        self._zeros = np.zeros((n, 1))
+        self._one = np.zeros((n, 4, 1))
+        self._road_seed = np.zeros(n, dtype=np.int64)
+        self._gear = np.zeros(n, dtype=np.int64)
+        self._sims: list[Simulator | None] = [None] * n
+        self._keys: list[tuple | None] = [None] * n
+        self._routes: list[RouteTable | None] = [None] * n
+        self._rngs: list[np.random.Generator] = [seeding.np_random()[0] for _ in range(n)]
+        self._needs_reset = np.ones(n, dtype=bool)  # step() before reset() resets
+        self._spec = get_preset(cfg.vehicle)
+        self._drive = DriveScales.from_spec(self._spec)
+        self._F = np.array([self._drive.peak_traction_force, self._drive.peak_power, self._drive.full_brake_force])
+        self._cycle = np.zeros((2, 2))
+        self._cycle[0, 1] = 1.0
+        self._tabs = self._ti = None
+        self._configs: list[EcoDriveConfig] = [cfg] * n
+        self._setup_one(0, cfg, cfg.road_seed if cfg.road_seed is not None else cfg.road_seed_range[0], 0)
+
+    # ------------------------------------------------------------------ checks
+    @staticmethod
+    def _check_batchable(cfg: EcoDriveConfig) -> None:
+        if cfg.observation != "state":
+            raise GymConfigError(f"observation: the native vector env batches mode 'state' only, got "
+                                 f"{cfg.observation!r}; use gymnasium.make_vec(..., vectorization_mode='sync') for "
+                                 f"'can' / 'can+estimates'")
+
+    # ------------------------------------------------------------------ per-env episode setup (EcoDriveEnv._setup)
+    def _fit(self, name: str, width: int) -> np.ndarray:
+        arr = getattr(self, name)
+        if arr.shape[-1] < width:
+            new = np.zeros(arr.shape[:-1] + (width,), dtype=arr.dtype)
+            new[..., :arr.shape[-1]] = arr
+            setattr(self, name, new)
+            arr = new
+        return arr
+
+    def _setup_one(self, i: int, cfg: EcoDriveConfig, road_seed: int, sim_seed: int) -> None:
+        key = (cfg.road, road_seed, cfg.route_length, repr(cfg.effects), cfg.preview_distances,
+               cfg.schedule_speed_fraction, cfg.lateral_acceleration_limit)
+        if key != self._keys[i]:
+            try:
+                profile = cut_profile(load_profile(cfg.road, seed=road_seed), cfg.route_length)
+                if not isinstance(profile, RoadProfile):
+                    raise GymConfigError(f"road: {cfg.road!r} is not a road profile")
+                sim = Simulator(self._spec, profile, cfg.effects, None, sim_seed, initial_speed=cfg.initial_speed,
+                                log_capacity=self._n_sub)
+                fresh = True
+            except GymConfigError:
+                raise
+            except ValueError as exc:
+                raise GymConfigError(f"cannot build the episode: {exc}") from exc
+            if sim._schedules.active:
+                raise GymConfigError("effects: time-varying (scheduled) effects are not batched by the native "
+                                     "vector env; use vectorization_mode='sync'")
+            route = RouteTable(profile, self._preview, cfg.schedule_speed_fraction, cfg.lateral_acceleration_limit)
+            self._sims[i], self._routes[i], self._keys[i] = sim, route, key
+            self._road_seed[i] = road_seed
+            if self._tabs is None:
+                self._tabs, self._ti = sim.tabs, sim.ti
+            nr = sim._road.shape[1]
+            self._fit("_road", nr)[i, :, :nr] = sim._road
+            self._road_n[i] = nr
+            nt = route.table.shape[1]
+            self._fit("_table", nt)[i, :, :nt] = route.table
+            self._table_n[i] = nt
+            rs = np.asarray(route.stops, dtype=float)
+            self._fit("_rstops", max(rs.size, 1))[i, :rs.size] = rs
+            self._rstops_n[i] = rs.size
+        else:
+            fresh = False
+        sim, route = self._sims[i], self._routes[i]
+        if not fresh:  # a new simulator is already reset with these seeds (as EcoDriveEnv's second reset leaves it)
+            sim.reset(seed=sim_seed, initial_speed=cfg.initial_speed)
+        ns = sim._stops.size
+        self._fit("_stops", max(ns, 1))[i, :ns] = sim._stops
+        self._stops_n[i] = ns
+        self._road[i, :, :self._road_n[i]] = sim._road  # reset may re-plan (poor_excitation)
+        self._X[i] = sim.X
+        self._fit("_P", sim.P.size)[i] = sim.P  # driver / effect parameters follow the N_PARAMS core block
+        self._rng[i] = sim._rng
+        self._cmd[i] = sim._cmd
+        e = self._E[i]
+        e[:] = 0.0
+        e[E_TIME_LIMIT] = cfg.time_limit if cfg.time_limit is not None else 2.0 * route.route_time + 30.0
+        e[E_LENGTH] = route.length
+        e[E_ROUTE_TIME] = route.route_time
+        e[E_LIMIT] = _speed_limit_at(self._table[i, :, :self._table_n[i]], self._X[i, S_POS], self._zero,
+                                     self._one[i])
+        self._ret_costs[i] = 0.0
+        _observe_one(self._X[i], e, self._table[i, :, :self._table_n[i]], self._preview, self._rstops[i],
+                     self._rstops_n[i], self._scale, self._low, self._high, self._buf[i], self._la[i], self._obs[i])
+
+    def _reset_one(self, i: int, seed: int | None, options: dict[str, Any] | None) -> None:
+        if seed is not None:
+            self._rngs[i], _ = seeding.np_random(seed)
+        cfg = updated_config(self._configs[i], options, SPACE_FIELDS_ECODRIVE)
+        if cfg.vehicle != self.config.vehicle:
+            raise GymConfigError(f"options.vehicle: the native vector env runs one vehicle ({self.config.vehicle!r})"
+                                 f" for all sub-envs, got {cfg.vehicle!r}")
+        self._check_batchable(cfg)
+        g = self._rngs[i]
+        road_seed = cfg.road_seed if cfg.road_seed is not None else int(g.integers(*cfg.road_seed_range))
+        sim_seed = int(g.integers(0, 2 ** 31 - 1))
+        self._configs[i] = cfg
+        self._setup_one(i, cfg, road_seed, sim_seed)
+
+    # ------------------------------------------------------------------ gymnasium API
+    def reset(self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None):
+        """Reset every sub-env (``options['reset_mask']``: only those where the mask is True)."""
+        n = self.num_envs
+        if seed is None:
+            seeds: list[int | None] = [None] * n
+        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            seeds = [int(seed) + i for i in range(n)]
+        else:
+            seeds = list(seed)
+            if len(seeds) != n:
+                raise ValueError(f"seed: expected an int or a list of {n} seeds, got {len(seeds)}")
+        opts = dict(options or {})
+        mask = opts.pop("reset_mask", None)
+        mask = np.ones(n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+        if mask.shape != (n,):
+            raise ValueError(f"options['reset_mask']: expected a boolean array of shape ({n},), got {mask.shape}")
+        for i in np.flatnonzero(mask):
+            self._reset_one(int(i), seeds[i], opts or None)
+        self._needs_reset[mask] = False
+        return self._obs.copy(), self._info(mask, with_terms=False)
+
+    def step(self, actions):
+        u = _validated_actions(actions, self.num_envs)[:, 0]
+        n = self.num_envs
+        reset_now = self._needs_reset.copy()
+        active = ~reset_now
+        if reset_now.any():
+            for i in np.flatnonzero(reset_now):
+                self._reset_one(int(i), None, None)
+            self._needs_reset[:] = False
+        cfg = self.config
+        w = cfg.reward
+        W = np.array([w.energy, w.time, w.speeding, w.lateral, w.stop, w.jerk, w.progress, w.scale])
+        self._step_compiled(active, u, W, cfg)
+        reward = np.where(active, self._reward, 0.0)
+        term = self._term & active
+        trunc = self._trunc & active
+        info = self._info(np.ones(n, dtype=bool), with_terms=active)
+        done = term | trunc
+        if self.autoreset_mode == gym.vector.AutoresetMode.NEXT_STEP:
+            self._needs_reset = done
+            return self._obs.copy(), reward, term, trunc, info
+        # same step: reset the finished sub-envs now, report their last observation / info
+        obs = self._obs.copy()
+        if done.any():
+            info["final_obs"] = np.where(done[:, None], obs, 0.0).astype(np.float32)
+            info["_final_obs"] = done
+            info["final_info"] = info_copy = {k: v for k, v in info.items() if k not in ("final_obs", "_final_obs")}
+            info["_final_info"] = done
+            del info_copy
+            for i in np.flatnonzero(done):
+                self._reset_one(int(i), None, None)
+            obs = self._obs.copy()
+            fresh = self._info(done, with_terms=False)
+            info = {**fresh, "final_obs": info["final_obs"], "_final_obs": done, "final_info": info["final_info"],
+                    "_final_info": done}
+        return obs, reward, term, trunc, info
+
+    def _step_compiled(self, active: np.ndarray, u: np.ndarray, W: np.ndarray, cfg: EcoDriveConfig) -> None:
+        if self.threads > 1:
+            fn, head = _step_threads, (self.threads,)
+        else:
+            fn, head = _step_range, (0, self.num_envs)
+        fn(*head, active, u, self._X, self._P, self._tabs, self._ti, self._road, self._road_n, self._stops,
+                    self._stops_n, self._cycle, self._rng, self._cmd, self._log, self._n_sub, self._F, self._E,
+                    self._table, self._table_n, self._preview, self._rstops, self._rstops_n, W,
+                    cfg.control_period, cfg.lateral_acceleration_limit, cfg.stop_speed, self._scale, self._low,
+                    self._high, self._obs, self._reward, self._terms, self._costs, self._ret_costs, self._term,
+                    self._trunc, self._buf, self._la, self._zeros, self._one)
+
+    def _info(self, mask: np.ndarray, with_terms: np.ndarray | bool) -> dict[str, Any]:
+        """gymnasium vector info: one array per key of the single env's info, '_key' = which sub-envs have it."""
+        X, E = self._X, self._E
+        info: dict[str, Any] = {
+            "t": X[:, S_T].copy(), "s": X[:, S_POS].copy(), "v": X[:, S_V].copy(), "a": X[:, S_A].copy(),
+            "gear": X[:, S_GEAR].astype(np.int64), "speed_limit": E[:, E_LIMIT].copy(),
+            "source_energy_total": X[:, S_E_SOURCE].copy(), "road_seed": self._road_seed.copy(),
+            "route_length": E[:, E_LENGTH].copy(), "schedule_time": E[:, E_ROUTE_TIME].copy(),
+            "return_costs": {k: self._ret_costs[:, j].copy() for j, k in enumerate(COST_NAMES)},
+        }
+        for k in INFO_SCALARS:
+            info["_" + k] = mask
+        for j, k in enumerate(COST_NAMES):
+            info["return_costs"]["_" + k] = mask
+        info["_return_costs"] = mask
+        tmask = np.asarray(with_terms, dtype=bool) & mask if not isinstance(with_terms, bool) else (
+            mask if with_terms else np.zeros_like(mask))
+        if tmask.any():
+            for name, src in (("terms", self._terms), ("costs", self._costs)):
+                d = {k: np.where(tmask, src[:, j], 0.0) for j, k in enumerate(COST_NAMES)}
+                for k in COST_NAMES:
+                    d["_" + k] = tmask
+                info[name] = d
+                info["_" + name] = tmask
+        return info
+
+    # ------------------------------------------------------------------ benchmark hook
+    def bare_physics_step(self, actions: np.ndarray) -> None:
+        """Only the batched physics of one env step (no reward, observation, info, autoreset): the reference the
+        benchmark compares the env step with."""
+        u = np.asarray(actions, dtype=np.float64).reshape(self.num_envs)
+        active = np.ones(self.num_envs, dtype=bool)
+        if self.threads > 1:
+            fn, head = _advance_threads, (self.threads,)
+        else:
+            fn, head = advance_range, (0, self.num_envs)
+        fn(*head, active, u, self._X, self._P, self._tabs, self._ti, self._road,
+                      self._road_n, self._stops, self._stops_n, self._cycle, self._rng, self._cmd, self._log,
+                      self._n_sub, self._F)
+
+    @property
+    def sub_simulators(self) -> list[Simulator | None]:
+        """The simulator objects the episodes were set up from (their state is NOT advanced by step())."""
+        return list(self._sims)
+
+
+def make_vector_env(num_envs: int = 1, **kwargs: Any) -> EcoDriveVectorEnv:
+    """The ``vector_entry_point`` of roadload/EcoDrive-v0 (``gymnasium.make_vec`` passes num_envs + env kwargs)."""
+    kwargs.pop("max_episode_steps", None)
+    if "render_mode" in kwargs and kwargs["render_mode"] is not None:
+        raise GymConfigError("render_mode: the native vector env does not render; use vectorization_mode='sync'")
+    kwargs.pop("render_mode", None)
+    return EcoDriveVectorEnv(num_envs=num_envs, **kwargs)
+
+
+__all__ = ["EcoDriveVectorEnv", "make_vector_env", "advance_range", "COST_NAMES"]

@@ -1,0 +1,91 @@
+"""Base mismatch first, effects second: a vehicle preset never matches the car, so before any effect is named the
+diagnosis calibrates the sim's base road load against the trips and reports it as its own block.
+
+Base parameters (each the catalog term of that name, :mod:`.catalog`): mass Δm_V [kg] (``mass_offset``), drag area
+Δc_x A_V [m²] (``drag_area``), rolling resistance factor - 1 (``rolling_scale``), drive-train efficiency /
+torque scale ε (``torque_scale``: F_xV,measured = (1 + ε) F_xV,sim-side), brake gain k (``friction_brake``:
+the wheels brake with (1 + k) F_B; only where the trips log brake pressure). They are fitted jointly by weighted
+least squares on the robust, regime-normalised residual of :mod:`.robust` (training rows; braking rows fit the
+brake gain only), with cluster-robust standard errors over 10 s blocks (:func:`.stats.cluster_covariance`). A
+parameter is *significant* when |value| >= z SE (z = 2.58, two-sided 1 %) and its contribution's RMS is at least
+``min_size`` N.
+
+With ``DiagnosisSettings.base_first`` the candidate effects are then ranked and selected over the calibrated base
+(the base columns join every design): an effect is named only for what it adds beyond the base. A withheld effect
+whose signature *is* a base parameter (a payload is a mass offset) then shows up in the base block, not as an
+effect — the base block says which catalog effect each significant base departure stands for.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from .catalog import get_candidate
+from .forcemodel import SimForceModel, columns_of
+from .robust import RobustTarget, weighted_fit
+from .selection import Split, design
+from .stats import cluster_covariance
+
+BASE_PARAMETERS: tuple[tuple[str, str], ...] = (
+    ("mass_offset", "mass m_V"), ("drag_area", "drag area c_x A_V"), ("rolling_scale", "rolling resistance f_r"),
+    ("torque_scale", "drive-train efficiency / torque scale"), ("friction_brake", "brake gain X_B"))
+Z_SIGNIFICANT = 2.58
+
+
+def base_columns(table: pd.DataFrame, model: SimForceModel, braking: np.ndarray,
+                 valid: np.ndarray) -> tuple[np.ndarray, list[dict]]:
+    """Regressors of the base calibration with one description per column; a parameter whose channels the trips
+    lack (no brake pressure: no brake gain) is left out; non-brake columns are zero on ``braking`` rows."""
+    cols = columns_of(table)
+    sub = {k: np.asarray(v)[valid] for k, v in cols.items()}
+    blocks, info = [], []
+    for name, label in BASE_PARAMETERS:
+        cand = get_candidate(name)
+        if cand.missing(sub):
+            continue
+        d = design([(cand, None)], model, cols)
+        A = d.A if cand.is_brake else np.where(np.asarray(braking)[:, None], 0.0, d.A)
+        blocks.append(A)
+        info += [{"name": label, "candidate": name, "parameter": n, "unit": u} for n, u in zip(d.names, d.units)]
+    return (np.hstack(blocks) if blocks else np.zeros((len(table), 0))), info
+
+
+def _physical(model: SimForceModel, row: dict) -> dict:
+    """The calibrated base value in the sim's own terms (mass [kg], drag area [m²], factors)."""
+    v = row["value"]
+    if row["candidate"] == "mass_offset":
+        return {"sim": model.mass, "calibrated": model.mass + v, "unit": "kg"}
+    if row["candidate"] == "drag_area":
+        return {"sim": model.drag_area, "calibrated": model.drag_area + v, "unit": "m^2"}
+    if row["candidate"] == "rolling_scale":
+        return {"sim": 1.0, "calibrated": 1.0 + v, "unit": "x f_r(v)"}
+    if row["candidate"] == "torque_scale":
+        return {"sim": model.drivetrain_efficiency, "calibrated": model.drivetrain_efficiency * (1.0 + v),
+                "unit": "eta (tractive force per drive force)"}
+    return {"sim": 1.0, "calibrated": 1.0 + v, "unit": "x X_B"}
+
+
+def base_calibration(table: pd.DataFrame, target: RobustTarget, split: Split, model: SimForceModel,
+                     min_size: float = 15.0) -> tuple[dict, np.ndarray]:
+    """The base block (see module doc) and the base design (n x k) for the effects beyond it."""
+    A, info = base_columns(table, model, target.braking, split.valid)
+    if A.shape[1] == 0:
+        return {"parameters": [], "note": "no base parameter can be fitted on these trips"}, A
+    rows = split.train
+    w = target.weight
+    X = weighted_fit(A, target.r_w, w, rows)
+    resid = target.r_w - A @ X
+    cov = cluster_covariance(A[rows], resid[rows], split.blocks[rows], w[rows])
+    se = np.sqrt(np.clip(np.diag(cov), 0, None))
+    out = []
+    for j, meta in enumerate(info):
+        contrib = A[rows, j] * X[j]
+        size = float(np.sqrt(np.mean(contrib ** 2)))
+        row = {**meta, "value": float(X[j]), "std_error": float(se[j]), "size_rms": size,
+               "significant": bool(abs(X[j]) >= Z_SIGNIFICANT * se[j] and size >= min_size)}
+        row["physical"] = _physical(model, row)
+        out.append(row)
+    return {"parameters": out, "method": "weighted least squares on the robust residual (training rows), "
+                                         "cluster-robust standard errors over 10 s blocks",
+            "z": Z_SIGNIFICANT, "min_size": min_size}, A

@@ -1,0 +1,154 @@
+"""The native vector env of roadload/EcoDrive-v0: every sub-env equals the single env (same seeds) to 1e-9, through
+autoresets (next-step and same-step), truncation and termination; SB3 adapter; input errors."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import roadload  # noqa: F401  (registers the ids)
+from roadload.gym.config import GymConfigError
+from roadload.gym.ecodrive import EcoDriveEnv
+from roadload.gym.vector import COST_NAMES, INFO_SCALARS, EcoDriveVectorEnv
+
+TOL = 1e-9
+
+
+def _singles(config, n, seed):
+    envs = [EcoDriveEnv(config=dict(config)) for _ in range(n)]
+    return envs, [e.reset(seed=seed + i) for i, e in enumerate(envs)]
+
+
+def _close(a, b, what):
+    assert np.allclose(a, b, rtol=0, atol=TOL), f"{what}: {a} != {b}"
+
+
+def _check_info(vinfo, i, sinfo, with_terms):
+    for k in INFO_SCALARS:
+        assert vinfo["_" + k][i]
+        _close(vinfo[k][i], sinfo[k], k)
+    for k in COST_NAMES:
+        _close(vinfo["return_costs"][k][i], sinfo["return_costs"][k], f"return_costs.{k}")
+    if with_terms:
+        for k in COST_NAMES:
+            _close(vinfo["terms"][k][i], sinfo["terms"][k], f"terms.{k}")
+            _close(vinfo["costs"][k][i], sinfo["costs"][k], f"costs.{k}")
+    else:
+        assert "terms" not in vinfo or not vinfo["_terms"][i]
+
+
+def test_make_vec_builds_the_native_env():
+    venv = gym.make_vec("roadload/EcoDrive-v0", num_envs=4, vectorization_mode="vector_entry_point",
+                        config={"route_length": 300.0})
+    assert isinstance(venv.unwrapped, EcoDriveVectorEnv) and isinstance(venv, gym.vector.VectorEnv)
+    single = EcoDriveEnv(config={"route_length": 300.0})
+    assert venv.single_observation_space == single.observation_space
+    assert venv.observation_space.shape == (4, single.observation_space.shape[0])
+    assert venv.action_space.shape == (4, 1)
+    obs, info = venv.reset(seed=1)
+    assert obs.shape == (4, single.observation_space.shape[0]) and obs.dtype == np.float32
+    assert venv.observation_space.contains(obs)
+
+
+@pytest.mark.parametrize("config", [
+    {"route_length": 150.0},                       # episodes terminate at the route end
+    {"route_length": 2000.0, "time_limit": 6.0},   # episodes truncate at the time limit
+    {"route_length": 400.0, "road": "city", "effects": {"wind": {"mean_speed": 6.0}}},  # stops, wind
+])
+def test_each_sub_env_equals_the_single_env_next_step_autoreset(config):
+    n, seed, steps = 3, 11, 320
+    venv = EcoDriveVectorEnv(n, config=dict(config))
+    vobs, vinfo = venv.reset(seed=seed)
+    singles, first = _singles(config, n, seed)
+    for i, (o, inf) in enumerate(first):
+        _close(vobs[i], o, "reset obs")
+        _check_info(vinfo, i, inf, with_terms=False)
+    rng = np.random.default_rng(0)
+    pending = [False] * n
+    episodes = [0] * n
+    for _ in range(steps):
+        a = rng.uniform(-0.6, 1.0, (n, 1)).astype(np.float32)
+        vobs, vr, vte, vtr, vinfo = venv.step(a)
+        for i, env in enumerate(singles):
+            if pending[i]:  # next-step autoreset: the action is ignored, the new episode's first observation
+                o, inf = env.reset()
+                r, te, tr, with_terms = 0.0, False, False, False
+                pending[i] = False
+            else:
+                o, r, te, tr, inf = env.step(a[i])
+                with_terms = True
+                pending[i] = te or tr
+                episodes[i] += pending[i]
+            _close(vobs[i], o, "obs")
+            _close(vr[i], r, "reward")
+            assert (bool(vte[i]), bool(vtr[i])) == (te, tr)
+            _check_info(vinfo, i, inf, with_terms)
+    assert min(episodes) >= 1, f"no autoreset exercised: {episodes}"
+
+
+def test_same_step_autoreset_reports_the_final_observation():
+    n, seed, config = 2, 5, {"route_length": 120.0}
+    venv = EcoDriveVectorEnv(n, config=config, autoreset_mode="same_step")
+    venv.reset(seed=seed)
+    singles, _ = _singles(config, n, seed)
+    rng = np.random.default_rng(1)
+    finals = 0
+    for _ in range(300):
+        a = rng.uniform(0.0, 1.0, (n, 1)).astype(np.float32)
+        vobs, vr, vte, vtr, vinfo = venv.step(a)
+        for i, env in enumerate(singles):
+            o, r, te, tr, inf = env.step(a[i])
+            _close(vr[i], r, "reward")
+            if te or tr:
+                finals += 1
+                assert vinfo["_final_obs"][i]
+                _close(vinfo["final_obs"][i], o, "final obs")
+                _close(vinfo["final_info"]["s"][i], inf["s"], "final info s")
+                o, inf = env.reset()
+            _close(vobs[i], o, "obs")
+    assert finals >= 2
+
+
+def test_bad_input_is_named():
+    venv = EcoDriveVectorEnv(2, config={"route_length": 300.0})
+    venv.reset(seed=0)
+    with pytest.raises(ValueError, match=r"actions\[1\]: must be finite"):
+        venv.step(np.array([[0.1], [np.nan]], dtype=np.float32))
+    with pytest.raises(ValueError, match=r"expected shape \(2, 1\)"):
+        venv.step(np.zeros((3, 1), dtype=np.float32))
+    with pytest.raises(GymConfigError, match="observation"):
+        EcoDriveVectorEnv(2, config={"observation": "can"})
+    with pytest.raises(GymConfigError, match="num_envs"):
+        EcoDriveVectorEnv(0)
+    with pytest.raises(GymConfigError, match="autoreset_mode"):
+        EcoDriveVectorEnv(1, autoreset_mode="sometimes")
+
+
+def test_sb3_adapter_episode_bookkeeping():
+    pytest.importorskip("stable_baselines3")
+    from roadload.gym.sb3 import SB3VecEnv
+
+    n = 2
+    venv = SB3VecEnv(EcoDriveVectorEnv(n, config={"route_length": 120.0}, autoreset_mode="same_step"))
+    venv.seed(3)
+    obs = venv.reset()
+    assert obs.shape == (n, venv.observation_space.shape[0])
+    single = EcoDriveEnv(config={"route_length": 120.0})
+    single.reset(seed=3)
+    ret, length = 0.0, 0
+    for _ in range(400):
+        venv.step_async(np.full((n, 1), 0.8, dtype=np.float32))
+        obs, rew, done, infos = venv.step_wait()
+        _, r, te, tr, _ = single.step(np.array([0.8], dtype=np.float32))
+        ret += r
+        length += 1
+        if done[0]:
+            assert te or tr
+            ep = infos[0]["episode"]
+            assert ep["l"] == length and abs(ep["r"] - ret) < 1e-4  # float32 rewards in SB3
+            assert infos[0]["terminal_observation"].shape == obs[0].shape
+            assert infos[0]["TimeLimit.truncated"] == (tr and not te)
+            break
+    else:
+        pytest.fail("no episode finished in 400 steps of 0.8 traction on a 120 m route")
+    with pytest.raises(ValueError, match="same_step"):
+        SB3VecEnv(EcoDriveVectorEnv(1))

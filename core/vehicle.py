@@ -206,7 +206,7 @@ class Curve:
 
 @dataclass
 class Map2D:
-    """A 2-D lookup table values[i][j] = f(x[i], y[j]), bilinear interpolation, clamped at the edges."""
+    """A 2-D lookup table ``values[i][j] = f(x[i], y[j])``, bilinear interpolation, clamped at the edges."""
 
     x: list[float]
     y: list[float]

@@ -16,8 +16,9 @@ A time step is the composition of interchangeable parts, selected by small integ
    P - L a P + Q_t(P_d) (Stenlund-Gustafsson); optional Joseph form in the Kalman family;
 6. :func:`regularise`: P ← P (I + κP)⁻¹ (eq. 3.34) and the Levenberg-Marquardt or Tikhonov parameter update;
 7. :func:`saturate`: parameter saturation X_min ≤ X̂ ≤ X_max (section 3.10.1);
-8. :func:`covariance_health` — the safety net of every composition: P must stay finite, positive definite
-   (LDLᵀ pivots > 0; for instruments, where P is not symmetric, a positive diagonal) and bounded,
+8. :func:`covariance_health` — the safety net of every composition: P must stay finite, with a positive
+   diagonal (every sample), positive definite (LDLᵀ pivots > 0, every ``PD_CHECK_INTERVAL`` = 16 samples; not
+   for instruments, where P is not symmetric) and bounded,
    max diag P ≤ ``p_bound`` (``FP_P_BOUND`` = ``covariance_bound_ratio`` × max diag P_0). An update that
    leaves P non-finite or indefinite is rolled back (X̂ as before the sample) and P is reset to P_0; a P above
    the bound is reset to P_0 (covariance resetting, the remedy against wind-up the text lists in section
@@ -76,7 +77,7 @@ CT_SKIPPED, CT_ROLLED_BACK, CT_BLOWUP_AT, CT_T, CT_RING_POS, CT_RING_FILL, CT_P_
 N_CT = 7
 #: samples between two positive-definiteness checks (LDLᵀ factorisation) of a symmetric P; finiteness, the
 #: diagonal and the bound are checked every sample
-PD_CHECK_INTERVAL = 8
+PD_CHECK_INTERVAL = 16  # a power of two
 #: scratch buffers run_record works in (allocated by the caller: the kernel runs without reference counting)
 N_SCRATCH_VECTORS, N_SCRATCH_MATRICES = 11, 2
 
@@ -493,6 +494,7 @@ def run_record(regressors, outputs, instruments, codes, settings, process_noise,
     row = vectors[10]
     P_prev = matrices[0]
     work = matrices[1]
+    t0 = counters[CT_T]  # samples before this record (sample indices are global: online == batch)
 
     for t in range(T):
         b, valid = read_sample(regressors, outputs, instruments, t, a, z, instrument_ring, counters, iv, delay, n)
@@ -549,7 +551,7 @@ def run_record(regressors, outputs, instruments, codes, settings, process_noise,
             if it > 0 and converged(X, X_iter, tol, n):
                 break
         # diagonal, finiteness and bound every sample; the LDLᵀ factorisation every PD_CHECK_INTERVAL samples
-        health, pmax = covariance_health(X, P, work, p_bound, n, sym, (counters[CT_T] + t) % PD_CHECK_INTERVAL == 0)
+        health, pmax = covariance_health(X, P, work, p_bound, n, sym, ((t0 + t) & (PD_CHECK_INTERVAL - 1)) == 0)
         if not ok:
             health = P_CORRUPT
         if health != P_CORRUPT and pmax > scalars[SC_PMAX]:
@@ -562,9 +564,9 @@ def run_record(regressors, outputs, instruments, codes, settings, process_noise,
             counters[CT_P_RESETS] += 1
             pmax = reset_covariance(P, P0, n)
             if counters[CT_BLOWUP_AT] < 0:
-                counters[CT_BLOWUP_AT] = counters[CT_T] + t
+                counters[CT_BLOWUP_AT] = t0 + t
         if pmax > blowup_level and counters[CT_BLOWUP_AT] < 0:
-            counters[CT_BLOWUP_AT] = counters[CT_T] + t
+            counters[CT_BLOWUP_AT] = t0 + t
         r_post = b
         if robust or store == STORE_FULL:
             for i in range(n):

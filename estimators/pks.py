@@ -122,7 +122,7 @@ class PolynomialKalmanSmoother:
 
 @dataclass
 class PKSBankResult:
-    """Output of a PKS bank. value[name][t] is the smoothed sample t - delay (produced at t); derivative[name]
+    """Output of a PKS bank. ``value[name][t]`` is the smoothed sample t - delay (produced at t); derivative[name]
     its first derivative [unit/s] (None if not requested); derivatives[name] is (T × k) with the 1st … k-th
     derivatives [unit/s^j]; delay [samples] and delay_s [s] are the same for every channel."""
 

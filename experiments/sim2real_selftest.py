@@ -350,8 +350,9 @@ def _world_result(world: str, seed: int, withheld: str, diag: Diagnosis, accepte
         before, after = diag.gap_before["force_residual"]["rmse"], diag.gap_after["force_residual"]["rmse"]
         shrink = diag.shrinkage("rmse")
     else:       # identified on the energy side: battery-power residual [W]
-        before = diag.energy["power_residual_before"]["rmse"]
-        after = diag.energy["power_residual_after"]["rmse"]
+        en = diag.energy or {}
+        before = en["power_residual_before"]["rmse"]
+        after = en["power_residual_after"]["rmse"]
         shrink = 1.0 - after / before if before > 0 else float("nan")
     res = WorldCaseResult(world, seed, withheld, first, acc, bool(correct), bool(among), float(before),
                           float(after), float(shrink), base_dep, where, seconds)

@@ -34,6 +34,7 @@ from roadload.envs import physics
 from roadload.envs.layout import (C_GEAR_REQ, C_STEER, C_TRACTION, C_USE_DRIVER, N_CMD, N_LOG, N_PARAMS, N_ROAD,
                                   N_STATE, S_A, S_AY, S_E_SOURCE, S_GEAR, S_NLOG, S_POS, S_T, S_V)
 from roadload.envs.simulator import Simulator
+from roadload.gym.actions import validate_actions
 from roadload.gym.config import SPACE_FIELDS_ECODRIVE, EcoDriveConfig, GymConfigError, make_config, updated_config
 from roadload.gym.ecodrive import (PREVIEW_GRID, STOP_HORIZON, DriveScales, RouteTable, _look_ahead, cut_profile,
                                    observation_layout)
@@ -50,20 +51,6 @@ E_LIMIT, E_U_PREV, E_A_PREV, E_LAST_ENERGY, E_TIME_LIMIT, E_LENGTH, E_ROUTE_TIME
 N_E = 7
 _SCHEDULE = RouteTable.SCHEDULE
 _SPEED_LIMIT = RouteTable.SPEED_LIMIT
-
-
-def _validated_actions(actions: Any, num_envs: int) -> np.ndarray:
-    """(num_envs, 1) float64 commands; ValueError naming the first bad entry (NaN / inf, or wrong shape)."""
-    a = np.asarray(actions, dtype=np.float64)
-    if a.shape not in ((num_envs, 1), (num_envs,)):
-        raise ValueError(f"actions: expected shape ({num_envs}, 1) (one normalised command u in [-1, 1] per "
-                         f"sub-env), got {a.shape}")
-    a = a.reshape(num_envs, 1)
-    bad = ~np.isfinite(a[:, 0])
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        raise ValueError(f"actions[{i}]: must be finite, got {a[i, 0]!r}")
-    return a
 
 
 # --------------------------------------------------------------------------------------------- compiled kernels
@@ -419,7 +406,7 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
         return self._obs.copy(), self._info(mask, with_terms=False)
 
     def step(self, actions):
-        u = _validated_actions(actions, self.num_envs)[:, 0]
+        u = validate_actions(actions, self.single_action_space, self.num_envs)[:, 0].astype(np.float64)
         n = self.num_envs
         reset_now = self._needs_reset.copy()
         active = ~reset_now

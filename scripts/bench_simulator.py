@@ -9,6 +9,9 @@ prepared simulator state, divided by the rate of a hand-written compiled point-m
 2.5-2.10, a PI speed controller, a 6-channel log) measured in the same run: a machine-independent ratio.
 ``--compare REF`` exports commit REF (``git archive``) into a temporary package tree and runs this script on it
 and on the working tree, interleaved ``--rounds`` times, and prints old/new ratios of the core and trip figures.
+``--ab REF`` loads REF's ``envs/physics.py`` into this process (next to the working tree's other modules, which
+must still fit it) and alternates old and new ``run`` call by call on the same state: the ratio least disturbed
+by a changing machine load.
 
 Target (issue 2): >= 1000x real time, i.e. a one-hour trip in under 3.6 s on one core.
 """
@@ -93,6 +96,49 @@ def core_rate(vehicle: str, n: int, repeats: int) -> float:
     return best
 
 
+def ab_core(ref: str, vehicle: str, n: int, repeats: int) -> float:
+    """new/old substeps per CPU-second of ``physics.run``, old = REF's physics.py loaded in this process,
+    alternated call by call (best of ``repeats`` each)."""
+    import importlib.util
+    import subprocess
+    import tempfile
+
+    from roadload.envs import Simulator, physics
+    from roadload.envs.layout import C_USE_DRIVER
+    from roadload.road_profiles import load_profile
+
+    src = subprocess.run(["git", "-C", str(Path(__file__).resolve().parents[1]), "show", f"{ref}:envs/physics.py"],
+                         check=True, capture_output=True, text=True).stdout
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(physics.__file__).with_name(f"_physics_ab_{Path(tmp).name}.py")
+        path.write_text(src)
+        try:
+            spec = importlib.util.spec_from_file_location(f"roadload.envs.{path.stem}", path)
+            old = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(old)
+            sim = Simulator(vehicle, load_profile("motorway", seed=1, length=max(60_000.0, n * 0.45)),
+                            effects="all", seed=1)
+            sim._ensure_capacity(n + 1)
+            sim._cmd[C_USE_DRIVER] = 1.0
+            X0, rng0 = sim.X.copy(), sim._rng.copy()
+            best = {"old": 0.0, "new": 0.0}
+            for r in range(repeats + 1):
+                for label, mod in (("old", old), ("new", physics)):
+                    X, rng = X0.copy(), rng0.copy()
+                    c0 = time.process_time()
+                    done = mod.run(X, sim.P, sim.tabs, sim.ti, sim._road, sim._stops, sim._cycle, rng, sim._cmd,
+                                   sim._log, n)
+                    if r:
+                        best[label] = max(best[label], done / max(time.process_time() - c0, 1e-9))
+        finally:
+            path.unlink(missing_ok=True)
+            from roadload.envs._jit import CACHE_DIR
+
+            for stale in Path(CACHE_DIR).rglob(f"*{path.stem}*") if CACHE_DIR else ():
+                stale.unlink(missing_ok=True)  # numba cache entries of the temporary module
+    return best["new"] / best["old"]
+
+
 def measure(duration: float, repeats: int, core_substeps: int) -> dict:
     """All figures of one run (JSON-able)."""
     from roadload.experiments.bench_simulator import step_speed, trip_speed
@@ -148,9 +194,16 @@ def main() -> None:
     ap.add_argument("--json", type=Path, help="also write the figures as JSON here")
     ap.add_argument("--compare", metavar="REF", help="git commit to compare against (same session, interleaved)")
     ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds of --compare")
+    ap.add_argument("--ab", metavar="REF", help="in-process A/B of the core against REF's physics.py")
     args = ap.parse_args()
     if args.quick:
         args.duration, args.repeats, args.core_substeps = 60.0, 2, 20_000
+    if args.ab:
+        for vehicle in ("gt_rwd", "bmw_i3"):
+            ratio = ab_core(args.ab, vehicle, args.core_substeps, max(args.repeats, 5))
+            print(f"{vehicle}: core new/old = {ratio:.3f} (physics.run, {args.core_substeps} substeps, best of "
+                  f"{max(args.repeats, 5)} alternated runs, CPU clock; old = {args.ab}:envs/physics.py)")
+        return
     if args.compare:
         from _refcompare import compare
 

@@ -57,6 +57,8 @@ def main() -> None:
     ap.add_argument("--no-exact", action="store_true", help="skip the precision='exact' file-size row")
     args = ap.parse_args()
     hours = [5 / 60, 10 / 60] if args.quick else sorted(args.hours)
+    if args.quick:
+        args.no_exact = True
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         out = os.path.join(tmp, "trip.parquet")

@@ -1,7 +1,8 @@
 """Diagnose the bmw_i3 preset against the real BMW i3 trips (TUM, ../shared/data/bmw_i3_tum): where the gap lies,
 which effects explain it, how far it shrinks. Writes report.md, diagnosis.json and figures.
 
-    python scripts/sim2real_i3.py [--trips TripA01,TripB01,...] [--out out/sim2real_i3]
+    python scripts/sim2real_i3.py [--trips TripA01,TripB01,...] [--out out/sim2real_i3] [--base-first]
+    python scripts/sim2real_i3.py --quick      # CI smoke run: two trips, short floor, no re-simulation
 """
 
 from __future__ import annotations
@@ -48,6 +49,9 @@ def main() -> None:
     ap.add_argument("--trips", default="", help="comma-separated trip names (default: all)")
     ap.add_argument("--out", default="out/sim2real_i3")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--base-first", action="store_true",
+                    help="select effects over the calibrated base (the preset is not the car)")
+    ap.add_argument("--quick", action="store_true", help="two trips, 300 s floor trips, no re-simulation")
     ap.add_argument("--user-candidate", action="store_true",
                     help="add the user candidate 'cold_rolling' (temperature-dependent rolling resistance)")
     args = ap.parse_args()
@@ -56,6 +60,8 @@ def main() -> None:
     if args.trips:
         want = {t.strip() for t in args.trips.split(",")}
         files = [f for f in files if f.stem in want]
+    if args.quick:
+        files = files[:2]
     t0 = time.perf_counter()
     trips, skipped = [], []
     for f in files:
@@ -66,7 +72,11 @@ def main() -> None:
     print(f"loaded {len(trips)} trips in {time.perf_counter() - t0:.0f} s; skipped {skipped or 'none'}")
     sim = SimConfig.load("bmw_i3")
     cands = DEFAULT_CANDIDATES + ((register_cold_rolling(),) if args.user_candidate else ())
-    diag = diagnose(trips, sim, DiagnosisSettings(seed=args.seed, candidates=cands),
+    settings = DiagnosisSettings(seed=args.seed, candidates=cands, base_first=args.base_first)
+    if args.quick:
+        settings = DiagnosisSettings(seed=args.seed, candidates=cands, base_first=args.base_first,
+                                     floor_duration=300.0, resimulate=False, replay=False)
+    diag = diagnose(trips, sim, settings,
                     progress=lambda what, frac: print(f"  [{time.perf_counter() - t0:5.0f} s] {what}"))
     paths = write_report(diag, Path(args.out))
     fb, fa = diag.gap_before["force_residual"], diag.gap_after["force_residual"]
@@ -75,6 +85,12 @@ def main() -> None:
     if diag.gap_after_sim:
         print(f"re-simulated: RMSE {diag.gap_after_sim['force_residual']['rmse']:.0f} N "
               f"(shrinkage {100 * diag.shrinkage('rmse', True):.1f} %)")
+    print("base calibration (" + ("effects selected over it" if args.base_first else "reported only") + "):")
+    for b in diag.notes["base_calibration"]["parameters"]:
+        print(f"  {b['name']:40s} {b['value']:+.4g} ± {b['std_error']:.2g} {b['unit']}  RMS {b['size_rms']:.0f} N"
+              + ("  significant" if b["significant"] else ""))
+    for imp in diag.notes.get("implausible", []):
+        print(f"  not accepted, implausible: {imp['effect']}: {imp['reason']}")
     print("ranking:")
     for r in diag.ranking[:8]:
         print(f"  {r['name']:20s} held-out {100 * r['heldout_improvement']:6.1f} %  dAIC {r['delta_aic']:9.0f}  "

@@ -19,6 +19,7 @@ import pandas as pd
 
 from roadload.experiments.sim2real_selftest import NONE_WORLD, WORLD_NAMES, run_world
 from roadload.fileio import write_json
+from roadload.sim2real.diagnose import DiagnosisSettings
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -37,12 +38,15 @@ def main(argv: list[str] | None = None) -> int:
     seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
     effects = [e.strip() for e in args.effects.split(",")] if args.effects else None
     duration = args.duration
+    settings = None
     if args.quick:
         worlds, seeds, effects, duration = ["independent"], [0], ["payload", NONE_WORLD], 240.0
+        settings = DiagnosisSettings(resimulate=False, replay=False, floor_duration=240.0, n_null=99)
     dump = {}
     for world in worlds:
         t0 = time.perf_counter()
-        run = run_world(world, seeds, effects, duration, vehicle=args.vehicle, say=lambda m: print(m, flush=True))
+        run = run_world(world, seeds, effects, duration, vehicle=args.vehicle, settings=settings,
+                        say=lambda m: print(m, flush=True))
         for seed in seeds:
             print(f"\n== {world}, seed {seed}: confusion (rows withheld, columns first accepted)")
             print(run.confusion(seed).to_string())

@@ -23,6 +23,7 @@ from roadload.experiments.worlds import (
 from roadload.experiments.worlds.selftest import (
     WorldResult,
     WorldSelftest,
+    markdown_table,
     plot_confusion,
 )
 from roadload.fileio import write_text
@@ -30,16 +31,17 @@ from roadload.fileio import write_text
 QUICK_EFFECTS = ("payload", "none")
 
 
-def report(world: str, res: WorldSelftest, seeds: list[int], png: Path | None, seconds: float | None = None
-           ) -> dict:
+def report(world: str, res: WorldSelftest, seeds: list[int], png: Path | None, seconds: float | None = None,
+           markdown: bool = False) -> dict:
     """Print the confusion table and summary of one world (and write its heat map to ``png``)."""
     took = f", {seconds:.0f} s" if seconds is not None else ""
     print(f"\n== world {world}: confusion (withheld x first identified), {len(seeds)} seed(s){took}")
-    print(res.confusion(world).to_string())
+    print(markdown_table(res.confusion(world)) if markdown else res.confusion(world).to_string())
     s = res.summary(world)
     print(f"top-1 {s['catalog_correct']}/{s['catalog_cases']} = {100 * s['top1']:.1f} %; out-of-catalog "
           f"unexplained and localised {s['outside_ok']}; nothing withheld -> nothing identified "
-          f"{s['none_clean']}; median held-out RMSE shrinkage {100 * s['median_shrinkage']:.1f} %")
+          f"{s['none_clean']}; median held-out RMSE shrinkage {100 * s['median_shrinkage']:.1f} %; withheld "
+          f"effect among all identified (force + energy side) {s['found_anywhere']}/{s['catalog_cases']}")
     if len(seeds) > 1:
         for seed in seeds:
             print(f"  seed {seed}: top-1 {100 * res.top1(world, seed):.1f} %")
@@ -53,7 +55,8 @@ def report(world: str, res: WorldSelftest, seeds: list[int], png: Path | None, s
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--world", default="all", choices=sorted(WORLDS) + ["all"])
-    ap.add_argument("--seeds", type=int, default=1, help="number of seeds (0 .. N-1)")
+    ap.add_argument("--seeds", type=int, default=1, help="number of seeds (first-seed .. first-seed + N - 1)")
+    ap.add_argument("--first-seed", type=int, default=0, help="first seed")
     ap.add_argument("--effects", default=None, help="comma-separated withheld effects (default: all the world "
                                                     "supports)")
     ap.add_argument("--duration", type=float, default=900.0, help="seconds per trip (3 trips per case)")
@@ -63,15 +66,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--png", type=Path, default=None, help="folder for the confusion heat maps (PNG per world)")
     ap.add_argument("--from-json", type=Path, default=None, help="print (and plot) the tables of a saved --json "
                                                                   "run instead of running")
+    ap.add_argument("--markdown", action="store_true", help="print the confusion tables as markdown")
     args = ap.parse_args(argv)
     if args.from_json:
         dump = json.loads(args.from_json.read_text())
         for world, d in dump.items():
             res = WorldSelftest([WorldResult(**r) for r in d["results"]])
-            report(world, res, sorted({r.seed for r in res.results}), args.png)
+            report(world, res, sorted({r.seed for r in res.results}), args.png, markdown=args.markdown)
         return 0
     worlds = sorted(WORLDS) if args.world == "all" else [args.world]
-    seeds = range(1 if args.quick else args.seeds)
+    seeds = range(args.first_seed, args.first_seed + (1 if args.quick else args.seeds))
     duration = 240.0 if args.quick else args.duration
     settings = default_settings(quick=args.quick)
     dump = {}
@@ -86,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
         res = run_world_selftest(world, seeds, effects, duration_s=duration, settings=settings,
                                  out_dir=args.out / world if args.out else None,
                                  progress=lambda msg: print(msg, flush=True))
-        s = report(world, res, list(seeds), args.png, time.perf_counter() - t0)
+        s = report(world, res, list(seeds), args.png, time.perf_counter() - t0, args.markdown)
         dump[world] = {"summary": s, "results": [r.to_dict() for r in res.results],
                        "confusion": res.confusion(world).to_dict()}
     if args.json:

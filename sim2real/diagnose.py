@@ -61,7 +61,8 @@ class DiagnosisSettings:
     loss sees offsets of a few N where cruising scatters by a few N, which is no sim-to-real gap worth a switch;
     max_effects); base_first: rank and select the effects over the calibrated base (mass, drag area, rolling
     resistance, drive-train efficiency, brake gain; :mod:`.base`) — for a preset that does not match the car;
-    the base block is reported either way; min_effect [N]: smallest bin median reported as a departure / unexplained residual;
+    the base block is reported either way; min_effect [N]: smallest bin median reported as a departure /
+    unexplained residual;
     floor roads (profile name, seed) and floor_duration [s] per road for the sim's own trips (none: no floor);
     resimulate: switch the identified effects on in the simulator with their fitted parameters, re-drive the
     floor trips and recompute the gap ("after, simulator"); replay: feed the recorded forces and road into the

@@ -340,7 +340,7 @@ class Selector:
 
     def effect_size(self, d: Design, fit: Fit, name: str) -> float:
         """RMS of one effect's fitted contribution over the training rows [N, or W on the power side]."""
-        own = [i for i, o in enumerate(d.owner) if o == name]
+        own = np.array([i for i, o in enumerate(d.owner) if o == name], dtype=int)
         tr = self.split.train
         contrib = d.A[np.ix_(tr, own)] @ fit.X[own]
         return float(np.sqrt(np.mean(contrib ** 2))) if contrib.size else 0.0

@@ -106,7 +106,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
             cands = tuple(c.strip() for c in candidates.split(",") if c.strip()) if candidates else DEFAULT_CANDIDATES
             if not floor_duration >= 60.0:
                 raise DiagnosisError(f"--floor-duration must be at least 60 s, got {floor_duration} s")
-            settings = DiagnosisSettings(candidates=cands, seed=seed, resimulate=resimulate, replay=resimulate,
+            settings = DiagnosisSettings(candidates=cands, seed=seed, resimulate=resimulate,
                                          strict_candidates=candidates is not None, base_first=base_first,
                                          floor_duration=floor_duration)
             with Progress(console=console) as bar:

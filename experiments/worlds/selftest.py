@@ -51,6 +51,11 @@ class WorldResult:
         return asdict(self)
 
 
+def _label(identified: str) -> str:
+    """Column label of the confusion table: failed cases (full message in the results) count as 'error'."""
+    return "error" if identified.startswith("error") else identified
+
+
 @dataclass
 class WorldSelftest:
     """All cases of a run; :meth:`confusion` per world (and per seed)."""
@@ -61,13 +66,14 @@ class WorldSelftest:
         return pd.DataFrame([r.to_dict() for r in self.results])
 
     def confusion(self, world: str | None = None, seed: int | None = None) -> pd.DataFrame:
-        """Rows: withheld effect, columns: first identified effect, entries: counts over the selected cases."""
+        """Rows: withheld effect, columns: first identified effect ('error' for a failed case), entries: counts
+        over the selected cases."""
         rows = [r for r in self.results if (world is None or r.world == world) and (seed is None or r.seed == seed)]
         labels = list(dict.fromkeys(r.withheld for r in rows))
-        cols = sorted({r.identified for r in rows})
+        cols = sorted({_label(r.identified) for r in rows})
         m = pd.DataFrame(0, index=labels, columns=cols)
         for r in rows:
-            m.loc[r.withheld, r.identified] += 1
+            m.loc[r.withheld, _label(r.identified)] += 1
         return m
 
     def top1(self, world: str | None = None, seed: int | None = None) -> float:
@@ -80,13 +86,16 @@ class WorldSelftest:
         rows = [r for r in self.results if world is None or r.world == world]
         out = [r for r in rows if r.withheld == OUTSIDE]
         none = [r for r in rows if r.withheld == NONE]
-        return {"cases": len(rows), "top1": self.top1(world),
+        cat = [r for r in rows if r.withheld not in (NONE, OUTSIDE)]
+        shrink = [r.shrinkage for r in cat if np.isfinite(r.shrinkage)]
+        anywhere = sum(bool(set(r.all_identified) & set(supported_effects(r.world)[r.withheld].accepted))
+                       for r in cat if r.withheld in supported_effects(r.world))
+        return {"cases": len(rows), "top1": self.top1(world), "found_anywhere": anywhere,
                 "catalog_correct": sum(r.correct for r in rows if r.withheld not in (NONE, OUTSIDE)),
                 "catalog_cases": sum(r.withheld not in (NONE, OUTSIDE) for r in rows),
                 "outside_ok": f"{sum(r.correct for r in out)}/{len(out)}",
                 "none_clean": f"{sum(r.correct for r in none)}/{len(none)}",
-                "median_shrinkage": float(np.nanmedian([r.shrinkage for r in rows
-                                                        if r.withheld not in (NONE, OUTSIDE)] or [np.nan]))}
+                "median_shrinkage": float(np.median(shrink)) if shrink else float("nan")}
 
 
 def default_settings(quick: bool = False) -> DiagnosisSettings:
@@ -191,4 +200,14 @@ def plot_confusion(table: pd.DataFrame, path: Path | str, title: str) -> Path:
     ax.set_title(title, fontsize=10)
     fig.tight_layout()
     return save_figure(fig, path)
+
+
+def markdown_table(table: pd.DataFrame, index_name: str = "withheld \\ identified") -> str:
+    """A DataFrame as a GitHub markdown table (zeros left blank)."""
+    cols = [str(c) for c in table.columns]
+    lines = ["| " + " | ".join([index_name] + cols) + " |", "|" + "---|" * (len(cols) + 1)]
+    for idx, row in table.iterrows():
+        cells = ["" if (isinstance(v, (int, np.integer)) and v == 0) else str(v) for v in row.tolist()]
+        lines.append("| " + " | ".join([str(idx)] + cells) + " |")
+    return "\n".join(lines)
 

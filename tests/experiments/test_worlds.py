@@ -21,6 +21,7 @@ from roadload.experiments.worlds.selftest import (
     UNEXPLAINED,
     WorldResult,
     WorldSelftest,
+    markdown_table,
     score,
 )
 from roadload.sim2real import SimConfig
@@ -292,3 +293,6 @@ def test_scoring_and_confusion():
     m = res.confusion("w")
     assert m.loc["payload", "mass_offset"] == 1 and m.loc["payload", "drag_area"] == 1
     assert res.top1("w") == 0.5 and res.summary("w")["none_clean"] == "1/1"
+    md = markdown_table(m).splitlines()
+    assert md[0] == "| withheld \\ identified | drag_area | mass_offset | unexplained |"
+    assert md[2] == "| payload | 1 | 1 |  |"

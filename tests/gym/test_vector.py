@@ -111,10 +111,12 @@ def test_same_step_autoreset_reports_the_final_observation():
 def test_bad_input_is_named():
     venv = EcoDriveVectorEnv(2, config={"route_length": 300.0})
     venv.reset(seed=0)
-    with pytest.raises(ValueError, match=r"actions\[1\]: must be finite"):
+    with pytest.raises(ValueError, match="non-finite"):
         venv.step(np.array([[0.1], [np.nan]], dtype=np.float32))
-    with pytest.raises(ValueError, match=r"expected shape \(2, 1\)"):
+    with pytest.raises(ValueError, match=r"shape \(2, 1\)"):
         venv.step(np.zeros((3, 1), dtype=np.float32))
+    with pytest.raises(ValueError, match="outside the bounds"):
+        venv.step(np.array([[0.1], [1.5]], dtype=np.float32))
     with pytest.raises(GymConfigError, match="observation"):
         EcoDriveVectorEnv(2, config={"observation": "can"})
     with pytest.raises(GymConfigError, match="num_envs"):

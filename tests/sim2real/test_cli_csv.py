@@ -82,3 +82,11 @@ def test_cli_diagnose_takes_format_and_mapping(csv_folder, tmp_path):
     assert d["notes"]["resimulation"].startswith("not asked")
     assert "base_calibration" in d["notes"] and d["notes"]["base_calibration"]["parameters"]
     assert d["effects"] and d["effects"][0]["name"] == "mass_offset"
+
+
+def test_cli_selftest_rejects_an_unknown_world_and_bad_seeds():
+    _load()
+    res = CliRunner().invoke(app, ["sim2real", "selftest", "--world", "mars"])
+    assert res.exit_code == 2 and "unknown world 'mars'" in res.output and "independent" in res.output
+    res = CliRunner().invoke(app, ["sim2real", "selftest", "--world", "independent", "--seeds", "one"])
+    assert res.exit_code == 2 and "--seeds" in res.output

@@ -1,0 +1,98 @@
+"""The named inline stages of the compiled kernels (simulator substep, estimator record loop) against their
+equations, called directly (an ``inline="always"`` numba function is also an ordinary compiled function)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from roadload.envs import layout
+from roadload.units import G
+from roadload.envs import physics as ph
+from roadload.estimators import kernel as K
+
+
+def test_aero_drag_is_eq_2_7_with_the_approach_velocity_of_eq_2_8():
+    rho, cxa, v, k = 1.2, 0.62, 30.0, 0.4
+    assert ph.aero_drag(rho, cxa, v, 0.0, 0.0, k) == pytest.approx(0.5 * rho * cxa * v * v, rel=1e-14)
+    # 5 m/s wind from 90° (pure crosswind): u_x = v, u_y = -5, v_a = |u|, factor 1 + k sin² psi_a
+    u_x, u_y = v - 5.0 * math.cos(math.pi / 2), -5.0
+    v_a = math.hypot(u_x, u_y)
+    expect = 0.5 * rho * cxa * u_x * v_a * (1.0 + k * u_y * u_y / (v_a * v_a))
+    assert ph.aero_drag(rho, cxa, v, 5.0, math.pi / 2, k) == pytest.approx(expect, rel=1e-14)
+    # tailwind faster than the car pushes: negative drag
+    assert ph.aero_drag(rho, cxa, 3.0, 10.0, 0.0, k) < 0.0
+
+
+def test_rolling_resistance_and_climbing_force_are_eq_2_9_2_10_and_2_5():
+    fr, f_roll = ph.rolling_resistance(0.009, 1e-4, 1e-9, 20.0, 1500.0, math.cos(0.02), 0.03)
+    assert fr == pytest.approx(0.009 + 1e-4 * 20.0 + 1e-9 * 20.0 ** 4, rel=1e-14)
+    assert f_roll == pytest.approx(fr * 1500.0 * G * math.cos(0.02) * math.cos(0.03) * math.tanh(200.0))
+    assert ph.rolling_resistance(0.009, 0.0, 0.0, 0.0, 1500.0, 1.0, 0.0)[1] == 0.0  # smoothed to 0 at standstill
+    assert ph.climbing_force(1500.0, math.sin(0.05)) == pytest.approx(1500.0 * 9.80665 * math.sin(0.05))
+
+
+def test_integrate_speed_holds_the_vehicle_and_books_the_hold_force():
+    # braking 50 kN at 0.1 m/s would reverse the car within dt: it stops (a = -v/dt), the rest is hold force
+    v_new, a, f_hold, v_avg = ph.integrate_speed(0.1, 0.0, 50000.0, 100.0, 1500.0, 0.01)
+    assert v_new == 0.0 and a == pytest.approx(-10.0) and v_avg == pytest.approx(0.05)
+    assert f_hold == pytest.approx(0.0 - 50000.0 - 100.0 + 1500.0 * 10.0)  # F_W - F_B - F_nb - M a
+    v_new, a, f_hold, _ = ph.integrate_speed(20.0, 3000.0, 0.0, 500.0, 1500.0, 0.01)  # M a = F_W - F_B - F_nb
+    assert a == pytest.approx(2500.0 / 1500.0) and v_new == pytest.approx(20.0 + 0.01 * a)
+    assert f_hold == pytest.approx(0.0, abs=1e-6)  # only round-off: nothing held while moving
+
+
+def test_layout_constants_match_their_name_lists_and_envs_has_no_star_imports():
+    for prefix, names in (("S_", layout.STATE), ("P_", layout.PARAMS), ("L_", layout.LOG), ("C_", layout.CMD),
+                          ("R_", layout.ROAD), ("T_", layout.TABLES)):
+        assert [getattr(layout, prefix + n) for n in names] == list(range(len(names)))
+    envs = Path(ph.__file__).parent
+    assert not [p.name for p in envs.glob("*.py") if "import *" in p.read_text()]
+
+
+def _spd(n, seed, cond=1e3):
+    rng = np.random.default_rng(seed)
+    q, _ = np.linalg.qr(rng.normal(size=(n, n)))
+    return q @ np.diag(np.geomspace(1.0, cond, n)) @ q.T
+
+
+@pytest.mark.parametrize("sym", [True, False])
+def test_regularise_is_eq_3_34(sym):
+    P = _spd(4, 1)
+    kappa = 0.3
+    out = P.copy()
+    assert K.regularise(out, kappa, np.empty(4), np.empty(4), 4, sym)
+    np.testing.assert_allclose(out, P @ np.linalg.inv(np.eye(4) + kappa * P), rtol=1e-10, atol=1e-12)
+
+
+def test_gain_and_forgetting_covariance_are_algorithm_3_1():
+    P = _spd(4, 2)
+    a = np.array([0.3, -1.0, 0.5, 1.0])
+    lam, w = 0.99, 0.7
+    Pz = P @ a
+    s = a @ Pz
+    L = np.empty(4)
+    K.gain(Pz, w, s, lam, L, 4)
+    np.testing.assert_allclose(L, w * P @ a / (lam + w * a @ P @ a), rtol=1e-13)
+    out = np.empty((4, 4))
+    K.covariance_forgetting(out, P, L, Pz, Pz, 1.0 / lam, 4, True)
+    np.testing.assert_allclose(out, (P - np.outer(L, a) @ P) / lam, rtol=1e-12, atol=1e-14)
+
+
+def test_covariance_health_classifies_indefinite_bounded_and_healthy_p():
+    work = np.empty((3, 3))
+    x = np.zeros(3)
+    healthy = _spd(3, 3)
+    assert K.covariance_health(x, healthy, work, 1e6, 3, True, True)[0] == K.P_HEALTHY
+    # positive diagonal, but indefinite (eigenvalues 3, -1, 1): only the LDLᵀ factorisation sees it
+    indefinite = np.array([[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    assert K.covariance_health(x, indefinite, work, 1e6, 3, True, True)[0] == K.P_CORRUPT
+    assert K.covariance_health(x, indefinite, work, 1e6, 3, True, False)[0] == K.P_HEALTHY
+    negative = np.diag([1.0, -4.5e307, 1.0])  # the failure of issue 16: |diag| is what is reported
+    status, pmax = K.covariance_health(x, negative, work, 1e6, 3, True, False)
+    assert status == K.P_CORRUPT and pmax == 4.5e307
+    assert K.covariance_health(x, 1e7 * healthy, work, 1e6, 3, True, True)[0] == K.P_ABOVE_BOUND
+    nan_x = np.array([0.0, np.nan, 0.0])
+    assert K.covariance_health(nan_x, healthy, work, 1e6, 3, True, False)[0] == K.P_CORRUPT

@@ -13,12 +13,13 @@ import math
 from dataclasses import dataclass, field
 
 from roadload.road_profiles import RoadProfile
+from roadload.vehicle import VehicleSpec
 
 from .base import ControllerError, DriveContext
-from .closed_loop import RunResult, run_closed_loop
+from .closed_loop import Controller, RunResult, run_closed_loop
 from .cruise import CruiseController, CruiseSettings
 from .energy import with_loss_error
-from .force_model import FORCE_MODEL_NAMES, ErroredForceModel, FixedForceModel, OracleForceModel
+from .force_model import FORCE_MODEL_NAMES, ErroredForceModel, FixedForceModel, ForceModel, OracleForceModel
 from .mpc import MpcSettings
 from .mpc_controller import MpcController, MpcControllerSettings
 from .sim_plant import HumanDriver, SimulatorPlant
@@ -47,7 +48,7 @@ class DriveSettings:
     dt: float = 0.1
     # the vehicle the abc model and the online model's prior come from (a fleet operator's nominal vehicle, e.g.
     # a half-loaded truck); None: the driven vehicle itself
-    nominal_vehicle: object = None
+    nominal_vehicle: VehicleSpec | str | None = None
     pipeline: PipelineSettings | None = None  # online model: preprocessing settings (None: the defaults)
     wrong_model: dict | None = None  # sensitivity: {"mass": 0.2, ...} relative errors on the oracle (see .errors)
 
@@ -94,6 +95,7 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
     nominal = st.nominal_vehicle if st.nominal_vehicle is not None else (vehicle if isinstance(vehicle, str)
                                                                          else spec)
     abc = abc_parameters(nominal)
+    force_model: ForceModel
     if st.controller == "mpc" and st.force_model == "oracle":
         force_model = OracleForceModel(plant.true_parameters)
     elif st.controller == "mpc" and st.force_model == "wrong":
@@ -102,14 +104,15 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
         if errors.get("drivetrain_loss"):
             energy = with_loss_error(energy, errors["drivetrain_loss"])
     elif st.controller == "mpc" and st.force_model == "online":
-
-        force_model = OnlineForceModel(_knowledge(nominal), model=st.model, estimator=st.estimator,
-                                       pipeline_settings=st.pipeline)
-        force_model.attach(plant.can_window)
+        online = OnlineForceModel(_knowledge(nominal), model=st.model, estimator=st.estimator,
+                                  pipeline_settings=st.pipeline)
+        online.attach(plant.can_window)
+        force_model = online
     else:
         force_model = FixedForceModel(abc)
     ctx = DriveContext(road=road, energy=energy, force_model=force_model, dt=st.dt,
                        lateral_accel_max=st.mpc.lateral_accel_max)
+    controller: Controller
     if st.controller == "mpc":
         mpc_settings = MpcSettings(**{**st.mpc.__dict__, "solver": st.solver, "time_weight": st.time_weight})
         controller = MpcController(MpcControllerSettings(mpc=mpc_settings))

@@ -88,12 +88,19 @@ class ControllerBase:
     name = "base"
 
     def __init__(self) -> None:
-        self.ctx: DriveContext | None = None
+        self._ctx: DriveContext | None = None
         self.events: Counter = Counter()
+
+    @property
+    def ctx(self) -> DriveContext:
+        """The drive context of the current run; ControllerError before ``reset(ctx)``."""
+        if self._ctx is None:
+            raise ControllerError(f"controller {self.name!r}: call reset(ctx) before act()")
+        return self._ctx
 
     # ------------------------------------------------------------------ lifecycle
     def reset(self, ctx: DriveContext) -> None:
-        self.ctx = ctx
+        self._ctx = ctx
         self.events = Counter()
         self.envelope = SpeedEnvelope(ctx.road, ctx.lateral_accel_max, ctx.guard_decel)
         self._stop_hold_since: float | None = None
@@ -129,7 +136,7 @@ class ControllerBase:
         raise NotImplementedError
 
     def act(self, obs: Observation) -> Command:
-        if self.ctx is None:
+        if self._ctx is None:
             raise ControllerError(f"controller {self.name!r}: call reset(ctx) before act()")
         if not (np.isfinite(obs.v) and np.isfinite(obs.s)):
             raise ControllerError(f"observation not finite (s={obs.s}, v={obs.v})")

@@ -14,7 +14,7 @@ from typing import Any, Protocol
 import numpy as np
 import pandas as pd
 
-from .base import Command, ControllerBase, DriveContext, Observation
+from .base import Command, DriveContext, Observation
 
 VIOLATION_TOLERANCE = 0.1  # [m/s] numerical tolerance above the posted limit
 
@@ -24,7 +24,7 @@ class Plant(Protocol):
 
     def reset(self) -> Observation: ...
 
-    def step(self, cmd: Command): ...  # -> object with .obs, .energy [J], .done
+    def step(self, cmd: Command | None): ...  # None: the plant's own driver; -> object with .obs, .energy [J], .done
 
 
 @dataclass
@@ -35,7 +35,20 @@ class RunResult:
     metrics: dict[str, Any] = field(default_factory=dict)
 
 
-def run_closed_loop(controller: ControllerBase, plant: Plant, ctx: DriveContext, max_time: float | None = None,
+class Controller(Protocol):
+    """What ``run_closed_loop`` drives: a ControllerBase subclass or the plant's built-in HumanDriver
+    (``act`` returns None: the plant's own driver decides)."""
+
+    name: str
+
+    def reset(self, ctx: DriveContext) -> None: ...
+
+    def act(self, obs: Observation) -> Command | None: ...
+
+    def stats(self) -> dict[str, Any]: ...
+
+
+def run_closed_loop(controller: Controller, plant: Plant, ctx: DriveContext, max_time: float | None = None,
                     progress=None) -> RunResult:
     """Drive the road once; ``max_time`` [s] aborts a run that does not arrive (default: 4x the time at 5 m/s)."""
     road = ctx.road
@@ -51,9 +64,9 @@ def run_closed_loop(controller: ControllerBase, plant: Plant, ctx: DriveContext,
         step = plant.step(cmd)
         energy += step.energy
         forces = (np.nan, np.nan, np.nan) if cmd is None else (cmd.traction, cmd.regen, cmd.brake)
-        rows.append((obs.t, obs.s, obs.v, *forces, energy))
+        row = (obs.t, obs.s, obs.v, *forces, energy)
         obs, done = step.obs, step.done
-        rows[-1] = rows[-1] + (obs.a,)
+        rows.append((*row, obs.a))  # the acceleration that resulted from this step's command
         if progress is not None:
             progress(min(obs.s / road.length, 1.0))
     log = pd.DataFrame(rows, columns=["t", "s", "v", "traction", "regen", "brake", "energy", "a_next"])

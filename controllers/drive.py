@@ -16,7 +16,7 @@ from roadload.road_profiles import RoadProfile
 from roadload.vehicle import VehicleSpec
 
 from .base import ControllerError, DriveContext
-from .closed_loop import RunResult, run_closed_loop
+from .closed_loop import Controller, RunResult, run_closed_loop
 from .cruise import CruiseController, CruiseSettings
 from .energy import with_loss_error
 from .force_model import FORCE_MODEL_NAMES, ErroredForceModel, FixedForceModel, ForceModel, OracleForceModel
@@ -104,7 +104,6 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
         if errors.get("drivetrain_loss"):
             energy = with_loss_error(energy, errors["drivetrain_loss"])
     elif st.controller == "mpc" and st.force_model == "online":
-
         online = OnlineForceModel(_knowledge(nominal), model=st.model, estimator=st.estimator,
                                   pipeline_settings=st.pipeline)
         online.attach(plant.can_window)
@@ -113,6 +112,7 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
         force_model = FixedForceModel(abc)
     ctx = DriveContext(road=road, energy=energy, force_model=force_model, dt=st.dt,
                        lateral_accel_max=st.mpc.lateral_accel_max)
+    controller: Controller
     if st.controller == "mpc":
         mpc_settings = MpcSettings(**{**st.mpc.__dict__, "solver": st.solver, "time_weight": st.time_weight})
         controller = MpcController(MpcControllerSettings(mpc=mpc_settings))

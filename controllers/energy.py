@@ -153,7 +153,8 @@ def fit_loss_polynomial(shaft_speed, shaft_torque, loss_power) -> tuple[float, f
     scale = np.abs(a).max(axis=0)
     scale[scale == 0] = 1.0
     coef, _ = nnls(a / scale, p[ok])
-    return tuple(float(c) for c in coef / scale)
+    l0, l1, l2, l3, l4 = (float(c) for c in coef / scale)
+    return l0, l1, l2, l3, l4
 
 
 def generic_ev(mass: float = 1420.0) -> SourceEnergyModel:

@@ -11,6 +11,7 @@ step: ``abc`` (fixed coast-down coefficients, M0), ``oracle`` (the simulator's t
 
 from __future__ import annotations
 
+from types import ModuleType
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -18,6 +19,7 @@ import numpy as np
 from roadload.road_load import RoadLoadParameters, road_load, tractive_force
 from roadload.units import G
 
+ca: ModuleType | None
 try:  # casadi is a hard dependency, but keep numpy-only callers importable without it loaded
     import casadi as ca
 except ImportError:  # pragma: no cover

@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field, fields
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -171,7 +172,7 @@ class OcpSolver:
         n = settings.n_nodes
         self.n = n
         self._build()
-        self._osqp = None
+        self._osqp: Any = None  # osqp.OSQP workspace (osqp ships no type information)
         self._qp_x = None
 
     # ------------------------------------------------------------------ formulation
@@ -215,13 +216,14 @@ class OcpSolver:
         self._blocks_g = [n, n, n, n, n]
         self._nlp = {"x": x, "p": p, "f": obj, "g": g}
         self._energy_fun = ca.Function("energy", [x, p], [energy * 1000.0])
-        opts = {"expand": True, "print_time": False, "error_on_fail": False,
+        opts: dict[str, Any] = {"expand": True, "print_time": False, "error_on_fail": False,
                 "ipopt": {"print_level": 0, "sb": "yes", "max_iter": st.max_iterations, "tol": 1e-6,
                           "acceptable_tol": 1e-4, "acceptable_iter": 5, "mu_strategy": "adaptive",
                           "mumps_permuting_scaling": 0, "mumps_scaling": 0}}
-        warm = {**opts, "ipopt": {**opts["ipopt"], "tol": st.warm_tol, "warm_start_init_point": "yes", "mu_init": 1e-5,
-                                   "warm_start_bound_push": 1e-7, "warm_start_mult_bound_push": 1e-7,
-                                   "warm_start_slack_bound_push": 1e-7, "mu_strategy": "monotone"}}
+        warm_ipopt = {**opts["ipopt"], "tol": st.warm_tol, "warm_start_init_point": "yes", "mu_init": 1e-5,
+                      "warm_start_bound_push": 1e-7, "warm_start_mult_bound_push": 1e-7,
+                      "warm_start_slack_bound_push": 1e-7, "mu_strategy": "monotone"}
+        warm: dict[str, Any] = {**opts, "ipopt": warm_ipopt}
         if st.solver == "ipopt":
             self._cold = ca.nlpsol("mpc_cold", "ipopt", self._nlp, opts)
             self._warm = ca.nlpsol("mpc_warm", "ipopt", self._nlp, warm)
@@ -372,6 +374,8 @@ class OcpSolver:
 
     def source_energy(self, plan: Plan, a_prev: float, preview: Preview, params: RoadLoadParameters) -> float:
         """Source energy [J] of a plan under the model (for reporting and tests)."""
+        if plan.x is None:
+            raise MpcError("source_energy: the plan has no primal vector x (a fallback plan); solve one first")
         return float(self._energy_fun(plan.x, self._params(a_prev, preview, params)))
 
     # ------------------------------------------------------------------ solve

@@ -150,7 +150,7 @@ class MpcController(ControllerBase):
         self.solve_times.append(plan.solve_time if plan is not None else time.perf_counter() - t0)
         if plan is not None:
             self.iterations.append(plan.iterations)
-        if ok:
+        if ok and plan is not None:
             if plan.relaxed:
                 self.events["relaxed_plans"] += 1  # counted in the run metrics (ctl_relaxed_plans)
             self.plan = plan

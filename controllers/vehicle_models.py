@@ -79,10 +79,11 @@ def _fit_energy(spec: VehicleSpec) -> SourceEnergyModel:
     r = float(spec.tires.dynamic_radius)
     speeds = np.linspace(3.0, 40.0, 38)
     if d.kind == "bev":
-        m = d.motor
+        m = d.require_motor()
+        battery = d.require_battery()
         ratio = float(d.gear_ratios[0] * d.final_drive)
-        aux = float(d.battery.auxiliary_power)
-        voc = float(d.battery.open_circuit_voltage)
+        aux = float(battery.auxiliary_power)
+        voc = float(battery.open_circuit_voltage)
         w_list, t_list, loss = [], [], []
         for v in speeds:
             omega = float(speed_ratio(P, 1)) * v
@@ -105,7 +106,7 @@ def _fit_energy(spec: VehicleSpec) -> SourceEnergyModel:
                                  max_regen_power=float(m.regen_power_limit),
                                  max_regen_torque=float(m.regen_torque_limit),
                                  auxiliary_power=aux, max_brake_deceleration=0.8 * G, name=spec.name)
-    e = d.engine
+    e = d.require_engine()
     if e is None or d.shift is None:
         raise ValueError(f"{spec.name}: an ICE drive-train needs an engine and a shift spec")
     ratios = tuple(float(g * d.final_drive) for g in d.gear_ratios)
@@ -134,12 +135,13 @@ def _fit_energy(spec: VehicleSpec) -> SourceEnergyModel:
     coef, _ = nnls(a / scale, np.asarray(target))  # Willans line with non-negative friction terms
     coef = coef / scale
     eta = 1.0 / coef[0]
-    loss = tuple(float(c * eta) for c in coef[1:])
+    ice_loss = tuple(float(c * eta) for c in coef[1:])
     pred = np.asarray(rows) @ coef
     FIT_QUALITY[spec.name] = {"rms_error_W": float(np.sqrt(np.mean((pred - np.asarray(target)) ** 2))),
                               "mean_fuel_power_W": float(np.mean(target))}
     # speed-only shift rule: upshift where the engine reaches the mean of the zero/full-load upshift speeds
-    up = 0.5 * (d.shift.upshift_speed_low + d.shift.upshift_speed_high)
+    shift_rule = d.require_shift()
+    up = 0.5 * (shift_rule.upshift_speed_low + shift_rule.upshift_speed_high)
     shift = tuple(float(up * r / ratios[g]) for g in range(d.n_gears - 1))
     torque_max = float(np.max(e.full_load.y))
     power_max = rated
@@ -149,7 +151,7 @@ def _fit_energy(spec: VehicleSpec) -> SourceEnergyModel:
     drag = -np.interp(w_drag, e.drag.x, e.drag.y)
     brake_torque = 0.9 * float(np.interp(up, e.drag.x, -np.asarray(e.drag.y)))
     brake_power = 0.9 * float(np.max(drag * w_drag))
-    return SourceEnergyModel(kind="ice", wheel_radius=r, gear_ratios=ratios, loss=loss, max_power=power_max,
+    return SourceEnergyModel(kind="ice", wheel_radius=r, gear_ratios=ratios, loss=ice_loss, max_power=power_max,
                              max_torque=torque_max, max_regen_power=brake_power, max_regen_torque=brake_torque,
                              indicated_efficiency=float(min(max(eta, 0.05), 1.0)),
                              auxiliary_power=0.0, max_brake_deceleration=0.8 * G, shift_speeds=shift, name=spec.name)

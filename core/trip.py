@@ -19,7 +19,7 @@ import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterator, Literal
 
 import numpy as np
 import pandas as pd
@@ -387,7 +387,7 @@ class TripWriter:
         self._tmp = self._ctx.__enter__()
         return self
 
-    def __exit__(self, exc_type, exc, tb) -> bool:
+    def __exit__(self, exc_type, exc, tb) -> Literal[False]:
         if self._writer is not None and not self._closed:
             self._writer.close()
         if exc_type is None and not self._closed:
@@ -480,8 +480,10 @@ class TripWriter:
             self._writer = pq.ParquetWriter(self._tmp, table.schema, compression="zstd", compression_level=15,
                                             use_dictionary=False, column_encoding=encoding)
         elif table.schema != self._schema:
-            raise TripError(f"{self.path}: chunk columns {names} differ from the first chunk's "
-                            f"{self._schema.names}")
+            expected = [] if self._schema is None else self._schema.names
+            raise TripError(f"{self.path}: chunk columns {names} differ from the first chunk's {expected}")
+        if self._writer is None:
+            raise TripError(f"{self.path}: TripWriter has no open Parquet writer (use it as a context manager)")
         self._writer.write_table(table)
         del table, arrays
         pa.default_memory_pool().release_unused()  # hand the chunk's buffers back: bounded RSS over a day

@@ -457,7 +457,31 @@ class DrivetrainSpec:
     @property
     def source_inertia(self) -> float:
         """I_E (engine) or motor rotor inertia [kg m^2]."""
-        return self.engine.inertia if self.kind == "ice" else self.motor.inertia
+        return self.require_engine().inertia if self.kind == "ice" else self.require_motor().inertia
+
+    def require_engine(self) -> EngineSpec:
+        """The engine of an 'ice' drive-train; VehicleSpecError when it is missing."""
+        if self.engine is None:
+            raise VehicleSpecError(f"drivetrain.engine: required for kind {self.kind!r}, got None")
+        return self.engine
+
+    def require_shift(self) -> ShiftSpec:
+        """The shift strategy of an 'ice' drive-train; VehicleSpecError when it is missing."""
+        if self.shift is None:
+            raise VehicleSpecError(f"drivetrain.shift: required for kind {self.kind!r}, got None")
+        return self.shift
+
+    def require_motor(self) -> MotorSpec:
+        """The traction motor of a 'bev' drive-train; VehicleSpecError when it is missing."""
+        if self.motor is None:
+            raise VehicleSpecError(f"drivetrain.motor: required for kind {self.kind!r}, got None")
+        return self.motor
+
+    def require_battery(self) -> BatterySpec:
+        """The traction battery of a 'bev' drive-train; VehicleSpecError when it is missing."""
+        if self.battery is None:
+            raise VehicleSpecError(f"drivetrain.battery: required for kind {self.kind!r}, got None")
+        return self.battery
 
     def reduced_inertia(self, gear: int) -> float:
         """I_red(G) [kg m^2] at the wheels, without the wheels themselves (eq. 2.17); gear 0 = neutral (ICE)."""
@@ -711,7 +735,7 @@ def _build(tp: Any, data: Any, path: str) -> Any:
             return None
         inner = [a for a in args if a is not type(None)]
         return _build(inner[0], data, path)
-    if dataclasses.is_dataclass(tp):
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
         if isinstance(data, tp):
             return data
         if not isinstance(data, dict):

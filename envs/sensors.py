@@ -16,6 +16,7 @@ sample's value does not depend on how the trip was cut into steps: ``SensorModel
 from __future__ import annotations
 
 from collections import OrderedDict
+from typing import Sequence
 
 import numpy as np
 
@@ -98,6 +99,7 @@ class SensorModel:
                     raise SensorConfigError(f"effect {effect!r} parameter 'channel': unknown or disabled channel(s) "
                                             f"{unknown or [explicit]}; enabled channels: {self.names}")
                 return np.array([n in wanted for n in self.names], dtype=bool)
+            sel: Sequence[str]
             if which == "inputs":
                 sel = INPUT_CHANNELS
             elif which == "outputs":
@@ -155,6 +157,8 @@ class SensorModel:
     def _dropout_runs(self, c: int) -> list[tuple[int, int]]:
         """(start, length) of dropout events that begin in chunk c (absolute sample indices)."""
         p = self.dropouts
+        if p is None:  # effect 'sensor_dropouts' off
+            return []
         g = np.random.default_rng([self.seed, 3, c])
         dt_meas = self.dt * self.decimation
         n = g.poisson(float(p["rate"]) / 3600.0 * CHUNK * dt_meas)
@@ -165,6 +169,8 @@ class SensorModel:
     def _outlier_bursts(self, j: int, c: int) -> list[tuple[int, float, np.ndarray]]:
         """(start, sign, sizes) of the outlier bursts of channel j that begin in chunk c (absolute sample index;
         sizes: burst_length values magnitude outlier_scale (1 + |N(0,1)|))."""
+        if self.outliers is None:  # effect 'sensor_outliers' off
+            return []
         go = np.random.default_rng([self.seed, 2, j, c])
         starts = np.flatnonzero(go.random(CHUNK) < float(self.outliers["rate"]))
         signs = np.where(go.random(starts.size) < 0.5, -1.0, 1.0)
@@ -195,8 +201,8 @@ class SensorModel:
                 u = go.random(CHUNK)
                 idx = np.flatnonzero(u < float(self.outliers["rate"]))
                 if idx.size:
-                    sign = np.where(go.random(idx.size) < 0.5, -1.0, 1.0)
-                    add[j, idx] += sign * self.outlier_size[j] * (1.0 + np.abs(go.standard_normal(idx.size)))
+                    signs = np.where(go.random(idx.size) < 0.5, -1.0, 1.0)
+                    add[j, idx] += signs * self.outlier_size[j] * (1.0 + np.abs(go.standard_normal(idx.size)))
         nan = missing = None
         if self.dropouts is not None:
             drop = np.zeros(CHUNK, dtype=bool)
@@ -251,7 +257,7 @@ class SensorModel:
                 val = val + np.concatenate([p[0][j] for p in perturb])[lo:lo + n_meas]
             val = self._quantise(val, j)
             if self.dropouts is not None and not self.missing_mode and perturb:
-                val[np.concatenate([p[1][j] for p in perturb])[lo:lo + n_meas]] = np.nan
+                val[np.concatenate([p[1][j] for p in perturb if p[1] is not None])[lo:lo + n_meas]] = np.nan
             out[name] = val
         if self.dropouts is not None and self.missing_mode and perturb:
             keep = ~np.concatenate([p[2] for p in perturb])[lo:lo + n_meas]

@@ -11,7 +11,7 @@ import os
 import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, overload
 
 import numpy as np
 import pandas as pd
@@ -299,13 +299,14 @@ class Simulator:
         X[S_LAST_SHIFT] = -1e9
         X[S_RIDX] = 0
         pay = self.effects.params("payload")
-        X[S_MASS] = self.vehicle.body.mass + (pay["initial_payload"] if self.effects.enabled("payload") else 0.0)
+        X[S_MASS] = self.vehicle.body.mass + (float(pay["initial_payload"]) if self.effects.enabled("payload") else 0.0)
         if X[S_MASS] <= 0:
             raise SimulationError("effect 'payload' parameter 'initial_payload': makes the mass <= 0")
         X[S_DRAGF] = 1.0 + (P[P_DRAG_ROOFBOX] if P[P_DRAG_ON] > 0.5 else 0.0)
         X[S_OIL_T] = P[P_OIL_START] if P[P_OIL_ON] > 0.5 else P[P_OIL_WARM]
         X[S_DISC_T] = P[P_T_AMB]
-        X[S_SOC] = self.vehicle.drivetrain.battery.initial_soc if self.vehicle.drivetrain.kind == "bev" else 0.0
+        d = self.vehicle.drivetrain
+        X[S_SOC] = d.require_battery().initial_soc if d.kind == "bev" else 0.0
         if P[P_KIND_BEV] > 0.5:
             X[S_GEAR], X[S_MODE] = 1, MODE_LOCKED
             X[S_OMEGA_E] = speed_ratio(P, 1) * v
@@ -688,6 +689,24 @@ class Simulator:
             self._log[:, :keep] = self._log[:, n_rel - keep:n_rel]
             self.X[S_NLOG] = keep
             self._log_base += n_rel - keep
+
+
+@overload
+def simulate(vehicle: VehicleSpec | str, road: RoadProfile | DriveCycle,
+             effects: EffectsConfig | list[str] | str | dict | None = None, sensors: SensorSpec | None = None,
+             seed: int = 0, duration: float | None = None, distance: float | None = None,
+             driver: DriverConfig | DriveCycle | None = None, progress: Callable[[float], None] | None = None,
+             initial_speed: float = 0.0, out: None = None, precision: str = "compact",
+             chunk_seconds: float = 300.0) -> Trip: ...
+
+
+@overload
+def simulate(vehicle: VehicleSpec | str, road: RoadProfile | DriveCycle,
+             effects: EffectsConfig | list[str] | str | dict | None = None, sensors: SensorSpec | None = None,
+             seed: int = 0, duration: float | None = None, distance: float | None = None,
+             driver: DriverConfig | DriveCycle | None = None, progress: Callable[[float], None] | None = None,
+             initial_speed: float = 0.0, *, out: str | os.PathLike, precision: str = "compact",
+             chunk_seconds: float = 300.0) -> Path: ...
 
 
 def simulate(vehicle: VehicleSpec | str, road: RoadProfile | DriveCycle,

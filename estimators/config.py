@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal, overload
 
 import numpy as np
 
@@ -29,6 +29,14 @@ REGULARISATION_KINDS = {"none": K.REG_NONE, "levenberg_marquardt": K.REG_LM, "ti
 _REG_ALIASES = {"lm": "levenberg_marquardt", "levenberg-marquardt": "levenberg_marquardt",
                 "levenbergmarquardt": "levenberg_marquardt", None: "none", "off": "none"}
 INSTRUMENT_KINDS = {"none": K.IV_NONE, "delayed": K.IV_DELAY, "user": K.IV_USER}
+
+
+@overload
+def _matrix(value: Any, n: int, what: str, *, allow_none: Literal[False] = False, psd: bool = False) -> np.ndarray: ...
+
+
+@overload
+def _matrix(value: Any, n: int, what: str, *, allow_none: bool, psd: bool = False) -> np.ndarray | None: ...
 
 
 def _matrix(value: Any, n: int, what: str, *, allow_none: bool = False, psd: bool = False) -> np.ndarray | None:
@@ -120,7 +128,7 @@ class EstimatorConfig:
     symmetrize: bool = True
     blowup_ratio: float = 1e6
     covariance_bound_ratio: float = 1e8
-    _arrays: dict = field(default=None, init=False, repr=False, compare=False)
+    _arrays: dict = field(default_factory=dict, init=False, repr=False, compare=False)  # set in __post_init__
 
     # ------------------------------------------------------------------ validation
     def __post_init__(self) -> None:
@@ -136,7 +144,8 @@ class EstimatorConfig:
                 if given.size > 3:
                     raise EstimatorConfigError(f"psi_params: at most 3 tuning constants, got {given.size}")
                 params[:given.size] = given.tolist()
-            check_psi_params(self.psi, tuple(params))
+            c1, c2, c3 = params
+            check_psi_params(self.psi, (c1, c2, c3))
         except InfluenceError as exc:
             raise EstimatorConfigError(str(exc)) from None
         self.psi = self.psi.lower().replace("-", "").replace("_", "")

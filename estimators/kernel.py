@@ -332,7 +332,8 @@ def covariance_health(X, P, pivots, p_bound, n, sym, factorise):
     """Classify P_t (and X̂_t) after an update; returns (P_HEALTHY | P_ABOVE_BOUND | P_CORRUPT, max |diag P|).
 
     P_CORRUPT: any non-finite X̂_i or P_ij, a diagonal entry ≤ 0, or (P symmetric and ``factorise``) a
-    non-positive pivot of P = Uᵀ D U (i.e. P not positive definite). P_ABOVE_BOUND: healthy but max diag P > ``p_bound``.
+    non-positive pivot of P = Uᵀ D U (i.e. P not positive definite). P_ABOVE_BOUND: healthy but
+    max diag P > ``p_bound``.
     For symmetric positive definite P, |P_ij| ≤ √(P_ii P_jj), so bounded diagonals bound every entry."""
     probe = 0.0
     pmax = 0.0
@@ -434,7 +435,8 @@ def store_sample(t, X, P, r_prior, r_post, w, sigma2, out_X, out_Pdiag, out_rpri
 
 
 # ============================================================================ the record loop
-@njit(cache=True, nogil=True, _nrt=False)
+# _nrt=False: numba's private switch for reference counting, not listed in its njit overloads
+@njit(cache=True, nogil=True, _nrt=False)  # type: ignore[call-overload]
 def run_record(regressors, outputs, instruments, codes, settings, process_noise, desired_cov, transition, xmin,
                xmax, P0, X, P, scalars, instrument_ring, counters, out_X, out_Pdiag, out_rprior, out_rpost, out_w,
                out_scale, vectors, matrices, size_tag):

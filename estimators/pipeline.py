@@ -48,7 +48,8 @@ SMOOTHED_CHANNELS = ("vehicle_speed", "accel_x", "drive_torque", "engine_speed",
 DISCRETE_CHANNELS = ("gear", "clutch", "brake_pressure_front", "brake_pressure_rear")
 WHEEL_SPEEDS = ("wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr")
 TRIGGER_CONDITIONS = ("no_brake", "moving", "no_slip", "torque", "rim_torque_available")
-PIPELINE_CHANNELS = SMOOTHED_CHANNELS + DISCRETE_CHANNELS   # every measured channel the pipeline reads
+PIPELINE_CHANNELS = tuple(dict.fromkeys(SMOOTHED_CHANNELS + DISCRETE_CHANNELS))
+"""Every measured channel the pipeline reads (when present)."""
 
 
 class PipelineError(ValueError):
@@ -504,9 +505,6 @@ def _stage_states(dec: pd.DataFrame, knowledge: VehicleKnowledge, settings: Pipe
     out["trigger"] = trigger
     return pd.DataFrame(out)
 
-
-PIPELINE_CHANNELS = tuple(dict.fromkeys(SMOOTHED_CHANNELS + DISCRETE_CHANNELS))
-"""Every measured channel the pipeline reads (when present)."""
 
 
 def load_for_pipeline(path: str | os.PathLike) -> Trip:

@@ -119,7 +119,8 @@ class RecursiveEstimator:
         self._x = arr["x0"].copy()
         self._p = arr["P0"].copy()
         self._scalars = np.array([self.config.scale0 ** 2, self.config.quantile0, float(np.max(np.diag(arr["P0"])))])
-        k = self.config.instrument_delay if self.config.instruments == "delayed" else 1
+        delay = self.config.instrument_delay  # set (default 4) whenever instruments are 'delayed'
+        k = delay if self.config.instruments == "delayed" and delay is not None else 1
         self._instrument_ring = np.zeros((k, n))
         self._counters = np.zeros(K.N_CT, dtype=np.int64)
         self._counters[K.CT_BLOWUP_AT] = -1
@@ -242,7 +243,8 @@ class RecursiveEstimator:
         arr = self.config.kernel_arrays
         e2, e1 = self._empty_out
         K.run_record(kernel_array(a), kernel_array(b), Z, self._codes_final, arr["fp"], arr["Q"], arr["Pd"],
-                     arr["F"], arr["xmin"], arr["xmax"], arr["P0"], self._x, self._p, self._scalars, self._instrument_ring, self._counters,
+                     arr["F"], arr["xmin"], arr["xmax"], arr["P0"], self._x, self._p, self._scalars,
+                     self._instrument_ring, self._counters,
                      e2, e2, e1, e1, e1, e1, *self._scratch, self._tag)
         return self._x.copy()
 
@@ -287,8 +289,8 @@ def run_many(config: EstimatorConfig, A, B, instruments=None, store: str = "full
              n_threads: int | None = None) -> EstimationResult:
     """Run independent records (trips) in parallel threads from the initial state of ``config``.
 
-    A: K×T×n (or T×n shared by all trips; it is copied per trip), B: K×T; pad shorter trips with NaN (padding is skipped and
-    counted). Results carry the trip axis first; counters are arrays of length K; ``state`` is a list.
+    A: K×T×n (or T×n shared by all trips; it is copied per trip), B: K×T; pad shorter trips with NaN (padding is
+    skipped and counted). Results carry the trip axis first; counters are arrays of length K; ``state`` is a list.
     ``n_threads``: worker threads (default: all cores); the kernel releases the GIL, so trips run on all cores.
     Identical to running :meth:`RecursiveEstimator.run` on each trip (the same compiled function)."""
     if store not in _STORE:

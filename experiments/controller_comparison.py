@@ -41,7 +41,8 @@ from roadload.presets import TRUCK_NOMINAL_MASS, truck_spec
 from roadload.road_profiles import city, cycle_to_profile, hilly, long_haul_truck, long_grades, motorway
 from roadload.controllers.drive import resolve_road
 from roadload.fileio import write_text
-from roadload.experiments.controller_report import markdown_table, write_figures
+from roadload.experiments.controller_report import write_figures
+from roadload.tables import markdown_table
 
 KMH = 1 / 3.6
 

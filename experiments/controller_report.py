@@ -10,7 +10,6 @@ import numpy as np
 import pandas as pd
 
 from roadload.fileio import save_figure
-from roadload.tables import markdown_table
 
 LABELS = {"cruise": "cruise control (PI)", "human": "human-like driver", "mpc_oracle": "MPC oracle",
           "mpc_abc": "MPC abc (M0)", "mpc_online": "MPC online (M4-RRLM)"}

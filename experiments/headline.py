@@ -19,7 +19,7 @@ import pandas as pd
 
 from roadload.experiments.controller_comparison import (PairedTask, format_difference, paired_summary,
                                                         run_paired_task)
-from roadload.experiments.controller_report import markdown_table
+from roadload.tables import markdown_table
 from roadload.fileio import write_text
 from roadload.sweep import run_sweep
 

@@ -27,6 +27,7 @@ from roadload.experiments.worlds import generate_case, supported_effects
 from roadload.sim2real.catalog import candidate_names, get_candidate
 from roadload.vehicle import load_vehicle
 from roadload.sim2real.diagnose import Diagnosis, DiagnosisSettings, diagnose, fit_floor, sim_trips
+from roadload.sim2real.floor import SimFloor
 from roadload.sim2real.simconfig import SimConfig
 from roadload.sim2real.selftest import UNEXPLAINED, identified_effect, outside_localised
 from roadload.sweep import run_sweep
@@ -168,12 +169,13 @@ class SelftestResult:
 def _case(label: str, switch: str, diag: Diagnosis, correct: bool, where: str, seconds: float) -> SelftestCase:
     effects = diag.effects + ((diag.energy or {}).get("effects") or [])
     eff = effects[0] if effects else {}
-    if diag.effects or not (diag.energy or {}).get("effects"):
+    energy = diag.energy or {}
+    if diag.effects or not energy.get("effects"):
         shrink, shrink_sim = diag.shrinkage("rmse"), diag.shrinkage("rmse", simulator=True)
         before, after = diag.gap_before["force_residual"]["rmse"], diag.gap_after["force_residual"]["rmse"]
     else:   # identified on the energy side: the battery-power residual's RMSE [W]
-        before = diag.energy["power_residual_before"]["rmse"]
-        after = diag.energy["power_residual_after"]["rmse"]
+        before = energy["power_residual_before"]["rmse"]
+        after = energy["power_residual_after"]["rmse"]
         shrink, shrink_sim = 1.0 - after / before, float("nan")
     return SelftestCase(label, switch, identified_effect(diag), correct, shrink, shrink_sim, before, after,
                         eff.get("parameters", {}), eff.get("sim_parameters"), where, seconds)
@@ -238,8 +240,9 @@ def run_selftest(vehicle: str = "bmw_i3", effects: Sequence[WithheldEffect] = SE
                                       float("nan"), {}, None, ""))
     out_case = cases.pop() if outside else None
     last = outcomes[-1]
+    nan = float("nan")
     none_case = last.value if last.ok else SelftestCase(NONE_LABEL, "none", f"error: {last.error}", False,
-                                                        *([float("nan")] * 4), {}, None, "")
+                                                        nan, nan, nan, nan, {}, None, "")
     return SelftestResult(cases, out_case, bool(out_case.correct) if out_case else False, vehicle, none_case)
 
 
@@ -414,9 +417,13 @@ def run_world(world: str, seeds: Sequence[int] = (0, 1, 2), effects: Sequence[st
                 say(_line(res))
         return WorldRun(world, vehicle or "bmw_i3 (matched: the world is roadload's own)", results)
     names = list(effects) if effects is not None else [n for n in supported_effects(world)]
-    tmp = tempfile.TemporaryDirectory(prefix=f"s2r-{world}-") if work is None else None
-    root = Path(tmp.name if tmp else work)
-    floor = None
+    tmp: tempfile.TemporaryDirectory[str] | None = None
+    if work is None:
+        tmp = tempfile.TemporaryDirectory(prefix=f"s2r-{world}-")
+        root = Path(tmp.name)
+    else:
+        root = Path(work)
+    world_floor: SimFloor | None = None  # fitted on the first case's trips, shared by all cases
     try:
         for seed in seeds:
             for name in names:
@@ -425,10 +432,10 @@ def run_world(world: str, seeds: Sequence[int] = (0, 1, 2), effects: Sequence[st
                     case = generate_case(world, name, seed, n_trips=3, duration_s=duration, out_dir=root / f"s{seed}")
                     trips = case.import_trips()
                     sim = SimConfig.load(vehicle) if vehicle else SimConfig(load_vehicle(case.vehicle_path))
-                    if floor is None:
-                        floor = fit_floor(sim, set(trips[0].channels), settings)
+                    if world_floor is None:
+                        world_floor = fit_floor(sim, set(trips[0].channels), settings)
                     t1, c1 = time.perf_counter(), time.process_time()
-                    diag = diagnose(trips, sim, settings, floor=floor)
+                    diag = diagnose(trips, sim, settings, floor=world_floor)
                     cpu = time.process_time() - c1
                     band = case.truth["parameters"] if name == OUTSIDE_WORLD else {}
                     res = _world_result(world, seed, name, diag, tuple(case.truth.get("accepted", ())),

@@ -11,8 +11,8 @@ an SI value divided by a fixed scale (``obs_scaling='normalized'``, default) or 
 
 Reward: ``-scale * (energy + time * dt + speeding * (v - v_lim)+ dt + lateral * (|a_y| - a_y,max)+ dt
 + stop * [stop line crossed faster than stop_speed] + jerk * jerk^2 dt - progress * ds)`` with ds the metres
-driven along the route in the step (potential-based shaping; see EcoDriveReward); each raw term is in ``info['terms']`` and each weighted term (J-equivalent) in
-``info['costs']``, so users can re-weight.
+driven along the route in the step (potential-based shaping; see EcoDriveReward); each raw term is in
+``info['terms']`` and each weighted term (J-equivalent) in ``info['costs']``, so users can re-weight.
 Terminates when the route's end is reached, truncates at the time limit.
 """
 
@@ -72,9 +72,11 @@ class DriveScales:
         dt = spec.drivetrain
         ratio = dt.gear_ratios[0] * dt.final_drive / spec.tires.dynamic_radius
         if dt.kind == "bev":
-            torque, power = dt.motor.max_torque, dt.motor.max_power
+            motor = dt.require_motor()
+            torque, power = motor.max_torque, motor.max_power
         else:
-            x, y = np.asarray(dt.engine.full_load.x), np.asarray(dt.engine.full_load.y)
+            full_load = dt.require_engine().full_load
+            x, y = np.asarray(full_load.x), np.asarray(full_load.y)
             torque, power = float(y.max()), float((x * y).max())
         return cls(float(torque * ratio), float(power), float(spec.body.mass * FULL_BRAKE_DECELERATION))
 
@@ -224,7 +226,7 @@ class EcoDriveEnv(gym.Env):
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
         self._sim: Simulator | None = None
         self._sim_key: tuple | None = None
-        self._estimator = None
+        self._estimator: OnlineForceModel | None = None  # observation mode 'can+estimates' only
         # build once now so that a bad road / vehicle / effect fails at construction, not mid-episode
         self._setup(self.config, road_seed=self.config.road_seed if self.config.road_seed is not None
                     else self.config.road_seed_range[0], sim_seed=0)
@@ -235,9 +237,10 @@ class EcoDriveEnv(gym.Env):
                cfg.schedule_speed_fraction, cfg.lateral_acceleration_limit)
         if key != self._sim_key:
             try:
-                profile = cut_profile(load_profile(cfg.road, seed=road_seed), cfg.route_length)
-                if not isinstance(profile, RoadProfile):
+                loaded = load_profile(cfg.road, seed=road_seed)
+                if not isinstance(loaded, RoadProfile):
                     raise GymConfigError(f"road: {cfg.road!r} is not a road profile")
+                profile = cut_profile(loaded, cfg.route_length)
                 spec = get_preset(cfg.vehicle)
                 self._can_window = None
                 if cfg.observation == "can+estimates":
@@ -262,7 +265,7 @@ class EcoDriveEnv(gym.Env):
             self._road_seed = road_seed
         self._time_limit = (cfg.time_limit if cfg.time_limit is not None
                             else 2.0 * self._route.route_time + 30.0)
-        self._state = self._sim.reset(seed=sim_seed, initial_speed=cfg.initial_speed)
+        self._state = self.simulator.reset(seed=sim_seed, initial_speed=cfg.initial_speed)
         if cfg.observation == "can+estimates":
             self._estimator = _make_online_estimator(cfg, self._can_window)
         self._dt = cfg.control_period
@@ -338,7 +341,7 @@ class EcoDriveEnv(gym.Env):
         return self._observe(), -w.scale * total, terminated, truncated, info
 
     def _update_can(self) -> None:
-        sample = self._sim.observe()
+        sample = self.simulator.observe()
         hold = self._can_hold
         if sample is not None:
             for j, name in enumerate(CAN_CHANNELS):
@@ -373,6 +376,8 @@ class EcoDriveEnv(gym.Env):
         buf[k + 2] = self._route.next_stop(s)
         buf[k + 3] = self._u_prev
         if cfg.observation == "can+estimates":
+            if self._estimator is None:
+                raise GymConfigError("observation 'can+estimates': no online estimator yet (call reset() first)")
             p = self._estimator.parameters()
             buf[k + 4:k + 7] = (p.mass, p.c0, p.c2)
         obs = buf / self._scale
@@ -413,6 +418,8 @@ class EcoDriveEnv(gym.Env):
     @property
     def simulator(self) -> Simulator:
         """The simulator of the current episode (e.g. ``true_parameters()``, ``to_trip()``)."""
+        if self._sim is None:
+            raise GymConfigError("EcoDrive: no simulator (the episode setup failed; see the error it raised)")
         return self._sim
 
     @property
@@ -421,7 +428,7 @@ class EcoDriveEnv(gym.Env):
         return self._profile
 
 
-def _make_online_estimator(cfg: EcoDriveConfig, can_window):
+def _make_online_estimator(cfg: EcoDriveConfig, can_window) -> OnlineForceModel:
     """The running estimator of observation mode 'can+estimates': roadload.controllers' online force model (the
     chapter-5 pipeline + a catalog estimator, model M4) on the episode's CAN samples, updated every 10 s."""
 

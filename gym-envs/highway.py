@@ -73,6 +73,10 @@ class RoadloadEgoVehicle(ControlledVehicle):
     """highway-env vehicle with roadload's longitudinal dynamics: lateral motion by highway-env's steering
     controller (lane keeping, lane changes), speed by the simulator ``plant`` under the wheel-force command."""
 
+    # attributes of highway-env's (untyped) ControlledVehicle that this class reads and writes
+    target_lane_index: tuple[str, str, int]
+    speed: float
+
     def __init__(self, road: Road, position, heading: float = 0.0, speed: float = 0.0,
                  target_lane_index=None, target_speed=None, route=None) -> None:
         super().__init__(road, position, heading, speed, target_lane_index, target_speed, route)
@@ -114,7 +118,7 @@ class RoadloadEgoVehicle(ControlledVehicle):
         self.action["acceleration"] = float(self.action["acceleration"])
 
     def step(self, dt: float) -> None:
-        if self.crashed or self.plant is None:
+        if self.crashed or self.plant is None or self.scales is None:  # no roadload plant: highway-env kinematics
             super().step(dt)
             return
         v0 = self.speed
@@ -202,7 +206,7 @@ class _EgoObservation(ObservationType):
         env = self.env
         ego: RoadloadEgoVehicle = env.vehicle
         x = np.zeros(self.scale.size)
-        if ego is None or env.road is None:
+        if ego is None or env.road is None or ego.plant is None:
             return x.astype(np.float32)
         st = ego.plant.state
         lanes = len(env.road.network.all_side_lanes(ego.lane_index))
@@ -225,7 +229,7 @@ class EcoHighwayEnv(AbstractEnv):
     config={...})`` or keyword overrides; ``reset(options={...})`` may change vehicle, road, effects, traffic and
     reward fields (not lane_changes / observed_vehicles, which shape the spaces)."""
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+    metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 10}
 
     def __init__(self, config: EcoHighwayConfig | dict | None = None, render_mode: str | None = None,
                  **overrides: Any) -> None:
@@ -237,7 +241,7 @@ class EcoHighwayEnv(AbstractEnv):
             os.environ["SDL_VIDEODRIVER"] = "offscreen"
         self.typed_config: EcoHighwayConfig = make_config(EcoHighwayConfig, config, **overrides)
         self.layout = highway_observation_layout(self.typed_config)
-        self._plant_key = None
+        self._plant_key: tuple[Any, ...] | None = None
         self._plant: Simulator | None = None
         self._road_seed = 0
         # validate vehicle / road / effects now (a bad one fails here, not mid-episode)
@@ -290,7 +294,7 @@ class EcoHighwayEnv(AbstractEnv):
             self._scales = DriveScales.from_spec(spec)
             self._plant_key = key
         self._road_seed = road_seed
-        self._plant.reset(seed=sim_seed, initial_speed=cfg.initial_speed)
+        self.simulator.reset(seed=sim_seed, initial_speed=cfg.initial_speed)
 
     # ------------------------------------------------------------------ episode
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -346,11 +350,11 @@ class EcoHighwayEnv(AbstractEnv):
         return bool(self.vehicle.crashed)
 
     def _is_truncated(self) -> bool:
-        return bool(self.time >= self.typed_config.duration or self._plant.state.done)
+        return bool(self.time >= self.typed_config.duration or self.simulator.state.done)
 
     def _info(self, obs, action=None) -> dict[str, Any]:
         ego = self.vehicle
-        st = self._plant.state
+        st = self.simulator.state
         gap, _ = ego.front_gap()
         return {"speed": float(ego.speed), "crashed": bool(ego.crashed), "lane": int(ego.lane_index[2]),
                 "s": float(st.s), "t": float(st.t), "source_energy_total": float(st.source_energy_total),
@@ -359,4 +363,6 @@ class EcoHighwayEnv(AbstractEnv):
     @property
     def simulator(self) -> Simulator:
         """The ego's simulator (true parameters, energy ledger, to_trip())."""
+        if self._plant is None:
+            raise GymConfigError("EcoHighway: no ego simulator (building it failed; see the error it raised)")
         return self._plant

@@ -40,7 +40,9 @@ class SB3VecEnv(VecEnv):
     def reset(self) -> np.ndarray:
         seeds = self._seeds
         seed = None if all(s is None for s in seeds) else [None if s is None else int(s) for s in seeds]
-        obs, _ = self.venv.reset(seed=seed, options=self._options[0] if self._options[0] else None)
+        # gymnasium annotates VectorEnv.reset(seed: int | None); its vector envs take one seed per sub-env too
+        obs, _ = self.venv.reset(seed=seed,  # type: ignore[arg-type]
+                                 options=self._options[0] if self._options[0] else None)
         self._reset_seeds()
         self._reset_options()
         self._ep_return[:] = 0.0
@@ -88,4 +90,4 @@ class SB3VecEnv(VecEnv):
             return range(self.num_envs)
         if isinstance(indices, int):
             return [indices]
-        return indices
+        return list(indices)

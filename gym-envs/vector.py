@@ -291,7 +291,8 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
         self._F = np.array([self._drive.peak_traction_force, self._drive.peak_power, self._drive.full_brake_force])
         self._cycle = np.zeros((2, 2))
         self._cycle[0, 1] = 1.0
-        self._tabs = self._ti = None
+        self._tabs: np.ndarray | None = None  # vehicle tables, shared by all sub-envs (set by the first setup)
+        self._ti: np.ndarray | None = None
         self._configs: list[EcoDriveConfig] = [cfg] * n
         self._setup_one(0, cfg, cfg.road_seed if cfg.road_seed is not None else cfg.road_seed_range[0], 0)
 
@@ -318,9 +319,10 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
                cfg.schedule_speed_fraction, cfg.lateral_acceleration_limit)
         if key != self._keys[i]:
             try:
-                profile = cut_profile(load_profile(cfg.road, seed=road_seed), cfg.route_length)
-                if not isinstance(profile, RoadProfile):
+                loaded = load_profile(cfg.road, seed=road_seed)
+                if not isinstance(loaded, RoadProfile):
                     raise GymConfigError(f"road: {cfg.road!r} is not a road profile")
+                profile = cut_profile(loaded, cfg.route_length)
                 sim = Simulator(self._spec, profile, cfg.effects, None, sim_seed, initial_speed=cfg.initial_speed,
                                 log_capacity=self._n_sub)
                 fresh = True
@@ -347,7 +349,10 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
             self._rstops_n[i] = rs.size
         else:
             fresh = False
-        sim, route = self._sims[i], self._routes[i]
+        cached_sim, cached_route = self._sims[i], self._routes[i]
+        if cached_sim is None or cached_route is None:
+            raise GymConfigError(f"sub-env {i}: no episode set up (its first setup failed)")
+        sim, route = cached_sim, cached_route
         if not fresh:  # a new simulator is already reset with these seeds (as EcoDriveEnv's second reset leaves it)
             sim.reset(seed=sim_seed, initial_speed=cfg.initial_speed)
         ns = sim._stops.size
@@ -389,7 +394,9 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
         n = self.num_envs
         if seed is None:
             seeds: list[int | None] = [None] * n
-        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+        elif isinstance(seed, bool):
+            raise ValueError(f"seed: expected an int or a list of {n} seeds, got {seed!r}")
+        elif isinstance(seed, (int, np.integer)):
             seeds = [int(seed) + i for i in range(n)]
         else:
             seeds = list(seed)
@@ -443,16 +450,16 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
         return obs, reward, term, trunc, info
 
     def _step_compiled(self, active: np.ndarray, u: np.ndarray, W: np.ndarray, cfg: EcoDriveConfig) -> None:
+        args = (active, u, self._X, self._P, self._tabs, self._ti, self._road, self._road_n, self._stops,
+                self._stops_n, self._cycle, self._rng, self._cmd, self._log, self._n_sub, self._F, self._E,
+                self._table, self._table_n, self._preview, self._rstops, self._rstops_n, W,
+                cfg.control_period, cfg.lateral_acceleration_limit, cfg.stop_speed, self._scale, self._low,
+                self._high, self._obs, self._reward, self._terms, self._costs, self._ret_costs, self._term,
+                self._trunc, self._buf, self._la, self._zeros, self._one)
         if self.threads > 1:
-            fn, head = _step_threads, (self.threads,)
+            _step_threads(self.threads, *args)
         else:
-            fn, head = _step_range, (0, self.num_envs)
-        fn(*head, active, u, self._X, self._P, self._tabs, self._ti, self._road, self._road_n, self._stops,
-                    self._stops_n, self._cycle, self._rng, self._cmd, self._log, self._n_sub, self._F, self._E,
-                    self._table, self._table_n, self._preview, self._rstops, self._rstops_n, W,
-                    cfg.control_period, cfg.lateral_acceleration_limit, cfg.stop_speed, self._scale, self._low,
-                    self._high, self._obs, self._reward, self._terms, self._costs, self._ret_costs, self._term,
-                    self._trunc, self._buf, self._la, self._zeros, self._one)
+            _step_range(0, self.num_envs, *args)
 
     def _info(self, mask: np.ndarray, with_terms: np.ndarray | bool) -> dict[str, Any]:
         """gymnasium vector info: one array per key of the single env's info, '_key' = which sub-envs have it."""
@@ -486,13 +493,12 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
         benchmark compares the env step with."""
         u = np.asarray(actions, dtype=np.float64).reshape(self.num_envs)
         active = np.ones(self.num_envs, dtype=bool)
+        args = (active, u, self._X, self._P, self._tabs, self._ti, self._road, self._road_n, self._stops,
+                self._stops_n, self._cycle, self._rng, self._cmd, self._log, self._n_sub, self._F)
         if self.threads > 1:
-            fn, head = _advance_threads, (self.threads,)
+            _advance_threads(self.threads, *args)
         else:
-            fn, head = advance_range, (0, self.num_envs)
-        fn(*head, active, u, self._X, self._P, self._tabs, self._ti, self._road,
-                      self._road_n, self._stops, self._stops_n, self._cycle, self._rng, self._cmd, self._log,
-                      self._n_sub, self._F)
+            advance_range(0, self.num_envs, *args)
 
     @property
     def sub_simulators(self) -> list[Simulator | None]:

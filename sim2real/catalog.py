@@ -11,7 +11,8 @@ A :class:`CandidateEffect` maps an unmodelled effect to
 - ``sim_effect`` and ``to_sim(params, shape, model)``: the simulator switch and its parameters from the fitted
   values, so the identified effect can be switched on in the simulator. A switch is an effect name of
   :data:`roadload.envs.effects.EFFECTS`, or ``spec:<dotted path>`` for a vehicle-spec field (e.g.
-  ``spec:sensors.channels.drive_torque.latency``), whose parameter ``{"delta": x}`` is added to the field (``{"factor": f}``: multiplied).
+  ``spec:sensors.channels.drive_torque.latency``), whose parameter ``{"delta": x}`` is added to the field
+  (``{"factor": f}``: multiplied).
 
 ``side`` is "force" (explains the force residual) or "power" (explains the battery-power residual of
 :mod:`.energy`, e.g. auxiliary loads). Users add their own with :func:`register_candidate`. Parameters are in
@@ -158,7 +159,8 @@ def _rolling_speed(model, shape):
 def _mass_offset(model, shape):
     def build(s):
         th = _c(s, GRADIENT_ANGLE)
-        return G * np.sin(th) + _c(s, ACCELERATION) + G * np.cos(th) * model.rolling_resistance_coefficient(_c(s, SPEED))
+        f_r = model.rolling_resistance_coefficient(_c(s, SPEED))
+        return G * np.sin(th) + _c(s, ACCELERATION) + G * np.cos(th) * f_r
     return (Term("g sin(theta) + dv/dt + g cos(theta) f_r(v)", "delta m_V", "kg", build,
                  (GRADIENT_ANGLE, ACCELERATION, SPEED), lambda n: 0.0),)
 
@@ -268,6 +270,14 @@ _TAU_GRID = (150.0, 300.0, 600.0, 1200.0, 2400.0, 4800.0)
 _DIST_GRID = (1000.0, 2500.0, 5000.0, 10000.0, 20000.0)
 
 
+def _tire_to_sim(p, shape: float | None, model) -> dict[str, float]:
+    """Fitted cold-tire factor - 1 and distance constant d [m] -> the sim's tire_warmup effect parameters."""
+    if shape is None:
+        raise DiagnosisError("tire_warmup: needs the fitted distance constant d [m] (the effect's shape), got None")
+    return {"cold_factor": float(np.clip(1.0 + _p(p, "cold tire factor - 1"), 1.0, 3.0)),
+            "distance_constant": float(shape)}
+
+
 def _oil_to_sim(p, shape, model):
     """Fitted extra loss fraction k at the start -> the sim's oil start temperature: phi_start - 1 =
     k / (1 - eta) = (phi_cold - 1) x, T_start = T_warm - x (T_warm - 293.15 K), x <= 1.5; the fitted decay time
@@ -322,8 +332,7 @@ for _cand in (
                     shape_grid=_TAU_GRID, shape_name="tau", shape_unit="s", regime_hint="time_since_start"),
     CandidateEffect("tire_warmup", "rolling resistance raised on cold tires (decays over distance d)", _tire_warmup,
                     (GRADIENT_ANGLE, SPEED, DISTANCE), "tire_warmup",
-                    lambda p, sh, m: {"cold_factor": float(np.clip(1.0 + _p(p, "cold tire factor - 1"), 1.0, 3.0)),
-                                      "distance_constant": float(sh)},
+                    _tire_to_sim,
                     shape_grid=_DIST_GRID, shape_name="d", shape_unit="m", regime_hint="time_since_start"),
     CandidateEffect("friction_brake", "friction-brake force off (pad friction drift)", _friction_brake,
                     (BRAKE_FORCE,), "spec:brakes.pad_friction",

@@ -14,6 +14,7 @@ path_curvature [1/m] (0 where unknown), air_density [kg/m³].
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -62,7 +63,7 @@ class SimForceModel:
     @classmethod
     def from_physical(cls, vehicle: str, mass: float, rolling_resistance_f0: float, rolling_resistance_f1: float,
                       rolling_resistance_f4: float, drag_area: float, cornering_stiffness: float,
-                      **drivetrain: float) -> "SimForceModel":
+                      **drivetrain: Any) -> "SimForceModel":
         """From m_V [kg], f_r0, f_r1, f_r4, c_x A_V [m²], c_yW [N/rad] and the drive-train fields."""
         if not (np.isfinite(mass) and mass > 0):
             raise DiagnosisError(f"SimForceModel: mass must be a positive number [kg], got {mass!r}")

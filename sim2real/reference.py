@@ -10,6 +10,7 @@ variables) or categories; each f_j is a bin mean shrunk towards 0 with n/(n + sh
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -117,7 +118,7 @@ class AdditiveRegimeModel:
 
     def importance(self, table: pd.DataFrame) -> list[dict]:
         """Per variable: the std of its partial effect over ``table`` [N] and its strongest bin, largest first."""
-        rows = []
+        rows: list[dict[str, Any]] = []
         for name, kind in self.variables:
             i = self._index(table, name, kind)
             c = np.where(i >= 0, self.effects[name][np.clip(i, 0, None)], 0.0)

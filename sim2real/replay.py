@@ -65,7 +65,8 @@ def _replay(frame, rows, sim, window, seed, t_all, trip, DT, Action, LateralVali
             continue
         t = t_all[sel]
         v = frame["speed"].to_numpy(dtype=float)[sel]
-        pos = np.maximum.accumulate(frame["distance"].to_numpy(dtype=float)[in_trip])[np.isin(np.flatnonzero(in_trip), sel)] - d[0]
+        distance_in_trip = np.maximum.accumulate(frame["distance"].to_numpy(dtype=float)[in_trip])
+        pos = distance_in_trip[np.isin(np.flatnonzero(in_trip), sel)] - d[0]
         drive = frame["drive_force"].to_numpy(dtype=float)[sel]
         brake = np.nan_to_num(frame["brake_force"].to_numpy(dtype=float)[sel])
         key = _windows(t, window)

@@ -8,7 +8,8 @@ diagnosis.json (schema_version 1; SI units, forces in N, NaN written as null):
 - ``gap``: {before, after, after_simulator, shrinkage, shrinkage_simulator, per_regime} on the held-out part;
   before/after = {force_residual: {n, mean, median, mad, medse, rmse}, replay_simulator: {rms, median_end,
   windows} [m/s] (recorded forces and road fed into the simulator; null for the fitted after),
-  replay_speed_error: {rms, median_end, windows} [m/s] (linearised), energy_per_distance: {measured, sim, relative_error, unit}}; shrinkage = 1 - after/before for
+  replay_speed_error: {rms, median_end, windows} [m/s] (linearised), energy_per_distance: {measured, sim,
+  relative_error, unit}}; shrinkage = 1 - after/before for
   rmse, medse, |median|; per_regime: [{regime, bin, n, rmse_before, rmse_after, median_before, median_after,
   remaining}];
 - ``regimes``: {regime: [{bin, n, n_blocks, share, median, mad, mean, medse, ci_low, ci_high, p_value,
@@ -45,6 +46,7 @@ import pandas as pd
 from roadload.fileio import atomic_path
 
 from .diagnose import Diagnosis
+from .errors import DiagnosisError
 
 
 def _atomic_write(path: Path, write) -> None:
@@ -68,14 +70,21 @@ def _save(fig, path: Path) -> None:
     plt.close(fig)
 
 
+def _held_out(diag: Diagnosis) -> tuple[pd.DataFrame, np.ndarray, np.ndarray]:
+    """(table frame, held-out row mask, residual after [N]) of a diagnosis run in this process."""
+    if diag.table is None or diag.test_rows is None or diag.residual_after is None:
+        raise DiagnosisError("the figures need the diagnosis table, held-out rows and residuals after the fit; a "
+                             "Diagnosis read back from JSON carries none - run diagnose() again")
+    return diag.table.frame, diag.test_rows, diag.residual_after
+
+
 def figure_residual_map(diag: Diagnosis, path: Path) -> Path:
     """Median residual over speed × acceleration, before and after (held-out part)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    f = diag.table.frame
-    test = diag.test_rows
+    f, test, residual_after = _held_out(diag)
     v = f["speed"].to_numpy() * 3.6
     a = f["acceleration"].to_numpy()
     ve = np.arange(0, max(140, np.nanmax(v[test]) + 10), 10)
@@ -83,7 +92,7 @@ def figure_residual_map(diag: Diagnosis, path: Path) -> Path:
     before = f["residual"].to_numpy()
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharey=True)
     maps = []
-    for r in (before, diag.residual_after):
+    for r in (before, residual_after):
         m = np.full((ae.size - 1, ve.size - 1), np.nan)
         iv = np.searchsorted(ve, v, side="right") - 1
         ia = np.searchsorted(ae, a, side="right") - 1
@@ -124,7 +133,7 @@ def figure_residual_time(diag: Diagnosis, path: Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    f = diag.table.frame
+    f, _, residual_after = _held_out(diag)
     valid = f["valid"].to_numpy(bool)
     fig, axes = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
     trips = list(pd.unique(f["trip"]))
@@ -132,7 +141,7 @@ def figure_residual_time(diag: Diagnosis, path: Path) -> Path:
         seasons = f["season"].to_numpy() if "season" in f.columns else np.full(len(f), "all")
         for season in pd.unique(seasons):
             sel = seasons == season
-            for ax, r in zip(axes, (f["residual"].to_numpy(), diag.residual_after)):
+            for ax, r in zip(axes, (f["residual"].to_numpy(), residual_after)):
                 x, lo, med, hi = _time_profile(f, r, valid, sel)
                 n_trips = f["trip"][sel].nunique()
                 line, = ax.plot(x, med, lw=1.5, label=f"{season} ({n_trips} trips)")
@@ -151,7 +160,7 @@ def figure_residual_time(diag: Diagnosis, path: Path) -> Path:
         if sel.sum() < 50:
             continue
         t = f["time_since_start"].to_numpy()[sel] / 60
-        for ax, r in zip(axes, (f["residual"].to_numpy()[sel], diag.residual_after[sel])):
+        for ax, r in zip(axes, (f["residual"].to_numpy()[sel], residual_after[sel])):
             ax.plot(t, pd.Series(r).rolling(300, min_periods=30, center=True).median(), lw=1, label=str(k))
     axes[0].set_title("force residual (30 s rolling median), before")
     axes[1].set_title("after the identified effects")
@@ -321,8 +330,10 @@ def markdown(diag: Diagnosis, figures: dict[str, str]) -> str:
         L += ["", "## Energy side (traction battery)", "",
               f"Battery energy while moving: measured {_fmt(ee['measured'], 2)}, sim {_fmt(ee['sim_before'], 2)}, "
               f"sim with the identified auxiliary effects {_fmt(ee['sim_after'], 2)} kWh/100 km. Power residual "
-              f"median {_fmt(en['power_residual_before']['median'], 0)} → {_fmt(en['power_residual_after']['median'], 0)} W, "
-              f"RMSE {_fmt(en['power_residual_before']['rmse'], 0)} → {_fmt(en['power_residual_after']['rmse'], 0)} W.", ""]
+              f"median {_fmt(en['power_residual_before']['median'], 0)} → "
+              f"{_fmt(en['power_residual_after']['median'], 0)} W, "
+              f"RMSE {_fmt(en['power_residual_before']['rmse'], 0)} → {_fmt(en['power_residual_after']['rmse'], 0)} W.",
+              ""]
         L += [f"- {r['name']}: held-out gain {100 * r['heldout_improvement']:.1f} %, "
               f"{_param_text(r['parameters'], r['std_errors'], r['units'])}" for r in en["ranking"]]
         L += ["", "Accepted: " + (", ".join(e["name"] for e in en["effects"]) or "none") + "."]

@@ -132,7 +132,7 @@ def with_spec_change(vehicle: VehicleSpec, path: str, params: dict[str, Any]) ->
         raise DiagnosisError(f"spec switch {path!r} takes {{'delta': x}} or {{'factor': f}}, got {params}")
     spec = copy.deepcopy(vehicle)
     parts = path.split(".")
-    obj = spec
+    obj: Any = spec  # walks attributes and dict keys
     for part in parts[:-1]:
         obj = obj[part] if isinstance(obj, dict) else getattr(obj, part, None)
         if obj is None:

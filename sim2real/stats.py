@@ -88,7 +88,7 @@ def block_bootstrap_median(values: np.ndarray, blocks: np.ndarray, rng: np.rando
         meds[s0:s0 + k] = xs[pos]
     alpha = (1.0 - level) / 2.0
     lo, hi = np.quantile(meds, [alpha, 1.0 - alpha])
-    p = 2.0 * min(np.mean(meds <= 0.0), np.mean(meds >= 0.0))
+    p = 2.0 * min(float(np.mean(meds <= 0.0)), float(np.mean(meds >= 0.0)))
     return med, float(lo), float(hi), float(min(1.0, max(p, 1.0 / n_boot)))
 
 

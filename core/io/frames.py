@@ -182,10 +182,10 @@ def _read_one_mf4(path: Path, MDF) -> CanFrames:
                 break
         if group is None:
             raise LogImportError(f"{path}: MDF4 file has no CAN_DataFrame channel group (not a CAN bus log)")
-        names = ["CAN_DataFrame.BusChannel", "CAN_DataFrame.ID", "CAN_DataFrame.IDE", "CAN_DataFrame.DataLength",
-                 "CAN_DataFrame.DataBytes"]
+        columns = ["CAN_DataFrame.BusChannel", "CAN_DataFrame.ID", "CAN_DataFrame.IDE", "CAN_DataFrame.DataLength",
+                   "CAN_DataFrame.DataBytes"]
         try:
-            sigs = mdf.select([(n, group, None) for n in names])
+            sigs = mdf.select([(n, group, None) for n in columns])
         except Exception as exc:
             raise LogImportError(f"{path}: MDF4 CAN channels unreadable, file truncated or corrupt "
                                  f"({type(exc).__name__}: {exc})") from None
@@ -322,9 +322,10 @@ def read_python_can(path: str | os.PathLike, report: ImportReport | None = None)
     data = np.zeros((len(rows), width), dtype=np.uint8)
     for i, b in enumerate(rows):
         data[i, : len(b)] = np.frombuffer(b, dtype=np.uint8)
-    t = np.asarray(t, dtype=float)
-    start = float(t[0])
-    return CanFrames(t - start, bus, ident, ext, length, data, start)
+    times = np.asarray(t, dtype=float)
+    start = float(times[0])
+    return CanFrames(times - start, np.asarray(bus), np.asarray(ident), np.asarray(ext), np.asarray(length), data,
+                     start)
 
 
 def read_comma2k19(folder: str | os.PathLike) -> CanFrames:

@@ -38,7 +38,7 @@ import json
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TypedDict
 
 import numpy as np
 import pandas as pd
@@ -425,8 +425,21 @@ def _missing_error(mapping: Mapping, missing: list[tuple[str, list[str]]], signa
     return LogImportError(f"mapping {mapping.name!r}: required channels missing in the source: " + "; ".join(parts))
 
 
+class ClockFit(TypedDict):
+    """Reference time = fit_a + fit_b * (logger time - fit_t0) [s]; median offset [s], drift [ppm], residual [s]."""
+
+    offset_s: float
+    drift_ppm: float
+    fit_a: float
+    fit_b: float
+    fit_t0: float
+    residual_rms_s: float
+    reference: str
+    n: int
+
+
 def clock_offset(signals: SignalSet, clock: dict[str, Any], start_time: float,
-                 report: ImportReport) -> dict[str, float]:
+                 report: ImportReport) -> ClockFit:
     """Fit reference time (e.g. a GNSS epoch signal) = a + b * logger time; returns offset/drift/residual."""
     key = find_source(signals, [clock["source"]])
     if key is None:
@@ -581,6 +594,8 @@ def apply_mapping(signals: SignalSet, mapping: Mapping, report: ImportReport, *,
         "unmapped_signals": unmapped[:200],
     })
     if clock_info is not None:
-        meta["clock"] = {k: clock_info[k] for k in ("reference", "offset_s", "drift_ppm", "residual_rms_s", "n")}
+        meta["clock"] = {"reference": clock_info["reference"], "offset_s": clock_info["offset_s"],
+                         "drift_ppm": clock_info["drift_ppm"], "residual_rms_s": clock_info["residual_rms_s"],
+                         "n": clock_info["n"]}
     meta["import_report"] = report.to_dict()
     return Trip(pd.DataFrame(cols), units, meta)

@@ -16,7 +16,7 @@ from roadload.controllers.drive import DriveSettings, drive
 from roadload.sweep import run_sweep
 from roadload.experiments.controller_comparison import CONDITIONS, ComparisonTask, run_comparison_task, write_outputs
 from roadload.experiments.controller_comparison import VEHICLE_CASES
-from roadload.experiments.controller_report import markdown_table
+from roadload.tables import markdown_table
 from roadload.experiments.headline import (headline_figure, headline_markdown, headline_tasks, run_paired,
                                            sensitivity_figure, sensitivity_table, sensitivity_tasks)
 from roadload.fileio import write_text

@@ -16,7 +16,8 @@ from roadload.experiments.fleet import FleetError
 from roadload.estimators.knowledge import knowledge_for_trip
 from roadload.estimators.models import ModelError, get_model
 from roadload.estimators.pipeline import PipelineError, model_data, run_pipeline
-from roadload.experiments.fleet import FleetError, generate_fleet, run_benchmark, single_trip_figures, stored_trips, write_report
+from roadload.experiments.fleet import (generate_fleet, run_benchmark, single_trip_figures, stored_trips,
+                                        write_report)
 from roadload.estimators.figures import plot_output_corrections, plot_parameter_traces, plot_stage, save
 
 
@@ -110,7 +111,8 @@ def benchmark_fleet_command(
     except (FleetError, ValueError) as exc:
         _fail(str(exc))
         return
-    report = write_report(res, out, figures=figures, title=f"chapter-5 benchmark, fleet seed {seed}, {len(paths)} trips")
+    report = write_report(res, out, figures=figures,
+                          title=f"chapter-5 benchmark, fleet seed {seed}, {len(paths)} trips")
     if figures and not res.trips.empty:
         # figures 5.4-5.8 for one trip: the longest one with outliers (else the longest)
         info = res.trips.sort_values("duration", ascending=False)

@@ -17,9 +17,9 @@ from roadload.road_profiles.registry import known_profiles, load_profile
 def profile_summary(profile: RoadProfile | DriveCycle) -> dict[str, float | int | str]:
     """Key statistics of a profile or cycle in edge units (km, %, km/h) for display."""
     if isinstance(profile, DriveCycle):
-        out = {"kind": "drive cycle", "duration_s": profile.duration, "distance_km": profile.distance / 1000,
-               "v_max_kmh": float(profile.speed.max() * 3.6),
-               "v_mean_kmh": profile.distance / profile.duration * 3.6}
+        out: dict[str, float | int | str] = {
+            "kind": "drive cycle", "duration_s": profile.duration, "distance_km": profile.distance / 1000,
+            "v_max_kmh": float(profile.speed.max() * 3.6), "v_mean_kmh": profile.distance / profile.duration * 3.6}
         if profile.grade is not None:
             out["grade_min_pct"] = float(np.tan(profile.grade).min() * 100)
             out["grade_max_pct"] = float(np.tan(profile.grade).max() * 100)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import NoReturn
 
 import typer
 from rich.console import Console
@@ -27,7 +28,7 @@ from .errors import fail
 AMBIENT_RANGE_C = (-60.0, 60.0)
 
 
-def _fail(msg: str) -> None:
+def _fail(msg: str) -> NoReturn:
     fail(msg)
 
 
@@ -114,6 +115,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         t_first = None
         for last in Trip.iter_chunks(path, channels=[], truth_channels=["position"]):  # bounded memory
             t_first = last.t[0] if t_first is None else t_first
+        if last.truth is None:
+            _fail(f"{path}: the streamed trip has no ground-truth position channel")
         km = float(last.truth["position"].iloc[-1]) / 1000.0
         duration_s = float(last.t[-1] - t_first)
         e = info["meta"]["energy"]["source"]

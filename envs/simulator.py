@@ -19,7 +19,8 @@ import pandas as pd
 from roadload.channels import TRUTH
 from roadload.road_profiles import DriveCycle, RoadProfile
 from roadload.trip import Trip, TripWriter
-from roadload.units import G, R_AIR, air_density
+from roadload.road_load import RoadLoadParameters
+from roadload.units import R_AIR, air_density
 from roadload.vehicle import SensorSpec, VehicleSpec
 
 from . import physics
@@ -569,15 +570,17 @@ class Simulator:
         lf, lr, wb = P[P_LF], P[P_LR], P[P_L]
         c_eq = 1.0 / (4.0 * (lr ** 2 / csf + lf ** 2 / csr) / wb ** 2)
         phi = oil_loss_factor(P, X[S_OIL_T]) if P[P_OIL_ON] > 0.5 else 1.0
+        a, b, c = RoadLoadParameters.from_physical(float(mass), float(fr0), float(fr1), float(fr4), float(cxa),
+                                                   float(rho)).coast_down   # eq. 5.4 of the current truth
         return {
             "mass": mass, "rolling_resistance_f0": fr0, "rolling_resistance_f1": fr1, "rolling_resistance_f4": fr4,
             "rolling_resistance_coefficient": fr0 + fr1 * v + fr4 * v ** 4, "drag_area": cxa, "air_density": rho,
-            "aero_coefficient": 0.5 * rho * cxa, "wind_speed": ws, "wind_angle": wa,
+            "aero_coefficient": c, "wind_speed": ws, "wind_angle": wa,
             "cornering_stiffness_front": csf, "cornering_stiffness_rear": csr, "cornering_stiffness": c_eq,
             "brake_friction_coefficient": mu, "drivetrain_loss_factor": phi, "oil_temperature": X[S_OIL_T],
             "ambient_temperature": P[P_T_AMB], "ambient_pressure": P[P_P_AMB], "grade": grade, "curvature": curv,
             "bank": bank, "wheel_radius": P[P_RW], "effective_mass": self.vehicle.effective_mass(int(X[S_GEAR]), mass),
-            "a": mass * G * fr0, "b": mass * G * fr1, "c": 0.5 * rho * cxa,
+            "a": a, "b": b, "c": c,
         }
 
     def regen_capacity(self) -> float:

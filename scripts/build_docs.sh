@@ -3,7 +3,8 @@
 #   scripts/build_docs.sh [--quick] [--skip-examples] [SITE_DIR]      (SITE_DIR defaults to /tmp/site)
 # Steps: (1) the generated reference tables are current (scripts/gen_docs_reference.py --check);
 # (2) mkdocs build --strict (a broken link, anchor, nav entry or API reference fails);
-# (3) pytest --markdown-docs on docs/index.md, docs/guides and docs/reference (tiny sizes, ~1-2 min on 2 cores);
+# (3) pytest --markdown-docs on docs/index.md, docs/guides and docs/reference (tiny sizes, ~1-2 min on 2 cores),
+#     then their shell blocks (.ci/doc_commands.py);
 # (4) every examples/*.py with --quick (< ~1 min each), unless --skip-examples.
 # --quick is accepted for the scripts/ convention; the runs are always the small ones.
 # mkdocstrings (griffe) reads the package from a non-editable copy: setuptools package-dir maps roadload to core/,
@@ -29,6 +30,8 @@ test -d "$pkg/roadload" || { echo "build_docs.sh: pip could not install roadload
 ROADLOAD_DOCS_PATH="$pkg" python -m mkdocs build --strict -d "$site"
 echo "site written to $site"
 python -m pytest -q -p no:cacheprovider --markdown-docs docs/index.md docs/guides docs/reference
+# the shell blocks of the same pages, in the repo root after the Python blocks wrote the files they read
+python .ci/doc_commands.py docs/index.md docs/guides/*.md --workdir .
 if [ "$examples" = 1 ]; then
   for example in examples/*.py; do
     echo "== $example --quick"

@@ -14,13 +14,14 @@ The safety envelope of :class:`~.base.ControllerBase` clips every command, so a 
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from .base import ControllerBase, DriveContext, Observation
+from .base import ControllerBase, ControllerError, DriveContext, Observation
 from .cruise import CruiseLaw, CruiseSettings
 from .energy import SourceEnergyModel
 from .mpc import SEGMENT0_FRACTIONS, MpcSettings, OcpSolver, Plan, Preview
@@ -46,6 +47,14 @@ class MpcControllerSettings:
     plan_tolerance: float = 2.0  # [m/s] previous plan usable as fallback while |v - v_plan| below this
     min_plan_left: float = 300.0  # [m] of previous plan ahead needed to keep using it
     fallback: CruiseSettings = field(default_factory=lambda: CruiseSettings(fraction=0.9))
+
+    def __post_init__(self) -> None:
+        for name in ("replan_period", "speed_gain", "lookahead_time", "plan_tolerance", "min_plan_left"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ControllerError(f"MpcControllerSettings.{name}: must be a finite number >= 0, got {value!r}")
+        if not self.replan_period > 0:
+            raise ControllerError(f"MpcControllerSettings.replan_period: must be > 0 [s], got {self.replan_period}")
 
 
 class MpcController(ControllerBase):

@@ -43,30 +43,42 @@ QUICK = {"max_search_runs": 2, "weight_factors": ()}  # smoke runs: 2 oracle run
 
 
 def headline_tasks(cases: list[str], roads: dict[str, list[str]], seeds: int, conditions: list[str] | None = None,
-                   human: bool = True, quick: bool = False) -> list[PairedTask]:
-    """One task per (case, road, condition, seed); roads: {case: [road, ...]}."""
+                   human: bool = True, quick: bool = False, first_seed: int = 0,
+                   search_runs: int | None = None, weight_factors: tuple[float, ...] | None = None
+                   ) -> list[PairedTask]:
+    """One task per (case, road, condition, seed); roads: {case: [road, ...]}; search_runs / weight_factors
+    override :class:`PairedTask`'s (fewer runs per seed on a loaded machine)."""
     conds = conditions or ["nominal"]
     extra: dict = dict(QUICK) if quick else {}
+    if search_runs is not None:
+        extra["max_search_runs"] = search_runs
+    if weight_factors is not None:
+        extra["weight_factors"] = weight_factors
     return [PairedTask(case, road, seed, condition=c, human=human, **extra)
             for case in cases for road in roads[case] for c in (conds if case == "car" else ["nominal"])
-            for seed in range(seeds)]
+            for seed in range(first_seed, first_seed + seeds)]
 
 
-def sensitivity_tasks(cases: dict[str, str], seeds: int, quick: bool = False) -> list[PairedTask]:
+def sensitivity_tasks(cases: dict[str, str], seeds: int, quick: bool = False, first_seed: int = 0
+                      ) -> list[PairedTask]:
     """cases: {vehicle case: road}; each wrong model at the oracle's matched lambda only (the joint fit takes
     slope and curvature from the oracle's search runs)."""
     models = ("oracle", "wrong:mass=0.2") if quick else sensitivity_models()
     return [PairedTask(case, road, seed, force_models=models, weight_factors=(),
                        max_search_runs=2 if quick else PairedTask.max_search_runs)
-            for case, road in cases.items() for seed in range(seeds)]
+            for case, road in cases.items() for seed in range(first_seed, first_seed + seeds)]
 
 
 def run_paired(tasks: list[PairedTask], out: Path, scheduler: str | None = None, workers: int | None = None,
-               description: str = "paired comparison") -> tuple[pd.DataFrame, list[str]]:
-    """Run the tasks on the sweep runner, write runs.json and summary.csv/.md; returns (summary, failures)."""
+               description: str = "paired comparison", merge: list[Path] | None = None
+               ) -> tuple[pd.DataFrame, list[str]]:
+    """Run the tasks on the sweep runner, write runs.json and summary.csv/.md; returns (summary, failures).
+    merge: runs.json files of earlier runs (other seeds) summarised together with these."""
     out.mkdir(parents=True, exist_ok=True)
     outcomes = run_sweep(run_paired_task, tasks, scheduler=scheduler, workers=workers, description=description)
     results = [o.value for o in outcomes if o.ok]
+    for path in merge or []:
+        results += json.loads(Path(path).read_text())
     failures = [f"{o.task.case}/{o.task.road}/{o.task.condition}/seed {o.task.seed}: {o.error}"
                 for o in outcomes if not o.ok]
     write_text(out / "runs.json", json.dumps(results, default=_json_default, indent=1))
@@ -133,7 +145,8 @@ def sensitivity_figure(table: pd.DataFrame, path: Path) -> Path:
     fig, axes = plt.subplots(1, len(vehicles), figsize=(6.5 * len(vehicles), 4.2), squeeze=False)
     for ax, veh in zip(axes[0], vehicles):
         t = table[table.vehicle == veh].reset_index(drop=True)
-        labels = [("joint" if p == "joint" else f"{p} {e:+g}") for p, e in zip(t.parameter, t.error)]
+        labels = [("joint" if p == "joint" else f"{p} {e:+g}") + f" (n={n})"
+                  for p, e, n in zip(t.parameter, t.error, t.seeds)]
         y = t.penalty_pct.to_numpy(float)
         err = np.vstack([y - t.ci95_lo_pct.to_numpy(float), t.ci95_hi_pct.to_numpy(float) - y])
         colors = ["tab:red" if (lo > 0 or hi < 0) else "tab:gray" for lo, hi in zip(t.ci95_lo_pct, t.ci95_hi_pct)]
@@ -141,7 +154,7 @@ def sensitivity_figure(table: pd.DataFrame, path: Path) -> Path:
         ax.set_yticks(range(len(t)), labels)
         ax.axvline(0.0, color="k", lw=0.8)
         ax.set_xlabel("energy penalty vs oracle MPC at equal time [%] (95 % CI)")
-        ax.set_title(f"{veh} ({t.road.iloc[0] if len(t) else ''}; grey: not resolved)")
+        ax.set_title(f"{veh} ({t.road.iloc[0] if len(t) else ''}; red: CI excludes 0; n=1: no CI)")
         ax.invert_yaxis()
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -2,13 +2,23 @@
 
 Usage: python scripts/compare_controllers.py --out DIR [--roads hilly,motorway,city,i3_munich]
        [--conditions all] [--scheduler tcp://host:8786] [--workers 2] [--solver ipopt|osqp]
+       python scripts/compare_controllers.py --quick     # tiny run for CI: hilly road, nominal, abc MPC only
 Prints the Markdown table and writes comparison.md/.csv, summary.csv and PNG figures into DIR.
+The paired, seeded comparison with confidence intervals is ``scripts/headline.py``.
 """
 
 import sys
+import tempfile
 
 from roadload.experiments.cli import main
 
+QUICK = ["--roads", "hilly", "--conditions", "nominal", "--force-models", "abc", "--workers", "1"]
+
 if __name__ == "__main__":
-    sys.argv = ["roadload", "benchmark", "controllers", *sys.argv[1:]]
+    args = sys.argv[1:]
+    if "--quick" in args:
+        args = QUICK + [a for a in args if a != "--quick"]
+        if "--out" not in args:
+            args += ["--out", tempfile.mkdtemp(prefix="roadload-controllers-")]
+    sys.argv = ["roadload", "benchmark", "controllers", *args]
     main()

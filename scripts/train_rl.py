@@ -3,15 +3,27 @@ learning curve and evaluate on held-out roads against cruise control and the MPC
 
     python scripts/train_rl.py --timesteps 300000 --out out/rl            # = roadload train ...
     python scripts/train_rl.py --evaluate-only --out out/rl               # re-evaluate saved policies
+    python scripts/train_rl.py --quick                                    # tiny run for CI (PPO, 2k steps)
 
 All options: python scripts/train_rl.py --help (the same as ``roadload train``).
 """
+
+import sys
+import tempfile
 
 import typer
 
 from roadload.experiments.rl import register
 
+QUICK = ["--algo", "ppo", "--timesteps", "2048", "--eval-every", "0", "--held-out", "1", "--baselines", "cruise"]
+
 if __name__ == "__main__":
+    args = sys.argv[1:]
+    if "--quick" in args:
+        args = [a for a in args if a != "--quick"]
+        if "--out" not in args:
+            args += ["--out", tempfile.mkdtemp(prefix="roadload-rl-")]
+        args = QUICK + args
     app = typer.Typer(add_completion=False)
     register(app, typer.Typer())
-    app(__import__("sys").argv[1:])  # the only command of this app: train
+    app(args)  # the only command of this app: train

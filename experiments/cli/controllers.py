@@ -193,6 +193,12 @@ def register_headline(benchmark_app: typer.Typer) -> None:
         conditions: str = typer.Option("nominal", help="car conditions (see benchmark controllers)"),
         seeds: int = typer.Option(10, help="seeds (= roads) per vehicle, road and condition"),
         quick: bool = typer.Option(False, "--quick", help="tiny run: car only, 2 seeds on a 1.2 km road"),
+        search_runs: int = typer.Option(4, help="oracle runs spent on the time-weight search per seed"),
+        weight_factors: str = typer.Option("0.8,1.25", help="extra time weights (x the matched one) per model; "
+                                           "'none': one run per model at the matched weight"),
+        first_seed: int = typer.Option(0, help="first seed (seeds first_seed .. first_seed + seeds - 1)"),
+        merge: list[Path] = typer.Option([], "--merge", help="runs.json of an earlier run (other seeds) to "
+                                         "summarise together with this one (repeatable)"),
         scheduler: str = typer.Option(None, help="Dask scheduler address (default: local processes)"),
         workers: int = typer.Option(None, help="local worker processes (default: CPU count)"),
     ) -> None:
@@ -210,8 +216,17 @@ def register_headline(benchmark_app: typer.Typer) -> None:
         bad = [c for c in conds if c not in CONDITIONS]
         if bad:
             _fail(f"--conditions: unknown {bad}; known: {list(CONDITIONS)}")
-        tasks = headline_tasks(cases, roads, seeds, conds, human=True, quick=quick)
-        summary, failures = run_paired(tasks, out, scheduler=scheduler, workers=workers, description="headline")
+        try:
+            factors = () if weight_factors.strip().lower() == "none" else tuple(
+                float(f) for f in weight_factors.split(",") if f.strip())
+        except ValueError:
+            _fail(f"--weight-factors: comma-separated numbers or 'none', got {weight_factors!r}")
+        if search_runs < 1:
+            _fail(f"--search-runs: at least 1, got {search_runs}")
+        tasks = headline_tasks(cases, roads, seeds, conds, human=True, quick=quick, first_seed=first_seed,
+                               search_runs=None if quick else search_runs, weight_factors=None if quick else factors)
+        summary, failures = run_paired(tasks, out, scheduler=scheduler, workers=workers, description="headline",
+                                       merge=list(merge))
         if summary.empty:
             _fail("every task failed: " + "; ".join(failures[:3]))
         md = headline_markdown(summary, failures)
@@ -226,6 +241,9 @@ def register_headline(benchmark_app: typer.Typer) -> None:
         vehicles: str = typer.Option("car,truck_40t", help="vehicle cases"),
         seeds: int = typer.Option(4, help="seeds (= roads) per vehicle"),
         quick: bool = typer.Option(False, "--quick", help="tiny run: car only, 2 seeds, mass +20 % only"),
+        first_seed: int = typer.Option(0, help="first seed (seeds first_seed .. first_seed + seeds - 1)"),
+        merge: list[Path] = typer.Option([], "--merge", help="runs.json of an earlier run (other seeds) to "
+                                         "summarise together with this one (repeatable)"),
         scheduler: str = typer.Option(None, help="Dask scheduler address (default: local processes)"),
         workers: int = typer.Option(None, help="local worker processes (default: CPU count)"),
     ) -> None:
@@ -236,8 +254,9 @@ def register_headline(benchmark_app: typer.Typer) -> None:
         if seeds < 2:
             _fail(f"--seeds: need at least 2 for a confidence interval, got {seeds}")
         road = {c: ("hilly_short" if quick else "hilly" if c == "car" else "long_grades") for c in cases}
-        summary, failures = run_paired(sensitivity_tasks(road, seeds, quick=quick), out, scheduler=scheduler,
-                                       workers=workers, description="sensitivity")
+        summary, failures = run_paired(sensitivity_tasks(road, seeds, quick=quick, first_seed=first_seed), out,
+                                       scheduler=scheduler, workers=workers, description="sensitivity",
+                                       merge=list(merge))
         if summary.empty:
             _fail("every task failed: " + "; ".join(failures[:3]))
         table = sensitivity_table(summary)

@@ -24,7 +24,7 @@ from roadload.sim2real.floor import SimFloor
 from roadload.sim2real.selftest import outside_localised
 from roadload.vehicle import load_vehicle
 
-from .cases import generate_case, supported_effects
+from .cases import WORLDS, generate_case, supported_effects
 from .common import NONE, OUTSIDE, WorldCase
 
 UNEXPLAINED = "unexplained"
@@ -49,6 +49,12 @@ class WorldResult:
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+
+def _accepted(world: str, withheld: str) -> tuple[str, ...]:
+    """Candidates that count as finding ``withheld`` in ``world`` (() for an unknown world or effect)."""
+    effect = WORLDS[world].EFFECTS.get(withheld) if world in WORLDS else None
+    return effect.accepted if effect is not None else ()
 
 
 def _label(identified: str) -> str:
@@ -88,8 +94,7 @@ class WorldSelftest:
         none = [r for r in rows if r.withheld == NONE]
         cat = [r for r in rows if r.withheld not in (NONE, OUTSIDE)]
         shrink = [r.shrinkage for r in cat if np.isfinite(r.shrinkage)]
-        anywhere = sum(bool(set(r.all_identified) & set(supported_effects(r.world)[r.withheld].accepted))
-                       for r in cat if r.withheld in supported_effects(r.world))
+        anywhere = sum(bool(set(r.all_identified) & set(_accepted(r.world, r.withheld))) for r in cat)
         return {"cases": len(rows), "top1": self.top1(world), "found_anywhere": anywhere,
                 "catalog_correct": sum(r.correct for r in rows if r.withheld not in (NONE, OUTSIDE)),
                 "catalog_cases": sum(r.withheld not in (NONE, OUTSIDE) for r in rows),

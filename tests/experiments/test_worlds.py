@@ -293,6 +293,9 @@ def test_scoring_and_confusion():
     m = res.confusion("w")
     assert m.loc["payload", "mass_offset"] == 1 and m.loc["payload", "drag_area"] == 1
     assert res.top1("w") == 0.5 and res.summary("w")["none_clean"] == "1/1"
+    both = WorldSelftest([WorldResult("independent", 0, "auxiliary_load", "mass_offset",
+                                      ["mass_offset", "auxiliary_power"], False, 1, 1, 0, "", 0)])
+    assert both.summary("independent")["found_anywhere"] == 1 and both.top1("independent") == 0.0
     md = markdown_table(m).splitlines()
     assert md[0] == "| withheld \\ identified | drag_area | mass_offset | unexplained |"
     assert md[2] == "| payload | 1 | 1 |  |"

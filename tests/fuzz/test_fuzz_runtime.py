@@ -20,7 +20,7 @@ from roadload.controllers.drive import DriveSettings
 from roadload.controllers.energy import generic_ev
 from roadload.road_load import RoadLoadParameters
 from roadload.controllers.mpc import MpcError, MpcSettings, Preview
-from roadload.controllers.mpc_controller import get_solver
+from roadload.controllers.mpc_controller import MpcControllerSettings, get_solver
 from roadload.fileio import TMP_MARK, OutputPathError, atomic_path, check_output_path, write_text
 from roadload.gym.actions import validate_action, validate_actions
 
@@ -30,8 +30,11 @@ NON_FINITE = [float("nan"), float("inf"), float("-inf")]
 # ----------------------------------------------------------------------------------------------- controller settings
 MPC_FLOATS = [f.name for f in dataclasses.fields(MpcSettings) if isinstance(f.default, float)]
 CRUISE_FLOATS = [f.name for f in dataclasses.fields(CruiseSettings) if isinstance(f.default, float)]
+MPC_CONTROLLER_FLOATS = ["replan_period", "speed_gain", "lookahead_time", "plan_tolerance", "min_plan_left"]
 SETTING_CASES = (
-    [(MpcSettings, name, v, MpcError) for name in MPC_FLOATS for v in NON_FINITE]
+    [(MpcControllerSettings, name, v, ControllerError) for name in MPC_CONTROLLER_FLOATS for v in NON_FINITE + [-1.0]]
+    + [(MpcControllerSettings, "replan_period", 0.0, ControllerError)]
+    + [(MpcSettings, name, v, MpcError) for name in MPC_FLOATS for v in NON_FINITE]
     + [(CruiseSettings, name, v, ControllerError) for name in CRUISE_FLOATS for v in NON_FINITE]
     + [(DriveSettings, "time_weight", v, ControllerError) for v in NON_FINITE + [-1.0]]
     + [(DriveSettings, "dt", v, ControllerError) for v in NON_FINITE + [0.0, -0.1]]

@@ -5,6 +5,7 @@ import pytest
 
 import roadload  # noqa: F401
 from roadload.experiments import rl as rl_cli
+from roadload.experiments.rl import command as rl_command
 
 CONFIG = {"road": "motorway", "route_length": 1000.0}
 
@@ -48,7 +49,7 @@ def test_bad_training_input(tmp_path):
     with pytest.raises(rl_cli.RLError, match="timesteps"):
         rl_cli.train_policy("ppo", 0, tmp_path)
     with pytest.raises(ValueError, match="unknown key"):
-        rl_cli._parse_config('{"vehicel": "bmw_i3"}')
+        rl_command._parse_config('{"vehicel": "bmw_i3"}')
     with pytest.raises(rl_cli.RLError, match="does not exist"):
         rl_cli.load_policy(tmp_path / "ppo_missing.zip")
     assert not list(tmp_path.iterdir())  # nothing half-written

@@ -1,0 +1,200 @@
+"""Environment speed: steps per second of the single env, process/dummy vectorisation and the native vector env."""
+
+from __future__ import annotations
+
+import time
+from typing import Any, Callable
+
+import numpy as np
+import pandas as pd
+
+from .common import make_vec_env
+
+
+# --------------------------------------------------------------------------------------------- speed benchmark
+def _steps_per_second(step: Callable[[], None], seconds: float) -> tuple[float, int]:
+    n = 0
+    t0 = time.perf_counter()
+    while True:
+        step()
+        n += 1
+        if n % 64 == 0 and time.perf_counter() - t0 >= seconds:
+            break
+    return n / (time.perf_counter() - t0), n
+
+
+def bench_single(env_id: str, seconds: float = 5.0, seed: int = 0, **kwargs) -> dict[str, Any]:
+    """Single-process steps/s of ``env_id`` under uniformly random actions (resets included)."""
+    import gymnasium as gym
+
+    env = gym.make(env_id, **kwargs)
+    env.reset(seed=seed)
+    env.action_space.seed(seed)
+    for _ in range(50):  # warm-up (numba cache load, first allocations)
+        _, _, te, tr, _ = env.step(env.action_space.sample())
+        if te or tr:
+            env.reset()
+
+    episodes = [0]
+
+    def step() -> None:
+        _, _, te, tr, _ = env.step(env.action_space.sample())
+        if te or tr:
+            env.reset()
+            episodes[0] += 1
+
+    rate, n = _steps_per_second(step, seconds)
+    env.close()
+    return {"env": env_id, "mode": "single process", "steps_per_s": rate, "steps": n, "episodes": episodes[0]}
+
+
+def bench_vectorised(n_envs: int = 2, seconds: float = 5.0, vec: str = "subproc",
+                     env_config: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Steps/s (summed over envs) of EcoDrive-v0 in an SB3 vectorised env with random actions."""
+    venv = make_vec_env(n_envs, 0, env_config, vec=vec)
+    try:
+        venv.reset()
+        rng = np.random.default_rng(0)
+        acts = rng.uniform(-1, 1, (4096, n_envs, 1)).astype(np.float32)
+        k = [0]
+
+        def step() -> None:
+            venv.step(acts[k[0] % 4096])
+            k[0] += 1
+
+        for _ in range(50):
+            step()
+        rate, n = _steps_per_second(step, seconds)
+    finally:
+        venv.close()
+    return {"env": "roadload/EcoDrive-v0", "mode": f"{vec} x{n_envs}", "steps_per_s": rate * n_envs,
+            "steps": n * n_envs, "episodes": None}
+
+
+def _rates(step: Callable[[], None], seconds: float) -> tuple[float, float, int]:
+    """(calls per wall second, calls per CPU second of this process, calls): CPU seconds make runs on a machine
+    shared with other jobs comparable (wall rates there measure the share the scheduler gave us)."""
+    n = 0
+    t0, c0 = time.perf_counter(), time.process_time()
+    while True:
+        step()
+        n += 1
+        if n % 8 == 0 and time.perf_counter() - t0 >= seconds:
+            break
+    return n / (time.perf_counter() - t0), n / max(time.process_time() - c0, 1e-9), n
+
+
+def bench_native(n_envs: int = 256, seconds: float = 5.0, threads: int = 1, bare: bool = False,
+                 env_config: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Env steps/s (summed over sub-envs, wall and per CPU second) of the native vector env under random actions
+    in [-1, 1] (autoresets included), or with ``bare`` only its batched physics (no reward / observation / info /
+    autoreset): the reference the env step is compared with."""
+    from roadload.gym.vector import EcoDriveVectorEnv
+
+    venv = EcoDriveVectorEnv(n_envs, config=dict(env_config or {}), threads=threads)
+    venv.reset(seed=0)
+    acts = np.random.default_rng(0).uniform(-1, 1, (256, n_envs, 1)).astype(np.float32)
+    k = [0]
+    fn = venv.bare_physics_step if bare else venv.step
+
+    def step() -> None:
+        fn(acts[k[0] % 256])
+        k[0] += 1
+
+    for _ in range(3):
+        step()
+    wall, cpu, n = _rates(step, seconds)
+    mode = f"{'bare batched physics' if bare else 'native vector env'} x{n_envs}, {threads} thread(s)"
+    return {"env": "roadload/EcoDrive-v0", "mode": mode, "steps_per_s": wall * n_envs,
+            "steps_per_cpu_s": cpu * n_envs, "steps": n * n_envs}
+
+
+def run_native_benchmark(seconds: float = 5.0, n_envs: int = 256, n_dummy: int = 16,
+                         progress: Callable[[str], None] | None = None) -> pd.DataFrame:
+    """The batched-env table (same run): single env, SB3 DummyVecEnv x n_dummy, the native vector env x n_envs
+    (1 and 2 threads) and its bare batched physics, as wall and per-CPU-second rates."""
+    rows = []
+
+    def add(row: dict[str, Any]) -> None:
+        rows.append(row)
+        if progress:
+            progress(row["mode"])
+
+    import gymnasium as gym
+
+    env = gym.make("roadload/EcoDrive-v0")
+    env.reset(seed=0)
+    env.action_space.seed(0)
+
+    def single() -> None:
+        _, _, te, tr, _ = env.step(env.action_space.sample())
+        if te or tr:
+            env.reset()
+
+    wall, cpu, n = _rates(single, seconds)
+    add({"env": "roadload/EcoDrive-v0", "mode": "single process", "steps_per_s": wall, "steps_per_cpu_s": cpu,
+         "steps": n})
+    venv = make_vec_env(n_dummy, 0, None, vec="dummy")
+    try:
+        venv.reset()
+        acts = np.random.default_rng(0).uniform(-1, 1, (256, n_dummy, 1)).astype(np.float32)
+        k = [0]
+
+        def dummy() -> None:
+            venv.step(acts[k[0] % 256])
+            k[0] += 1
+
+        wall, cpu, n = _rates(dummy, seconds)
+    finally:
+        venv.close()
+    add({"env": "roadload/EcoDrive-v0", "mode": f"dummy x{n_dummy}", "steps_per_s": wall * n_dummy,
+         "steps_per_cpu_s": cpu * n_dummy, "steps": n * n_dummy})
+    for threads in (1, 2):
+        add(bench_native(n_envs, seconds, threads))
+    add(bench_native(n_envs, seconds, 1, bare=True))
+    return pd.DataFrame(rows)
+
+
+def run_benchmark(seconds: float = 5.0, n_envs: int = 2, include_highway: bool = True,
+                  progress: Callable[[str], None] | None = None) -> pd.DataFrame:
+    """The speed table: EcoDrive-v0 (state and can observations) single process, vectorised (dummy and subproc
+    x n_envs), EcoHighway-v0 and highway-env's highway-fast-v0 measured in the same run."""
+    rows = []
+
+    def note(msg):
+        if progress:
+            progress(msg)
+
+    rows.append(bench_single("roadload/EcoDrive-v0", seconds))
+    note("EcoDrive-v0 single")
+    rows.append({**bench_single("roadload/EcoDrive-v0", seconds, observation="can"),
+                 "env": "roadload/EcoDrive-v0 (observation=can)"})
+    note("EcoDrive-v0 can")
+    rows.append(bench_vectorised(n_envs, seconds, "dummy"))
+    note("EcoDrive-v0 dummy")
+    rows.append(bench_vectorised(n_envs, seconds, "subproc"))
+    note("EcoDrive-v0 subproc")
+    if include_highway:
+        import highway_env
+        import gymnasium as gym
+
+        gym.register_envs(highway_env)
+        rows.append(bench_single("roadload/EcoHighway-v0", seconds))
+        note("EcoHighway-v0")
+        rows.append(bench_single("highway-fast-v0", seconds))
+        note("highway-fast-v0")
+    table = pd.DataFrame(rows)
+    step_time = {"roadload/EcoDrive-v0": 0.1, "roadload/EcoDrive-v0 (observation=can)": 0.1,
+                 "roadload/EcoHighway-v0": 0.5, "highway-fast-v0": 1.0}
+    table["simulated_s_per_step"] = table["env"].map(step_time)
+    table["simulated_s_per_wall_s"] = table["steps_per_s"] * table["simulated_s_per_step"]
+    return table
+
+
+def speed_ratio(table: pd.DataFrame) -> float:
+    """EcoDrive-v0 single-process steps/s divided by highway-fast-v0's (same run)."""
+    eco = table[(table.env == "roadload/EcoDrive-v0") & (table["mode"] == "single process")].steps_per_s
+    hw = table[table.env == "highway-fast-v0"].steps_per_s
+    if eco.empty or hw.empty:
+        return float("nan")
+    return float(eco.iloc[0] / hw.iloc[0])

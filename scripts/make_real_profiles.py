@@ -91,8 +91,9 @@ def main() -> int:
         args.out, args.bmw = Path(tempfile.mkdtemp(prefix="roadload-profiles-")), args.bmw[:1]
     base = shared_data_dir()
     if base is None:
-        print("needs the shared data folder (../shared/data or $ROADLOAD_DATA)", file=sys.stderr)
-        return 1
+        print("needs the shared data folder (../shared/data or $ROADLOAD_DATA)"
+              + ("; skipped" if args.quick else ""), file=sys.stderr)
+        return 0 if args.quick else 1
     files = canedge_profiles(base, args.out, 1 if args.quick else None) + bmw_profiles(base, args.out, args.bmw)
     print(f"wrote {len(files)} profiles to {args.out}")
     return 0

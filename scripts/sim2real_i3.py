@@ -8,6 +8,7 @@ which effects explain it, how far it shrinks. Writes report.md, diagnosis.json a
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
@@ -55,7 +56,11 @@ def main() -> None:
     ap.add_argument("--user-candidate", action="store_true",
                     help="add the user candidate 'cold_rolling' (temperature-dependent rolling resistance)")
     args = ap.parse_args()
-    folder = require_shared_data("bmw_i3_tum") / "data"
+    try:
+        folder = require_shared_data("bmw_i3_tum") / "data"
+    except FileNotFoundError as exc:
+        print(f"{exc}" + ("; skipped" if args.quick else ""), file=sys.stderr)
+        sys.exit(0 if args.quick else 1)
     files = sorted(folder.glob("Trip*.csv"))
     if args.trips:
         want = {t.strip() for t in args.trips.split(",")}

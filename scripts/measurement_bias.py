@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from roadload.experiments.controller_report import markdown_table
+from roadload.tables import markdown_table
 from roadload.experiments.measurement_bias import PARAMETERS, bias_figure, measurement_bias, summarise_bias
 from roadload.fileio import write_text
 

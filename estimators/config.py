@@ -8,10 +8,15 @@ raise :class:`EstimatorConfigError` naming the setting) and translates itself in
 from __future__ import annotations
 
 import dataclasses
+import math
+import typing
 from dataclasses import dataclass, field
-from typing import Any, Literal, overload
+from typing import Annotated, Any, Literal, overload
 
+import annotated_types as at
 import numpy as np
+from pydantic import Field
+from pydantic.fields import FieldInfo
 
 from . import kernel as K
 from .influence import InfluenceError, check_psi_params, psi_code, psi_defaults
@@ -29,6 +34,13 @@ REGULARISATION_KINDS = {"none": K.REG_NONE, "levenberg_marquardt": K.REG_LM, "ti
 _REG_ALIASES = {"lm": "levenberg_marquardt", "levenberg-marquardt": "levenberg_marquardt",
                 "levenbergmarquardt": "levenberg_marquardt", None: "none", "off": "none"}
 INSTRUMENT_KINDS = {"none": K.IV_NONE, "delayed": K.IV_DELAY, "user": K.IV_USER}
+
+
+def _setting(doc: str, unit: str = "1", *, gt: float | None = None, ge: float | None = None,
+             lt: float | None = None, le: float | None = None) -> Any:
+    """A declared numeric setting: its bounds (pydantic ``gt``/``ge``/``lt``/``le``), meaning and unit, read by
+    :meth:`EstimatorConfig._check_declared` (a setting left at None is one the composition does not use)."""
+    return Field(description=f"{doc} [{unit}]", json_schema_extra={"unit": unit}, gt=gt, ge=ge, lt=lt, le=le)
 
 
 @overload
@@ -101,33 +113,35 @@ class EstimatorConfig:
     psi: str = "l2"
     psi_params: tuple[float, ...] | None = None
     robust_scale: bool = False
-    scale0: float = 25.0
-    quantile0: float = 350.0
-    learn_rate: float = 0.01
-    quantile_p: float = 0.5
-    scale_forgetting: float = 0.995
-    scale_factor: float = 1.483
-    scale_iterations: int = 1
-    iteration_tol: float = 1e-10
-    min_scale: float = 1e-12
+    scale0: Annotated[float, _setting("initial / fixed scale sigma_0", "unit of B", gt=0.0)] = 25.0
+    quantile0: Annotated[float, _setting("initial quantile Q_0 of the squared residual", "unit of B^2",
+                                         ge=0.0)] = 350.0
+    learn_rate: Annotated[float, _setting("learning rate eta of the recursive quantile (eq. 3.29)", gt=0.0)] = 0.01
+    quantile_p: Annotated[float, _setting("quantile p of the recursive quantile", gt=0.0, lt=1.0)] = 0.5
+    scale_forgetting: Annotated[float, _setting("forgetting lambda of sigma^2 (Algorithm 3.3)", ge=0.0,
+                                                le=1.0)] = 0.995
+    scale_factor: Annotated[float, _setting("consistency factor of the robust scale", gt=0.0)] = 1.483
+    scale_iterations: Annotated[int, _setting("iterations of one time step (optimal variant)", ge=1)] = 1
+    iteration_tol: Annotated[float, _setting("relative convergence tolerance of the iterations", ge=0.0)] = 1e-10
+    min_scale: Annotated[float, _setting("floor of the scale sigma", "unit of B", gt=0.0)] = 1e-12
     covariance: str = "forgetting"
-    forgetting: float | None = None
+    forgetting: Annotated[float | None, _setting("forgetting factor lambda (RLS family)", gt=0.0, le=1.0)] = None
     process_noise: Any = None
-    output_noise: float | None = None
+    output_noise: Annotated[float | None, _setting("output noise R (Kalman family)", "unit of B^2", gt=0.0)] = None
     desired_covariance: Any = None
     joseph: bool = False
     regularisation: str = "none"
-    kappa: float = 0.0
+    kappa: Annotated[float, _setting("regularisation kappa (eq. 3.34)", ge=0.0)] = 0.0
     instruments: str = "none"
-    instrument_delay: int | None = None
+    instrument_delay: Annotated[int | None, _setting("instrument delay in valid samples", ge=1)] = None
     x_min: Any = None
     x_max: Any = None
     x0: Any = None
     p0: Any = 100.0
     transition: Any = None
     symmetrize: bool = True
-    blowup_ratio: float = 1e6
-    covariance_bound_ratio: float = 1e8
+    blowup_ratio: Annotated[float, _setting("blow-up report level, x max diag P0", gt=1.0)] = 1e6
+    covariance_bound_ratio: Annotated[float, _setting("covariance reset level, x max diag P0", gt=1.0)] = 1e8
     _arrays: dict = field(default_factory=dict, init=False, repr=False, compare=False)  # set in __post_init__
 
     # ------------------------------------------------------------------ validation
@@ -169,41 +183,7 @@ class EstimatorConfig:
         self.instruments = iv
         self._check_unused_settings()
 
-        def in_range(name: str, lo: float, hi: float, lo_open: bool, hi_open: bool) -> float:
-            val = getattr(self, name)
-            try:
-                val = float(val)
-            except (TypeError, ValueError):
-                raise EstimatorConfigError(f"{name} must be a number, got {val!r}") from None
-            ok = np.isfinite(val) and (val > lo if lo_open else val >= lo) and (val < hi if hi_open else val <= hi)
-            if not ok:
-                lb = "(" if lo_open else "["
-                rb = ")" if hi_open else "]"
-                raise EstimatorConfigError(f"{name} must lie in {lb}{lo}, {hi}{rb}, got {val}")
-            setattr(self, name, val)
-            return val
-
-        inf = np.inf
-        if self.covariance == "forgetting":
-            in_range("forgetting", 0.0, 1.0, True, False)
-        else:
-            in_range("output_noise", 0.0, inf, True, True)
-        in_range("scale_forgetting", 0.0, 1.0, False, False)
-        in_range("quantile_p", 0.0, 1.0, True, True)
-        in_range("learn_rate", 0.0, inf, True, True)
-        in_range("scale0", 0.0, inf, True, True)
-        in_range("quantile0", 0.0, inf, False, True)
-        in_range("scale_factor", 0.0, inf, True, True)
-        in_range("iteration_tol", 0.0, inf, False, True)
-        in_range("min_scale", 0.0, inf, True, True)
-        in_range("kappa", 0.0, inf, False, True)
-        in_range("blowup_ratio", 1.0, inf, True, True)
-        in_range("covariance_bound_ratio", 1.0, inf, True, True)
-        for name in ("scale_iterations",) + (("instrument_delay",) if self.instruments == "delayed" else ()):
-            val = getattr(self, name)
-            if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1:
-                raise EstimatorConfigError(f"{name} must be an integer >= 1, got {val!r}")
-            setattr(self, name, int(val))
+        self._check_declared()
         if self.regularisation == "none" and self.kappa != 0.0:
             raise EstimatorConfigError(f"kappa = {self.kappa} given without regularisation; set regularisation "
                                        "to 'levenberg_marquardt' or 'tikhonov'")
@@ -274,6 +254,38 @@ class EstimatorConfig:
             "F": np.ascontiguousarray(F), "xmin": xmin, "xmax": xmax, "x0": x0, "P0": P0,
         }
 
+    def _check_declared(self) -> None:
+        """Every setting declared with :func:`_setting`: a finite number (an integer where declared) inside its
+        declared bounds; the error names the setting, the range and the unit. None = not used by the parts."""
+        hints = _declared_hints()
+        for name, (integer, info) in hints.items():
+            value = getattr(self, name)
+            if value is None:
+                continue
+            bounds = {type(m): m for m in info.metadata}
+            unit = (info.json_schema_extra or {}).get("unit", "1") if isinstance(info.json_schema_extra, dict) else "1"
+            if integer:
+                lo = getattr(bounds.get(at.Ge), "ge", 1)
+                if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo:
+                    raise EstimatorConfigError(f"{name} must be an integer >= {lo}, got {value!r}")
+                setattr(self, name, int(value))
+                continue
+            try:
+                val = float(value)
+            except (TypeError, ValueError):
+                raise EstimatorConfigError(f"{name} must be a number [{unit}], got {value!r}") from None
+            lo, lo_open = (bounds[at.Gt].gt, True) if at.Gt in bounds else (getattr(bounds.get(at.Ge), "ge", -math.inf),
+                                                                             False)
+            hi, hi_open = (bounds[at.Lt].lt, True) if at.Lt in bounds else (getattr(bounds.get(at.Le), "le", math.inf),
+                                                                             False)
+            hi_open = hi_open or hi == math.inf
+            ok = (math.isfinite(val) and (val > lo if lo_open else val >= lo)
+                  and (val < hi if hi_open else val <= hi))
+            if not ok:
+                raise EstimatorConfigError(f"{name} must lie in {'(' if lo_open else '['}{float(lo)}, {float(hi)}"
+                                           f"{')' if hi_open else ']'} [{unit}], got {val}")
+            setattr(self, name, val)
+
     def _check_unused_settings(self) -> None:
         """Reject settings the chosen parts ignore; fill in the defaults of the ones they use."""
         where = f"estimator {self.name!r} (covariance {self.covariance!r}, instruments {self.instruments!r})"
@@ -318,6 +330,25 @@ class EstimatorConfig:
     def settings(self) -> dict[str, Any]:
         """All settings as a plain dict (arrays as given)."""
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.init}
+
+
+def _declared_hints() -> dict[str, tuple[bool, FieldInfo]]:
+    """name -> (integer, Field info) of the settings declared with bounds (cached)."""
+    if not _DECLARED:
+        hints = typing.get_type_hints(EstimatorConfig, include_extras=True)
+        for name, hint in hints.items():
+            if typing.get_origin(hint) is not Annotated:
+                continue
+            info = next((m for m in hint.__metadata__ if isinstance(m, FieldInfo)), None)
+            if info is None:
+                continue
+            base = typing.get_args(hint)[0]
+            integer = base is int or int in typing.get_args(base)
+            _DECLARED[name] = (integer, info)
+    return _DECLARED
+
+
+_DECLARED: dict[str, tuple[bool, FieldInfo]] = {}
 
 
 def setting_names() -> list[str]:

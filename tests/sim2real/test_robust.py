@@ -3,6 +3,9 @@ produce acceptances; a real effect still does; an implausible fit is reported, n
 
 from __future__ import annotations
 
+import importlib.util
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -15,38 +18,14 @@ from roadload.sim2real.selection import Selector, make_split
 from roadload.sim2real.simconfig import SimConfig
 from roadload.sim2real.table import time_since
 
-from roadload.sim2real.forcemodel import SimForceModel
 from roadload.units import G
 
-MODEL = SimForceModel.from_physical("toy", 1500.0, 0.01, 0.0, 0.0, 0.6, 8e4)
-
-
-def synth(extra_fn, n_trips=2, duration=500.0, noise=30.0, seed=0) -> pd.DataFrame:
-    """Trips with varied speed / grade / curvature; measured force = the sim's balance + extra + noise."""
-    rng = np.random.default_rng(seed)
-    frames = []
-    for k in range(n_trips):
-        t = np.arange(0.0, duration, 0.1)
-        v = 20 + 8 * np.sin(2 * np.pi * t / 300 + k) + 5 * np.sin(2 * np.pi * t / 71 + 2 * k) \
-            + 2 * np.sin(2 * np.pi * t / 23 + k)
-        th = 0.03 * np.sin(2 * np.pi * t / 400 + 3 * k) + 0.01 * np.sin(2 * np.pi * t / 97)
-        kappa = 0.004 * np.sin(2 * np.pi * t / 50 + k)
-        frames.append(pd.DataFrame({"trip": f"T{k}", "t": t, "time_since_start": t, "speed": v,
-                                    "acceleration": np.gradient(v, t), "gradient_angle": th,
-                                    "path_curvature": kappa, "air_density": 1.2, "gear": 1.0,
-                                    "distance": np.cumsum(v) * 0.1, "heading": np.cumsum(kappa * v) * 0.1}))
-    tab = pd.concat(frames, ignore_index=True)
-    sim = MODEL.predict(tab)
-    tab["brake_force"] = 0.0
-    tab["tractive_force"] = sim + extra_fn(tab) + rng.normal(0, noise, len(tab))
-    tab["sim_force"] = sim
-    tab["sim_drive_force"] = sim
-    tab["sim_drive_force_rate"] = np.concatenate([np.gradient(sim[tab.trip == k], 0.1) for k in pd.unique(tab.trip)])
-    tab["lateral_acceleration"] = tab.speed ** 2 * tab.path_curvature
-    tab["mode"] = np.where(sim > 0, "traction", "regen")
-    tab["valid"] = True
-    tab["residual"] = tab.tractive_force - tab.sim_force
-    return tab
+# the synthetic diagnosis table of the core tests (one definition: tests/sim2real/test_core.py)
+_spec = importlib.util.spec_from_file_location("sim2real_core_tables", Path(__file__).with_name("test_core.py"))
+assert _spec is not None and _spec.loader is not None
+_core = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_core)
+MODEL, synth = _core.MODEL, _core.synth
 
 
 def mass_extra(tab):

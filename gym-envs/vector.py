@@ -91,6 +91,17 @@ def _speed_limit_at(table, s, zero, one):
     return one[_SPEED_LIMIT, 0]
 
 
+@njit(inline="always", cache=True)
+def _set_command(c, ui, v, F):
+    """The simulator command of a normalised action ui in [-1, 1] at speed v [m/s]: wheel force ui x the peak
+    traction force (capped by peak power / v) or ui x the full brake force [N]
+    (DriveScales ``F = (peak traction force, peak power, full brake force)``), built-in steering and gears."""
+    c[C_USE_DRIVER] = 2.0
+    c[C_TRACTION] = ui * min(F[0], F[1] / max(v, 1.0)) if ui >= 0.0 else ui * F[2]
+    c[C_STEER] = np.nan
+    c[C_GEAR_REQ] = -1.0
+
+
 @njit(cache=True)
 def advance_range(lo, hi, active, u, X, P, tabs, ti, road, road_n, stops, stops_n, cycle, rng, cmd, log, n_sub, F):
     """The bare batched physics for vehicles lo..hi-1: for every active vehicle i, the wheel force of command u[i]
@@ -99,17 +110,8 @@ def advance_range(lo, hi, active, u, X, P, tabs, ti, road, road_n, stops, stops_
     for i in range(lo, hi):
         if not active[i]:
             continue
-        ui = u[i]
-        v = X[i, S_V]
-        if ui >= 0.0:
-            f = ui * min(F[0], F[1] / max(v, 1.0))
-        else:
-            f = ui * F[2]
         c = cmd[i]
-        c[C_USE_DRIVER] = 2.0
-        c[C_TRACTION] = f
-        c[C_STEER] = np.nan
-        c[C_GEAR_REQ] = -1.0
+        _set_command(c, u[i], X[i, S_V], F)
         X[i, S_NLOG] = 0.0  # the env reads the state, not the log: a window of n_sub rows suffices
         physics.advance(X[i], P[i], tabs, ti, road[i, :, :road_n[i]], stops[i, :stops_n[i]], cycle, rng[i], c,
                         log[i], n_sub)
@@ -132,15 +134,8 @@ def _step_range(lo, hi, active, u, X, P, tabs, ti, road, road_n, stops, stops_n,
         s0 = x[S_POS]
         v0 = x[S_V]
         limit0 = e[E_LIMIT]
-        if ui >= 0.0:
-            f = ui * min(F[0], F[1] / max(v0, 1.0))
-        else:
-            f = ui * F[2]
         c = cmd[i]
-        c[C_USE_DRIVER] = 2.0
-        c[C_TRACTION] = f
-        c[C_STEER] = np.nan
-        c[C_GEAR_REQ] = -1.0
+        _set_command(c, ui, v0, F)
         x[S_NLOG] = 0.0
         physics.advance(x, P[i], tabs, ti, road[i, :, :road_n[i]], stops[i, :stops_n[i]], cycle, rng[i], c,
                         log[i], n_sub)

@@ -22,6 +22,7 @@ from roadload.experiments.controller_comparison import (PairedTask, format_diffe
 from roadload.tables import markdown_table
 from roadload.fileio import write_text
 from roadload.sweep import run_sweep
+from roadload.fileio import save_figure
 
 SENSITIVITY_ERRORS: dict[str, tuple[float, ...]] = {
     "mass": (-0.2, 0.2), "rolling": (-0.5, 0.5), "drag_area": (-0.3, 0.3), "grade_bias": (-0.005, 0.005),
@@ -157,10 +158,7 @@ def sensitivity_figure(table: pd.DataFrame, path: Path) -> Path:
         ax.set_title(f"{veh} ({t.road.iloc[0] if len(t) else ''}; red: CI excludes 0; n=1: no CI)")
         ax.invert_yaxis()
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=120)
 
 
 def headline_figure(summary: pd.DataFrame, path: Path) -> Path:
@@ -182,10 +180,7 @@ def headline_figure(summary: pd.DataFrame, path: Path) -> Path:
     ax.set_xlabel("MPC energy vs oracle MPC at equal trip time [%] (95 % CI over seeds)")
     ax.invert_yaxis()
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=120)
 
 
 def finite(x: float) -> bool:

@@ -30,6 +30,7 @@ from roadload.estimators.models import (ACCELERATION, GRADIENT_ANGLE, PATH_CURVA
 from roadload.estimators.pipeline import PipelineSettings, model_data, run_pipeline
 from roadload.presets import get_preset
 from roadload.road_profiles import hilly
+from roadload.fileio import save_figure
 
 VARIANTS = ("can", "no_torque_bias", "pitch_corrected", "both")
 PARAMETERS = ("m_V f_r0", "m_V", "rho_a/2 A_V c_x", "m_V^2/c_yW")
@@ -121,7 +122,6 @@ def bias_figure(summary: pd.DataFrame, path) -> None:
         ax.set_yticks(range(len(s)), labels, fontsize=7)
     axes[0].invert_yaxis()
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path, dpi=120)
 
 

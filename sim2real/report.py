@@ -44,6 +44,7 @@ import numpy as np
 import pandas as pd
 
 from roadload.fileio import atomic_path
+from roadload.fileio import save_figure
 
 from .diagnose import Diagnosis
 from .errors import DiagnosisError
@@ -64,10 +65,7 @@ def write_json(diag: Diagnosis, path: Path) -> Path:
 
 # ------------------------------------------------------------------------------------------------ figures
 def _save(fig, path: Path) -> None:
-    import matplotlib.pyplot as plt
-
-    _atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
-    plt.close(fig)
+    save_figure(fig, path, dpi=110, format="png")
 
 
 def _held_out(diag: Diagnosis) -> tuple[pd.DataFrame, np.ndarray, np.ndarray]:

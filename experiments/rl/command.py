@@ -12,7 +12,9 @@ import pandas as pd
 import typer
 
 from roadload.gym.config import EcoDriveConfig, make_config
-from .common import HELD_OUT_SEEDS, RLError, _algo_class, _atomic_write_bytes
+from roadload.tables import write_csv
+
+from .common import HELD_OUT_SEEDS, RLError, _algo_class
 from .rollouts import CONTROLLER_BASELINES, random_policy, sb3_policy
 from .training import TrainResult, load_policy, plot_learning_curves, plot_speed_profiles, train_policy
 from .evaluation import evaluation_table, summarise
@@ -90,7 +92,7 @@ def train_and_evaluate(algos: list[str], timesteps: int, out_dir: Path, n_envs: 
                                    vec=vec, eval_every=eval_every,
                                    progress=lambda n: bar.update(task, completed=n))
                 curve = res.curve
-                _atomic_write_bytes(out_dir / f"{algo}_learning_curve.csv", lambda tmp: curve.to_csv(tmp, index=False))
+                write_csv(out_dir / f"{algo}_learning_curve.csv", curve)
             results.append(res)
         curve_png = plot_learning_curves(results, out_dir / "learning_curve.png")
         if skip_evaluation:
@@ -109,8 +111,8 @@ def train_and_evaluate(algos: list[str], timesteps: int, out_dir: Path, n_envs: 
         profiles_png = plot_speed_profiles(logs, env_config, road_seeds[0], out_dir / "speed_profiles.png")
     table_path = out_dir / "evaluation.csv"
     summary = summarise(table)
-    _atomic_write_bytes(table_path, lambda tmp: table.to_csv(tmp, index=False))
-    _atomic_write_bytes(out_dir / "evaluation_summary.csv", lambda tmp: summary.to_csv(tmp, index=False))
+    write_csv(table_path, table)
+    write_csv(out_dir / "evaluation_summary.csv", summary)
     return {"results": results, "curve_png": curve_png, "table": table, "summary": summary, "notes": notes,
             "table_path": table_path, "profiles_png": profiles_png}
 

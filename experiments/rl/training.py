@@ -12,6 +12,8 @@ import numpy as np
 import pandas as pd
 
 from roadload.gym.config import EcoDriveConfig, make_config
+from roadload.fileio import save_figure
+
 from .common import ALGO_DEFAULTS, RLError, VALIDATION_SEEDS, _algo_class, _atomic_write_bytes, _route, make_vec_env
 from .rollouts import run_policy, sb3_policy
 
@@ -135,8 +137,7 @@ def plot_learning_curves(results: list[TrainResult], path: Path) -> Path:
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    _atomic_write_bytes(Path(path), lambda tmp: fig.savefig(tmp, dpi=120, format="png"))
-    plt.close(fig)
+    save_figure(fig, path, dpi=120, format="png")
     return Path(path)
 
 
@@ -166,6 +167,5 @@ def plot_speed_profiles(logs: dict[str, pd.DataFrame], env_config: dict[str, Any
     ax2.set_xlabel("distance [m]")
     ax2.grid(alpha=0.3)
     fig.tight_layout()
-    _atomic_write_bytes(Path(path), lambda tmp: fig.savefig(tmp, dpi=120, format="png"))
-    plt.close(fig)
+    save_figure(fig, path, dpi=120, format="png")
     return Path(path)

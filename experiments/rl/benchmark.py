@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 
 from .common import make_vec_env
+from roadload.gym.vector import EcoDriveVectorEnv
 
 
 # --------------------------------------------------------------------------------------------- speed benchmark
@@ -89,7 +90,6 @@ def bench_native(n_envs: int = 256, seconds: float = 5.0, threads: int = 1, bare
     """Env steps/s (summed over sub-envs, wall and per CPU second) of the native vector env under random actions
     in [-1, 1] (autoresets included), or with ``bare`` only its batched physics (no reward / observation / info /
     autoreset): the reference the env step is compared with."""
-    from roadload.gym.vector import EcoDriveVectorEnv
 
     venv = EcoDriveVectorEnv(n_envs, config=dict(env_config or {}), threads=threads)
     venv.reset(seed=0)

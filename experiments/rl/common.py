@@ -10,6 +10,8 @@ from roadload.fileio import atomic_path
 from roadload.gym.config import EcoDriveConfig
 from roadload.gym.ecodrive import cut_profile
 from roadload.road_profiles import RoadProfile, load_profile
+from roadload.gym.sb3 import SB3VecEnv
+from roadload.gym.vector import EcoDriveVectorEnv
 
 
 
@@ -75,8 +77,6 @@ def make_vec_env(n_envs: int, seed: int, env_config: dict[str, Any] | None = Non
     if vec not in VEC_MODES:
         raise RLError(f"vec must be one of {VEC_MODES}, got {vec!r}")
     if vec == "native":
-        from roadload.gym.sb3 import SB3VecEnv  # needs stable-baselines3 (optional dependency), hence here
-        from roadload.gym.vector import EcoDriveVectorEnv
 
         venv = SB3VecEnv(EcoDriveVectorEnv(n_envs, config=dict(env_config or {}), autoreset_mode="same_step",
                                            threads=threads))

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from roadload import tables
 from roadload.sim2real import DiagnosisSettings, SimConfig, diagnose
 from roadload.sim2real.diagnose import Diagnosis, fit_floor
 from roadload.sim2real.floor import SimFloor
@@ -26,6 +27,7 @@ from roadload.vehicle import load_vehicle
 
 from .cases import WORLDS, generate_case, supported_effects
 from .common import NONE, OUTSIDE, WorldCase
+from roadload.fileio import save_figure
 
 UNEXPLAINED = "unexplained"
 
@@ -190,7 +192,6 @@ def plot_confusion(table: pd.DataFrame, path: Path | str, title: str) -> Path:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from roadload.fileio import save_figure
 
     fig, ax = plt.subplots(figsize=(max(6.0, 2.5 + 0.75 * table.shape[1]), max(3.5, 1.8 + 0.45 * table.shape[0])))
     ax.imshow(table.to_numpy(dtype=float), cmap="Blues", aspect="auto")
@@ -208,11 +209,9 @@ def plot_confusion(table: pd.DataFrame, path: Path | str, title: str) -> Path:
 
 
 def markdown_table(table: pd.DataFrame, index_name: str = "withheld \\ identified") -> str:
-    """A DataFrame as a GitHub markdown table (zeros left blank)."""
-    cols = [str(c) for c in table.columns]
-    lines = ["| " + " | ".join([index_name] + cols) + " |", "|" + "---|" * (len(cols) + 1)]
-    for idx, row in table.iterrows():
-        cells = ["" if (isinstance(v, (int, np.integer)) and v == 0) else str(v) for v in row.tolist()]
-        lines.append("| " + " | ".join([str(idx)] + cells) + " |")
-    return "\n".join(lines)
+    """A confusion table as Markdown through the one table writer (index as the first column, zeros blank)."""
+    counts = table.astype(object).where(table != 0, "")
+    frame = counts.reset_index()
+    frame.columns = [index_name] + [str(c) for c in table.columns]
+    return tables.markdown_table(frame)
 

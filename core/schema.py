@@ -14,7 +14,7 @@ from typing import Any
 import pydantic
 from pydantic import BaseModel, ConfigDict
 
-__all__ = ["StrictModel", "format_errors", "field_unit", "loc_text"]
+__all__ = ["StrictModel", "format_errors", "field_unit", "loc_text", "field_info_at"]
 
 
 class StrictModel(BaseModel):
@@ -172,3 +172,45 @@ def format_errors(exc: pydantic.ValidationError, model: type[BaseModel] | None =
     if len(errors) > limit:
         lines.append(f"... and {len(errors) - limit} more problems")
     return "; ".join(lines)
+
+
+def field_info_at(root: Any, loc: tuple[Any, ...]) -> tuple[Any, Any]:
+    """Walk a pydantic model or pydantic dataclass along an error location (field names, list indices, dict keys);
+    returns (the type owning the last named field, that field's FieldInfo) — (owner, None) when the location ends
+    in a list item or dict value without its own FieldInfo, or leaves the declared types."""
+    import typing
+
+    from pydantic.fields import FieldInfo
+
+    tp: Any = root
+    owner: Any = root
+    info: Any = None
+    for part in loc:
+        tp = _unwrap_optional(tp)
+        fields = getattr(tp, "__pydantic_fields__", None) or getattr(tp, "model_fields", None)
+        origin = typing.get_origin(tp)
+        if isinstance(fields, dict) and isinstance(part, str):
+            if part not in fields:
+                return tp, None
+            owner, info = tp, fields[part]
+            tp = info.annotation
+        elif origin is list and isinstance(part, int):
+            item = typing.get_args(tp)[0]
+            info = FieldInfo.from_annotation(item) if typing.get_origin(item) is typing.Annotated else None
+            tp = typing.get_args(item)[0] if typing.get_origin(item) is typing.Annotated else item
+        elif origin is dict:
+            tp, info = typing.get_args(tp)[1], None
+        else:
+            return owner, None
+    return owner, info
+
+
+def _unwrap_optional(tp: Any) -> Any:
+    import types
+    import typing
+
+    if typing.get_origin(tp) in (typing.Union, types.UnionType):
+        inner = [a for a in typing.get_args(tp) if a is not type(None)]
+        if len(inner) == 1:
+            return inner[0]
+    return tp

@@ -18,29 +18,28 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import os
-import types
 import typing
-from dataclasses import dataclass, field
+from dataclasses import field
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Callable, Literal, TypeVar
 
 import numpy as np
-from pydantic import Field, TypeAdapter
+from pydantic import ConfigDict, Field, Strict, TypeAdapter, ValidationError, field_validator, model_validator
+from pydantic.dataclasses import dataclass as pydantic_dataclass
 from pydantic.fields import FieldInfo
 
 from .fileio import write_json
+from .schema import field_info_at, loc_text
 from .units import G, STANDARD_AIR_DENSITY
 from .channels import MEASURED
 
 __all__ = [
     "VehicleSpecError", "Curve", "Map2D", "BodySpec", "AeroSpec", "TireSpec", "EngineSpec", "MotorSpec",
     "BatterySpec", "ShiftSpec", "DrivetrainSpec", "BrakeSpec", "SteeringSpec", "ChannelSensorSpec", "SensorSpec",
-    "VehicleSpec", "load_vehicle", "save_vehicle", "check_declared", "check_physics",
+    "VehicleSpec", "load_vehicle", "save_vehicle", "parse_spec", "check_physics",
     "MASS_MIN", "MASS_MAX", "TOP_SPEED_MIN", "vehicle_json_schema",
 ]
-
 
 
 class VehicleSpecError(ValueError):
@@ -56,51 +55,165 @@ FINAL_DRIVE_MIN, FINAL_DRIVE_MAX = 0.5, 15.0
 #: the top speed (kinematic and power limit, flat road) a road vehicle must reach [m/s]
 TOP_SPEED_MIN = 20.0
 
+#: every spec part: unknown keys are errors, NaN/inf refused; numbers are JSON numbers (``Real``), not strings
+_CONFIG = ConfigDict(extra="forbid", allow_inf_nan=False)
+#: a finite JSON number: int or float, never a string or a bool (pydantic strict float; NaN/inf refused by _CONFIG)
+Real = Annotated[float, Strict()]
 
-def _q(unit: str, doc: str, *, plausible: tuple[float, float] | None = None, gt: float | None = 0.0) -> FieldInfo:
-    """A declared physical quantity: > gt, inside the plausible range [lo, hi], in `unit` (pydantic Field
-    metadata read by :func:`check_declared`; also shows in the JSON schema of the spec)."""
+
+def _q(unit: str, doc: str, *, plausible: tuple[float, float] | None = None, gt: float | None = 0.0,
+       ge: float | None = None, le: float | None = None) -> FieldInfo:
+    """A declared physical quantity (pydantic Field): > gt (or >= ge), <= le, inside the plausible range
+    [lo, hi] of a road vehicle, in `unit`; bounds, unit and meaning also show in the JSON schema of the spec."""
     extra: dict[str, Any] = {"unit": unit}
     if plausible is not None:
         extra["plausible"] = list(plausible)
-    return Field(gt=gt, description=f"{doc} [{unit}]", json_schema_extra=extra)
+        ge, le = plausible
+    return Field(gt=gt, ge=ge, le=le, description=f"{doc} [{unit}]", json_schema_extra=extra)
 
 
-_HINTS: dict[type, dict[str, Any]] = {}
+class _FieldError(ValueError):
+    """Raised by a validator: `sub` is the field (relative to the validated part) the message is about."""
+
+    def __init__(self, sub: str, message: str) -> None:
+        super().__init__(message)
+        self.sub = sub
 
 
-def check_declared(obj: Any, path: str) -> None:
-    """Check every field declared with :func:`_q` on a (nested) spec dataclass: finite, > bound, inside the
-    plausible range; the error names the field, the value, the bound and the unit."""
-    tp = type(obj)
-    if tp not in _HINTS:
-        _HINTS[tp] = typing.get_type_hints(tp, include_extras=True)
-    hints = _HINTS[tp]
-    for f in dataclasses.fields(obj):
-        value = getattr(obj, f.name)
-        hint: Any = hints.get(f.name)
-        if typing.get_origin(hint) is Annotated:
-            for info in hint.__metadata__:
-                if isinstance(info, FieldInfo):
-                    _check_quantity(f"{path}.{f.name}", value, info)
-        if dataclasses.is_dataclass(value) and not isinstance(value, type):
-            check_declared(value, f"{path}.{f.name}")
+T = TypeVar("T")
 
 
-def _check_quantity(path: str, value: Any, info: FieldInfo) -> None:
-    extra: dict[str, Any] = dict(info.json_schema_extra) if isinstance(info.json_schema_extra, dict) else {}
-    unit = extra.get("unit", "")
-    if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
-        raise VehicleSpecError(f"{path}: must be a finite number [{unit}], got {value!r}")
-    for m in info.metadata:
-        gt = getattr(m, "gt", None)
-        if gt is not None and not value > gt:
-            raise VehicleSpecError(f"{path}: must be > {gt:g} [{unit}], got {value!r}")
+@typing.dataclass_transform(field_specifiers=(dataclasses.field, Field))
+def _spec(cls: type[T]) -> type[T]:
+    """A spec part: a pydantic dataclass (validated on construction, attribute access, ``dataclasses.replace``,
+    positional arguments) whose ValidationError is re-raised as a one-line :class:`VehicleSpecError`."""
+    pcls: Any = pydantic_dataclass(cls, config=_CONFIG)
+    init = pcls.__init__
+    root = "vehicle" if cls.__name__ == "VehicleSpec" else cls.__name__
+
+    def __init__(self: Any, *args: Any, **kwargs: Any) -> None:
+        try:
+            init(self, *args, **kwargs)
+        except ValidationError as exc:
+            raise VehicleSpecError(spec_error_text(exc, pcls, root)) from None
+
+    __init__.__doc__ = init.__doc__
+    pcls.__init__ = __init__
+    return typing.cast(type[T], pcls)
+
+
+def _bound_text(value: Any, info: FieldInfo | None) -> str:
+    """The bound a number broke, from its declaration: > gt, the plausible range, or [ge, le]; with the unit."""
+    extra: dict[str, Any] = dict(info.json_schema_extra) if info is not None and isinstance(
+        info.json_schema_extra, dict) else {}
+    unit = str(extra.get("unit", ""))
+    bounds = {k: getattr(m, k) for m in (info.metadata if info is not None else []) for k in ("gt", "ge", "lt", "le")
+              if getattr(m, k, None) is not None}
+    u = f" [{unit}]" if unit else ""
+    if not isinstance(value, (int, float)) or value != value or value in (float("inf"), float("-inf")):
+        return f"must be a finite number{u}, got {value!r}"
+    if "gt" in bounds and not value > bounds["gt"]:
+        return f"must be > {bounds['gt']:g}{u}, got {value!r}"
     if "plausible" in extra:
         lo, hi = (float(b) for b in extra["plausible"])
-        if not lo <= value <= hi:
-            raise VehicleSpecError(f"{path}: {value!r} {unit} is outside the plausible range [{lo:g}, {hi:g}] "
-                                   f"{unit} of a road vehicle ({info.description})")
+        v_unit = "" if unit in ("", "1") else f" {unit}"
+        return (f"{value!r}{v_unit} is outside the plausible range [{lo:g}, {hi:g}]{v_unit} of a road vehicle "
+                f"({info.description if info is not None else ''})")
+    lo_t = f"({bounds['gt']:g}" if "gt" in bounds else (f"[{bounds['ge']:g}" if "ge" in bounds else "(-inf")
+    hi_t = f"{bounds['lt']:g})" if "lt" in bounds else (f"{bounds['le']:g}]" if "le" in bounds else "inf)")
+    return f"must lie in {lo_t}, {hi_t}{u}, got {value!r}"
+
+
+_TYPE_WORDS = {"float_type": "a number", "float_parsing": "a number", "int_type": "an integer",
+               "int_from_float": "an integer", "bool_type": "true/false", "string_type": "a string",
+               "list_type": "a list", "dict_type": "an object", "dataclass_type": "an object",
+               "dataclass_exact_type": "an object"}
+
+
+def spec_error_text(exc: ValidationError, root_type: Any, root: str = "vehicle") -> str:
+    """One line for the first error of a spec's ValidationError: ``<root>.<field path>: <problem>`` naming the
+    value, the bound and the unit (the style of every spec error, e.g. ``vehicle.body.mass: must be > 0 [kg]``)."""
+    err = exc.errors(include_url=False)[0]
+    loc, kind, value = tuple(err["loc"]), err["type"], err.get("input")
+    names = list(getattr(root_type, "__pydantic_fields__", {}))
+    if loc and isinstance(loc[0], int) and loc[0] < len(names):  # a positional argument: name its field
+        loc = (names[loc[0]],) + loc[1:]
+    ctx = err.get("ctx") or {}
+    where = loc_text(loc, root)
+    _, info = field_info_at(root_type, loc)
+    if kind == "value_error" and isinstance(ctx.get("error"), ValueError):
+        cause = ctx["error"]
+        if isinstance(cause, _FieldError):
+            where = f"{where}.{cause.sub}" if not cause.sub.startswith("[") else where + cause.sub
+        return f"{where}: {cause}"
+    if kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal", "finite_number"):
+        return f"{where}: {_bound_text(value, info)}"
+    if kind in _TYPE_WORDS:
+        unit = _unit(info)
+        got = type(value).__name__ if kind in ("list_type", "dict_type", "dataclass_type") else repr(value)
+        return f"{where}: expected {_TYPE_WORDS[kind]}{unit}, got {got}"
+    if kind in ("missing", "missing_argument", "missing_keyword_argument"):
+        return f"{where}: missing required field"
+    if kind in ("unexpected_keyword_argument", "extra_forbidden", "unexpected_positional_argument"):
+        owner, _ = field_info_at(root_type, loc[:-1] + ("",)) if len(loc) > 1 else (root_type, None)
+        known = sorted(getattr(owner, "__pydantic_fields__", {}))
+        return f"{where}: unknown field (known: {known})"
+    if kind == "literal_error":
+        return f"{where}: must be {ctx.get('expected')}, got {value!r}"
+    if kind == "string_too_short":
+        return f"{where}: must be a non-empty string, got {value!r}"
+    if kind == "too_short":
+        return f"{where}: needs at least {ctx.get('min_length')} item(s), got {ctx.get('actual_length')}"
+    if kind == "too_long":
+        return f"{where}: at most {ctx.get('max_length')} items, got {ctx.get('actual_length')}"
+    return f"{where}: {err['msg']}, got {value!r}"
+
+
+def _unit(info: FieldInfo | None) -> str:
+    extra = info.json_schema_extra if info is not None else None
+    return f" [{extra['unit']}]" if isinstance(extra, dict) and extra.get("unit") else ""
+
+
+_ADAPTERS: dict[type, TypeAdapter] = {}
+
+
+def parse_spec(tp: type[T], data: Any, path: str = "vehicle") -> T:
+    """Validate JSON-like data into the spec type `tp` (a part or a whole VehicleSpec); VehicleSpecError naming
+    the field under `path` on any problem."""
+    if tp not in _ADAPTERS:
+        _ADAPTERS[tp] = TypeAdapter(tp)
+    try:
+        return typing.cast(T, _ADAPTERS[tp].validate_python(data))
+    except ValidationError as exc:
+        raise VehicleSpecError(spec_error_text(exc, tp, path)) from None
+
+
+class _Part:
+    """Methods shared by every spec part."""
+
+    @classmethod
+    def from_dict(cls: type[T], data: dict[str, Any], path: str = "vehicle") -> T:
+        """Build from JSON-like data; errors name the field under `path`."""
+        return parse_spec(cls, data, path)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(typing.cast(Any, self))
+
+    def validate(self, path: str = "vehicle") -> None:
+        """Re-validate after fields were changed in place (construction validates already)."""
+        parse_spec(type(self), _fields_of(self), path)
+
+
+def _fields_of(obj: Any) -> Any:
+    """A spec as nested dicts for re-validation: parts become dicts, tables are passed as they are (not copied,
+    unlike ``dataclasses.asdict``; pydantic builds new lists)."""
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return {f.name: _fields_of(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+    if isinstance(obj, dict):
+        return {k: _fields_of(v) for k, v in obj.items()}
+    if isinstance(obj, list) and obj and dataclasses.is_dataclass(obj[0]):
+        return [_fields_of(v) for v in obj]
+    return obj
 
 
 def _flat_road_speed(power: float, mass: float, tires: "TireSpec", drag_area: float, efficiency: float = 0.9) -> float:
@@ -114,20 +227,11 @@ def _flat_road_speed(power: float, mass: float, tires: "TireSpec", drag_area: fl
     return lo
 
 
-def check_physics(spec: "VehicleSpec", path: str = "vehicle") -> None:
-    """Cross-field checks of a complete spec: gear ratios in range and strictly decreasing, final drive in range,
-    and a reachable top speed (min of the shaft-speed limit in the top gear and the flat-road power limit)
-    above TOP_SPEED_MIN."""
+def check_physics(spec: "VehicleSpec") -> None:
+    """Cross-field check of a complete spec (run by VehicleSpec's model validator): a reachable top speed (min of
+    the shaft-speed limit in the top gear and the flat-road power limit) above TOP_SPEED_MIN; raises a
+    ValueError naming the limiting field."""
     d = spec.drivetrain
-    for k, r in enumerate(d.gear_ratios):
-        if not GEAR_RATIO_MIN <= r <= GEAR_RATIO_MAX:
-            raise VehicleSpecError(f"{path}.drivetrain.gear_ratios[{k}]: {r!r} is outside the plausible range "
-                                   f"[{GEAR_RATIO_MIN:g}, {GEAR_RATIO_MAX:g}] of a gearbox ratio [1]")
-    steps = np.diff(np.asarray(d.gear_ratios, dtype=float))
-    if np.any(steps >= 0):
-        k = int(np.flatnonzero(steps >= 0)[0])
-        raise VehicleSpecError(f"{path}.drivetrain.gear_ratios: must be strictly decreasing from first gear up, "
-                               f"got {d.gear_ratios[k]!r} then {d.gear_ratios[k + 1]!r} at gears {k + 1}, {k + 2}")
     if d.engine is not None and d.kind == "ice":
         shaft_max = d.engine.max_speed
         x, y = np.asarray(d.engine.full_load.x, float), np.asarray(d.engine.full_load.y, float)
@@ -146,81 +250,65 @@ def check_physics(spec: "VehicleSpec", path: str = "vehicle") -> None:
                  f"{d.final_drive:g} on {r:g} m wheels gives {v_shaft:.3g} m/s" if v_shaft <= v_power else
                  f"peak power {power / 1e3:.3g} kW moves {spec.body.mass:g} kg at {v_power:.3g} m/s on a flat road")
         where = "drivetrain.gear_ratios" if v_shaft <= v_power else "body.mass"
-        raise VehicleSpecError(f"{path}.{where}: top speed {v_top:.3g} m/s [{v_top * 3.6:.3g} km/h] is below "
-                               f"{TOP_SPEED_MIN:g} m/s [{TOP_SPEED_MIN * 3.6:g} km/h] ({cause})")
+        raise _FieldError(where, f"top speed {v_top:.3g} m/s [{v_top * 3.6:.3g} km/h] is below "
+                                 f"{TOP_SPEED_MIN:g} m/s [{TOP_SPEED_MIN * 3.6:g} km/h] ({cause})")
 
 
-# ----------------------------------------------------------------------------------------------- check helpers
-def _finite(path: str, value: float) -> None:
-    if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
-        raise VehicleSpecError(f"{path}: must be a finite number, got {value!r}")
+def _strictly_increasing(values: list[float]) -> list[float]:
+    if not np.all(np.diff(np.asarray(values, dtype=float)) > 0):
+        raise ValueError("must be strictly increasing")
+    return values
 
 
-def _positive(path: str, value: float) -> None:
-    _finite(path, value)
-    if value <= 0:
-        raise VehicleSpecError(f"{path}: must be > 0, got {value!r}")
-
-
-def _nonneg(path: str, value: float) -> None:
-    _finite(path, value)
-    if value < 0:
-        raise VehicleSpecError(f"{path}: must be >= 0, got {value!r}")
-
-
-def _between(path: str, value: float, lo: float, hi: float) -> None:
-    _finite(path, value)
-    if not lo <= value <= hi:
-        raise VehicleSpecError(f"{path}: must lie in [{lo}, {hi}], got {value!r}")
-
-
-def _increasing(path: str, values: list[float], min_len: int = 2) -> None:
-    arr = np.asarray(values, dtype=float)
-    if arr.ndim != 1 or arr.size < min_len:
-        raise VehicleSpecError(f"{path}: needs a list of at least {min_len} numbers")
-    if not np.all(np.isfinite(arr)):
-        raise VehicleSpecError(f"{path}: contains NaN/inf")
-    if not np.all(np.diff(arr) > 0):
-        raise VehicleSpecError(f"{path}: must be strictly increasing")
+def _nonnegative_table(what: str) -> Callable[[Any], Any]:
+    """An after-validator of a table part: every entry of ``values`` >= 0."""
+    def check(table: Any) -> Any:
+        if np.any(np.asarray(table.values) < 0):
+            raise _FieldError("values", f"{what} must be >= 0")
+        return table
+    return check
 
 
 # ----------------------------------------------------------------------------------------------- tables
-@dataclass
-class Curve:
+Axis = Annotated[list[Real], Field(min_length=2, description="strictly increasing breakpoints")]
+
+
+@_spec
+class Curve(_Part):
     """A 1-D lookup table y(x), linear interpolation, clamped at the ends."""
 
-    x: list[float]
-    y: list[float]
+    x: Axis
+    y: list[Real]
 
-    def validate(self, path: str) -> None:
-        _increasing(f"{path}.x", self.x)
-        y = np.asarray(self.y, dtype=float)
-        if y.shape != (len(self.x),):
-            raise VehicleSpecError(f"{path}.y: length {y.size} differs from x length {len(self.x)}")
-        if not np.all(np.isfinite(y)):
-            raise VehicleSpecError(f"{path}.y: contains NaN/inf")
+    _x_increasing = field_validator("x")(_strictly_increasing)
+
+    @model_validator(mode="after")
+    def _same_length(self) -> "Curve":
+        if len(self.y) != len(self.x):
+            raise _FieldError("y", f"length {len(self.y)} differs from x length {len(self.x)}")
+        return self
 
     def __call__(self, x):
         return np.interp(x, self.x, self.y)
 
 
-@dataclass
-class Map2D:
+@_spec
+class Map2D(_Part):
     """A 2-D lookup table ``values[i][j] = f(x[i], y[j])``, bilinear interpolation, clamped at the edges."""
 
-    x: list[float]
-    y: list[float]
-    values: list[list[float]]
+    x: Axis
+    y: Axis
+    values: list[list[Real]]
 
-    def validate(self, path: str) -> None:
-        _increasing(f"{path}.x", self.x)
-        _increasing(f"{path}.y", self.y)
-        v = np.asarray(self.values, dtype=float)
-        if v.shape != (len(self.x), len(self.y)):
-            raise VehicleSpecError(f"{path}.values: shape {v.shape} differs from (len(x), len(y)) = "
-                                   f"({len(self.x)}, {len(self.y)})")
-        if not np.all(np.isfinite(v)):
-            raise VehicleSpecError(f"{path}.values: contains NaN/inf")
+    _axes_increasing = field_validator("x", "y")(_strictly_increasing)
+
+    @model_validator(mode="after")
+    def _shape(self) -> "Map2D":
+        shape = (len(self.values), *{len(row) for row in self.values})
+        if shape != (len(self.x), len(self.y)):
+            raise _FieldError("values", f"shape {shape} differs from (len(x), len(y)) = "
+                                        f"({len(self.x)}, {len(self.y)})")
+        return self
 
     def __call__(self, x, y):
         """Bilinear interpolation (numpy, vectorised)."""
@@ -236,131 +324,116 @@ class Map2D:
 
 
 # ----------------------------------------------------------------------------------------------- parts
-@dataclass
-class BodySpec:
+@_spec
+class BodySpec(_Part):
     """Mass and geometry. mass m_V [kg] nominal incl. driver; wheelbase l = l_12 + l_34 [m];
     cg_to_front_axle l_12 [m]; yaw_inertia I_z [kg m^2]; pitch/roll gradients [rad per m/s^2] tilt the body-fixed
     accelerometers (eq. 4.4/5.2: nose up under acceleration, roll outward in corners)."""
 
-    mass: Annotated[float, _q("kg", "nominal mass incl. driver", plausible=(MASS_MIN, MASS_MAX))]
-    wheelbase: Annotated[float, _q("m", "wheelbase l = l_12 + l_34", plausible=(1.0, 10.0))]
-    cg_to_front_axle: float
-    cg_height: Annotated[float, _q("m", "CG height", plausible=(0.1, 3.5))] = 0.55
-    track_front: Annotated[float, _q("m", "front track width", plausible=(0.5, 3.0))] = 1.6
-    track_rear: Annotated[float, _q("m", "rear track width", plausible=(0.5, 3.0))] = 1.6
-    yaw_inertia: Annotated[float, _q("kg m^2", "yaw inertia I_z", plausible=(10.0, 2.0e6))] = 3000.0
-    pitch_gradient: float = 0.004
-    roll_gradient: float = 0.006
+    mass: Annotated[Real, _q("kg", "nominal mass incl. driver", plausible=(MASS_MIN, MASS_MAX))]
+    wheelbase: Annotated[Real, _q("m", "wheelbase l = l_12 + l_34", plausible=(1.0, 10.0))]
+    cg_to_front_axle: Annotated[Real, _q("m", "CG-to-front-axle distance l_12")]
+    cg_height: Annotated[Real, _q("m", "CG height", plausible=(0.1, 3.5))] = 0.55
+    track_front: Annotated[Real, _q("m", "front track width", plausible=(0.5, 3.0))] = 1.6
+    track_rear: Annotated[Real, _q("m", "rear track width", plausible=(0.5, 3.0))] = 1.6
+    yaw_inertia: Annotated[Real, _q("kg m^2", "yaw inertia I_z", plausible=(10.0, 2.0e6))] = 3000.0
+    pitch_gradient: Annotated[Real, _q("rad/(m/s^2)", "pitch gradient", gt=None, ge=0.0, le=0.05)] = 0.004
+    roll_gradient: Annotated[Real, _q("rad/(m/s^2)", "roll gradient", gt=None, ge=0.0, le=0.05)] = 0.006
+
+    @model_validator(mode="after")
+    def _cg_inside_wheelbase(self) -> "BodySpec":
+        if self.cg_to_front_axle >= self.wheelbase:
+            raise _FieldError("cg_to_front_axle", f"must be < wheelbase ({self.wheelbase} m) [m], "
+                                                  f"got {self.cg_to_front_axle!r}")
+        return self
 
     @property
     def cg_to_rear_axle(self) -> float:
         """l_34 [m]."""
         return self.wheelbase - self.cg_to_front_axle
 
-    def validate(self, path: str) -> None:
-        for name in ("mass", "wheelbase", "cg_to_front_axle", "cg_height", "track_front", "track_rear",
-                     "yaw_inertia"):
-            _positive(f"{path}.{name}", getattr(self, name))
-        if self.cg_to_front_axle >= self.wheelbase:
-            raise VehicleSpecError(f"{path}.cg_to_front_axle: must be < wheelbase ({self.wheelbase} m)")
-        _between(f"{path}.pitch_gradient", self.pitch_gradient, 0.0, 0.05)
-        _between(f"{path}.roll_gradient", self.roll_gradient, 0.0, 0.05)
 
-
-@dataclass
-class AeroSpec:
+@_spec
+class AeroSpec(_Part):
     """Aerodynamics (eq. 2.7): c_x(psi_a) = c_w cos(psi_a) (1 + yaw_drag_factor sin^2 psi_a), frontal area A_V."""
 
-    drag_coefficient: Annotated[float, _q("1", "drag coefficient c_w", plausible=(1e-3, 2.0))]
-    frontal_area: Annotated[float, _q("m^2", "frontal area A_V", plausible=(0.3, 15.0))]
-    yaw_drag_factor: float = 0.3
+    drag_coefficient: Annotated[Real, _q("1", "drag coefficient c_w", plausible=(1e-3, 2.0))]
+    frontal_area: Annotated[Real, _q("m^2", "frontal area A_V", plausible=(0.3, 15.0))]
+    yaw_drag_factor: Annotated[Real, _q("1", "yaw drag factor", gt=None, ge=0.0, le=5.0)] = 0.3
 
     @property
     def drag_area(self) -> float:
         """c_x*A_V [m^2] at zero air approach angle."""
         return self.drag_coefficient * self.frontal_area
 
-    def validate(self, path: str) -> None:
-        _between(f"{path}.drag_coefficient", self.drag_coefficient, 1e-3, 2.0)
-        _positive(f"{path}.frontal_area", self.frontal_area)
-        _between(f"{path}.yaw_drag_factor", self.yaw_drag_factor, 0.0, 5.0)
 
-
-@dataclass
-class TireSpec:
+@_spec
+class TireSpec(_Part):
     """Tires and wheels: dynamic radius r_W [m]; f_r(v) = f_r0 + f_r1 v + f_r4 v^4 (eq. 2.10, f_r1 [s/m],
     f_r4 [s^4/m^4]); axle cornering stiffnesses X_12, X_34 [N/rad] (eq. 2.12); longitudinal slip stiffness c_xW
     per wheel [N] (eq. 2.3a); wheel inertia I_W per wheel incl. brake disc [kg m^2]; toe_in per front wheel [rad]."""
 
-    dynamic_radius: Annotated[float, _q("m", "dynamic tyre radius r_W", plausible=(0.1, 1.5))]
-    rolling_resistance_f0: float
-    rolling_resistance_f1: float
-    rolling_resistance_f4: float
-    cornering_stiffness_front: float
-    cornering_stiffness_rear: float
-    longitudinal_stiffness: float = 8.0e4
-    wheel_inertia: float = 1.0
-    toe_in: float = 0.0015
+    dynamic_radius: Annotated[Real, _q("m", "dynamic tyre radius r_W", plausible=(0.1, 1.5))]
+    rolling_resistance_f0: Annotated[Real, _q("1", "rolling resistance f_r0 (eq. 2.10)", gt=None, ge=1e-4,
+                                              le=0.1)]
+    rolling_resistance_f1: Annotated[Real, _q("s/m", "rolling resistance f_r1 (eq. 2.10)", gt=None, ge=0.0,
+                                              le=1e-2)]
+    rolling_resistance_f4: Annotated[Real, _q("s^4/m^4", "rolling resistance f_r4 (eq. 2.10)", gt=None, ge=0.0,
+                                              le=1e-6)]
+    cornering_stiffness_front: Annotated[Real, _q("N/rad", "front axle cornering stiffness X_12 (eq. 2.12)")]
+    cornering_stiffness_rear: Annotated[Real, _q("N/rad", "rear axle cornering stiffness X_34 (eq. 2.12)")]
+    longitudinal_stiffness: Annotated[Real, _q("N", "longitudinal slip stiffness c_xW per wheel")] = 8.0e4
+    wheel_inertia: Annotated[Real, _q("kg m^2", "wheel inertia I_W per wheel")] = 1.0
+    toe_in: Annotated[Real, _q("rad", "toe-in per front wheel", gt=None, ge=0.0, le=0.02)] = 0.0015
 
     def rolling_resistance_coefficient(self, v):
         """f_r(v) (eq. 2.10)."""
         v = np.asarray(v, dtype=float)
         return self.rolling_resistance_f0 + self.rolling_resistance_f1 * v + self.rolling_resistance_f4 * v ** 4
 
-    def validate(self, path: str) -> None:
-        _between(f"{path}.dynamic_radius", self.dynamic_radius, 0.1, 1.5)
-        _between(f"{path}.rolling_resistance_f0", self.rolling_resistance_f0, 1e-4, 0.1)
-        _between(f"{path}.rolling_resistance_f1", self.rolling_resistance_f1, 0.0, 1e-2)
-        _between(f"{path}.rolling_resistance_f4", self.rolling_resistance_f4, 0.0, 1e-6)
-        for name in ("cornering_stiffness_front", "cornering_stiffness_rear", "longitudinal_stiffness",
-                     "wheel_inertia"):
-            _positive(f"{path}.{name}", getattr(self, name))
-        _between(f"{path}.toe_in", self.toe_in, 0.0, 0.02)
 
-
-@dataclass
-class EngineSpec:
+@_spec
+class EngineSpec(_Part):
     """Combustion engine: speeds [rad/s]; full_load T_max(omega) and drag (motoring, negative) torque curves [N m];
     fuel_power map P_fuel(omega, T_E) [W] (x = speed, y = torque; zero below the drag curve = fuel cut);
     inertia I_E [kg m^2]."""
 
-    idle_speed: Annotated[float, _q("rad/s", "idle speed", plausible=(20.0, 200.0))]
-    max_speed: Annotated[float, _q("rad/s", "maximum engine speed", plausible=(100.0, 1500.0))]
+    idle_speed: Annotated[Real, _q("rad/s", "idle speed", plausible=(20.0, 200.0))]
+    max_speed: Annotated[Real, _q("rad/s", "maximum engine speed", plausible=(100.0, 1500.0))]
     full_load: Curve
     drag: Curve
     fuel_power: Map2D
-    inertia: float
+    inertia: Annotated[Real, _q("kg m^2", "engine inertia I_E")]
 
-    def validate(self, path: str) -> None:
-        _positive(f"{path}.idle_speed", self.idle_speed)
-        _positive(f"{path}.max_speed", self.max_speed)
+    _fuel_nonnegative = field_validator("fuel_power")(_nonnegative_table("fuel power"))
+
+    @model_validator(mode="after")
+    def _curves(self) -> "EngineSpec":
         if self.max_speed <= self.idle_speed:
-            raise VehicleSpecError(f"{path}.max_speed: must exceed idle_speed")
-        self.full_load.validate(f"{path}.full_load")
-        self.drag.validate(f"{path}.drag")
+            raise _FieldError("max_speed", f"must exceed idle_speed ({self.idle_speed:g} rad/s) [rad/s], "
+                                           f"got {self.max_speed!r}")
         if np.any(np.asarray(self.full_load.y) <= 0):
-            raise VehicleSpecError(f"{path}.full_load.y: full-load torque must be > 0")
+            raise _FieldError("full_load.y", "full-load torque must be > 0 [N*m]")
         if np.any(np.asarray(self.drag.y) > 0):
-            raise VehicleSpecError(f"{path}.drag.y: drag torque must be <= 0")
-        self.fuel_power.validate(f"{path}.fuel_power")
-        if np.any(np.asarray(self.fuel_power.values) < 0):
-            raise VehicleSpecError(f"{path}.fuel_power.values: fuel power must be >= 0")
-        _positive(f"{path}.inertia", self.inertia)
+            raise _FieldError("drag.y", "drag torque must be <= 0 [N*m]")
+        return self
 
 
-@dataclass
-class MotorSpec:
+@_spec
+class MotorSpec(_Part):
     """Traction motor: torque / power limits (motoring) [N m, W], regen limits (magnitudes) [N m, W], max speed
     [rad/s], rotor inertia [kg m^2], loss_map P_loss(omega, T) [W] >= 0 (x = speed, y = torque); electrical power
     P_el = T omega + P_loss (efficiency map: see ``MotorSpec.efficiency``)."""
 
-    max_torque: Annotated[float, _q("N*m", "maximum motor torque", plausible=(5.0, 1.0e5))]
-    max_power: Annotated[float, _q("W", "maximum motor power", plausible=(1.0e3, 2.0e6))]
-    max_speed: Annotated[float, _q("rad/s", "maximum motor speed", plausible=(50.0, 3000.0))]
-    regen_torque_limit: float
-    regen_power_limit: float
-    inertia: float
+    max_torque: Annotated[Real, _q("N*m", "maximum motor torque", plausible=(5.0, 1.0e5))]
+    max_power: Annotated[Real, _q("W", "maximum motor power", plausible=(1.0e3, 2.0e6))]
+    max_speed: Annotated[Real, _q("rad/s", "maximum motor speed", plausible=(50.0, 3000.0))]
+    regen_torque_limit: Annotated[Real, _q("N*m", "regenerative torque limit (magnitude)")]
+    regen_power_limit: Annotated[Real, _q("W", "regenerative power limit (magnitude)")]
+    inertia: Annotated[Real, _q("kg m^2", "rotor inertia")]
     loss_map: Map2D
+
+    _losses_nonnegative = field_validator("loss_map")(_nonnegative_table("losses"))
 
     def efficiency(self, speed, torque):
         """Motor efficiency eta(omega, T) [-] derived from the loss map (motoring: P_m/P_el; generating: P_el/P_m)."""
@@ -372,59 +445,47 @@ class MotorSpec:
             eta = np.where(p_mech >= 0, p_mech / (p_mech + loss), (-p_mech - loss) / (-p_mech))
         return np.where(np.abs(p_mech) > 1e-9, eta, 0.0)
 
-    def validate(self, path: str) -> None:
-        for name in ("max_torque", "max_power", "max_speed", "regen_torque_limit", "regen_power_limit", "inertia"):
-            _positive(f"{path}.{name}", getattr(self, name))
-        self.loss_map.validate(f"{path}.loss_map")
-        if np.any(np.asarray(self.loss_map.values) < 0):
-            raise VehicleSpecError(f"{path}.loss_map.values: losses must be >= 0")
 
-
-@dataclass
-class BatterySpec:
+@_spec
+class BatterySpec(_Part):
     """Traction battery: usable capacity [J], open-circuit voltage [V], internal resistance [Ohm],
     auxiliary (12 V, electronics) power [W], initial state of charge [-]."""
 
-    capacity: Annotated[float, _q("J", "usable battery capacity", plausible=(1.0e5, 1.0e10))]
-    open_circuit_voltage: float
-    internal_resistance: float
-    auxiliary_power: float = 300.0
-    initial_soc: float = 0.9
-
-    def validate(self, path: str) -> None:
-        _positive(f"{path}.capacity", self.capacity)
-        _positive(f"{path}.open_circuit_voltage", self.open_circuit_voltage)
-        _nonneg(f"{path}.internal_resistance", self.internal_resistance)
-        _nonneg(f"{path}.auxiliary_power", self.auxiliary_power)
-        _between(f"{path}.initial_soc", self.initial_soc, 0.0, 1.0)
+    capacity: Annotated[Real, _q("J", "usable battery capacity", plausible=(1.0e5, 1.0e10))]
+    open_circuit_voltage: Annotated[Real, _q("V", "open-circuit voltage")]
+    internal_resistance: Annotated[Real, _q("Ohm", "internal resistance", gt=None, ge=0.0)]
+    auxiliary_power: Annotated[Real, _q("W", "auxiliary power", gt=None, ge=0.0)] = 300.0
+    initial_soc: Annotated[Real, _q("1", "initial state of charge", gt=None, ge=0.0, le=1.0)] = 0.9
 
 
-@dataclass
-class ShiftSpec:
+@_spec
+class ShiftSpec(_Part):
     """Shift strategy and clutch: up/downshift engine speeds [rad/s] at zero and full load (linear in between),
     min time between shifts [s], engine-speed sync time constant while slipping [s], max slip time [s],
     launch engine speed [rad/s], slip speed below which the clutch locks [rad/s]."""
 
-    upshift_speed_low: float
-    upshift_speed_high: float
-    downshift_speed_low: float
-    downshift_speed_high: float
-    min_interval: float = 1.0
-    sync_time_constant: float = 0.08
-    max_slip_time: float = 1.5
-    launch_speed: float = 130.0
-    lock_slip_speed: float = 5.0
+    upshift_speed_low: Annotated[Real, _q("rad/s", "upshift engine speed at zero load")]
+    upshift_speed_high: Annotated[Real, _q("rad/s", "upshift engine speed at full load")]
+    downshift_speed_low: Annotated[Real, _q("rad/s", "downshift engine speed at zero load")]
+    downshift_speed_high: Annotated[Real, _q("rad/s", "downshift engine speed at full load")]
+    min_interval: Annotated[Real, _q("s", "minimum time between shifts")] = 1.0
+    sync_time_constant: Annotated[Real, _q("s", "engine-speed sync time constant while slipping")] = 0.08
+    max_slip_time: Annotated[Real, _q("s", "maximum clutch slip time")] = 1.5
+    launch_speed: Annotated[Real, _q("rad/s", "launch engine speed")] = 130.0
+    lock_slip_speed: Annotated[Real, _q("rad/s", "slip speed below which the clutch locks")] = 5.0
 
-    def validate(self, path: str) -> None:
-        for name in ("upshift_speed_low", "upshift_speed_high", "downshift_speed_low", "downshift_speed_high",
-                     "min_interval", "sync_time_constant", "max_slip_time", "launch_speed", "lock_slip_speed"):
-            _positive(f"{path}.{name}", getattr(self, name))
+    @model_validator(mode="after")
+    def _downshift_below_upshift(self) -> "ShiftSpec":
         if self.downshift_speed_low >= self.upshift_speed_low or self.downshift_speed_high >= self.upshift_speed_high:
-            raise VehicleSpecError(f"{path}.downshift_speed_low: downshift speeds must be below upshift speeds")
+            raise _FieldError("downshift_speed_low", "downshift speeds must be below upshift speeds [rad/s]")
+        return self
 
 
-@dataclass
-class DrivetrainSpec:
+GearRatio = Annotated[Real, _q("1", "gearbox ratio i_G", plausible=(GEAR_RATIO_MIN, GEAR_RATIO_MAX))]
+
+
+@_spec
+class DrivetrainSpec(_Part):
     """Drive-train (eq. 2.17). kind 'ice' (engine + clutch + gearbox) or 'bev' (motor + single gear);
     driven_axle 'rear' | 'front' | 'all'; gear_ratios i_G(G) for G = 1..n; final_drive i_D;
     gearbox_inertia I_G(G) (input side), clutch_inertia I_C, differential_inertia I_D (at differential input)
@@ -433,22 +494,60 @@ class DrivetrainSpec:
     Losses scale with oil temperature: factor = 1 + (oil_cold_loss_factor - 1) * clip((T_warm - T_oil) /
     (T_warm - 293.15 K), 0, 1.5)."""
 
-    kind: str
-    driven_axle: str
-    gear_ratios: list[float]
-    final_drive: Annotated[float, _q("1", "final drive ratio i_D", plausible=(FINAL_DRIVE_MIN, FINAL_DRIVE_MAX))]
-    gearbox_inertia: list[float]
-    clutch_inertia: float
-    differential_inertia: float
+    kind: Literal["ice", "bev"]
+    driven_axle: Literal["rear", "front", "all"]
+    gear_ratios: Annotated[list[GearRatio], Field(min_length=1, max_length=12,
+                                                  description="gear ratios i_G(G), strictly decreasing [1]")]
+    final_drive: Annotated[Real, _q("1", "final drive ratio i_D", plausible=(FINAL_DRIVE_MIN, FINAL_DRIVE_MAX))]
+    gearbox_inertia: list[Annotated[Real, _q("kg m^2", "gearbox inertia I_G(G)", gt=None, ge=0.0)]]
+    clutch_inertia: Annotated[Real, _q("kg m^2", "clutch inertia I_C", gt=None, ge=0.0)]
+    differential_inertia: Annotated[Real, _q("kg m^2", "differential inertia I_D", gt=None, ge=0.0)]
     gearbox_loss: list[Map2D]
     differential_loss: Map2D
     engine: EngineSpec | None = None
     motor: MotorSpec | None = None
     battery: BatterySpec | None = None
     shift: ShiftSpec | None = None
-    oil_warm_temperature: float = 363.15
-    oil_cold_loss_factor: float = 1.6
-    oil_time_constant: float = 1200.0
+    oil_warm_temperature: Annotated[Real, _q("K", "warm oil temperature", gt=None, ge=300.0, le=450.0)] = 363.15
+    oil_cold_loss_factor: Annotated[Real, _q("1", "loss factor of cold oil", gt=None, ge=1.0, le=10.0)] = 1.6
+    oil_time_constant: Annotated[Real, _q("s", "oil warm-up time constant")] = 1200.0
+
+    _differential_loss_nonnegative = field_validator("differential_loss")(_nonnegative_table("loss torques"))
+
+    @field_validator("gear_ratios")
+    @classmethod
+    def _gear_ratios_decreasing(cls, ratios: list[float]) -> list[float]:
+        """i_G(1) > i_G(2) > ...: a gearbox whose ratios do not fall from first gear up is a typo."""
+        for k in range(len(ratios) - 1):
+            if ratios[k + 1] >= ratios[k]:
+                raise ValueError(f"must be strictly decreasing from first gear up, got {ratios[k]!r} then "
+                                 f"{ratios[k + 1]!r} at gears {k + 1}, {k + 2} [1]")
+        return ratios
+
+    @field_validator("gearbox_loss")
+    @classmethod
+    def _gearbox_losses_nonnegative(cls, maps: list[Map2D]) -> list[Map2D]:
+        for k, m in enumerate(maps):
+            if np.any(np.asarray(m.values) < 0):
+                raise _FieldError(f"[{k}].values", "loss torques must be >= 0 [N*m]")
+        return maps
+
+    @model_validator(mode="after")
+    def _parts_of_the_kind(self) -> "DrivetrainSpec":
+        """One gearbox inertia and loss map per gear; an ICE has an engine and a shift strategy, a BEV a motor,
+        a battery and exactly one gear."""
+        if len(self.gearbox_inertia) != self.n_gears:
+            raise _FieldError("gearbox_inertia", f"needs one value per gear ({self.n_gears}), "
+                                                 f"got {len(self.gearbox_inertia)}")
+        if len(self.gearbox_loss) != self.n_gears:
+            raise _FieldError("gearbox_loss", f"needs one map per gear ({self.n_gears}), got {len(self.gearbox_loss)}")
+        needed = ("engine", "shift") if self.kind == "ice" else ("motor", "battery")
+        for part in needed:
+            if getattr(self, part) is None:
+                raise _FieldError(part, f"required for kind {self.kind!r}")
+        if self.kind == "bev" and self.n_gears != 1:
+            raise _FieldError("gear_ratios", f"a 'bev' drive-train has exactly one gear, got {self.n_gears}")
+        return self
 
     @property
     def n_gears(self) -> int:
@@ -494,87 +593,42 @@ class DrivetrainSpec:
         return i_d ** 2 * self.differential_inertia + (i_d * i_g) ** 2 * (
             self.gearbox_inertia[gear - 1] + self.clutch_inertia + self.source_inertia)
 
-    def validate(self, path: str) -> None:
-        if self.kind not in ("ice", "bev"):
-            raise VehicleSpecError(f"{path}.kind: must be 'ice' or 'bev', got {self.kind!r}")
-        if self.driven_axle not in ("rear", "front", "all"):
-            raise VehicleSpecError(f"{path}.driven_axle: must be 'rear', 'front' or 'all', got {self.driven_axle!r}")
-        if not self.gear_ratios:
-            raise VehicleSpecError(f"{path}.gear_ratios: needs at least one gear")
-        if len(self.gear_ratios) > 12:
-            raise VehicleSpecError(f"{path}.gear_ratios: at most 12 gears")
-        for k, r in enumerate(self.gear_ratios):
-            _positive(f"{path}.gear_ratios[{k}]", r)
-        _positive(f"{path}.final_drive", self.final_drive)
-        if len(self.gearbox_inertia) != self.n_gears:
-            raise VehicleSpecError(f"{path}.gearbox_inertia: needs one value per gear ({self.n_gears})")
-        for k, r in enumerate(self.gearbox_inertia):
-            _nonneg(f"{path}.gearbox_inertia[{k}]", r)
-        _nonneg(f"{path}.clutch_inertia", self.clutch_inertia)
-        _nonneg(f"{path}.differential_inertia", self.differential_inertia)
-        if len(self.gearbox_loss) != self.n_gears:
-            raise VehicleSpecError(f"{path}.gearbox_loss: needs one map per gear ({self.n_gears})")
-        for k, m in enumerate(self.gearbox_loss):
-            m.validate(f"{path}.gearbox_loss[{k}]")
-            if np.any(np.asarray(m.values) < 0):
-                raise VehicleSpecError(f"{path}.gearbox_loss[{k}].values: loss torques must be >= 0")
-        self.differential_loss.validate(f"{path}.differential_loss")
-        if np.any(np.asarray(self.differential_loss.values) < 0):
-            raise VehicleSpecError(f"{path}.differential_loss.values: loss torques must be >= 0")
-        if self.kind == "ice":
-            if self.engine is None:
-                raise VehicleSpecError(f"{path}.engine: required for kind 'ice'")
-            if self.shift is None:
-                raise VehicleSpecError(f"{path}.shift: required for kind 'ice'")
-            self.engine.validate(f"{path}.engine")
-            self.shift.validate(f"{path}.shift")
-        else:
-            if self.motor is None:
-                raise VehicleSpecError(f"{path}.motor: required for kind 'bev'")
-            if self.battery is None:
-                raise VehicleSpecError(f"{path}.battery: required for kind 'bev'")
-            if self.n_gears != 1:
-                raise VehicleSpecError(f"{path}.gear_ratios: a 'bev' drive-train has exactly one gear")
-            self.motor.validate(f"{path}.motor")
-            self.battery.validate(f"{path}.battery")
-        _between(f"{path}.oil_warm_temperature", self.oil_warm_temperature, 300.0, 450.0)
-        _between(f"{path}.oil_cold_loss_factor", self.oil_cold_loss_factor, 1.0, 10.0)
-        _positive(f"{path}.oil_time_constant", self.oil_time_constant)
 
-
-@dataclass
-class BrakeSpec:
+@_spec
+class BrakeSpec(_Part):
     """Friction brakes (T_B = p_B A_B r_B X_B, section 2.7): per-wheel effective piston area A_B [m^2], effective
     radius r_B [m] per axle, nominal pad friction X_B [-] (incl. caliper efficiency), front share of the brake
     torque [-], max pressure [Pa], lumped disc heat capacity per axle [J/K] and cooling [W/K, W/(K m/s)]."""
 
-    front_area: float
-    rear_area: float
-    front_radius: float
-    rear_radius: float
-    pad_friction: float = 0.4
-    front_share: float = 0.65
-    max_pressure: float = 1.6e7
-    disc_heat_capacity: float = 8000.0
-    disc_cooling: float = 15.0
-    disc_cooling_speed: float = 1.5
-
-    def validate(self, path: str) -> None:
-        for name in ("front_area", "rear_area", "front_radius", "rear_radius", "max_pressure",
-                     "disc_heat_capacity", "disc_cooling"):
-            _positive(f"{path}.{name}", getattr(self, name))
-        _between(f"{path}.pad_friction", self.pad_friction, 0.05, 1.5)
-        _between(f"{path}.front_share", self.front_share, 0.0, 1.0)
-        _nonneg(f"{path}.disc_cooling_speed", self.disc_cooling_speed)
+    front_area: Annotated[Real, _q("m^2", "front piston area A_B per wheel")]
+    rear_area: Annotated[Real, _q("m^2", "rear piston area A_B per wheel")]
+    front_radius: Annotated[Real, _q("m", "front effective brake radius r_B")]
+    rear_radius: Annotated[Real, _q("m", "rear effective brake radius r_B")]
+    pad_friction: Annotated[Real, _q("1", "pad friction X_B", gt=None, ge=0.05, le=1.5)] = 0.4
+    front_share: Annotated[Real, _q("1", "front share of the brake torque", gt=None, ge=0.0, le=1.0)] = 0.65
+    max_pressure: Annotated[Real, _q("Pa", "maximum brake pressure")] = 1.6e7
+    disc_heat_capacity: Annotated[Real, _q("J/K", "disc heat capacity per axle")] = 8000.0
+    disc_cooling: Annotated[Real, _q("W/K", "disc cooling at standstill")] = 15.0
+    disc_cooling_speed: Annotated[Real, _q("W/(K m/s)", "disc cooling per speed", gt=None, ge=0.0)] = 1.5
 
 
-@dataclass
-class SteeringSpec:
+@_spec
+class SteeringSpec(_Part):
     """Steering ratio table delta_W12 = f(delta_S) (section 5.2.4): steering-wheel angle delta_S [rad] to front
     wheel steer angle delta_W [rad], strictly increasing, through (0, 0)."""
 
-    steering_wheel_angle: list[float]
-    wheel_angle: list[float]
+    steering_wheel_angle: Axis
+    wheel_angle: Axis
+
+    _angles_increasing = field_validator("steering_wheel_angle", "wheel_angle")(_strictly_increasing)
+
+    @model_validator(mode="after")
+    def _through_origin(self) -> "SteeringSpec":
+        if len(self.wheel_angle) != len(self.steering_wheel_angle):
+            raise _FieldError("wheel_angle", "length differs from steering_wheel_angle")
+        if abs(float(np.interp(0.0, self.steering_wheel_angle, self.wheel_angle))) > 1e-6:
+            raise _FieldError("wheel_angle", "the table must pass through (0, 0) [rad]")
+        return self
 
     def wheel_from_steering_wheel(self, delta_s):
         return np.interp(delta_s, self.steering_wheel_angle, self.wheel_angle)
@@ -582,64 +636,46 @@ class SteeringSpec:
     def steering_wheel_from_wheel(self, delta_w):
         return np.interp(delta_w, self.wheel_angle, self.steering_wheel_angle)
 
-    def validate(self, path: str) -> None:
-        _increasing(f"{path}.steering_wheel_angle", self.steering_wheel_angle)
-        _increasing(f"{path}.wheel_angle", self.wheel_angle)
-        if len(self.wheel_angle) != len(self.steering_wheel_angle):
-            raise VehicleSpecError(f"{path}.wheel_angle: length differs from steering_wheel_angle")
-        if abs(float(np.interp(0.0, self.steering_wheel_angle, self.wheel_angle))) > 1e-6:
-            raise VehicleSpecError(f"{path}.wheel_angle: the table must pass through (0, 0)")
 
-
-@dataclass
-class ChannelSensorSpec:
+@_spec
+class ChannelSensorSpec(_Part):
     """One CAN channel: white-noise std, constant bias, resolution (quantisation step, 0 = none) in the channel's SI
     unit, latency [s], outlier scale (typical outlier size, used by the sensor_outliers effect), enabled."""
 
-    noise_std: float = 0.0
-    bias: float = 0.0
-    resolution: float = 0.0
-    latency: float = 0.0
-    outlier_scale: float = 1.0
-    enabled: bool = True
-
-    def validate(self, path: str) -> None:
-        _nonneg(f"{path}.noise_std", self.noise_std)
-        _finite(f"{path}.bias", self.bias)
-        _nonneg(f"{path}.resolution", self.resolution)
-        _between(f"{path}.latency", self.latency, 0.0, 5.0)
-        _nonneg(f"{path}.outlier_scale", self.outlier_scale)
+    noise_std: Annotated[Real, _q("channel unit", "white-noise standard deviation", gt=None, ge=0.0)] = 0.0
+    bias: Annotated[Real, _q("channel unit", "constant bias", gt=None)] = 0.0
+    resolution: Annotated[Real, _q("channel unit", "quantisation step (0 = none)", gt=None, ge=0.0)] = 0.0
+    latency: Annotated[Real, _q("s", "latency", gt=None, ge=0.0, le=5.0)] = 0.0
+    outlier_scale: Annotated[Real, _q("channel unit", "typical outlier size", gt=None, ge=0.0)] = 1.0
+    enabled: Annotated[bool, Strict()] = True
 
 
-@dataclass
-class SensorSpec:
+@_spec
+class SensorSpec(_Part):
     """The CAN-like sensor set: sample rate [Hz] and one ChannelSensorSpec per measured channel (names from
     roadload.channels). drive_torque_gain_error / drive_torque_offset [N m]: error of the engine / motor torque
     model (the CAN torque is a model output, section 5.2.1); speed_scale_error: ESP speed scale error [-]."""
 
-    sample_rate: float = 100.0
+    sample_rate: Annotated[Real, _q("Hz", "sample rate", gt=None, ge=1.0, le=1000.0)] = 100.0
     channels: dict[str, ChannelSensorSpec] = field(default_factory=dict)
-    drive_torque_gain_error: float = 0.0
-    drive_torque_offset: float = 0.0
-    speed_scale_error: float = 0.0
+    drive_torque_gain_error: Annotated[Real, _q("1", "drive-torque gain error", gt=None, ge=-0.5, le=0.5)] = 0.0
+    drive_torque_offset: Annotated[Real, _q("N*m", "drive-torque offset", gt=None)] = 0.0
+    speed_scale_error: Annotated[Real, _q("1", "ESP speed scale error", gt=None, ge=-0.2, le=0.2)] = 0.0
 
-    def validate(self, path: str) -> None:
-
-        _between(f"{path}.sample_rate", self.sample_rate, 1.0, 1000.0)
-        for name, ch in self.channels.items():
+    @field_validator("channels")
+    @classmethod
+    def _measured_channels(cls, channels: dict[str, ChannelSensorSpec]) -> dict[str, ChannelSensorSpec]:
+        for name in channels:
             if name not in MEASURED:
-                raise VehicleSpecError(f"{path}.channels.{name}: not a measured channel of the catalogue")
-            ch.validate(f"{path}.channels.{name}")
-        _between(f"{path}.drive_torque_gain_error", self.drive_torque_gain_error, -0.5, 0.5)
-        _finite(f"{path}.drive_torque_offset", self.drive_torque_offset)
-        _between(f"{path}.speed_scale_error", self.speed_scale_error, -0.2, 0.2)
+                raise _FieldError(name, f"not a measured channel of the catalogue (measured: {sorted(MEASURED)})")
+        return channels
 
 
-@dataclass
-class VehicleSpec:
+@_spec
+class VehicleSpec(_Part):
     """A complete vehicle: body, aero, tires, drive-train, brakes, steering table and sensors."""
 
-    name: str
+    name: Annotated[str, Strict(), Field(min_length=1, description="name of the vehicle")]
     body: BodySpec
     aero: AeroSpec
     tires: TireSpec
@@ -647,10 +683,13 @@ class VehicleSpec:
     brakes: BrakeSpec
     steering: SteeringSpec
     sensors: SensorSpec = field(default_factory=SensorSpec)
-    description: str = ""
+    description: Annotated[str, Strict()] = ""
 
-    def __post_init__(self) -> None:
-        self.validate()
+    @model_validator(mode="after")
+    def _top_speed_reachable(self) -> "VehicleSpec":
+        """Cross-field physics: the top speed this drive-train, mass and drag reach (see :func:`check_physics`)."""
+        check_physics(self)
+        return self
 
     # ------------------------------------------------------------------ derived quantities
     @property
@@ -690,22 +729,7 @@ class VehicleSpec:
                + b.cg_to_front_axle ** 2 / t.cornering_stiffness_rear) / b.wheelbase ** 2
         return 1.0 / (4.0 * inv)
 
-    # ------------------------------------------------------------------ validation and I/O
-    def validate(self, path: str = "vehicle") -> None:
-        if not isinstance(self.name, str) or not self.name:
-            raise VehicleSpecError(f"{path}.name: must be a non-empty string")
-        check_declared(self, path)
-        for part in ("body", "aero", "tires", "drivetrain", "brakes", "steering", "sensors"):
-            getattr(self, part).validate(f"{path}.{part}")
-        check_physics(self, path)
-
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any], path: str = "vehicle") -> "VehicleSpec":
-        return _build(cls, data, path)
-
+    # ------------------------------------------------------------------ I/O
     def replace(self, **changes: Any) -> "VehicleSpec":
         """A validated copy with dotted-path changes, e.g. ``spec.replace(**{"body.mass": 2100.0})``."""
         d = self.to_dict()
@@ -723,60 +747,6 @@ class VehicleSpec:
 
     def save(self, path: str | os.PathLike) -> Path:
         return save_vehicle(self, path)
-
-
-# ----------------------------------------------------------------------------------------------- dict -> dataclass
-def _build(tp: Any, data: Any, path: str) -> Any:
-    """Convert JSON-like data into the annotated type, naming the field on any error (no validation of values)."""
-    origin = typing.get_origin(tp)
-    args = typing.get_args(tp)
-    if origin in (typing.Union, types.UnionType):
-        if data is None and type(None) in args:
-            return None
-        inner = [a for a in args if a is not type(None)]
-        return _build(inner[0], data, path)
-    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
-        if isinstance(data, tp):
-            return data
-        if not isinstance(data, dict):
-            raise VehicleSpecError(f"{path}: expected an object, got {type(data).__name__}")
-        hints = typing.get_type_hints(tp)
-        names = {f.name for f in dataclasses.fields(tp)}
-        unknown = sorted(set(data) - names)
-        if unknown:
-            raise VehicleSpecError(f"{path}.{unknown[0]}: unknown field (known: {sorted(names)})")
-        kwargs = {}
-        for f in dataclasses.fields(tp):
-            if f.name in data:
-                kwargs[f.name] = _build(hints[f.name], data[f.name], f"{path}.{f.name}")
-            elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-                raise VehicleSpecError(f"{path}.{f.name}: missing required field")
-        return tp(**kwargs)
-    if origin is list:
-        if not isinstance(data, (list, tuple)):
-            raise VehicleSpecError(f"{path}: expected a list, got {type(data).__name__}")
-        return [_build(args[0], x, f"{path}[{i}]") for i, x in enumerate(data)]
-    if origin is dict:
-        if not isinstance(data, dict):
-            raise VehicleSpecError(f"{path}: expected an object, got {type(data).__name__}")
-        return {str(k): _build(args[1], v, f"{path}.{k}") for k, v in data.items()}
-    if tp is float:
-        if isinstance(data, bool) or not isinstance(data, (int, float)):
-            raise VehicleSpecError(f"{path}: expected a number, got {data!r}")
-        return float(data)
-    if tp is int:
-        if isinstance(data, bool) or not isinstance(data, int):
-            raise VehicleSpecError(f"{path}: expected an integer, got {data!r}")
-        return data
-    if tp is bool:
-        if not isinstance(data, bool):
-            raise VehicleSpecError(f"{path}: expected true/false, got {data!r}")
-        return data
-    if tp is str:
-        if not isinstance(data, str):
-            raise VehicleSpecError(f"{path}: expected a string, got {data!r}")
-        return data
-    raise VehicleSpecError(f"{path}: unsupported type {tp!r}")  # pragma: no cover - programming error
 
 
 def vehicle_json_schema() -> dict[str, Any]:

@@ -12,14 +12,13 @@ from roadload.vehicle import load_vehicle
 from roadload.presets import PRESETS, get_preset
 from roadload.road_profiles import load_profile
 from roadload.road_profiles import DriveCycle
-from roadload.vehicle import SensorSpec, VehicleSpecError
+from roadload.vehicle import SensorSpec, VehicleSpecError, parse_spec
 from roadload.envs.effects import EffectsConfig
 from roadload.envs.simulator import simulate
 from roadload.trip import Trip, TripError
 from roadload.envs.plotting import plot_trip
 from roadload.envs.effects import describe_effects
 from roadload.experiments.bench_simulator import report
-from roadload.vehicle import _build
 
 from .errors import fail
 
@@ -96,8 +95,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                     data = json.loads(Path(sensors).read_text())
                 except (OSError, json.JSONDecodeError) as exc:
                     _fail(f"--sensors {sensors}: cannot read a JSON sensor spec ({exc})")
-                sensor_spec = _build(SensorSpec, data, "sensors")
-                sensor_spec.validate("sensors")
+                sensor_spec = parse_spec(SensorSpec, data, "sensors")
             with Progress(TextColumn("[bold]simulating[/bold] {task.description}"), BarColumn(),
                           TextColumn("{task.percentage:>5.1f}%"), TimeElapsedColumn(),
                           console=Console(stderr=True), transient=True) as bar:

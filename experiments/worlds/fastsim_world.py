@@ -32,7 +32,7 @@ import functools
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from roadload.units import KELVIN, G, air_density
@@ -301,6 +301,7 @@ def matched_vehicle(variant: Variant = BEV_VARIANT) -> VehicleSpec:
     shift: ShiftSpec | None = None
     motor: MotorSpec | None = None
     battery: BatterySpec | None = None
+    kind: Literal["ice", "bev"]
     if variant.kind == "bev":
         _, _, p_max = _eff_curve(d)
         motor = MotorSpec(max_torque=245.0, max_power=p_max, max_speed=1190.0, regen_torque_limit=245.0,

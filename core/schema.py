@@ -8,13 +8,16 @@ unknown key, the known keys.
 
 from __future__ import annotations
 
+import dataclasses
 import re
-from typing import Any
+import typing
+from typing import Any, Callable
 
 import pydantic
+import pydantic.dataclasses
 from pydantic import BaseModel, ConfigDict
 
-__all__ = ["StrictModel", "format_errors", "field_unit", "loc_text", "field_info_at"]
+__all__ = ["StrictModel", "format_errors", "field_unit", "loc_text", "field_info_at", "spec_dataclass"]
 
 
 class StrictModel(BaseModel):
@@ -214,3 +217,30 @@ def _unwrap_optional(tp: Any) -> Any:
         if len(inner) == 1:
             return inner[0]
     return tp
+
+
+_T = typing.TypeVar("_T")
+
+
+@typing.dataclass_transform(field_specifiers=(dataclasses.field, pydantic.Field))
+def spec_dataclass(config: ConfigDict, error: Callable[[pydantic.ValidationError, Any], Exception]
+                   ) -> Callable[[type[_T]], type[_T]]:
+    """Decorator: a pydantic dataclass (validated on construction; attribute access, positional arguments and
+    ``dataclasses.replace`` as with a stdlib dataclass) whose ValidationError is re-raised as the one-line
+    domain error ``error(exc, cls)`` (e.g. VehicleSpecError naming the field, the bound and the unit)."""
+
+    def wrap(cls: type[_T]) -> type[_T]:
+        pcls: Any = pydantic.dataclasses.dataclass(cls, config=config)
+        init = pcls.__init__
+
+        def __init__(self: Any, *args: Any, **kwargs: Any) -> None:
+            try:
+                init(self, *args, **kwargs)
+            except pydantic.ValidationError as exc:
+                raise error(exc, pcls) from None
+
+        __init__.__doc__ = init.__doc__
+        pcls.__init__ = __init__
+        return typing.cast(type[_T], pcls)
+
+    return wrap

@@ -26,11 +26,10 @@ from typing import Annotated, Any, Callable, Literal, TypeVar
 
 import numpy as np
 from pydantic import ConfigDict, Field, Strict, TypeAdapter, ValidationError, field_validator, model_validator
-from pydantic.dataclasses import dataclass as pydantic_dataclass
 from pydantic.fields import FieldInfo
 
 from .fileio import write_json
-from .schema import field_info_at, loc_text
+from .schema import field_info_at, loc_text, spec_dataclass
 from .units import G, STANDARD_AIR_DENSITY
 from .channels import MEASURED
 
@@ -83,23 +82,12 @@ class _FieldError(ValueError):
 T = TypeVar("T")
 
 
-@typing.dataclass_transform(field_specifiers=(dataclasses.field, Field))
-def _spec(cls: type[T]) -> type[T]:
-    """A spec part: a pydantic dataclass (validated on construction, attribute access, ``dataclasses.replace``,
-    positional arguments) whose ValidationError is re-raised as a one-line :class:`VehicleSpecError`."""
-    pcls: Any = pydantic_dataclass(cls, config=_CONFIG)
-    init = pcls.__init__
-    root = "vehicle" if cls.__name__ == "VehicleSpec" else cls.__name__
+def _spec_error(exc: ValidationError, cls: Any) -> VehicleSpecError:
+    return VehicleSpecError(spec_error_text(exc, cls, "vehicle" if cls.__name__ == "VehicleSpec" else cls.__name__))
 
-    def __init__(self: Any, *args: Any, **kwargs: Any) -> None:
-        try:
-            init(self, *args, **kwargs)
-        except ValidationError as exc:
-            raise VehicleSpecError(spec_error_text(exc, pcls, root)) from None
 
-    __init__.__doc__ = init.__doc__
-    pcls.__init__ = __init__
-    return typing.cast(type[T], pcls)
+#: a spec part: a pydantic dataclass whose errors are one-line VehicleSpecErrors naming the field
+_spec = spec_dataclass(_CONFIG, _spec_error)
 
 
 def _bound_text(value: Any, info: FieldInfo | None) -> str:

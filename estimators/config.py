@@ -8,14 +8,15 @@ raise :class:`EstimatorConfigError` naming the setting) and translates itself in
 from __future__ import annotations
 
 import dataclasses
-import math
+import types
 import typing
-from dataclasses import dataclass, field
+from dataclasses import field
 from typing import Annotated, Any, Literal, overload
 
 import annotated_types as at
 import numpy as np
-from pydantic import Field
+from pydantic import ConfigDict, Field, Strict, ValidationError, field_validator, model_validator
+from roadload.schema import spec_dataclass
 from pydantic.fields import FieldInfo
 
 from . import kernel as K
@@ -38,9 +39,52 @@ INSTRUMENT_KINDS = {"none": K.IV_NONE, "delayed": K.IV_DELAY, "user": K.IV_USER}
 
 def _setting(doc: str, unit: str = "1", *, gt: float | None = None, ge: float | None = None,
              lt: float | None = None, le: float | None = None) -> Any:
-    """A declared numeric setting: its bounds (pydantic ``gt``/``ge``/``lt``/``le``), meaning and unit, read by
-    :meth:`EstimatorConfig._check_declared` (a setting left at None is one the composition does not use)."""
+    """A declared numeric setting (pydantic Field): its bounds ``gt``/``ge``/``lt``/``le``, meaning and unit; pydantic
+    checks them on construction (a setting left at None is one the composition does not use)."""
     return Field(description=f"{doc} [{unit}]", json_schema_extra={"unit": unit}, gt=gt, ge=ge, lt=lt, le=le)
+
+
+#: a finite number: int or float, never a string or a bool (pydantic strict; NaN/inf refused by the config)
+Real = Annotated[float, Strict()]
+Count = Annotated[int, Strict()]
+
+
+def _error_text(exc: ValidationError) -> str:
+    """The first error of a ValidationError of EstimatorConfig as one line naming the setting, its range and unit:
+    ``forgetting must lie in (0.0, 1.0] [1], got 0.0``."""
+    err = exc.errors(include_url=False)[0]
+    ctx = err.get("ctx") or {}
+    if err["type"] == "value_error" and isinstance(ctx.get("error"), ValueError):
+        return str(ctx["error"])
+    loc = tuple(err["loc"])
+    names = [f.name for f in dataclasses.fields(EstimatorConfig) if f.init]
+    name = names[loc[0]] if loc and isinstance(loc[0], int) and loc[0] < len(names) else (str(loc[0]) if loc else "")
+    value = err.get("input")
+    declared = _declared_hints()
+    if name == "n_params":
+        return f"n_params must be a positive integer, got {value!r}"
+    if name in declared:
+        integer, info = declared[name]
+        bounds = {type(m): m for m in info.metadata}
+        if integer:
+            return f"{name} must be an integer >= {getattr(bounds.get(at.Ge), 'ge', 1)}, got {value!r}"
+        unit = info.json_schema_extra.get("unit", "1") if isinstance(info.json_schema_extra, dict) else "1"
+        if err["type"] in ("float_type", "float_parsing"):
+            return f"{name} must be a number [{unit}], got {value!r}"
+        lo, lo_open = (bounds[at.Gt].gt, True) if at.Gt in bounds else (getattr(bounds.get(at.Ge), "ge", -np.inf),
+                                                                         False)
+        hi, hi_open = (bounds[at.Lt].lt, True) if at.Lt in bounds else (getattr(bounds.get(at.Le), "le", np.inf),
+                                                                         False)
+        hi_open = hi_open or hi == np.inf
+        return (f"{name} must lie in {'(' if lo_open else '['}{float(lo)}, {float(hi)}{')' if hi_open else ']'} "
+                f"[{unit}], got {value!r}")
+    if err["type"] in ("unexpected_keyword_argument", "unexpected_positional_argument"):
+        return f"unknown setting(s) [{name!r}]; valid settings are {sorted(setting_names())}"
+    if err["type"] == "bool_type":
+        return f"{name} must be true or false, got {value!r}"
+    if err["type"] == "string_type":
+        return f"{name} must be a string, got {value!r}"
+    return f"{name}: {err['msg']}, got {value!r}"
 
 
 @overload
@@ -77,7 +121,8 @@ def _matrix(value: Any, n: int, what: str, *, allow_none: bool = False, psd: boo
     return np.ascontiguousarray(arr)
 
 
-@dataclass
+@spec_dataclass(ConfigDict(extra="forbid", allow_inf_nan=False, arbitrary_types_allowed=True),
+                lambda exc, cls: EstimatorConfigError(_error_text(exc)))
 class EstimatorConfig:
     """One recursive estimator as a composition of parts (chapter 3). Units: X in units of B per unit of A.
 
@@ -108,82 +153,146 @@ class EstimatorConfig:
       positive definite (that update is also rolled back).
     """
 
-    n_params: int
+    n_params: Annotated[Count, Field(ge=1, description="number of parameters n [1]")]
     name: str = "custom"
     psi: str = "l2"
-    psi_params: tuple[float, ...] | None = None
-    robust_scale: bool = False
-    scale0: Annotated[float, _setting("initial / fixed scale sigma_0", "unit of B", gt=0.0)] = 25.0
-    quantile0: Annotated[float, _setting("initial quantile Q_0 of the squared residual", "unit of B^2",
-                                         ge=0.0)] = 350.0
-    learn_rate: Annotated[float, _setting("learning rate eta of the recursive quantile (eq. 3.29)", gt=0.0)] = 0.01
-    quantile_p: Annotated[float, _setting("quantile p of the recursive quantile", gt=0.0, lt=1.0)] = 0.5
-    scale_forgetting: Annotated[float, _setting("forgetting lambda of sigma^2 (Algorithm 3.3)", ge=0.0,
-                                                le=1.0)] = 0.995
-    scale_factor: Annotated[float, _setting("consistency factor of the robust scale", gt=0.0)] = 1.483
-    scale_iterations: Annotated[int, _setting("iterations of one time step (optimal variant)", ge=1)] = 1
-    iteration_tol: Annotated[float, _setting("relative convergence tolerance of the iterations", ge=0.0)] = 1e-10
-    min_scale: Annotated[float, _setting("floor of the scale sigma", "unit of B", gt=0.0)] = 1e-12
+    psi_params: tuple[Real, ...] | None = None
+    robust_scale: Annotated[bool, Strict()] = False
+    scale0: Annotated[Real, _setting("initial / fixed scale sigma_0", "unit of B", gt=0.0)] = 25.0
+    quantile0: Annotated[Real, _setting("initial quantile Q_0 of the squared residual", "unit of B^2",
+                                        ge=0.0)] = 350.0
+    learn_rate: Annotated[Real, _setting("learning rate eta of the recursive quantile (eq. 3.29)", gt=0.0)] = 0.01
+    quantile_p: Annotated[Real, _setting("quantile p of the recursive quantile", gt=0.0, lt=1.0)] = 0.5
+    scale_forgetting: Annotated[Real, _setting("forgetting lambda of sigma^2 (Algorithm 3.3)", ge=0.0,
+                                               le=1.0)] = 0.995
+    scale_factor: Annotated[Real, _setting("consistency factor of the robust scale", gt=0.0)] = 1.483
+    scale_iterations: Annotated[Count, _setting("iterations of one time step (optimal variant)", ge=1)] = 1
+    iteration_tol: Annotated[Real, _setting("relative convergence tolerance of the iterations", ge=0.0)] = 1e-10
+    min_scale: Annotated[Real, _setting("floor of the scale sigma", "unit of B", gt=0.0)] = 1e-12
     covariance: str = "forgetting"
-    forgetting: Annotated[float | None, _setting("forgetting factor lambda (RLS family)", gt=0.0, le=1.0)] = None
+    forgetting: Annotated[Real, _setting("forgetting factor lambda (RLS family)", gt=0.0, le=1.0)] | None = None
     process_noise: Any = None
-    output_noise: Annotated[float | None, _setting("output noise R (Kalman family)", "unit of B^2", gt=0.0)] = None
+    output_noise: Annotated[Real, _setting("output noise R (Kalman family)", "unit of B^2", gt=0.0)] | None = None
     desired_covariance: Any = None
-    joseph: bool = False
+    joseph: Annotated[bool, Strict()] = False
     regularisation: str = "none"
-    kappa: Annotated[float, _setting("regularisation kappa (eq. 3.34)", ge=0.0)] = 0.0
+    kappa: Annotated[Real, _setting("regularisation kappa (eq. 3.34)", ge=0.0)] = 0.0
     instruments: str = "none"
-    instrument_delay: Annotated[int | None, _setting("instrument delay in valid samples", ge=1)] = None
+    instrument_delay: Annotated[Count, _setting("instrument delay in valid samples", ge=1)] | None = None
     x_min: Any = None
     x_max: Any = None
     x0: Any = None
     p0: Any = 100.0
     transition: Any = None
-    symmetrize: bool = True
-    blowup_ratio: Annotated[float, _setting("blow-up report level, x max diag P0", gt=1.0)] = 1e6
-    covariance_bound_ratio: Annotated[float, _setting("covariance reset level, x max diag P0", gt=1.0)] = 1e8
-    _arrays: dict = field(default_factory=dict, init=False, repr=False, compare=False)  # set in __post_init__
+    symmetrize: Annotated[bool, Strict()] = True
+    blowup_ratio: Annotated[Real, _setting("blow-up report level, x max diag P0", gt=1.0)] = 1e6
+    covariance_bound_ratio: Annotated[Real, _setting("covariance reset level, x max diag P0", gt=1.0)] = 1e8
+    _arrays: dict = field(default_factory=dict, init=False, repr=False, compare=False)  # set by _kernel_arrays
 
-    # ------------------------------------------------------------------ validation
-    def __post_init__(self) -> None:
-        n = self.n_params
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-            raise EstimatorConfigError(f"n_params must be a positive integer, got {n!r}")
-        self.n_params = n = int(n)
+    # ------------------------------------------------------------------ validation (pydantic, in this order:
+    # the declared fields, the choices, then the model validators top to bottom)
+    @field_validator("n_params", "scale_iterations", "instrument_delay", "robust_scale", "joseph", "symmetrize",
+                     mode="before")
+    @classmethod
+    def _numpy_scalars(cls, value: Any) -> Any:
+        """numpy integers and booleans count as Python ones (the strict int and bool types refuse them)."""
+        if isinstance(value, np.bool_):
+            return bool(value)
+        return int(value) if isinstance(value, np.integer) else value
+
+    @field_validator("psi_params", mode="before")
+    @classmethod
+    def _psi_params_as_tuple(cls, given: Any) -> Any:
+        """A scalar or array of tuning constants becomes a tuple (at most 3: delta, beta, c or Hampel's a, b, c)."""
+        if given is None or isinstance(given, tuple):
+            return given
+        return tuple(np.atleast_1d(np.asarray(given)).tolist())
+
+    @field_validator("psi")
+    @classmethod
+    def _known_psi(cls, psi: str) -> str:
         try:
-            psi_code(self.psi)
-            params = list(psi_defaults(self.psi))
-            if self.psi_params is not None:
-                given = np.atleast_1d(np.asarray(self.psi_params, dtype=float))
-                if given.size > 3:
-                    raise EstimatorConfigError(f"psi_params: at most 3 tuning constants, got {given.size}")
-                params[:given.size] = given.tolist()
-            c1, c2, c3 = params
+            psi_code(psi)
+        except InfluenceError as exc:
+            raise EstimatorConfigError(str(exc)) from None
+        return psi.lower().replace("-", "").replace("_", "")
+
+    @field_validator("covariance", mode="before")
+    @classmethod
+    def _known_covariance(cls, cov: Any) -> str:
+        name = _COV_ALIASES.get(str(cov).lower(), str(cov).lower())
+        if name not in COVARIANCE_KINDS:
+            raise EstimatorConfigError(f"covariance {cov!r} unknown; choose one of {sorted(COVARIANCE_KINDS)}")
+        return name
+
+    @field_validator("regularisation", mode="before")
+    @classmethod
+    def _known_regularisation(cls, reg: Any) -> str:
+        name = _REG_ALIASES.get(reg.lower() if isinstance(reg, str) else reg, reg)
+        if name not in REGULARISATION_KINDS:
+            raise EstimatorConfigError(f"regularisation {reg!r} unknown; choose one of "
+                                       f"{sorted(REGULARISATION_KINDS)}")
+        return str(name)
+
+    @field_validator("instruments", mode="before")
+    @classmethod
+    def _known_instruments(cls, iv: Any) -> str:
+        if str(iv).lower() not in INSTRUMENT_KINDS:
+            raise EstimatorConfigError(f"instruments {iv!r} unknown; choose one of {sorted(INSTRUMENT_KINDS)}")
+        return str(iv).lower()
+
+    @model_validator(mode="after")
+    def _psi_tuning_constants(self) -> "EstimatorConfig":
+        """Fill the influence function's defaults and check its constants (:func:`.influence.check_psi_params`)."""
+        params = list(psi_defaults(self.psi))
+        if self.psi_params is not None:
+            if len(self.psi_params) > 3:
+                raise EstimatorConfigError(f"psi_params: at most 3 tuning constants, got {len(self.psi_params)}")
+            params[:len(self.psi_params)] = self.psi_params
+        c1, c2, c3 = (float(p) for p in params)
+        try:
             check_psi_params(self.psi, (c1, c2, c3))
         except InfluenceError as exc:
             raise EstimatorConfigError(str(exc)) from None
-        self.psi = self.psi.lower().replace("-", "").replace("_", "")
-        self.psi_params = tuple(float(p) for p in params)
+        self.psi_params = (c1, c2, c3)
+        return self
 
-        cov = _COV_ALIASES.get(str(self.covariance).lower(), str(self.covariance).lower())
-        if cov not in COVARIANCE_KINDS:
-            raise EstimatorConfigError(f"covariance {self.covariance!r} unknown; choose one of "
-                                       f"{sorted(COVARIANCE_KINDS)}")
-        self.covariance = cov
-        reg = self.regularisation.lower() if isinstance(self.regularisation, str) else self.regularisation
-        reg = _REG_ALIASES.get(reg, reg)
-        if reg not in REGULARISATION_KINDS:
-            raise EstimatorConfigError(f"regularisation {self.regularisation!r} unknown; choose one of "
-                                       f"{sorted(REGULARISATION_KINDS)}")
-        self.regularisation = reg
-        iv = str(self.instruments).lower()
-        if iv not in INSTRUMENT_KINDS:
-            raise EstimatorConfigError(f"instruments {self.instruments!r} unknown; choose one of "
-                                       f"{sorted(INSTRUMENT_KINDS)}")
-        self.instruments = iv
-        self._check_unused_settings()
+    @model_validator(mode="after")
+    def _check_unused_settings(self) -> "EstimatorConfig":
+        """Cross-setting check: reject settings the chosen parts ignore; fill in the defaults of the ones they
+        use."""
+        where = f"estimator {self.name!r} (covariance {self.covariance!r}, instruments {self.instruments!r})"
+        unused = []
+        if self.covariance == "forgetting":
+            if self.output_noise is not None:
+                unused.append(("output_noise", ("R¹ only enters the Kalman family ('kalman', "
+                                               "'stenlund_gustafsson')")))
+            if self.forgetting is None:
+                self.forgetting = 0.999
+        else:
+            if self.forgetting is not None:
+                unused.append(("forgetting", ("λ only enters covariance 'forgetting'; the Kalman family forgets "
+                                             "through process_noise Q or desired_covariance P_d")))
+            if self.output_noise is None:
+                self.output_noise = 0.8
+        if self.covariance != "kalman" and self.process_noise is not None:
+            unused.append(("process_noise", "Q only enters covariance 'kalman'"))
+        if self.covariance != "stenlund_gustafsson" and self.desired_covariance is not None:
+            unused.append(("desired_covariance", "P_d only enters covariance 'stenlund_gustafsson'"))
+        if self.instruments == "delayed":
+            if self.instrument_delay is None:
+                self.instrument_delay = 4
+        elif self.instrument_delay is not None:
+            unused.append(("instrument_delay", "the delay only enters instruments 'delayed'"))
+        if unused:
+            name, why = unused[0]
+            raise EstimatorConfigError(f"{name} = {getattr(self, name)!r} is not used by {where}: {why}; "
+                                       f"remove it or choose parts that use it")
+        return self
 
-        self._check_declared()
+    @model_validator(mode="after")
+    def _compatible_parts(self) -> "EstimatorConfig":
+        """kappa only with a regularisation; the Joseph form only in the Kalman family without instruments."""
         if self.regularisation == "none" and self.kappa != 0.0:
             raise EstimatorConfigError(f"kappa = {self.kappa} given without regularisation; set regularisation "
                                        "to 'levenberg_marquardt' or 'tikhonov'")
@@ -192,7 +301,12 @@ class EstimatorConfig:
                                        "'stenlund_gustafsson'), not to forgetting")
         if self.joseph and self.instruments != "none":
             raise EstimatorConfigError("joseph=True is defined for regressor gains only, not with instruments")
+        return self
 
+    @model_validator(mode="after")
+    def _kernel_arrays(self) -> "EstimatorConfig":
+        """Matrix-valued settings (Q, P_d, P_0 symmetric PSD; x0, bounds, F by shape) and the kernel's codes."""
+        n = self.n_params
         Q = _matrix(self.process_noise, n, "process_noise (Q)", allow_none=True, psd=True)
         if self.covariance == "kalman" and Q is None:
             raise EstimatorConfigError("covariance 'kalman' needs process_noise (Q): a scalar, "
@@ -253,68 +367,7 @@ class EstimatorConfig:
             "Pd": Pd if Pd is not None else np.zeros((n, n)),
             "F": np.ascontiguousarray(F), "xmin": xmin, "xmax": xmax, "x0": x0, "P0": P0,
         }
-
-    def _check_declared(self) -> None:
-        """Every setting declared with :func:`_setting`: a finite number (an integer where declared) inside its
-        declared bounds; the error names the setting, the range and the unit. None = not used by the parts."""
-        hints = _declared_hints()
-        for name, (integer, info) in hints.items():
-            value = getattr(self, name)
-            if value is None:
-                continue
-            bounds = {type(m): m for m in info.metadata}
-            unit = (info.json_schema_extra or {}).get("unit", "1") if isinstance(info.json_schema_extra, dict) else "1"
-            if integer:
-                lo = getattr(bounds.get(at.Ge), "ge", 1)
-                if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo:
-                    raise EstimatorConfigError(f"{name} must be an integer >= {lo}, got {value!r}")
-                setattr(self, name, int(value))
-                continue
-            try:
-                val = float(value)
-            except (TypeError, ValueError):
-                raise EstimatorConfigError(f"{name} must be a number [{unit}], got {value!r}") from None
-            lo, lo_open = (bounds[at.Gt].gt, True) if at.Gt in bounds else (getattr(bounds.get(at.Ge), "ge", -math.inf),
-                                                                             False)
-            hi, hi_open = (bounds[at.Lt].lt, True) if at.Lt in bounds else (getattr(bounds.get(at.Le), "le", math.inf),
-                                                                             False)
-            hi_open = hi_open or hi == math.inf
-            ok = (math.isfinite(val) and (val > lo if lo_open else val >= lo)
-                  and (val < hi if hi_open else val <= hi))
-            if not ok:
-                raise EstimatorConfigError(f"{name} must lie in {'(' if lo_open else '['}{float(lo)}, {float(hi)}"
-                                           f"{')' if hi_open else ']'} [{unit}], got {val}")
-            setattr(self, name, val)
-
-    def _check_unused_settings(self) -> None:
-        """Reject settings the chosen parts ignore; fill in the defaults of the ones they use."""
-        where = f"estimator {self.name!r} (covariance {self.covariance!r}, instruments {self.instruments!r})"
-        unused = []
-        if self.covariance == "forgetting":
-            if self.output_noise is not None:
-                unused.append(("output_noise", ("R¹ only enters the Kalman family ('kalman', "
-                                               "'stenlund_gustafsson')")))
-            if self.forgetting is None:
-                self.forgetting = 0.999
-        else:
-            if self.forgetting is not None:
-                unused.append(("forgetting", ("λ only enters covariance 'forgetting'; the Kalman family forgets "
-                                             "through process_noise Q or desired_covariance P_d")))
-            if self.output_noise is None:
-                self.output_noise = 0.8
-        if self.covariance != "kalman" and self.process_noise is not None:
-            unused.append(("process_noise", "Q only enters covariance 'kalman'"))
-        if self.covariance != "stenlund_gustafsson" and self.desired_covariance is not None:
-            unused.append(("desired_covariance", "P_d only enters covariance 'stenlund_gustafsson'"))
-        if self.instruments == "delayed":
-            if self.instrument_delay is None:
-                self.instrument_delay = 4
-        elif self.instrument_delay is not None:
-            unused.append(("instrument_delay", "the delay only enters instruments 'delayed'"))
-        if unused:
-            name, why = unused[0]
-            raise EstimatorConfigError(f"{name} = {getattr(self, name)!r} is not used by {where}: {why}; "
-                                       f"remove it or choose parts that use it")
+        return self
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -337,6 +390,8 @@ def _declared_hints() -> dict[str, tuple[bool, FieldInfo]]:
     if not _DECLARED:
         hints = typing.get_type_hints(EstimatorConfig, include_extras=True)
         for name, hint in hints.items():
+            if typing.get_origin(hint) in (typing.Union, types.UnionType):  # X | None: a setting used by some parts
+                hint = next(a for a in typing.get_args(hint) if a is not type(None))
             if typing.get_origin(hint) is not Annotated:
                 continue
             info = next((m for m in hint.__metadata__ if isinstance(m, FieldInfo)), None)

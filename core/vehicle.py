@@ -86,8 +86,10 @@ def _spec_error(exc: ValidationError, cls: Any) -> VehicleSpecError:
     return VehicleSpecError(spec_error_text(exc, cls, "vehicle" if cls.__name__ == "VehicleSpec" else cls.__name__))
 
 
-#: a spec part: a pydantic dataclass whose errors are one-line VehicleSpecErrors naming the field
-_spec = spec_dataclass(_CONFIG, _spec_error)
+@typing.dataclass_transform(field_specifiers=(dataclasses.field, Field))
+def _spec(cls: type[T]) -> type[T]:
+    """A spec part: a pydantic dataclass whose errors are one-line VehicleSpecErrors naming the field."""
+    return spec_dataclass(_CONFIG, _spec_error)(cls)
 
 
 def _bound_text(value: Any, info: FieldInfo | None) -> str:

@@ -349,7 +349,7 @@ class EstimatorConfig:
         codes[K.IP_CONSTRAIN] = int(constrain)
         codes[K.IP_TRANSITION] = int(self.transition is not None)
         values = np.zeros(K.N_FP)  # float settings
-        values[K.FP_C1], values[K.FP_C2], values[K.FP_C3] = self.psi_params
+        values[K.FP_C1], values[K.FP_C2], values[K.FP_C3] = self.psi_params or psi_defaults(self.psi)  # filled above
         values[K.FP_LAMBDA] = self.forgetting if self.forgetting is not None else 1.0  # 1.0: not used
         values[K.FP_R] = self.output_noise if self.output_noise is not None else 1.0
         values[K.FP_KAPPA] = self.kappa

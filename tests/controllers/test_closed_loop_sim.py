@@ -3,29 +3,21 @@ import pytest
 
 from roadload.controllers.drive import DriveSettings, drive
 from roadload.controllers.vehicle_models import FIT_QUALITY, energy_model_from_spec, oracle_parameters
-from roadload.road_profiles import RoadProfile
 
 
-def short_road(length=1200.0):
-    s = np.arange(0.0, length + 1, 5.0)
-    grade = 0.04 * np.sin(2 * np.pi * s / 1000.0)
-    limit = np.where(s > 1000, 50 / 3.6, 80 / 3.6)
-    return RoadProfile("short", s, grade, np.zeros_like(s), np.zeros_like(s), limit)
-
-
-def test_same_seed_reproduces_the_same_closed_loop_run_on_the_simulator():
+def test_same_seed_reproduces_the_same_closed_loop_run_on_the_simulator(sine_hill_road):
     settings = DriveSettings(controller="mpc", force_model="online")
-    a, _ = drive("bmw_i3", short_road(), effects=["wind:mean_speed=4"], seed=3, settings=settings)
-    b, _ = drive("bmw_i3", short_road(), effects=["wind:mean_speed=4"], seed=3, settings=settings)
+    a, _ = drive("bmw_i3", sine_hill_road, effects=["wind:mean_speed=4"], seed=3, settings=settings)
+    b, _ = drive("bmw_i3", sine_hill_road, effects=["wind:mean_speed=4"], seed=3, settings=settings)
     assert a.log.equals(b.log)
     assert a.metrics["energy_J"] == b.metrics["energy_J"]
     assert a.metrics["online"]["updates"] >= 5 and a.metrics["online"]["rows"] > 100
-    c, _ = drive("bmw_i3", short_road(), effects=["wind:mean_speed=4"], seed=4, settings=settings)
+    c, _ = drive("bmw_i3", sine_hill_road, effects=["wind:mean_speed=4"], seed=4, settings=settings)
     assert not np.allclose(c.log["v"].to_numpy()[:500], a.log["v"].to_numpy()[:500])  # the seed matters
 
 
-def test_oracle_parameters_follow_the_simulator_truth():
-    res, plant = drive("bmw_i3", short_road(), effects=["payload:initial_payload=300,min_payload=300,"
+def test_oracle_parameters_follow_the_simulator_truth(sine_hill_road):
+    res, plant = drive("bmw_i3", sine_hill_road, effects=["payload:initial_payload=300,min_payload=300,"
                                                         "max_payload=300,change_std=0", "winter_tires"],
                        seed=0, settings=DriveSettings(controller="mpc", force_model="oracle"))
     assert res.metrics["arrived"] and res.metrics["speed_violations"] == 0
@@ -47,10 +39,10 @@ def test_energy_fit_matches_the_simulator_maps():
     assert list(ice.shift_speeds) == sorted(ice.shift_speeds)
 
 
-def test_combustion_car_mpc_keeps_pace_with_the_shift_rule_in_the_nlp():
+def test_combustion_car_mpc_keeps_pace_with_the_shift_rule_in_the_nlp(sine_hill_road):
     # a gear fixed from a slow previous plan would make speeding up look expensive (high engine speed) and
     # trap the MPC at crawling speed; the smooth shift rule inside the NLP must not
-    road = short_road()
+    road = sine_hill_road
     mpc, _ = drive("gt_rwd", road, seed=0, settings=DriveSettings(controller="mpc", force_model="oracle"))
     cruise, _ = drive("gt_rwd", road, seed=0, settings=DriveSettings(controller="cruise", force_model="abc"))
     assert mpc.metrics["arrived"] and mpc.metrics["speed_violations"] == 0

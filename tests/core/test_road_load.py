@@ -8,7 +8,6 @@ from roadload.envs import Simulator
 from roadload.presets import get_preset
 from roadload.road_load import (RoadLoadError, RoadLoadParameters, aerodynamic_drag_force, climbing_force,
                                 cornering_resistance_force, road_load, rolling_resistance_force, tractive_force)
-from roadload.road_profiles import load_profile
 from roadload.units import G, STANDARD_AIR_DENSITY
 
 
@@ -34,7 +33,7 @@ def test_numpy_and_casadi_give_the_same_force():
         assert float(f(*args)) == pytest.approx(road_load(*args, p), rel=1e-12)
 
 
-def test_constructors_agree():
+def test_constructors_agree(hilly_road):
     spec = get_preset("bmw_i3")
     p = RoadLoadParameters.from_spec(spec)
     a, b, c = p.coast_down
@@ -47,7 +46,7 @@ def test_constructors_agree():
     # without f_r4 and cornering, the coast-down form reproduces the flat-road load
     assert np.allclose(road_load(v, 0.0, 0.0, q), road_load(v, 0.0, 0.0, p.with_(c4=0.0)), rtol=1e-12)
     # the simulator's truth at reset is the nominal spec
-    sim = Simulator(spec, load_profile("hilly", seed=1))
+    sim = Simulator(spec, hilly_road)
     sim.reset()
     truth = RoadLoadParameters.from_truth(sim.true_parameters())
     assert truth.mass == pytest.approx(spec.body.mass)

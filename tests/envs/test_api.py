@@ -13,14 +13,8 @@ from roadload.road_profiles import RoadProfile
 from roadload.vehicle import VehicleSpec, VehicleSpecError, load_vehicle
 
 
-def short_road(length=1500.0, stops=()):
-    s = np.arange(0.0, length + 1.0, 10.0)
-    return RoadProfile("short", s, 0.02 * np.sin(s / 200.0), 0.003 * np.sin(s / 150.0), np.zeros_like(s),
-                       np.full_like(s, 20.0), stops=np.asarray(stops, float))
-
-
-def test_same_seed_identical_trip_and_different_seed_different_noise():
-    road = short_road()
+def test_same_seed_identical_trip_and_different_seed_different_noise(rolling_road):
+    road = rolling_road()
     a = simulate("gt_rwd", road, effects=["wind", "sensor_outliers"], seed=3)
     b = simulate("gt_rwd", road, effects=["wind", "sensor_outliers"], seed=3)
     c = simulate("gt_rwd", road, effects=["wind", "sensor_outliers"], seed=4)
@@ -31,8 +25,8 @@ def test_same_seed_identical_trip_and_different_seed_different_noise():
     assert not np.allclose(a.truth["wind_speed"].to_numpy()[:n], c.truth["wind_speed"].to_numpy()[:n])
 
 
-def test_trip_contract_measured_truth_and_meta(tmp_path):
-    trip = simulate("bmw_i3", short_road(stops=[800.0]), effects=["payload", "tire_warmup"], seed=1)
+def test_trip_contract_measured_truth_and_meta(tmp_path, rolling_road):
+    trip = simulate("bmw_i3", rolling_road(stops=[800.0]), effects=["payload", "tire_warmup"], seed=1)
     for ch in ("wheel_speed_fl", "wheel_speed_rr", "vehicle_speed", "accel_x", "accel_y", "yaw_rate",
                "steering_wheel_angle", "drive_torque", "engine_speed", "gear", "clutch", "brake_pressure_front",
                "brake_pressure_rear", "ambient_temperature", "battery_voltage", "battery_current"):
@@ -55,8 +49,8 @@ def test_trip_contract_measured_truth_and_meta(tmp_path):
     assert Trip.load(path).equals(trip)
 
 
-def test_step_api_observe_matches_trip_rows_and_done_at_end():
-    sim = Simulator("gt_rwd", short_road(600.0), effects=["sensor_bias", "sensor_dropouts"], seed=2)
+def test_step_api_observe_matches_trip_rows_and_done_at_end(rolling_road):
+    sim = Simulator("gt_rwd", rolling_road(600.0), effects=["sensor_bias", "sensor_dropouts"], seed=2)
     assert sim.observe() is None
     obs = []
     while not sim.state.done:
@@ -71,8 +65,8 @@ def test_step_api_observe_matches_trip_rows_and_done_at_end():
             assert (np.isnan(o[k]) and np.isnan(row[k])) or o[k] == row[k], k
 
 
-def test_step_api_actions_and_true_parameters():
-    sim = Simulator("bmw_i3", short_road(3000.0), seed=0, initial_speed=15.0)
+def test_step_api_actions_and_true_parameters(rolling_road):
+    sim = Simulator("bmw_i3", rolling_road(3000.0), seed=0, initial_speed=15.0)
     r0 = sim.step(Action(traction_force=1500.0), n_substeps=50)
     assert r0.a > 0.3 and r0.source_energy > 0  # accelerating draws battery energy
     r1 = sim.step(-1200.0, n_substeps=50)  # signed force: regen first
@@ -110,7 +104,7 @@ def test_lateral_validity_warning_above_4_mps2():
     assert sim.to_trip().meta["warnings"]
 
 
-def test_bad_inputs_name_the_field(tmp_path):
+def test_bad_inputs_name_the_field(tmp_path, rolling_road):
     spec = get_preset("gt_rwd")
     d = spec.to_dict()
     d["body"]["mass"] = -5.0
@@ -142,9 +136,9 @@ def test_bad_inputs_name_the_field(tmp_path):
     with pytest.raises(VehicleSpecError, match="unknown vehicle preset"):
         get_preset("porsche")
     with pytest.raises(SimulationError, match="seed"):
-        Simulator("gt_rwd", short_road(), seed=-1)
+        Simulator("gt_rwd", rolling_road(), seed=-1)
     with pytest.raises(SimulationError, match="distance"):
-        simulate("gt_rwd", short_road(), distance=5000.0)
+        simulate("gt_rwd", rolling_road(), distance=5000.0)
 
 
 def test_vehicle_json_round_trip(tmp_path):

@@ -4,19 +4,12 @@ import numpy as np
 import pytest
 
 from roadload.envs import Action, DriverConfig, Simulator, get_preset, simulate
-from roadload.road_profiles import DriveCycle, RoadProfile
+from roadload.road_profiles import DriveCycle
 from roadload.units import G
 
 
-def road(length=3000.0, grade=0.0, curvature=0.0, limit=25.0, stops=()):
-    s = np.arange(0.0, length + 1.0, 10.0)
-    g = grade(s) if callable(grade) else np.full_like(s, grade)
-    k = curvature(s) if callable(curvature) else np.full_like(s, curvature)
-    return RoadProfile("test", s, g, k, np.zeros_like(s), np.full_like(s, limit), stops=np.asarray(stops, float))
-
-
-def test_wind_statistics_and_headwind_drag():
-    r = road(6000.0)
+def test_wind_statistics_and_headwind_drag(straight_road):
+    r = straight_road(6000.0)
     calm = simulate("gt_rwd", r, seed=1)
     windy = simulate("gt_rwd", r, effects="wind:mean_speed=6,gust_std=1.5,direction=3.14159,direction_std=0", seed=1)
     ws = windy.true("wind_speed")
@@ -33,9 +26,9 @@ def test_wind_statistics_and_headwind_drag():
     assert windy.meta["energy"]["aero_loss"] > 1.2 * calm.meta["energy"]["aero_loss"]
 
 
-def test_drag_area_winter_wet_and_bank_truth():
+def test_drag_area_winter_wet_and_bank_truth(straight_road):
     spec = get_preset("gt_rwd")
-    curvy = road(3000.0, curvature=lambda s: 0.004 * np.sin(s / 300.0))
+    curvy = straight_road(3000.0, curvature=lambda s: 0.004 * np.sin(s / 300.0))
     t = simulate(spec, curvy, effects="drag_area:roof_box=0.25,toggle_rate=0;winter_tires;wet_road;road_bank",
                  seed=2)
     assert np.allclose(t.true("drag_area"), spec.aero.drag_area * 1.25)
@@ -55,15 +48,15 @@ def test_drag_area_winter_wet_and_bank_truth():
     assert t.meta["energy"]["cornering_loss"] < 0.9 * flat.meta["energy"]["cornering_loss"]
 
 
-def test_drag_area_toggles_are_recorded():
-    t = simulate("bmw_i3", road(8000.0), effects="drag_area:toggle_rate=200", seed=3)
+def test_drag_area_toggles_are_recorded(straight_road):
+    t = simulate("bmw_i3", straight_road(8000.0), effects="drag_area:toggle_rate=200", seed=3)
     f = t.true("drag_area_factor")
     assert set(np.round(np.unique(f), 6)) <= {1.0, 1.02, 1.05, 1.07}
     assert len(np.unique(f)) >= 3
 
 
-def test_oil_temperature_warms_and_losses_fall():
-    r = road(12000.0, limit=30.0)
+def test_oil_temperature_warms_and_losses_fall(straight_road):
+    r = straight_road(12000.0, limit=30.0)
     cold = simulate("gt_rwd", r, effects="oil_temperature", seed=4)
     warm = simulate("gt_rwd", r, seed=4)
     oil = cold.true("oil_temperature")
@@ -75,8 +68,8 @@ def test_oil_temperature_warms_and_losses_fall():
     assert np.all(warm.true("drivetrain_loss_factor") == 1.0)
 
 
-def test_brake_pad_friction_fades_with_disc_temperature():
-    downhill = road(4000.0, grade=-0.08, limit=15.0)
+def test_brake_pad_friction_fades_with_disc_temperature(straight_road):
+    downhill = straight_road(4000.0, grade=-0.08, limit=15.0)
     t = simulate("gt_rwd", downhill, effects="brake_pad_drift:random_walk_std=0", seed=5)
     disc = t.true("brake_disc_temperature")
     mu = t.true("brake_friction_coefficient")
@@ -89,8 +82,8 @@ def test_brake_pad_friction_fades_with_disc_temperature():
     assert hot.sum() > 100
 
 
-def test_barometric_pressure_and_auxiliary_load():
-    hill = road(4000.0, grade=0.06, limit=20.0)
+def test_barometric_pressure_and_auxiliary_load(straight_road):
+    hill = straight_road(4000.0, grade=0.06, limit=20.0)
     t = simulate("bmw_i3", hill, effects="barometric;auxiliary_load:power=2000", seed=6)
     h = t.true("elevation")
     assert np.allclose(t.true("air_pressure"), 101325.0 * np.exp(-h / 8434.5))
@@ -99,9 +92,9 @@ def test_barometric_pressure_and_auxiliary_load():
     assert extra == pytest.approx(2000.0 * t.duration, rel=0.05)  # battery chemical energy incl. R I^2
 
 
-def test_accelerometer_reads_grade_as_in_eq_5_2():
+def test_accelerometer_reads_grade_as_in_eq_5_2(straight_road):
     spec = get_preset("gt_rwd").replace(**{"body.pitch_gradient": 0.0})
-    hill = road(3000.0, grade=lambda s: 0.05 * np.sin(s / 300.0))
+    hill = straight_road(3000.0, grade=lambda s: 0.05 * np.sin(s / 300.0))
     t = simulate(spec, hill, seed=7)
     tr = t.truth
     theta = np.arcsin(np.clip((tr["specific_force_x"] - tr["acceleration"]) / G, -1, 1))
@@ -112,8 +105,8 @@ def test_accelerometer_reads_grade_as_in_eq_5_2():
     assert abs(np.mean(err)) < 0.01 and np.std(err) == pytest.approx(0.08, rel=0.25)
 
 
-def test_sensor_outliers_dropouts_latency_bias_and_torque_error():
-    r = road(4000.0)
+def test_sensor_outliers_dropouts_latency_bias_and_torque_error(straight_road):
+    r = straight_road(4000.0)
     clean = simulate("gt_rwd", r, seed=8)
     sim = Simulator("gt_rwd", r, effects="sensor_outliers:rate=0.01,channels=outputs;sensor_dropouts:rate=600;"
                     "sensor_latency:extra=0.1;torque_model_error:gain_error=0.1,offset=20;sensor_bias", seed=8)
@@ -146,16 +139,16 @@ def test_sensor_outliers_dropouts_latency_bias_and_torque_error():
     assert np.nanmax(np.abs(vs - v_true)) < 0.5
 
 
-def test_missing_samples_mode_removes_rows():
-    t = simulate("bmw_i3", road(2000.0), effects="sensor_dropouts:rate=600,mode=missing", seed=9)
+def test_missing_samples_mode_removes_rows(straight_road):
+    t = simulate("bmw_i3", straight_road(2000.0), effects="sensor_dropouts:rate=600,mode=missing", seed=9)
     dt = np.diff(t.t)
     assert dt.max() > 0.05 and np.isclose(np.median(dt), 0.01)
     assert not t.measured.isna().any().any()
     assert len(t.truth) > len(t)
 
 
-def test_poor_excitation_cruise_stretches_hold_speed():
-    r = road(20000.0, limit=25.0)
+def test_poor_excitation_cruise_stretches_hold_speed(straight_road):
+    r = straight_road(20000.0, limit=25.0)
     t = simulate("gt_rwd", r, effects="poor_excitation:fraction=0.5,stretch_length=5000", seed=10)
     free = simulate("gt_rwd", r, seed=10)
 
@@ -169,9 +162,9 @@ def test_poor_excitation_cruise_stretches_hold_speed():
     assert cruise_std < 0.3 * free_std
 
 
-def test_driver_respects_speed_limits_curves_and_stops():
+def test_driver_respects_speed_limits_curves_and_stops(straight_road):
     cfg = DriverConfig(lateral_acceleration_limit=2.0)
-    curvy = road(6000.0, curvature=lambda s: np.where((s > 2000) & (s < 2600), 0.02, 0.0), limit=27.0,
+    curvy = straight_road(6000.0, curvature=lambda s: np.where((s > 2000) & (s < 2600), 0.02, 0.0), limit=27.0,
                  stops=[4500.0])
     t = simulate("gt_rwd", curvy, driver=cfg, seed=11)
     tr = t.truth
@@ -198,8 +191,8 @@ def test_driver_follows_a_drive_cycle():
     assert tr["position"].iloc[-1] == pytest.approx(cycle.distance, rel=0.02)
 
 
-def test_external_steering_and_gear_requests():
-    sim = Simulator("gt_rwd", road(3000.0), seed=0, initial_speed=20.0)
+def test_external_steering_and_gear_requests(straight_road):
+    sim = Simulator("gt_rwd", straight_road(3000.0), seed=0, initial_speed=20.0)
     for _ in range(20):
         r = sim.step(Action(traction_force=1200.0, gear=4), n_substeps=10)
     assert r.gear == 4

@@ -5,14 +5,6 @@ import numpy as np
 import pytest
 
 from roadload.envs import EffectsError, SensorConfigError, Simulator, simulate
-from roadload.road_profiles import RoadProfile
-
-
-def road(length=3000.0, limit=25.0, stops=()):
-    s = np.arange(0.0, length + 1.0, 10.0)
-    lim = limit(s) if callable(limit) else np.full_like(s, limit)
-    z = np.zeros_like(s)
-    return RoadProfile("test", s, z, z, z, lim, stops=np.asarray(stops, float))
 
 
 def runs(mask):
@@ -21,15 +13,15 @@ def runs(mask):
     return np.flatnonzero(d == -1) - np.flatnonzero(d == 1)
 
 
-def test_outlier_bursts_have_the_requested_length_on_the_selected_channel():
-    sim = Simulator("gt_rwd", road(4000.0),
+def test_outlier_bursts_have_the_requested_length_on_the_selected_channel(straight_road):
+    sim = Simulator("gt_rwd", straight_road(4000.0),
                     effects="sensor_outliers:rate=0.001,magnitude=5,burst_length=25,channel=drive_torque", seed=3)
     for _ in range(900):  # step API: observe() must equal the trip's rows, also across chunk boundaries
         sim.step(None)
     obs = sim.observe()
     sim.run()
     trip = sim.to_trip()
-    clean = simulate("gt_rwd", road(4000.0), seed=3)
+    clean = simulate("gt_rwd", straight_road(4000.0), seed=3)
     n = min(len(trip), len(clean))
     dev = np.abs(trip.measured["drive_torque"].to_numpy()[:n] - clean.measured["drive_torque"].to_numpy()[:n])
     lengths = runs(dev > 1e-9)
@@ -41,31 +33,31 @@ def test_outlier_bursts_have_the_requested_length_on_the_selected_channel():
     row = trip.measured.iloc[8999]  # 900 steps x 10 substeps
     assert obs["drive_torque"] == row["drive_torque"]
     # burst_length 1 is the old behaviour, bit for bit
-    a = simulate("gt_rwd", road(1500.0), effects="sensor_outliers:rate=0.01", seed=4)
-    b = simulate("gt_rwd", road(1500.0), effects="sensor_outliers:rate=0.01,burst_length=1", seed=4)
+    a = simulate("gt_rwd", straight_road(1500.0), effects="sensor_outliers:rate=0.01", seed=4)
+    b = simulate("gt_rwd", straight_road(1500.0), effects="sensor_outliers:rate=0.01,burst_length=1", seed=4)
     np.testing.assert_array_equal(a.measured.to_numpy(), b.measured.to_numpy())
 
 
-def test_dropouts_on_a_single_channel_and_clear_errors():
-    t = simulate("gt_rwd", road(3000.0), effects="sensor_dropouts:rate=600,channel=accel_x", seed=5)
+def test_dropouts_on_a_single_channel_and_clear_errors(straight_road):
+    t = simulate("gt_rwd", straight_road(3000.0), effects="sensor_dropouts:rate=600,channel=accel_x", seed=5)
     nan = t.measured.isna()
     assert 0.02 < nan["accel_x"].mean() < 0.3
     assert not nan.drop(columns=["accel_x"]).any().any()
-    two = simulate("gt_rwd", road(1500.0), effects="sensor_dropouts:rate=600,channel=accel_x+yaw_rate", seed=5)
+    two = simulate("gt_rwd", straight_road(1500.0), effects="sensor_dropouts:rate=600,channel=accel_x+yaw_rate", seed=5)
     assert two.measured["accel_x"].isna().any() and two.measured["yaw_rate"].isna().any()
     assert not two.measured["vehicle_speed"].isna().any()
     with pytest.raises(SensorConfigError, match="no_such_channel"):
-        Simulator("gt_rwd", road(), effects="sensor_dropouts:channel=no_such_channel")
+        Simulator("gt_rwd", straight_road(), effects="sensor_dropouts:channel=no_such_channel")
     with pytest.raises(SensorConfigError, match="mode 'nan'"):
-        Simulator("gt_rwd", road(), effects="sensor_dropouts:channel=accel_x,mode=missing")
+        Simulator("gt_rwd", straight_road(), effects="sensor_dropouts:channel=accel_x,mode=missing")
     with pytest.raises(SensorConfigError, match="whole number"):
-        Simulator("gt_rwd", road(), effects="sensor_outliers:burst_length=2.5")
+        Simulator("gt_rwd", straight_road(), effects="sensor_outliers:burst_length=2.5")
     with pytest.raises(EffectsError, match="burst_length"):
-        Simulator("gt_rwd", road(), effects="sensor_outliers:burst_length=0")
+        Simulator("gt_rwd", straight_road(), effects="sensor_outliers:burst_length=0")
 
 
-def test_headwind_ramp_in_truth_and_tractive_force():
-    r = road(6000.0)
+def test_headwind_ramp_in_truth_and_tractive_force(straight_road):
+    r = straight_road(6000.0)
     t = simulate("gt_rwd", r, effects="wind_ramp:onset=100,ramp=30,final_speed=8", seed=6, duration=180.0)
     tr = t.truth
     time, w = tr["t"].to_numpy(), tr["wind_speed"].to_numpy()
@@ -89,10 +81,10 @@ def test_headwind_ramp_in_truth_and_tractive_force():
     assert expected > 150.0 and rise == pytest.approx(expected, rel=0.1)
 
 
-def test_parameter_ramps_in_truth_and_step_api_equals_run():
+def test_parameter_ramps_in_truth_and_step_api_equals_run(straight_road):
     eff = ("mass_ramp:onset=1000,onset_unit=m,ramp=500,magnitude=300;drag_area_ramp:onset=40,ramp=0,magnitude=0.25;"
            "rolling_resistance_ramp:onset=20,ramp=40,magnitude=-0.3")
-    sim = Simulator("gt_rwd", road(3000.0), effects=eff, seed=7)
+    sim = Simulator("gt_rwd", straight_road(3000.0), effects=eff, seed=7)
     sim.run(duration=100.0)
     tr = sim.to_trip().truth
     m0 = sim.vehicle.body.mass
@@ -107,7 +99,7 @@ def test_parameter_ramps_in_truth_and_step_api_equals_run():
     f0 = tr["rolling_resistance_f0"].to_numpy()
     assert np.allclose(f0[time > 60.02], 0.7 * f0[0]) and np.isclose(f0[np.searchsorted(time, 40.01)], 0.85 * f0[0])
     # the step API applies the same schedule: identical truth
-    step = Simulator("gt_rwd", road(3000.0), effects=eff, seed=7)
+    step = Simulator("gt_rwd", straight_road(3000.0), effects=eff, seed=7)
     for _ in range(1000):
         step.step(None)
     np.testing.assert_array_equal(step.to_trip().truth.to_numpy(), tr.to_numpy())
@@ -123,9 +115,9 @@ def longest_steady(trip, a_max=0.05):
     return runs(ok).max() * 0.01 if ok.any() else 0.0
 
 
-def test_cruise_holds_one_speed_for_600_s_despite_limit_changes():
+def test_cruise_holds_one_speed_for_600_s_despite_limit_changes(straight_road):
     limits = lambda s: np.where((s // 2000) % 2 == 0, 22.0, 27.0)  # noqa: E731 - limit changes every 2 km
-    r = road(17000.0, limit=limits, stops=(9000.0,))
+    r = straight_road(17000.0, limit=limits, stops=(9000.0,))
     eff = "poor_excitation:fraction=1,stretch_length=16000,hold_speed=yes"
     held = simulate("gt_rwd", r, effects=eff, seed=8, duration=760.0)
     plain = simulate("gt_rwd", r, effects="poor_excitation:fraction=1,stretch_length=16000", seed=8, duration=760.0)

@@ -48,8 +48,8 @@ def test_streamed_file_equals_the_in_memory_trip(tmp_path, effects, sensors_rate
     assert Trip.load(exact).equals(mem)                  # precision 'exact' streamed = in memory, bit for bit
 
 
-def test_chunked_reader_and_info(tmp_path):
-    road = load_profile("hilly", seed=1, length=4000.0)
+def test_chunked_reader_and_info(tmp_path, hilly_road):
+    road = hilly_road
     path = simulate("bmw_i3", road, seed=2, duration=100.0, out=tmp_path / "c.parquet", chunk_seconds=30.0)
     info = Trip.read_info(path)
     assert info["n_measured"] == 10_000 and info["precision"] == "compact" and "vehicle_speed" in info["channels"]
@@ -61,8 +61,8 @@ def test_chunked_reader_and_info(tmp_path):
                                   whole.channel("vehicle_speed"))
 
 
-def test_streamed_simulator_refuses_whole_log_queries_and_failed_runs_leave_nothing(tmp_path):
-    road = load_profile("hilly", seed=1, length=3000.0)
+def test_streamed_simulator_refuses_whole_log_queries_and_failed_runs_leave_nothing(tmp_path, hilly_road):
+    road = hilly_road
     sim = Simulator("bmw_i3", road, seed=0, log_capacity=500)
     with sim.trip_writer(tmp_path / "x.parquet") as w:
         sim.run(duration=60.0, chunk_seconds=10.0, writer=w)

@@ -147,15 +147,14 @@ def test_packaged_project_dbcs_match_the_presets_sensor_quantisation(tmp_path):
                 assert scales[name] == ch.resolution, name
 
 
-def test_simulated_trip_round_trip_through_mf4(tmp_path):
+def test_simulated_trip_round_trip_through_mf4(tmp_path, hilly_road):
     """The simulator's trip (sensor spec in its metadata) -> MF4 + project DBC -> import: every channel back to
     quantisation; the only differences are the importer's counted repairs (negative wheel speeds at standstill
     clipped to 0)."""
     from roadload.envs.simulator import simulate
     from roadload.io.export import sensors_from_meta
-    from roadload.road_profiles.registry import load_profile
 
-    trip = simulate("bmw_i3", load_profile("hilly", seed=1, length=2000.0), seed=3, duration=30.0)
+    trip = simulate("bmw_i3", hilly_road, seed=3, duration=30.0)
     sensors = sensors_from_meta(trip.meta)
     paths = export_trip(trip, tmp_path / "sim", "mf4")
     db = cantools.database.load_file(str(paths["dbc"]))

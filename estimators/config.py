@@ -118,6 +118,7 @@ def _matrix(value: Any, n: int, what: str, *, allow_none: bool = False, psd: boo
             raise EstimatorConfigError(f"{what} must be symmetric")
         if np.min(np.linalg.eigvalsh(arr)) < -1e-12 * max(1.0, np.max(np.abs(arr))):
             raise EstimatorConfigError(f"{what} must be positive semi-definite")
+        arr = 0.5 * (arr + arr.T)  # exactly symmetric (the kernel relies on it; a symmetric input is unchanged)
     return np.ascontiguousarray(arr)
 
 

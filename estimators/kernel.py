@@ -180,19 +180,22 @@ def prior_products(P, X, a, z, b, P_z, a_P, n, sym, cov):
 
 
 @_inline
-def desired_products(desired_cov, a, z, Pd_z, a_Pd, n):
-    """Stenlund-Gustafsson products P_d 𝔄ᵀ → Pd_z, a P_d → a_Pd; returns s_d = a P_d 𝔄ᵀ."""
-    for i in range(n):
-        acc = 0.0
-        acc2 = 0.0
-        for j in range(n):
-            acc += desired_cov[i, j] * z[j]
-            acc2 += a[j] * desired_cov[j, i]
-        Pd_z[i] = acc
-        a_Pd[i] = acc2
+def desired_products(desired_cov, a, z, Pd_z, a_Pd, n, sym):
+    """Stenlund-Gustafsson products P_d 𝔄ᵀ → Pd_z, a P_d → a_Pd; returns s_d = a P_d 𝔄ᵀ. With ``sym`` (no
+    instruments: 𝔄 = a; P_d is symmetric, checked by the config) a P_d = (P_d aᵀ)ᵀ: one product, shared buffer."""
     s_d = 0.0
     for i in range(n):
-        s_d += a[i] * Pd_z[i]
+        acc = 0.0
+        for j in range(n):
+            acc += desired_cov[i, j] * z[j]
+        Pd_z[i] = acc
+        s_d += a[i] * acc
+    if not sym:
+        for i in range(n):
+            acc = 0.0
+            for j in range(n):
+                acc += a[j] * desired_cov[j, i]
+            a_Pd[i] = acc
     return s_d
 
 
@@ -491,7 +494,8 @@ def run_record(regressors, outputs, instruments, codes, settings, process_noise,
     a_P = vectors[5]
     L = vectors[6]
     Pd_z = vectors[7]
-    a_Pd = vectors[8]
+    # symmetric P_d with 𝔄 = a: a P_d equals P_d aᵀ (desired_products fills one buffer)
+    a_Pd = Pd_z if sym else vectors[8]
     col = vectors[9]
     row = vectors[10]
     P_prev = matrices[0]
@@ -509,7 +513,7 @@ def run_record(regressors, outputs, instruments, codes, settings, process_noise,
             backup_state(X, P, X_prev, P_prev, n, sym)
             r_prior, s = prior_products(P, X, a, z, b, P_z, a_P, n, sym, cov)
             if cov == COV_SG:
-                s_d = desired_products(desired_cov, a, z, Pd_z, a_Pd, n)
+                s_d = desired_products(desired_cov, a, z, Pd_z, a_Pd, n, sym)
             # overflow-scale samples (a P aᵀ, a P 𝔄ᵀ or ΔB beyond the float range) are skipped like non-finite ones
             probe = r_prior * 0.0 + s * 0.0 + s_d * 0.0
             if iv != IV_NONE:

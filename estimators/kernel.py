@@ -340,13 +340,13 @@ def covariance_health(X, P, pivots, p_bound, n, sym, factorise):
     For symmetric positive definite P, |P_ij| ≤ √(P_ii P_jj), so bounded diagonals bound every entry."""
     probe = 0.0
     pmax = 0.0
-    positive = True
+    dmin = np.inf
     for i in range(n):
         d = P[i, i]
         probe += X[i] * 0.0 + d * 0.0
-        if not d > 0.0:
-            positive = False
+        dmin = min(dmin, d)
         pmax = max(pmax, abs(d))
+    positive = dmin > 0.0  # (a NaN diagonal entry makes probe NaN)
     if sym and factorise:
         # LDLᵀ pivots on the upper triangle (row-wise): D_j = P_jj - Σ_{k<j} U_kj² D_k, U_kj = P_kj / D_k
         for j in range(n):

@@ -47,7 +47,10 @@ def air_density(temperature_k, pressure_pa):
     return np.asarray(pressure_pa, dtype=float) / (R_AIR * np.asarray(temperature_k, dtype=float))
 
 
-STANDARD_AIR_DENSITY = float(air_density(293.15, 101325.0))  # kg/m^3, dry air at 20 degC and 1013.25 hPa
+STANDARD_TEMPERATURE = 293.15  # K, reference air / oil temperature (20 degC)
+STANDARD_PRESSURE = 101325.0  # Pa, standard atmospheric pressure (1013.25 hPa)
+#: kg/m^3, dry air at 20 degC and 1013.25 hPa
+STANDARD_AIR_DENSITY = float(air_density(STANDARD_TEMPERATURE, STANDARD_PRESSURE))
 
 
 # Conversions from a unit string to SI: factor and offset, value_si = value * factor + offset.

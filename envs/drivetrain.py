@@ -15,6 +15,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from roadload.units import STANDARD_TEMPERATURE
+
 from ._jit import jit
 
 from .layout import (
@@ -69,7 +71,7 @@ def _fade(omega):
 @jit
 def oil_loss_factor(P, oil_temperature):
     """phi(T_oil) = 1 + (phi_cold - 1) clip((T_warm - T_oil)/(T_warm - 293.15), 0, 1.5)."""
-    x = (P[P_OIL_WARM] - oil_temperature) / (P[P_OIL_WARM] - 293.15)
+    x = (P[P_OIL_WARM] - oil_temperature) / (P[P_OIL_WARM] - STANDARD_TEMPERATURE)
     if x < 0.0:
         x = 0.0
     elif x > 1.5:

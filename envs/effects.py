@@ -17,6 +17,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from roadload.units import STANDARD_PRESSURE, STANDARD_TEMPERATURE
+
 
 class EffectsError(ValueError):
     """Unknown effect / parameter or a parameter outside its range; the message names it."""
@@ -189,8 +191,9 @@ def _parse_value(effect: str, name: str, raw: Any, p: EffectParam) -> float | st
 class EffectsConfig:
     """Which effects are on, with which parameters, plus the ambient conditions."""
 
-    def __init__(self, effects: dict[str, dict[str, Any]] | None = None, ambient_temperature: float = 293.15,
-                 ambient_pressure: float = 101325.0) -> None:
+    def __init__(self, effects: dict[str, dict[str, Any]] | None = None,
+                 ambient_temperature: float = STANDARD_TEMPERATURE,
+                 ambient_pressure: float = STANDARD_PRESSURE) -> None:
         if not 200.0 <= float(ambient_temperature) <= 350.0:
             raise EffectsError(f"ambient_temperature: must lie in [200, 350] K, got {ambient_temperature!r}")
         if not 50000.0 <= float(ambient_pressure) <= 110000.0:
@@ -291,7 +294,8 @@ class EffectsConfig:
             raise EffectsError(f"effects config: unknown keys {sorted(unknown)}")
         eff = {n: {k: (math.nan if v is None else v) for k, v in (p or {}).items()}
                for n, p in (data.get("effects") or {}).items()}
-        return cls(eff, data.get("ambient_temperature", 293.15), data.get("ambient_pressure", 101325.0))
+        return cls(eff, data.get("ambient_temperature", STANDARD_TEMPERATURE),
+                   data.get("ambient_pressure", STANDARD_PRESSURE))
 
     def copy(self) -> "EffectsConfig":
         return copy.deepcopy(self)

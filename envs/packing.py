@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from roadload.units import STANDARD_PRESSURE, STANDARD_TEMPERATURE
 from roadload.vehicle import Curve, Map2D, VehicleSpec, VehicleSpecError
 
 from .layout import (
@@ -124,8 +125,8 @@ def pack_vehicle(spec: VehicleSpec, dt: float = 0.01) -> tuple[np.ndarray, np.nd
     P[P_DISC_H] = br.disc_cooling
     P[P_DISC_HV] = br.disc_cooling_speed
     P[P_BRAKE_TAU] = 0.03
-    P[P_T_AMB] = 293.15
-    P[P_P_AMB] = 101325.0
+    P[P_T_AMB] = STANDARD_TEMPERATURE
+    P[P_P_AMB] = STANDARD_PRESSURE
     P[P_T_END] = np.inf
     P[P_S_END] = np.inf
     P[P_STEER_MAX] = 0.6

@@ -18,6 +18,7 @@ from roadload.data import require_shared_data
 from roadload.io import import_log
 from roadload.sim2real.diagnose import DiagnosisSettings, diagnose
 from roadload.sim2real.report import write_report
+from roadload.units import STANDARD_TEMPERATURE
 from roadload.sim2real.simconfig import SimConfig
 from roadload.estimators.models import Term
 from roadload.sim2real.catalog import CandidateEffect, register_candidate
@@ -33,7 +34,7 @@ def register_cold_rolling() -> str:
     def terms(model, shape):
         def build(s):
             th = np.asarray(s["gradient_angle"], dtype=float)
-            cold = np.clip(293.15 - np.asarray(s["ambient_temperature"], dtype=float), 0.0, None) / 10.0
+            cold = np.clip(STANDARD_TEMPERATURE - np.asarray(s["ambient_temperature"], dtype=float), 0.0, None) / 10.0
             return model.mass * G * np.cos(th) * model.rolling_resistance_coefficient(
                 np.asarray(s["speed"], dtype=float)) * np.nan_to_num(cold)
         return (Term("m_V g cos(theta) f_r(v) max(20 degC - T_a, 0)/10 K", "cold rolling rise k", "1/(10 K)",

@@ -29,7 +29,7 @@ import numpy as np
 from roadload.estimators.models import ACCELERATION, GRADIENT_ANGLE, PATH_CURVATURE, SPEED, ModelStructure, \
     Term, register_model
 from roadload.registry import Registry
-from roadload.units import G
+from roadload.units import STANDARD_TEMPERATURE, G
 
 from .errors import DiagnosisError
 from .forcemodel import AIR_DENSITY, SimForceModel
@@ -285,7 +285,8 @@ def _oil_to_sim(p, shape, model):
     k = _p(p, "cold loss fraction")
     x = k / max(1.0 - model.drivetrain_efficiency, 1e-3) / max(model.oil_cold_loss_factor - 1.0, 1e-3)
     x = float(np.clip(x, 0.0, 1.5))
-    return {"start_temperature": float(model.oil_warm_temperature - x * (model.oil_warm_temperature - 293.15)),
+    warm = model.oil_warm_temperature
+    return {"start_temperature": float(warm - x * (warm - STANDARD_TEMPERATURE)),
             "spec_changes": {"drivetrain.oil_time_constant": {"factor": float(shape) / model.oil_time_constant}}}
 
 for _cand in (

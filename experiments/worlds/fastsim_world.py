@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-from roadload.units import KELVIN, G, air_density
+from roadload.units import KELVIN, STANDARD_PRESSURE, G, air_density
 from roadload.vehicle import (
     AeroSpec,
     BatterySpec,
@@ -72,7 +72,7 @@ from .common import (
 
 STEP = 0.1                   # s, FASTSim time step
 AMBIENT = 295.15             # K, FASTSim's default ambient air temperature
-AIR_PRESSURE = 101325.0
+AIR_PRESSURE = STANDARD_PRESSURE
 BATTERY_RESISTANCE = 0.08    # Ohm, the logger's battery model (U = U_oc - R I)
 RPM = 2 * np.pi / 60
 T_PEAK = 250.0               # N m, the conventional engine's peak torque (FASTSim gives power only)

@@ -34,7 +34,7 @@ from typing import Any
 
 import numba
 import numpy as np
-from roadload.units import KELVIN, R_AIR, G
+from roadload.units import KELVIN, R_AIR, STANDARD_PRESSURE, G
 from roadload.vehicle import (
     AeroSpec,
     BatterySpec,
@@ -66,7 +66,7 @@ from .common import (
 
 DT = 0.01
 PITCH_GRADIENT = 0.004     # rad per m/s², body pitch under longitudinal acceleration
-AIR_PRESSURE = 101325.0
+AIR_PRESSURE = STANDARD_PRESSURE
 
 
 @dataclass(frozen=True)

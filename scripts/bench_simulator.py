@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from roadload.units import G
+from roadload.units import STANDARD_AIR_DENSITY, G
 
 
 @njit(cache=True)
@@ -44,7 +44,7 @@ def reference_loop(n, dt, mass, cxa, f_r, v_set, log):
         theta = 0.03 * math.sin(s / 400.0)
         f_cl = mass * g * math.sin(theta)
         f_roll = f_r * mass * g * math.cos(theta) * math.tanh(v / 0.1)
-        f_aero = 0.5 * 1.2 * cxa * v * v
+        f_aero = 0.5 * STANDARD_AIR_DENSITY * cxa * v * v
         err = v_set - v
         integ += err * dt
         f_drive = mass * (0.8 * err + 0.05 * integ)

@@ -67,6 +67,9 @@ from .common import (
 DT = 0.01
 PITCH_GRADIENT = 0.004     # rad per m/s², body pitch under longitudinal acceleration
 AIR_PRESSURE = STANDARD_PRESSURE
+#: the world's driver's own rounded air density in its force feed-forward [kg/m^3] (a driver's estimate, not the
+#: world's air: that follows from AIR_PRESSURE and the ambient temperature)
+DRIVER_AIR_DENSITY = 1.2
 
 
 @dataclass(frozen=True)
@@ -224,7 +227,7 @@ def _drive(n, dt, ds, grade, kappa, v_plan, v_free, stops, taps, p, eff, ambient
         a_d = 0.8 * (v_t - v)
         a_d = min(a_d, 2.0)
         a_d = max(a_d, -3.0)
-        f_est = m0 * G * np.sin(th) + m0 * G * fr0 + 0.5 * 1.2 * cxa * v * v
+        f_est = m0 * G * np.sin(th) + m0 * G * fr0 + 0.5 * DRIVER_AIR_DENSITY * cxa * v * v
         f_d = m0 * a_d + f_est
         tap = _interp_uniform(t, 1.0, taps)
         omega = v / rw * ratio

@@ -12,7 +12,6 @@ engine fuel map; copper/iron/windage motor losses) and stored as tables in the s
 
 from __future__ import annotations
 
-import copy
 
 import numpy as np
 
@@ -288,7 +287,7 @@ def _truck_40t() -> VehicleSpec:
 
 
 _PRESETS = {"gt_rwd": _gt_rwd, "gt_awd": _gt_awd, "bmw_i3": _bmw_i3, "truck_40t": _truck_40t}
-_CACHE: dict[str, VehicleSpec] = {}
+_CACHE: dict[str, dict] = {}
 PRESETS = tuple(_PRESETS)
 
 
@@ -297,5 +296,6 @@ def get_preset(name: str) -> VehicleSpec:
     if name not in _PRESETS:
         raise VehicleSpecError(f"unknown vehicle preset {name!r}; presets: {sorted(_PRESETS)}")
     if name not in _CACHE:
-        _CACHE[name] = _PRESETS[name]()
-    return copy.deepcopy(_CACHE[name])
+        _CACHE[name] = _PRESETS[name]().to_dict()
+    # validating the cached plain form builds a fresh, independent spec (faster than a deep copy of the parts)
+    return VehicleSpec.from_dict(_CACHE[name])

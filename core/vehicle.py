@@ -148,15 +148,18 @@ def spec_error_text(exc: ValidationError, root_type: Any, root: str = "vehicle")
         owner, _ = field_info_at(root_type, loc[:-1] + ("",)) if len(loc) > 1 else (root_type, None)
         known = sorted(getattr(owner, "__pydantic_fields__", {}))
         return f"{where}: unknown field (known: {known})"
-    if kind == "literal_error":
-        return f"{where}: must be {ctx.get('expected')}, got {value!r}"
-    if kind == "string_too_short":
-        return f"{where}: must be a non-empty string, got {value!r}"
-    if kind == "too_short":
-        return f"{where}: needs at least {ctx.get('min_length')} item(s), got {ctx.get('actual_length')}"
-    if kind == "too_long":
-        return f"{where}: at most {ctx.get('max_length')} items, got {ctx.get('actual_length')}"
+    if kind in _CHOICE_AND_LENGTH_WORDS:
+        return f"{where}: " + _CHOICE_AND_LENGTH_WORDS[kind].format(value=value, **ctx)
     return f"{where}: {err['msg']}, got {value!r}"
+
+
+#: pydantic error type -> our wording (filled from the error's context: expected, min_length, actual_length, ...)
+_CHOICE_AND_LENGTH_WORDS = {
+    "literal_error": "must be {expected}, got {value!r}",
+    "string_too_short": "must be a non-empty string, got {value!r}",
+    "too_short": "needs at least {min_length} item(s), got {actual_length}",
+    "too_long": "at most {max_length} items, got {actual_length}",
+}
 
 
 def _unit(info: FieldInfo | None) -> str:

@@ -25,7 +25,6 @@ from roadload.trip import Trip
 
 from roadload.experiments.worlds import generate_case, supported_effects
 from roadload.sim2real.catalog import candidate_names, get_candidate
-from roadload.vehicle import load_vehicle
 from roadload.sim2real.diagnose import Diagnosis, DiagnosisSettings, diagnose, fit_floor, sim_trips
 from roadload.sim2real.floor import SimFloor
 from roadload.sim2real.simconfig import SimConfig
@@ -273,9 +272,79 @@ class WorldCaseResult:
     error: str = ""
     cpu_seconds: float = float("nan")
     among_with_base: bool = False
+    fits: dict = field(default_factory=dict)
+    stands_for: tuple[str, ...] = ()
+    found: bool = False
 
     def to_dict(self) -> dict:
         return dict(self.__dict__)
+
+
+def _fits(diag: Diagnosis) -> dict[str, dict]:
+    """candidate -> {"source": "effect" | "base", "significant": bool, "size_rms": [N] (base only),
+    "parameters": {name: (value, standard error)}}: every accepted effect (force and energy side) and every
+    base-block parameter, what :func:`found_against_reference` compares."""
+    out: dict[str, dict] = {}
+    for e in diag.effects + list((diag.energy or {}).get("effects") or []):
+        se = e.get("std_errors") or {}
+        out[e["name"]] = {"source": "effect", "significant": True,
+                          "parameters": {k: (float(v), float(se.get(k, float("nan"))))
+                                         for k, v in (e.get("parameters") or {}).items()}}
+    for p in (diag.notes.get("base_calibration") or {}).get("parameters", []):
+        out.setdefault(p["candidate"], {"source": "base", "significant": bool(p.get("significant")),
+                                        "size_rms": float(p.get("size_rms", float("nan"))), "parameters": {}})
+        if out[p["candidate"]]["source"] == "base":
+            out[p["candidate"]]["parameters"][p["parameter"]] = (float(p["value"]), float(p["std_error"]))
+    return out
+
+
+Z_SHIFT = 2.58     # two-sided 1 %: the same level the base block calls a departure significant at
+
+
+MIN_SHIFT_SIZE = 15.0   # N, a base shift's contribution RMS must reach the acceptance gate's min_size
+
+
+def _moved(fit: dict, ref: dict | None) -> bool:
+    """Some parameter departs from the reference fit by >= Z_SHIFT combined standard errors (a parameter the
+    reference lacks counts from 0 with the reference's error 0); for a base parameter the shift's contribution
+    (size_rms |Δx| / |x|, the regressor is the same) must also reach MIN_SHIFT_SIZE N, as an accepted effect must."""
+    for name, (x, se) in fit["parameters"].items():
+        x0, se0 = (ref or {}).get("parameters", {}).get(name, (0.0, 0.0))
+        s = float(np.hypot(se if np.isfinite(se) else 0.0, se0 if np.isfinite(se0) else 0.0))
+        if not (np.isfinite(x) and s > 0 and abs(x - x0) >= Z_SHIFT * s):
+            continue
+        if fit["source"] == "base" and abs(x) > 0:
+            if fit.get("size_rms", float("nan")) * abs(x - x0) / abs(x) < MIN_SHIFT_SIZE:
+                continue
+        return True
+    return False
+
+
+def found_against_reference(case: WorldCaseResult, reference: WorldCaseResult | None) -> bool:
+    """The scoring rule for a withheld effect, one for every world and sim (documented in
+    docs/results/worlds.md): the effect is **found** when a catalog candidate that stands for it
+
+    1. is an accepted effect (force or energy side), or a significant departure of the base block (mass, drag area,
+       rolling resistance, drive-train efficiency / torque scale, brake gain: with an unmatched preset a payload
+       *is* a mass shift), and
+    2. is not already there without the effect: in the reference diagnosis of the same sim on the same seed's
+       drives with nothing withheld it is neither accepted nor significant, or its fitted parameters moved from
+       the reference's by >= 2.58 combined standard errors.
+
+    With the matched sim the reference accepts nothing, so rule 2 only drops candidates the reference already
+    accepts; with a preset it separates the withheld effect from the preset's own mismatch, which the base block
+    and the effects carry on every drive."""
+    if case.withheld in (NONE_WORLD, OUTSIDE_WORLD) or case.error:
+        return False
+    ref_fits = reference.fits if reference is not None and not reference.error else {}
+    for name in case.stands_for:
+        fit = case.fits.get(name)
+        if fit is None or not fit["significant"]:
+            continue
+        ref = ref_fits.get(name)
+        if ref is None or not ref["significant"] or _moved(fit, ref):
+            return True
+    return False
 
 
 @dataclass
@@ -298,7 +367,15 @@ class WorldRun:
             m.loc[r.withheld, r.identified] += 1
         return m
 
+    def score(self) -> None:
+        """Set ``found`` of every case by :func:`found_against_reference` against its seed's "nothing withheld"
+        case (reference None when that case was not run)."""
+        refs = {r.seed: r for r in self.results if r.withheld == NONE_WORLD}
+        for r in self.results:
+            r.found = found_against_reference(r, refs.get(r.seed))
+
     def summary(self) -> dict:
+        self.score()
         cat = self.catalog()
         none = [r for r in self.results if r.withheld == NONE_WORLD]
         out = [r for r in self.results if r.withheld == OUTSIDE_WORLD]
@@ -307,6 +384,8 @@ class WorldRun:
                 "catalog_cases": len(cat), "top1_correct": sum(r.correct for r in cat),
                 "among_accepted": sum(r.among_accepted for r in cat),
                 "among_accepted_or_base": sum(r.among_with_base for r in cat),
+                "found": sum(r.found for r in cat),
+                "found_cases": sum(r.seed in {x.seed for x in none} for r in cat),
                 "false_acceptances_none": sum(bool(r.accepted) for r in none), "none_cases": len(none),
                 "false_acceptances_outside": sum(bool(r.accepted) for r in out), "outside_cases": len(out),
                 "median_shrinkage_identified": float(np.median(shr)) if shr else float("nan"),
@@ -363,6 +442,8 @@ def _world_result(world: str, seed: int, withheld: str, diag: Diagnosis, accepte
     # the base is calibrated first; counted apart, as it is also what a preset's own mismatch looks like
     res.among_with_base = bool(among or (withheld not in (NONE_WORLD, OUTSIDE_WORLD)
                                          and any(b in accepted_names for b in base_dep)))
+    res.fits = _fits(diag)
+    res.stands_for = tuple(accepted_names)
     return res
 
 
@@ -431,7 +512,7 @@ def run_world(world: str, seeds: Sequence[int] = (0, 1, 2), effects: Sequence[st
                 try:
                     case = generate_case(world, name, seed, n_trips=3, duration_s=duration, out_dir=root / f"s{seed}")
                     trips = case.import_trips()
-                    sim = SimConfig.load(vehicle) if vehicle else SimConfig(load_vehicle(case.vehicle_path))
+                    sim = SimConfig.load(vehicle if vehicle else case.sim_path)
                     if world_floor is None:
                         world_floor = fit_floor(sim, set(trips[0].channels), settings)
                     t1, c1 = time.perf_counter(), time.process_time()

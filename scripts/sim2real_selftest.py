@@ -52,6 +52,9 @@ def main(argv: list[str] | None = None) -> int:
             print(run.confusion(seed).to_string())
         s = run.summary()
         print(f"\n== {world} ({s['vehicle']}), seeds {s['seeds']}, {time.perf_counter() - t0:.0f} s")
+        print(f"found (scoring rule: accepted or a significant base departure, beyond the same seed's "
+              f"nothing-withheld reference) {s['found']}/{s['catalog_cases']} "
+              f"({s['found_cases']} with a reference run)")
         print(f"top-1 {s['top1_correct']}/{s['catalog_cases']}; withheld among the accepted "
               f"{s['among_accepted']}/{s['catalog_cases']} (or a significant base departure standing for it: "
               f"{s['among_accepted_or_base']}/{s['catalog_cases']}); false acceptances: nothing withheld "

@@ -396,6 +396,34 @@ class WorldRun:
                 "max_cpu_seconds": float(np.nanmax([r.cpu_seconds for r in self.results])) if self.results else 0.0,
                 "errors": sum(bool(r.error) for r in self.results)}
 
+    @classmethod
+    def from_dicts(cls, world: str, vehicle: str, results: Sequence[dict]) -> "WorldRun":
+        """A run rebuilt from :meth:`to_dict` results (possibly of several runs of the same world and sim)."""
+        fields_ = set(WorldCaseResult.__dataclass_fields__)
+        rows = [WorldCaseResult(**{k: (tuple(v) if k == "stands_for" else v) for k, v in r.items() if k in fields_})
+                for r in results]
+        return cls(world, vehicle, rows)
+
+    def markdown(self) -> str:
+        """withheld x seed: ✓/✗, the accepted effects (first first; with ``found`` by the scoring rule when a
+        reference ran) and the held-out RMSE before -> after."""
+        self.score()
+        seeds = sorted({r.seed for r in self.results})
+        labels = list(dict.fromkeys(r.withheld for r in self.results))
+        cell: dict[tuple[str, int], str] = {}
+        refs = {r.seed for r in self.results if r.withheld == NONE_WORLD}
+        for r in self.results:
+            mark = "✓" if r.correct else "✗"
+            if r.withheld not in (NONE_WORLD, OUTSIDE_WORLD) and r.seed in refs and r.found != r.correct:
+                mark += " (found)" if r.found else " (not found)"
+            what = r.identified if r.error else (",".join(r.accepted) or "nothing")
+            cell[(r.withheld, r.seed)] = f"{mark} {what} ({r.rmse_before:.1f}→{r.rmse_after:.1f})"
+        lines = ["| withheld | " + " | ".join(f"seed {s}" for s in seeds) + " |",
+                 "|---|" + "---|" * len(seeds)]
+        for lab in labels:
+            lines.append(f"| {lab} | " + " | ".join(cell.get((lab, s), "–") for s in seeds) + " |")
+        return "\n".join(lines)
+
     def to_dict(self) -> dict:
         return {"summary": self.summary(), "results": [r.to_dict() for r in self.results],
                 "confusion": self.confusion().to_dict()}

@@ -281,40 +281,42 @@ class WorldCaseResult:
 
 
 def _fits(diag: Diagnosis) -> dict[str, dict]:
-    """candidate -> {"source": "effect" | "base", "significant": bool, "size_rms": [N] (base only),
-    "parameters": {name: (value, standard error)}}: every accepted effect (force and energy side) and every
-    base-block parameter, what :func:`found_against_reference` compares."""
+    """What :func:`found_against_reference` compares: every accepted effect (force and energy side) by its name,
+    {"source": "effect", "parameters": {name: (value, standard error)}}, and every parameter of the base blocks
+    (force side; energy side with battery power) under "base:<candidate>", with "significant", "size_rms" [N or W]
+    and the size gate "min_size" of its side."""
     out: dict[str, dict] = {}
     for e in diag.effects + list((diag.energy or {}).get("effects") or []):
         se = e.get("std_errors") or {}
         out[e["name"]] = {"source": "effect", "significant": True,
                           "parameters": {k: (float(v), float(se.get(k, float("nan"))))
                                          for k, v in (e.get("parameters") or {}).items()}}
-    for p in (diag.notes.get("base_calibration") or {}).get("parameters", []):
-        out.setdefault(p["candidate"], {"source": "base", "significant": bool(p.get("significant")),
-                                        "size_rms": float(p.get("size_rms", float("nan"))), "parameters": {}})
-        if out[p["candidate"]]["source"] == "base":
-            out[p["candidate"]]["parameters"][p["parameter"]] = (float(p["value"]), float(p["std_error"]))
+    blocks = [diag.notes.get("base_calibration") or {}, (diag.energy or {}).get("base_calibration") or {}]
+    for block in blocks:
+        for p in block.get("parameters", []):
+            entry = out.setdefault(f"base:{p['candidate']}", {
+                "source": "base", "significant": bool(p.get("significant")), "min_size": float(block["min_size"]),
+                "size_rms": float(p.get("size_rms", float("nan"))), "parameters": {}})
+            entry["parameters"][p["parameter"]] = (float(p["value"]), float(p["std_error"]))
     return out
 
 
 Z_SHIFT = 2.58     # two-sided 1 %: the same level the base block calls a departure significant at
 
 
-MIN_SHIFT_SIZE = 15.0   # N, a base shift's contribution RMS must reach the acceptance gate's min_size
-
-
-def _moved(fit: dict, ref: dict | None) -> bool:
-    """Some parameter departs from the reference fit by >= Z_SHIFT combined standard errors (a parameter the
-    reference lacks counts from 0 with the reference's error 0); for a base parameter the shift's contribution
-    (size_rms |Δx| / |x|, the regressor is the same) must also reach MIN_SHIFT_SIZE N, as an accepted effect must."""
+def _moved(fit: dict, ref: dict) -> bool:
+    """Some parameter departs from the reference fit by >= Z_SHIFT combined standard errors; for a base parameter
+    the shift's contribution (size_rms |Δx| / |x|, the regressor is the same) must also reach the block's size gate
+    (15 N force side, 100 W energy side), as an accepted effect must."""
     for name, (x, se) in fit["parameters"].items():
-        x0, se0 = (ref or {}).get("parameters", {}).get(name, (0.0, 0.0))
+        if name not in ref["parameters"]:
+            continue
+        x0, se0 = ref["parameters"][name]
         s = float(np.hypot(se if np.isfinite(se) else 0.0, se0 if np.isfinite(se0) else 0.0))
         if not (np.isfinite(x) and s > 0 and abs(x - x0) >= Z_SHIFT * s):
             continue
         if fit["source"] == "base" and abs(x) > 0:
-            if fit.get("size_rms", float("nan")) * abs(x - x0) / abs(x) < MIN_SHIFT_SIZE:
+            if fit.get("size_rms", float("nan")) * abs(x - x0) / abs(x) < fit.get("min_size", 0.0):
                 continue
         return True
     return False
@@ -322,27 +324,34 @@ def _moved(fit: dict, ref: dict | None) -> bool:
 
 def found_against_reference(case: WorldCaseResult, reference: WorldCaseResult | None) -> bool:
     """The scoring rule for a withheld effect, one for every world and sim (documented in
-    docs/results/worlds.md): the effect is **found** when a catalog candidate that stands for it
+    docs/results/worlds.md). The effect is **found** when a catalog candidate that stands for it
 
-    1. is an accepted effect (force or energy side), or a significant departure of the base block (mass, drag area,
-       rolling resistance, drive-train efficiency / torque scale, brake gain: with an unmatched preset a payload
-       *is* a mass shift), and
-    2. is not already there without the effect: in the reference diagnosis of the same sim on the same seed's
-       drives with nothing withheld it is neither accepted nor significant, or its fitted parameters moved from
-       the reference's by >= 2.58 combined standard errors.
+    1. is an accepted effect (force or energy side) that the reference diagnosis (same sim, same seed's drives,
+       nothing withheld) does not accept, or accepts with parameters >= 2.58 combined standard errors away; or
+    2. is a base-block parameter (force side: mass, drag area, rolling resistance, drive-train efficiency, brake
+       gain; energy side: auxiliary power, motor efficiency) whose calibrated value moved from the reference's by
+       >= 2.58 combined standard errors with a shift of at least the block's size gate (15 N / 100 W) — with an
+       unmatched preset a payload *is* a mass shift and an auxiliary load an auxiliary-power shift. Without a
+       reference run, a significant base departure counts.
 
-    With the matched sim the reference accepts nothing, so rule 2 only drops candidates the reference already
-    accepts; with a preset it separates the withheld effect from the preset's own mismatch, which the base block
-    and the effects carry on every drive."""
+    With the matched sim the reference accepts nothing and its base block sits near zero; with a preset, rule 1's
+    second half and rule 2 separate the withheld effect from the preset's own mismatch, which the base blocks and
+    the effects carry on every drive."""
     if case.withheld in (NONE_WORLD, OUTSIDE_WORLD) or case.error:
         return False
-    ref_fits = reference.fits if reference is not None and not reference.error else {}
+    have_ref = reference is not None and not reference.error
+    ref_fits = reference.fits if have_ref and reference is not None else {}
     for name in case.stands_for:
-        fit = case.fits.get(name)
-        if fit is None or not fit["significant"]:
+        eff, ref_eff = case.fits.get(name), ref_fits.get(name)
+        if eff is not None and (ref_eff is None or _moved(eff, ref_eff)):
+            return True
+        base, ref_base = case.fits.get(f"base:{name}"), ref_fits.get(f"base:{name}")
+        if base is None:
             continue
-        ref = ref_fits.get(name)
-        if ref is None or not ref["significant"] or _moved(fit, ref):
+        if have_ref and ref_base is not None:
+            if _moved(base, ref_base):
+                return True
+        elif base["significant"]:
             return True
     return False
 

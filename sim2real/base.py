@@ -31,6 +31,7 @@ import numpy as np
 import pandas as pd
 
 from .catalog import DRIVE_FORCE, get_candidate
+from .energy import MOTOR_SPEED
 from .forcemodel import SimForceModel, columns_of
 from .robust import RobustTarget, weighted_fit
 from .selection import Split, design
@@ -108,3 +109,37 @@ def base_calibration(table: pd.DataFrame, target: RobustTarget, split: Split, mo
     return {"parameters": out, "method": "weighted least squares on the robust residual (training rows), "
                                          "cluster-robust standard errors over 10 s blocks",
             "z": Z_SIGNIFICANT, "min_size": min_size}, A
+
+
+ENERGY_PARAMETERS: tuple[tuple[str, str, str, str], ...] = (
+    ("auxiliary_power", "auxiliary power P_aux", "delta P_aux", "W"),
+    ("motor_efficiency", "motor / inverter efficiency", "loss fraction error of |T_E omega_E|", "1"))
+
+
+def energy_base_calibration(table: pd.DataFrame, power_residual: np.ndarray, split: Split,
+                            min_power_size: float = 100.0) -> dict:
+    """The energy side's base block (battery-electric trips): the battery-power residual P_el,measured -
+    P_el,sim [W] fitted on a constant (the auxiliary power a preset gets wrong, ``auxiliary_power``) and
+    |T_E ω_E| (a motor / inverter loss proportional to the converted power, ``motor_efficiency``) by least squares
+    on the training rows, cluster-robust standard errors over 10 s blocks; significant as on the force side
+    (|value| >= z SE and contribution RMS >= ``min_power_size`` W). Reported, not subtracted: with an unmatched
+    preset an auxiliary load is a shift of this block (as a payload is of the mass), which the selftest's
+    scoring compares against its reference drive."""
+    p_motor = table["drive_torque"].to_numpy(dtype=float) * table[MOTOR_SPEED].to_numpy(dtype=float)
+    A = np.column_stack([np.ones(len(table)), np.abs(np.nan_to_num(p_motor))])
+    y = np.asarray(power_residual, dtype=float)
+    rows = split.train & np.isfinite(y) & np.isfinite(p_motor)
+    if rows.sum() < 100:
+        return {"parameters": [], "note": "too few rows with battery power"}
+    X, *_ = np.linalg.lstsq(A[rows], y[rows], rcond=None)
+    cov = cluster_covariance(A[rows], y[rows] - A[rows] @ X, split.blocks[rows])
+    se = np.sqrt(np.clip(np.diag(cov), 0, None))
+    out = []
+    for j, (cand, label, param, unit) in enumerate(ENERGY_PARAMETERS):
+        size = float(np.sqrt(np.mean((A[rows, j] * X[j]) ** 2)))
+        out.append({"name": label, "candidate": cand, "parameter": param, "unit": unit, "value": float(X[j]),
+                    "std_error": float(se[j]), "size_rms": size,
+                    "significant": bool(abs(X[j]) >= Z_SIGNIFICANT * se[j] and size >= min_power_size)})
+    return {"parameters": out, "method": "least squares on the battery-power residual (training rows), "
+                                         "cluster-robust standard errors over 10 s blocks",
+            "z": Z_SIGNIFICANT, "min_size": min_power_size, "unit_of_size": "W"}

@@ -332,30 +332,39 @@ def _case(withheld, fits, seed=0, stands_for=()):
     return r
 
 
-def _base(value, se, size=100.0, significant=True, name="delta m_V"):
-    return {"source": "base", "significant": significant, "size_rms": size, "parameters": {name: (value, se)}}
+def _base(value, se, size=100.0, significant=True, name="delta m_V", min_size=15.0):
+    return {"source": "base", "significant": significant, "size_rms": size, "min_size": min_size,
+            "parameters": {name: (value, se)}}
+
+
+def _effect(**params):
+    return {"source": "effect", "significant": True, "parameters": params}
 
 
 def test_found_against_reference_separates_the_withheld_effect_from_the_preset_mismatch():
     from roadload.experiments.sim2real_selftest import WorldRun, found_against_reference
-    ref = _case(NONE, {"mass_offset": _base(457.0, 2.0, size=500.0),
-                       "auxiliary_power": {"source": "effect", "significant": True,
-                                           "parameters": {"delta P_aux": (-1670.0, 130.0)}}})
-    payload = _case("payload", {"mass_offset": _base(665.0, 2.0, size=700.0)}, stands_for=["mass_offset"])
+    aux0 = _base(-1670.0, 130.0, size=1670.0, name="delta P_aux", min_size=100.0)
+    ref = _case(NONE, {"base:mass_offset": _base(457.0, 2.0, size=500.0), "base:auxiliary_power": aux0,
+                       "auxiliary_power": _effect(**{"delta P_aux": (-1670.0, 130.0)})})
+    payload = _case("payload", {"base:mass_offset": _base(665.0, 2.0, size=700.0)}, stands_for=["mass_offset"])
     assert found_against_reference(payload, ref)                     # +208 kg beyond the preset's own +457 kg
-    same = _case("payload", {"mass_offset": _base(459.0, 2.0, size=500.0)}, stands_for=["mass_offset"])
+    same = _case("payload", {"base:mass_offset": _base(459.0, 2.0, size=500.0)}, stands_for=["mass_offset"])
     assert not found_against_reference(same, ref)                    # only the preset's mismatch (0.7 sigma)
-    small = _case("payload", {"mass_offset": _base(470.0, 2.0, size=500.0)}, stands_for=["mass_offset"])
+    small = _case("payload", {"base:mass_offset": _base(470.0, 2.0, size=500.0)}, stands_for=["mass_offset"])
     assert not found_against_reference(small, ref)                   # 4.6 sigma, but 14 N < 15 N of contribution
-    aux = _case("auxiliary_load", {"auxiliary_power": {"source": "effect", "significant": True,
-                                                       "parameters": {"delta P_aux": (-1700.0, 140.0)}}},
+    assert found_against_reference(small, None)                      # no reference: a significant departure counts
+    aux = _case("auxiliary_load", {"auxiliary_power": _effect(**{"delta P_aux": (-1700.0, 140.0)})},
                 stands_for=["auxiliary_power"])
     assert not found_against_reference(aux, ref)                     # accepted in the reference too, not moved
     aux.fits["auxiliary_power"]["parameters"]["delta P_aux"] = (-170.0, 140.0)
-    assert found_against_reference(aux, ref)
+    assert found_against_reference(aux, ref)                         # moved by 1500 W
+    # the load cancels the preset's own mismatch: nothing accepted, but the energy base moved by 1500 W
+    cancel = _case("auxiliary_load", {"base:auxiliary_power": _base(-170.0, 130.0, size=170.0, name="delta P_aux",
+                                                                    significant=False, min_size=100.0)},
+                   stands_for=["auxiliary_power"])
+    assert found_against_reference(cancel, ref)
     # matched sim: the reference accepts nothing, an accepted candidate standing for the effect is found
-    wind = _case("wind", {"wind_world": {"source": "effect", "significant": True,
-                                         "parameters": {"w": (6.0, 0.5)}}}, stands_for=["wind", "wind_world"])
+    wind = _case("wind", {"wind_world": _effect(w=(6.0, 0.5))}, stands_for=["wind", "wind_world"])
     assert found_against_reference(wind, _case(NONE, {}))
     assert not found_against_reference(_case("wind", {}, stands_for=["wind_world"]), _case(NONE, {}))
     run = WorldRun("w", "preset", [ref, payload, same, _case(OUTSIDE, {})])

@@ -17,6 +17,7 @@ from roadload.experiments.worlds import (
 )
 from roadload.experiments.worlds import independent as iw
 from roadload.experiments.worlds.base_gap import base_gap
+from roadload.experiments.sim2real_selftest import WorldCaseResult, WorldRun, found_against_reference
 from roadload.experiments.worlds.common import NONE, OUTSIDE, WorldCase
 from roadload.experiments.worlds.selftest import (
     UNEXPLAINED,
@@ -326,7 +327,6 @@ def test_matched_independent_vehicle_reproduces_the_world_base_forces():
 
 # ------------------------------------------------------- scoring rule: found beyond the nothing-withheld reference
 def _case(withheld, fits, seed=0, stands_for=()):
-    from roadload.experiments.sim2real_selftest import WorldCaseResult
     r = WorldCaseResult("w", seed, withheld, "-", [], False, False, 1.0, 1.0, 0.0, [], "", 1.0)
     r.fits, r.stands_for = fits, tuple(stands_for)
     return r
@@ -342,7 +342,6 @@ def _effect(**params):
 
 
 def test_found_against_reference_separates_the_withheld_effect_from_the_preset_mismatch():
-    from roadload.experiments.sim2real_selftest import WorldRun, found_against_reference
     aux0 = _base(-1670.0, 130.0, size=1670.0, name="delta P_aux", min_size=100.0)
     ref = _case(NONE, {"base:mass_offset": _base(457.0, 2.0, size=500.0), "base:auxiliary_power": aux0,
                        "auxiliary_power": _effect(**{"delta P_aux": (-1670.0, 130.0)})})

@@ -411,6 +411,9 @@ class WorldRun:
         fields_ = set(WorldCaseResult.__dataclass_fields__)
         rows = [WorldCaseResult(**{k: (tuple(v) if k == "stands_for" else v) for k, v in r.items() if k in fields_})
                 for r in results]
+        for row in rows:    # results written before the energy base block keyed the force base by bare names
+            row.fits = {(f"base:{k}" if f.get("source") == "base" and not k.startswith("base:") else k):
+                        ({"min_size": 15.0, **f} if f.get("source") == "base" else f) for k, f in row.fits.items()}
         return cls(world, vehicle, rows)
 
     def markdown(self) -> str:

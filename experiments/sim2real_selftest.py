@@ -409,8 +409,10 @@ class WorldRun:
     def from_dicts(cls, world: str, vehicle: str, results: Sequence[dict]) -> "WorldRun":
         """A run rebuilt from :meth:`to_dict` results (possibly of several runs of the same world and sim)."""
         fields_ = set(WorldCaseResult.__dataclass_fields__)
-        rows = [WorldCaseResult(**{k: (tuple(v) if k == "stands_for" else v) for k, v in r.items() if k in fields_})
-                for r in results]
+        rows = []
+        for r in results:
+            kw: dict[str, Any] = {k: (tuple(v) if k == "stands_for" else v) for k, v in r.items() if k in fields_}
+            rows.append(WorldCaseResult(**kw))
         for row in rows:    # results written before the energy base block keyed the force base by bare names
             row.fits = {(f"base:{k}" if f.get("source") == "base" and not k.startswith("base:") else k):
                         ({"min_size": 15.0, **f} if f.get("source") == "base" else f) for k, f in row.fits.items()}

@@ -389,6 +389,7 @@ class WorldRun:
         none = [r for r in self.results if r.withheld == NONE_WORLD]
         out = [r for r in self.results if r.withheld == OUTSIDE_WORLD]
         shr = [r.shrinkage for r in cat if r.correct and np.isfinite(r.shrinkage)]
+        cpu = [r.cpu_seconds for r in self.results if np.isfinite(r.cpu_seconds)]
         return {"world": self.world, "vehicle": self.vehicle, "seeds": sorted({r.seed for r in self.results}),
                 "catalog_cases": len(cat), "top1_correct": sum(r.correct for r in cat),
                 "among_accepted": sum(r.among_accepted for r in cat),
@@ -400,9 +401,8 @@ class WorldRun:
                 "median_shrinkage_identified": float(np.median(shr)) if shr else float("nan"),
                 "median_shrinkage_all": float(np.nanmedian([r.shrinkage for r in cat])) if cat else float("nan"),
                 "median_seconds": float(np.median([r.seconds for r in self.results])) if self.results else 0.0,
-                "median_cpu_seconds": float(np.nanmedian([r.cpu_seconds for r in self.results]))
-                if self.results else 0.0,
-                "max_cpu_seconds": float(np.nanmax([r.cpu_seconds for r in self.results])) if self.results else 0.0,
+                "median_cpu_seconds": float(np.median(cpu)) if cpu else float("nan"),
+                "max_cpu_seconds": float(np.max(cpu)) if cpu else float("nan"),
                 "errors": sum(bool(r.error) for r in self.results)}
 
     @classmethod

@@ -25,7 +25,6 @@ from roadload.trip import Trip
 
 from roadload.experiments.worlds import generate_case, supported_effects
 from roadload.sim2real.catalog import candidate_names, get_candidate
-from roadload.vehicle import load_vehicle
 from roadload.sim2real.diagnose import Diagnosis, DiagnosisSettings, diagnose, fit_floor, sim_trips
 from roadload.sim2real.floor import SimFloor
 from roadload.sim2real.simconfig import SimConfig
@@ -273,9 +272,88 @@ class WorldCaseResult:
     error: str = ""
     cpu_seconds: float = float("nan")
     among_with_base: bool = False
+    fits: dict = field(default_factory=dict)
+    stands_for: tuple[str, ...] = ()
+    found: bool = False
 
     def to_dict(self) -> dict:
         return dict(self.__dict__)
+
+
+def _fits(diag: Diagnosis) -> dict[str, dict]:
+    """What :func:`found_against_reference` compares: every accepted effect (force and energy side) by its name,
+    {"source": "effect", "parameters": {name: (value, standard error)}}, and every parameter of the base blocks
+    (force side; energy side with battery power) under "base:<candidate>", with "significant", "size_rms" [N or W]
+    and the size gate "min_size" of its side."""
+    out: dict[str, dict] = {}
+    for e in diag.effects + list((diag.energy or {}).get("effects") or []):
+        se = e.get("std_errors") or {}
+        out[e["name"]] = {"source": "effect", "significant": True,
+                          "parameters": {k: (float(v), float(se.get(k, float("nan"))))
+                                         for k, v in (e.get("parameters") or {}).items()}}
+    blocks = [diag.notes.get("base_calibration") or {}, (diag.energy or {}).get("base_calibration") or {}]
+    for block in blocks:
+        for p in block.get("parameters", []):
+            entry = out.setdefault(f"base:{p['candidate']}", {
+                "source": "base", "significant": bool(p.get("significant")), "min_size": float(block["min_size"]),
+                "size_rms": float(p.get("size_rms", float("nan"))), "parameters": {}})
+            entry["parameters"][p["parameter"]] = (float(p["value"]), float(p["std_error"]))
+    return out
+
+
+Z_SHIFT = 2.58     # two-sided 1 %: the same level the base block calls a departure significant at
+
+
+def _moved(fit: dict, ref: dict) -> bool:
+    """Some parameter departs from the reference fit by >= Z_SHIFT combined standard errors; for a base parameter
+    the shift's contribution (size_rms |Δx| / |x|, the regressor is the same) must also reach the block's size gate
+    (15 N force side, 100 W energy side), as an accepted effect must."""
+    for name, (x, se) in fit["parameters"].items():
+        if name not in ref["parameters"]:
+            continue
+        x0, se0 = ref["parameters"][name]
+        s = float(np.hypot(se if np.isfinite(se) else 0.0, se0 if np.isfinite(se0) else 0.0))
+        if not (np.isfinite(x) and s > 0 and abs(x - x0) >= Z_SHIFT * s):
+            continue
+        if fit["source"] == "base" and abs(x) > 0:
+            if fit.get("size_rms", float("nan")) * abs(x - x0) / abs(x) < fit.get("min_size", 0.0):
+                continue
+        return True
+    return False
+
+
+def found_against_reference(case: WorldCaseResult, reference: WorldCaseResult | None) -> bool:
+    """The scoring rule for a withheld effect, one for every world and sim (documented in
+    docs/results/worlds.md). The effect is **found** when a catalog candidate that stands for it
+
+    1. is an accepted effect (force or energy side) that the reference diagnosis (same sim, same seed's drives,
+       nothing withheld) does not accept, or accepts with parameters >= 2.58 combined standard errors away; or
+    2. is a base-block parameter (force side: mass, drag area, rolling resistance, drive-train efficiency, brake
+       gain; energy side: auxiliary power, motor efficiency) whose calibrated value moved from the reference's by
+       >= 2.58 combined standard errors with a shift of at least the block's size gate (15 N / 100 W) — with an
+       unmatched preset a payload *is* a mass shift and an auxiliary load an auxiliary-power shift. Without a
+       reference run, a significant base departure counts.
+
+    With the matched sim the reference accepts nothing and its base block sits near zero; with a preset, rule 1's
+    second half and rule 2 separate the withheld effect from the preset's own mismatch, which the base blocks and
+    the effects carry on every drive."""
+    if case.withheld in (NONE_WORLD, OUTSIDE_WORLD) or case.error:
+        return False
+    have_ref = reference is not None and not reference.error
+    ref_fits = reference.fits if have_ref and reference is not None else {}
+    for name in case.stands_for:
+        eff, ref_eff = case.fits.get(name), ref_fits.get(name)
+        if eff is not None and (ref_eff is None or _moved(eff, ref_eff)):
+            return True
+        base, ref_base = case.fits.get(f"base:{name}"), ref_fits.get(f"base:{name}")
+        if base is None:
+            continue
+        if have_ref and ref_base is not None:
+            if _moved(base, ref_base):
+                return True
+        elif base["significant"]:
+            return True
+    return False
 
 
 @dataclass
@@ -298,24 +376,67 @@ class WorldRun:
             m.loc[r.withheld, r.identified] += 1
         return m
 
+    def score(self) -> None:
+        """Set ``found`` of every case by :func:`found_against_reference` against its seed's "nothing withheld"
+        case (reference None when that case was not run)."""
+        refs = {r.seed: r for r in self.results if r.withheld == NONE_WORLD}
+        for r in self.results:
+            r.found = found_against_reference(r, refs.get(r.seed))
+
     def summary(self) -> dict:
+        self.score()
         cat = self.catalog()
         none = [r for r in self.results if r.withheld == NONE_WORLD]
         out = [r for r in self.results if r.withheld == OUTSIDE_WORLD]
         shr = [r.shrinkage for r in cat if r.correct and np.isfinite(r.shrinkage)]
+        cpu = [r.cpu_seconds for r in self.results if np.isfinite(r.cpu_seconds)]
         return {"world": self.world, "vehicle": self.vehicle, "seeds": sorted({r.seed for r in self.results}),
                 "catalog_cases": len(cat), "top1_correct": sum(r.correct for r in cat),
                 "among_accepted": sum(r.among_accepted for r in cat),
                 "among_accepted_or_base": sum(r.among_with_base for r in cat),
+                "found": sum(r.found for r in cat),
+                "found_cases": sum(r.seed in {x.seed for x in none} for r in cat),
                 "false_acceptances_none": sum(bool(r.accepted) for r in none), "none_cases": len(none),
                 "false_acceptances_outside": sum(bool(r.accepted) for r in out), "outside_cases": len(out),
                 "median_shrinkage_identified": float(np.median(shr)) if shr else float("nan"),
                 "median_shrinkage_all": float(np.nanmedian([r.shrinkage for r in cat])) if cat else float("nan"),
                 "median_seconds": float(np.median([r.seconds for r in self.results])) if self.results else 0.0,
-                "median_cpu_seconds": float(np.nanmedian([r.cpu_seconds for r in self.results]))
-                if self.results else 0.0,
-                "max_cpu_seconds": float(np.nanmax([r.cpu_seconds for r in self.results])) if self.results else 0.0,
+                "median_cpu_seconds": float(np.median(cpu)) if cpu else float("nan"),
+                "max_cpu_seconds": float(np.max(cpu)) if cpu else float("nan"),
                 "errors": sum(bool(r.error) for r in self.results)}
+
+    @classmethod
+    def from_dicts(cls, world: str, vehicle: str, results: Sequence[dict]) -> "WorldRun":
+        """A run rebuilt from :meth:`to_dict` results (possibly of several runs of the same world and sim)."""
+        fields_ = set(WorldCaseResult.__dataclass_fields__)
+        rows = []
+        for r in results:
+            kw: dict[str, Any] = {k: (tuple(v) if k == "stands_for" else v) for k, v in r.items() if k in fields_}
+            rows.append(WorldCaseResult(**kw))
+        for row in rows:    # results written before the energy base block keyed the force base by bare names
+            row.fits = {(f"base:{k}" if f.get("source") == "base" and not k.startswith("base:") else k):
+                        ({"min_size": 15.0, **f} if f.get("source") == "base" else f) for k, f in row.fits.items()}
+        return cls(world, vehicle, rows)
+
+    def markdown(self) -> str:
+        """withheld x seed: ✓/✗, the accepted effects (first first; with ``found`` by the scoring rule when a
+        reference ran) and the held-out RMSE before -> after."""
+        self.score()
+        seeds = sorted({r.seed for r in self.results})
+        labels = list(dict.fromkeys(r.withheld for r in self.results))
+        cell: dict[tuple[str, int], str] = {}
+        refs = {r.seed for r in self.results if r.withheld == NONE_WORLD}
+        for r in self.results:
+            mark = "✓" if r.correct else "✗"
+            if r.withheld not in (NONE_WORLD, OUTSIDE_WORLD) and r.seed in refs and r.found != r.correct:
+                mark += " (found)" if r.found else " (not found)"
+            what = r.identified if r.error else (",".join(r.accepted) or "nothing")
+            cell[(r.withheld, r.seed)] = f"{mark} {what} ({r.rmse_before:.1f}→{r.rmse_after:.1f})"
+        lines = ["| withheld | " + " | ".join(f"seed {s}" for s in seeds) + " |",
+                 "|---|" + "---|" * len(seeds)]
+        for lab in labels:
+            lines.append(f"| {lab} | " + " | ".join(cell.get((lab, s), "–") for s in seeds) + " |")
+        return "\n".join(lines)
 
     def to_dict(self) -> dict:
         return {"summary": self.summary(), "results": [r.to_dict() for r in self.results],
@@ -363,6 +484,8 @@ def _world_result(world: str, seed: int, withheld: str, diag: Diagnosis, accepte
     # the base is calibrated first; counted apart, as it is also what a preset's own mismatch looks like
     res.among_with_base = bool(among or (withheld not in (NONE_WORLD, OUTSIDE_WORLD)
                                          and any(b in accepted_names for b in base_dep)))
+    res.fits = _fits(diag)
+    res.stands_for = tuple(accepted_names)
     return res
 
 
@@ -431,7 +554,7 @@ def run_world(world: str, seeds: Sequence[int] = (0, 1, 2), effects: Sequence[st
                 try:
                     case = generate_case(world, name, seed, n_trips=3, duration_s=duration, out_dir=root / f"s{seed}")
                     trips = case.import_trips()
-                    sim = SimConfig.load(vehicle) if vehicle else SimConfig(load_vehicle(case.vehicle_path))
+                    sim = SimConfig.load(vehicle if vehicle else case.sim_path)
                     if world_floor is None:
                         world_floor = fit_floor(sim, set(trips[0].channels), settings)
                     t1, c1 = time.perf_counter(), time.process_time()

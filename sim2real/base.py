@@ -1,14 +1,23 @@
 """Base mismatch first, effects second: a vehicle preset never matches the car, so before any effect is named the
 diagnosis calibrates the sim's base road load against the trips and reports it as its own block.
 
-Base parameters (each the catalog term of that name, :mod:`.catalog`): mass Δm_V [kg] (``mass_offset``), drag area
-Δc_x A_V [m²] (``drag_area``), rolling resistance factor - 1 (``rolling_scale``), drive-train efficiency /
-torque scale ε (``torque_scale``: F_xV,measured = (1 + ε) F_xV,sim-side), brake gain k (``friction_brake``:
-the wheels brake with (1 + k) F_B; only where the trips log brake pressure). They are fitted jointly by weighted
-least squares on the robust, regime-normalised residual of :mod:`.robust` (training rows; braking rows fit the
-brake gain only), with cluster-robust standard errors over 10 s blocks (:func:`.stats.cluster_covariance`). A
-parameter is *significant* when |value| >= z SE (z = 2.58, two-sided 1 %) and its contribution's RMS is at least
-``min_size`` N.
+Base parameters (the catalog term of that name, :mod:`.catalog`): mass Δm_V [kg] (``mass_offset``), drag area
+Δc_x A_V [m²] (``drag_area``), rolling resistance factor - 1 (``rolling_scale``), drive-train efficiency ε
+(reported as ``drive_efficiency``: F_xV,measured = F_xV,sim-side + ε |F_xV,sim-side|, i.e. the tractive force
+per drive force is (1 + ε) in traction and (1 - ε) in regeneration: a mesh loss proportional to the transmitted
+torque, section 2.6), brake gain k (``friction_brake``: the wheels brake with (1 + k) F_B; only where the trips
+log brake pressure).
+
+Why the efficiency and not a symmetric torque scale: F_xV,sim-side = m_V (v̇ + g sin θ + g cos θ f_r) + ρ/2 c_x A
+v² + cornering is, term by term, the span of the mass, rolling and drag-area regressors, so a symmetric scale
+(1 + ε) F_xV,sim-side is collinear with them and the joint fit splits a payload arbitrarily between mass and
+scale (seen: +200 kg withheld -> mass unchanged, scale -0.13 -> -0.28). A symmetric drive-torque gain is therefore
+not a base parameter: with an unmatched preset it is indistinguishable from a larger mass and road load.
+
+The parameters are fitted jointly by weighted least squares on the robust, regime-normalised residual of
+:mod:`.robust` (training rows; braking rows fit the brake gain only), with cluster-robust standard errors over
+10 s blocks (:func:`.stats.cluster_covariance`). A parameter is *significant* when |value| >= z SE (z = 2.58,
+two-sided 1 %) and its contribution's RMS is at least ``min_size`` N.
 
 With ``DiagnosisSettings.base_first`` the candidate effects are then ranked and selected over the calibrated base
 (the base columns join every design): an effect is named only for what it adds beyond the base. A withheld effect
@@ -21,7 +30,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from .catalog import get_candidate
+from .catalog import DRIVE_FORCE, get_candidate
+from .energy import MOTOR_SPEED
 from .forcemodel import SimForceModel, columns_of
 from .robust import RobustTarget, weighted_fit
 from .selection import Split, design
@@ -29,7 +39,13 @@ from .stats import cluster_covariance
 
 BASE_PARAMETERS: tuple[tuple[str, str], ...] = (
     ("mass_offset", "mass m_V"), ("drag_area", "drag area c_x A_V"), ("rolling_scale", "rolling resistance f_r"),
-    ("torque_scale", "drive-train efficiency / torque scale"), ("friction_brake", "brake gain X_B"))
+    ("drive_efficiency", "drive-train efficiency"), ("friction_brake", "brake gain X_B"))
+EFFICIENCY_PARAMETER = "drive-train loss error epsilon (|F_drive|)"
+
+
+def _efficiency_column(cols: dict) -> np.ndarray:
+    """|F_xV,sim-side| [N]: the base drive-train efficiency's regressor (module doc)."""
+    return np.abs(np.nan_to_num(np.asarray(cols[DRIVE_FORCE], dtype=float)))[:, None]
 Z_SIGNIFICANT = 2.58
 
 
@@ -44,10 +60,14 @@ def base_columns(table: pd.DataFrame, model: SimForceModel, braking: np.ndarray,
         cand = get_candidate(name)
         if cand.missing(sub):
             continue
-        d = design([(cand, None)], model, cols)
-        A = d.A if cand.is_brake else np.where(np.asarray(braking)[:, None], 0.0, d.A)
+        if name == "drive_efficiency":
+            A, names, units = _efficiency_column(cols), [EFFICIENCY_PARAMETER], ["1"]
+        else:
+            d = design([(cand, None)], model, cols)
+            A, names, units = d.A, d.names, d.units
+        A = A if cand.is_brake else np.where(np.asarray(braking)[:, None], 0.0, A)
         blocks.append(A)
-        info += [{"name": label, "candidate": name, "parameter": n, "unit": u} for n, u in zip(d.names, d.units)]
+        info += [{"name": label, "candidate": name, "parameter": n, "unit": u} for n, u in zip(names, units)]
     return (np.hstack(blocks) if blocks else np.zeros((len(table), 0))), info
 
 
@@ -60,9 +80,9 @@ def _physical(model: SimForceModel, row: dict) -> dict:
         return {"sim": model.drag_area, "calibrated": model.drag_area + v, "unit": "m^2"}
     if row["candidate"] == "rolling_scale":
         return {"sim": 1.0, "calibrated": 1.0 + v, "unit": "x f_r(v)"}
-    if row["candidate"] == "torque_scale":
+    if row["candidate"] == "drive_efficiency":
         return {"sim": model.drivetrain_efficiency, "calibrated": model.drivetrain_efficiency * (1.0 + v),
-                "unit": "eta (tractive force per drive force)"}
+                "unit": "eta (tractive force per drive force in traction; 1 / that ratio in regeneration)"}
     return {"sim": 1.0, "calibrated": 1.0 + v, "unit": "x X_B"}
 
 
@@ -89,3 +109,37 @@ def base_calibration(table: pd.DataFrame, target: RobustTarget, split: Split, mo
     return {"parameters": out, "method": "weighted least squares on the robust residual (training rows), "
                                          "cluster-robust standard errors over 10 s blocks",
             "z": Z_SIGNIFICANT, "min_size": min_size}, A
+
+
+ENERGY_PARAMETERS: tuple[tuple[str, str, str, str], ...] = (
+    ("auxiliary_power", "auxiliary power P_aux", "delta P_aux", "W"),
+    ("motor_efficiency", "motor / inverter efficiency", "loss fraction error of |T_E omega_E|", "1"))
+
+
+def energy_base_calibration(table: pd.DataFrame, power_residual: np.ndarray, split: Split,
+                            min_power_size: float = 100.0) -> dict:
+    """The energy side's base block (battery-electric trips): the battery-power residual P_el,measured -
+    P_el,sim [W] fitted on a constant (the auxiliary power a preset gets wrong, ``auxiliary_power``) and
+    |T_E ω_E| (a motor / inverter loss proportional to the converted power, ``motor_efficiency``) by least squares
+    on the training rows, cluster-robust standard errors over 10 s blocks; significant as on the force side
+    (|value| >= z SE and contribution RMS >= ``min_power_size`` W). Reported, not subtracted: with an unmatched
+    preset an auxiliary load is a shift of this block (as a payload is of the mass), which the selftest's
+    scoring compares against its reference drive."""
+    p_motor = table["drive_torque"].to_numpy(dtype=float) * table[MOTOR_SPEED].to_numpy(dtype=float)
+    A = np.column_stack([np.ones(len(table)), np.abs(np.nan_to_num(p_motor))])
+    y = np.asarray(power_residual, dtype=float)
+    rows = split.train & np.isfinite(y) & np.isfinite(p_motor)
+    if rows.sum() < 100:
+        return {"parameters": [], "note": "too few rows with battery power"}
+    X, *_ = np.linalg.lstsq(A[rows], y[rows], rcond=None)
+    cov = cluster_covariance(A[rows], y[rows] - A[rows] @ X, split.blocks[rows])
+    se = np.sqrt(np.clip(np.diag(cov), 0, None))
+    out = []
+    for j, (cand, label, param, unit) in enumerate(ENERGY_PARAMETERS):
+        size = float(np.sqrt(np.mean((A[rows, j] * X[j]) ** 2)))
+        out.append({"name": label, "candidate": cand, "parameter": param, "unit": unit, "value": float(X[j]),
+                    "std_error": float(se[j]), "size_rms": size,
+                    "significant": bool(abs(X[j]) >= Z_SIGNIFICANT * se[j] and size >= min_power_size)})
+    return {"parameters": out, "method": "least squares on the battery-power residual (training rows), "
+                                         "cluster-robust standard errors over 10 s blocks",
+            "z": Z_SIGNIFICANT, "min_size": min_power_size, "unit_of_size": "W"}

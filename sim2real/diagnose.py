@@ -33,7 +33,7 @@ from .gap import gap_measures
 from .reference import AdditiveRegimeModel
 from .regimes import DEFAULT_REGIMES, get_regime, localise, residual_analysis, strongest_departures
 from .selection import Selector, make_split
-from .base import base_calibration
+from .base import base_calibration, energy_base_calibration
 from .robust import robust_target
 from .simconfig import SimConfig
 from .stats import block_bootstrap_mean_difference
@@ -313,6 +313,8 @@ def _energy_side(table: pd.DataFrame, split, settings: DiagnosisSettings, model,
     e_before = electric_energy_per_distance(table, sim_p, test)
     e_after = electric_energy_per_distance(table, measured - after, test)
     return {"power_residual_before": robust_summary(pr[test]), "power_residual_after": robust_summary(after[test]),
+            "base_calibration": energy_base_calibration(table, np.where(ok, pr, np.nan), sp,
+                                                        settings.min_power_size),
             "electric_energy_per_distance": {"measured": e_meas, "sim_before": e_before, "sim_after": e_after,
                                              "unit": "kWh/100 km (while moving)"},
             "ranking": [r.to_dict() for r in ranked], "skipped_candidates": skipped, "forward_selection": steps,

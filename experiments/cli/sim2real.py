@@ -155,6 +155,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
             console.print(f"confusion, {world}, seed {sd} (rows withheld, columns first accepted):")
             console.print(run.confusion(sd).to_string())
         s = run.summary()
+        console.print(f"found (scoring rule: accepted or a base shift beyond the seed's nothing-withheld "
+                      f"reference) {s['found']}/{s['catalog_cases']}")
         console.print(f"top-1 {s['top1_correct']}/{s['catalog_cases']}; withheld among the accepted "
                       f"{s['among_accepted']}/{s['catalog_cases']}; false acceptances: nothing withheld "
                       f"{s['false_acceptances_none']}/{s['none_cases']}, out-of-catalog "

@@ -67,7 +67,9 @@ def generate_case(world: str, withheld: str | None, seed: int, n_trips: int = 3,
     vehicle = mod.matched_vehicle()
     vpath = write_json(out / f"{world}_vehicle.json", vehicle.to_dict())
     # `roadload diagnose --sim` takes a sim config (a bare vehicle spec JSON is rejected): one next to it
-    write_json(out / f"{world}_sim.json", {"vehicle": vpath.name, "name": f"{world} world, matched vehicle"})
+    # with the world's nominal ambient temperature: the sim's own trips (its floor) then see the world's air density
+    write_json(out / f"{world}_sim.json", {"vehicle": vpath.name, "name": f"{world} world, matched vehicle",
+                                          "effects": {"effects": {}, "ambient_temperature": mod.NOMINAL_AMBIENT}})
     w = mod.EFFECTS[withheld]
     truth = {"world": world, "withheld": withheld, "accepted": list(w.accepted), "parameters": w.params,
              "description": w.description, "seed": seed, "duration_s": duration_s,

@@ -57,6 +57,11 @@ class WorldCase:
     truth: dict[str, Any]
     out_dir: Path
 
+    @property
+    def sim_path(self) -> Path:
+        """The sim config ``<world>_sim.json``: the matched vehicle at the world's nominal ambient temperature."""
+        return self.out_dir / f"{self.world}_sim.json"
+
     def import_trips(self) -> list[Trip]:
         """The trips through roadload's CSV importer and the case's mapping."""
         return [import_log(p, "csv", self.mapping_path) for p in self.trip_paths]

@@ -393,6 +393,7 @@ class FastsimWorld:
     """One FASTSim variant as a test world (the interface of :mod:`.cases`)."""
 
     TIME_HEADER = TIME_HEADER
+    NOMINAL_AMBIENT = AMBIENT       # K, the logged ambient (FASTSim's own air density is constant)
 
     def __init__(self, variant: Variant):
         self.variant = variant

@@ -70,6 +70,11 @@ AIR_PRESSURE = STANDARD_PRESSURE
 #: the world's driver's own rounded air density in its force feed-forward [kg/m^3] (a driver's estimate, not the
 #: world's air: that follows from AIR_PRESSURE and the ambient temperature)
 DRIVER_AIR_DENSITY = 1.2
+AMBIENT_START_C = (2.0, 14.0)     # °C, a trip's initial ambient temperature is drawn uniformly from this range
+AMBIENT_DRIFT_K = (-3.0, 4.0)     # K, its linear drift over the trip, drawn uniformly
+# the world's nominal ambient [K]: the mean over trips and time of T_a(t) = T_0 + drift t / duration (+ zero-mean
+# noise); the matched sim config runs at it, so the sim's own trips see the world's air density (eq. 2.8)
+NOMINAL_AMBIENT = KELVIN + sum(AMBIENT_START_C) / 2 + sum(AMBIENT_DRIFT_K) / 4
 
 
 @dataclass(frozen=True)
@@ -388,8 +393,8 @@ def simulate_trip(road_name: str, road_seed: int, rng: np.random.Generator, dura
         for t0 in np.cumsum(rng.exponential(120.0, 20)):
             if t0 < n_s - 2:
                 taps[int(t0)] = 10e5
-    t_amb0 = float(rng.uniform(2.0, 14.0)) + KELVIN
-    drift = float(rng.uniform(-3.0, 4.0))
+    t_amb0 = float(rng.uniform(*AMBIENT_START_C)) + KELVIN
+    drift = float(rng.uniform(*AMBIENT_DRIFT_K))
     tt = np.arange(n) * DT
     ambient = t_amb0 + drift * tt / max(duration, 1.0) + _ou(rng, n // 100 + 2, 1.0, 60.0, 0.3)[tt.astype(int)]
     v_free = planned_speed(replace_stops(prof), np.random.default_rng(plan_seed), accel=1.8, power_to_mass=45.0,

@@ -23,7 +23,6 @@ from roadload.sim2real import DiagnosisSettings, SimConfig, diagnose
 from roadload.sim2real.diagnose import Diagnosis, fit_floor
 from roadload.sim2real.floor import SimFloor
 from roadload.sim2real.selftest import outside_localised
-from roadload.vehicle import load_vehicle
 
 from .cases import WORLDS, generate_case, supported_effects
 from .common import NONE, OUTSIDE, WorldCase
@@ -132,7 +131,7 @@ def diagnose_case(case: WorldCase, settings: DiagnosisSettings, floor: SimFloor 
     """Import the case's logs, diagnose them against the matched vehicle, score."""
     t0 = time.perf_counter()
     trips = case.import_trips()
-    sim = SimConfig(load_vehicle(case.vehicle_path))
+    sim = SimConfig.load(case.sim_path)
     diag = diagnose(trips, sim, settings, floor=floor)
     first, ok, where = score(case, diag)
     gb = diag.gap_before["force_residual"]["rmse"]
@@ -145,7 +144,7 @@ def world_floor(world: str, settings: DiagnosisSettings, work: Path) -> SimFloor
     """The sim's floor for the world's matched vehicle, reduced to the channels the world logs (fitted once)."""
     probe = generate_case(world, NONE, 0, n_trips=1, duration_s=120.0, out_dir=work / "probe")
     trips = probe.import_trips()
-    sim = SimConfig(load_vehicle(probe.vehicle_path))
+    sim = SimConfig.load(probe.sim_path)
     return fit_floor(sim, set(trips[0].channels), settings)
 
 

@@ -16,6 +16,8 @@ from roadload.experiments.worlds import (
     supported_effects,
 )
 from roadload.experiments.worlds import independent as iw
+from roadload.experiments.worlds.base_gap import base_gap
+from roadload.experiments.sim2real_selftest import WorldCaseResult, WorldRun, found_against_reference
 from roadload.experiments.worlds.common import NONE, OUTSIDE, WorldCase
 from roadload.experiments.worlds.selftest import (
     UNEXPLAINED,
@@ -299,3 +301,71 @@ def test_scoring_and_confusion():
     md = markdown_table(m).splitlines()
     assert md[0] == "| withheld \\ identified | drag_area | mass_offset | unexplained |"
     assert md[2] == "| payload | 1 | 1 |  |"
+
+
+# ------------------------------------------------------------- the matched vehicle reproduces the world's base
+def test_matched_sim_config_carries_the_world_ambient(independent_case):
+    sim = SimConfig.load(independent_case.sim_path)
+    lo, hi = iw.AMBIENT_START_C
+    assert sim.effects.ambient_temperature == pytest.approx(iw.NOMINAL_AMBIENT)
+    assert lo + 273.15 < sim.effects.ambient_temperature < hi + 273.15
+
+
+@pytest.mark.slow
+def test_matched_independent_vehicle_reproduces_the_world_base_forces():
+    """Nothing withheld: the matched sim (balance + floor) against the world's logged tractive force, per speed
+    bin. Before the floor's truncated fit and the world's ambient in the sim config the bins above 80 km/h sat
+    25-47 N off over 3 x 900 s (issue 13: Δf_r1 ≈ -3e-5 named with nothing withheld); now within 6 N there and
+    10 N anywhere (3 x 300 s here; the floor's own sensitivity is tests/sim2real/test_floor.py)."""
+    tab = base_gap("independent", seed=0, duration=300.0)
+    after = tab[(tab.variant == "after") & (tab["speed [km/h]"] != "all") & (tab.n >= 200)]
+    fast = after[after["speed [km/h]"].isin(["(80, 100]", "(100, 120]", "(120, 160]"])]
+    assert len(fast) >= 2 and len(after) >= 5
+    assert fast["residual median [N]"].abs().max() <= 6.0, fast
+    assert after["residual median [N]"].abs().max() <= 10.0, after
+
+
+# ------------------------------------------------------- scoring rule: found beyond the nothing-withheld reference
+def _case(withheld, fits, seed=0, stands_for=()):
+    r = WorldCaseResult("w", seed, withheld, "-", [], False, False, 1.0, 1.0, 0.0, [], "", 1.0)
+    r.fits, r.stands_for = fits, tuple(stands_for)
+    return r
+
+
+def _base(value, se, size=100.0, significant=True, name="delta m_V", min_size=15.0):
+    return {"source": "base", "significant": significant, "size_rms": size, "min_size": min_size,
+            "parameters": {name: (value, se)}}
+
+
+def _effect(**params):
+    return {"source": "effect", "significant": True, "parameters": params}
+
+
+def test_found_against_reference_separates_the_withheld_effect_from_the_preset_mismatch():
+    aux0 = _base(-1670.0, 130.0, size=1670.0, name="delta P_aux", min_size=100.0)
+    ref = _case(NONE, {"base:mass_offset": _base(457.0, 2.0, size=500.0), "base:auxiliary_power": aux0,
+                       "auxiliary_power": _effect(**{"delta P_aux": (-1670.0, 130.0)})})
+    payload = _case("payload", {"base:mass_offset": _base(665.0, 2.0, size=700.0)}, stands_for=["mass_offset"])
+    assert found_against_reference(payload, ref)                     # +208 kg beyond the preset's own +457 kg
+    same = _case("payload", {"base:mass_offset": _base(459.0, 2.0, size=500.0)}, stands_for=["mass_offset"])
+    assert not found_against_reference(same, ref)                    # only the preset's mismatch (0.7 sigma)
+    small = _case("payload", {"base:mass_offset": _base(470.0, 2.0, size=500.0)}, stands_for=["mass_offset"])
+    assert not found_against_reference(small, ref)                   # 4.6 sigma, but 14 N < 15 N of contribution
+    assert found_against_reference(small, None)                      # no reference: a significant departure counts
+    aux = _case("auxiliary_load", {"auxiliary_power": _effect(**{"delta P_aux": (-1700.0, 140.0)})},
+                stands_for=["auxiliary_power"])
+    assert not found_against_reference(aux, ref)                     # accepted in the reference too, not moved
+    aux.fits["auxiliary_power"]["parameters"]["delta P_aux"] = (-170.0, 140.0)
+    assert found_against_reference(aux, ref)                         # moved by 1500 W
+    # the load cancels the preset's own mismatch: nothing accepted, but the energy base moved by 1500 W
+    cancel = _case("auxiliary_load", {"base:auxiliary_power": _base(-170.0, 130.0, size=170.0, name="delta P_aux",
+                                                                    significant=False, min_size=100.0)},
+                   stands_for=["auxiliary_power"])
+    assert found_against_reference(cancel, ref)
+    # matched sim: the reference accepts nothing, an accepted candidate standing for the effect is found
+    wind = _case("wind", {"wind_world": _effect(w=(6.0, 0.5))}, stands_for=["wind", "wind_world"])
+    assert found_against_reference(wind, _case(NONE, {}))
+    assert not found_against_reference(_case("wind", {}, stands_for=["wind_world"]), _case(NONE, {}))
+    run = WorldRun("w", "preset", [ref, payload, same, _case(OUTSIDE, {})])
+    s = run.summary()
+    assert (s["found"], s["catalog_cases"], s["found_cases"]) == (1, 2, 2)

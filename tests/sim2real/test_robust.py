@@ -156,3 +156,25 @@ def test_base_calibration_reports_a_mass_offset_with_its_uncertainty():
     assert 0 < m["std_error"] < 30.0
     assert m["physical"]["calibrated"] == pytest.approx(MODEL.mass + m["value"])
     assert not rows["drag_area"]["significant"]
+
+
+def _base_rows(extra, seed=4):
+    tab = synth(extra, noise=20.0, seed=seed)
+    split = make_split(tab, seed=seed, n_folds=4)
+    tg = robust_target(tab, tab.residual.to_numpy(), split.train, split.segments, split.fold, split.n_folds)
+    block, _ = base_calibration(tab, tg, split, MODEL)
+    return {p["candidate"]: p for p in block["parameters"]}
+
+
+def test_base_block_separates_a_payload_from_the_drivetrain_efficiency():
+    """The base's drive-train efficiency is a loss ∝ |F_drive| (traction x (1 + e), regen x (1 - e)); a symmetric
+    scale of F_drive would be collinear with mass + rolling + drag area and split a payload between them."""
+    rows = _base_rows(mass_extra)
+    assert rows["mass_offset"]["value"] == pytest.approx(120.0, abs=15.0)
+    assert not rows["drive_efficiency"]["significant"]
+    assert abs(rows["drive_efficiency"]["value"]) < 0.01
+    eff = _base_rows(lambda tab: 0.04 * np.abs(MODEL.predict(tab)))
+    e = eff["drive_efficiency"]
+    assert e["significant"] and e["value"] == pytest.approx(0.04, abs=4 * e["std_error"] + 0.005)
+    assert abs(eff["mass_offset"]["value"]) < 15.0
+    assert e["physical"]["calibrated"] == pytest.approx(MODEL.drivetrain_efficiency * (1 + e["value"]))

@@ -114,7 +114,7 @@ def advance_range(lo, hi, active, u, X, P, tabs, ti, road, road_n, stops, stops_
             continue
         c = cmd[i]
         _set_command(c, u[i], X[i, S_V], F)
-        X[i, S_NLOG] = 0.0  # the env reads the state, not the log: a window of n_sub rows suffices
+        X[i, S_NLOG] = 0.0  # the env reads the state, not the log (which has no rows: nothing is logged)
         physics.advance(X[i], P[i], tabs, ti, road[i, :, :road_n[i]], stops[i, :stops_n[i]], cycle, rng[i], c,
                         log[i], n_sub)
 
@@ -261,7 +261,9 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
         self._rng = np.zeros((n, 1), dtype=np.uint64)
         self._cmd = np.zeros((n, N_CMD))
         self._n_sub = cfg.n_substeps
-        self._log = np.zeros((n, N_LOG, self._n_sub))
+        # a truth log of no rows: the env reads the state, never the log, and the core skips writing a row when the
+        # log is full (physics.substep), which saves ~10% of a step; the state is the same with or without it
+        self._log = np.zeros((n, N_LOG, 0))
         self._E = np.zeros((n, N_E))
         self._table = np.zeros((n, 4, 2))
         self._table_n = np.zeros(n, dtype=np.int64)

@@ -522,8 +522,10 @@ class TripWriter:
             self._schema = table.schema
             encoding = {f.name: "BYTE_STREAM_SPLIT" for f in table.schema if pa.types.is_floating(f.type)}
             encoding.update({f.name: "DELTA_BINARY_PACKED" for f in table.schema if pa.types.is_integer(f.type)})
+            # no column statistics: no reader filters on them, and pyarrow's writer keeps every row group's column
+            # metadata in memory until close (with statistics: +94 MB for 1440 row groups of 77 columns, measured)
             self._writer = pq.ParquetWriter(self._tmp, table.schema, compression="zstd", compression_level=15,
-                                            use_dictionary=False, column_encoding=encoding)
+                                            use_dictionary=False, column_encoding=encoding, write_statistics=False)
         elif table.schema != self._schema:
             expected = [] if self._schema is None else self._schema.names
             raise TripError(f"{self.path}: chunk columns {names} differ from the first chunk's {expected}")

@@ -22,7 +22,7 @@ __all__ = ["TripPayload", "TripMetadataError", "parse_trip_payload", "SUPPORTED_
 class TripMetadataError(ValueError):
     """The metadata of a trip file is missing, not JSON or violates the schema; the message names file and field."""
 
-SUPPORTED_VERSIONS = (1, 2)  # 2: streamed row groups, compact encodings (core/trip.py TripWriter)
+SUPPORTED_VERSIONS = (1, 2, 3)  # 2: streamed row groups, compact encodings; 3: + differenced integer columns
 
 
 class TripPayload(StrictModel):

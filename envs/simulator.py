@@ -615,24 +615,42 @@ class Simulator:
         """SI unit of every truth channel of this simulator's trips (incl. 't')."""
         return {c: TRUTH[c].unit for c in ["t", *self._truth_map(), "cornering_stiffness"]}
 
-    def _frames(self, start: int, stop: int) -> tuple[pd.DataFrame, pd.DataFrame]:
-        """Measured and truth frames of the absolute substeps start..stop-1 (the log holds substep _log_base on)."""
+    def _frames(self, start: int, stop: int, views: bool = False) -> tuple[pd.DataFrame, pd.DataFrame]:
+        """Measured and truth frames of the absolute substeps start..stop-1 (the log holds substep _log_base on).
+        ``views``: the truth columns are views of the log rows and the measured columns the sensor model's own
+        arrays (no 2-D copies; only for frames used before the log changes, as a streamed chunk)."""
         log, base = self._log, self._log_base
         t, channels, keep = self.sensor_model.measure(log, stop, start=start, offset=base)
+        if views and keep.all():  # the channels' own arrays, no 2-D block (all float64, as the block would be)
+            measured = pd.DataFrame({"t": t, **{k: np.asarray(v, dtype=float) for k, v in channels.items()}},
+                                    copy=False)
+        else:
+            measured = self._measured_block(t, channels, keep)
+        return measured, self._truth_frame(start, stop, views)
+
+    @staticmethod
+    def _measured_block(t: np.ndarray, channels: dict[str, np.ndarray], keep: np.ndarray) -> pd.DataFrame:
         block = np.empty((len(channels) + 1, t.size))  # one 2-D block: no column-by-column consolidation
         block[0] = t
         for i, arr in enumerate(channels.values()):
             block[i + 1] = arr
         if not keep.all():
             block = block[:, keep]
-        measured = pd.DataFrame(block.T, columns=["t", *channels], copy=False)
+        return pd.DataFrame(block.T, columns=["t", *channels], copy=False)
+
+    def _truth_frame(self, start: int, stop: int, views: bool) -> pd.DataFrame:
+        log, base = self._log, self._log_base
         truth_map = self._truth_map()
         cols = [L_T, *truth_map.values()]
-        truth = pd.DataFrame(log[cols, start - base:stop - base].T, columns=["t", *truth_map], copy=False)
+        if views:  # one array per channel, no 2-D copy of the chunk (a streamed day's peak memory)
+            truth = pd.DataFrame(dict(zip(["t", *truth_map], (log[c, start - base:stop - base] for c in cols))),
+                                 copy=False)
+        else:
+            truth = pd.DataFrame(log[cols, start - base:stop - base].T, columns=["t", *truth_map], copy=False)
         truth["cornering_stiffness"] = 1.0 / (4.0 * (self.P[P_LR] ** 2 / truth["cornering_stiffness_front"]
                                                     + self.P[P_LF] ** 2 / truth["cornering_stiffness_rear"])
                                               / self.P[P_L] ** 2)
-        return measured, truth
+        return truth
 
     def _trip_meta(self, name: str | None) -> dict[str, Any]:
         warn = []
@@ -684,7 +702,7 @@ class Simulator:
         n_rel = int(self.X[S_NLOG])
         stop = self._log_base + n_rel
         if stop > self._flushed:
-            measured, truth = self._frames(self._flushed, stop)
+            measured, truth = self._frames(self._flushed, stop, views=True)
             writer.write(measured, truth)
             self._flushed = stop
         keep = self.sensor_model.max_delay + self.sensor_model.decimation

@@ -105,6 +105,11 @@ class EcoDriveConfig(_Strict):
     initial_speed: float = Field(0.0, ge=0, le=60.0, description="speed at reset [m/s]")
     obs_scaling: Literal["normalized", "si"] = Field("normalized", description="'si': raw SI values; "
                                                      "'normalized': SI value / documented scale")
+    speed_shield: bool = Field(False, description="cap the command so that the speed stays under the speed-limit "
+                                                  "braking envelope (roadload.gym.ecodrive.shield_command)")
+    shield_margin: float = Field(0.5, ge=0, le=5.0, description="the shield keeps this far below the limit [m/s]")
+    shield_deceleration: float = Field(1.0, gt=0, le=4.0, description="deceleration of the shield's braking "
+                                                                      "envelope ahead of a lower limit [m/s^2]")
     reward: EcoDriveReward = Field(default_factory=EcoDriveReward)
 
     _vehicle = field_validator("vehicle")(classmethod(lambda cls, v: _check_vehicle(v)))

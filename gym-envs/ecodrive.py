@@ -6,6 +6,11 @@ Action: ``u`` in [-1, 1] (Box, shape (1,)), a normalised wheel-force command hel
 u < 0 asks for a braking force |u| * 0.5 m_V g, which the simulator splits regen first, friction brakes for the rest
 (its default allocator). The drive-train clips the request to what it can deliver in the current gear.
 
+Speed shield (``speed_shield=True``, off by default): before it is applied, the command is capped at
+SHIELD_GAIN * (v_env(s) - v), where v_env is the braking envelope of the speed limits ahead lowered by
+``shield_margin`` (:meth:`RouteTable.braking_envelope`). The capped command is what the vehicle gets and what
+``previous_command`` reports.
+
 Observation: see :data:`OBSERVATION_DOC` (built by :func:`observation_layout`) and the README table. Every entry is
 an SI value divided by a fixed scale (``obs_scaling='normalized'``, default) or the raw SI value (``'si'``).
 
@@ -122,6 +127,40 @@ def _look_ahead(table, grid, points, s, out):
             out[r, j] = table[r, i] * (1.0 - f) + table[r, i + 1] * f
 
 
+SHIELD_GAIN = 2.0
+"""Gain of the speed shield [1/(m/s)]: the command is capped at SHIELD_GAIN * (v_envelope - v)."""
+
+
+@njit(cache=True)
+def _braking_envelope(limit, grid, margin, decel, out):
+    """Backward pass: out[k] = min over y >= x_k of sqrt((v_lim(y) - margin)^2 + 2 decel (y - x_k)) on the grid."""
+    n = limit.size
+    nxt = max(limit[n - 1] - margin, 0.0)
+    out[n - 1] = nxt
+    for k in range(n - 2, -1, -1):
+        own = max(limit[k] - margin, 0.0)
+        reach = math.sqrt(nxt * nxt + 2.0 * decel * grid)
+        nxt = own if own < reach else reach
+        out[k] = nxt
+
+
+@njit(cache=True)
+def shield_command(envelope, n, s, v, u):
+    """The speed shield: the command u capped at SHIELD_GAIN * (v_env(s) - v), clipped to [-1, 1], with v_env the
+    braking envelope (RouteTable.braking_envelope, first n grid points) linearly interpolated at s [m], v [m/s]."""
+    x = s / PREVIEW_GRID
+    if x < 0.0:
+        x = 0.0
+    elif x > n - 1.001:
+        x = n - 1.001
+    i = int(x)
+    f = x - i
+    cap = SHIELD_GAIN * (envelope[i] * (1.0 - f) + envelope[i + 1] * f - v)
+    if cap < -1.0:
+        cap = -1.0
+    return u if u < cap else cap
+
+
 class RouteTable:
     """A road profile resampled on a uniform grid for fast preview look-ups, plus the schedule.
 
@@ -147,6 +186,13 @@ class RouteTable:
         self._out = np.zeros((4, self.preview.size))
         self._zero = np.zeros(1)
         self._one = np.zeros((4, 1))
+
+    def braking_envelope(self, margin: float, deceleration: float) -> np.ndarray:
+        """Highest speed [m/s] on the grid from which braking at ``deceleration`` [m/s^2] keeps the speed
+        ``margin`` [m/s] under every speed limit ahead (the speed shield's envelope)."""
+        out = np.empty(self.table.shape[1])
+        _braking_envelope(self.table[self.SPEED_LIMIT], PREVIEW_GRID, margin, deceleration, out)
+        return out
 
     def look_ahead(self, s: float) -> np.ndarray:
         """(4, len(preview)) grade [rad], curvature [1/m], speed limit [m/s], schedule time [s] at s + preview
@@ -280,6 +326,8 @@ class EcoDriveEnv(gym.Env):
                                            0.0)
         self._limit = float(self._route.at(self._state.s)[RouteTable.SPEED_LIMIT])
         self._obs_buf = np.zeros(len(self.layout))
+        self._envelope = (self._route.braking_envelope(cfg.shield_margin, cfg.shield_deceleration)
+                          if cfg.speed_shield else None)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
@@ -298,6 +346,8 @@ class EcoDriveEnv(gym.Env):
         cfg = self.config
         w = cfg.reward
         st0 = self._state
+        if self._envelope is not None:
+            u = float(shield_command(self._envelope, self._envelope.size, st0.s, st0.v, u))
         limit0 = self._limit
         force = self._drive.wheel_force(u, st0.v)
         with warnings.catch_warnings():

@@ -53,6 +53,8 @@ def test_make_vec_builds_the_native_env():
     {"route_length": 150.0},                       # episodes terminate at the route end
     {"route_length": 2000.0, "time_limit": 6.0},   # episodes truncate at the time limit
     {"route_length": 400.0, "road": "city", "effects": {"wind": {"mean_speed": 6.0}}},  # stops, wind
+    {"route_length": 150.0, "road": "city", "speed_shield": True, "shield_margin": 5.0,
+     "time_limit": 12.0},  # the speed shield caps the commands
 ])
 def test_each_sub_env_equals_the_single_env_next_step_autoreset(config):
     n, seed, steps = 3, 11, 320

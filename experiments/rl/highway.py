@@ -36,8 +36,8 @@ from .common import RLError, _atomic_write_bytes
 HIGHWAY_ENV_ID = "roadload:roadload/EcoHighway-v0"
 HIGHWAY_HELD_OUT_SEEDS = tuple(range(50_000, 50_010))
 """Episode seeds of the held-out evaluation (traffic and road drawn from them; training draws from its own RNG)."""
-HIGHWAY_PPO = dict(n_steps=256, batch_size=256, n_epochs=10, learning_rate=3e-4, gamma=0.99, gae_lambda=0.95,
-                   clip_range=0.2, ent_coef=0.0, policy_kwargs={"log_std_init": -1.0})
+HIGHWAY_PPO: dict[str, Any] = dict(n_steps=256, batch_size=256, n_epochs=10, learning_rate=3e-4, gamma=0.99,
+                                   gae_lambda=0.95, clip_range=0.2, ent_coef=0.0, policy_kwargs={"log_std_init": -1.0})
 """PPO settings: gamma 0.99 (an 80-step episode at 2 Hz), the rest as EcoDrive's."""
 HIGHWAY_COLUMNS = ["controller", "seed", "crashed", "distance_m", "energy_kWh", "energy_Wh_per_km", "mean_speed_kmh",
                    "headway_deficit", "episode_return"]
@@ -144,7 +144,7 @@ def train_highway(timesteps: int, out_dir: Path, n_envs: int = 4, seed: int = 0,
     out_dir.mkdir(parents=True, exist_ok=True)
     venv = sb3_make_vec_env(HIGHWAY_ENV_ID, n_envs=n_envs, seed=seed, env_kwargs={"config": env_config},
                             vec_env_cls=DummyVecEnv)
-    params = dict(HIGHWAY_PPO)
+    params: dict[str, Any] = dict(HIGHWAY_PPO)
     params["n_steps"] = max(16, min(params["n_steps"], max(timesteps // n_envs, 16)))
     params["batch_size"] = min(params["batch_size"], params["n_steps"] * n_envs)
     model = PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **params)

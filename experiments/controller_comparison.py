@@ -511,3 +511,35 @@ def format_difference(mean: float, se: float, lo: float, hi: float) -> str:
         return f"{mean:+.2f} % (1 seed, no CI)"
     text = f"{mean:+.2f} % [{lo:+.2f}, {hi:+.2f}] (1σ {se:.2f})"
     return text if (lo > 0 or hi < 0) else f"not resolved ({text})"
+
+
+def refit_results(results: list[dict[str, Any]], metric: str = "net", window: float = 0.06,
+                  quadratic: bool = True) -> list[dict[str, Any]]:
+    """The stored runs of run_paired_task refitted with another metric / time window / fit order (the
+    resolution study of issue 14: same closed-loop runs, different matching). The reference time is the
+    cruise-control time of the nominal set speed when the oracle matched it, else the oracle's closest run."""
+    if metric not in METRICS:
+        raise ValueError(f"metric: choose one of {sorted(METRICS)}, got {metric!r}")
+    time_key, energy_key = METRICS[metric]
+    out = []
+    for r in results:
+        off = r.get("kinetic_energy_offset_J", 0.0) if metric == "net" else 0.0
+        cruise = [x for x in r["runs"] if x["force_model"] == "cruise"]
+        mpc_runs = [x for x in r["runs"] if x["force_model"] != "cruise"]
+        if not cruise or not mpc_runs or cruise[0].get(time_key) is None:
+            continue
+        t_cruise = float(cruise[0][time_key])
+        oracle = [x for x in mpc_runs if x["force_model"] == "oracle"]
+        closest = min(oracle, key=lambda x: abs(x[time_key] / t_cruise - 1.0))
+        t_ref = t_cruise if abs(closest[time_key] / t_cruise - 1.0) <= r["task"].get("tol", 0.002) else float(
+            closest[time_key])
+        points: dict[str, list[tuple[float, float]]] = {}
+        for x in mpc_runs:
+            points.setdefault(x["force_model"], []).append((x[time_key], x[energy_key] + off))
+        fit = fit_energy_at_time(points, t_ref, window=window, quadratic=quadratic)
+        cfit = fit_energy_at_time({"cruise": [(x[time_key], x[energy_key] + off) for x in cruise]}, t_ref,
+                                  window=max(window, 0.08))
+        out.append({**r, "t_ref": t_ref, "energy_at_tref_J": fit.energy, "cruise_energy_J": cfit.energy["cruise"],
+                    "nearest_time_error": fit.nearest, "fit_residual_std": fit.residual_std,
+                    "task": {**r["task"], "metric": f"{metric} (window {100 * window:g} %)"}})
+    return out

@@ -248,6 +248,9 @@ def register_headline(benchmark_app: typer.Typer) -> None:
         typer.echo(md)
         typer.echo(f"wrote {out}/headline.md, summary.csv, summary_other_metric.csv, runs.json, headline.png")
         load1 = os.getloadavg()
+        cpu = os.times()
+        typer.echo(f"CPU time {cpu.user + cpu.system + cpu.children_user + cpu.children_system:.0f} s (this "
+                   f"process and its finished workers)")
         typer.echo(f"wall time {time.perf_counter() - wall0:.0f} s for {len(tasks)} tasks on "
                    f"{workers or os.cpu_count()} workers; 1-min load average {load0[0]:.2f} at start, "
                    f"{load1[0]:.2f} at end (5-min {load1[1]:.2f})")

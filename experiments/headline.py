@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -62,10 +63,11 @@ def headline_tasks(cases: list[str], roads: dict[str, list[str]], seeds: int, co
         extra["max_search_runs"] = search_runs
     if weight_factors is not None:
         extra["weight_factors"] = weight_factors
+    # seed-major: a sweep that is stopped early has the same seeds for every case
     return [PairedTask(case, road, seed, condition=c, human=human,
                        warmup=truck_warmup if VEHICLE_CASES[case].truck else 0.0, **extra)
-            for case in cases for road in roads[case] for c in (conds if case == "car" else ["nominal"])
-            for seed in range(first_seed, first_seed + seeds)]
+            for seed in range(first_seed, first_seed + seeds)
+            for case in cases for road in roads[case] for c in (conds if case == "car" else ["nominal"])]
 
 
 def sensitivity_tasks(cases: dict[str, str], seeds: int, quick: bool = False, first_seed: int = 0
@@ -84,10 +86,11 @@ def run_paired(tasks: list[PairedTask], out: Path, scheduler: str | None = None,
     """Run the tasks on the sweep runner, write runs.json and summary.csv/.md; returns (summary, failures).
     merge: runs.json files of earlier runs (other seeds) summarised together with these."""
     out.mkdir(parents=True, exist_ok=True)
-    outcomes = run_sweep(run_paired_task, tasks, scheduler=scheduler, workers=workers, description=description)
+    outcomes = run_sweep(partial(run_and_store, folder=str(out / "tasks")), tasks, scheduler=scheduler,
+                         workers=workers, description=description)
     results = [o.value for o in outcomes if o.ok]
     for path in merge or []:
-        results += json.loads(Path(path).read_text())
+        results += load_stored(Path(path)) if Path(path).is_dir() else json.loads(Path(path).read_text())
     failures = [f"{o.task.case}/{o.task.road}/{o.task.condition}/seed {o.task.seed}: {o.error}"
                 for o in outcomes if not o.ok]
     write_text(out / "runs.json", json.dumps(results, default=_json_default, indent=1))
@@ -97,6 +100,21 @@ def run_paired(tasks: list[PairedTask], out: Path, scheduler: str | None = None,
     write_text(out / "summary_other_metric.csv", (paired_summary(other) if other else pd.DataFrame()).to_csv(
         index=False))
     return summary, failures
+
+
+def run_and_store(task: PairedTask, folder: str) -> dict[str, Any]:
+    """run_paired_task, its result also written to ``folder``/<case>_<road>_<condition>_<seed>.json as soon as
+    it is done (a long sweep that is stopped keeps its finished seeds: :func:`load_stored`)."""
+    result = run_paired_task(task)
+    path = Path(folder) / f"{task.case}_{task.road}_{task.condition}_{task.seed}.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_text(path, json.dumps(result, default=_json_default))
+    return result
+
+
+def load_stored(folder: Path) -> list[dict[str, Any]]:
+    """The per-task results that :func:`run_and_store` wrote into ``folder``."""
+    return [json.loads(p.read_text()) for p in sorted(Path(folder).glob("*.json"))]
 
 
 def _json_default(x: Any):

@@ -200,8 +200,9 @@ def register_headline(benchmark_app: typer.Typer) -> None:
         weight_factors: str = typer.Option("0.8,1.25", help="extra time weights (x the matched one) per model; "
                                            "'none': one run per model at the matched weight"),
         first_seed: int = typer.Option(0, help="first seed (seeds first_seed .. first_seed + seeds - 1)"),
-        merge: list[Path] = typer.Option([], "--merge", help="runs.json of an earlier run (other seeds) to "
-                                         "summarise together with this one (repeatable)"),
+        merge: list[Path] = typer.Option([], "--merge", help="runs.json of an earlier run (other seeds), or its "
+                                         "tasks/ folder of finished seeds, to summarise together with this one "
+                                         "(repeatable)"),
         scheduler: str = typer.Option(None, help="Dask scheduler address (default: local processes)"),
         workers: int = typer.Option(None, help="local worker processes (default: CPU count)"),
         truck_warmup: float = typer.Option(0.0, help="trucks: warm-up distance [m] driven before the measured "
@@ -218,8 +219,9 @@ def register_headline(benchmark_app: typer.Typer) -> None:
         wall0, load0 = time.perf_counter(), os.getloadavg()
         cases = ["car"] if quick else _car_truck_cases(vehicles)
         seeds = 2 if quick else seeds
-        if seeds < 2:
-            _fail(f"--seeds: need at least 2 for a confidence interval, got {seeds}")
+        if seeds < 2 and not (seeds == 0 and merge):
+            _fail(f"--seeds: need at least 2 for a confidence interval (0 with --merge: summarise only), got "
+                  f"{seeds}")
         roads = {c: [r.strip() for r in (car_roads if c == "car" else truck_roads).split(",") if r.strip()]
                  for c in cases}
         if quick:

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from roadload.experiments.controller_comparison import (PairedTask, _mean_ci, other_metric_results, paired_summary,
-                                                        parse_force_model)
+                                                        parse_force_model, refit_results)
 from roadload.experiments.time_matching import fit_energy_at_time
 
 
@@ -88,3 +88,29 @@ def test_other_metric_results_swap_in_the_same_runs_second_evaluation():
     assert net.loc["abc", "vs_oracle_pct"] == pytest.approx(1.0) and net.loc["abc", "metric"] == "net"
     assert raw.loc["abc", "vs_oracle_pct"] == pytest.approx(-1.0) and raw.loc["abc", "metric"] == "raw"
     assert raw.loc["oracle", "fit_residual_std_pct"] == pytest.approx(0.4)
+
+
+def test_refit_results_recovers_levels_and_books_the_kinetic_energy_offset():
+    # one seed: oracle and abc on the convex curve (abc 0.5 % above), cruise control on its own curve; the net
+    # metric adds cruise control's kinetic-energy offset (a constant) to every run, the raw one does not
+    t_ref, off = 120.0, 2.0e5
+
+    def run(model, t, level, **kw):
+        e = _curve(t, level, t_ref=t_ref)
+        return {"force_model": model, "trip_time": t, "energy_J": e + 7.0, "segment_time": t,
+                "energy_net_J": e - off, **kw}
+
+    runs = [run("cruise", t, 1.1e6) for t in (120.0, 123.0, 117.0, 126.0, 114.0)]
+    runs += [run("oracle", t, 1.0e6, time_weight=1.0) for t in (113.0, 118.0, 120.0, 124.0)]
+    runs += [run("abc", t, 1.005e6, time_weight=1.0) for t in (115.0, 119.5, 125.0)]
+    r = {"task": {"case": "car", "road": "hilly", "condition": "nominal", "seed": 0, "tol": 0.002},
+         "runs": runs, "kinetic_energy_offset_J": off}
+    net = refit_results([r], "net", window=0.06)[0]
+    assert net["t_ref"] == pytest.approx(120.0)
+    assert net["energy_at_tref_J"]["oracle"] == pytest.approx(1.0e6, rel=2e-4)
+    assert net["energy_at_tref_J"]["abc"] / net["energy_at_tref_J"]["oracle"] == pytest.approx(1.005, abs=2e-4)
+    assert net["cruise_energy_J"] == pytest.approx(1.1e6, rel=2e-4)
+    raw = refit_results([r], "raw", window=0.06)[0]
+    assert raw["energy_at_tref_J"]["oracle"] == pytest.approx(1.0e6 + 7.0, rel=2e-4)
+    with pytest.raises(ValueError, match="metric"):
+        refit_results([r], "kwh")

@@ -22,8 +22,8 @@ from roadload.tables import markdown_table
 
 
 def resolution_table(results: list[dict], windows=(0.06, 0.04, 0.03)) -> pd.DataFrame:
-    """Per metric and window: the paired difference vs the oracle in % of ONE common reference energy per seed
-    (the oracle's net-metric energy at T_ref, window 6 %: a raw battery energy can be ~0 on a downhill road)."""
+    """Per metric and window: the paired difference vs the oracle as a fleet total, mean difference [J] over the
+    mean of ONE common reference energy (the oracle's net-metric energy at T_ref, window 6 %) [%]."""
     ref = {(r["task"]["case"], r["task"]["seed"]): r["energy_at_tref_J"]["oracle"]
            for r in refit_results(results, "net", window=0.06)}
     rows = []
@@ -32,9 +32,10 @@ def resolution_table(results: list[dict], windows=(0.06, 0.04, 0.03)) -> pd.Data
             fitted = refit_results(results, metric, window=w)
             for case in dict.fromkeys(r["task"]["case"] for r in fitted):
                 rs = [r for r in fitted if r["task"]["case"] == case]
+                scale = 100.0 / float(np.nanmean([ref[(case, r["task"]["seed"])] for r in rs]))
                 for m in [k for k in rs[0]["energy_at_tref_J"] if k != "oracle"]:
-                    d = np.array([100 * (r["energy_at_tref_J"][m] - r["energy_at_tref_J"]["oracle"])
-                                  / ref[(case, r["task"]["seed"])] for r in rs])
+                    d = np.array([scale * (r["energy_at_tref_J"][m] - r["energy_at_tref_J"]["oracle"])
+                                  for r in rs])
                     mean, se, lo, hi = _mean_ci(d)
                     rows.append({"vehicle": case, "metric": metric, "window_pct": 100 * w, "force_model": m,
                                  "seeds": int(np.isfinite(d).sum()), "vs_oracle_pct": mean,

@@ -391,8 +391,9 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
         raise RuntimeError(f"cruise control did not arrive on {task.road} seed {task.seed}")
     extra = {}
     if task.human:
-        human = run(replace(base, controller="human"))
-        extra = {"human_energy_J": human.metrics["energy_J"], "human_time": human.metrics["trip_time"]}
+        human = run(replace(base, controller="human")).metrics  # the same metric as cruise control's
+        extra = {"human_energy_J": human[energy_key] + (offset if task.metric == "net" else 0.0),
+                 "human_time": human[time_key]}
     points: dict[str, list[tuple[float, float]]] = {}
     points_other: dict[str, list[tuple[float, float]]] = {}
 

@@ -52,7 +52,7 @@ QUICK = {"max_search_runs": 2, "weight_factors": ()}  # smoke runs: 2 oracle run
 def headline_tasks(cases: list[str], roads: dict[str, list[str]], seeds: int, conditions: list[str] | None = None,
                    human: bool = True, quick: bool = False, first_seed: int = 0,
                    search_runs: int | None = None, weight_factors: tuple[float, ...] | None = None,
-                   truck_warmup: float = 0.0, metric: str = "net") -> list[PairedTask]:
+                   truck_warmup: float = 0.0, metric: str = "net", car_warmup: float = 0.0) -> list[PairedTask]:
     """One task per (case, road, condition, seed); roads: {case: [road, ...]}; search_runs / weight_factors
     override :class:`PairedTask`'s (fewer runs per seed on a loaded machine); truck_warmup [m]: warm-up before
     the trucks' measured segment."""
@@ -65,7 +65,7 @@ def headline_tasks(cases: list[str], roads: dict[str, list[str]], seeds: int, co
         extra["weight_factors"] = weight_factors
     # seed-major: a sweep that is stopped early has the same seeds for every case
     return [PairedTask(case, road, seed, condition=c, human=human,
-                       warmup=truck_warmup if VEHICLE_CASES[case].truck else 0.0, **extra)
+                       warmup=truck_warmup if VEHICLE_CASES[case].truck else car_warmup, **extra)
             for seed in range(first_seed, first_seed + seeds)
             for case in cases for road in roads[case] for c in (conds if case == "car" else ["nominal"])]
 

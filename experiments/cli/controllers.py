@@ -207,6 +207,7 @@ def register_headline(benchmark_app: typer.Typer) -> None:
         workers: int = typer.Option(None, help="local worker processes (default: CPU count)"),
         truck_warmup: float = typer.Option(0.0, help="trucks: warm-up distance [m] driven before the measured "
                                            "4 km (the online estimator converges there; every controller drives it)"),
+        car_warmup: float = typer.Option(0.0, help="car: warm-up distance [m] driven before the measured 2.5 km"),
         metric: str = typer.Option("net", help="net: segment energy net of the kinetic energy left at arrival, "
                                    "crossings interpolated; raw: first step past the road end"),
     ) -> None:
@@ -214,8 +215,8 @@ def register_headline(benchmark_app: typer.Typer) -> None:
         seeds, with the 1-sigma resolution and 95 % CIs of every difference."""
         if metric not in ("net", "raw"):
             _fail(f"--metric: net or raw, got {metric!r}")
-        if not truck_warmup >= 0:
-            _fail(f"--truck-warmup: a distance >= 0 m, got {truck_warmup}")
+        if not (truck_warmup >= 0 and car_warmup >= 0):
+            _fail(f"--truck-warmup / --car-warmup: distances >= 0 m, got {truck_warmup} / {car_warmup}")
         wall0, load0 = time.perf_counter(), os.getloadavg()
         cases = ["car"] if quick else _car_truck_cases(vehicles)
         seeds = 2 if quick else seeds
@@ -239,7 +240,7 @@ def register_headline(benchmark_app: typer.Typer) -> None:
             _fail(f"--search-runs: at least 1, got {search_runs}")
         tasks = headline_tasks(cases, roads, seeds, conds, human=True, quick=quick, first_seed=first_seed,
                                search_runs=None if quick else search_runs, weight_factors=None if quick else factors,
-                               truck_warmup=truck_warmup, metric=metric)
+                               truck_warmup=truck_warmup, metric=metric, car_warmup=car_warmup)
         summary, failures = run_paired(tasks, out, scheduler=scheduler, workers=workers, description="headline",
                                        merge=list(merge))
         if summary.empty:

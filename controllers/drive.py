@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from dataclasses import dataclass, field
 
 from roadload.road_profiles import RoadProfile
@@ -18,7 +20,7 @@ from roadload.vehicle import VehicleSpec
 from .base import ControllerError, DriveContext
 from .closed_loop import Controller, RunResult, run_closed_loop
 from .cruise import CruiseController, CruiseSettings
-from .energy import with_loss_error
+from .energy import SourceEnergyModel, with_loss_error
 from .force_model import FORCE_MODEL_NAMES, ErroredForceModel, FixedForceModel, ForceModel, OracleForceModel
 from .mpc import MpcSettings
 from .mpc_controller import MpcController, MpcControllerSettings
@@ -51,6 +53,7 @@ class DriveSettings:
     nominal_vehicle: VehicleSpec | str | None = None
     pipeline: PipelineSettings | None = None  # online model: preprocessing settings (None: the defaults)
     wrong_model: dict | None = None  # sensitivity: {"mass": 0.2, ...} relative errors on the oracle (see .errors)
+    measure_from: float = 0.0  # [m] start of the measured segment (warm-up before it; see run_closed_loop)
 
     def __post_init__(self) -> None:
         if self.controller not in CONTROLLERS:
@@ -81,6 +84,19 @@ def resolve_road(road: RoadProfile | str, seed: int = 0) -> RoadProfile:
     if not isinstance(prof, RoadProfile):
         raise ControllerError(f"road {road!r} is a drive cycle, not a road profile; the controllers need a road")
     return prof
+
+
+def net_energy_metrics(metrics: dict, inertial_mass: float, energy: SourceEnergyModel) -> dict[str, float]:
+    """The measured segment's source energy net of the kinetic energy it leaves behind:
+    E_net = E_segment + (m_inertial/2) (v_start^2 - v_arrival^2) / eta_i  [J].
+
+    Trips end at the road end at whatever speed the controller has, and 1 m/s more at the end of a 2.5 km car trip
+    is ~4 % of its energy; E_net books that kinetic energy at its marginal source cost (the energy model's
+    Willans 1/eta_i per J of wheel work; EV: 1), the value the MPC itself gives the kinetic energy at its horizon
+    end. m_inertial: the plant's body plus rotating mass at arrival (engaged gear)."""
+    ke = 0.5 * inertial_mass * (metrics["segment_start_speed"] ** 2 - metrics["arrival_speed"] ** 2)
+    return {"kinetic_energy_change_J": -ke, "energy_net_J": metrics["segment_energy_J"]
+            + ke / energy.indicated_efficiency}
 
 
 def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, seed: int = 0,
@@ -120,10 +136,15 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
         controller = CruiseController(st.cruise)
     else:
         controller = HumanDriver()
-    result = run_closed_loop(controller, plant, ctx, progress=progress)
+    result = run_closed_loop(controller, plant, ctx, progress=progress, measure_from=st.measure_from)
+    result.metrics.update(net_energy_metrics(result.metrics, plant.true_parameters().inertial_mass, energy))
     result.metrics.update(controller=st.controller, force_model=st.force_model if st.controller == "mpc" else "-",
                           solver=st.solver if st.controller == "mpc" else "-",
                           time_weight=st.time_weight if st.controller == "mpc" else float("nan"))
     if hasattr(force_model, "describe") and st.force_model == "online" and st.controller == "mpc":
-        result.metrics["online"] = force_model.describe()
+        desc = force_model.describe()
+        hist = desc.get("history")
+        if hist and hist["t"]:  # where the estimate stood: position [m] of each update
+            desc["history"]["s"] = [float(x) for x in np.interp(hist["t"], result.log["t"], result.log["s"])]
+        result.metrics["online"] = desc
     return result, plant

@@ -77,6 +77,7 @@ class OnlineForceModel:
         self.rows = 0
         self.clipped = 0
         self.errors: list[str] = []
+        self.history: list[tuple[float, list[float]]] = []  # (t [s], estimate) after every update
 
     def observe(self, sample: dict[str, float]) -> None:
         t = float(sample.get("t", np.nan))
@@ -107,6 +108,7 @@ class OnlineForceModel:
             self._t_done = float(t[new].max())
         self.updates += 1
         self.rows += int(new.sum())
+        self.history.append((self._t_done, [float(x) for x in self.estimate()]))
         return int(new.sum())
 
     def estimate(self) -> np.ndarray:
@@ -130,4 +132,6 @@ class OnlineForceModel:
     def describe(self) -> dict[str, Any]:
         return {"force_model": self.name, "model": self.model_name, "estimator": self.estimator_name,
                 "updates": self.updates, "rows": self.rows, "clipped": self.clipped,
-                "estimate": dict(zip(self.structure.parameter_names, map(float, self.estimate())))}
+                "estimate": dict(zip(self.structure.parameter_names, map(float, self.estimate()))),
+                "history": {"parameters": list(self.structure.parameter_names), "t": [h[0] for h in self.history],
+                            "x": [h[1] for h in self.history]}}

@@ -283,16 +283,17 @@ def _longhaul_profile() -> RoadProfile:
     return _LONGHAUL[0]
 
 
-def paired_road(name: str, seed: int) -> RoadProfile:
+def paired_road(name: str, seed: int, warmup: float = 0.0) -> RoadProfile:
     """Roads of the paired comparison, one per seed: 'hilly' (2.5 km generated country road), 'long_grades'
     (4 km, 3-6 % grades of 2-4 km), 'longhaul_real' (10 km windows of the real long-haul truck cycle). Short,
-    because the shared machine gives each run a fraction of a core."""
+    because the shared machine gives each run a fraction of a core. ``warmup`` [m]: the generated road is that
+    much longer; the measured segment is its last 2.5 / 4 km (see PairedTask.warmup)."""
     if name == "hilly":
-        return hilly(seed=seed, length=2500.0)
+        return hilly(seed=seed, length=2500.0 + warmup)
     if name == "hilly_short":  # smoke runs (--quick)
-        return hilly(seed=seed, length=1200.0)
+        return hilly(seed=seed, length=1200.0 + warmup)
     if name == "long_grades":
-        return long_grades(seed=seed, length=4000.0)
+        return long_grades(seed=seed, length=4000.0 + warmup)
     if name == "longhaul_real":
         return _longhaul_window(seed)
     raise ValueError(f"unknown paired road {name!r}; known: hilly, hilly_short, long_grades, longhaul_real")
@@ -323,6 +324,21 @@ class PairedTask:
     tol: float = 0.002
     human: bool = False
     max_search_runs: int = 4  # oracle runs spent on the lambda search; the local fit handles the rest
+    # [m] warm-up driven before the measured segment (every controller drives it; the online estimator learns
+    # there, fleet practice: the estimate carries over from the trip's start); metrics cover the segment only
+    warmup: float = 0.0
+    # "net": segment time and source energy net of the kinetic energy left at arrival, crossings interpolated
+    # (drive.net_energy_metrics); "raw": the first control step past the road end and its source energy
+    metric: str = "net"
+
+    def __post_init__(self) -> None:
+        if self.metric not in METRICS:
+            raise ValueError(f"PairedTask.metric: choose one of {sorted(METRICS)}, got {self.metric!r}")
+        if not (math.isfinite(self.warmup) and self.warmup >= 0):
+            raise ValueError(f"PairedTask.warmup must be a finite distance >= 0 m, got {self.warmup}")
+
+
+METRICS = {"net": ("segment_time", "energy_net_J"), "raw": ("trip_time", "energy_J")}
 
 
 def run_paired_task(task: PairedTask) -> dict[str, Any]:
@@ -334,12 +350,20 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
        jumps over T_ref (a truck's time saturates at its power limit and can jump between local optima), T_ref
        moves to the oracle run closest to it, and cruise control's energy comes from its local fit there;
     3. every force model at lambda* x (1, weight_factors) on the same road, seed and plant;
-    4. the joint local fit of energy over trip time of the MPC runs (common slope/curvature) -> E_m(T_ref)."""
+    4. the joint local fit of energy over trip time of the MPC runs (common slope/curvature) -> E_m(T_ref).
+
+    Metric "net" (default): every run's segment energy is corrected to cruise control's arrival speed,
+    E = E_net + (E_seg - E_net)_cruise, i.e. the kinetic energy it leaves at the road end is booked at its
+    marginal source cost (drive.net_energy_metrics) relative to cruise control's. Differences between runs are
+    those of E_net; percentages are relative to an energy of the size of a real trip's (a net energy alone can be
+    ~0 or negative on a downhill road)."""
     case = VEHICLE_CASES[task.case]
-    road = paired_road(task.road, task.seed)
+    road = paired_road(task.road, task.seed, task.warmup)
     effects = CONDITIONS[task.condition] if not case.truck else None
-    base = case.settings()
+    base = replace(case.settings(), measure_from=task.warmup)
     vehicle = case.vehicle()
+    time_key, energy_key = METRICS[task.metric]
+    other = METRICS["raw" if task.metric == "net" else "net"]
 
     def run(settings: DriveSettings):
         res, _ = drive(vehicle, road, effects=effects, seed=task.seed, settings=settings)
@@ -348,53 +372,76 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
     runs_out: list[dict[str, Any]] = []
     f0 = base.cruise.fraction
     cruise_pts: list[tuple[float, float]] = []
+    cruise_other: list[tuple[float, float]] = []
+    offset = 0.0
     t_cruise = float("nan")
     for df in (0.0, -0.03, 0.03, -0.06, 0.06):
         f = f0 + df
         if not 0.5 < f <= 1.0:
             continue
         m = run(replace(base, cruise=replace(base.cruise, fraction=f))).metrics
-        cruise_pts.append((m["trip_time"], m["energy_J"]))
-        runs_out.append({"force_model": "cruise", "cruise_fraction": f, "trip_time": m["trip_time"],
-                         "energy_J": m["energy_J"], "speed_violations": m.get("speed_violations")})
+        if df == 0.0:  # net energies get cruise control's kinetic-energy change back (see _NET_OFFSET_DOC)
+            offset = m["segment_energy_J"] - m["energy_net_J"]
+        cruise_pts.append((m[time_key], m[energy_key] + (offset if task.metric == "net" else 0.0)))
+        cruise_other.append((m[other[0]], m[other[1]] + (offset if task.metric == "raw" else 0.0)))
+        runs_out.append({"force_model": "cruise", "cruise_fraction": f, **_run_metrics(m)})
         if df == 0.0:
-            t_cruise = m["trip_time"]
+            t_cruise = m[time_key]
     if not math.isfinite(t_cruise):
         raise RuntimeError(f"cruise control did not arrive on {task.road} seed {task.seed}")
     extra = {}
     if task.human:
-        human = run(replace(base, controller="human"))
-        extra = {"human_energy_J": human.metrics["energy_J"], "human_time": human.metrics["trip_time"]}
+        human = run(replace(base, controller="human")).metrics  # the same metric as cruise control's
+        extra = {"human_energy_J": human[energy_key] + (offset if task.metric == "net" else 0.0),
+                 "human_time": human[time_key]}
     points: dict[str, list[tuple[float, float]]] = {}
+    points_other: dict[str, list[tuple[float, float]]] = {}
 
     def mpc(spec: str, lam: float):
         fm, errors = parse_force_model(spec)
         res = run(replace(base, controller="mpc", force_model=fm, time_weight=lam, wrong_model=errors))
         m = res.metrics
-        points.setdefault(spec, []).append((m["trip_time"], m["energy_J"]))
-        runs_out.append({"force_model": spec, "time_weight": lam, "trip_time": m["trip_time"],
-                         "energy_J": m["energy_J"], "solve_time_median": m.get("solve_time_median"),
-                         "fallbacks": m.get("fallbacks"), "speed_violations": m.get("speed_violations"),
-                         "online_estimate": m.get("online", {}).get("estimate")})
+        points.setdefault(spec, []).append((m[time_key], m[energy_key] + (offset if task.metric == "net" else 0.0)))
+        points_other.setdefault(spec, []).append((m[other[0]], m[other[1]] + (offset if task.metric == "raw"
+                                                                                 else 0.0)))
+        runs_out.append({"force_model": spec, "time_weight": lam, **_run_metrics(m),
+                         "solve_time_median": m.get("solve_time_median"), "fallbacks": m.get("fallbacks"),
+                         "online_estimate": m.get("online", {}).get("estimate"),
+                         "online_history": m.get("online", {}).get("history")})
         return res
 
     matched = match_trip_time(lambda lam: mpc("oracle", lam), t_cruise, tol=task.tol, lam0=case.lam0,
-                              max_runs=task.max_search_runs, step=2.0)
+                              max_runs=task.max_search_runs, step=2.0, time_key=time_key, energy_key=energy_key)
     lam_star = matched.time_weight
-    t_ref = t_cruise if matched.matched else float(matched.result.metrics["trip_time"])
+    t_ref = t_cruise if matched.matched else float(matched.result.metrics[time_key])
     for spec in task.force_models:
         factors = task.weight_factors if spec == "oracle" else (1.0, *task.weight_factors)
         for f in factors:
             mpc(spec, lam_star * f)
     fit = fit_energy_at_time(points, t_ref)
     cruise_fit = fit_energy_at_time({"cruise": cruise_pts}, t_ref, window=0.08)
+    # the other metric on the same runs (before/after comparison of the resolution): its own reference time
+    t_ref_other = float(cruise_other[0][0]) if matched.matched else float(matched.result.metrics[other[0]])
+    fit_other = fit_energy_at_time(points_other, t_ref_other)
+    cruise_fit_other = fit_energy_at_time({"cruise": cruise_other}, t_ref_other, window=0.08)
     return {"task": task.__dict__, "t_ref": t_ref, "t_cruise": t_cruise, "t_ref_moved": not matched.matched,
+            "kinetic_energy_offset_J": offset,
+            "other_metric": {"metric": "raw" if task.metric == "net" else "net", "t_ref": t_ref_other,
+                             "energy_at_tref_J": fit_other.energy, "cruise_energy_J": cruise_fit_other.energy[
+                                 "cruise"], "fit_residual_std": fit_other.residual_std,
+                             "nearest_time_error": fit_other.nearest},
             "cruise_energy_J": cruise_fit.energy["cruise"], "cruise_nominal_energy_J": cruise_pts[0][1],
             "cruise_spanned": cruise_fit.spanned["cruise"],
             "lambda_star": lam_star, "oracle_time_error": matched.time_error, "oracle_matched": matched.matched,
             "energy_at_tref_J": fit.energy, "nearest_time_error": fit.nearest, "spanned": fit.spanned,
             "fit_residual_std": fit.residual_std, "fit_slope": fit.slope, "fit_curvature": fit.curvature,
             "runs": runs_out, **extra}
+
+
+def _run_metrics(m: dict[str, Any]) -> dict[str, Any]:
+    keys = ("trip_time", "energy_J", "segment_time", "energy_net_J", "arrival_speed", "segment_start_speed",
+            "kinetic_energy_change_J", "speed_violations")
+    return {k: m.get(k) for k in keys}
 
 
 def _mean_ci(values: np.ndarray) -> tuple[float, float, float, float]:
@@ -413,10 +460,38 @@ def _mean_ci(values: np.ndarray) -> tuple[float, float, float, float]:
     return mean, se, mean - h, mean + h
 
 
+def other_metric_results(results: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The same seeds evaluated with the task's other metric (``other_metric`` of run_paired_task: raw vs net),
+    for a before/after comparison of the resolution on identical runs."""
+    out = []
+    for r in results:
+        o = r.get("other_metric")
+        if o is None:
+            continue
+        out.append({**r, "t_ref": o["t_ref"], "energy_at_tref_J": o["energy_at_tref_J"],
+                    "cruise_energy_J": o["cruise_energy_J"], "fit_residual_std": o["fit_residual_std"],
+                    "nearest_time_error": o["nearest_time_error"],
+                    "task": {**r["task"], "metric": o["metric"]}})
+    return out
+
+
+def _ratio_of_means_ci(energy: np.ndarray, reference: np.ndarray) -> tuple[float, float, float, float]:
+    """Paired difference as a fleet total [%]: 100 mean(E - E_ref) / mean(E_ref) over the seeds where both are
+    finite, its 1-sigma standard error and Student-t 95 % CI (the spread of the per-seed differences E - E_ref
+    over the same mean reference). Unlike the mean of per-seed percentages it stays meaningful when one road is
+    net downhill and its energy ~0."""
+    ok = np.isfinite(energy) & np.isfinite(reference)
+    if not ok.any():
+        return (float("nan"),) * 4
+    scale = 100.0 / float(np.mean(reference[ok]))
+    mean, se, lo, hi = _mean_ci((energy[ok] - reference[ok]) * scale)
+    return mean, se, lo, hi
+
+
 def paired_summary(results: list[dict[str, Any]]) -> pd.DataFrame:
     """Per (case, road, condition, force model): paired energy difference at equal time vs the oracle MPC and vs
-    cruise control [%] over seeds: mean, 1-sigma resolution (standard error), 95 % CI, and 'resolved' (CI
-    excludes 0)."""
+    cruise control [%] over seeds (fleet totals, :func:`_ratio_of_means_ci`): mean, 1-sigma resolution (standard
+    error), 95 % CI, and 'resolved' (CI excludes 0); the median of the per-seed percentages alongside."""
     rows = []
     groups: dict[tuple, list[dict[str, Any]]] = {}
     for r in results:
@@ -425,14 +500,19 @@ def paired_summary(results: list[dict[str, Any]]) -> pd.DataFrame:
     for (case, road, cond), rs in groups.items():
         models = list(dict.fromkeys(m for r in rs for m in r["energy_at_tref_J"]))
         for m in models:
-            vs_oracle = np.array([100 * (r["energy_at_tref_J"][m] / r["energy_at_tref_J"]["oracle"] - 1) for r in rs])
-            vs_cruise = np.array([100 * (r["energy_at_tref_J"][m] / r["cruise_energy_J"] - 1) for r in rs])
-            mo, so, lo, hi = _mean_ci(vs_oracle)
-            mc, sc, lc, hc = _mean_ci(vs_cruise)
+            e_m = np.array([r["energy_at_tref_J"].get(m, np.nan) for r in rs], float)
+            e_o = np.array([r["energy_at_tref_J"]["oracle"] for r in rs], float)
+            e_c = np.array([r["cruise_energy_J"] for r in rs], float)
+            vs_oracle = 100 * (e_m / e_o - 1)
+            mo, so, lo, hi = _ratio_of_means_ci(e_m, e_o)
+            mc, sc, lc, hc = _ratio_of_means_ci(e_m, e_c)
             near = np.array([r["nearest_time_error"][m] for r in rs], float)
             rows.append({"vehicle": case, "road": road, "condition": cond, "force_model": m,
+                         "metric": rs[0]["task"].get("metric", "raw"), "warmup_m": rs[0]["task"].get("warmup", 0.0),
                          "seeds": int(np.isfinite(vs_oracle).sum()),
                          "vs_oracle_pct": mo, "resolution_1sigma_pct": so, "ci95_lo_pct": lo, "ci95_hi_pct": hi,
+                         "vs_oracle_per_seed_median_pct": float(np.nanmedian(vs_oracle))
+                         if np.isfinite(vs_oracle).any() else float("nan"),
                          "resolved": bool(np.isfinite(lo) and (lo > 0 or hi < 0)) if m != "oracle" else False,
                          "vs_cruise_pct": mc, "vs_cruise_1sigma_pct": sc, "vs_cruise_ci95_lo": lc,
                          "vs_cruise_ci95_hi": hc,
@@ -449,3 +529,35 @@ def format_difference(mean: float, se: float, lo: float, hi: float) -> str:
         return f"{mean:+.2f} % (1 seed, no CI)"
     text = f"{mean:+.2f} % [{lo:+.2f}, {hi:+.2f}] (1σ {se:.2f})"
     return text if (lo > 0 or hi < 0) else f"not resolved ({text})"
+
+
+def refit_results(results: list[dict[str, Any]], metric: str = "net", window: float = 0.06,
+                  quadratic: bool = True) -> list[dict[str, Any]]:
+    """The stored runs of run_paired_task refitted with another metric / time window / fit order (the
+    resolution study of issue 14: same closed-loop runs, different matching). The reference time is the
+    cruise-control time of the nominal set speed when the oracle matched it, else the oracle's closest run."""
+    if metric not in METRICS:
+        raise ValueError(f"metric: choose one of {sorted(METRICS)}, got {metric!r}")
+    time_key, energy_key = METRICS[metric]
+    out = []
+    for r in results:
+        off = r.get("kinetic_energy_offset_J", 0.0) if metric == "net" else 0.0
+        cruise = [x for x in r["runs"] if x["force_model"] == "cruise"]
+        mpc_runs = [x for x in r["runs"] if x["force_model"] != "cruise"]
+        if not cruise or not mpc_runs or cruise[0].get(time_key) is None:
+            continue
+        t_cruise = float(cruise[0][time_key])
+        oracle = [x for x in mpc_runs if x["force_model"] == "oracle"]
+        closest = min(oracle, key=lambda x: abs(x[time_key] / t_cruise - 1.0))
+        t_ref = t_cruise if abs(closest[time_key] / t_cruise - 1.0) <= r["task"].get("tol", 0.002) else float(
+            closest[time_key])
+        points: dict[str, list[tuple[float, float]]] = {}
+        for x in mpc_runs:
+            points.setdefault(x["force_model"], []).append((x[time_key], x[energy_key] + off))
+        fit = fit_energy_at_time(points, t_ref, window=window, quadratic=quadratic)
+        cfit = fit_energy_at_time({"cruise": [(x[time_key], x[energy_key] + off) for x in cruise]}, t_ref,
+                                  window=max(window, 0.08))
+        out.append({**r, "t_ref": t_ref, "energy_at_tref_J": fit.energy, "cruise_energy_J": cfit.energy["cruise"],
+                    "nearest_time_error": fit.nearest, "fit_residual_std": fit.residual_std,
+                    "task": {**r["task"], "metric": f"{metric} (window {100 * window:g} %)"}})
+    return out

@@ -11,15 +11,21 @@ from __future__ import annotations
 
 import json
 import math
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from roadload.experiments.controller_comparison import (PairedTask, format_difference, paired_summary,
-                                                        run_paired_task)
+from roadload.experiments.controller_comparison import (VEHICLE_CASES, PairedTask, format_difference,
+                                                        other_metric_results, paired_summary, run_paired_task)
+from dataclasses import replace
+
+from roadload.controllers.drive import drive
+from roadload.road_profiles import long_grades
 from roadload.tables import markdown_table
+from roadload.units import G
 from roadload.fileio import write_text
 from roadload.sweep import run_sweep
 from roadload.fileio import save_figure
@@ -45,19 +51,23 @@ QUICK = {"max_search_runs": 2, "weight_factors": ()}  # smoke runs: 2 oracle run
 
 def headline_tasks(cases: list[str], roads: dict[str, list[str]], seeds: int, conditions: list[str] | None = None,
                    human: bool = True, quick: bool = False, first_seed: int = 0,
-                   search_runs: int | None = None, weight_factors: tuple[float, ...] | None = None
-                   ) -> list[PairedTask]:
+                   search_runs: int | None = None, weight_factors: tuple[float, ...] | None = None,
+                   truck_warmup: float = 0.0, metric: str = "net", car_warmup: float = 0.0) -> list[PairedTask]:
     """One task per (case, road, condition, seed); roads: {case: [road, ...]}; search_runs / weight_factors
-    override :class:`PairedTask`'s (fewer runs per seed on a loaded machine)."""
+    override :class:`PairedTask`'s (fewer runs per seed on a loaded machine); truck_warmup [m]: warm-up before
+    the trucks' measured segment."""
     conds = conditions or ["nominal"]
     extra: dict = dict(QUICK) if quick else {}
+    extra["metric"] = metric
     if search_runs is not None:
         extra["max_search_runs"] = search_runs
     if weight_factors is not None:
         extra["weight_factors"] = weight_factors
-    return [PairedTask(case, road, seed, condition=c, human=human, **extra)
-            for case in cases for road in roads[case] for c in (conds if case == "car" else ["nominal"])
-            for seed in range(first_seed, first_seed + seeds)]
+    # seed-major: a sweep that is stopped early has the same seeds for every case
+    return [PairedTask(case, road, seed, condition=c, human=human,
+                       warmup=truck_warmup if VEHICLE_CASES[case].truck else car_warmup, **extra)
+            for seed in range(first_seed, first_seed + seeds)
+            for case in cases for road in roads[case] for c in (conds if case == "car" else ["nominal"])]
 
 
 def sensitivity_tasks(cases: dict[str, str], seeds: int, quick: bool = False, first_seed: int = 0
@@ -76,16 +86,35 @@ def run_paired(tasks: list[PairedTask], out: Path, scheduler: str | None = None,
     """Run the tasks on the sweep runner, write runs.json and summary.csv/.md; returns (summary, failures).
     merge: runs.json files of earlier runs (other seeds) summarised together with these."""
     out.mkdir(parents=True, exist_ok=True)
-    outcomes = run_sweep(run_paired_task, tasks, scheduler=scheduler, workers=workers, description=description)
+    outcomes = run_sweep(partial(run_and_store, folder=str(out / "tasks")), tasks, scheduler=scheduler,
+                         workers=workers, description=description)
     results = [o.value for o in outcomes if o.ok]
     for path in merge or []:
-        results += json.loads(Path(path).read_text())
+        results += load_stored(Path(path)) if Path(path).is_dir() else json.loads(Path(path).read_text())
     failures = [f"{o.task.case}/{o.task.road}/{o.task.condition}/seed {o.task.seed}: {o.error}"
                 for o in outcomes if not o.ok]
     write_text(out / "runs.json", json.dumps(results, default=_json_default, indent=1))
     summary = paired_summary(results) if results else pd.DataFrame()
     write_text(out / "summary.csv", summary.to_csv(index=False))
+    other = other_metric_results(results)  # the same runs with the other metric (before/after resolution)
+    write_text(out / "summary_other_metric.csv", (paired_summary(other) if other else pd.DataFrame()).to_csv(
+        index=False))
     return summary, failures
+
+
+def run_and_store(task: PairedTask, folder: str) -> dict[str, Any]:
+    """run_paired_task, its result also written to ``folder``/<case>_<road>_<condition>_<seed>.json as soon as
+    it is done (a long sweep that is stopped keeps its finished seeds: :func:`load_stored`)."""
+    result = run_paired_task(task)
+    path = Path(folder) / f"{task.case}_{task.road}_{task.condition}_{task.seed}.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_text(path, json.dumps(result, default=_json_default))
+    return result
+
+
+def load_stored(folder: Path) -> list[dict[str, Any]]:
+    """The per-task results that :func:`run_and_store` wrote into ``folder``."""
+    return [json.loads(p.read_text()) for p in sorted(Path(folder).glob("*.json"))]
 
 
 def _json_default(x: Any):
@@ -185,3 +214,72 @@ def headline_figure(summary: pd.DataFrame, path: Path) -> Path:
 
 def finite(x: float) -> bool:
     return isinstance(x, float) and math.isfinite(x)
+
+
+# ------------------------------------------------------------------- online estimate vs distance (trucks, issue 14)
+def convergence_run(case: str, seed: int, length: float) -> dict[str, Any]:
+    """One online-MPC drive of a truck case on a ``length`` [m] long-grades road (time weight: the case's start
+    value): the M4-RRLM estimate after every update against the truth, by position. Truth: the plant's mass and
+    drag coefficient rho/2 c_x A, and m g f_r0 of the tyres (M4's m_V f_r0 also absorbs f_r1 v, so its
+    reference is rough)."""
+    vc = VEHICLE_CASES[case]
+    road = long_grades(seed=seed, length=length)
+    res, plant = drive(vc.vehicle(), road, seed=seed,
+                       settings=replace(vc.settings(), controller="mpc", force_model="online", time_weight=vc.lam0))
+    p = plant.true_parameters()
+    truth = {"m_V": p.mass, "rho_a/2 A_V c_x": p.c2, "m_V f_r0": p.c0 / G}
+    hist = res.metrics["online"]["history"]
+    names = hist["parameters"]
+    x = np.asarray(hist["x"], float)
+    return {"case": case, "seed": seed, "length_m": length, "s": hist.get("s", []), "t": hist["t"],
+            "truth": truth, "estimate": {n: x[:, i].tolist() for i, n in enumerate(names) if n in truth},
+            "trip_time": res.metrics["trip_time"]}
+
+
+def convergence_table(runs: list[dict[str, Any]], at: tuple[float, ...] = (2000.0, 4000.0, 8000.0, 12000.0,
+                                                                            16000.0)) -> pd.DataFrame:
+    """Median over seeds of the relative estimate error [%] per case, parameter and distance [m] (the last
+    update at or before that distance)."""
+    rows = []
+    for case in dict.fromkeys(r["case"] for r in runs):
+        rs = [r for r in runs if r["case"] == case]
+        for name in ("m_V", "rho_a/2 A_V c_x", "m_V f_r0"):
+            for d in at:
+                errs = []
+                for r in rs:
+                    s = np.asarray(r["s"], float)
+                    k = np.flatnonzero(s <= d)
+                    if k.size and d <= r["length_m"]:
+                        errs.append(100.0 * (r["estimate"][name][k[-1]] / r["truth"][name] - 1.0))
+                if errs:
+                    rows.append({"vehicle": case, "parameter": name, "distance_km": d / 1000.0,
+                                 "error_median_pct": float(np.median(errs)),
+                                 "error_abs_max_pct": float(np.max(np.abs(errs))), "seeds": len(errs)})
+    return pd.DataFrame(rows)
+
+
+def convergence_figure(runs: list[dict[str, Any]], path: Path) -> Path:
+    """Relative error of m_V, rho/2 c_x A and m_V f_r0 [%] over distance [km], one line per run."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = ("m_V", "rho_a/2 A_V c_x", "m_V f_r0")
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.0))
+    colors = {c: f"C{i}" for i, c in enumerate(dict.fromkeys(r["case"] for r in runs))}
+    for ax, name in zip(axes, names):
+        for r in runs:
+            s = np.asarray(r["s"], float) / 1000.0
+            e = 100.0 * (np.asarray(r["estimate"][name]) / r["truth"][name] - 1.0)
+            ax.plot(s, e, color=colors[r["case"]], lw=1.0, alpha=0.8,
+                    label=r["case"] if r["seed"] == min(q["seed"] for q in runs if q["case"] == r["case"]) else None)
+        ax.axhline(0.0, color="k", lw=0.8)
+        ax.set_ylim(-60, 60) if name != "m_V" else ax.set_ylim(-20, 20)
+        ax.set_xlabel("distance driven [km]")
+        ax.set_ylabel(f"{name}: estimate vs truth [%]")
+        ax.grid(alpha=0.3)
+    axes[0].legend()
+    fig.suptitle("Online M4-RRLM estimate on the truck's CAN stream (online MPC, long grades)")
+    fig.tight_layout()
+    return save_figure(fig, path, dpi=120)

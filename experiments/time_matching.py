@@ -28,6 +28,7 @@ class MatchedRun:
     matched: bool
     runs: int
     history: list[tuple[float, float, float]] = field(default_factory=list)  # (lambda, trip time, energy J)
+    time_key: str = "trip_time"
 
     def energy_at_target(self) -> float:
         """Source energy [J] interpolated linearly in trip time to exactly the target time between the two
@@ -45,13 +46,15 @@ class MatchedRun:
     @property
     def time_error(self) -> float:
         """(T - T_target) / T_target [-]."""
-        return self.result.metrics["trip_time"] / self.target_time - 1.0
+        return self.result.metrics[self.time_key] / self.target_time - 1.0
 
 
 def match_trip_time(run: Callable[[float], RunResult], target_time: float, tol: float = 0.01,
                     lam0: float = 8000.0, lam_min: float = 50.0, lam_max: float = 2e6,
-                    max_runs: int = 10, step: float = 4.0) -> MatchedRun:
-    """Closed-loop runs ``run(lambda)`` until the trip time is within ``tol`` of ``target_time`` [s]."""
+                    max_runs: int = 10, step: float = 4.0, time_key: str = "trip_time",
+                    energy_key: str = "energy_J") -> MatchedRun:
+    """Closed-loop runs ``run(lambda)`` until the trip time (``metrics[time_key]``) is within ``tol`` of
+    ``target_time`` [s]; the history records ``metrics[energy_key]`` [J]."""
     if not target_time > 0 or not math.isfinite(target_time):
         raise ValueError(f"target_time must be a positive finite number, got {target_time}")
     if not 0 < tol < 1:
@@ -61,7 +64,7 @@ def match_trip_time(run: Callable[[float], RunResult], target_time: float, tol: 
     def evaluate(lam: float) -> float:
         res = run(lam)
         history.append((lam, res))
-        t = res.metrics["trip_time"]
+        t = res.metrics[time_key]
         return t if math.isfinite(t) else float("inf")
 
     def done(t: float) -> bool:
@@ -87,11 +90,11 @@ def match_trip_time(run: Callable[[float], RunResult], target_time: float, tol: 
             x_new = min(max(x_new, x1 + 0.1 * span), x2 - 0.1 * span)  # safeguard: stay inside the bracket
         lam = math.exp(x_new)
         t = evaluate(lam)
-    best_lam, best = min(history, key=lambda h: abs(h[1].metrics["trip_time"] / target_time - 1.0)
-                         if math.isfinite(h[1].metrics["trip_time"]) else float("inf"))
-    ok = math.isfinite(best.metrics["trip_time"]) and done(best.metrics["trip_time"])
-    trace = [(lam_i, r.metrics["trip_time"], r.metrics["energy_J"]) for lam_i, r in history]
-    return MatchedRun(best, best_lam, target_time, ok, len(history), trace)
+    best_lam, best = min(history, key=lambda h: abs(h[1].metrics[time_key] / target_time - 1.0)
+                         if math.isfinite(h[1].metrics[time_key]) else float("inf"))
+    ok = math.isfinite(best.metrics[time_key]) and done(best.metrics[time_key])
+    trace = [(lam_i, r.metrics[time_key], r.metrics[energy_key]) for lam_i, r in history]
+    return MatchedRun(best, best_lam, target_time, ok, len(history), trace, time_key)
 
 
 # ------------------------------------------------------------------------------------------- local fit (issue 14)

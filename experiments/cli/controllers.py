@@ -3,6 +3,9 @@ comparison: table + figures)."""
 
 from __future__ import annotations
 
+import os
+import time
+
 import json
 import math
 from pathlib import Path
@@ -197,17 +200,29 @@ def register_headline(benchmark_app: typer.Typer) -> None:
         weight_factors: str = typer.Option("0.8,1.25", help="extra time weights (x the matched one) per model; "
                                            "'none': one run per model at the matched weight"),
         first_seed: int = typer.Option(0, help="first seed (seeds first_seed .. first_seed + seeds - 1)"),
-        merge: list[Path] = typer.Option([], "--merge", help="runs.json of an earlier run (other seeds) to "
-                                         "summarise together with this one (repeatable)"),
+        merge: list[Path] = typer.Option([], "--merge", help="runs.json of an earlier run (other seeds), or its "
+                                         "tasks/ folder of finished seeds, to summarise together with this one "
+                                         "(repeatable)"),
         scheduler: str = typer.Option(None, help="Dask scheduler address (default: local processes)"),
         workers: int = typer.Option(None, help="local worker processes (default: CPU count)"),
+        truck_warmup: float = typer.Option(0.0, help="trucks: warm-up distance [m] driven before the measured "
+                                           "4 km (the online estimator converges there; every controller drives it)"),
+        car_warmup: float = typer.Option(0.0, help="car: warm-up distance [m] driven before the measured 2.5 km"),
+        metric: str = typer.Option("net", help="net: segment energy net of the kinetic energy left at arrival, "
+                                   "crossings interpolated; raw: first step past the road end"),
     ) -> None:
         """MPC with the oracle / abc / online force model against cruise control at equal trip time, paired over
         seeds, with the 1-sigma resolution and 95 % CIs of every difference."""
+        if metric not in ("net", "raw"):
+            _fail(f"--metric: net or raw, got {metric!r}")
+        if not (truck_warmup >= 0 and car_warmup >= 0):
+            _fail(f"--truck-warmup / --car-warmup: distances >= 0 m, got {truck_warmup} / {car_warmup}")
+        wall0, load0 = time.perf_counter(), os.getloadavg()
         cases = ["car"] if quick else _car_truck_cases(vehicles)
         seeds = 2 if quick else seeds
-        if seeds < 2:
-            _fail(f"--seeds: need at least 2 for a confidence interval, got {seeds}")
+        if seeds < 2 and not (seeds == 0 and merge):
+            _fail(f"--seeds: need at least 2 for a confidence interval (0 with --merge: summarise only), got "
+                  f"{seeds}")
         roads = {c: [r.strip() for r in (car_roads if c == "car" else truck_roads).split(",") if r.strip()]
                  for c in cases}
         if quick:
@@ -224,7 +239,8 @@ def register_headline(benchmark_app: typer.Typer) -> None:
         if search_runs < 1:
             _fail(f"--search-runs: at least 1, got {search_runs}")
         tasks = headline_tasks(cases, roads, seeds, conds, human=True, quick=quick, first_seed=first_seed,
-                               search_runs=None if quick else search_runs, weight_factors=None if quick else factors)
+                               search_runs=None if quick else search_runs, weight_factors=None if quick else factors,
+                               truck_warmup=truck_warmup, metric=metric, car_warmup=car_warmup)
         summary, failures = run_paired(tasks, out, scheduler=scheduler, workers=workers, description="headline",
                                        merge=list(merge))
         if summary.empty:
@@ -233,7 +249,14 @@ def register_headline(benchmark_app: typer.Typer) -> None:
         write_text(out / "headline.md", "# Headline: eco-driving MPC force models at equal trip time\n\n" + md)
         headline_figure(summary, out / "headline.png")
         typer.echo(md)
-        typer.echo(f"wrote {out}/headline.md, summary.csv, runs.json, headline.png")
+        typer.echo(f"wrote {out}/headline.md, summary.csv, summary_other_metric.csv, runs.json, headline.png")
+        load1 = os.getloadavg()
+        cpu = os.times()
+        typer.echo(f"CPU time {cpu.user + cpu.system + cpu.children_user + cpu.children_system:.0f} s (this "
+                   f"process and its finished workers)")
+        typer.echo(f"wall time {time.perf_counter() - wall0:.0f} s for {len(tasks)} tasks on "
+                   f"{workers or os.cpu_count()} workers; 1-min load average {load0[0]:.2f} at start, "
+                   f"{load1[0]:.2f} at end (5-min {load1[1]:.2f})")
 
     @benchmark_app.command("sensitivity")
     def sensitivity_cmd(

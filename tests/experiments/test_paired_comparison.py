@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from roadload.experiments.controller_comparison import _mean_ci, paired_summary, parse_force_model
+from roadload.experiments.controller_comparison import (PairedTask, _mean_ci, other_metric_results, paired_summary,
+                                                        parse_force_model, refit_results)
 from roadload.experiments.time_matching import fit_energy_at_time
 
 
@@ -65,3 +66,51 @@ def test_parse_force_model():
     assert parse_force_model("wrong:mass=0.2,grade_bias=-0.005") == ("wrong", {"mass": 0.2, "grade_bias": -0.005})
     with pytest.raises(ValueError, match="force model"):
         parse_force_model("magic")
+
+
+def test_paired_task_rejects_unknown_metric_and_negative_warmup():
+    with pytest.raises(ValueError, match="metric"):
+        PairedTask("car", "hilly", 0, metric="energy")
+    with pytest.raises(ValueError, match="warmup"):
+        PairedTask("truck_40t", "long_grades", 0, warmup=-1.0)
+
+
+def test_other_metric_results_swap_in_the_same_runs_second_evaluation():
+    r = {"task": {"case": "car", "road": "hilly", "condition": "nominal", "seed": 0, "metric": "net"},
+         "t_ref": 120.0, "energy_at_tref_J": {"oracle": 100.0, "abc": 101.0}, "cruise_energy_J": 110.0,
+         "nearest_time_error": {"oracle": 0.0, "abc": 0.001}, "fit_residual_std": 0.001,
+         "other_metric": {"metric": "raw", "t_ref": 120.1, "energy_at_tref_J": {"oracle": 100.0, "abc": 99.0},
+                          "cruise_energy_J": 105.0, "fit_residual_std": 0.004,
+                          "nearest_time_error": {"oracle": 0.0, "abc": 0.002}}}
+    rs = [r, {**r, "task": {**r["task"], "seed": 1}}]
+    net = paired_summary(rs).set_index("force_model")
+    raw = paired_summary(other_metric_results(rs)).set_index("force_model")
+    assert net.loc["abc", "vs_oracle_pct"] == pytest.approx(1.0) and net.loc["abc", "metric"] == "net"
+    assert raw.loc["abc", "vs_oracle_pct"] == pytest.approx(-1.0) and raw.loc["abc", "metric"] == "raw"
+    assert raw.loc["oracle", "fit_residual_std_pct"] == pytest.approx(0.4)
+
+
+def test_refit_results_recovers_levels_and_books_the_kinetic_energy_offset():
+    # one seed: oracle and abc on the convex curve (abc 0.5 % above), cruise control on its own curve; the net
+    # metric adds cruise control's kinetic-energy offset (a constant) to every run, the raw one does not
+    t_ref, off = 120.0, 2.0e5
+
+    def run(model, t, level, **kw):
+        e = _curve(t, level, t_ref=t_ref)
+        return {"force_model": model, "trip_time": t, "energy_J": e + 7.0, "segment_time": t,
+                "energy_net_J": e - off, **kw}
+
+    runs = [run("cruise", t, 1.1e6) for t in (120.0, 123.0, 117.0, 126.0, 114.0)]
+    runs += [run("oracle", t, 1.0e6, time_weight=1.0) for t in (113.0, 118.0, 120.0, 124.0)]
+    runs += [run("abc", t, 1.005e6, time_weight=1.0) for t in (115.0, 119.5, 125.0)]
+    r = {"task": {"case": "car", "road": "hilly", "condition": "nominal", "seed": 0, "tol": 0.002},
+         "runs": runs, "kinetic_energy_offset_J": off}
+    net = refit_results([r], "net", window=0.06)[0]
+    assert net["t_ref"] == pytest.approx(120.0)
+    assert net["energy_at_tref_J"]["oracle"] == pytest.approx(1.0e6, rel=2e-4)
+    assert net["energy_at_tref_J"]["abc"] / net["energy_at_tref_J"]["oracle"] == pytest.approx(1.005, abs=2e-4)
+    assert net["cruise_energy_J"] == pytest.approx(1.1e6, rel=2e-4)
+    raw = refit_results([r], "raw", window=0.06)[0]
+    assert raw["energy_at_tref_J"]["oracle"] == pytest.approx(1.0e6 + 7.0, rel=2e-4)
+    with pytest.raises(ValueError, match="metric"):
+        refit_results([r], "kwh")

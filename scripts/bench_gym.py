@@ -5,7 +5,10 @@ Table 1 (all in the same run): EcoDrive-v0 single process, SB3 DummyVecEnv, and 
 threads=k)``) and its bare batched physics with the same k numba threads (the like-for-like reference), as
 wall-clock and per-CPU-second rates (the machine is shared: the CPU rate is what the code costs, the wall rate what
 the scheduler gave us), with the 1-minute load average as each row started: on 2 cores a load above ~1 means
-another process holds a core, and a 2-thread env then waits at every step's barrier (about half the rate).
+another process holds a core, and a 2-thread env then waits at every step's barrier. The 2-thread rows run
+with OMP_WAIT_POLICY=PASSIVE unless it is set (roadload.gym.vector: spinning OpenMP threads made 2 threads 3x
+slower than one on the shared machine); ``OMP_WAIT_POLICY=ACTIVE python scripts/bench_gym.py ...`` measures the
+spinning default.
 Table 2: per thread count, native / bare and native / DummyVecEnv, and the target check (>= 300,000 wall steps/s).
 Table 3 (unless --no-classic): single / can observation / DummyVecEnv / SubprocVecEnv x n, EcoHighway-v0 and
 highway-env's highway-fast-v0. Random actions in [-1, 1], resets included.
@@ -22,6 +25,7 @@ from rich.console import Console
 
 from roadload.experiments.rl import (load_average, native_ratios, print_table, run_benchmark, run_native_benchmark,
                                      speed_ratio)
+from roadload.gym.vector import openmp_wait_policy
 
 TARGET_STEPS_PER_S = 300_000
 """Issue 17: native vector env steps/s (wall) at N = 256 on the 2-core machine."""
@@ -61,14 +65,15 @@ if __name__ == "__main__":
                 f"native vector env ({cores} cores, load average {load0:.1f} at start)", "{:,.0f}")
     ratios = native_ratios(native)
     rates = ["native_steps_per_s", "native_steps_per_cpu_s"]
-    print_table(console, ratios.assign(**{c: ratios[c].map("{:,.0f}".format) for c in rates}), "native env against the bare batched physics with the same threads and against "
-                                 "DummyVecEnv", "{:.2f}")
+    print_table(console, ratios.assign(**{c: ratios[c].map("{:,.0f}".format) for c in rates}),
+                "native env against the bare batched physics with the same threads and against DummyVecEnv", "{:.2f}")
     best = ratios.loc[ratios.native_steps_per_s.idxmax()]
     mark = "met" if best.native_steps_per_s >= TARGET_STEPS_PER_S else "missed"
     console.print(f"best native wall rate: {best.native_steps_per_s:,.0f} steps/s with {int(best.threads)} "
                   f"thread(s) at N = {args.native} (target >= {TARGET_STEPS_PER_S:,}: {mark}); native / bare "
                   f"{best.native_over_bare_wall:.2f} (wall), native / DummyVecEnv {best.native_over_dummy_cpu:.1f}x "
-                  f"(per CPU second); load average at the end {load_average():.2f}")
+                  f"(per CPU second); load average at the end {load_average():.2f}; OMP_WAIT_POLICY "
+                  f"{openmp_wait_policy()}")
     if not args.no_classic:
         load = load_average()
         table = run_benchmark(args.seconds, args.n_envs, not args.no_highway)

@@ -8,7 +8,7 @@ import pytest
 import roadload  # noqa: F401  (registers the ids)
 from roadload.gym.config import GymConfigError
 from roadload.gym.ecodrive import EcoDriveEnv
-from roadload.gym.vector import COST_NAMES, INFO_SCALARS, EcoDriveVectorEnv
+from roadload.gym.vector import COST_NAMES, INFO_SCALARS, EcoDriveVectorEnv, openmp_wait_policy
 
 TOL = 1e-9
 
@@ -167,6 +167,8 @@ def test_two_threads_give_the_one_thread_trajectories():
     envs = [gym.make_vec("roadload/EcoDrive-v0", num_envs=n, vectorization_mode="vector_entry_point",
                          threads=t, config=dict(config)).unwrapped for t in (1, 2)]
     assert [e.threads for e in envs] == [1, 2]
+    # numba's OpenMP threads sleep rather than spin when idle unless the user chose otherwise (vector.py: Threads)
+    assert openmp_wait_policy() != "default"
     first = [e.reset(seed=seed) for e in envs]
     _close(first[0][0], first[1][0], "reset obs")
     rng = np.random.default_rng(1)

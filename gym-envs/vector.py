@@ -38,6 +38,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
+import numba
 from numba import njit, prange
 
 from roadload.envs import physics
@@ -221,8 +222,6 @@ def _advance_threads(n_chunks, active, u, X, P, tabs, ti, road, road_n, stops, s
 
 def _prefer_passive_openmp_wait() -> None:
     """OMP_WAIT_POLICY=PASSIVE unless set, before numba's OpenMP pool starts (module docstring: Threads)."""
-    import numba
-
     try:
         numba.threading_layer()  # raises ValueError while no parallel function has run: the pool is not started
     except ValueError:

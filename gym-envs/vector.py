@@ -21,7 +21,7 @@ does not change any trajectory, tests/gym/test_vector.py) splits the vehicles in
 numba's OpenMP layer by default makes an idle thread spin for a while before it sleeps; on a machine whose cores are
 shared, a spinning thread burns the time slice the other thread needs to reach the per-step barrier, and 2 threads
 ran 3x slower than one (11-14k against 38-41k env steps/s at N = 256, load average 7-8). With
-``OMP_WAIT_POLICY=PASSIVE`` the same runs gave 69-146k. So the first env with ``threads > 1`` sets
+``OMP_WAIT_POLICY=PASSIVE`` the same runs gave 68-146k. So the first env with ``threads > 1`` sets
 ``OMP_WAIT_POLICY=PASSIVE`` unless the variable is already set (set ``OMP_WAIT_POLICY=ACTIVE`` beforehand for
 dedicated cores) and unless numba's thread pool has already started; :func:`openmp_wait_policy` reports it.
 

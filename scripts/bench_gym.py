@@ -37,7 +37,7 @@ def _thread_counts(text: str) -> tuple[int, ...]:
     except ValueError:
         counts = ()
     if not counts or min(counts) < 1:
-        raise argparse.ArgumentTypeError(f"--threads: expected comma-separated thread counts >= 1 (e.g. 1,2), got "
+        raise argparse.ArgumentTypeError(f"expected comma-separated thread counts >= 1 (e.g. 1,2), got "
                                          f"{text!r}")
     return counts
 

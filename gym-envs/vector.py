@@ -20,7 +20,7 @@ Threads: ``threads=k`` (a keyword of the constructor and of ``gymnasium.make_vec
 does not change any trajectory, tests/gym/test_vector.py) splits the vehicles into k blocks, one numba thread each.
 numba's OpenMP layer by default makes an idle thread spin for a while before it sleeps; on a machine whose cores are
 shared, a spinning thread burns the time slice the other thread needs to reach the per-step barrier, and 2 threads
-ran 3x slower than one (11-14k against 38-41k env steps/s at N = 256, load average 7-8). With
+ran 3x slower than one (10-14k against 34-41k env steps/s at N = 256, load average 7-8). With
 ``OMP_WAIT_POLICY=PASSIVE`` the same runs gave 68-146k. So the first env with ``threads > 1`` sets
 ``OMP_WAIT_POLICY=PASSIVE`` unless the variable is already set (set ``OMP_WAIT_POLICY=ACTIVE`` beforehand for
 dedicated cores) and unless numba's thread pool has already started; :func:`openmp_wait_policy` reports it.

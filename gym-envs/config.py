@@ -153,11 +153,19 @@ SPACE_FIELDS_ECODRIVE = ("observation", "preview_distances", "obs_scaling", "est
 
 
 class EcoHighwayReward(_Strict):
-    """Weights of the EcoHighway reward r = scale * (progress * dx - energy * E - collision * [crash]
-    - headway * (h_min - h)+ * dt - jerk * jerk^2 * dt - lane_change * [lane change])."""
+    """Weights of the EcoHighway reward r = scale * (progress * dx - energy * E + mechanical_energy * dM
+    - collision * [crash] - headway * (h_min - h)+ * dt - jerk * jerk^2 * dt - lane_change * [lane change]),
+    dM the change of the ego's mechanical energy (kinetic 0.5 m v^2 + potential m g h) over the step: summed over
+    an episode it is the mechanical energy left at the end minus the initial one, so speed and height left at the
+    cutoff keep their battery-equivalent value and braking to recover the start's kinetic energy no longer pays."""
 
     progress: float = Field(1000.0, ge=0, description="reward per metre travelled [J/m equivalent]")
     energy: float = Field(1.0, ge=0, description="weight of the source energy [1 per J]")
+    mechanical_energy: float = Field(0.9, ge=0, description="credit per J of change of the ego's mechanical "
+                                     "energy (0.5 m v^2 + m g h): its battery-equivalent value [1 per J]; 0.9 = the "
+                                     "source energy bmw_i3 regenerates per J of kinetic energy less road losses "
+                                     "(measured 0.84-0.91 braking from 25 m/s); 0 = the first reward, which paid "
+                                     "for braking down before the cutoff")
     collision: float = Field(1.0e6, ge=0, description="penalty of a collision [J]")
     headway: float = Field(2.0e4, ge=0, description="penalty per second of time headway below the minimum, per s")
     jerk: float = Field(20.0, ge=0, description="penalty per (m/s^3)^2 per second")

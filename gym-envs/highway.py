@@ -16,8 +16,12 @@ Observation: Box (see :func:`highway_observation_layout`): ego speed, accelerati
 closing speed to the vehicle ahead, then the nearest ``observed_vehicles`` vehicles' presence and relative x, y,
 vx, vy in the ego frame, each divided by a documented scale.
 
-Reward: scale * (progress * dx - energy * E_source - collision * [crash] - headway * integral (h_min - h)+ dt
-- jerk * integral jerk^2 dt - lane_change * [lane change]); raw terms in ``info['terms']``. Terminates on a
+Reward: scale * (progress * dx - energy * E_source + mechanical_energy * dM - collision * [crash]
+- headway * integral (h_min - h)+ dt - jerk * integral jerk^2 dt - lane_change * [lane change]); raw terms in
+``info['terms']``. dM is the change of the ego's mechanical energy over the step, kinetic 0.5 m v^2 plus potential
+(the simulator's climbing work m g dh) [J]; its episode sum is the final minus the initial mechanical energy, i.e. a
+terminal credit for the speed and height left at the cutoff, paid as they change (without it, braking from the
+initial speed and regenerating its kinetic energy beat driving on: docs/results/scale.md). Terminates on a
 collision, truncates at ``duration``.
 """
 
@@ -44,6 +48,7 @@ from roadload.gym.actions import validate_action
 from roadload.gym.config import SPACE_FIELDS_HIGHWAY, EcoHighwayConfig, GymConfigError, make_config, updated_config
 from roadload.gym.ecodrive import DriveScales, cut_profile
 from roadload.presets import get_preset
+from roadload.envs.layout import S_MASS, S_W_CLIMB
 from roadload.envs.simulator import LateralValidityWarning, Simulator
 
 ROAD_LENGTH = 10_000.0
@@ -88,8 +93,8 @@ class RoadloadEgoVehicle(ControlledVehicle):
         self.reset_log()
 
     def reset_log(self) -> None:
-        self.log = {"energy": 0.0, "distance": 0.0, "jerk": 0.0, "headway": 0.0, "lane_change": 0.0,
-                    "time": 0.0}
+        self.log = {"energy": 0.0, "distance": 0.0, "mechanical": 0.0, "jerk": 0.0, "headway": 0.0,
+                    "lane_change": 0.0, "time": 0.0}
 
     def request(self, command: float, lane_change: int) -> None:
         """Hold the normalised force command; lane_change -1 left, +1 right, 0 keep (highway-env semantics)."""
@@ -124,6 +129,8 @@ class RoadloadEgoVehicle(ControlledVehicle):
         v0 = self.speed
         a0 = self.plant.state.a
         s0 = self.plant.state.s
+        v_plant0 = self.plant.state.v
+        climb0 = float(self.plant.X[S_W_CLIMB])
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", LateralValidityWarning)
             st = self.plant.step(self.scales.wheel_force(self.command, v0), self.n_substeps)
@@ -134,6 +141,8 @@ class RoadloadEgoVehicle(ControlledVehicle):
         log = self.log
         log["energy"] += float(st.source_energy)
         log["distance"] += float(st.s - s0)
+        log["mechanical"] += (0.5 * float(self.plant.X[S_MASS]) * (float(st.v) ** 2 - float(v_plant0) ** 2)
+                              + float(self.plant.X[S_W_CLIMB]) - climb0)
         log["jerk"] += jerk * jerk * dt
         log["time"] += dt
         h_min = self._headway_min
@@ -337,13 +346,15 @@ class EcoHighwayEnv(AbstractEnv):
 
     def _rewards(self, action) -> dict[str, float]:
         log = self.vehicle.log
-        return {"progress": log["distance"], "energy": log["energy"], "collision": float(self.vehicle.crashed),
+        return {"progress": log["distance"], "energy": log["energy"], "mechanical": log["mechanical"],
+                "collision": float(self.vehicle.crashed),
                 "headway": log["headway"], "jerk": log["jerk"], "lane_change": log["lane_change"]}
 
     def _reward(self, action) -> float:
         w = self.typed_config.reward
         t = self._rewards(action)
-        return float(w.scale * (w.progress * t["progress"] - w.energy * t["energy"] - w.collision * t["collision"]
+        return float(w.scale * (w.progress * t["progress"] - w.energy * t["energy"]
+                                + w.mechanical_energy * t["mechanical"] - w.collision * t["collision"]
                                 - w.headway * t["headway"] - w.jerk * t["jerk"] - w.lane_change * t["lane_change"]))
 
     def _is_terminated(self) -> bool:

@@ -16,18 +16,29 @@ resets in the same step and puts the final observation / info into ``info['final
 
 Seeds: ``reset(seed=s)`` seeds sub-env i with ``s + i`` (as ``SyncVectorEnv``); a list gives one seed per sub-env.
 
+Threads: ``threads=k`` (a keyword of the constructor and of ``gymnasium.make_vec``, not an EcoDriveConfig field: it
+does not change any trajectory, tests/gym/test_vector.py) splits the vehicles into k blocks, one numba thread each.
+numba's OpenMP layer by default makes an idle thread spin for a while before it sleeps; on a machine whose cores are
+shared, a spinning thread burns the time slice the other thread needs to reach the per-step barrier, and 2 threads
+ran 3x slower than one (10-14k against 34-41k env steps/s at N = 256, load average 7-8). With
+``OMP_WAIT_POLICY=PASSIVE`` the same runs gave 68-146k. So the first env with ``threads > 1`` sets
+``OMP_WAIT_POLICY=PASSIVE`` unless the variable is already set (set ``OMP_WAIT_POLICY=ACTIVE`` beforehand for
+dedicated cores) and unless numba's thread pool has already started; :func:`openmp_wait_policy` reports it.
+
 Not batched: observation modes ``'can'`` and ``'can+estimates'`` (the CAN sensor model and the online estimator
 are per-vehicle Python objects) and time-varying (scheduled) effects; use ``vectorization_mode='sync'`` for those.
 """
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
+import numba
 from numba import njit, prange
 
 from roadload.envs import physics
@@ -209,14 +220,26 @@ def _advance_threads(n_chunks, active, u, X, P, tabs, ti, road, road_n, stops, s
                       stops_n, cycle, rng, cmd, log, n_sub, F)
 
 
+def _prefer_passive_openmp_wait() -> None:
+    """OMP_WAIT_POLICY=PASSIVE unless set, before numba's OpenMP pool starts (module docstring: Threads)."""
+    try:
+        numba.threading_layer()  # raises ValueError while no parallel function has run: the pool is not started
+    except ValueError:
+        os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+
+def openmp_wait_policy() -> str:
+    """The ``OMP_WAIT_POLICY`` of this process ('default' = unset: libgomp spins, then sleeps)."""
+    return os.environ.get("OMP_WAIT_POLICY", "default")
+
+
 # --------------------------------------------------------------------------------------------- the vector env
 class EcoDriveVectorEnv(gym.vector.VectorEnv):
     """N EcoDrive-v0 sub-environments stepped in one compiled call (module docstring).
 
     ``config`` / keyword overrides as for the single env (every sub-env shares them); ``autoreset_mode`` is
     ``'next_step'`` (gymnasium's default) or ``'same_step'``; ``threads``: numba threads that split the vehicles
-    (default 1: on a machine shared with other jobs, handing work to a second thread costs a scheduler time slice
-    per step -- measured 5x slower at N=64 under load; use 2+ on idle cores)."""
+    (default 1; 2 uses both cores of an idle 2-core machine, see the module docstring on the OpenMP wait policy)."""
 
     metadata = {"render_modes": [], "autoreset_mode": gym.vector.AutoresetMode.NEXT_STEP}
 
@@ -234,6 +257,8 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
         if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
             raise GymConfigError(f"threads: expected an integer >= 1, got {threads!r}")
         self.threads = int(threads)
+        if self.threads > 1:
+            _prefer_passive_openmp_wait()
         self.metadata = {**self.metadata, "autoreset_mode": mode}
         self.config: EcoDriveConfig = make_config(EcoDriveConfig, config, **overrides)
         self._check_batchable(self.config)
@@ -522,4 +547,4 @@ def make_vector_env(num_envs: int = 1, **kwargs: Any) -> EcoDriveVectorEnv:
     return EcoDriveVectorEnv(num_envs=num_envs, **kwargs)
 
 
-__all__ = ["EcoDriveVectorEnv", "make_vector_env", "advance_range", "COST_NAMES"]
+__all__ = ["EcoDriveVectorEnv", "make_vector_env", "advance_range", "COST_NAMES", "openmp_wait_policy"]

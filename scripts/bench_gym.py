@@ -1,13 +1,20 @@
 """Environment steps per second (one EcoDrive-v0 step = 0.1 s of driving, 10 physics steps at 100 Hz).
 
-Table 1 (all in the same run): EcoDrive-v0 single process, SB3 DummyVecEnv, the native batched vector env
-(``gymnasium.make_vec(..., vectorization_mode="vector_entry_point")``, 1 and 2 numba threads) and its bare batched
-physics (the reference it is compared with), as wall-clock and per-CPU-second rates (the machine is shared: the
-CPU rate is what the code costs, the wall rate what the scheduler gave us). Table 2 (unless --no-classic):
-single / can observation / DummyVecEnv / SubprocVecEnv x n, EcoHighway-v0 and highway-env's highway-fast-v0.
-Random actions in [-1, 1], resets included.
+Table 1 (all in the same run): EcoDrive-v0 single process, SB3 DummyVecEnv, and for each thread count of
+``--threads`` the native batched vector env (``gymnasium.make_vec(..., vectorization_mode="vector_entry_point",
+threads=k)``) and its bare batched physics with the same k numba threads (the like-for-like reference), as
+wall-clock and per-CPU-second rates (the machine is shared: the CPU rate is what the code costs, the wall rate what
+the scheduler gave us), with the 1-minute load average as each row started: on 2 cores a load above ~1 means
+another process holds a core, and a 2-thread env then waits at every step's barrier. The 2-thread rows run
+with OMP_WAIT_POLICY=PASSIVE unless it is set (roadload.gym.vector: spinning OpenMP threads made 2 threads 3x
+slower than one on the shared machine); ``OMP_WAIT_POLICY=ACTIVE python scripts/bench_gym.py ...`` measures the
+spinning default.
+Table 2: per thread count, native / bare and native / DummyVecEnv, and the target check (>= 300,000 wall steps/s).
+Table 3 (unless --no-classic): single / can observation / DummyVecEnv / SubprocVecEnv x n, EcoHighway-v0 and
+highway-env's highway-fast-v0. Random actions in [-1, 1], resets included.
 
-    python scripts/bench_gym.py [--seconds 5] [--native 256] [--n-envs 2]     # full
+    python scripts/bench_gym.py --no-classic --threads 1,2       # the native-env figures (issue 17), ~1 min
+    python scripts/bench_gym.py [--seconds 5] [--native 256] [--n-envs 2] [--threads 1,2]     # everything
     python scripts/bench_gym.py --quick                                       # CI smoke run (< 60 s)
 """
 
@@ -16,13 +23,32 @@ import os
 
 from rich.console import Console
 
-from roadload.experiments.rl import print_table, run_benchmark, run_native_benchmark, speed_ratio
+from roadload.experiments.rl import (load_average, native_ratios, print_table, run_benchmark, run_native_benchmark,
+                                     speed_ratio)
+from roadload.gym.vector import openmp_wait_policy
+
+TARGET_STEPS_PER_S = 300_000
+"""Issue 17: native vector env steps/s (wall) at N = 256 on the 2-core machine."""
+
+
+def _thread_counts(text: str) -> tuple[int, ...]:
+    try:
+        counts = tuple(int(t) for t in text.split(",") if t.strip())
+    except ValueError:
+        counts = ()
+    if not counts or min(counts) < 1:
+        raise argparse.ArgumentTypeError(f"expected comma-separated thread counts >= 1 (e.g. 1,2), got "
+                                         f"{text!r}")
+    return counts
+
 
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=5.0, help="measurement time per row [s]")
     ap.add_argument("--native", type=int, default=256, help="sub-envs of the native vector env")
     ap.add_argument("--dummy", type=int, default=16, help="sub-envs of the DummyVecEnv reference")
+    ap.add_argument("--threads", type=_thread_counts, default=(1, 2),
+                    help="numba thread counts of the native env and its bare loop, comma-separated (default 1,2)")
     ap.add_argument("--n-envs", type=int, default=2, help="vectorised environments of the classic table")
     ap.add_argument("--no-highway", action="store_true", help="skip EcoHighway-v0 and highway-fast-v0")
     ap.add_argument("--no-classic", action="store_true", help="only the native-vector-env table")
@@ -31,19 +57,26 @@ if __name__ == "__main__":
     if args.quick:
         args.seconds, args.native, args.dummy, args.no_classic = 0.5, 32, 4, True
     console = Console(width=150)
-    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    native = run_native_benchmark(args.seconds, args.native, args.dummy)
-    print_table(console, native, f"native vector env ({os.cpu_count()} cores, load average {load:.1f})", "{:.0f}")
-    by = native.set_index("mode")
-    env1 = by.filter(like="native vector env", axis=0).iloc[0]
-    bare = by.filter(like="bare batched", axis=0).iloc[0]
-    dummy = by.filter(like="dummy", axis=0).iloc[0]
-    best_wall = by.filter(like="native vector env", axis=0).steps_per_s.max()
-    console.print(f"native (1 thread) / bare physics, per CPU second: {env1.steps_per_cpu_s / bare.steps_per_cpu_s:.2f}"
-                  f"; native / DummyVecEnv per CPU second: {env1.steps_per_cpu_s / dummy.steps_per_cpu_s:.1f}x; "
-                  f"best native wall rate {best_wall:.0f} steps/s")
+    cores = os.cpu_count()
+    load0 = load_average()
+    console.print(f"load average (1 min) at start: {load0:.2f} on {cores} cores")
+    native = run_native_benchmark(args.seconds, args.native, args.dummy, threads=args.threads)
+    print_table(console, native.assign(load_1min=native.load_1min.map("{:.2f}".format)),
+                f"native vector env ({cores} cores, load average {load0:.1f} at start)", "{:,.0f}")
+    ratios = native_ratios(native)
+    rates = ["native_steps_per_s", "native_steps_per_cpu_s"]
+    print_table(console, ratios.assign(**{c: ratios[c].map("{:,.0f}".format) for c in rates}),
+                "native env against the bare batched physics with the same threads and against DummyVecEnv", "{:.2f}")
+    best = ratios.loc[ratios.native_steps_per_s.idxmax()]
+    mark = "met" if best.native_steps_per_s >= TARGET_STEPS_PER_S else "missed"
+    console.print(f"best native wall rate: {best.native_steps_per_s:,.0f} steps/s with {int(best.threads)} "
+                  f"thread(s) at N = {args.native} (target >= {TARGET_STEPS_PER_S:,}: {mark}); native / bare "
+                  f"{best.native_over_bare_wall:.2f} (wall), native / DummyVecEnv {best.native_over_dummy_cpu:.1f}x "
+                  f"(per CPU second); load average at the end {load_average():.2f}; OMP_WAIT_POLICY "
+                  f"{openmp_wait_policy()}")
     if not args.no_classic:
+        load = load_average()
         table = run_benchmark(args.seconds, args.n_envs, not args.no_highway)
         print_table(console, table.drop(columns=["episodes"]),
-                    f"environment steps per second ({os.cpu_count()} cores, load average {load:.1f})", "{:.1f}")
+                    f"environment steps per second ({cores} cores, load average {load:.1f})", "{:.1f}")
         console.print(f"EcoDrive-v0 / highway-fast-v0 single-process steps/s: {speed_ratio(table):.0f}x")

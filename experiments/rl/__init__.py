@@ -42,6 +42,8 @@ from .benchmark import (  # noqa: F401
     bench_native,
     bench_single,
     bench_vectorised,
+    load_average,
+    native_ratios,
     run_benchmark,
     run_native_benchmark,
     speed_ratio,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import time
 from typing import Any, Callable
 
@@ -109,14 +110,25 @@ def bench_native(n_envs: int = 256, seconds: float = 5.0, threads: int = 1, bare
             "steps_per_cpu_s": cpu * n_envs, "steps": n * n_envs}
 
 
+def load_average() -> float:
+    """The 1-minute load average (NaN where the OS has none): on a shared 2-core machine a load above ~1 means
+    another process holds a core, which stalls every step of a 2-thread env at its barrier."""
+    return os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+
+
 def run_native_benchmark(seconds: float = 5.0, n_envs: int = 256, n_dummy: int = 16,
-                         progress: Callable[[str], None] | None = None) -> pd.DataFrame:
-    """The batched-env table (same run): single env, SB3 DummyVecEnv x n_dummy, the native vector env x n_envs
-    (1 and 2 threads) and its bare batched physics, as wall and per-CPU-second rates."""
+                         progress: Callable[[str], None] | None = None,
+                         threads: tuple[int, ...] = (1, 2)) -> pd.DataFrame:
+    """The batched-env table (same run): single env, SB3 DummyVecEnv x n_dummy, then for each thread count in
+    ``threads`` the native vector env x n_envs and its bare batched physics with the same thread count (the
+    like-for-like reference), as wall and per-CPU-second rates; ``load_1min`` = the load average as the row
+    started."""
+    if not threads or any(isinstance(t, bool) or int(t) != t or t < 1 for t in threads):
+        raise ValueError(f"threads: expected thread counts >= 1, e.g. (1, 2), got {threads!r}")
     rows = []
 
-    def add(row: dict[str, Any]) -> None:
-        rows.append(row)
+    def add(row: dict[str, Any], load: float) -> None:
+        rows.append({**row, "load_1min": load})
         if progress:
             progress(row["mode"])
 
@@ -131,9 +143,10 @@ def run_native_benchmark(seconds: float = 5.0, n_envs: int = 256, n_dummy: int =
         if te or tr:
             env.reset()
 
+    load = load_average()
     wall, cpu, n = _rates(single, seconds)
-    add({"env": "roadload/EcoDrive-v0", "mode": "single process", "steps_per_s": wall, "steps_per_cpu_s": cpu,
-         "steps": n})
+    add({"env": "roadload/EcoDrive-v0", "mode": "single process", "threads": 1, "steps_per_s": wall,
+         "steps_per_cpu_s": cpu, "steps": n}, load)
     venv = make_vec_env(n_dummy, 0, None, vec="dummy")
     try:
         venv.reset()
@@ -144,15 +157,35 @@ def run_native_benchmark(seconds: float = 5.0, n_envs: int = 256, n_dummy: int =
             venv.step(acts[k[0] % 256])
             k[0] += 1
 
+        load = load_average()
         wall, cpu, n = _rates(dummy, seconds)
     finally:
         venv.close()
-    add({"env": "roadload/EcoDrive-v0", "mode": f"dummy x{n_dummy}", "steps_per_s": wall * n_dummy,
-         "steps_per_cpu_s": cpu * n_dummy, "steps": n * n_dummy})
-    for threads in (1, 2):
-        add(bench_native(n_envs, seconds, threads))
-    add(bench_native(n_envs, seconds, 1, bare=True))
+    add({"env": "roadload/EcoDrive-v0", "mode": f"dummy x{n_dummy}", "threads": 1, "steps_per_s": wall * n_dummy,
+         "steps_per_cpu_s": cpu * n_dummy, "steps": n * n_dummy}, load)
+    for t in threads:
+        for bare in (False, True):
+            load = load_average()
+            add({**bench_native(n_envs, seconds, int(t), bare=bare), "threads": int(t)}, load)
     return pd.DataFrame(rows)
+
+
+def native_ratios(table: pd.DataFrame) -> pd.DataFrame:
+    """Per thread count of a :func:`run_native_benchmark` table: the native env's wall and CPU rates, and its
+    ratios to the bare batched physics with the same thread count and to the DummyVecEnv (per CPU second)."""
+    dummy = table[table["mode"].str.startswith("dummy")].iloc[0]
+    out = []
+    batched = table[table["mode"].str.startswith(("native", "bare"))]
+    for t, grp in batched.groupby("threads"):
+        env = grp[grp["mode"].str.startswith("native")].iloc[0]
+        bare = grp[grp["mode"].str.startswith("bare")].iloc[0]
+        out.append({"threads": int(t), "native_steps_per_s": env.steps_per_s,
+                    "native_steps_per_cpu_s": env.steps_per_cpu_s,
+                    "native_over_bare_wall": env.steps_per_s / bare.steps_per_s,
+                    "native_over_bare_cpu": env.steps_per_cpu_s / bare.steps_per_cpu_s,
+                    "native_over_dummy_cpu": env.steps_per_cpu_s / dummy.steps_per_cpu_s,
+                    "load_1min": env.load_1min})
+    return pd.DataFrame(out)
 
 
 def run_benchmark(seconds: float = 5.0, n_envs: int = 2, include_highway: bool = True,

@@ -69,7 +69,7 @@ def load_trained(algo: str, out_dir: Path) -> TrainResult:
 def train_and_evaluate(algos: list[str], timesteps: int, out_dir: Path, n_envs: int, seed: int,
                        env_config: dict[str, Any], vec: str, eval_every: int, road_seeds, console=None,
                        controllers: tuple[str, ...] = ("cruise", "mpc"), evaluate_only: bool = False,
-                       skip_evaluation: bool = False) -> dict[str, Any]:
+                       skip_evaluation: bool = False, threads: int = 1) -> dict[str, Any]:
     """The whole workflow of ``roadload train`` / scripts/train_rl.py: train each algorithm (or, with
     ``evaluate_only``, load what an earlier run saved in ``out_dir``), write the learning curve PNG, evaluate on
     held-out roads with the baselines, write CSV tables; returns paths and tables."""
@@ -89,7 +89,7 @@ def train_and_evaluate(algos: list[str], timesteps: int, out_dir: Path, n_envs: 
             else:
                 task = bar.add_task(f"training {algo.upper()}", total=timesteps)
                 res = train_policy(algo, timesteps, out_dir, n_envs=n_envs, seed=seed, env_config=env_config,
-                                   vec=vec, eval_every=eval_every,
+                                   vec=vec, eval_every=eval_every, threads=threads,
                                    progress=lambda n: bar.update(task, completed=n))
                 curve = res.curve
                 write_csv(out_dir / f"{algo}_learning_curve.csv", curve)
@@ -125,6 +125,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         n_envs: int = typer.Option(2, help="vectorised environments"),
         vec: str = typer.Option("native", help="'native' (batched vector env, observation 'state'), 'subproc' "
                                 "(one process per env) or 'dummy' (in-process)"),
+        threads: int = typer.Option(1, help="numba threads of the native vector env (--vec native): 2 on 2 idle "
+                                    "cores; 1 on a shared machine, where a second thread waits at every step"),
         seed: int = typer.Option(0, help="training seed"),
         config: str = typer.Option(None, help="EcoDrive-v0 config as JSON text or a .json file, e.g. "
                                    "'{\"vehicle\": \"gt_rwd\", \"road\": \"city\"}'"),
@@ -155,7 +157,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                 raise RLError(f"--baselines: unknown {bad}; choose from {sorted(CONTROLLER_BASELINES)}")
             res = train_and_evaluate(algos, timesteps, out, n_envs, seed, env_config, vec, eval_every, seeds,
                                      console, controllers=ctl, evaluate_only=evaluate_only,
-                                     skip_evaluation=skip_evaluation)
+                                     skip_evaluation=skip_evaluation, threads=threads)
         except ValueError as exc:  # RLError, GymConfigError
             _fail(str(exc))
         for r in res["results"]:

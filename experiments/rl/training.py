@@ -64,9 +64,10 @@ def _curve_callback(env_config: dict[str, Any], eval_every: int, progress: Calla
 def train_policy(algo: str, timesteps: int, out_dir: Path, n_envs: int = 2, seed: int = 0,
                  env_config: dict[str, Any] | None = None, vec: str = "subproc", eval_every: int = 0,
                  hyperparams: dict[str, Any] | None = None, progress: Callable[[int], None] | None = None,
-                 torch_threads: int = 1) -> TrainResult:
-    """Train PPO or SAC on EcoDrive-v0 with ``n_envs`` vectorised envs; saves ``<algo>_ecodrive.zip`` (atomic)
-    and returns the learning curve (training episode returns + validation returns every ``eval_every``)."""
+                 torch_threads: int = 1, threads: int = 1) -> TrainResult:
+    """Train PPO or SAC on EcoDrive-v0 with ``n_envs`` vectorised envs (``threads`` numba threads of the native
+    vector env); saves ``<algo>_ecodrive.zip`` (atomic) and returns the learning curve (training episode returns
+    + validation returns every ``eval_every``)."""
     import torch
 
     if timesteps < 1:
@@ -75,7 +76,10 @@ def train_policy(algo: str, timesteps: int, out_dir: Path, n_envs: int = 2, seed
     algo = algo.lower()
     torch.set_num_threads(torch_threads)
     env_config = dict(env_config or {})
-    venv = make_vec_env(n_envs, seed, env_config, vec=vec)
+    if threads != 1 and vec != "native":
+        raise RLError(f"threads: only the native vector env (vec='native') splits its vehicles over threads, got "
+                      f"threads={threads} with vec={vec!r}")
+    venv = make_vec_env(n_envs, seed, env_config, vec=vec, threads=threads)
     params = {**ALGO_DEFAULTS[algo], **(hyperparams or {})}
     if algo == "ppo" and vec == "native" and "n_steps" not in (hyperparams or {}):
         # many batched envs: keep a rollout of ~4096 samples (as 2 envs x 2048) rather than n_envs x 1024
@@ -95,6 +99,7 @@ def train_policy(algo: str, timesteps: int, out_dir: Path, n_envs: int = 2, seed
     _atomic_write_bytes(path, lambda tmp: model.save(str(tmp)))
     curve = pd.DataFrame(callback.rows, columns=["timesteps", "kind", "value"])
     meta = {"algo": algo, "timesteps": int(model.num_timesteps), "n_envs": n_envs, "seed": seed, "vec": vec,
+            "threads": threads,
             "env_config": env_config, "hyperparams": params, "seconds": seconds}
     _atomic_write_bytes(Path(out_dir) / f"{algo}_ecodrive.json",
                         lambda tmp: tmp.write_text(json.dumps(meta, indent=1, default=str)))

@@ -97,3 +97,27 @@ def test_summary_compares_energy_on_common_roads_only():
 def test_bench_single_counts_steps():
     row = rl_cli.bench_single("roadload/EcoDrive-v0", seconds=0.01, route_length=300.0)
     assert row["steps"] >= 64 and row["steps_per_s"] > 0
+
+
+def test_threads_reach_the_native_env_of_the_training_path(tmp_path):
+    """``roadload train --threads`` -> train_policy -> make_vec_env -> the native vector env's numba threads;
+    other vec modes refuse threads (nothing written)."""
+    from roadload.experiments.rl.common import make_vec_env
+    from roadload.gym.vector import EcoDriveVectorEnv
+
+    venv = make_vec_env(3, 0, {"route_length": 150.0}, vec="native", threads=2)
+    assert isinstance(venv.venv, EcoDriveVectorEnv) and venv.venv.threads == 2
+    venv.close()
+    with pytest.raises(rl_cli.RLError, match="threads"):
+        rl_cli.train_policy("ppo", 64, tmp_path, n_envs=2, vec="dummy", threads=2)
+    with pytest.raises(ValueError, match="threads"):
+        make_vec_env(2, 0, None, vec="native", threads=0)
+    assert not list(tmp_path.iterdir())
+    import typer
+    from typer.testing import CliRunner
+
+    app = typer.Typer(add_completion=False)
+    rl_command.register(app, typer.Typer())
+    res = CliRunner().invoke(app, ["--threads", "0", "--algo", "ppo", "--timesteps", "64", "--out", str(tmp_path),
+                                   "--eval-every", "0", "--skip-evaluation"])
+    assert res.exit_code != 0 and "threads" in res.output, res.output

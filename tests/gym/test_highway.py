@@ -10,6 +10,7 @@ import pytest
 import roadload  # noqa: F401
 from roadload.gym.config import GymConfigError
 from roadload.gym.ecodrive import DriveScales
+from roadload.envs.layout import S_W_CLIMB
 from roadload.envs.simulator import Simulator
 
 FAST = dict(vehicles_count=8, duration=10.0)
@@ -131,3 +132,47 @@ def test_bad_configuration_fails_at_construction():
     _, info = env.reset(seed=0, options={"vehicle": "gt_awd", "road": None})
     assert env.unwrapped.simulator.vehicle.name == "gt_awd"
     assert np.all(env.unwrapped.simulator.road.grade == 0.0)
+
+
+
+def _return_and_end(policy, road, reward=None):
+    """Return, final speed [m/s], distance [m] of one 40 s episode without traffic (the light training config:
+    4 Hz traffic frames, 2 Hz decisions) driven by ``policy(v)``; checks that the mechanical term telescopes."""
+    cfg = dict(vehicles_count=0, duration=40.0, simulation_frequency=4.0, policy_frequency=2.0, road=road,
+               road_seed=1)
+    if reward is not None:
+        cfg["reward"] = reward
+    env = gym.make("roadload/EcoHighway-v0", config=cfg)
+    _, info = env.reset(seed=0)
+    sim = env.unwrapped.simulator
+    v0, climb0 = info["speed"], sim.X[S_W_CLIMB]
+    ret, mech, done = 0.0, 0.0, False
+    while not done:
+        _, r, te, tr, info = env.step(np.array([policy(info["speed"])], dtype=np.float32))
+        ret += r
+        mech += info["terms"]["mechanical"]
+        done = te or tr
+    assert not info["crashed"]
+    m = sim.vehicle.body.mass
+    # the episode sum is the final minus the initial mechanical energy (kinetic + climbing work)
+    assert mech == pytest.approx(0.5 * m * (info["speed"] ** 2 - v0 ** 2) + sim.X[S_W_CLIMB] - climb0, rel=1e-9)
+    return ret, info["speed"], info["s"]
+
+
+@pytest.mark.parametrize("road", [None, "motorway"])
+def test_braking_to_a_stop_to_recover_the_kinetic_energy_does_not_beat_cruising(road):
+    """The exploit PPO found (docs/results/scale.md): brake from the 25 m/s start, regenerate the kinetic energy
+    and cover less road. With the mechanical-energy credit, braking to a stop returns far less than a 25 m/s
+    cruise; with the credit off (the first reward) it returned more, so this test catches the flaw."""
+    cruise = lambda v: float(np.clip(0.08 + 0.5 * (25.0 - v), -1.0, 1.0))  # noqa: E731
+    brakes = [lambda v, u=u: u if v > 0.5 else 0.0 for u in (-0.2, -0.4, -1.0)]
+    r_cruise, v_cruise, s_cruise = _return_and_end(cruise, road)
+    assert v_cruise == pytest.approx(25.0, abs=1.0) and s_cruise > 950.0
+    old = {"mechanical_energy": 0.0}
+    r_cruise_old = _return_and_end(cruise, road, old)[0]
+    for brake in brakes:
+        r_brake, v_brake, s_brake = _return_and_end(brake, road)
+        assert v_brake < 1.0 and s_brake < 0.4 * s_cruise
+        assert r_brake < r_cruise - 15.0, (r_brake, r_cruise)
+    # the flaw the credit removes: under the first reward regenerating to a stop beat cruising
+    assert _return_and_end(brakes[0], road, old)[0] > r_cruise_old + 5.0

@@ -8,7 +8,7 @@ import pytest
 import roadload  # noqa: F401  (registers the ids)
 from roadload.gym.config import GymConfigError
 from roadload.gym.ecodrive import EcoDriveEnv
-from roadload.gym.vector import COST_NAMES, INFO_SCALARS, EcoDriveVectorEnv
+from roadload.gym.vector import COST_NAMES, INFO_SCALARS, EcoDriveVectorEnv, openmp_wait_policy
 
 TOL = 1e-9
 
@@ -156,3 +156,36 @@ def test_sb3_adapter_episode_bookkeeping():
         pytest.fail("no episode finished in 400 steps of 0.8 traction on a 120 m route")
     with pytest.raises(ValueError, match="same_step"):
         SB3VecEnv(EcoDriveVectorEnv(1))
+
+
+def test_two_threads_give_the_one_thread_trajectories():
+    """threads=2 (reached through gymnasium.make_vec's keyword) splits the vehicles over numba threads; every
+    sub-env's observation, reward, flags and info equal the 1-thread env's to 1e-9 through autoresets, for an odd N
+    (uneven blocks) with the speed shield on, and the bare physics too."""
+    config = {"route_length": 150.0, "road": "city", "speed_shield": True, "shield_margin": 5.0, "time_limit": 12.0}
+    n, seed = 7, 3
+    envs = [gym.make_vec("roadload/EcoDrive-v0", num_envs=n, vectorization_mode="vector_entry_point",
+                         threads=t, config=dict(config)).unwrapped for t in (1, 2)]
+    assert [e.threads for e in envs] == [1, 2]
+    # numba's OpenMP threads sleep rather than spin when idle unless the user chose otherwise (vector.py: Threads)
+    assert openmp_wait_policy() != "default"
+    first = [e.reset(seed=seed) for e in envs]
+    _close(first[0][0], first[1][0], "reset obs")
+    rng = np.random.default_rng(1)
+    done = 0
+    for _ in range(200):
+        a = rng.uniform(-0.6, 1.0, (n, 1)).astype(np.float32)
+        (o1, r1, te1, tr1, i1), (o2, r2, te2, tr2, i2) = (e.step(a) for e in envs)
+        _close(o1, o2, "obs")
+        _close(r1, r2, "reward")
+        assert np.array_equal(te1, te2) and np.array_equal(tr1, tr2)
+        for k in INFO_SCALARS:
+            _close(i1[k], i2[k], k)
+        done += int((te1 | tr1).sum())
+    assert done >= n, f"too few autoresets exercised: {done}"
+    u = rng.uniform(-1, 1, n)
+    for _ in range(20):
+        for e in envs:
+            e.bare_physics_step(u)
+    _close(envs[0]._X, envs[1]._X, "bare physics state")
+

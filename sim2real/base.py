@@ -30,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from roadload.estimators.batch import BatchInputError, m_estimate
 from roadload.estimators.models import ACCELERATION
 from roadload.units import G
 
@@ -193,7 +194,7 @@ def accelerometer_bias_from_elevation(table: pd.DataFrame, split: Split, mass: f
     the force balance: eq. 5.2 turns a bias into a grade error, sin θ̂ = sin θ + b/g, so the elevation climbed
     along the grade, ∫ sin θ̂ ds, drifts from the logged one by (b/g) s. Per split segment (60 s) the drift
     increment e = Δ∫ sin θ̂ ds - Δh is regressed on the distance increment Δs through the origin,
-    b = g Σ e Δs / Σ Δs² (training segments), with the segments' heteroscedasticity-robust standard error
+    b = g x (slope), by a Huber M-estimate over the training segments, with the segments' sandwich standard error
     (increments of different segments are independent: the grade noise integrates within a segment, the GNSS
     error enters at its ends). Size: the force m_V |b| [N] the sim's climbing term is off by. On the force side a
     constant m_V b is, over an unmatched preset's nearly flat f_r(v), the rolling-resistance factor; the
@@ -226,10 +227,15 @@ def accelerometer_bias_from_elevation(table: pd.DataFrame, split: Split, mass: f
     e, s = e[moving], s[moving]
     if e.size < MIN_BIAS_SEGMENTS:
         return None
-    ss = float(np.sum(s ** 2))
-    slope = float(np.sum(e * s) / ss)
+    # Huber M-estimate through the origin (a segment with an elevation glitch — a GNSS jump, a trip turned at the
+    # end of the road — must not decide it), sandwich standard error with the final weights
+    try:
+        fit = m_estimate(s[:, None], e, "huber", max_iter=30, tol=1e-8)
+        slope, wts = float(fit.X[0]), np.asarray(fit.weights, dtype=float)
+    except BatchInputError:
+        slope, wts = float(np.sum(e * s) / np.sum(s ** 2)), np.ones_like(s)
     resid = e - slope * s
-    se_slope = float(np.sqrt(np.sum(s ** 2 * resid ** 2)) / ss)
+    se_slope = float(np.sqrt(np.sum((wts * s * resid) ** 2)) / np.sum(wts * s ** 2))
     b, se = G * slope, G * se_slope
     size = float(mass * abs(b))
     return {"name": "accelerometer bias (from the logged elevation)", "candidate": "accel_bias",

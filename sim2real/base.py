@@ -5,8 +5,12 @@ Base parameters (the catalog term of that name, :mod:`.catalog`): mass Δm_V [kg
 Δc_x A_V [m²] (``drag_area``), rolling resistance factor - 1 (``rolling_scale``), drive-train efficiency ε
 (reported as ``drive_efficiency``: F_xV,measured = F_xV,sim-side + ε |F_xV,sim-side|, i.e. the tractive force
 per drive force is (1 + ε) in traction and (1 - ε) in regeneration: a mesh loss proportional to the transmitted
-torque, section 2.6), brake gain k (``friction_brake``: the wheels brake with (1 + k) F_B; only where the trips
-log brake pressure).
+torque, section 2.6), rotating inertia ΔI_red/r_W² [kg] (``rotational_inertia``: dv/dt alone, eq. 2.6/2.17),
+cornering resistance Δm_V²/c_yW (``cornering``, eq. 2.15; only with a path curvature), brake gain k
+(``friction_brake``: the wheels brake with (1 + k) F_B; only where the trips log brake pressure); reported with
+them but not in their force fit: the accelerometer bias b [m/s²] from the logged elevation (``accel_bias``,
+:func:`accelerometer_bias_from_elevation`). With inertia and cornering the sim's drive force lies in the
+block's span, so no drive-force direction is left over for a candidate to pick up a preset's mismatch.
 
 Why the efficiency and not a symmetric torque scale: F_xV,sim-side = m_V (v̇ + g sin θ + g cos θ f_r) + ρ/2 c_x A
 v² + cornering is, term by term, the span of the mass, rolling and drag-area regressors, so a symmetric scale
@@ -20,9 +24,10 @@ The parameters are fitted jointly by weighted least squares on the robust, regim
 two-sided 1 %) and its contribution's RMS is at least ``min_size`` N.
 
 With ``DiagnosisSettings.base_first`` the candidate effects are then ranked and selected over the calibrated base
-(the base columns join every design): an effect is named only for what it adds beyond the base. A withheld effect
-whose signature *is* a base parameter (a payload is a mass offset) then shows up in the base block, not as an
-effect — the base block says which catalog effect each significant base departure stands for.
+(with ``joint_base`` the base columns join every design and are refitted with each candidate: a nested comparison
+base vs base + candidate, :class:`.selection.Selector`): an effect is named only for what it adds beyond the base.
+A withheld effect whose signature *is* a base parameter (a payload is a mass offset) then shows up in the base
+block, not as an effect — the base block says which catalog effect each significant base departure stands for.
 """
 
 from __future__ import annotations

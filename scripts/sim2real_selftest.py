@@ -11,12 +11,19 @@ the vehicle matched to the world (base calibrated first) and "withheld among the
 
 from __future__ import annotations
 
-import argparse
-import json
-import time
-from pathlib import Path
+import os
 
-import pandas as pd
+# the speed target is "one diagnosis on one core": one BLAS thread (set before numpy loads; on a shared machine
+# OpenBLAS' spinning worker threads otherwise count several times the work as process CPU time)
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import pandas as pd  # noqa: E402
 
 from roadload.experiments.sim2real_selftest import NONE_WORLD, WORLD_NAMES, WorldRun, run_world
 from roadload.fileio import write_json

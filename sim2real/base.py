@@ -5,8 +5,12 @@ Base parameters (the catalog term of that name, :mod:`.catalog`): mass Δm_V [kg
 Δc_x A_V [m²] (``drag_area``), rolling resistance factor - 1 (``rolling_scale``), drive-train efficiency ε
 (reported as ``drive_efficiency``: F_xV,measured = F_xV,sim-side + ε |F_xV,sim-side|, i.e. the tractive force
 per drive force is (1 + ε) in traction and (1 - ε) in regeneration: a mesh loss proportional to the transmitted
-torque, section 2.6), brake gain k (``friction_brake``: the wheels brake with (1 + k) F_B; only where the trips
-log brake pressure).
+torque, section 2.6), rotating inertia ΔI_red/r_W² [kg] (``rotational_inertia``: dv/dt alone, eq. 2.6/2.17),
+cornering resistance Δm_V²/c_yW (``cornering``, eq. 2.15; only with a path curvature), brake gain k
+(``friction_brake``: the wheels brake with (1 + k) F_B; only where the trips log brake pressure); reported with
+them but not in their force fit: the accelerometer bias b [m/s²] from the logged elevation (``accel_bias``,
+:func:`accelerometer_bias_from_elevation`). With inertia and cornering the sim's drive force lies in the
+block's span, so no drive-force direction is left over for a candidate to pick up a preset's mismatch.
 
 Why the efficiency and not a symmetric torque scale: F_xV,sim-side = m_V (v̇ + g sin θ + g cos θ f_r) + ρ/2 c_x A
 v² + cornering is, term by term, the span of the mass, rolling and drag-area regressors, so a symmetric scale
@@ -20,15 +24,20 @@ The parameters are fitted jointly by weighted least squares on the robust, regim
 two-sided 1 %) and its contribution's RMS is at least ``min_size`` N.
 
 With ``DiagnosisSettings.base_first`` the candidate effects are then ranked and selected over the calibrated base
-(the base columns join every design): an effect is named only for what it adds beyond the base. A withheld effect
-whose signature *is* a base parameter (a payload is a mass offset) then shows up in the base block, not as an
-effect — the base block says which catalog effect each significant base departure stands for.
+(with ``joint_base`` the base columns join every design and are refitted with each candidate: a nested comparison
+base vs base + candidate, :class:`.selection.Selector`): an effect is named only for what it adds beyond the base.
+A withheld effect whose signature *is* a base parameter (a payload is a mass offset) then shows up in the base
+block, not as an effect — the base block says which catalog effect each significant base departure stands for.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+
+from roadload.estimators.batch import BatchInputError, m_estimate
+from roadload.estimators.models import ACCELERATION
+from roadload.units import G
 
 from .catalog import DRIVE_FORCE, get_candidate
 from .energy import MOTOR_SPEED
@@ -39,8 +48,10 @@ from .stats import cluster_covariance
 
 BASE_PARAMETERS: tuple[tuple[str, str], ...] = (
     ("mass_offset", "mass m_V"), ("drag_area", "drag area c_x A_V"), ("rolling_scale", "rolling resistance f_r"),
-    ("drive_efficiency", "drive-train efficiency"), ("friction_brake", "brake gain X_B"))
+    ("drive_efficiency", "drive-train efficiency"), ("rotational_inertia", "rotating inertia I_red/r_W^2"),
+    ("cornering", "cornering resistance m_V^2/c_yW"), ("friction_brake", "brake gain X_B"))
 EFFICIENCY_PARAMETER = "drive-train loss error epsilon (|F_drive|)"
+INERTIA_PARAMETER = "delta I_red/r_W^2 (all gears)"
 
 
 def _efficiency_column(cols: dict) -> np.ndarray:
@@ -58,6 +69,18 @@ def base_columns(table: pd.DataFrame, model: SimForceModel, braking: np.ndarray,
     blocks, info = [], []
     for name, label in BASE_PARAMETERS:
         cand = get_candidate(name)
+        if name == "rotational_inertia":
+            # the rotating masses' share of the inertial mass (eq. 2.6/2.17: wheels, rotor, gears): dv/dt alone;
+            # a preset's wheels and rotor never match the car either, and without it the sim's drive force (whose
+            # inertial term is m_red dv/dt, not m dv/dt) is not in the block's span
+            if ACCELERATION not in sub or not np.isfinite(sub[ACCELERATION]).any():
+                continue
+            A = np.nan_to_num(np.asarray(cols[ACCELERATION], dtype=float))[:, None]
+            names, units = [INERTIA_PARAMETER], ["kg"]
+            A = np.where(np.asarray(braking)[:, None], 0.0, A)
+            blocks.append(A)
+            info += [{"name": label, "candidate": name, "parameter": n, "unit": u} for n, u in zip(names, units)]
+            continue
         if cand.missing(sub):
             continue
         if name == "drive_efficiency":
@@ -80,6 +103,10 @@ def _physical(model: SimForceModel, row: dict) -> dict:
         return {"sim": model.drag_area, "calibrated": model.drag_area + v, "unit": "m^2"}
     if row["candidate"] == "rolling_scale":
         return {"sim": 1.0, "calibrated": 1.0 + v, "unit": "x f_r(v)"}
+    if row["candidate"] == "cornering":
+        return {"sim": 0.0, "calibrated": v, "unit": "kg^2 rad/N (added to m_V^2/c_yW, eq. 2.15)"}
+    if row["candidate"] == "rotational_inertia":
+        return {"sim": 0.0, "calibrated": v, "unit": "kg (added to the sim's reduced mass)"}
     if row["candidate"] == "drive_efficiency":
         return {"sim": model.drivetrain_efficiency, "calibrated": model.drivetrain_efficiency * (1.0 + v),
                 "unit": "eta (tractive force per drive force in traction; 1 / that ratio in regeneration)"}
@@ -106,6 +133,9 @@ def base_calibration(table: pd.DataFrame, target: RobustTarget, split: Split, mo
                "significant": bool(abs(X[j]) >= Z_SIGNIFICANT * se[j] and size >= min_size)}
         row["physical"] = _physical(model, row)
         out.append(row)
+    bias = accelerometer_bias_from_elevation(table, split, model.mass, min_size)
+    if bias is not None:    # reported with the block, not part of its force fit (see the function)
+        out.append(bias)
     return {"parameters": out, "method": "weighted least squares on the robust residual (training rows), "
                                          "cluster-robust standard errors over 10 s blocks",
             "z": Z_SIGNIFICANT, "min_size": min_size}, A
@@ -113,20 +143,34 @@ def base_calibration(table: pd.DataFrame, target: RobustTarget, split: Split, mo
 
 ENERGY_PARAMETERS: tuple[tuple[str, str, str, str], ...] = (
     ("auxiliary_power", "auxiliary power P_aux", "delta P_aux", "W"),
-    ("motor_efficiency", "motor / inverter efficiency", "loss fraction error of |T_E omega_E|", "1"))
+    ("motor_efficiency", "motor / inverter efficiency", "loss fraction error of |T_E omega_E|", "1"),
+    ("torque_scale", "drive-torque signal gain", "gain error of the signed T_E omega_E", "1"))
+
+
+def energy_base_columns(table: pd.DataFrame) -> np.ndarray:
+    """Regressors of the energy-side base block (n x 3) in the order of :data:`ENERGY_PARAMETERS`: 1 [-],
+    |T_E ω_E| [W] and T_E ω_E [W]. P_el,sim is computed from the *logged* torque (:mod:`.energy`), so a torque
+    signal reading (1 + g) times the true torque over-predicts the battery power by ≈ g T_E ω_E — signed, positive
+    in traction and negative in regeneration — where a motor / inverter efficiency error scales the loss |T_E ω_E|
+    and an auxiliary load is constant."""
+    p_motor = table["drive_torque"].to_numpy(dtype=float) * table[MOTOR_SPEED].to_numpy(dtype=float)
+    return np.column_stack([np.ones(len(table)), np.abs(p_motor), p_motor])
 
 
 def energy_base_calibration(table: pd.DataFrame, power_residual: np.ndarray, split: Split,
                             min_power_size: float = 100.0) -> dict:
     """The energy side's base block (battery-electric trips): the battery-power residual P_el,measured -
-    P_el,sim [W] fitted on a constant (the auxiliary power a preset gets wrong, ``auxiliary_power``) and
-    |T_E ω_E| (a motor / inverter loss proportional to the converted power, ``motor_efficiency``) by least squares
-    on the training rows, cluster-robust standard errors over 10 s blocks; significant as on the force side
-    (|value| >= z SE and contribution RMS >= ``min_power_size`` W). Reported, not subtracted: with an unmatched
-    preset an auxiliary load is a shift of this block (as a payload is of the mass), which the selftest's
-    scoring compares against its reference drive."""
-    p_motor = table["drive_torque"].to_numpy(dtype=float) * table[MOTOR_SPEED].to_numpy(dtype=float)
-    A = np.column_stack([np.ones(len(table)), np.abs(np.nan_to_num(p_motor))])
+    P_el,sim [W] fitted on a constant (the auxiliary power a preset gets wrong, ``auxiliary_power``),
+    |T_E ω_E| (a motor / inverter loss proportional to the converted power, ``motor_efficiency``) and the signed
+    T_E ω_E (a gain error of the logged drive torque, ``torque_scale``; :func:`energy_base_columns`) by least
+    squares on the training rows, cluster-robust standard errors over 10 s blocks; significant as on the force
+    side (|value| >= z SE and contribution RMS >= ``min_power_size`` W). With an unmatched preset an auxiliary
+    load is a shift of this block (as a payload is of the mass), which the selftest's scoring compares against
+    its reference drive; with ``base_first`` the energy-side effects are judged over this block
+    (:func:`roadload.sim2real.diagnose.diagnose`)."""
+    A = energy_base_columns(table)
+    p_motor = A[:, 2]
+    A = np.nan_to_num(A)
     y = np.asarray(power_residual, dtype=float)
     rows = split.train & np.isfinite(y) & np.isfinite(p_motor)
     if rows.sum() < 100:
@@ -143,3 +187,64 @@ def energy_base_calibration(table: pd.DataFrame, power_residual: np.ndarray, spl
     return {"parameters": out, "method": "least squares on the battery-power residual (training rows), "
                                          "cluster-robust standard errors over 10 s blocks",
             "z": Z_SIGNIFICANT, "min_size": min_power_size, "unit_of_size": "W"}
+
+
+ELEVATION = "elevation"
+MIN_BIAS_SEGMENTS = 10
+
+
+def accelerometer_bias_from_elevation(table: pd.DataFrame, split: Split, mass: float,
+                                      min_size: float = 15.0) -> dict | None:
+    """The accelerometer bias b [m/s²] as a base parameter, from the logged elevation h (GNSS, map) instead of
+    the force balance: eq. 5.2 turns a bias into a grade error, sin θ̂ = sin θ + b/g, so the elevation climbed
+    along the grade, ∫ sin θ̂ ds, drifts from the logged one by (b/g) s. Per split segment (60 s) the drift
+    increment e = Δ∫ sin θ̂ ds - Δh is regressed on the distance increment Δs through the origin,
+    b = g x (slope), by a Huber M-estimate over the training segments, with the segments' sandwich standard error
+    (increments of different segments are independent: the grade noise integrates within a segment, the GNSS
+    error enters at its ends). Size: the force m_V |b| [N] the sim's climbing term is off by. On the force side a
+    constant m_V b is, over an unmatched preset's nearly flat f_r(v), the rolling-resistance factor; the
+    elevation separates the two. None without a logged elevation."""
+    if ELEVATION not in table.columns:
+        return None
+    h = table[ELEVATION].to_numpy(dtype=float)
+    if not np.isfinite(h).any():
+        return None
+    trip = table["trip"].to_numpy()
+    th = np.nan_to_num(table["gradient_angle"].to_numpy(dtype=float))
+    dist = table["distance"].to_numpy(dtype=float)
+    seg = np.asarray(split.segments)
+    train = split.train
+    e_list, s_list = [], []
+    for k in pd.unique(trip):
+        rows = np.flatnonzero(trip == k)
+        ds = np.diff(dist[rows], prepend=dist[rows][0])
+        climb = np.cumsum(np.sin(th[rows]) * ds)
+        hk, sk, tr = h[rows], seg[rows], train[rows]
+        for s_id in np.unique(sk[tr]):
+            idx = np.flatnonzero((sk == s_id) & np.isfinite(hk))
+            if idx.size < 2:
+                continue
+            i0, i1 = idx[0], idx[-1]
+            e_list.append((climb[i1] - climb[i0]) - (hk[i1] - hk[i0]))
+            s_list.append(dist[rows][i1] - dist[rows][i0])
+    e, s = np.asarray(e_list), np.asarray(s_list)
+    moving = s > 1.0
+    e, s = e[moving], s[moving]
+    if e.size < MIN_BIAS_SEGMENTS:
+        return None
+    # Huber M-estimate through the origin (a segment with an elevation glitch — a GNSS jump, a trip turned at the
+    # end of the road — must not decide it), sandwich standard error with the final weights
+    try:
+        fit = m_estimate(s[:, None], e, "huber", max_iter=30, tol=1e-8)
+        slope, wts = float(fit.X[0]), np.asarray(fit.weights, dtype=float)
+    except BatchInputError:
+        slope, wts = float(np.sum(e * s) / np.sum(s ** 2)), np.ones_like(s)
+    resid = e - slope * s
+    se_slope = float(np.sqrt(np.sum((wts * s * resid) ** 2)) / np.sum(wts * s ** 2))
+    b, se = G * slope, G * se_slope
+    size = float(mass * abs(b))
+    return {"name": "accelerometer bias (from the logged elevation)", "candidate": "accel_bias",
+            "parameter": "accelerometer bias b", "unit": "m/s^2", "value": b, "std_error": se, "size_rms": size,
+            "significant": bool(abs(b) >= Z_SIGNIFICANT * se and size >= min_size), "in_fit": False,
+            "physical": {"sim": 0.0, "calibrated": b, "unit": "m/s^2 (eq. 5.2 grade offset b/g)"},
+            "method": f"drift of the eq. 5.2 climb against the logged elevation over {e.size} training segments"}

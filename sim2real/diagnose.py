@@ -33,8 +33,8 @@ from .gap import gap_measures
 from .reference import AdditiveRegimeModel
 from .regimes import DEFAULT_REGIMES, get_regime, localise, residual_analysis, strongest_departures
 from .selection import Selector, make_split
-from .base import base_calibration, energy_base_calibration
-from .robust import robust_target
+from .base import base_calibration, energy_base_calibration, energy_base_columns
+from .robust import braking_rows, robust_target, weighted_fit
 from .simconfig import SimConfig
 from .stats import block_bootstrap_mean_difference
 from .table import DiagnosisTable, build_table
@@ -61,7 +61,9 @@ class DiagnosisSettings:
     loss sees offsets of a few N where cruising scatters by a few N, which is no sim-to-real gap worth a switch;
     max_effects); base_first: rank and select the effects over the calibrated base (mass, drag area, rolling
     resistance, drive-train efficiency, brake gain; :mod:`.base`) — for a preset that does not match the car;
-    the base block is reported either way; min_effect [N]: smallest bin median reported as a departure /
+    the base block is reported either way; joint_base (with base_first): the base is refitted jointly with every
+    candidate (nested comparison base vs base + candidate, :class:`.selection.Selector`) instead of only
+    subtracted before the effects are judged; min_effect [N]: smallest bin median reported as a departure /
     unexplained residual;
     floor roads (profile name, seed) and floor_duration [s] per road for the sim's own trips (none: no floor);
     resimulate: switch the identified effects on in the simulator with their fitted parameters, re-drive the
@@ -89,6 +91,7 @@ class DiagnosisSettings:
     min_size: float = 15.0
     min_power_size: float = 100.0
     base_first: bool = False
+    joint_base: bool = True
     floor_roads: tuple[tuple[str, int], ...] = FLOOR_ROADS
     floor_duration: float = 900.0
     resimulate: bool = True
@@ -287,17 +290,26 @@ def _energy_side(table: pd.DataFrame, split, settings: DiagnosisSettings, model,
         return None
     sp = Split(split.valid & ok, split.test & ok, np.where(ok, split.fold, -1), split.n_folds, split.blocks,
                split.segments)
-    sel = Selector(table, np.where(ok, pr, 0.0), sp, model, robust=settings.robust, n_boot=settings.n_boot,
+    y = np.where(ok, pr, 0.0)
+    base_A = None
+    if settings.base_first:
+        # base mismatch first: the energy base block (auxiliary power, motor efficiency, torque-signal gain) is
+        # fitted and subtracted, and refitted jointly with every power-side candidate (nested comparison)
+        braking = braking_rows(table)
+        base_A = np.where(braking[:, None], 0.0, np.nan_to_num(energy_base_columns(table)))
+        x_b = weighted_fit(base_A, y, np.ones(len(y)), sp.train)
+        y = y - base_A @ x_b
+    sel = Selector(table, y, sp, model, robust=settings.robust, n_boot=settings.n_boot,
                    seed=settings.seed, min_gain=settings.min_gain, min_explained=settings.min_explained, side="power",
                    n_null=settings.n_null, alpha=settings.alpha, clip=settings.clip, plausible=plausible,
-                   min_size=settings.min_power_size)
+                   min_size=settings.min_power_size, base_design=base_A)
     ranked, skipped = sel.rank(names)
     steps = sel.forward(ranked, max_effects=settings.max_effects)
-    after = np.where(ok, pr, 0.0)
+    after = y.copy()
     effects = []
     if sel.chosen:
         d, fit = sel.final_fit(sel.chosen)
-        after = after - d.A @ fit.X
+        after = after - (sel.fitted_columns(d) if sel.base_design is not None else d.A) @ fit.X
         se = np.sqrt(np.clip(np.diag(fit.cov), 0, None)) if fit.cov is not None else np.full(fit.X.size, np.nan)
         for cand, shape in sel.chosen:
             own = [i for i, o in enumerate(d.owner) if o == cand.name]
@@ -362,12 +374,13 @@ def diagnose(real: Sequence[Trip], sim: SimConfig, settings: DiagnosisSettings |
     base, base_A = base_calibration(table, target0, split, model, min_size=settings.min_size)
     base["used_for_effects"] = settings.base_first
     if settings.base_first and base_A.shape[1]:
-        x_base = np.array([p_["value"] for p_ in base["parameters"]])
+        x_base = np.array([p_["value"] for p_ in base["parameters"] if p_.get("in_fit", True)])
         y_sel = y_sel - base_A @ x_base
     sel = Selector(table, y_sel, split, model, robust=settings.robust, n_boot=settings.n_boot,
                    seed=settings.seed, min_gain=settings.min_gain, min_explained=settings.min_explained,
                    n_null=settings.n_null, alpha=settings.alpha, clip=settings.clip, plausible=plausible,
-                   min_size=settings.min_size)
+                   min_size=settings.min_size,
+                   base_design=base_A if (settings.base_first and settings.joint_base) else None)
     explicit = settings.strict_candidates
     ranked, skipped = sel.rank([n for n in settings.candidates if get_candidate(n).side == "force"])
     if explicit:
@@ -382,7 +395,9 @@ def diagnose(real: Sequence[Trip], sim: SimConfig, settings: DiagnosisSettings |
     r_after = y_sel.copy()
     if chosen:
         d, fit = sel.final_fit(chosen)
-        r_after = y_sel - d.A @ fit.X
+        # jointly with the base: predict with the design as fitted (the base says nothing on braking rows, so an
+        # effect's coefficients, conditional on it, are not extrapolated there)
+        r_after = y_sel - (sel.fitted_columns(d) if sel.base_design is not None else d.A) @ fit.X
         se = np.sqrt(np.clip(np.diag(fit.cov), 0, None)) if fit.cov is not None else np.full(fit.X.size, np.nan)
         for cand, shape in chosen:
             own = [i for i, o in enumerate(d.owner) if o == cand.name]

@@ -191,6 +191,36 @@ def segment_sums(A: np.ndarray, target: RobustTarget, y0: np.ndarray, e: np.ndar
     return SegmentSums(G, b0, b1, c00, c01, c11)
 
 
+def extended_sums(base: SegmentSums, base_A: np.ndarray, A: np.ndarray, target: RobustTarget, y0: np.ndarray,
+                  e: np.ndarray) -> SegmentSums:
+    """The :class:`SegmentSums` of the design [base_A, A] from the base's own sums: only the cross terms with the
+    new columns are summed (a step's base is shared by all its candidates; the result equals
+    ``segment_sums(np.hstack([base_A, A]), ...)``)."""
+    rows = target.segment >= 0
+    s = target.segment[rows]
+    S = target.n_segments
+    w = target.weight[rows]
+    A = np.asarray(A, dtype=float).reshape(len(target.segment), -1)[rows]
+    B = np.asarray(base_A, dtype=float).reshape(len(target.segment), -1)[rows]
+    kb, kc = B.shape[1], A.shape[1]
+    k = kb + kc
+    G = np.zeros((S, k, k))
+    G[:, :kb, :kb] = base.G
+    b0 = np.zeros((S, k))
+    b1 = np.zeros((S, k))
+    b0[:, :kb], b1[:, :kb] = base.b0, base.b1
+    wA = A * w[:, None]
+    y0r, er = np.asarray(y0, dtype=float)[rows], np.asarray(e, dtype=float)[rows]
+    for i in range(kc):
+        b0[:, kb + i] = np.bincount(s, weights=wA[:, i] * y0r, minlength=S)
+        b1[:, kb + i] = np.bincount(s, weights=wA[:, i] * er, minlength=S)
+        for j in range(kb):
+            G[:, kb + i, j] = G[:, j, kb + i] = np.bincount(s, weights=wA[:, i] * B[:, j], minlength=S)
+        for j in range(i, kc):
+            G[:, kb + i, kb + j] = G[:, kb + j, kb + i] = np.bincount(s, weights=wA[:, i] * A[:, j], minlength=S)
+    return SegmentSums(G, b0, b1, base.c00, base.c01, base.c11)
+
+
 def cv_loss(sums: SegmentSums, fold_of_segment: np.ndarray, n_folds: int, signs: np.ndarray) -> np.ndarray:
     """Out-of-fold weighted squared loss Σ w (y - A X̂_fold)² for each row of ``signs`` (B x segments, ±1) with
     y = y0 + ε_s e; X̂_fold: weighted least squares on the other folds' segments. Returns (B,)."""
@@ -283,15 +313,16 @@ def step_statistics(base: np.ndarray, candidates: Sequence[Sequence[np.ndarray]]
     else:
         y0 = np.zeros_like(y)
     e = y - y0
-    L0 = cv_loss(segment_sums(base_s, target, y0, e), target.fold_of_segment, target.n_folds, signs)
+    base_sums = segment_sums(base_s, target, y0, e)
+    L0 = cv_loss(base_sums, target.fold_of_segment, target.n_folds, signs)
     norm = float(np.sum(w[rows] * y[rows] ** 2))     # the loss of the sim as is (relative gains share it)
     gains = np.zeros((signs.shape[0], len(candidates)))
     variant = np.zeros(len(candidates), dtype=int)
     for j, variants in enumerate(candidates):
         best = None
         for i, A in enumerate(variants):
-            full = np.hstack([base_s, scaled(A, w)])
-            L1 = cv_loss(segment_sums(full, target, y0, e), target.fold_of_segment, target.n_folds, signs)
+            L1 = cv_loss(extended_sums(base_sums, base_s, scaled(A, w), target, y0, e), target.fold_of_segment,
+                         target.n_folds, signs)
             if best is None or L1[0] < best[0]:
                 variant[j] = i
             best = L1 if best is None else np.minimum(best, L1)

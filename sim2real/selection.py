@@ -214,7 +214,13 @@ def information_criteria(sse: float, m: int, o: int) -> tuple[float, float]:
 @dataclass
 class Selector:
     """Everything the ranking needs: the table, the residual y, the split, the sim's force model; ``side``: which
-    candidates apply ("force": y is the force residual [N]; "power": the battery-power residual [W])."""
+    candidates apply ("force": y is the force residual [N]; "power": the battery-power residual [W]).
+
+    ``base_design`` (n x k, optional): the base calibration's regressors (:mod:`.base`, already zero where they
+    must not fit). They join every design — the null model, every candidate, the reference and the final fit —
+    so each candidate is judged by the nested comparison base vs base + candidate (the base refitted jointly with
+    it, against the same wild-bootstrap null): an effect only partly collinear with a base parameter keeps the
+    part the base cannot explain, and a candidate that *is* a base direction gains nothing."""
 
     table: pd.DataFrame
     residual: np.ndarray
@@ -231,6 +237,7 @@ class Selector:
     clip: float = 5.0
     plausible: Callable[[CandidateEffect, dict, float | None], str | None] | None = None
     min_size: float = 0.0
+    base_design: np.ndarray | None = None
     cols: dict[str, np.ndarray] = field(init=False)
     baseline_loss: np.ndarray = field(init=False)
 
@@ -250,6 +257,11 @@ class Selector:
         self.target = robust_target(self.table, y, self.split.train, self.split.blocks, self.split.fold,
                                     self.split.n_folds, clip=self.clip)
         self.signs = rademacher(self.n_null, self.target.n_segments, self.rng)
+        if self.base_design is not None:
+            B = np.asarray(self.base_design, dtype=float).reshape(len(self.table), -1)
+            if B.shape[1] == 0:
+                B = None
+            self.base_design = None if B is None else np.nan_to_num(B)
 
     # ---------------------------------------------------------------- helpers
     def _mse(self, pred: np.ndarray) -> tuple[float, np.ndarray]:
@@ -301,7 +313,20 @@ class Selector:
         A = d.A.copy()
         brake = np.array([get_candidate(o).is_brake for o in d.owner], dtype=bool)
         A[np.ix_(self.target.braking, ~brake)] = 0.0
+        if self.base_design is not None:    # the base refitted jointly (its columns are masked already)
+            k = self.base_design.shape[1]
+            A = np.hstack([self.base_design, A])
+            d = Design(np.hstack([self.base_design, d.A]), [f"base {i}" for i in range(k)] + d.names,
+                       ["-"] * k + d.units, ["base"] * k + d.owner)
         return d, fit_linear(A, self.residual, self.split.train, self.robust, self.split.blocks)
+
+    def fitted_columns(self, d: Design) -> np.ndarray:
+        """The design as :meth:`final_fit` fits it: columns of candidates that are not about the friction brake
+        zero on braking rows (base columns come masked)."""
+        A = d.A.copy()
+        mask = np.array([o != "base" and not get_candidate(o).is_brake for o in d.owner], dtype=bool)
+        A[np.ix_(self.target.braking, mask)] = 0.0
+        return A
 
     # ---------------------------------------------------------------- robust design
     def candidate_columns(self, cand: CandidateEffect, shape: float | None) -> np.ndarray:
@@ -316,9 +341,10 @@ class Selector:
         return [self.candidate_columns(cand, sh) for sh in cand.shapes()]
 
     def _base(self, chosen: Sequence[tuple[CandidateEffect, float | None]]) -> np.ndarray:
-        if not chosen:
-            return np.zeros((len(self.table), 0))
-        return np.hstack([self.candidate_columns(c, sh) for c, sh in chosen])
+        """The design a step's candidates are added to: the base block (when given) and the chosen effects."""
+        parts = [] if self.base_design is None else [self.base_design]
+        parts += [self.candidate_columns(c, sh) for c, sh in chosen]
+        return np.hstack(parts) if parts else np.zeros((len(self.table), 0))
 
     def _reference_loss(self, chosen: Sequence[tuple[CandidateEffect, float | None]]) -> float:
         """Robust out-of-fold loss (relative to the sim as is) of the chosen effects plus the flexible reference
@@ -331,6 +357,8 @@ class Selector:
 
     def _reference_loss_uncached(self, chosen: Sequence[tuple[CandidateEffect, float | None]]) -> float:
         A = design(list(chosen), self.model, self.cols).A if chosen else None
+        if self.base_design is not None:
+            A = self.base_design if A is None else np.hstack([self.base_design, A])
         pred = cv_predict(A, self.residual, self.table, self.split, self.robust, reference=True)
         t = self.target
         rows = t.segment >= 0
@@ -339,11 +367,23 @@ class Selector:
         return loss / norm if norm > 0 else float("nan")
 
     def effect_size(self, d: Design, fit: Fit, name: str) -> float:
-        """RMS of one effect's fitted contribution over the training rows [N, or W on the power side]."""
+        """RMS of one effect's fitted contribution over the training rows [N, or W on the power side]. With a
+        ``base_design`` the contribution is taken net of the other columns (base and other effects): the part of
+        it they cannot take, i.e. what the effect changes in the fitted model — a candidate nearly collinear with
+        the base otherwise shows a large contribution that the refitted base cancels."""
         own = np.array([i for i, o in enumerate(d.owner) if o == name], dtype=int)
         tr = self.split.train
-        contrib = d.A[np.ix_(tr, own)] @ fit.X[own]
-        return float(np.sqrt(np.mean(contrib ** 2))) if contrib.size else 0.0
+        A = self.fitted_columns(d) if self.base_design is not None else d.A
+        contrib = A[np.ix_(tr, own)] @ fit.X[own]
+        if not contrib.size:
+            return 0.0
+        if self.base_design is not None:
+            other = np.array([i for i, o in enumerate(d.owner) if o != name], dtype=int)
+            if other.size:
+                B = A[np.ix_(tr, other)]
+                coef, *_ = np.linalg.lstsq(B, contrib, rcond=None)
+                contrib = contrib - B @ coef
+        return float(np.sqrt(np.mean(contrib ** 2)))
 
     # ---------------------------------------------------------------- ranking
     def rank(self, names: Sequence[str]) -> tuple[list[CandidateResult], dict[str, str]]:
@@ -378,12 +418,13 @@ class Selector:
             o = d.A.shape[1] + (1 if cand.shape_grid else 0)
             aic, bic = information_criteria(sse, m, o)
             se = np.sqrt(np.clip(np.diag(fit.cov), 0, None)) if fit.cov is not None else np.full(fit.X.size, np.nan)
-            params = {n: float(x) for n, x in zip(d.names, fit.X)}
+            own = [i for i, o in enumerate(d.owner) if o == cand.name]
+            params = {d.names[i]: float(fit.X[i]) for i in own}
             explainable = 1.0 - min(ref_loss, 1.0 - gain)
             frac = float(np.clip(gain / explainable, -np.inf, 1.0)) if explainable > 0 else 0.0
             res = CandidateResult(
                 cand.name, cand.description, shape, cand.shape_name, params,
-                {n: float(s) for n, s in zip(d.names, se)}, dict(zip(d.names, d.units)), 1.0 - gain, 1.0,
+                {d.names[i]: float(se[i]) for i in own}, {d.names[i]: d.units[i] for i in own}, 1.0 - gain, 1.0,
                 gain, (gain, float(np.quantile(stats.null[:, j], 1 - self.alpha)) if stats.null.size else gain,
                        float(stats.null[:, j].max()) if stats.null.size else gain),
                 bool(p <= self.alpha and gain >= self.min_gain

@@ -208,6 +208,7 @@ def build_table(trips: Sequence[Trip], sim: SimConfig, settings: PipelineSetting
         pres = _sample(trip, "ambient_pressure", t)
         pres = np.where(np.isfinite(pres), pres, sim.effects.ambient_pressure)
         f["ambient_temperature"] = amb
+        f["elevation"] = _sample(trip, "elevation", t)
         f["air_density"] = air_density(amb_fill, pres)
         has_brakes = any(c in dec for c in ("brake_pressure_front", "brake_pressure_rear"))
         if has_brakes:

@@ -259,9 +259,7 @@ class Selector:
         self.signs = rademacher(self.n_null, self.target.n_segments, self.rng)
         if self.base_design is not None:
             B = np.asarray(self.base_design, dtype=float).reshape(len(self.table), -1)
-            if B.shape[1] == 0:
-                B = None
-            self.base_design = None if B is None else np.nan_to_num(B)
+            self.base_design = np.nan_to_num(B) if B.shape[1] else None
 
     # ---------------------------------------------------------------- helpers
     def _mse(self, pred: np.ndarray) -> tuple[float, np.ndarray]:

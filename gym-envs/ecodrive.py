@@ -111,18 +111,23 @@ def cut_profile(profile: RoadProfile, length: float | None) -> RoadProfile:
                        stops=profile.stops[profile.stops <= length], meta=dict(profile.meta))
 
 
+@njit(inline="always", cache=True)
+def _grid_cell(x, n):
+    """Grid position x (in grid steps) clamped to [0, n - 1.001] -> (cell index i, fraction f in [0, 1))."""
+    if x < 0.0:
+        x = 0.0
+    elif x > n - 1.001:
+        x = n - 1.001
+    i = int(x)
+    return i, x - i
+
+
 @njit(cache=True)
 def _look_ahead(table, grid, points, s, out):
     """Linear interpolation of every row of ``table`` (uniform grid step ``grid`` [m]) at s + points -> out."""
     n = table.shape[1]
     for j in range(points.size):
-        x = (s + points[j]) / grid
-        if x < 0.0:
-            x = 0.0
-        elif x > n - 1.001:
-            x = n - 1.001
-        i = int(x)
-        f = x - i
+        i, f = _grid_cell((s + points[j]) / grid, n)
         for r in range(table.shape[0]):
             out[r, j] = table[r, i] * (1.0 - f) + table[r, i + 1] * f
 
@@ -148,13 +153,7 @@ def _braking_envelope(limit, grid, margin, decel, out):
 def shield_command(envelope, n, s, v, u):
     """The speed shield: the command u capped at SHIELD_GAIN * (v_env(s) - v), clipped to [-1, 1], with v_env the
     braking envelope (RouteTable.braking_envelope, first n grid points) linearly interpolated at s [m], v [m/s]."""
-    x = s / PREVIEW_GRID
-    if x < 0.0:
-        x = 0.0
-    elif x > n - 1.001:
-        x = n - 1.001
-    i = int(x)
-    f = x - i
+    i, f = _grid_cell(s / PREVIEW_GRID, n)
     cap = SHIELD_GAIN * (envelope[i] * (1.0 - f) + envelope[i + 1] * f - v)
     if cap < -1.0:
         cap = -1.0

@@ -19,7 +19,9 @@ from roadload.experiments.rl.highway import (HIGHWAY_HELD_OUT_SEEDS, highway_eva
                                              idm_policy)
 from roadload.gym.config import EcoHighwayConfig, make_config
 
-DEFAULT_POLICY = "PPO=docs/results/scale_rl/highway_credit/ppo_ecohighway.zip"
+# the shipped policy, found from the repository wherever the script is run from
+REPO = Path(__file__).resolve().parents[1]
+DEFAULT_POLICY = f"PPO={REPO / 'docs/results/scale_rl/highway_credit/ppo_ecohighway.zip'}"
 
 
 def _policy(model):

@@ -145,12 +145,15 @@ def predict(transition, X, P, x_tmp, work, n, sym):
 
 # ============================================================================ stage 2: a-priori products
 @_inline
-def backup_state(X, P, X_prev, P_prev, n, sym):
-    """X_prev ← X̂_{t-1}, P_prev ← P_{t-1} (upper triangle when P is symmetric), for iterations and roll-back."""
+def backup_state(X, P, X_prev, P_prev, n, sym, with_P):
+    """X_prev ← X̂_{t-1} (roll-back, parameter update); P_prev ← P_{t-1} (upper triangle when P is symmetric) only
+    ``with_P`` -- the iterated variant recomputes P from it; a single update evolves P in place."""
     for i in range(n):
         X_prev[i] = X[i]
-        for j in range(i if sym else 0, n):
-            P_prev[i, j] = P[i, j]
+    if with_P:
+        for i in range(n):
+            for j in range(i if sym else 0, n):
+                P_prev[i, j] = P[i, j]
 
 
 @_inline
@@ -221,7 +224,8 @@ def gain(P_z, w, s, c_gain, L, n):
 # ============================================================================ stage 5: covariance evolution
 @_inline
 def covariance_forgetting(P, P_prev, L, P_z, a_P, inv_lam, n, sym):
-    """Exponential forgetting P = (P - L a P)/λ (Algorithm 3.1)."""
+    """Exponential forgetting P = (P - L a P)/λ (Algorithm 3.1). ``P_prev`` may be ``P`` itself: every entry is
+    read once before it is written (the lower triangle of a symmetric P is written, never read)."""
     if sym:
         for i in range(n):
             for j in range(i, n):
@@ -238,7 +242,8 @@ def covariance_forgetting(P, P_prev, L, P_z, a_P, inv_lam, n, sym):
 def covariance_kalman(P, P_prev, L, P_z, a_P, s, r_joseph, process_noise, g_sg, Pd_z, a_Pd, n, sym, joseph,
                       kalman):
     """Kalman family: P - L a P + Q (Algorithm 3.13) or + Q_t = W P_d 𝔄ᵀ a P_d / (R + W a P_d 𝔄ᵀ)
-    (Stenlund-Gustafsson, Algorithm 3.16); Joseph form (I - L a) P (I - L a)ᵀ + L (R/W) Lᵀ on request."""
+    (Stenlund-Gustafsson, Algorithm 3.16); Joseph form (I - L a) P (I - L a)ᵀ + L (R/W) Lᵀ on request.
+    ``P_prev`` may be ``P`` itself (in place, as in :func:`covariance_forgetting`)."""
     for i in range(n):
         j0 = i if sym else 0
         for j in range(j0, n):
@@ -376,14 +381,10 @@ def covariance_health(X, P, pivots, p_bound, n, sym, factorise):
 
 
 @_inline
-def restore_state(X, P, X_prev, P_prev, n, sym):
-    """Roll back to the backup of :func:`backup_state`."""
+def restore_state(X, X_prev, n):
+    """Roll X̂ back to the backup of :func:`backup_state` (P is reset to P_0 right after, so it needs none)."""
     for i in range(n):
         X[i] = X_prev[i]
-        for j in range(i if sym else 0, n):
-            P[i, j] = P_prev[i, j]
-            if sym:
-                P[j, i] = P_prev[i, j]
 
 
 @_inline
@@ -498,7 +499,9 @@ def run_record(regressors, outputs, instruments, codes, settings, process_noise,
     a_Pd = Pd_z if sym else vectors[8]
     col = vectors[9]
     row = vectors[10]
-    P_prev = matrices[0]
+    # P_{t-1} for the covariance update: a copy only when the update is iterated (each iteration restarts from it)
+    iterated = max_iter > 1
+    P_source = matrices[0] if iterated else P
     work = matrices[1]
     t0 = counters[CT_T]  # samples before this record (sample indices are global: online == batch)
 
@@ -510,7 +513,7 @@ def run_record(regressors, outputs, instruments, codes, settings, process_noise,
         s = 0.0
         s_d = 0.0
         if valid:
-            backup_state(X, P, X_prev, P_prev, n, sym)
+            backup_state(X, P, X_prev, P_source, n, sym, iterated)
             r_prior, s = prior_products(P, X, a, z, b, P_z, a_P, n, sym, cov)
             if cov == COV_SG:
                 s_d = desired_products(desired_cov, a, z, Pd_z, a_Pd, n, sym)
@@ -542,10 +545,10 @@ def run_record(regressors, outputs, instruments, codes, settings, process_noise,
                 w = weight(psi, r, sigma, c1, c2, c3)
             den = gain(P_z, w, s, c_gain, L, n)
             if cov == COV_FORGETTING:
-                covariance_forgetting(P, P_prev, L, P_z, a_P, inv_lam, n, sym)
+                covariance_forgetting(P, P_source, L, P_z, a_P, inv_lam, n, sym)
             else:
                 g_sg = w / (R + w * s_d) if cov == COV_SG else 0.0
-                covariance_kalman(P, P_prev, L, P_z, a_P, s, R * w / (den * den), process_noise, g_sg, Pd_z, a_Pd,
+                covariance_kalman(P, P_source, L, P_z, a_P, s, R * w / (den * den), process_noise, g_sg, Pd_z, a_Pd,
                                   n, sym, joseph, cov == COV_KALMAN)
             if regularised:
                 ok = regularise(P, kappa, col, row, n, sym)
@@ -566,7 +569,7 @@ def run_record(regressors, outputs, instruments, codes, settings, process_noise,
             if health == P_CORRUPT:
                 # a non-finite or indefinite result (overflow, singular normalisation) is undone
                 counters[CT_ROLLED_BACK] += 1
-                restore_state(X, P, X_prev, P_prev, n, sym)
+                restore_state(X, X_prev, n)
             counters[CT_P_RESETS] += 1
             pmax = reset_covariance(P, P0, n)
             if counters[CT_BLOWUP_AT] < 0:

@@ -32,6 +32,7 @@ from roadload.presets import get_preset
 from roadload.tables import write_csv
 
 from .common import RLError, _atomic_write_bytes
+from .training import _curve_callback
 
 HIGHWAY_ENV_ID = "roadload:roadload/EcoHighway-v0"
 HIGHWAY_HELD_OUT_SEEDS = tuple(range(50_000, 50_010))
@@ -131,7 +132,6 @@ def train_highway(timesteps: int, out_dir: Path, n_envs: int = 4, seed: int = 0,
     evaluation CSVs to ``out_dir``; returns paths, tables and the wall time."""
     import torch
     from stable_baselines3 import PPO
-    from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.env_util import make_vec_env as sb3_make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv
 
@@ -148,19 +148,10 @@ def train_highway(timesteps: int, out_dir: Path, n_envs: int = 4, seed: int = 0,
     params["n_steps"] = max(16, min(params["n_steps"], max(timesteps // n_envs, 16)))
     params["batch_size"] = min(params["batch_size"], params["n_steps"] * n_envs)
     model = PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **params)
-    rows: list[tuple[int, float]] = []
-
-    class Curve(BaseCallback):
-        def _on_step(self) -> bool:
-            for info in self.locals.get("infos", []):
-                ep = info.get("episode")
-                if ep is not None:
-                    rows.append((self.num_timesteps, float(ep["r"])))
-            return True
-
+    callback = _curve_callback(env_config, eval_every=0, progress=None)  # training episode returns only
     t0 = time.perf_counter()
     try:
-        model.learn(total_timesteps=timesteps, callback=Curve())
+        model.learn(total_timesteps=timesteps, callback=callback)
     finally:
         venv.close()
     seconds = time.perf_counter() - t0
@@ -169,7 +160,8 @@ def train_highway(timesteps: int, out_dir: Path, n_envs: int = 4, seed: int = 0,
             "seed": seed, "env_config": env_config, "hyperparams": params, "seconds": seconds}
     _atomic_write_bytes(out_dir / "ppo_ecohighway.json",
                         lambda tmp: tmp.write_text(json.dumps(meta, indent=1, default=str)))
-    curve = pd.DataFrame(rows, columns=["timesteps", "episode_return"])
+    curve = pd.DataFrame([(t, v) for t, kind, v in callback.rows if kind == "train"],
+                         columns=["timesteps", "episode_return"])
     write_csv(out_dir / "ppo_ecohighway_curve.csv", curve)
     _plot_curve(curve, out_dir / "ppo_ecohighway_curve.png")
     rng = np.random.default_rng(seed)

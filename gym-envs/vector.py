@@ -375,6 +375,7 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
         self._road_seed = np.zeros(n, dtype=np.int64)
         self._gear = np.zeros(n, dtype=np.int64)
         self._sims: list[Simulator | None] = [None] * n
+        self._templates: dict[str, Simulator] = {}  # per repr(effects): the simulator new roads are set up from
         self._keys: list[tuple | None] = [None] * n
         self._routes: list[RouteTable | None] = [None] * n
         self._rngs: list[np.random.Generator] = [seeding.np_random()[0] for _ in range(n)]
@@ -423,8 +424,13 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
                 if not isinstance(loaded, RoadProfile):
                     raise GymConfigError(f"road: {cfg.road!r} is not a road profile")
                 profile = cut_profile(loaded, cfg.route_length)
-                sim = Simulator(self._spec, profile, cfg.effects, None, sim_seed, initial_speed=cfg.initial_speed,
-                                log_capacity=self._n_sub)
+                template = self._templates.get(key[3])
+                if template is None:  # the first episode with these effects: validate and pack the vehicle
+                    sim = Simulator(self._spec, profile, cfg.effects, None, sim_seed,
+                                    initial_speed=cfg.initial_speed, log_capacity=self._n_sub)
+                    self._templates[key[3]] = sim
+                else:  # the packed vehicle and effects of that first simulator on the new road (bit for bit)
+                    sim = template.on_road(profile, sim_seed, cfg.initial_speed)
                 fresh = True
             except GymConfigError:
                 raise

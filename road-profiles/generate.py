@@ -189,16 +189,37 @@ def _cell_average(s: np.ndarray, knot_s: np.ndarray, knot_v: np.ndarray) -> np.n
     knot_s = np.concatenate([[min(knot_s[0], s[0]) - 1.0], knot_s, [max(knot_s[-1], s[-1]) + 1.0]])
     knot_v = np.concatenate([[knot_v[0]], knot_v, [knot_v[-1]]])
     area = np.concatenate([[0.0], np.cumsum(0.5 * (knot_v[1:] + knot_v[:-1]) * np.diff(knot_s))])
-
-    def integral(x):
-        k = np.clip(np.searchsorted(knot_s, x, side="right") - 1, 0, knot_s.size - 2)
-        width = knot_s[k + 1] - knot_s[k]
-        slope = np.divide(knot_v[k + 1] - knot_v[k], width, out=np.zeros_like(width), where=width > 0)
-        dx = x - knot_s[k]
-        return area[k] + knot_v[k] * dx + 0.5 * slope * dx ** 2
-
     h = s[1] - s[0]
-    return (integral(s + h / 2) - integral(s - h / 2)) / h
+    return _cell_means(s, h, knot_s, knot_v, area)
+
+
+@njit(cache=True)
+def _knot_integral(x, knot_s, knot_v, area):
+    """Integral of the piecewise-linear (knot_s, knot_v) from knot_s[0] to x: area[k] + v_k dx + slope dx^2 / 2 on
+    the knot interval k = (last knot <= x), clamped to the first / last interval (knot_s sorted)."""
+    lo, hi = 0, knot_s.size
+    while lo < hi:  # searchsorted(knot_s, x, side="right")
+        mid = (lo + hi) // 2
+        if knot_s[mid] <= x:
+            lo = mid + 1
+        else:
+            hi = mid
+    k = min(max(lo - 1, 0), knot_s.size - 2)
+    width = knot_s[k + 1] - knot_s[k]
+    slope = (knot_v[k + 1] - knot_v[k]) / width if width > 0 else 0.0
+    dx = x - knot_s[k]
+    return area[k] + knot_v[k] * dx + 0.5 * slope * (dx * dx)
+
+
+@njit(cache=True)
+def _cell_means(s, h, knot_s, knot_v, area):
+    """(integral to s_i + h/2 - integral to s_i - h/2) / h for every grid point (numpy's order of operations)."""
+    out = np.empty(s.size)
+    half = h / 2
+    for i in range(s.size):
+        out[i] = (_knot_integral(s[i] + half, knot_s, knot_v, area)
+                  - _knot_integral(s[i] - half, knot_s, knot_v, area)) / h
+    return out
 
 
 def _zones(rng: np.random.Generator, s: np.ndarray, choices: list[tuple[float, tuple[float, float], float]]

@@ -44,3 +44,32 @@ def test_generated_road_statistics_unchanged():
     grades = np.concatenate([np.tan(g.hilly(seed).grade) for seed in range(10)])
     assert abs(grades.mean()) < 0.01
     assert 0.025 < grades.std() < 0.05
+
+
+def _cell_average_numpy(s, knot_s, knot_v):
+    """The numpy form the compiled cell average replaced (reference)."""
+    knot_s = np.concatenate([[min(knot_s[0], s[0]) - 1.0], knot_s, [max(knot_s[-1], s[-1]) + 1.0]])
+    knot_v = np.concatenate([[knot_v[0]], knot_v, [knot_v[-1]]])
+    area = np.concatenate([[0.0], np.cumsum(0.5 * (knot_v[1:] + knot_v[:-1]) * np.diff(knot_s))])
+
+    def integral(x):
+        k = np.clip(np.searchsorted(knot_s, x, side="right") - 1, 0, knot_s.size - 2)
+        width = knot_s[k + 1] - knot_s[k]
+        slope = np.divide(knot_v[k + 1] - knot_v[k], width, out=np.zeros_like(width), where=width > 0)
+        dx = x - knot_s[k]
+        return area[k] + knot_v[k] * dx + 0.5 * slope * dx ** 2
+
+    h = s[1] - s[0]
+    return (integral(s + h / 2) - integral(s - h / 2)) / h
+
+
+def test_cell_average_equals_the_numpy_form_bitwise():
+    rng = np.random.default_rng(5)
+    for trial in range(30):
+        s = g._grid(float(rng.uniform(100, 5000)), float(rng.choice([1.0, 2.0, 5.0])))
+        knots = np.sort(rng.uniform(-50.0, s[-1] + 50.0, int(rng.integers(1, 60))))
+        if trial % 3 == 0 and knots.size > 2:
+            knots[1] = knots[0]  # a zero-width interval (a curve knot repeated)
+        values = rng.normal(0.0, 0.01, knots.size)
+        want = _cell_average_numpy(s, knots, values)
+        assert np.array_equal(g._cell_average(s, knots, values), want), trial

@@ -68,20 +68,20 @@ def compare_with(args: argparse.Namespace) -> None:
             return statistics.median(r[key] for run in runs for r in run["ratios"] if r["threads"] == t)
         o_wall, n_wall = pick(old, "native_steps_per_s"), pick(new, "native_steps_per_s")
         o_cpu, n_cpu = pick(old, "native_steps_per_cpu_s"), pick(new, "native_steps_per_cpu_s")
-        rows.append({"threads": t, "old_steps_per_s": o_wall, "new_steps_per_s": n_wall,
-                     "new/old wall": n_wall / o_wall,
-                     "old_steps_per_cpu_s": o_cpu, "new_steps_per_cpu_s": n_cpu, "new/old cpu": n_cpu / o_cpu,
-                     "old native/bare wall": pick(old, "native_over_bare_wall"),
-                     "new native/bare wall": pick(new, "native_over_bare_wall"),
-                     "old native/bare cpu": pick(old, "native_over_bare_cpu"),
-                     "new native/bare cpu": pick(new, "native_over_bare_cpu")})
+        rows.append({"threads": t, "old /s": o_wall, "new /s": n_wall, "new/old": n_wall / o_wall,
+                     "old /cpu-s": o_cpu, "new /cpu-s": n_cpu, "new/old cpu": n_cpu / o_cpu,
+                     "old n/b": pick(old, "native_over_bare_wall"), "new n/b": pick(new, "native_over_bare_wall"),
+                     "old n/b cpu": pick(old, "native_over_bare_cpu"),
+                     "new n/b cpu": pick(new, "native_over_bare_cpu")})
     loads = [run["load_1min_start"] for run in old + new]
     table = pd.DataFrame(rows)
     print_table(console, table.assign(**{c: table[c].map("{:,.0f}".format) for c in table.columns
-                                         if c.endswith("_per_s") or c.endswith("_per_cpu_s")}),
+                                         if c.endswith(("/s", "/cpu-s"))}),
                 f"native vector env x{args.native}: {args.compare} (old) vs working tree (new), median of "
                 f"{args.rounds} interleaved rounds; load average at the starts {min(loads):.1f}-{max(loads):.1f}",
                 "{:.2f}")
+    console.print("/s = env steps per wall second, /cpu-s = per CPU second of the process, n/b = native env / bare "
+                  "batched physics with the same threads (wall, cpu)")
 
 
 if __name__ == "__main__":

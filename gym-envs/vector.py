@@ -337,7 +337,8 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
         self._high = np.array([row[4] for row in self.layout]) / self._scale
         self.single_observation_space = spaces.Box(self._low.astype(np.float32), self._high.astype(np.float32),
                                                    shape=(n_obs,), dtype=np.float32)
-        self.single_action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        self._action_box = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        self.single_action_space = self._action_box
         self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, n)
         self.action_space = gym.vector.utils.batch_space(self.single_action_space, n)
         self._preview = np.array((0.0, *cfg.preview_distances))
@@ -534,7 +535,7 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
                 if flat.dtype == np.float64:  # the action space is float32: round as validate_actions does
                     flat = flat.astype(np.float32)
                 return flat.astype(np.float64)
-        return validate_actions(actions, self.single_action_space, n)[:, 0].astype(np.float64)
+        return validate_actions(actions, self._action_box, n)[:, 0].astype(np.float64)
 
     def step(self, actions):
         u = self._actions(actions)
@@ -585,11 +586,12 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
     def _step_compiled(self, active: np.ndarray, u: np.ndarray, reward: np.ndarray, term: np.ndarray,
                        trunc: np.ndarray, info: np.ndarray, ints: np.ndarray) -> None:
         args = self._step_args()
-        tail = (*self._args_tail, term, trunc, *self._args_work, info, ints, self._road_seed)
+        call = (active, u, *args, reward, *self._args_tail, term, trunc, *self._args_work, info, ints,
+                self._road_seed)
         if self.threads > 1:
-            _step_threads(self.threads, active, u, *args, reward, *tail)
+            _step_threads(self.threads, *call)
         else:
-            _step_range(0, self.num_envs, active, u, *args, reward, *tail)
+            _step_range(0, self.num_envs, *call)
 
     def _info_dict(self, block: np.ndarray, ints: np.ndarray, mask: np.ndarray,
                    with_terms: np.ndarray | None) -> dict[str, Any]:

@@ -24,6 +24,9 @@ ran 3x slower than one (10-14k against 34-41k env steps/s at N = 256, load avera
 ``OMP_WAIT_POLICY=PASSIVE`` the same runs gave 68-146k. So the first env with ``threads > 1`` sets
 ``OMP_WAIT_POLICY=PASSIVE`` unless the variable is already set (set ``OMP_WAIT_POLICY=ACTIVE`` beforehand for
 dedicated cores) and unless numba's thread pool has already started; :func:`openmp_wait_policy` reports it.
+libgomp reads the variable once, when it is loaded: if torch (stable-baselines3) was imported first, setting it
+here has no effect (2 threads then ran 32k instead of 160k env steps/s on the loaded machine) and the env warns;
+set ``OMP_WAIT_POLICY`` in the environment before Python starts in that case (scripts/bench_gym.py does).
 
 Not batched: observation modes ``'can'`` and ``'can+estimates'`` (the CAN sensor model and the online estimator
 are per-vehicle Python objects) and time-varying (scheduled) effects; use ``vectorization_mode='sync'`` for those.
@@ -32,6 +35,7 @@ are per-vehicle Python objects) and time-varying (scheduled) effects; use ``vect
 from __future__ import annotations
 
 import os
+import warnings
 from typing import Any
 
 import gymnasium as gym
@@ -285,17 +289,48 @@ def _advance_threads(n_chunks, active, u, X, P, tabs, ti, road, road_n, stops, s
                       stops_n, cycle, rng, cmd, log, n_sub, F)
 
 
+_WAIT_POLICY_LATE = False
+"""True when this module set OMP_WAIT_POLICY after an OpenMP runtime was already loaded (then not in effect)."""
+
+
+def _openmp_runtime_loaded() -> bool:
+    """Whether an OpenMP runtime (libgomp / libiomp / libomp) is mapped into this process (Linux; False elsewhere).
+    libgomp reads OMP_WAIT_POLICY once, when it is loaded: torch (imported by stable-baselines3) loads it."""
+    try:
+        with open("/proc/self/maps") as f:
+            maps = f.read()
+    except OSError:
+        return False
+    return any(name in maps for name in ("libgomp", "libiomp", "libomp"))
+
+
 def _prefer_passive_openmp_wait() -> None:
-    """OMP_WAIT_POLICY=PASSIVE unless set, before numba's OpenMP pool starts (module docstring: Threads)."""
+    """OMP_WAIT_POLICY=PASSIVE unless set, before numba's OpenMP pool starts (module docstring: Threads); a
+    RuntimeWarning when an OpenMP runtime is already loaded, so that the setting cannot take effect any more (with
+    torch imported first, 2 threads ran 32k instead of 160k env steps/s at N = 256 on the loaded 2-core machine)."""
+    global _WAIT_POLICY_LATE
+    if "OMP_WAIT_POLICY" in os.environ:
+        return
     try:
         numba.threading_layer()  # raises ValueError while no parallel function has run: the pool is not started
+        return
     except ValueError:
-        os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+        pass
+    if _openmp_runtime_loaded():
+        _WAIT_POLICY_LATE = True
+        warnings.warn("threads > 1: an OpenMP runtime is already loaded in this process (e.g. by torch), so "
+                      "OMP_WAIT_POLICY=PASSIVE can no longer take effect and idle OpenMP threads spin, which is "
+                      "several times slower on a machine whose cores are busy; set OMP_WAIT_POLICY=PASSIVE in the "
+                      "environment before Python starts (or before importing torch / stable-baselines3)",
+                      RuntimeWarning, stacklevel=3)
+    os.environ["OMP_WAIT_POLICY"] = "PASSIVE"
 
 
 def openmp_wait_policy() -> str:
-    """The ``OMP_WAIT_POLICY`` of this process ('default' = unset: libgomp spins, then sleeps)."""
-    return os.environ.get("OMP_WAIT_POLICY", "default")
+    """The ``OMP_WAIT_POLICY`` of this process ('default' = unset: libgomp spins, then sleeps; a note when this
+    module set it after the OpenMP runtime was loaded, i.e. without effect)."""
+    policy = os.environ.get("OMP_WAIT_POLICY", "default")
+    return f"{policy} (set after the OpenMP runtime was loaded: not in effect)" if _WAIT_POLICY_LATE else policy
 
 
 # --------------------------------------------------------------------------------------------- the vector env

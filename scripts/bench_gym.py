@@ -24,19 +24,25 @@ load), and prints per thread count the native env's wall and per-CPU-second rate
 native / bare of each (the bare batched physics is the same code in both, so it also shows how the load moved).
 """
 
-import argparse
-import json
 import os
-import statistics
-import sys
-from pathlib import Path
 
-import pandas as pd
-from rich.console import Console
+# libgomp reads OMP_WAIT_POLICY once, when it is loaded, and roadload.experiments.rl imports torch, which loads it:
+# the default has to be set before that import (the env's own default comes too late then: 32k instead of 160k
+# env steps/s with 2 threads on the loaded machine)
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from roadload.experiments.rl import (load_average, native_ratios, print_table, run_benchmark, run_native_benchmark,
-                                     speed_ratio)
-from roadload.gym.vector import openmp_wait_policy
+import argparse  # noqa: E402
+import json  # noqa: E402
+import statistics  # noqa: E402
+import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import pandas as pd  # noqa: E402
+from rich.console import Console  # noqa: E402
+
+from roadload.experiments.rl import (load_average, native_ratios, print_table, run_benchmark,  # noqa: E402
+                                     run_native_benchmark, speed_ratio)
+from roadload.gym.vector import openmp_wait_policy  # noqa: E402
 
 TARGET_STEPS_PER_S = 300_000
 """Issue 17: native vector env steps/s (wall) at N = 256 on the 2-core machine."""

@@ -252,3 +252,12 @@ def test_same_step_final_info_has_the_single_env_terms_and_the_new_episode_info(
                 _check_info(vinfo, i, inf, with_terms=False)
             _close(vobs[i], o, "obs")
     assert finals >= 3
+
+
+def test_openmp_runtime_loaded_by_torch_is_detected():
+    """torch loads libgomp, which reads OMP_WAIT_POLICY only then: the vector env must see that (and warn) rather
+    than believe its late PASSIVE default is in effect."""
+    pytest.importorskip("torch")
+    from roadload.gym.vector import _openmp_runtime_loaded
+
+    assert _openmp_runtime_loaded()

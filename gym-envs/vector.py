@@ -84,11 +84,17 @@ _SPEED_LIMIT = RouteTable.SPEED_LIMIT
 @njit(cache=True)
 def _observe_one(X, E, table, preview, stops, n_stops, scale, low, high, buf, la, out):
     """The single env's 'state' observation (EcoDriveEnv._observe) for one vehicle -> out (float32)."""
+    _look_ahead(table, PREVIEW_GRID, preview, X[S_POS], la)
+    _observe_from_look_ahead(X, E, la, stops, n_stops, scale, low, high, buf, out)
+
+
+@njit(cache=True)
+def _observe_from_look_ahead(X, E, la, stops, n_stops, scale, low, high, buf, out):
+    """_observe_one with the route table's look-ahead la (rows at s + preview) already read."""
     s = X[S_POS]
     buf[0] = X[S_V]
     buf[1] = X[S_A]
     k = 2
-    _look_ahead(table, PREVIEW_GRID, preview, s, la)
     m = la.shape[1]
     for r in range(3):
         for j in range(m):
@@ -201,11 +207,15 @@ def _step_range(lo, hi, active, u, X, P, tabs, ti, road, road_n, stops, stops_n,
         x[S_NLOG] = 0.0
         physics.advance(x, P[i], tabs, ti, road[i, :, :road_n[i]], stops[i, :stops_n[i]], cycle, rng[i], c,
                         log[i], n_sub)
-        # stage 'speed limit' at the new position s1 (route table, linear interpolation)
+        # stage 'look-ahead': the route table (grade, curvature, speed limit, schedule time; linear interpolation)
+        # at s1 + preview; preview[0] = 0, so column 0 holds the speed limit at s1 itself (the same arithmetic as
+        # RouteTable.at), read once for the reward and the observation
         tab = table[i, :, :table_n[i]]
         s1 = x[S_POS]
         v1 = x[S_V]
-        limit = _speed_limit_at(tab, s1, zero[i], one[i])
+        lai = la[i]
+        _look_ahead(tab, PREVIEW_GRID, preview, s1, lai)
+        limit = lai[_SPEED_LIMIT, 0]
         e[E_LIMIT] = limit
         length = e[E_LENGTH]
         # stage 'reward terms' (EcoDriveReward): speeding = (mean(v) - mean(v_lim))+ dt, lateral = (|a_y| - a_max)+ dt,
@@ -246,7 +256,7 @@ def _step_range(lo, hi, active, u, X, P, tabs, ti, road, road_n, stops, stops_n,
         e[E_U_PREV] = ui
         e[E_A_PREV] = x[S_A]
         # stage 'observation' (EcoDriveEnv._observe, mode 'state') and stage 'info'
-        _observe_one(x, e, tab, preview, rstops[i], rstops_n[i], scale, low, high, buf[i], la[i], obs[i])
+        _observe_from_look_ahead(x, e, lai, rstops[i], rstops_n[i], scale, low, high, buf[i], obs[i])
         _gather_info(i, x, e, ret_costs, tm, cs, True, info, ints, road_seed)
 
 
@@ -376,7 +386,7 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
         self.single_action_space = self._action_box
         self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, n)
         self.action_space = gym.vector.utils.batch_space(self.single_action_space, n)
-        self._preview = np.array((0.0, *cfg.preview_distances))
+        self._preview = np.array((0.0, *cfg.preview_distances))  # column 0 = at s: the compiled step's limit
         # per-vehicle arrays (grown on demand where roads differ in length)
         self._X = np.zeros((n, N_STATE))
         self._P = np.zeros((n, N_PARAMS))

@@ -24,6 +24,9 @@ ran 3x slower than one (10-14k against 34-41k env steps/s at N = 256, load avera
 ``OMP_WAIT_POLICY=PASSIVE`` the same runs gave 68-146k. So the first env with ``threads > 1`` sets
 ``OMP_WAIT_POLICY=PASSIVE`` unless the variable is already set (set ``OMP_WAIT_POLICY=ACTIVE`` beforehand for
 dedicated cores) and unless numba's thread pool has already started; :func:`openmp_wait_policy` reports it.
+libgomp reads the variable once, when it is loaded: if torch (stable-baselines3) was imported first, setting it
+here has no effect (2 threads then ran 32k instead of 160k env steps/s on the loaded machine) and the env warns;
+set ``OMP_WAIT_POLICY`` in the environment before Python starts in that case (scripts/bench_gym.py does).
 
 Not batched: observation modes ``'can'`` and ``'can+estimates'`` (the CAN sensor model and the online estimator
 are per-vehicle Python objects) and time-varying (scheduled) effects; use ``vectorization_mode='sync'`` for those.
@@ -32,6 +35,7 @@ are per-vehicle Python objects) and time-varying (scheduled) effects; use ``vect
 from __future__ import annotations
 
 import os
+import warnings
 from typing import Any
 
 import gymnasium as gym
@@ -45,7 +49,7 @@ from roadload.envs import physics
 from roadload.envs.layout import (C_GEAR_REQ, C_STEER, C_TRACTION, C_USE_DRIVER, N_CMD, N_LOG, N_PARAMS, N_ROAD,
                                   N_STATE, S_A, S_AY, S_E_SOURCE, S_GEAR, S_NLOG, S_POS, S_T, S_V)
 from roadload.envs.simulator import Simulator
-from roadload.gym.actions import validate_actions
+from roadload.gym.actions import BOUND_TOLERANCE, validate_actions
 from roadload.gym.config import SPACE_FIELDS_ECODRIVE, EcoDriveConfig, GymConfigError, make_config, updated_config
 from roadload.gym.ecodrive import (PREVIEW_GRID, STOP_HORIZON, DriveScales, RouteTable, _look_ahead, cut_profile,
                                    observation_layout, shield_command)
@@ -56,6 +60,16 @@ COST_NAMES = ("energy", "time", "speeding", "lateral", "stop", "jerk", "progress
 """Reward terms, in the order of ``info['terms']`` / ``info['costs']`` (EcoDriveEnv)."""
 INFO_SCALARS = ("t", "s", "v", "a", "gear", "speed_limit", "source_energy_total", "road_seed", "route_length",
                 "schedule_time")
+
+# rows of the float info block one step returns (filled by the compiled step; each info array is a row view of a
+# block allocated afresh per step, so infos a user keeps are never overwritten): INFO_SCALARS without the two
+# integer keys, then return_costs, terms and costs (7 each, COST_NAMES order)
+I_T, I_S, I_V, I_A, I_LIMIT, I_ENERGY_TOTAL, I_ROUTE_LENGTH, I_SCHEDULE = range(8)
+I_RETURN, I_TERMS, I_COSTS = 8, 15, 22
+N_INFO = 29
+_INFO_ROWS = (("t", I_T), ("s", I_S), ("v", I_V), ("a", I_A), ("gear", -1), ("speed_limit", I_LIMIT),
+              ("source_energy_total", I_ENERGY_TOTAL), ("road_seed", -2), ("route_length", I_ROUTE_LENGTH),
+              ("schedule_time", I_SCHEDULE))
 
 # per-env scalars of the episode bookkeeping (columns of the `E` array)
 E_LIMIT, E_U_PREV, E_A_PREV, E_LAST_ENERGY, E_TIME_LIMIT, E_LENGTH, E_ROUTE_TIME = range(7)
@@ -70,11 +84,17 @@ _SPEED_LIMIT = RouteTable.SPEED_LIMIT
 @njit(cache=True)
 def _observe_one(X, E, table, preview, stops, n_stops, scale, low, high, buf, la, out):
     """The single env's 'state' observation (EcoDriveEnv._observe) for one vehicle -> out (float32)."""
+    _look_ahead(table, PREVIEW_GRID, preview, X[S_POS], la)
+    _observe_from_look_ahead(X, E, la, stops, n_stops, scale, low, high, buf, out)
+
+
+@njit(cache=True)
+def _observe_from_look_ahead(X, E, la, stops, n_stops, scale, low, high, buf, out):
+    """_observe_one with the route table's look-ahead la (rows at s + preview) already read."""
     s = X[S_POS]
     buf[0] = X[S_V]
     buf[1] = X[S_A]
     k = 2
-    _look_ahead(table, PREVIEW_GRID, preview, s, la)
     m = la.shape[1]
     for r in range(3):
         for j in range(m):
@@ -130,51 +150,93 @@ def advance_range(lo, hi, active, u, X, P, tabs, ti, road, road_n, stops, stops_
                         log[i], n_sub)
 
 
+@njit(inline="always", cache=True)
+def _gather_info(i, x, e, ret_costs, tm, cs, with_terms, info, ints, road_seed):
+    """Stage 'info' of vehicle i: the single env's info values (EcoDriveEnv._info; terms / costs only for a vehicle
+    that stepped, zeros otherwise) -> column i of the info block (float rows I_*) and of the integer block (gear,
+    road seed)."""
+    info[I_T, i] = x[S_T]
+    info[I_S, i] = x[S_POS]
+    info[I_V, i] = x[S_V]
+    info[I_A, i] = x[S_A]
+    info[I_LIMIT, i] = e[E_LIMIT]
+    info[I_ENERGY_TOTAL, i] = x[S_E_SOURCE]
+    info[I_ROUTE_LENGTH, i] = e[E_LENGTH]
+    info[I_SCHEDULE, i] = e[E_ROUTE_TIME]
+    ints[0, i] = np.int64(x[S_GEAR])  # truncation, as ndarray.astype(np.int64)
+    ints[1, i] = road_seed[i]
+    for k in range(7):
+        info[I_RETURN + k, i] = ret_costs[i, k]
+        info[I_TERMS + k, i] = tm[k] if with_terms else 0.0
+        info[I_COSTS + k, i] = cs[k] if with_terms else 0.0
+
+
 @njit(cache=True)
 def _step_range(lo, hi, active, u, X, P, tabs, ti, road, road_n, stops, stops_n, cycle, rng, cmd, log, n_sub, F,
                 E, table, table_n, envelope, preview, rstops, rstops_n, W, dt, lat_lim, stop_speed,
-                scale, low, high, obs, reward, terms, costs, ret_costs, term, trunc, buf, la, zero, one):
-    """One env step of every active vehicle: EcoDriveEnv.step (physics via advance_batch's loop body, reward terms,
-    'state' observation) for vehicles lo..hi-1. W = (energy, time, speeding, lateral, stop, jerk, progress, scale)
-    reward weights."""
+                scale, low, high, obs, reward, terms, costs, ret_costs, term, trunc, buf, la, zero, one,
+                info, ints, road_seed):
+    """One env step (EcoDriveEnv.step) of vehicles lo..hi-1 as named stages per vehicle: action (clip to [-1, 1],
+    speed shield), physics (the simulator core), speed limit, reward terms, done flags, 'state' observation and
+    info. A vehicle that is not active (reset in this step, next-step autoreset) only gets reward 0, no done flags,
+    no terms and its info. W = (energy, time, speeding, lateral, stop, jerk, progress, scale) reward weights;
+    reward / term / trunc / info / ints are written for every vehicle."""
     for i in range(lo, hi):
-        if not active[i]:
-            continue
         x = X[i]
         e = E[i]
+        tm = terms[i]
+        cs = costs[i]
+        if not active[i]:
+            reward[i] = 0.0
+            term[i] = False
+            trunc[i] = False
+            _gather_info(i, x, e, ret_costs, tm, cs, False, info, ints, road_seed)
+            continue
+        # stage 'action': u clipped to [-1, 1], then capped by the speed shield
+        # u <= SHIELD_GAIN (v_env(s) - v) (no-op without the shield: envelope = NO_SHIELD)
         ui = u[i]
         ui = -1.0 if ui < -1.0 else (1.0 if ui > 1.0 else ui)
         s0 = x[S_POS]
         v0 = x[S_V]
-        ui = shield_command(envelope[i], table_n[i], s0, v0, ui)  # no-op without the shield (envelope = NO_SHIELD)
+        ui = shield_command(envelope[i], table_n[i], s0, v0, ui)
         limit0 = e[E_LIMIT]
+        # stage 'physics': wheel force F_w = u min(F_peak, P_max / max(v, 1)) (u >= 0) or u F_brake (u < 0),
+        # held for n_sub substeps of the simulator core
         c = cmd[i]
         _set_command(c, ui, v0, F)
         x[S_NLOG] = 0.0
         physics.advance(x, P[i], tabs, ti, road[i, :, :road_n[i]], stops[i, :stops_n[i]], cycle, rng[i], c,
                         log[i], n_sub)
+        # stage 'look-ahead': the route table (grade, curvature, speed limit, schedule time; linear interpolation)
+        # at s1 + preview; preview[0] = 0, so column 0 holds the speed limit at s1 itself (the same arithmetic as
+        # RouteTable.at), read once for the reward and the observation
         tab = table[i, :, :table_n[i]]
         s1 = x[S_POS]
         v1 = x[S_V]
-        limit = _speed_limit_at(tab, s1, zero[i], one[i])
+        lai = la[i]
+        _look_ahead(tab, PREVIEW_GRID, preview, s1, lai)
+        limit = lai[_SPEED_LIMIT, 0]
         e[E_LIMIT] = limit
         length = e[E_LENGTH]
+        # stage 'reward terms' (EcoDriveReward): speeding = (mean(v) - mean(v_lim))+ dt, lateral = (|a_y| - a_max)+ dt,
+        # stop = stop lines s0 < s_stop <= s1 crossed faster than stop_speed (speed interpolated linearly),
+        # jerk^2 dt with jerk = (a1 - a0) / dt, progress = min(s1, L) - min(s0, L), energy = E_source(t1) - E_source(t0)
         speeding = max(0.0, 0.5 * (v0 + v1 - limit0 - limit)) * dt
         lateral = max(0.0, abs(x[S_AY]) - lat_lim) * dt
         stop = 0.0
-        for j in range(rstops_n[i]):  # stops with s0 < stop <= s1
+        for j in range(rstops_n[i]):
             st = rstops[i, j]
             if st > s0 and st <= s1:
                 frac = (st - s0) / max(s1 - s0, 1e-9)
                 if v0 + frac * (v1 - v0) > stop_speed:
                     stop += 1.0
         jerk = (x[S_A] - e[E_A_PREV]) / dt
+        # stage 'done flags': terminated at the route end, truncated at the time limit
         terminated = s1 >= length - 1e-6
         truncated = (not terminated) and x[S_T] >= e[E_TIME_LIMIT] - 1e-9
         progress = min(s1, length) - min(s0, length)
         energy = x[S_E_SOURCE] - e[E_LAST_ENERGY]
         e[E_LAST_ENERGY] = x[S_E_SOURCE]
-        tm = terms[i]
         tm[0] = energy
         tm[1] = dt
         tm[2] = speeding
@@ -182,7 +244,7 @@ def _step_range(lo, hi, active, u, X, P, tabs, ti, road, road_n, stops, stops_n,
         tm[4] = stop
         tm[5] = jerk * jerk * dt
         tm[6] = progress
-        cs = costs[i]
+        # stage 'reward': r = -scale * sum_k cost_k with cost_k = w_k term_k (progress: -w_progress ds)
         total = 0.0
         for k in range(7):
             cs[k] = (-W[6] * tm[6]) if k == 6 else W[k] * tm[k]
@@ -193,22 +255,39 @@ def _step_range(lo, hi, active, u, X, P, tabs, ti, road, road_n, stops, stops_n,
         trunc[i] = truncated
         e[E_U_PREV] = ui
         e[E_A_PREV] = x[S_A]
-        _observe_one(x, e, tab, preview, rstops[i], rstops_n[i], scale, low, high, buf[i], la[i], obs[i])
+        # stage 'observation' (EcoDriveEnv._observe, mode 'state') and stage 'info'
+        _observe_from_look_ahead(x, e, lai, rstops[i], rstops_n[i], scale, low, high, buf[i], obs[i])
+        _gather_info(i, x, e, ret_costs, tm, cs, True, info, ints, road_seed)
 
 
 @njit(parallel=True, cache=True)
 def _step_threads(n_chunks, active, u, X, P, tabs, ti, road, road_n, stops, stops_n, cycle, rng, cmd, log, n_sub,
                   F, E, table, table_n, envelope, preview, rstops, rstops_n, W, dt, lat_lim, stop_speed, scale, low,
-                  high, obs,
-                  reward, terms, costs, ret_costs, term, trunc, buf, la, zero, one):
+                  high, obs, reward, terms, costs, ret_costs, term, trunc, buf, la, zero, one, info, ints,
+                  road_seed):
     """_step_range over n_chunks contiguous blocks of vehicles, one numba thread each."""
     n = X.shape[0]
     for c in prange(n_chunks):
         _step_range(c * n // n_chunks, (c + 1) * n // n_chunks, active, u, X, P, tabs, ti, road, road_n, stops,
                     stops_n, cycle, rng, cmd, log, n_sub, F, E, table, table_n, envelope, preview, rstops, rstops_n,
-                    W, dt,
-                    lat_lim, stop_speed, scale, low, high, obs, reward, terms, costs, ret_costs, term, trunc, buf,
-                    la, zero, one)
+                    W, dt, lat_lim, stop_speed, scale, low, high, obs, reward, terms, costs, ret_costs, term, trunc,
+                    buf, la, zero, one, info, ints, road_seed)
+
+
+@njit(cache=True)
+def _gather_info_all(X, E, ret_costs, terms, costs, info, ints, road_seed):
+    """Stage 'info' of every vehicle without terms (the info of reset())."""
+    for i in range(X.shape[0]):
+        _gather_info(i, X[i], E[i], ret_costs, terms[i], costs[i], False, info, ints, road_seed)
+
+
+@njit(cache=True)
+def _actions_in_bounds(u, tol):
+    """True when every action is finite and inside [-1 - tol, 1 + tol] (the fast path of the action check)."""
+    for j in range(u.size):
+        if not (u[j] >= -1.0 - tol and u[j] <= 1.0 + tol):  # NaN fails too
+            return False
+    return True
 
 
 @njit(parallel=True, cache=True)
@@ -220,17 +299,48 @@ def _advance_threads(n_chunks, active, u, X, P, tabs, ti, road, road_n, stops, s
                       stops_n, cycle, rng, cmd, log, n_sub, F)
 
 
+_WAIT_POLICY_LATE = False
+"""True when this module set OMP_WAIT_POLICY after an OpenMP runtime was already loaded (then not in effect)."""
+
+
+def _openmp_runtime_loaded() -> bool:
+    """Whether an OpenMP runtime (libgomp / libiomp / libomp) is mapped into this process (Linux; False elsewhere).
+    libgomp reads OMP_WAIT_POLICY once, when it is loaded: torch (imported by stable-baselines3) loads it."""
+    try:
+        with open("/proc/self/maps") as f:
+            maps = f.read()
+    except OSError:
+        return False
+    return any(name in maps for name in ("libgomp", "libiomp", "libomp"))
+
+
 def _prefer_passive_openmp_wait() -> None:
-    """OMP_WAIT_POLICY=PASSIVE unless set, before numba's OpenMP pool starts (module docstring: Threads)."""
+    """OMP_WAIT_POLICY=PASSIVE unless set, before numba's OpenMP pool starts (module docstring: Threads); a
+    RuntimeWarning when an OpenMP runtime is already loaded, so that the setting cannot take effect any more (with
+    torch imported first, 2 threads ran 32k instead of 160k env steps/s at N = 256 on the loaded 2-core machine)."""
+    global _WAIT_POLICY_LATE
+    if "OMP_WAIT_POLICY" in os.environ:
+        return
     try:
         numba.threading_layer()  # raises ValueError while no parallel function has run: the pool is not started
+        return
     except ValueError:
-        os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+        pass
+    if _openmp_runtime_loaded():
+        _WAIT_POLICY_LATE = True
+        warnings.warn("threads > 1: an OpenMP runtime is already loaded in this process (e.g. by torch), so "
+                      "OMP_WAIT_POLICY=PASSIVE can no longer take effect and idle OpenMP threads spin, which is "
+                      "several times slower on a machine whose cores are busy; set OMP_WAIT_POLICY=PASSIVE in the "
+                      "environment before Python starts (or before importing torch / stable-baselines3)",
+                      RuntimeWarning, stacklevel=3)
+    os.environ["OMP_WAIT_POLICY"] = "PASSIVE"
 
 
 def openmp_wait_policy() -> str:
-    """The ``OMP_WAIT_POLICY`` of this process ('default' = unset: libgomp spins, then sleeps)."""
-    return os.environ.get("OMP_WAIT_POLICY", "default")
+    """The ``OMP_WAIT_POLICY`` of this process ('default' = unset: libgomp spins, then sleeps; a note when this
+    module set it after the OpenMP runtime was loaded, i.e. without effect)."""
+    policy = os.environ.get("OMP_WAIT_POLICY", "default")
+    return f"{policy} (set after the OpenMP runtime was loaded: not in effect)" if _WAIT_POLICY_LATE else policy
 
 
 # --------------------------------------------------------------------------------------------- the vector env
@@ -272,10 +382,11 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
         self._high = np.array([row[4] for row in self.layout]) / self._scale
         self.single_observation_space = spaces.Box(self._low.astype(np.float32), self._high.astype(np.float32),
                                                    shape=(n_obs,), dtype=np.float32)
-        self.single_action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        self._action_box = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        self.single_action_space = self._action_box
         self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, n)
         self.action_space = gym.vector.utils.batch_space(self.single_action_space, n)
-        self._preview = np.array((0.0, *cfg.preview_distances))
+        self._preview = np.array((0.0, *cfg.preview_distances))  # column 0 = at s: the compiled step's limit
         # per-vehicle arrays (grown on demand where roads differ in length)
         self._X = np.zeros((n, N_STATE))
         self._P = np.zeros((n, N_PARAMS))
@@ -310,6 +421,7 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
         self._road_seed = np.zeros(n, dtype=np.int64)
         self._gear = np.zeros(n, dtype=np.int64)
         self._sims: list[Simulator | None] = [None] * n
+        self._templates: dict[str, Simulator] = {}  # per repr(effects): the simulator new roads are set up from
         self._keys: list[tuple | None] = [None] * n
         self._routes: list[RouteTable | None] = [None] * n
         self._rngs: list[np.random.Generator] = [seeding.np_random()[0] for _ in range(n)]
@@ -322,6 +434,12 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
         self._tabs: np.ndarray | None = None  # vehicle tables, shared by all sub-envs (set by the first setup)
         self._ti: np.ndarray | None = None
         self._configs: list[EcoDriveConfig] = [cfg] * n
+        w = cfg.reward
+        self._W = np.array([w.energy, w.time, w.speeding, w.lateral, w.stop, w.jerk, w.progress, w.scale])
+        self._all_active = np.ones(n, dtype=bool)
+        self._args: tuple | None = None  # the compiled step's arguments (_step_args)
+        self._args_tail: tuple = ()
+        self._args_work: tuple = ()
         self._setup_one(0, cfg, cfg.road_seed if cfg.road_seed is not None else cfg.road_seed_range[0], 0)
 
     # ------------------------------------------------------------------ checks
@@ -339,6 +457,7 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
             new = np.zeros(arr.shape[:-1] + (width,), dtype=arr.dtype)
             new[..., :arr.shape[-1]] = arr
             setattr(self, name, new)
+            self._args = None  # the compiled step's argument tuple holds the old array
             arr = new
         return arr
 
@@ -351,8 +470,13 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
                 if not isinstance(loaded, RoadProfile):
                     raise GymConfigError(f"road: {cfg.road!r} is not a road profile")
                 profile = cut_profile(loaded, cfg.route_length)
-                sim = Simulator(self._spec, profile, cfg.effects, None, sim_seed, initial_speed=cfg.initial_speed,
-                                log_capacity=self._n_sub)
+                template = self._templates.get(key[3])
+                if template is None:  # the first episode with these effects: validate and pack the vehicle
+                    sim = Simulator(self._spec, profile, cfg.effects, None, sim_seed,
+                                    initial_speed=cfg.initial_speed, log_capacity=self._n_sub)
+                    self._templates[key[3]] = sim
+                else:  # the packed vehicle and effects of that first simulator on the new road (bit for bit)
+                    sim = template.on_road(profile, sim_seed, cfg.initial_speed)
                 fresh = True
             except GymConfigError:
                 raise
@@ -444,80 +568,108 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
         self._needs_reset[mask] = False
         return self._obs.copy(), self._info(mask, with_terms=False)
 
-    def step(self, actions):
-        u = validate_actions(actions, self.single_action_space, self.num_envs)[:, 0].astype(np.float64)
+    def _actions(self, actions: Any) -> np.ndarray:
+        """The commands as float64 (n,), equal to validate_actions' float32 result: a float32 / float64 (n, 1)
+        array inside the bounds takes a compiled check; anything else (and every bad action, for its error
+        message) goes through validate_actions. Values within BOUND_TOLERANCE outside [-1, 1] are clipped by the
+        compiled step as validate_actions clips them."""
         n = self.num_envs
-        reset_now = self._needs_reset.copy()
-        active = ~reset_now
+        if type(actions) is np.ndarray and actions.shape == (n, 1) and actions.dtype in (np.float32, np.float64):
+            flat = actions.reshape(n)
+            if _actions_in_bounds(flat, BOUND_TOLERANCE):
+                if flat.dtype == np.float64:  # the action space is float32: round as validate_actions does
+                    flat = flat.astype(np.float32)
+                return flat.astype(np.float64)
+        return validate_actions(actions, self._action_box, n)[:, 0].astype(np.float64)
+
+    def step(self, actions):
+        u = self._actions(actions)
+        n = self.num_envs
+        reset_now = self._needs_reset
         if reset_now.any():
+            active = ~reset_now
             for i in np.flatnonzero(reset_now):
                 self._reset_one(int(i), None, None)
-            self._needs_reset[:] = False
-        cfg = self.config
-        w = cfg.reward
-        W = np.array([w.energy, w.time, w.speeding, w.lateral, w.stop, w.jerk, w.progress, w.scale])
-        self._step_compiled(active, u, W, cfg)
-        reward = np.where(active, self._reward, 0.0)
-        term = self._term & active
-        trunc = self._trunc & active
-        info = self._info(np.ones(n, dtype=bool), with_terms=active)
-        done = term | trunc
+            self._needs_reset = np.zeros(n, dtype=bool)
+        else:
+            active = self._all_active
+        reward = np.empty(n)
+        term = np.empty(n, dtype=bool)
+        trunc = np.empty(n, dtype=bool)
+        info_block = np.empty((N_INFO, n))
+        ints = np.empty((2, n), dtype=np.int64)
+        self._step_compiled(active, u, reward, term, trunc, info_block, ints)
+        info = self._info_dict(info_block, ints, np.ones(n, dtype=bool), active)
         if self.autoreset_mode == gym.vector.AutoresetMode.NEXT_STEP:
-            self._needs_reset = done
+            self._needs_reset = term | trunc
             return self._obs.copy(), reward, term, trunc, info
         # same step: reset the finished sub-envs now, report their last observation / info
+        done = term | trunc
         obs = self._obs.copy()
         if done.any():
-            info["final_obs"] = np.where(done[:, None], obs, 0.0).astype(np.float32)
-            info["_final_obs"] = done
-            info["final_info"] = info_copy = {k: v for k, v in info.items() if k not in ("final_obs", "_final_obs")}
-            info["_final_info"] = done
-            del info_copy
+            final_obs = np.where(done[:, None], obs, 0.0).astype(np.float32)
             for i in np.flatnonzero(done):
                 self._reset_one(int(i), None, None)
             obs = self._obs.copy()
             fresh = self._info(done, with_terms=False)
-            info = {**fresh, "final_obs": info["final_obs"], "_final_obs": done, "final_info": info["final_info"],
-                    "_final_info": done}
+            info = {**fresh, "final_obs": final_obs, "_final_obs": done, "final_info": info, "_final_info": done}
         return obs, reward, term, trunc, info
 
-    def _step_compiled(self, active: np.ndarray, u: np.ndarray, W: np.ndarray, cfg: EcoDriveConfig) -> None:
-        args = (active, u, self._X, self._P, self._tabs, self._ti, self._road, self._road_n, self._stops,
-                self._stops_n, self._cycle, self._rng, self._cmd, self._log, self._n_sub, self._F, self._E,
-                self._table, self._table_n, self._envelope, self._preview, self._rstops, self._rstops_n, W,
-                cfg.control_period, cfg.lateral_acceleration_limit, cfg.stop_speed, self._scale, self._low,
-                self._high, self._obs, self._reward, self._terms, self._costs, self._ret_costs, self._term,
-                self._trunc, self._buf, self._la, self._zeros, self._one)
-        if self.threads > 1:
-            _step_threads(self.threads, *args)
-        else:
-            _step_range(0, self.num_envs, *args)
+    def _step_args(self) -> tuple:
+        """The per-vehicle arrays and constants of the compiled step (rebuilt when a buffer grows, see _fit)."""
+        if self._args is None:
+            cfg = self.config
+            self._args = (self._X, self._P, self._tabs, self._ti, self._road, self._road_n, self._stops,
+                          self._stops_n, self._cycle, self._rng, self._cmd, self._log, self._n_sub, self._F, self._E,
+                          self._table, self._table_n, self._envelope, self._preview, self._rstops, self._rstops_n,
+                          self._W, cfg.control_period, cfg.lateral_acceleration_limit, cfg.stop_speed, self._scale,
+                          self._low, self._high, self._obs)
+            self._args_tail = (self._terms, self._costs, self._ret_costs)
+            self._args_work = (self._buf, self._la, self._zeros, self._one)
+        return self._args
 
-    def _info(self, mask: np.ndarray, with_terms: np.ndarray | bool) -> dict[str, Any]:
-        """gymnasium vector info: one array per key of the single env's info, '_key' = which sub-envs have it."""
-        X, E = self._X, self._E
-        info: dict[str, Any] = {
-            "t": X[:, S_T].copy(), "s": X[:, S_POS].copy(), "v": X[:, S_V].copy(), "a": X[:, S_A].copy(),
-            "gear": X[:, S_GEAR].astype(np.int64), "speed_limit": E[:, E_LIMIT].copy(),
-            "source_energy_total": X[:, S_E_SOURCE].copy(), "road_seed": self._road_seed.copy(),
-            "route_length": E[:, E_LENGTH].copy(), "schedule_time": E[:, E_ROUTE_TIME].copy(),
-            "return_costs": {k: self._ret_costs[:, j].copy() for j, k in enumerate(COST_NAMES)},
-        }
+    def _step_compiled(self, active: np.ndarray, u: np.ndarray, reward: np.ndarray, term: np.ndarray,
+                       trunc: np.ndarray, info: np.ndarray, ints: np.ndarray) -> None:
+        args = self._step_args()
+        call = (active, u, *args, reward, *self._args_tail, term, trunc, *self._args_work, info, ints,
+                self._road_seed)
+        if self.threads > 1:
+            _step_threads(self.threads, *call)
+        else:
+            _step_range(0, self.num_envs, *call)
+
+    def _info_dict(self, block: np.ndarray, ints: np.ndarray, mask: np.ndarray,
+                   with_terms: np.ndarray | None) -> dict[str, Any]:
+        """gymnasium vector info from the info block: one array per key of the single env's info (row views of
+        the block, fresh every step), '_key' = which sub-envs have it; 'terms' / 'costs' when any sub-env
+        stepped (with_terms: those that did)."""
+        info: dict[str, Any] = {k: (block[r] if r >= 0 else ints[-1 - r]) for k, r in _INFO_ROWS}
+        rc: dict[str, Any] = {k: block[I_RETURN + j] for j, k in enumerate(COST_NAMES)}
+        info["return_costs"] = rc
         for k in INFO_SCALARS:
             info["_" + k] = mask
-        for j, k in enumerate(COST_NAMES):
-            info["return_costs"]["_" + k] = mask
+        for k in COST_NAMES:
+            rc["_" + k] = mask
         info["_return_costs"] = mask
-        tmask = np.asarray(with_terms, dtype=bool) & mask if not isinstance(with_terms, bool) else (
-            mask if with_terms else np.zeros_like(mask))
-        if tmask.any():
-            for name, src in (("terms", self._terms), ("costs", self._costs)):
-                d = {k: np.where(tmask, src[:, j], 0.0) for j, k in enumerate(COST_NAMES)}
+        if with_terms is not None and with_terms.any():
+            tmask = with_terms & mask
+            for name, row in (("terms", I_TERMS), ("costs", I_COSTS)):
+                d: dict[str, Any] = {k: block[row + j] for j, k in enumerate(COST_NAMES)}
                 for k in COST_NAMES:
                     d["_" + k] = tmask
                 info[name] = d
                 info["_" + name] = tmask
         return info
+
+    def _info(self, mask: np.ndarray, with_terms: bool = False) -> dict[str, Any]:
+        """The info of reset() (no terms): every sub-env's current values, '_key' = mask."""
+        if with_terms:
+            raise ValueError("with_terms: the info with terms is built by the compiled step")
+        n = self.num_envs
+        block = np.empty((N_INFO, n))
+        ints = np.empty((2, n), dtype=np.int64)
+        _gather_info_all(self._X, self._E, self._ret_costs, self._terms, self._costs, block, ints, self._road_seed)
+        return self._info_dict(block, ints, mask, None)
 
     # ------------------------------------------------------------------ benchmark hook
     def bare_physics_step(self, actions: np.ndarray) -> None:

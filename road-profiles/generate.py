@@ -23,8 +23,10 @@ Model (shared by the three road classes, parameters in ``_CLASSES`` and each gen
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
+from numba import njit
 from scipy.ndimage import gaussian_filter1d
 
 from roadload.units import G
@@ -88,12 +90,56 @@ def _grade(rng: np.random.Generator, s: np.ndarray, rc: _RoadClass) -> np.ndarra
     sigma = rc.grade_correlation / np.sqrt(2.0) / step  # filter sigma [samples]; autocorrelation length l
     pad = int(4 * sigma) + 1
     noise = rng.standard_normal(s.size + 2 * pad)
-    filtered = gaussian_filter1d(noise, sigma, mode="wrap")[pad:pad + s.size]
+    filtered = _gaussian_interior(noise, float(sigma), pad, s.size)
+    x = rc.grade_std * filtered / _unit_std(float(sigma), pad)
+    return np.arctan(rc.grade_cap * np.tanh(x / rc.grade_cap))
+
+
+@lru_cache(maxsize=64)
+def _unit_std(sigma: float, pad: int) -> float:
+    """Standard deviation of white noise of unit variance after the Gaussian filter of ``sigma`` [samples]
+    (root of the sum of the squared filter weights)."""
     impulse = np.zeros(2 * pad + 1)
     impulse[pad] = 1.0
-    unit_std = np.sqrt(np.sum(gaussian_filter1d(impulse, sigma, mode="constant") ** 2))
-    x = rc.grade_std * filtered / unit_std
-    return np.arctan(rc.grade_cap * np.tanh(x / rc.grade_cap))
+    return float(np.sqrt(np.sum(gaussian_filter1d(impulse, sigma, mode="constant") ** 2)))
+
+
+def _gaussian_interior(x: np.ndarray, sigma: float, pad: int, n: int) -> np.ndarray:
+    """``scipy.ndimage.gaussian_filter1d(x, sigma)[pad:pad + n]`` (truncate 4) where the filter of radius
+    r = int(4 sigma + 0.5) <= pad never reaches the ends of x, bit for bit (tests/road_profiles): the same
+    weights w_j = exp(-j^2 / (2 sigma^2)) / sum and scipy's order of operations for a symmetric filter,
+    y_k = x_k w_0 + sum_{j=r..1} (x_{k-j} + x_{k+j}) w_j, with the loops swapped so that the compiled inner loop
+    runs over k (vectorised; 4-5x faster than scipy's loop over j per output)."""
+    radius = int(4.0 * sigma + 0.5)
+    if radius > pad or x.size < n + 2 * pad:
+        raise ValueError(f"_gaussian_interior: the filter radius {radius} needs pad >= {radius} samples on each "
+                         f"side of the {n} outputs, got pad {pad} and {x.size} samples")
+    j = np.arange(-radius, radius + 1)
+    weights = np.exp(-0.5 / (sigma * sigma) * j ** 2)
+    weights = weights / weights.sum()
+    return _symmetric_correlate(x, weights[::-1].copy(), pad, n)
+
+
+@njit(cache=True)
+def _symmetric_correlate(x, w, lo, n):
+    """y_k = x_{lo+k} w_c + sum_{m=0..c-1} (x_{lo+k+m-c} + x_{lo+k+c-m}) w_m, k = 0..n-1, for symmetric weights w of
+    odd size 2c + 1 (scipy.ndimage's NI_Correlate1D order per output, loops over m outside)."""
+    c = w.size // 2
+    out = np.empty(n)
+    for k in range(n):
+        out[k] = x[lo + k] * w[c]
+    for m in range(c):
+        wm = w[m]
+        a = x[lo + m - c:lo + m - c + n]
+        b = x[lo + c - m:lo + c - m + n]
+        for k in range(n):
+            out[k] += (a[k] + b[k]) * wm
+    return out
+
+
+def _clamp(x: float, low: float, high: float) -> float:
+    """x clipped to [low, high] (np.clip of a scalar, without its per-call overhead)."""
+    return min(max(x, low), high)
 
 
 def _posted(v: float) -> float:
@@ -119,7 +165,7 @@ class _Layout:
         ends = [start, start + transition, start + transition + arc, start + 2 * transition + arc]
         self.kappa_knots += [(ends[0], 0.0), (ends[1], kappa), (ends[2], kappa), (ends[3], 0.0)]
         if c.bank is not None:
-            q = float(np.clip(0.4 * design_speed ** 2 / (G * radius), *c.bank))
+            q = _clamp(float(0.4 * design_speed ** 2 / (G * radius)), *c.bank)
             phi = -direction * np.arctan(q)
             self.bank_knots += [(ends[0], 0.0), (ends[1], phi), (ends[2], phi), (ends[3], 0.0)]
         self.restrict(ends[0] - c.lead, ends[3], _posted(np.sqrt(c.lateral_acceleration * radius)))
@@ -127,8 +173,9 @@ class _Layout:
         return ends[3]
 
     def restrict(self, start: float, end: float, limit: float) -> None:
-        mask = (self.s >= start) & (self.s <= end)
-        self.limit[mask] = np.minimum(self.limit[mask], limit)
+        """The limit lowered to ``limit`` [m/s] where start <= s <= end [m] (s is the increasing grid: a slice)."""
+        lo, hi = np.searchsorted(self.s, start, side="left"), np.searchsorted(self.s, end, side="right")
+        np.minimum(self.limit[lo:hi], limit, out=self.limit[lo:hi])
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:
         """Curvature and bank on the grid as cell averages of the piecewise-linear knots, so the heading change
@@ -142,16 +189,37 @@ def _cell_average(s: np.ndarray, knot_s: np.ndarray, knot_v: np.ndarray) -> np.n
     knot_s = np.concatenate([[min(knot_s[0], s[0]) - 1.0], knot_s, [max(knot_s[-1], s[-1]) + 1.0]])
     knot_v = np.concatenate([[knot_v[0]], knot_v, [knot_v[-1]]])
     area = np.concatenate([[0.0], np.cumsum(0.5 * (knot_v[1:] + knot_v[:-1]) * np.diff(knot_s))])
-
-    def integral(x):
-        k = np.clip(np.searchsorted(knot_s, x, side="right") - 1, 0, knot_s.size - 2)
-        width = knot_s[k + 1] - knot_s[k]
-        slope = np.divide(knot_v[k + 1] - knot_v[k], width, out=np.zeros_like(width), where=width > 0)
-        dx = x - knot_s[k]
-        return area[k] + knot_v[k] * dx + 0.5 * slope * dx ** 2
-
     h = s[1] - s[0]
-    return (integral(s + h / 2) - integral(s - h / 2)) / h
+    return _cell_means(s, h, knot_s, knot_v, area)
+
+
+@njit(cache=True)
+def _knot_integral(x, knot_s, knot_v, area):
+    """Integral of the piecewise-linear (knot_s, knot_v) from knot_s[0] to x: area[k] + v_k dx + slope dx^2 / 2 on
+    the knot interval k = (last knot <= x), clamped to the first / last interval (knot_s sorted)."""
+    lo, hi = 0, knot_s.size
+    while lo < hi:  # searchsorted(knot_s, x, side="right")
+        mid = (lo + hi) // 2
+        if knot_s[mid] <= x:
+            lo = mid + 1
+        else:
+            hi = mid
+    k = min(max(lo - 1, 0), knot_s.size - 2)
+    width = knot_s[k + 1] - knot_s[k]
+    slope = (knot_v[k + 1] - knot_v[k]) / width if width > 0 else 0.0
+    dx = x - knot_s[k]
+    return area[k] + knot_v[k] * dx + 0.5 * slope * (dx * dx)
+
+
+@njit(cache=True)
+def _cell_means(s, h, knot_s, knot_v, area):
+    """(integral to s_i + h/2 - integral to s_i - h/2) / h for every grid point (numpy's order of operations)."""
+    out = np.empty(s.size)
+    half = h / 2
+    for i in range(s.size):
+        out[i] = (_knot_integral(s[i] + half, knot_s, knot_v, area)
+                  - _knot_integral(s[i] - half, knot_s, knot_v, area)) / h
+    return out
 
 
 def _zones(rng: np.random.Generator, s: np.ndarray, choices: list[tuple[float, tuple[float, float], float]]
@@ -179,7 +247,7 @@ def _open_road(rng: np.random.Generator, s: np.ndarray, c: _Curves, zone_limit: 
     while pos < s[-1]:
         radius = float(np.exp(rng.uniform(*np.log(c.radius))))
         heading = np.radians(rng.uniform(*c.heading_change))
-        transition = float(np.clip(radius / c.transition_ratio, *c.transition))
+        transition = _clamp(radius / c.transition_ratio, *c.transition)
         transition = min(transition, radius * heading / 2)  # the two spirals alone must not exceed the turn
         direction = 1 if rng.random() < 0.5 else -1
         design = min(float(np.interp(pos, s, zone_limit)), np.sqrt(c.lateral_acceleration * radius))
@@ -275,7 +343,7 @@ def city(seed: int, length: float = 8_000.0, step: float = 5.0) -> RoadProfile:
         if rng.random() < 0.2 and gap > 150.0:
             radius = float(np.exp(rng.uniform(*np.log(c.radius))))
             heading = np.radians(rng.uniform(*c.heading_change))
-            transition = min(float(np.clip(radius / c.transition_ratio, *c.transition)), radius * heading / 2)
+            transition = min(_clamp(radius / c.transition_ratio, *c.transition), radius * heading / 2)
             bend_end = layout.curve(pos + 0.2 * gap, radius, heading, 1 if rng.random() < 0.5 else -1,
                                     transition, c, 0.0)
             gap = max(gap, bend_end - pos + 30.0)

@@ -16,16 +16,33 @@ highway-env's highway-fast-v0. Random actions in [-1, 1], resets included.
     python scripts/bench_gym.py --no-classic --threads 1,2       # the native-env figures (issue 17), ~1 min
     python scripts/bench_gym.py [--seconds 5] [--native 256] [--n-envs 2] [--threads 1,2]     # everything
     python scripts/bench_gym.py --quick                                       # CI smoke run (< 60 s)
+    python scripts/bench_gym.py --compare e7237e4 --threads 1,2 [--rounds 2]  # old commit vs working tree
+
+``--compare REF`` exports commit REF (``git archive``, scripts/_refcompare.py) and runs the native-env table on
+it and on the working tree, interleaved ``--rounds`` times (old, new, old, new, ...: both see the same machine
+load), and prints per thread count the native env's wall and per-CPU-second rates, old and new, their ratio and
+native / bare of each (the bare batched physics is the same code in both, so it also shows how the load moved).
 """
 
-import argparse
 import os
 
-from rich.console import Console
+# libgomp reads OMP_WAIT_POLICY once, when it is loaded, and roadload.experiments.rl imports torch, which loads it:
+# the default has to be set before that import (the env's own default comes too late then: 32k instead of 160k
+# env steps/s with 2 threads on the loaded machine)
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from roadload.experiments.rl import (load_average, native_ratios, print_table, run_benchmark, run_native_benchmark,
-                                     speed_ratio)
-from roadload.gym.vector import openmp_wait_policy
+import argparse  # noqa: E402
+import json  # noqa: E402
+import statistics  # noqa: E402
+import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import pandas as pd  # noqa: E402
+from rich.console import Console  # noqa: E402
+
+from roadload.experiments.rl import (load_average, native_ratios, print_table, run_benchmark,  # noqa: E402
+                                     run_native_benchmark, speed_ratio)
+from roadload.gym.vector import openmp_wait_policy  # noqa: E402
 
 TARGET_STEPS_PER_S = 300_000
 """Issue 17: native vector env steps/s (wall) at N = 256 on the 2-core machine."""
@@ -42,6 +59,37 @@ def _thread_counts(text: str) -> tuple[int, ...]:
     return counts
 
 
+def compare_with(args: argparse.Namespace) -> None:
+    """--compare: the native-env table of commit args.compare and of the working tree, interleaved."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from _refcompare import compare
+
+    bench = ["--no-classic", "--seconds", str(args.seconds), "--native", str(args.native), "--dummy",
+             str(args.dummy), "--threads", ",".join(str(t) for t in args.threads)]
+    old, new = compare(Path(__file__).resolve(), bench, args.compare, args.rounds)
+    console = Console(width=150)
+    rows = []
+    for t in args.threads:
+        def pick(runs: list[dict], key: str) -> float:
+            return statistics.median(r[key] for run in runs for r in run["ratios"] if r["threads"] == t)
+        o_wall, n_wall = pick(old, "native_steps_per_s"), pick(new, "native_steps_per_s")
+        o_cpu, n_cpu = pick(old, "native_steps_per_cpu_s"), pick(new, "native_steps_per_cpu_s")
+        rows.append({"threads": t, "old /s": o_wall, "new /s": n_wall, "new/old": n_wall / o_wall,
+                     "old /cpu-s": o_cpu, "new /cpu-s": n_cpu, "new/old cpu": n_cpu / o_cpu,
+                     "old n/b": pick(old, "native_over_bare_wall"), "new n/b": pick(new, "native_over_bare_wall"),
+                     "old n/b cpu": pick(old, "native_over_bare_cpu"),
+                     "new n/b cpu": pick(new, "native_over_bare_cpu")})
+    loads = [run["load_1min_start"] for run in old + new]
+    table = pd.DataFrame(rows)
+    print_table(console, table.assign(**{c: table[c].map("{:,.0f}".format) for c in table.columns
+                                         if c.endswith(("/s", "/cpu-s"))}),
+                f"native vector env x{args.native}: {args.compare} (old) vs working tree (new), median of "
+                f"{args.rounds} interleaved rounds; load average at the starts {min(loads):.1f}-{max(loads):.1f}",
+                "{:.2f}")
+    console.print("/s = env steps per wall second, /cpu-s = per CPU second of the process, n/b = native env / bare "
+                  "batched physics with the same threads (wall, cpu)")
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=5.0, help="measurement time per row [s]")
@@ -53,9 +101,15 @@ if __name__ == "__main__":
     ap.add_argument("--no-highway", action="store_true", help="skip EcoHighway-v0 and highway-fast-v0")
     ap.add_argument("--no-classic", action="store_true", help="only the native-vector-env table")
     ap.add_argument("--quick", action="store_true", help="tiny run for CI (0.5 s per row, 32 native envs)")
+    ap.add_argument("--json", metavar="PATH", help="also write the native-env ratios table as JSON")
+    ap.add_argument("--compare", metavar="REF", help="old (commit REF) against new (working tree), interleaved")
+    ap.add_argument("--rounds", type=int, default=2, help="interleaved rounds of --compare")
     args = ap.parse_args()
     if args.quick:
         args.seconds, args.native, args.dummy, args.no_classic = 0.5, 32, 4, True
+    if args.compare:
+        compare_with(args)
+        sys.exit(0)
     console = Console(width=150)
     cores = os.cpu_count()
     load0 = load_average()
@@ -67,6 +121,9 @@ if __name__ == "__main__":
     rates = ["native_steps_per_s", "native_steps_per_cpu_s"]
     print_table(console, ratios.assign(**{c: ratios[c].map("{:,.0f}".format) for c in rates}),
                 "native env against the bare batched physics with the same threads and against DummyVecEnv", "{:.2f}")
+    if args.json:
+        Path(args.json).write_text(json.dumps({"load_1min_start": load0, "ratios": ratios.to_dict("records"),
+                                               "table": native.to_dict("records")}))
     best = ratios.loc[ratios.native_steps_per_s.idxmax()]
     mark = "met" if best.native_steps_per_s >= TARGET_STEPS_PER_S else "missed"
     console.print(f"best native wall rate: {best.native_steps_per_s:,.0f} steps/s with {int(best.threads)} "

@@ -187,3 +187,44 @@ def test_presets_are_plausible_and_expose_the_estimating_side_quantities():
     assert rwd.steering.wheel_from_steering_wheel(np.radians(90)) == pytest.approx(np.radians(90) / 15.5, rel=0.02)
     assert rwd.understeer_gradient() > 0  # the presets understeer
     assert rwd.tires.cornering_stiffness_front > 0 and rwd.aero.drag_area == pytest.approx(0.29 * 2.36)
+
+
+@pytest.mark.parametrize("vehicle, effects", [("bmw_i3", None), ("gt_rwd", {"wind": {"mean_speed": 6.0}, "payload": {},
+                                                                             "poor_excitation": {}})])
+def test_on_road_equals_a_new_simulator_bitwise(vehicle, effects):
+    """Simulator.on_road (the native vector env's episode setup) gives the state and trajectory of a simulator built
+    from scratch on that road, bit for bit, and leaves the simulator it came from untouched."""
+    from roadload.road_profiles import load_profile
+
+    first = Simulator(vehicle, load_profile("hilly", seed=1), effects, seed=3, initial_speed=5.0)
+    x_first = first.X.copy()
+    road = load_profile("city", seed=7)
+    swapped = first.on_road(road, seed=11, initial_speed=8.0)
+    fresh = Simulator(vehicle, road, effects, seed=11, initial_speed=8.0)
+    for name in ("P", "_road", "_stops", "X", "_rng", "_cycle", "_cmd", "_vplan_base"):
+        assert np.array_equal(getattr(swapped, name), getattr(fresh, name)), name
+    rng = np.random.default_rng(0)
+    for _ in range(300):
+        force = float(rng.uniform(-3000.0, 3000.0))
+        a, b = swapped.step(force, 10), fresh.step(force, 10)
+        assert np.array_equal(swapped.X, fresh.X)
+        assert a.source_energy == b.source_energy
+    assert swapped.X[1] > 100.0  # it drove
+    assert np.array_equal(first.X, x_first)  # the template did not move
+    assert swapped.observe() == fresh.observe()
+
+
+def test_on_road_refuses_a_drive_cycle_simulator_and_bad_roads():
+    from roadload.road_profiles import load_profile
+
+    sim = Simulator("bmw_i3", load_profile("hilly", seed=1))
+    with pytest.raises(SimulationError, match="road"):
+        sim.on_road("hilly", seed=1)
+    with pytest.raises(SimulationError, match="seed"):
+        sim.on_road(load_profile("hilly", seed=2), seed=-1)
+    from roadload.road_profiles import DriveCycle
+
+    t = np.arange(0.0, 60.0, 1.0)
+    cycle_sim = Simulator("bmw_i3", DriveCycle("ramp", t, np.minimum(t, 15.0)))
+    with pytest.raises(SimulationError, match="drive-cycle"):
+        cycle_sim.on_road(load_profile("hilly", seed=2), seed=1)

@@ -189,3 +189,75 @@ def test_two_threads_give_the_one_thread_trajectories():
             e.bare_physics_step(u)
     _close(envs[0]._X, envs[1]._X, "bare physics state")
 
+
+
+def test_action_forms_and_kept_infos():
+    """Every accepted action form (float32 / float64 (n, 1), a float64 (n,) vector, values within the bound
+    tolerance outside [-1, 1]) gives the float32 path's trajectory; a returned info / reward is never overwritten by
+    a later step (fresh arrays per step); obs_scaling 'si' equals the single env too."""
+    config = {"route_length": 150.0, "obs_scaling": "si"}
+    n, seed = 3, 4
+    envs = [EcoDriveVectorEnv(n, config=dict(config)) for _ in range(4)]
+    for e in envs:
+        e.reset(seed=seed)
+    singles, _ = _singles(config, n, seed)
+    rng = np.random.default_rng(2)
+    kept = []
+    for k in range(160):
+        a32 = rng.uniform(-0.5, 1.0, (n, 1)).astype(np.float32)
+        if k % 7 == 0:
+            a32[0, 0] = np.float32(1.0 + 5e-7)  # inside the tolerance: clipped to 1
+        forms = [a32, a32.astype(np.float64), a32[:, 0].astype(np.float64), list(a32[:, 0])]
+        outs = [e.step(f) for e, f in zip(envs, forms)]
+        for o, r, te, tr, inf in outs[1:]:
+            assert np.array_equal(o, outs[0][0]) and np.array_equal(r, outs[0][1])
+            assert np.array_equal(te, outs[0][2]) and np.array_equal(inf["s"], outs[0][4]["s"])
+        o, r, te, tr, inf = outs[0]
+        for i, env in enumerate(singles):
+            so, sr, ste, strunc, sinf = env.step(np.clip(a32[i], -1.0, 1.0))
+            _close(o[i], so, "si obs")
+            _close(r[i], sr, "reward")
+            if ste or strunc:
+                env.reset()
+        kept.append((k, r.copy(), r, inf["s"].copy(), inf["s"], inf.get("terms", {}).get("energy")))
+        if any(te) or any(outs[0][3]):
+            break
+    for k, r_copy, r, s_copy, s, _ in kept:
+        assert np.array_equal(r, r_copy) and np.array_equal(s, s_copy), f"step {k}'s arrays were overwritten"
+    assert len(kept) > 20
+
+
+def test_same_step_final_info_has_the_single_env_terms_and_the_new_episode_info():
+    """Same-step autoreset through terminations with the speed shield on (city road, stops): final_info carries the
+    last step's terms / costs / return costs of the single env, and the info of a reset sub-env is the single env's
+    reset info (no terms)."""
+    n, seed = 3, 8
+    config = {"route_length": 120.0, "road": "city", "speed_shield": True, "shield_margin": 4.0}
+    venv = EcoDriveVectorEnv(n, config=dict(config), autoreset_mode="same_step")
+    venv.reset(seed=seed)
+    singles, _ = _singles(config, n, seed)
+    rng = np.random.default_rng(3)
+    finals = 0
+    for _ in range(400):
+        a = rng.uniform(0.2, 1.0, (n, 1)).astype(np.float32)
+        vobs, vr, vte, vtr, vinfo = venv.step(a)
+        for i, env in enumerate(singles):
+            o, r, te, tr, inf = env.step(a[i])
+            _close(vr[i], r, "reward")
+            if te or tr:
+                finals += 1
+                assert vinfo["_final_info"][i]
+                _check_info(vinfo["final_info"], i, inf, with_terms=True)
+                o, inf = env.reset()
+                _check_info(vinfo, i, inf, with_terms=False)
+            _close(vobs[i], o, "obs")
+    assert finals >= 3
+
+
+def test_openmp_runtime_loaded_by_torch_is_detected():
+    """torch loads libgomp, which reads OMP_WAIT_POLICY only then: the vector env must see that (and warn) rather
+    than believe its late PASSIVE default is in effect."""
+    pytest.importorskip("torch")
+    from roadload.gym.vector import _openmp_runtime_loaded
+
+    assert _openmp_runtime_loaded()

@@ -450,6 +450,20 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
                                  f"{cfg.observation!r}; use gymnasium.make_vec(..., vectorization_mode='sync') for "
                                  f"'can' / 'can+estimates'")
 
+    # the fields the compiled step reads once for the whole batch (reward weights W, dt, the lateral limit of the
+    # reward, the stop speed, the observation scale and preview): a reset option changing one of them for some
+    # sub-envs would be silently ignored, so it is refused
+    SHARED_FIELDS = ("reward", "control_period", "preview_distances", "lateral_acceleration_limit", "stop_speed",
+                     "obs_scaling", "estimator")
+
+    def _check_per_env(self, cfg: EcoDriveConfig) -> None:
+        changed = [f for f in self.SHARED_FIELDS if getattr(cfg, f) != getattr(self.config, f)]
+        if changed:
+            raise GymConfigError(f"reset options {changed}: the native vector env applies these to all sub-envs at "
+                                 f"construction (make_vec(..., {changed[0]}=...)); per sub-env it takes road, "
+                                 f"road_seed, road_seed_range, route_length, effects, initial_speed, "
+                                 f"schedule_speed_fraction, time_limit and the speed-shield settings")
+
     # ------------------------------------------------------------------ per-env episode setup (EcoDriveEnv._setup)
     def _fit(self, name: str, width: int) -> np.ndarray:
         arr = getattr(self, name)
@@ -538,6 +552,7 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
             raise GymConfigError(f"options.vehicle: the native vector env runs one vehicle ({self.config.vehicle!r})"
                                  f" for all sub-envs, got {cfg.vehicle!r}")
         self._check_batchable(cfg)
+        self._check_per_env(cfg)
         g = self._rngs[i]
         road_seed = cfg.road_seed if cfg.road_seed is not None else int(g.integers(*cfg.road_seed_range))
         sim_seed = int(g.integers(0, 2 ** 31 - 1))

@@ -127,6 +127,21 @@ def test_bad_input_is_named():
         EcoDriveVectorEnv(1, autoreset_mode="sometimes")
 
 
+
+def test_reset_options_the_batch_shares_are_refused_not_ignored():
+    """The compiled step reads the reward weights once for the batch: a per-sub-env reward change used to be
+    accepted and silently ignored. Per-sub-env options it does honour still work (a new road for one sub-env)."""
+    venv = EcoDriveVectorEnv(2, config={"route_length": 300.0})
+    venv.reset(seed=0)
+    with pytest.raises(GymConfigError, match=r"\['reward'\].*make_vec"):
+        venv.reset(options={"reward": {"energy": 2.0}, "reset_mask": np.array([True, False])})
+    with pytest.raises(GymConfigError, match="stop_speed"):
+        venv.reset(options={"stop_speed": 2.0})
+    obs, _ = venv.reset(seed=0, options={"road_seed": 7, "reset_mask": np.array([False, True])})
+    single = EcoDriveEnv(config={"route_length": 300.0, "road_seed": 7})
+    single_obs, _ = single.reset(seed=1)
+    np.testing.assert_allclose(obs[1], single_obs, atol=1e-9)
+
 def test_sb3_adapter_episode_bookkeeping():
     pytest.importorskip("stable_baselines3")
     from roadload.gym.sb3 import SB3VecEnv

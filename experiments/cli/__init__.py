@@ -7,6 +7,7 @@ internal errors one line and exit code 1; tracebacks only with the global ``--de
 from __future__ import annotations
 
 import importlib
+import os
 
 import typer
 
@@ -49,5 +50,9 @@ def _load() -> None:
 
 
 def main() -> None:
+    # libgomp reads OMP_WAIT_POLICY once, when it is loaded, and loading the commands loads it (torch, via
+    # stable-baselines3): set the native vector env's default here, first, or `roadload train --threads 2` spins
+    # idle OpenMP threads (32k instead of 160k steps/s at load 4.6, docs/results/vector_env_speed.md)
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     _load()
     app()

@@ -121,3 +121,21 @@ def test_threads_reach_the_native_env_of_the_training_path(tmp_path):
     res = CliRunner().invoke(app, ["--threads", "0", "--algo", "ppo", "--timesteps", "64", "--out", str(tmp_path),
                                    "--eval-every", "0", "--skip-evaluation"])
     assert res.exit_code != 0 and "threads" in res.output, res.output
+
+
+def test_cli_sets_the_openmp_wait_policy_before_the_runtime_loads():
+    """`roadload train --threads 2` runs with OMP_WAIT_POLICY=PASSIVE in effect: the CLI sets it before loading the
+    commands (which load libgomp through torch); set later, libgomp ignores it and idle threads spin."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("import os, sys; sys.argv = ['roadload', '--help']\n"
+            "from roadload.experiments.cli import main\n"
+            "try:\n    main()\nexcept SystemExit:\n    pass\n"
+            "from roadload.gym.vector import openmp_wait_policy\n"
+            "print('POLICY', openmp_wait_policy())")
+    env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().splitlines()[-1] == "POLICY PASSIVE"

@@ -256,17 +256,36 @@ VEHICLE_CASES = {
 }
 
 
-def _longhaul_window(seed: int, length: float = 10_000.0) -> RoadProfile:
-    """The seed-th 10 km window with real grades of the 805 km long-haul truck cycle (drive_cycles/, FASTSim),
-    windows taken where the grade range exceeds 2 % (its grades span -2.3..+2.9 %); speed limit 90 km/h (a
-    truck's limiter), no stops."""
+LONGHAUL_MIN_GRADE_RANGE = 0.015  # [-] a window qualifies when its grades span more than 1.5 %
+
+
+def longhaul_windows(length: float = 10_000.0) -> list[float]:
+    """Start positions [m] of the non-overlapping windows of the real long-haul cycle whose grade range exceeds
+    LONGHAUL_MIN_GRADE_RANGE (candidates every 1 km, first fit): the cycle is mostly flat, 805 km hold 7 such
+    10 km windows."""
     prof = _longhaul_profile()
     s, g = prof.distance, prof.grade
-    starts = np.arange(0.0, s[-1] - length, length)
-    good = [a for a in starts if np.ptp(np.tan(g[(s >= a) & (s <= a + length)])) > 0.02]
-    if not good:
-        raise RuntimeError("long-haul cycle: no 10 km window with a grade range above 2 %")
-    a = good[seed % len(good)]
+    picks: list[float] = []
+    for a in np.arange(0.0, s[-1] - length, 1000.0):
+        if picks and a < picks[-1] + length:
+            continue
+        if np.ptp(np.tan(g[(s >= a) & (s <= a + length)])) > LONGHAUL_MIN_GRADE_RANGE:
+            picks.append(float(a))
+    return picks
+
+
+def _longhaul_window(seed: int, length: float = 10_000.0) -> RoadProfile:
+    """The seed-th 10 km window with real grades of the 805 km long-haul truck cycle (drive_cycles/, FASTSim;
+    :func:`longhaul_windows`: non-overlapping, grade range > 1.5 %; its grades span -2.3..+2.9 %); speed limit
+    90 km/h (a truck's limiter), no stops. Seeds beyond the number of windows are an error (no silent repeats)."""
+    prof = _longhaul_profile()
+    s, g = prof.distance, prof.grade
+    starts = longhaul_windows(length)
+    if not 0 <= seed < len(starts):
+        raise ValueError(f"longhaul_real: seed {seed} out of range; the long-haul cycle has {len(starts)} "
+                         f"non-overlapping {length / 1000:g} km windows with a grade range above "
+                         f"{100 * LONGHAUL_MIN_GRADE_RANGE:g} % (seeds 0..{len(starts) - 1})")
+    a = starts[seed]
     keep = (s >= a) & (s <= a + length)
     d = s[keep] - s[keep][0]
     return RoadProfile("longhaul_real", d, g[keep], np.zeros(d.size), np.zeros(d.size), np.full(d.size, 25.0),

@@ -357,6 +357,7 @@ class PairedTask:
     time_factors: tuple[float, ...] = (0.99, 1.01)
     terminal_value: str = "wheel"  # MpcSettings.terminal_value: "source" (m E_N / eta_i) or "wheel" (m E_N)
     multistart_period: float = 5.0  # [s] schedule knob only (MpcControllerSettings.multistart_period)
+    schedule_pilot: bool = False  # schedule knob: lambda_0 from one oracle pilot run (see run_paired_task)
     schedule_shape: str = "linear"  # schedule knob: "linear" in distance or "cruise" (cruise control's time profile)
 
     def __post_init__(self) -> None:
@@ -458,7 +459,13 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
         return res
 
     if task.knob == "schedule":  # every model targets T_cruise x (1, *time_factors); no search
+        # lambda_0 of the feedback: one oracle pilot run from the case's start value, then the median lambda its
+        # feedback used over the measured segment (a P law keeps a lateness proportional to the error in lambda_0)
         lam_star = case.lam0
+        if task.schedule_pilot:
+            pilot = mpc(task.force_models[0], case.lam0, t_cruise)
+            lam_pilot = float(pilot.metrics.get("ctl_time_weight_median", float("nan")))
+            lam_star = lam_pilot if math.isfinite(lam_pilot) and lam_pilot > 0 else case.lam0
         for spec in task.force_models:
             for f in (1.0, *task.time_factors):
                 res = mpc(spec, lam_star, t_cruise * f)

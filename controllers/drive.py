@@ -60,6 +60,7 @@ class DriveSettings:
     multistart_period: float = 0.0  # [s] MPC only: cold multi-start solves (MpcControllerSettings); 0 = off
     # shape of the target schedule: (positions [m], elapsed fraction of target_time [-]); None: linear in distance
     target_shape: tuple[tuple[float, ...], tuple[float, ...]] | None = None
+    schedule_gain: float = 20.0  # P gain of the target schedule's lambda feedback (TripSchedule.gain)
 
     def __post_init__(self) -> None:
         if self.controller not in CONTROLLERS:
@@ -141,6 +142,7 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
         mpc_settings = MpcSettings(**{**st.mpc.__dict__, "solver": st.solver, "time_weight": st.time_weight})
         schedule = (None if st.target_time is None
                     else TripSchedule(start=st.measure_from, end=road.length, duration=st.target_time,
+                                      gain=st.schedule_gain,
                                       shape_s=st.target_shape[0] if st.target_shape else (),
                                       shape_fraction=st.target_shape[1] if st.target_shape else ()))
         controller = MpcController(MpcControllerSettings(mpc=mpc_settings, schedule=schedule,

@@ -357,6 +357,7 @@ class PairedTask:
     time_factors: tuple[float, ...] = (0.99, 1.01)
     terminal_value: str = "wheel"  # MpcSettings.terminal_value: "source" (m E_N / eta_i) or "wheel" (m E_N)
     multistart_period: float = 5.0  # [s] schedule knob only (MpcControllerSettings.multistart_period)
+    schedule_gain: float = 20.0  # schedule knob: P gain of the lambda feedback (TripSchedule.gain)
     schedule_pilot: bool = False  # schedule knob: lambda_0 from one oracle pilot run (see run_paired_task)
     schedule_shape: str = "linear"  # schedule knob: "linear" in distance or "cruise" (cruise control's time profile)
 
@@ -444,6 +445,7 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
         settings = replace(base, controller="mpc", force_model=fm, time_weight=lam, wrong_model=errors)
         if target is not None:
             settings = replace(settings, target_time=target, multistart_period=task.multistart_period,
+                               schedule_gain=task.schedule_gain,
                                target_shape=shape if task.schedule_shape == "cruise" else None)
         res = run(settings)
         m = res.metrics

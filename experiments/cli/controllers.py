@@ -214,6 +214,10 @@ def register_headline(benchmark_app: typer.Typer) -> None:
                                  "schedule (every model targets the cruise time x (1, time factors) by lambda "
                                  "feedback and multi-start solves; continuous in the target)"),
         time_factors: str = typer.Option("0.99,1.01", help="schedule knob: extra target times (x the cruise time)"),
+        schedule_gain: float = typer.Option(20.0, help="schedule knob: P gain of the lambda feedback on the "
+                                            "lateness (ln lambda change per lateness / scheduled time left)"),
+        schedule_pilot: bool = typer.Option(False, "--schedule-pilot", help="schedule knob: lambda_0 from one "
+                                            "oracle pilot run (its median lambda over the segment)"),
         terminal_value: str = typer.Option("wheel", help="MPC value of the kinetic energy at the horizon end: "
                                            "source (m E_N / eta_i) or wheel (m E_N, sessions 1-2)"),
     ) -> None:
@@ -221,6 +225,8 @@ def register_headline(benchmark_app: typer.Typer) -> None:
         seeds, with the 1-sigma resolution and 95 % CIs of every difference."""
         if metric not in ("net", "raw"):
             _fail(f"--metric: net or raw, got {metric!r}")
+        if not (schedule_gain >= 0):
+            _fail(f"--schedule-gain: a number >= 0, got {schedule_gain}")
         if knob not in ("lambda", "schedule"):
             _fail(f"--knob: lambda or schedule, got {knob!r}")
         if terminal_value not in ("source", "wheel"):
@@ -255,7 +261,8 @@ def register_headline(benchmark_app: typer.Typer) -> None:
         tasks = headline_tasks(cases, roads, seeds, conds, human=True, quick=quick, first_seed=first_seed,
                                search_runs=None if quick else search_runs, weight_factors=None if quick else factors,
                                truck_warmup=truck_warmup, metric=metric, car_warmup=car_warmup, knob=knob,
-                               time_factors=t_factors, terminal_value=terminal_value)
+                               time_factors=t_factors, terminal_value=terminal_value,
+                               schedule_gain=schedule_gain, schedule_pilot=schedule_pilot)
         summary, failures = run_paired(tasks, out, scheduler=scheduler, workers=workers, description="headline",
                                        merge=list(merge))
         if summary.empty:

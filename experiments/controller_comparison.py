@@ -631,6 +631,8 @@ def refit_results(results: list[dict[str, Any]], metric: str = "net", window: fl
         closest = min(oracle, key=lambda x: abs(x[time_key] / t_cruise - 1.0))
         t_ref = t_cruise if abs(closest[time_key] / t_cruise - 1.0) <= r["task"].get("tol", 0.002) else float(
             closest[time_key])
+        if r["task"].get("knob") == "schedule":  # the schedule knob always compares at the cruise time
+            t_ref = t_cruise
         points: dict[str, list[tuple[float, float]]] = {}
         for x in mpc_runs:
             points.setdefault(x["force_model"], []).append((x[time_key], x[energy_key] + off))

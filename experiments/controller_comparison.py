@@ -356,7 +356,9 @@ class PairedTask:
     knob: str = "lambda"
     time_factors: tuple[float, ...] = (0.99, 1.01)
     terminal_value: str = "wheel"  # MpcSettings.terminal_value: "source" (m E_N / eta_i) or "wheel" (m E_N)
-    multistart_period: float = 5.0  # [s] schedule knob only (MpcControllerSettings.multistart_period)
+    # [s] cold multi-start solves of every MPC run (MpcControllerSettings.multistart_period); None: 5 s with the
+    # schedule knob (needed to leave a gear branch), off with the lambda knob (sessions 1-2)
+    multistart_period: float | None = None
     schedule_gain: float = 20.0  # schedule knob: P gain of the lambda feedback (TripSchedule.gain)
     schedule_pilot: bool = False  # schedule knob: lambda_0 from one oracle pilot run (see run_paired_task)
     schedule_shape: str = "linear"  # schedule knob: "linear" in distance or "cruise" (cruise control's time profile)
@@ -442,9 +444,12 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
 
     def mpc(spec: str, lam: float, target: float | None = None):
         fm, errors = parse_force_model(spec)
-        settings = replace(base, controller="mpc", force_model=fm, time_weight=lam, wrong_model=errors)
+        multistart = task.multistart_period if task.multistart_period is not None else (
+            5.0 if task.knob == "schedule" else 0.0)
+        settings = replace(base, controller="mpc", force_model=fm, time_weight=lam, wrong_model=errors,
+                           multistart_period=multistart)
         if target is not None:
-            settings = replace(settings, target_time=target, multistart_period=task.multistart_period,
+            settings = replace(settings, target_time=target,
                                schedule_gain=task.schedule_gain,
                                target_shape=shape if task.schedule_shape == "cruise" else None)
         res = run(settings)

@@ -218,6 +218,8 @@ def register_headline(benchmark_app: typer.Typer) -> None:
                                             "lateness (ln lambda change per lateness / scheduled time left)"),
         schedule_pilot: bool = typer.Option(False, "--schedule-pilot", help="schedule knob: lambda_0 from one "
                                             "oracle pilot run (its median lambda over the segment)"),
+        multistart_period: float = typer.Option(-1.0, help="[s] cold multi-start MPC solves this often (leave a "
+                                                "gear branch); < 0: 5 s with the schedule knob, off with lambda"),
         terminal_value: str = typer.Option("wheel", help="MPC value of the kinetic energy at the horizon end: "
                                            "source (m E_N / eta_i) or wheel (m E_N, sessions 1-2)"),
     ) -> None:
@@ -262,7 +264,8 @@ def register_headline(benchmark_app: typer.Typer) -> None:
                                search_runs=None if quick else search_runs, weight_factors=None if quick else factors,
                                truck_warmup=truck_warmup, metric=metric, car_warmup=car_warmup, knob=knob,
                                time_factors=t_factors, terminal_value=terminal_value,
-                               schedule_gain=schedule_gain, schedule_pilot=schedule_pilot)
+                               schedule_gain=schedule_gain, schedule_pilot=schedule_pilot,
+                               multistart_period=None if multistart_period < 0 else multistart_period)
         summary, failures = run_paired(tasks, out, scheduler=scheduler, workers=workers, description="headline",
                                        merge=list(merge))
         if summary.empty:

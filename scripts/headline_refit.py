@@ -8,6 +8,7 @@ Usage: python scripts/headline_refit.py RUNS.json [--out DIR]
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -30,8 +31,9 @@ def matching_stats(results: list[dict]) -> list[str]:
         lines.append(f"{case}: {len(rs)} seeds; oracle at the cruise time within 0.2 %: "
                      f"{sum(bool(r['oracle_matched']) for r in rs)}; nearest run within 0.2 % of T_ref "
                      + ", ".join(f"{m} {k}" for m, k in near.items())
-                     + f"; fit residual median {np.nanmedian(res):.3f} % max {np.nanmax(res):.3f} % "
-                     f"({int(np.isnan(res).sum())} seeds without time spread)" if np.isfinite(res).any() else "")
+                     + (f"; fit residual median {np.nanmedian(res):.3f} % max {np.nanmax(res):.3f} %"
+                        if np.isfinite(res).any() else "; no fit residual")
+                     + f" ({int(np.isnan(res).sum())} seeds without time spread)")
     return lines
 
 
@@ -43,10 +45,11 @@ def main() -> None:
     a = ap.parse_args()
     if a.quick:
         folder = Path("headline_refit_quick")
+        sys.argv = ["roadload", "benchmark", "headline", "--quick", "--out", str(folder), "--workers", "1"]
         try:
-            cli_main(["benchmark", "headline", "--quick", "--out", str(folder), "--workers", "1"])
+            cli_main()
         except SystemExit as exc:
-            if exc.code not in (0, None):
+            if exc.code:
                 raise
         a.runs = folder / "runs.json"
     if a.runs is None:

@@ -23,7 +23,7 @@ from .cruise import CruiseController, CruiseSettings
 from .energy import SourceEnergyModel, with_loss_error
 from .force_model import FORCE_MODEL_NAMES, ErroredForceModel, FixedForceModel, ForceModel, OracleForceModel
 from .mpc import MpcSettings
-from .mpc_controller import MpcController, MpcControllerSettings
+from .mpc_controller import MpcController, MpcControllerSettings, TripSchedule
 from .sim_plant import HumanDriver, SimulatorPlant
 from .vehicle_models import abc_parameters, energy_model_from_spec
 from roadload.estimators.knowledge import knowledge_for_preset
@@ -54,6 +54,13 @@ class DriveSettings:
     pipeline: PipelineSettings | None = None  # online model: preprocessing settings (None: the defaults)
     wrong_model: dict | None = None  # sensitivity: {"mass": 0.2, ...} relative errors on the oracle (see .errors)
     measure_from: float = 0.0  # [m] start of the measured segment (warm-up before it; see run_closed_loop)
+    # MPC only: target time [s] of the measured segment [measure_from, road end]; lambda follows it by feedback
+    # from time_weight (mpc_controller.TripSchedule); None: the fixed time weight
+    target_time: float | None = None
+    multistart_period: float = 0.0  # [s] MPC only: cold multi-start solves (MpcControllerSettings); 0 = off
+    # shape of the target schedule: (positions [m], elapsed fraction of target_time [-]); None: linear in distance
+    target_shape: tuple[tuple[float, ...], tuple[float, ...]] | None = None
+    schedule_gain: float = 20.0  # P gain of the target schedule's lambda feedback (TripSchedule.gain)
 
     def __post_init__(self) -> None:
         if self.controller not in CONTROLLERS:
@@ -62,6 +69,8 @@ class DriveSettings:
             raise ControllerError(f"unknown force model {self.force_model!r}; choose one of {FORCE_MODEL_NAMES}")
         if not (math.isfinite(self.time_weight) and self.time_weight >= 0):
             raise ControllerError(f"time_weight: must be a finite number >= 0 [J/s], got {self.time_weight}")
+        if self.target_time is not None and not (math.isfinite(self.target_time) and self.target_time > 0):
+            raise ControllerError(f"target_time: must be a finite number > 0 [s] or None, got {self.target_time}")
         if not (math.isfinite(self.dt) and self.dt > 0):
             raise ControllerError(f"dt: must be a finite number > 0 [s], got {self.dt}")
 
@@ -131,7 +140,13 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
     controller: Controller
     if st.controller == "mpc":
         mpc_settings = MpcSettings(**{**st.mpc.__dict__, "solver": st.solver, "time_weight": st.time_weight})
-        controller = MpcController(MpcControllerSettings(mpc=mpc_settings))
+        schedule = (None if st.target_time is None
+                    else TripSchedule(start=st.measure_from, end=road.length, duration=st.target_time,
+                                      gain=st.schedule_gain,
+                                      shape_s=st.target_shape[0] if st.target_shape else (),
+                                      shape_fraction=st.target_shape[1] if st.target_shape else ()))
+        controller = MpcController(MpcControllerSettings(mpc=mpc_settings, schedule=schedule,
+                                                         multistart_period=st.multistart_period))
     elif st.controller == "cruise":
         controller = CruiseController(st.cruise)
     else:

@@ -47,6 +47,7 @@ class MpcError(ValueError):
 
 
 SOLVERS = ("ipopt", "osqp")
+TERMINAL_VALUES = ("source", "wheel")
 QP_E_SCALE = 30.0  # QP path: kinetic-energy variables in units of 30 m^2/s^2 (forces are in kN)
 
 
@@ -64,6 +65,9 @@ class MpcSettings:
     stop_speed: float = 1.0  # speed cap at a stop node [m/s]; the closed loop stops the car from there
     speed_margin: float = 0.3  # planned speed stays this far below the limit [m/s]
     time_weight: float = 3000.0  # lambda [J/s]: energy worth one second of trip time
+    # value of the kinetic energy left at the horizon end: "source" = m E_N / eta_i (what it costs at the source,
+    # Willans line; = m E_N for an EV), "wheel" = m E_N (sessions 1-2: undervalues it by eta_i on an ICE)
+    terminal_value: str = "wheel"
     accel_weight: float = 0.05  # comfort term [kJ per (m/s^2)^2 per segment, times mass/1000]
     solver: str = "ipopt"
     max_iterations: int = 100  # IPOPT iteration cap / SQP iterations cap per call (osqp path uses sqp_iterations)
@@ -96,6 +100,8 @@ class MpcSettings:
             raise MpcError(f"time_weight must be >= 0, got {self.time_weight}")
         if not 0 < self.warm_tol < 1:
             raise MpcError(f"warm_tol must be in (0, 1), got {self.warm_tol}")
+        if self.terminal_value not in TERMINAL_VALUES:
+            raise MpcError(f"MpcSettings.terminal_value: choose one of {TERMINAL_VALUES}, got {self.terminal_value!r}")
         if self.solver not in SOLVERS:
             raise MpcError(f"unknown solver {self.solver!r}; choose one of {SOLVERS}")
         if self.stop_speed < self.speed_floor:
@@ -209,7 +215,8 @@ class OcpSolver:
         ratio_obj = en.smooth_ratio(vm) if en.kind == "ice" else ratio
         psrc = en.source_power(1000.0 * ft, 1000.0 * fr, vm, ratio_obj)
         energy = ca.sum1(psrc * dt) / 1000.0  # kJ
-        obj = (energy + lam * t_end / 1000.0 - m_in * E[n] / 1000.0
+        ke_value = 1.0 / en.indicated_efficiency if st.terminal_value == "source" else 1.0
+        obj = (energy + lam * t_end / 1000.0 - ke_value * m_in * E[n] / 1000.0
                + st.accel_weight * m / 1000.0 * ca.sumsqr(acc) + 1e-3 * ds / 1000.0 * ca.sum1(ft + fr + fb))
         self._nx, self._ng, self._np = x.numel(), g.numel(), p.numel()
         self._blocks_x = [n + 1, n, n, n]
@@ -308,9 +315,13 @@ class OcpSolver:
                               np.full(n, (en.max_regen_power if en.regenerates else 0.0) / 1000.0)])
         return lbx, ubx, lbg, ubg
 
-    def _params(self, a_prev: float, preview: Preview, params: RoadLoadParameters) -> np.ndarray:
+    def _params(self, a_prev: float, preview: Preview, params: RoadLoadParameters,
+                time_weight: float | None = None) -> np.ndarray:
+        lam = self.settings.time_weight if time_weight is None else time_weight
+        if not (math.isfinite(lam) and lam >= 0):
+            raise MpcError(f"time_weight: must be a finite number >= 0 [J/s], got {lam}")
         return np.concatenate([[a_prev], preview.grade, preview.curvature, preview.ratio, params.as_vector(),
-                               [self.settings.time_weight]])
+                               [lam]])
 
     def _check(self, v0: float, a_prev: float, preview: Preview) -> None:
         n = self.n
@@ -325,10 +336,14 @@ class OcpSolver:
             if not np.all(np.isfinite(arr)):
                 raise MpcError(f"preview.{name} contains NaN/inf")
 
-    def initial_guess(self, v0: float, preview: Preview, params: RoadLoadParameters, a_prev: float = 0.0) -> np.ndarray:
-        """A feasible-ish cold start: speed ramps (comfortably) from v0 towards the cap, quasi-static forces."""
+    def initial_guess(self, v0: float, preview: Preview, params: RoadLoadParameters, a_prev: float = 0.0,
+                      target_speed: float | None = None) -> np.ndarray:
+        """A feasible-ish cold start: speed ramps (comfortably) from v0 towards the cap (or towards
+        ``target_speed`` [m/s] where that is lower), quasi-static forces."""
         st, n, ds = self.settings, self.n, self.settings.ds
         cap = self.reachable_cap(v0, preview, a_prev)
+        if target_speed is not None:
+            cap = np.maximum(np.minimum(cap, target_speed), st.speed_floor)
         v = np.empty(n + 1)
         v[0] = max(v0, st.speed_floor)
         for k in range(n):
@@ -380,13 +395,17 @@ class OcpSolver:
 
     # ------------------------------------------------------------------ solve
     def solve(self, v0: float, a_prev: float, preview: Preview, params: RoadLoadParameters,
-              warm: Plan | None = None) -> Plan:
-        """Solve from speed v0 [m/s] with the previous commanded acceleration a_prev [m/s^2]."""
+              warm: Plan | None = None, time_weight: float | None = None,
+              target_speed: float | None = None) -> Plan:
+        """Solve from speed v0 [m/s] with the previous commanded acceleration a_prev [m/s^2]; ``time_weight``
+        [J/s] overrides the settings' lambda for this solve (a parameter of the built NLP, no rebuild);
+        ``target_speed`` [m/s]: a cold start (IPOPT) whose guess cruises at that speed (multi-start, see
+        MpcControllerSettings.multistart_period)."""
         self._check(v0, a_prev, preview)
         if self.settings.solver == "ipopt":
-            plan = self._solve_ipopt(v0, a_prev, preview, params, warm)
+            plan = self._solve_ipopt(v0, a_prev, preview, params, warm, time_weight, target_speed)
         else:
-            plan = self._solve_qp(v0, a_prev, preview, params, warm)
+            plan = self._solve_qp(v0, a_prev, preview, params, warm, time_weight)
         plan.relaxed_nodes = self.relaxed_nodes(v0, preview)
         return plan
 
@@ -396,18 +415,18 @@ class OcpSolver:
         cap = np.maximum(np.asarray(preview.speed_cap, float) - st.speed_margin, st.speed_floor)
         return int(np.sum(self.reachable_cap(v0, preview) > cap + 1e-9))
 
-    def _solve_ipopt(self, v0, a_prev, preview, params, warm) -> Plan:
+    def _solve_ipopt(self, v0, a_prev, preview, params, warm, time_weight=None, target_speed=None) -> Plan:
         lbx, ubx, lbg, ubg = self._bounds(v0, preview, params, a_prev)
-        p = self._params(a_prev, preview, params)
+        p = self._params(a_prev, preview, params, time_weight)
         args = {"lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg, "p": p}
-        if warm is not None and warm.x is not None and warm.lam_g is not None:
+        if target_speed is None and warm is not None and warm.x is not None and warm.lam_g is not None:
             x0, lam_x0, lam_g0 = self.shift(warm, float(preview.s[0]))
             x0 = np.clip(x0, lbx, ubx)
             solver = self._warm
             args.update(x0=x0, lam_x0=lam_x0, lam_g0=lam_g0)
         else:
             solver = self._cold
-            args.update(x0=self.initial_guess(v0, preview, params, a_prev))
+            args.update(x0=self.initial_guess(v0, preview, params, a_prev, target_speed))
         t0, c0 = time.perf_counter(), time.process_time()
         res = solver(**args)
         elapsed, cpu = time.perf_counter() - t0, time.process_time() - c0
@@ -449,11 +468,11 @@ class OcpSolver:
         adata *= d[self._a_cols]
         return grad * d, gval, pdata, adata
 
-    def _solve_qp(self, v0, a_prev, preview, params, warm) -> Plan:
+    def _solve_qp(self, v0, a_prev, preview, params, warm, time_weight=None) -> Plan:
         import osqp
 
         lbx, ubx, lbg, ubg = self._bounds(v0, preview, params, a_prev)
-        p = self._params(a_prev, preview, params)
+        p = self._params(a_prev, preview, params, time_weight)
         t0, c0 = time.perf_counter(), time.process_time()
         if warm is not None and warm.x is not None:
             x, lam_x, lam_g = self.shift(warm, float(preview.s[0]))

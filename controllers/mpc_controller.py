@@ -39,6 +39,69 @@ def get_solver(settings: MpcSettings, energy: SourceEnergyModel) -> OcpSolver:
 
 
 @dataclass(frozen=True)
+class TripSchedule:
+    """A trip-time target for the measured segment [start, end] [m]: ``duration`` [s] from the moment the vehicle
+    passes ``start`` (issue 14, session 3: the continuous time knob of the truck comparison).
+
+    The controller keeps lambda of the MPC objective on schedule by feedback on the lateness
+    e = t - t_sched(s), t_sched linear in distance over the segment [s]:
+        ln lambda = ln lambda_0 + clip(gain e / max(T_left, time_floor), +-max_log_change),
+    T_left the scheduled time still to go [s]. Where the fixed-lambda closed loop jumps between two branches
+    (a truck's speed-dependent gear makes the fuel per metre non-convex in speed), lambda then moves to the
+    crossover and the vehicle mixes the two cruising speeds, so the segment time follows ``duration``
+    continuously. Before ``start`` lambda is lambda_0."""
+
+    start: float
+    end: float
+    duration: float
+    gain: float = 20.0
+    # k_i [1/s^2]: ln lambda += k_i * integral of e dt; 0 = off (0.01 wound lambda up to 30 x on a power-limited
+    # truck and made energy a rough function of time: fit residual 0.98 %, session 3)
+    integral_gain: float = 0.0
+    time_floor: float = 30.0  # [s]
+    max_log_change: float = 4.0
+    # shape of t_sched: the fraction of ``duration`` scheduled at the positions ``shape_s`` [m] (increasing from
+    # 0 at start to 1 at end, e.g. a cruise-control run's time profile, so a power-limited climb is scheduled
+    # slow); empty: linear in distance
+    shape_s: tuple[float, ...] = ()
+    shape_fraction: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        for name in ("start", "end", "duration", "gain", "integral_gain", "time_floor", "max_log_change"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value)):
+                raise ControllerError(f"TripSchedule.{name}: must be a finite number, got {value!r}")
+        if not 0 <= self.start < self.end:
+            raise ControllerError(f"TripSchedule: need 0 <= start < end [m], got start={self.start}, end={self.end}")
+        if (not self.duration > 0 or not self.time_floor > 0 or self.gain < 0 or self.max_log_change < 0
+                or self.integral_gain < 0):
+            raise ControllerError(f"TripSchedule: duration and time_floor must be > 0 [s], gain and max_log_change "
+                                  f">= 0, got {self.duration}, {self.time_floor}, {self.gain}, {self.max_log_change}")
+        if len(self.shape_s) != len(self.shape_fraction) or (self.shape_s and (
+                np.any(np.diff(self.shape_s) <= 0) or np.any(np.diff(self.shape_fraction) < 0))):
+            raise ControllerError("TripSchedule.shape_s / shape_fraction: equal lengths, positions [m] strictly "
+                                  "increasing and fractions non-decreasing")
+
+    def fraction(self, s: float) -> float:
+        """Scheduled fraction [-] of ``duration`` elapsed at position s [m] (0 at start, 1 at end)."""
+        x = min(max((s - self.start) / (self.end - self.start), 0.0), 1.0)
+        if not self.shape_s:
+            return x
+        return float(np.clip(np.interp(s, self.shape_s, self.shape_fraction), 0.0, 1.0))
+
+    def lateness(self, t: float, s: float, t_start: float) -> float:
+        """e = t - t_sched(s) [s] (> 0: behind schedule)."""
+        return t - (t_start + self.fraction(s) * self.duration)
+
+    def time_weight(self, lam0: float, t: float, s: float, t_start: float, integral: float = 0.0) -> float:
+        """lambda [J/s] at time t [s] and position s [m] of a vehicle that passed ``start`` at t_start [s];
+        ``integral``: the running integral of the lateness [s^2] (integral_gain)."""
+        left = max((1.0 - self.fraction(s)) * self.duration, self.time_floor)
+        x = self.gain * self.lateness(t, s, t_start) / left + self.integral_gain * integral
+        return lam0 * math.exp(float(np.clip(x, -self.max_log_change, self.max_log_change)))
+
+
+@dataclass(frozen=True)
 class MpcControllerSettings:
     mpc: MpcSettings = field(default_factory=MpcSettings)
     replan_period: float = 1.0  # [s]
@@ -47,9 +110,17 @@ class MpcControllerSettings:
     plan_tolerance: float = 2.0  # [m/s] previous plan usable as fallback while |v - v_plan| below this
     min_plan_left: float = 300.0  # [m] of previous plan ahead needed to keep using it
     fallback: CruiseSettings = field(default_factory=lambda: CruiseSettings(fraction=0.9))
+    schedule: TripSchedule | None = None  # trip-time target: lambda by feedback (TripSchedule); None: fixed lambda
+    # [s] every this often a second IPOPT solve starts cold from a plan cruising ``multistart_step`` [m/s] faster or
+    # slower (behind / ahead of schedule; alternating without one) and replaces the warm-started plan when its
+    # objective is lower: the truck's NLP has two local cruise optima (gears), and warm starts never leave one
+    # (issue 14, session 3). 0 = off
+    multistart_period: float = 0.0
+    multistart_step: float = 4.0  # [m/s]
 
     def __post_init__(self) -> None:
-        for name in ("replan_period", "speed_gain", "lookahead_time", "plan_tolerance", "min_plan_left"):
+        for name in ("replan_period", "speed_gain", "lookahead_time", "plan_tolerance", "min_plan_left",
+                     "multistart_period", "multistart_step"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ControllerError(f"MpcControllerSettings.{name}: must be a finite number >= 0, got {value!r}")
@@ -82,6 +153,14 @@ class MpcController(ControllerBase):
         self._fine_s = np.arange(0.0, road.length + st.horizon + 2 * st.ds, 2.0)
         self._fine_cap = speed_cap(road, st.lateral_accel_max, np.minimum(self._fine_s, road.length))
         self._unserved = list(np.sort(np.asarray(road.stops, dtype=float)))
+        self._schedule_start: float | None = None  # time [s] the vehicle passed the schedule's start
+        self._next_multistart = 0.0
+        self._multistart_sign = 1.0
+        self._late = 0.0
+        self._late_integral = 0.0  # [s^2]
+        self._last_t = 0.0
+        self._last_s: tuple[float, float] | None = None
+        self.time_weights: list[float] = []
 
     def serve_stop(self, index: int) -> None:
         super().serve_stop(index)
@@ -98,6 +177,7 @@ class MpcController(ControllerBase):
                    solve_time_median=float(np.median(times)) if times.size else float("nan"),
                    solve_time_p99=float(np.percentile(times, 99)) if times.size else float("nan"),
                    iterations_median=float(np.median(self.iterations)) if self.iterations else float("nan"),
+                   time_weight_median=float(np.median(self.time_weights)) if self.time_weights else float("nan"),
                    fallbacks=int(self.events["fallback_shifted_plan"] + self.events["fallback_cruise"]))
         return out
 
@@ -139,10 +219,14 @@ class MpcController(ControllerBase):
             a_prev = float(np.interp(obs.s, 0.5 * (self.plan.s[1:] + self.plan.s[:-1]), self.plan.accel))
         preview = self.preview(obs.s, obs.v)
         params = self.params()
+        lam = self.time_weight(obs)
         t0 = time.perf_counter()
         try:
-            plan = self.ocp.solve(obs.v, a_prev, preview, params, warm=self.plan)
+            plan = self.ocp.solve(obs.v, a_prev, preview, params, warm=self.plan, time_weight=lam)
             ok = plan.success
+            if self.settings.multistart_period > 0 and obs.t >= self._next_multistart and self.plan is not None:
+                self._next_multistart = obs.t + self.settings.multistart_period
+                plan, ok = self._multistart(obs, a_prev, preview, params, lam, plan, ok)
         except Exception as exc:  # any solver crash becomes a counted fallback, never an exception upstream
             self.events["solver_exception"] += 1
             self.last_error = repr(exc)
@@ -170,6 +254,48 @@ class MpcController(ControllerBase):
                 self.cruise.restart(obs.v)
             self.mode = "cruise"
             self.plan = None
+
+    def _multistart(self, obs, a_prev, preview, params, lam, plan, ok):
+        """A second, cold IPOPT solve from a guess cruising multistart_step faster (late / alternating) or slower;
+        the lower objective wins (counted in events ``multistart_switches``)."""
+        if self.settings.schedule is not None and self._schedule_start is not None:
+            sign = 1.0 if self._late > 0 else -1.0
+        else:
+            sign = self._multistart_sign
+            self._multistart_sign = -sign
+        ref = self.plan if self.plan is not None else plan
+        target = float(np.mean(ref.v)) + sign * self.settings.multistart_step
+        alt = self.ocp.solve(obs.v, a_prev, preview, params, time_weight=lam, target_speed=target)
+        if alt.success and (not ok or alt.objective < plan.objective - 1e-6 * abs(plan.objective)):
+            self.events["multistart_switches"] += 1
+            return alt, True
+        return plan, ok
+
+    def time_weight(self, obs: Observation) -> float:
+        """lambda [J/s] of this solve: the settings' fixed value, or the schedule's feedback (TripSchedule)."""
+        lam0 = self.settings.mpc.time_weight
+        sched = self.settings.schedule
+        if sched is None:
+            return lam0
+        if self._schedule_start is None and obs.s >= sched.start:
+            if self._last_s is not None and obs.s > self._last_s[1]:  # interpolate the crossing of ``start``
+                t1, s1 = self._last_s
+                self._schedule_start = t1 + (obs.t - t1) * (sched.start - s1) / (obs.s - s1)
+            else:
+                self._schedule_start = obs.t
+            self._last_t = obs.t
+        self._last_s = (obs.t, obs.s)
+        if self._schedule_start is None:
+            return lam0
+        late = sched.lateness(obs.t, obs.s, self._schedule_start)
+        if sched.integral_gain > 0:  # anti-windup: the integral term alone stays within +-max_log_change
+            bound = sched.max_log_change / sched.integral_gain
+            self._late_integral = float(np.clip(self._late_integral + late * (obs.t - self._last_t), -bound, bound))
+        self._last_t = obs.t
+        lam = sched.time_weight(lam0, obs.t, obs.s, self._schedule_start, self._late_integral)
+        self.time_weights.append(lam)  # the stats' time_weight_median covers the scheduled segment only
+        self._late = late
+        return lam
 
     def wheel_force(self, obs: Observation) -> float:
         stale = self.plan is not None and obs.s > self.plan.s[-2]

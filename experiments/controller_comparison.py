@@ -31,7 +31,7 @@ from roadload.road_profiles import RoadProfile
 
 from roadload.controllers.cruise import CruiseSettings
 from roadload.controllers.drive import DriveSettings, drive
-from roadload.experiments.time_matching import fit_energy_at_time, match_trip_time
+from roadload.experiments.time_matching import MatchedRun, fit_energy_at_time, match_trip_time
 from roadload.data import require_shared_data
 from roadload.io.importer import import_log
 from roadload.io.profiles import profile_from_trip
@@ -256,17 +256,36 @@ VEHICLE_CASES = {
 }
 
 
-def _longhaul_window(seed: int, length: float = 10_000.0) -> RoadProfile:
-    """The seed-th 10 km window with real grades of the 805 km long-haul truck cycle (drive_cycles/, FASTSim),
-    windows taken where the grade range exceeds 2 % (its grades span -2.3..+2.9 %); speed limit 90 km/h (a
-    truck's limiter), no stops."""
+LONGHAUL_MIN_GRADE_RANGE = 0.015  # [-] a window qualifies when its grades span more than 1.5 %
+
+
+def longhaul_windows(length: float = 10_000.0) -> list[float]:
+    """Start positions [m] of the non-overlapping windows of the real long-haul cycle whose grade range exceeds
+    LONGHAUL_MIN_GRADE_RANGE (candidates every 1 km, first fit): the cycle is mostly flat, 805 km hold 7 such
+    10 km windows."""
     prof = _longhaul_profile()
     s, g = prof.distance, prof.grade
-    starts = np.arange(0.0, s[-1] - length, length)
-    good = [a for a in starts if np.ptp(np.tan(g[(s >= a) & (s <= a + length)])) > 0.02]
-    if not good:
-        raise RuntimeError("long-haul cycle: no 10 km window with a grade range above 2 %")
-    a = good[seed % len(good)]
+    picks: list[float] = []
+    for a in np.arange(0.0, s[-1] - length, 1000.0):
+        if picks and a < picks[-1] + length:
+            continue
+        if np.ptp(np.tan(g[(s >= a) & (s <= a + length)])) > LONGHAUL_MIN_GRADE_RANGE:
+            picks.append(float(a))
+    return picks
+
+
+def _longhaul_window(seed: int, length: float = 10_000.0) -> RoadProfile:
+    """The seed-th 10 km window with real grades of the 805 km long-haul truck cycle (drive_cycles/, FASTSim;
+    :func:`longhaul_windows`: non-overlapping, grade range > 1.5 %; its grades span -2.3..+2.9 %); speed limit
+    90 km/h (a truck's limiter), no stops. Seeds beyond the number of windows are an error (no silent repeats)."""
+    prof = _longhaul_profile()
+    s, g = prof.distance, prof.grade
+    starts = longhaul_windows(length)
+    if not 0 <= seed < len(starts):
+        raise ValueError(f"longhaul_real: seed {seed} out of range; the long-haul cycle has {len(starts)} "
+                         f"non-overlapping {length / 1000:g} km windows with a grade range above "
+                         f"{100 * LONGHAUL_MIN_GRADE_RANGE:g} % (seeds 0..{len(starts) - 1})")
+    a = starts[seed]
     keep = (s >= a) & (s <= a + length)
     d = s[keep] - s[keep][0]
     return RoadProfile("longhaul_real", d, g[keep], np.zeros(d.size), np.zeros(d.size), np.full(d.size, 25.0),
@@ -330,15 +349,36 @@ class PairedTask:
     # "net": segment time and source energy net of the kinetic energy left at arrival, crossings interpolated
     # (drive.net_energy_metrics); "raw": the first control step past the road end and its source energy
     metric: str = "net"
+    # the time knob (session 3): "lambda" = fixed time weight per run, matched by a search over lambda (the
+    # truck's trip time jumps between two gear branches); "schedule" = every model targets the segment time
+    # T_cruise x (1, *time_factors) by lambda feedback with multi-start solves (DriveSettings.target_time), so
+    # the segment time is continuous in the knob
+    knob: str = "lambda"
+    time_factors: tuple[float, ...] = (0.99, 1.01)
+    terminal_value: str = "wheel"  # MpcSettings.terminal_value: "source" (m E_N / eta_i) or "wheel" (m E_N)
+    # [s] cold multi-start solves of every MPC run (MpcControllerSettings.multistart_period); None: 5 s with the
+    # schedule knob (needed to leave a gear branch), off with the lambda knob (sessions 1-2)
+    multistart_period: float | None = None
+    schedule_gain: float = 20.0  # schedule knob: P gain of the lambda feedback (TripSchedule.gain)
+    schedule_pilot: bool = False  # schedule knob: lambda_0 from one oracle pilot run (see run_paired_task)
+    schedule_shape: str = "linear"  # schedule knob: "linear" in distance or "cruise" (cruise control's time profile)
 
     def __post_init__(self) -> None:
         if self.metric not in METRICS:
             raise ValueError(f"PairedTask.metric: choose one of {sorted(METRICS)}, got {self.metric!r}")
+        if self.knob not in KNOBS:
+            raise ValueError(f"PairedTask.knob: choose one of {KNOBS}, got {self.knob!r}")
+        if self.knob == "schedule" and self.metric != "net":
+            raise ValueError("PairedTask: knob 'schedule' targets the measured segment's time; use metric 'net'")
+        if not all(math.isfinite(f) and 0.5 < f < 2.0 for f in self.time_factors):
+            raise ValueError(f"PairedTask.time_factors: factors of the cruise time in (0.5, 2), got "
+                             f"{self.time_factors}")
         if not (math.isfinite(self.warmup) and self.warmup >= 0):
             raise ValueError(f"PairedTask.warmup must be a finite distance >= 0 m, got {self.warmup}")
 
 
 METRICS = {"net": ("segment_time", "energy_net_J"), "raw": ("trip_time", "energy_J")}
+KNOBS = ("lambda", "schedule")
 
 
 def run_paired_task(task: PairedTask) -> dict[str, Any]:
@@ -361,6 +401,7 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
     road = paired_road(task.road, task.seed, task.warmup)
     effects = CONDITIONS[task.condition] if not case.truck else None
     base = replace(case.settings(), measure_from=task.warmup)
+    base = replace(base, mpc=replace(base.mpc, terminal_value=task.terminal_value))
     vehicle = case.vehicle()
     time_key, energy_key = METRICS[task.metric]
     other = METRICS["raw" if task.metric == "net" else "net"]
@@ -375,11 +416,15 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
     cruise_other: list[tuple[float, float]] = []
     offset = 0.0
     t_cruise = float("nan")
+    shape = None
     for df in (0.0, -0.03, 0.03, -0.06, 0.06):
         f = f0 + df
         if not 0.5 < f <= 1.0:
             continue
-        m = run(replace(base, cruise=replace(base.cruise, fraction=f))).metrics
+        cruise_res = run(replace(base, cruise=replace(base.cruise, fraction=f)))
+        m = cruise_res.metrics
+        if df == 0.0:
+            shape = schedule_shape(cruise_res.log, task.warmup, road.length)
         if df == 0.0:  # net energies get cruise control's kinetic-energy change back (see _NET_OFFSET_DOC)
             offset = m["segment_energy_J"] - m["energy_net_J"]
         cruise_pts.append((m[time_key], m[energy_key] + (offset if task.metric == "net" else 0.0)))
@@ -397,34 +442,62 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
     points: dict[str, list[tuple[float, float]]] = {}
     points_other: dict[str, list[tuple[float, float]]] = {}
 
-    def mpc(spec: str, lam: float):
+    def mpc(spec: str, lam: float, target: float | None = None):
         fm, errors = parse_force_model(spec)
-        res = run(replace(base, controller="mpc", force_model=fm, time_weight=lam, wrong_model=errors))
+        multistart = task.multistart_period if task.multistart_period is not None else (
+            5.0 if task.knob == "schedule" else 0.0)
+        settings = replace(base, controller="mpc", force_model=fm, time_weight=lam, wrong_model=errors,
+                           multistart_period=multistart)
+        if target is not None:
+            settings = replace(settings, target_time=target,
+                               schedule_gain=task.schedule_gain,
+                               target_shape=shape if task.schedule_shape == "cruise" else None)
+        res = run(settings)
         m = res.metrics
         points.setdefault(spec, []).append((m[time_key], m[energy_key] + (offset if task.metric == "net" else 0.0)))
         points_other.setdefault(spec, []).append((m[other[0]], m[other[1]] + (offset if task.metric == "raw"
                                                                                  else 0.0)))
-        runs_out.append({"force_model": spec, "time_weight": lam, **_run_metrics(m),
+        runs_out.append({"force_model": spec, "time_weight": lam, "target_time": target,
+                         "time_weight_median": m.get("ctl_time_weight_median"),
+                         "multistart_switches": m.get("ctl_multistart_switches", 0), **_run_metrics(m),
                          "solve_time_median": m.get("solve_time_median"), "fallbacks": m.get("fallbacks"),
                          "online_estimate": m.get("online", {}).get("estimate"),
                          "online_history": m.get("online", {}).get("history")})
         return res
 
-    matched = match_trip_time(lambda lam: mpc("oracle", lam), t_cruise, tol=task.tol, lam0=case.lam0,
-                              max_runs=task.max_search_runs, step=2.0, time_key=time_key, energy_key=energy_key)
-    lam_star = matched.time_weight
-    t_ref = t_cruise if matched.matched else float(matched.result.metrics[time_key])
-    for spec in task.force_models:
-        factors = task.weight_factors if spec == "oracle" else (1.0, *task.weight_factors)
-        for f in factors:
-            mpc(spec, lam_star * f)
+    if task.knob == "schedule":  # every model targets T_cruise x (1, *time_factors); no search
+        # lambda_0 of the feedback: one oracle pilot run from the case's start value, then the median lambda its
+        # feedback used over the measured segment (a P law keeps a lateness proportional to the error in lambda_0)
+        lam_star = case.lam0
+        if task.schedule_pilot:
+            pilot = mpc(task.force_models[0], case.lam0, t_cruise)
+            lam_pilot = float(pilot.metrics.get("ctl_time_weight_median", float("nan")))
+            lam_star = lam_pilot if math.isfinite(lam_pilot) and lam_pilot > 0 else case.lam0
+        for spec in task.force_models:
+            for f in (1.0, *task.time_factors):
+                res = mpc(spec, lam_star, t_cruise * f)
+                if spec == task.force_models[0] and f == 1.0:
+                    first = res
+        err = first.metrics[time_key] / t_cruise - 1.0
+        matched = MatchedRun(first, lam_star, t_cruise, abs(err) <= task.tol, 1, [], time_key)
+        t_ref = t_cruise
+    else:
+        matched = match_trip_time(lambda lam: mpc("oracle", lam), t_cruise, tol=task.tol, lam0=case.lam0,
+                                  max_runs=task.max_search_runs, step=2.0, time_key=time_key, energy_key=energy_key)
+        lam_star = matched.time_weight
+        t_ref = t_cruise if matched.matched else float(matched.result.metrics[time_key])
+        for spec in task.force_models:
+            factors = task.weight_factors if spec == "oracle" else (1.0, *task.weight_factors)
+            for f in factors:
+                mpc(spec, lam_star * f)
     fit = fit_energy_at_time(points, t_ref)
     cruise_fit = fit_energy_at_time({"cruise": cruise_pts}, t_ref, window=0.08)
     # the other metric on the same runs (before/after comparison of the resolution): its own reference time
-    t_ref_other = float(cruise_other[0][0]) if matched.matched else float(matched.result.metrics[other[0]])
+    t_ref_other = (float(cruise_other[0][0]) if matched.matched or task.knob == "schedule"
+                   else float(matched.result.metrics[other[0]]))
     fit_other = fit_energy_at_time(points_other, t_ref_other)
     cruise_fit_other = fit_energy_at_time({"cruise": cruise_other}, t_ref_other, window=0.08)
-    return {"task": task.__dict__, "t_ref": t_ref, "t_cruise": t_cruise, "t_ref_moved": not matched.matched,
+    return {"task": task.__dict__, "t_ref": t_ref, "t_cruise": t_cruise, "t_ref_moved": t_ref != t_cruise,
             "kinetic_energy_offset_J": offset,
             "other_metric": {"metric": "raw" if task.metric == "net" else "net", "t_ref": t_ref_other,
                              "energy_at_tref_J": fit_other.energy, "cruise_energy_J": cruise_fit_other.energy[
@@ -436,6 +509,18 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
             "energy_at_tref_J": fit.energy, "nearest_time_error": fit.nearest, "spanned": fit.spanned,
             "fit_residual_std": fit.residual_std, "fit_slope": fit.slope, "fit_curvature": fit.curvature,
             "runs": runs_out, **extra}
+
+
+def schedule_shape(log: pd.DataFrame, start: float, end: float, step: float = 100.0
+                   ) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """The time profile of a run over the segment [start, end] [m] as (positions [m], elapsed fraction of its
+    segment time [-]) on a ``step`` grid: the shape of the schedule knob's target (cruise control's pace, slow on
+    the power-limited climbs)."""
+    s, t = log["s"].to_numpy(float), log["t"].to_numpy(float)
+    grid = np.append(np.arange(start, end, step), end)
+    tg = np.interp(grid, s, t)
+    frac = (tg - tg[0]) / max(tg[-1] - tg[0], 1e-9)
+    return tuple(float(x) for x in grid), tuple(float(x) for x in np.maximum.accumulate(frac))
 
 
 def _run_metrics(m: dict[str, Any]) -> dict[str, Any]:
@@ -551,6 +636,8 @@ def refit_results(results: list[dict[str, Any]], metric: str = "net", window: fl
         closest = min(oracle, key=lambda x: abs(x[time_key] / t_cruise - 1.0))
         t_ref = t_cruise if abs(closest[time_key] / t_cruise - 1.0) <= r["task"].get("tol", 0.002) else float(
             closest[time_key])
+        if r["task"].get("knob") == "schedule":  # the schedule knob always compares at the cruise time
+            t_ref = t_cruise
         points: dict[str, list[tuple[float, float]]] = {}
         for x in mpc_runs:
             points.setdefault(x["force_model"], []).append((x[time_key], x[energy_key] + off))

@@ -52,13 +52,21 @@ QUICK = {"max_search_runs": 2, "weight_factors": ()}  # smoke runs: 2 oracle run
 def headline_tasks(cases: list[str], roads: dict[str, list[str]], seeds: int, conditions: list[str] | None = None,
                    human: bool = True, quick: bool = False, first_seed: int = 0,
                    search_runs: int | None = None, weight_factors: tuple[float, ...] | None = None,
-                   truck_warmup: float = 0.0, metric: str = "net", car_warmup: float = 0.0) -> list[PairedTask]:
+                   truck_warmup: float = 0.0, metric: str = "net", car_warmup: float = 0.0,
+                   knob: str = "lambda", time_factors: tuple[float, ...] | None = None,
+                   terminal_value: str = "wheel", schedule_gain: float | None = None,
+                   schedule_pilot: bool = False, multistart_period: float | None = None) -> list[PairedTask]:
     """One task per (case, road, condition, seed); roads: {case: [road, ...]}; search_runs / weight_factors
     override :class:`PairedTask`'s (fewer runs per seed on a loaded machine); truck_warmup [m]: warm-up before
     the trucks' measured segment."""
     conds = conditions or ["nominal"]
     extra: dict = dict(QUICK) if quick else {}
-    extra["metric"] = metric
+    extra.update(metric=metric, knob=knob, terminal_value=terminal_value, schedule_pilot=schedule_pilot,
+                 multistart_period=multistart_period)
+    if schedule_gain is not None:
+        extra["schedule_gain"] = schedule_gain
+    if time_factors is not None:
+        extra["time_factors"] = time_factors
     if search_runs is not None:
         extra["max_search_runs"] = search_runs
     if weight_factors is not None:

@@ -116,7 +116,7 @@ class LocalFit:
 
 
 def fit_energy_at_time(runs: dict[str, list[tuple[float, float]]], target_time: float, window: float = 0.06,
-                       quadratic: bool = True) -> LocalFit:
+                       quadratic: bool = True, min_spread: float = 0.002) -> LocalFit:
     """Energy of every force model at exactly ``target_time`` [s] from a JOINT local fit over trip time.
 
     runs: {force model: [(trip time [s], energy [J]), ...]} of the same road, seed and plant at several time
@@ -125,7 +125,9 @@ def fit_energy_at_time(runs: dict[str, list[tuple[float, float]]], target_time: 
     road and vehicle; sharing it turns 3 runs per model into a well-posed fit). Only runs within ``window``
     (relative time) are used. E_m(T_target) = alpha_m E_ref. A model with no run inside the window gets NaN.
     Unlike linear interpolation between two bracketing runs (which overstates the energy on a convex curve)
-    the common curvature is estimated from all runs."""
+    the common curvature is estimated from all runs. When no model's runs spread in time by ``min_spread``
+    (relative) the slope is not identified: each model's energy is then the mean of its runs within
+    ``min_spread`` of the target (NaN without one; residual_std NaN)."""
     if not target_time > 0:
         raise ValueError(f"target_time must be > 0 s, got {target_time}")
     names, rows, y = [], [], []
@@ -142,6 +144,22 @@ def fit_energy_at_time(runs: dict[str, list[tuple[float, float]]], target_time: 
     e_ref = float(np.median(y))
     y_arr = np.asarray(y) / e_ref
     x = np.array([r[1] for r in rows])
+    # the slope is identified only by the spread of trip time WITHIN a model's runs: without it the shared slope
+    # would be the between-model difference in energy over their difference in time (a force model's effect
+    # booked as an energy-time trade-off, session 3: 40 t seed 5). Then only runs within min_spread of the
+    # target count, level only, and a model without one gets NaN
+    within = x - np.array([np.mean([xx for (nn, _), xx in zip(rows, x) if nn == r[0]]) for r in rows])
+    if float(np.max(np.abs(within), initial=0.0)) < min_spread:
+        close = np.abs(x) <= min_spread
+        energy = {n: float(np.mean([yy for (nn, _), yy, c in zip(rows, y, close) if nn == n and c]))
+                  if any(nn == n and c for (nn, _), c in zip(rows, close)) else float("nan") for n in names}
+        nearest, spanned = {}, {}
+        for n, pts in runs.items():
+            xs = [t / target_time - 1.0 for t, e in pts if math.isfinite(t) and math.isfinite(e)]
+            nearest[n] = float(min(abs(v) for v in xs)) if xs else float("nan")
+            spanned[n] = bool(xs) and min(xs) <= 0.0 <= max(xs)
+        return LocalFit({**out_nan, **energy}, nearest, spanned, float("nan"), float("nan"), float("nan"),
+                        len(rows))
     cols = [np.array([1.0 if r[0] == n else 0.0 for r in rows]) for n in names] + [x]
     if quadratic and len(rows) >= len(names) + 3:
         cols.append(x * x)

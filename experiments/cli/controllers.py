@@ -210,11 +210,33 @@ def register_headline(benchmark_app: typer.Typer) -> None:
         car_warmup: float = typer.Option(0.0, help="car: warm-up distance [m] driven before the measured 2.5 km"),
         metric: str = typer.Option("net", help="net: segment energy net of the kinetic energy left at arrival, "
                                    "crossings interpolated; raw: first step past the road end"),
+        knob: str = typer.Option("lambda", help="time knob: lambda (fixed time weight per run, searched) or "
+                                 "schedule (every model targets the cruise time x (1, time factors) by lambda "
+                                 "feedback and multi-start solves; continuous in the target)"),
+        time_factors: str = typer.Option("0.99,1.01", help="schedule knob: extra target times (x the cruise time)"),
+        schedule_gain: float = typer.Option(20.0, help="schedule knob: P gain of the lambda feedback on the "
+                                            "lateness (ln lambda change per lateness / scheduled time left)"),
+        schedule_pilot: bool = typer.Option(False, "--schedule-pilot", help="schedule knob: lambda_0 from one "
+                                            "oracle pilot run (its median lambda over the segment)"),
+        multistart_period: float = typer.Option(-1.0, help="[s] cold multi-start MPC solves this often (leave a "
+                                                "gear branch); < 0: 5 s with the schedule knob, off with lambda"),
+        terminal_value: str = typer.Option("wheel", help="MPC value of the kinetic energy at the horizon end: "
+                                           "source (m E_N / eta_i) or wheel (m E_N, sessions 1-2)"),
     ) -> None:
         """MPC with the oracle / abc / online force model against cruise control at equal trip time, paired over
         seeds, with the 1-sigma resolution and 95 % CIs of every difference."""
         if metric not in ("net", "raw"):
             _fail(f"--metric: net or raw, got {metric!r}")
+        if not (schedule_gain >= 0):
+            _fail(f"--schedule-gain: a number >= 0, got {schedule_gain}")
+        if knob not in ("lambda", "schedule"):
+            _fail(f"--knob: lambda or schedule, got {knob!r}")
+        if terminal_value not in ("source", "wheel"):
+            _fail(f"--terminal-value: source or wheel, got {terminal_value!r}")
+        try:
+            t_factors = tuple(float(f) for f in time_factors.split(",") if f.strip())
+        except ValueError:
+            _fail(f"--time-factors: comma-separated numbers (x the cruise time), got {time_factors!r}")
         if not (truck_warmup >= 0 and car_warmup >= 0):
             _fail(f"--truck-warmup / --car-warmup: distances >= 0 m, got {truck_warmup} / {car_warmup}")
         wall0, load0 = time.perf_counter(), os.getloadavg()
@@ -240,7 +262,10 @@ def register_headline(benchmark_app: typer.Typer) -> None:
             _fail(f"--search-runs: at least 1, got {search_runs}")
         tasks = headline_tasks(cases, roads, seeds, conds, human=True, quick=quick, first_seed=first_seed,
                                search_runs=None if quick else search_runs, weight_factors=None if quick else factors,
-                               truck_warmup=truck_warmup, metric=metric, car_warmup=car_warmup)
+                               truck_warmup=truck_warmup, metric=metric, car_warmup=car_warmup, knob=knob,
+                               time_factors=t_factors, terminal_value=terminal_value,
+                               schedule_gain=schedule_gain, schedule_pilot=schedule_pilot,
+                               multistart_period=None if multistart_period < 0 else multistart_period)
         summary, failures = run_paired(tasks, out, scheduler=scheduler, workers=workers, description="headline",
                                        merge=list(merge))
         if summary.empty:

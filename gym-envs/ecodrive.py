@@ -34,7 +34,7 @@ import numpy as np
 from gymnasium import spaces
 from numba import njit
 
-from roadload.road_profiles import RoadProfile, load_profile
+from roadload.road_profiles import RoadProfile, load_profile_start
 from roadload.units import G
 from roadload.vehicle import VehicleSpec
 
@@ -282,7 +282,7 @@ class EcoDriveEnv(gym.Env):
                cfg.schedule_speed_fraction, cfg.lateral_acceleration_limit)
         if key != self._sim_key:
             try:
-                loaded = load_profile(cfg.road, seed=road_seed)
+                loaded = load_profile_start(cfg.road, cfg.route_length, seed=road_seed)
                 if not isinstance(loaded, RoadProfile):
                     raise GymConfigError(f"road: {cfg.road!r} is not a road profile")
                 profile = cut_profile(loaded, cfg.route_length)

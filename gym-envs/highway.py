@@ -42,7 +42,7 @@ from highway_env.utils import class_from_path, near_split
 from highway_env.vehicle.controller import ControlledVehicle
 from highway_env.vehicle.kinematics import Vehicle
 
-from roadload.road_profiles import RoadProfile, load_profile
+from roadload.road_profiles import RoadProfile, load_profile_start
 
 from roadload.gym.actions import validate_action
 from roadload.gym.config import SPACE_FIELDS_HIGHWAY, EcoHighwayConfig, GymConfigError, make_config, updated_config
@@ -284,7 +284,7 @@ class EcoHighwayEnv(AbstractEnv):
                     s = np.array([0.0, length])
                     grade = np.zeros(2)
                 else:
-                    prof = load_profile(cfg.road, seed=road_seed)
+                    prof = load_profile_start(cfg.road, length, seed=road_seed)
                     if not isinstance(prof, RoadProfile):
                         raise GymConfigError(f"road: {cfg.road!r} is not a road profile")
                     prof = cut_profile(prof, min(length, prof.length))

@@ -54,7 +54,7 @@ from roadload.gym.config import SPACE_FIELDS_ECODRIVE, EcoDriveConfig, GymConfig
 from roadload.gym.ecodrive import (PREVIEW_GRID, STOP_HORIZON, DriveScales, RouteTable, _look_ahead, cut_profile,
                                    observation_layout, shield_command)
 from roadload.presets import get_preset
-from roadload.road_profiles import RoadProfile, load_profile
+from roadload.road_profiles import RoadProfile, load_profile_start
 
 COST_NAMES = ("energy", "time", "speeding", "lateral", "stop", "jerk", "progress")
 """Reward terms, in the order of ``info['terms']`` / ``info['costs']`` (EcoDriveEnv)."""
@@ -480,7 +480,7 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
                cfg.schedule_speed_fraction, cfg.lateral_acceleration_limit)
         if key != self._keys[i]:
             try:
-                loaded = load_profile(cfg.road, seed=road_seed)
+                loaded = load_profile_start(cfg.road, cfg.route_length, seed=road_seed)
                 if not isinstance(loaded, RoadProfile):
                     raise GymConfigError(f"road: {cfg.road!r} is not a road profile")
                 profile = cut_profile(loaded, cfg.route_length)

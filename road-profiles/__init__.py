@@ -10,7 +10,7 @@ from .files import ProfileFileError, load_gpx, load_profile_file, load_track_csv
 from .generate import city, hilly, long_grades, motorway
 from .profile import DriveCycle, RoadProfile, RoadProfileError
 from .real_routes import bus_route, bus_route_measured, gradeit_route, racetrack
-from .registry import (UnknownProfileError, known_profiles, load_profile, register_profile,
+from .registry import (UnknownProfileError, known_profiles, load_profile, load_profile_start, register_profile,
                        register_profile_file, register_profile_folder)
 from .tracks import (curvature_from_heading, curvature_from_xy, curve_speed_limit, grade_from_elevation,
                      haversine_distance, heading_from_xy, latlon_to_xy, path_length, profile_from_track,
@@ -18,7 +18,8 @@ from .tracks import (curvature_from_heading, curvature_from_xy, curve_speed_limi
 
 __all__ = [
     "DriveCycle", "RoadProfile", "RoadProfileError", "ProfileFileError", "UnknownProfileError",
-    "load_profile", "save_profile", "load_profile_file", "register_profile", "register_profile_file",
+    "load_profile", "load_profile_start", "save_profile", "load_profile_file", "register_profile",
+    "register_profile_file",
     "register_profile_folder", "known_profiles",
     "hilly", "motorway", "city", "long_grades",
     "load_cycle", "ftp75", "tsdc_trip", "long_haul_truck", "cycle_position", "speed_at_position", "cycle_stops",

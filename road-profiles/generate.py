@@ -76,6 +76,16 @@ _CLASSES = {
 
 # --------------------------------------------------------------------------------------------- building blocks
 
+def _kept(s: np.ndarray, keep: float | None) -> int:
+    """Number of grid points built for ``keep`` [m]: every point up to ``keep`` and one more (so interpolating
+    at ``keep`` reads the same two points as on the whole road); all of them for None."""
+    if keep is None:
+        return s.size
+    if not keep > 0:
+        raise RoadProfileError(f"keep: expected a positive length [m] (or None for the whole road), got {keep}")
+    return min(s.size, int(np.searchsorted(s, keep, side="right")) + 1)
+
+
 def _grid(length: float, step: float) -> np.ndarray:
     if not length > 0 or not step > 0:
         raise RoadProfileError(f"length and step must be positive, got length={length}, step={step}")
@@ -84,13 +94,15 @@ def _grid(length: float, step: float) -> np.ndarray:
     return np.linspace(0.0, length, int(round(length / step)) + 1)
 
 
-def _grade(rng: np.random.Generator, s: np.ndarray, rc: _RoadClass) -> np.ndarray:
-    """theta [rad]: soft-capped stationary Gaussian process (see module docstring)."""
+def _grade(rng: np.random.Generator, s: np.ndarray, rc: _RoadClass, m: int) -> np.ndarray:
+    """theta [rad] at the first m grid points: soft-capped stationary Gaussian process (see module docstring).
+    The noise is drawn for the whole grid (the draws that follow stay the same); output k only reads noise
+    k..k + 2 pad, so the first m outputs equal the whole road's."""
     step = s[1] - s[0]
     sigma = rc.grade_correlation / np.sqrt(2.0) / step  # filter sigma [samples]; autocorrelation length l
     pad = int(4 * sigma) + 1
     noise = rng.standard_normal(s.size + 2 * pad)
-    filtered = _gaussian_interior(noise, float(sigma), pad, s.size)
+    filtered = _gaussian_interior(noise, float(sigma), pad, m)
     x = rc.grade_std * filtered / _unit_std(float(sigma), pad)
     return np.arctan(rc.grade_cap * np.tanh(x / rc.grade_cap))
 
@@ -160,9 +172,8 @@ class _Layout:
     def curve(self, start: float, radius: float, heading_change: float, direction: int, transition: float,
               c: _Curves, design_speed: float) -> float:
         """Adds one clothoid-arc-clothoid curve at ``start`` [m]; returns where it ends [m]."""
-        arc = max(radius * heading_change - transition, 0.0)
+        ends = _curve_ends(start, radius, heading_change, transition)
         kappa = direction / radius
-        ends = [start, start + transition, start + transition + arc, start + 2 * transition + arc]
         self.kappa_knots += [(ends[0], 0.0), (ends[1], kappa), (ends[2], kappa), (ends[3], 0.0)]
         if c.bank is not None:
             q = _clamp(float(0.4 * design_speed ** 2 / (G * radius)), *c.bank)
@@ -171,6 +182,16 @@ class _Layout:
         self.restrict(ends[0] - c.lead, ends[3], _posted(np.sqrt(c.lateral_acceleration * radius)))
         self.curves += 1
         return ends[3]
+
+    def beyond(self, start: float, c: _Curves) -> bool:
+        """True when a curve starting at ``start`` [m] (advisory from ``start - lead``) lies wholly past the grid
+        and its last cell: it changes no grid value (curvature, bank and limit are 0 / unchanged there)."""
+        return start - c.lead > self.s[-1] + (self.s[1] - self.s[0])
+
+    def skip(self, start: float, radius: float, heading_change: float, transition: float) -> float:
+        """A curve past the grid (``beyond``): only counted; returns where it ends [m], as ``curve`` would."""
+        self.curves += 1
+        return _curve_ends(start, radius, heading_change, transition)[3]
 
     def restrict(self, start: float, end: float, limit: float) -> None:
         """The limit lowered to ``limit`` [m/s] where start <= s <= end [m] (s is the increasing grid: a slice)."""
@@ -182,6 +203,12 @@ class _Layout:
         of every curve (the integral of the curvature) is kept exactly even when a curve is short against the
         grid step (a 90 deg city turn of R = 10 m is 16 m long)."""
         return _cell_average(self.s, *np.array(self.kappa_knots).T), _cell_average(self.s, *np.array(self.bank_knots).T)
+
+
+def _curve_ends(start: float, radius: float, heading_change: float, transition: float) -> list[float]:
+    """Knot positions [m] of a clothoid-arc-clothoid curve: start, arc start, arc end, end (arc = R dpsi - L_t)."""
+    arc = max(radius * heading_change - transition, 0.0)
+    return [start, start + transition, start + transition + arc, start + 2 * transition + arc]
 
 
 def _cell_average(s: np.ndarray, knot_s: np.ndarray, knot_v: np.ndarray) -> np.ndarray:
@@ -240,34 +267,43 @@ def _zones(rng: np.random.Generator, s: np.ndarray, choices: list[tuple[float, t
     return limit
 
 
-def _open_road(rng: np.random.Generator, s: np.ndarray, c: _Curves, zone_limit: np.ndarray) -> _Layout:
-    """Straights and clothoid curves until the end of the grid (country road, motorway)."""
-    layout = _Layout(s, zone_limit)
+def _open_road(rng: np.random.Generator, s: np.ndarray, c: _Curves, zone_limit: np.ndarray, m: int) -> _Layout:
+    """Straights and clothoid curves until the end of the grid s (country road, motorway); the layout covers the
+    first m grid points (curves past them are drawn but not built)."""
+    layout = _Layout(s[:m], zone_limit[:m])
+    log_radius = np.log(c.radius)
     pos = rng.uniform(*c.straight)
     while pos < s[-1]:
-        radius = float(np.exp(rng.uniform(*np.log(c.radius))))
+        radius = float(np.exp(rng.uniform(*log_radius)))
         heading = np.radians(rng.uniform(*c.heading_change))
         transition = _clamp(radius / c.transition_ratio, *c.transition)
         transition = min(transition, radius * heading / 2)  # the two spirals alone must not exceed the turn
         direction = 1 if rng.random() < 0.5 else -1
-        design = min(float(np.interp(pos, s, zone_limit)), np.sqrt(c.lateral_acceleration * radius))
-        pos = layout.curve(pos, radius, heading, direction, transition, c, design)
+        if layout.beyond(pos, c):
+            pos = layout.skip(pos, radius, heading, transition)
+        else:
+            design = min(float(np.interp(pos, s, zone_limit)), np.sqrt(c.lateral_acceleration * radius))
+            pos = layout.curve(pos, radius, heading, direction, transition, c, design)
         pos += rng.uniform(*c.straight)
     return layout
 
 
 def _profile(name: str, seed: int, s: np.ndarray, grade, layout: _Layout, stops, extra: dict) -> RoadProfile:
+    """The profile on the layout's grid (the first m points of s); meta describes the whole road."""
     curvature, bank = layout.arrays()
     meta = {"source": "generated", "generator": name, "seed": int(seed), "licence": LICENCE,
             "length_m": float(s[-1]), "step_m": float(s[1] - s[0]), "n_curves": layout.curves,
             "n_stops": len(stops), **extra}
-    return RoadProfile(name=name, distance=s, grade=grade, curvature=curvature, bank=bank,
-                       speed_limit=layout.limit, stops=np.sort(np.asarray(stops, dtype=float)), meta=meta)
+    if layout.s.size < s.size:
+        meta["built_m"] = float(layout.s[-1])
+    stops = np.sort(np.asarray(stops, dtype=float))
+    return RoadProfile(name=name, distance=layout.s, grade=grade, curvature=curvature, bank=bank,
+                       speed_limit=layout.limit, stops=stops[stops <= layout.s[-1]], meta=meta)
 
 
 # --------------------------------------------------------------------------------------------- generators
 
-def hilly(seed: int, length: float = 20_000.0, step: float = 5.0) -> RoadProfile:
+def hilly(seed: int, length: float = 20_000.0, step: float = 5.0, keep: float | None = None) -> RoadProfile:
     """Hilly countryside road (German Landstrasse-like), ``length`` [m] on a ``step`` [m] grid.
 
     Statistics: grade process std 4 %, soft cap 8 % (peaks 6-8 % on 20 km), correlation length 300 m -> mean
@@ -275,12 +311,17 @@ def hilly(seed: int, length: float = 20_000.0, step: float = 5.0) -> RoadProfile
     15-120 deg, transitions R/4 (20-150 m); superelevation 2.5-7 %. Speed limit 100 km/h, reduced to
     sqrt(2 m/s^2 * R) rounded down to 10 km/h from 80 m before curves (R < ~390 m); villages every 3-10 km
     (500-1500 m at 50 km/h, a stop at a junction in half of them).
+
+    ``keep`` [m] builds only the first ``keep`` metres (and one grid step more) of the same road: the random draws
+    still cover ``length``, so the result is the whole road's first part bit for bit (tests/road_profiles); the
+    episode setups of the gym envs use it for their short routes.
     """
     rng = np.random.default_rng(seed)
     rc = _CLASSES["hilly"]
     s = _grid(length, step)
-    grade = _grade(rng, s, rc)
-    layout = _open_road(rng, s, rc.curves, np.full_like(s, 100 * KMH))
+    m = _kept(s, keep)
+    grade = _grade(rng, s, rc, m)
+    layout = _open_road(rng, s, rc.curves, np.full_like(s, 100 * KMH), m)
     stops, villages, pos = [], 0, rng.uniform(1_000.0, 6_000.0)
     while pos < s[-1] - 500.0:
         end = min(pos + rng.uniform(500.0, 1500.0), s[-1])
@@ -292,7 +333,7 @@ def hilly(seed: int, length: float = 20_000.0, step: float = 5.0) -> RoadProfile
     return _profile("hilly", seed, s, grade, layout, stops, {"road_class": "country", "n_villages": villages})
 
 
-def motorway(seed: int, length: float = 50_000.0, step: float = 5.0) -> RoadProfile:
+def motorway(seed: int, length: float = 50_000.0, step: float = 5.0, keep: float | None = None) -> RoadProfile:
     """Motorway (German Autobahn-like), ``length`` [m] on a ``step`` [m] grid.
 
     Statistics: grade process std 1.5 %, soft cap 4 %, correlation length 600 m (mean climb ~1.9 km);
@@ -300,18 +341,23 @@ def motorway(seed: int, length: float = 50_000.0, step: float = 5.0) -> RoadProf
     (100-400 m); superelevation 2.5-6 % with the curvature. Speed-limit zones: 130 km/h (the cap used for
     unlimited sections; 3-12 km, p=0.5), 120 km/h (3-10 km, p=0.35), 100 km/h (1-3 km, p=0.15); curves with
     sqrt(1.5 m/s^2 * R) below the zone get the rounded-down advisory from 250 m before. No stops.
+
+    ``keep`` [m] builds only the first ``keep`` metres (and one grid step more) of the same road: the random draws
+    still cover ``length``, so the result is the whole road's first part bit for bit (tests/road_profiles); the
+    episode setups of the gym envs use it for their short routes.
     """
     rng = np.random.default_rng(seed)
     rc = _CLASSES["motorway"]
     s = _grid(length, step)
-    grade = _grade(rng, s, rc)
+    m = _kept(s, keep)
+    grade = _grade(rng, s, rc, m)
     zones = _zones(rng, s, [(130 * KMH, (3_000.0, 12_000.0), 0.5), (120 * KMH, (3_000.0, 10_000.0), 0.35),
                             (100 * KMH, (1_000.0, 3_000.0), 0.15)])
-    layout = _open_road(rng, s, rc.curves, zones)
+    layout = _open_road(rng, s, rc.curves, zones, m)
     return _profile("motorway", seed, s, grade, layout, [], {"road_class": "motorway"})
 
 
-def city(seed: int, length: float = 8_000.0, step: float = 5.0) -> RoadProfile:
+def city(seed: int, length: float = 8_000.0, step: float = 5.0, keep: float | None = None) -> RoadProfile:
     """Urban route, ``length`` [m] on a ``step`` [m] grid.
 
     Statistics: grade process std 1 %, soft cap 3 %, correlation length 250 m. Intersections every 80-300 m
@@ -320,14 +366,19 @@ def city(seed: int, length: float = 8_000.0, step: float = 5.0) -> RoadProfile:
     intersections a gentle bend (R 150-600 m, 10-30 deg) with p=0.2. Speed limit 50 km/h with 30 km/h zones
     (300-1000 m, about a third of the route), turns limited to sqrt(2.5 m/s^2 * R) rounded down (20 km/h floor)
     from 20 m before. No bank.
+
+    ``keep`` [m] builds only the first ``keep`` metres (and one grid step more) of the same road: the random draws
+    still cover ``length``, so the result is the whole road's first part bit for bit (tests/road_profiles); the
+    episode setups of the gym envs use it for their short routes.
     """
     rng = np.random.default_rng(seed)
     rc = _CLASSES["city"]
     c = rc.curves
     s = _grid(length, step)
-    grade = _grade(rng, s, rc)
+    m = _kept(s, keep)
+    grade = _grade(rng, s, rc, m)
     zones = _zones(rng, s, [(50 * KMH, (800.0, 2_500.0), 0.6), (30 * KMH, (300.0, 1_000.0), 0.4)])
-    layout = _Layout(s, zones)
+    layout = _Layout(s[:m], zones[:m])
     stops, turns, pos = [], 0, rng.uniform(50.0, 300.0)
     while pos < s[-1] - 50.0:
         turning = rng.random() < 0.25
@@ -337,15 +388,21 @@ def city(seed: int, length: float = 8_000.0, step: float = 5.0) -> RoadProfile:
             radius = rng.uniform(10.0, 25.0)
             transition = rng.uniform(5.0, 10.0)
             direction = 1 if rng.random() < 0.5 else -1
-            pos = layout.curve(pos, radius, np.pi / 2, direction, transition, c, 0.0)
+            if layout.beyond(pos, c):
+                pos = layout.skip(pos, radius, np.pi / 2, transition)
+            else:
+                pos = layout.curve(pos, radius, np.pi / 2, direction, transition, c, 0.0)
             turns += 1
         gap = rng.uniform(80.0, 300.0)
         if rng.random() < 0.2 and gap > 150.0:
             radius = float(np.exp(rng.uniform(*np.log(c.radius))))
             heading = np.radians(rng.uniform(*c.heading_change))
             transition = min(_clamp(radius / c.transition_ratio, *c.transition), radius * heading / 2)
-            bend_end = layout.curve(pos + 0.2 * gap, radius, heading, 1 if rng.random() < 0.5 else -1,
-                                    transition, c, 0.0)
+            direction = 1 if rng.random() < 0.5 else -1
+            if layout.beyond(pos + 0.2 * gap, c):
+                bend_end = layout.skip(pos + 0.2 * gap, radius, heading, transition)
+            else:
+                bend_end = layout.curve(pos + 0.2 * gap, radius, heading, direction, transition, c, 0.0)
             gap = max(gap, bend_end - pos + 30.0)
         pos += gap
     return _profile("city", seed, s, grade, layout, [x for x in stops if x <= s[-1]],

@@ -37,6 +37,7 @@ class ProfileEntry:
     description: str
     kind: str  # "road" (RoadProfile) or "cycle" (DriveCycle)
     seeded: bool  # the factory takes ``seed``
+    keeps: bool = False  # the factory takes ``keep`` (builds only the start of its road, load_profile_start)
 
 
 _REGISTRY: Registry[ProfileEntry] = Registry("road profile", ProfileEntry, ValueError, normalise=str.lower)
@@ -54,8 +55,9 @@ def register_profile(name: str, factory: Factory, *, description: str = "", kind
         raise ValueError(f"profile name {name!r}: must be non-empty and not look like a file path")
     if kind not in ("road", "cycle"):
         raise ValueError(f"kind must be 'road' or 'cycle', got {kind!r}")
-    seeded = "seed" in inspect.signature(factory).parameters
-    _REGISTRY.register(key, ProfileEntry(key, factory, description, kind, seeded), replace_existing=overwrite)
+    parameters = inspect.signature(factory).parameters
+    _REGISTRY.register(key, ProfileEntry(key, factory, description, kind, "seed" in parameters, "keep" in parameters),
+                       replace_existing=overwrite)
 
 
 def register_profile_file(name: str, path: str | os.PathLike, *, description: str = "",
@@ -104,6 +106,17 @@ def load_profile(name_or_path: str | os.PathLike, seed: int = 0, **kw) -> RoadPr
         return load_profile_file(path, **kw)
     raise UnknownProfileError(f"unknown road profile {text!r}: not a registered name and not a .json/.csv/.gpx "
                               f"file; known names: {', '.join(known_profiles())}")
+
+
+def load_profile_start(name_or_path: str | os.PathLike, length: float | None, seed: int = 0
+                       ) -> RoadProfile | DriveCycle:
+    """``load_profile(name_or_path, seed=seed)`` when only its first ``length`` [m] will be used (None: all of it):
+    a registered generator that takes ``keep`` builds just that part (and one grid step more), bit for bit the
+    whole road's; any other profile is loaded whole. Cut it to ``length`` afterwards as needed."""
+    entry = _REGISTRY.find(os.fspath(name_or_path))
+    if length is not None and entry is not None and entry.keeps:
+        return entry.factory(seed=seed, keep=length) if entry.seeded else entry.factory(keep=length)
+    return load_profile(name_or_path, seed=seed)
 
 
 def _register_builtins() -> None:

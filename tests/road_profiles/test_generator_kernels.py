@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter1d
 
+from roadload.road_profiles import RoadProfileError, load_profile_start
 from roadload.road_profiles import generate as g
 
 
@@ -73,3 +74,38 @@ def test_cell_average_equals_the_numpy_form_bitwise():
         values = rng.normal(0.0, 0.01, knots.size)
         want = _cell_average_numpy(s, knots, values)
         assert np.array_equal(g._cell_average(s, knots, values), want), trial
+
+
+@pytest.mark.parametrize("name", ["hilly", "motorway", "city"])
+def test_keep_builds_the_first_part_of_the_same_road_bitwise(name):
+    """keep= (the gym envs' episode setup) draws the whole road but builds only its start: every array equals the
+    whole road's first points bit for bit, stops up to the end of the part, and the curve count of the whole road.
+    A keep that skipped draws, or a curve past the part that moved a limit or curvature inside it, would differ."""
+    gen = getattr(g, name)
+    for seed in range(12):
+        whole = gen(seed)
+        for keep in (2000.0, 1234.5, 17.5, whole.length - 3.0):
+            part = gen(seed, keep=keep)
+            m = part.distance.size
+            assert part.distance[-1] >= keep and (m == whole.distance.size or part.distance[-2] <= keep)
+            assert m < whole.distance.size or keep > whole.length - 5.0
+            for key in ("distance", "grade", "curvature", "bank", "speed_limit"):
+                assert getattr(part, key).tobytes() == getattr(whole, key)[:m].tobytes(), (seed, keep, key)
+            assert part.stops.tobytes() == whole.stops[whole.stops <= part.distance[-1]].tobytes()
+            assert part.meta["n_curves"] == whole.meta["n_curves"]
+    assert np.count_nonzero(gen(3, keep=3000.0).curvature) > 0 or name == "motorway"
+
+
+@pytest.mark.parametrize("keep", [0.0, -5.0, float("nan")])
+def test_keep_must_be_a_positive_length(keep):
+    with pytest.raises(RoadProfileError, match=r"keep: expected a positive length \[m\]"):
+        g.hilly(0, keep=keep)
+
+
+def test_load_profile_start_builds_only_the_start_where_the_generator_can():
+    part = load_profile_start("hilly", 2000.0, seed=5)
+    assert part.distance[-1] == 2005.0 and part.meta["built_m"] == 2005.0
+    assert load_profile_start("hilly", None, seed=5).length == 20_000.0
+    # long_grades smooths the whole road at once (mode 'nearest' at its end): it is loaded whole
+    whole = load_profile_start("long_grades", 2000.0, seed=1)
+    assert whole.length == 12_000.0 and "built_m" not in whole.meta

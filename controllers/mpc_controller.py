@@ -153,13 +153,16 @@ class MpcController(ControllerBase):
         self._fine_s = np.arange(0.0, road.length + st.horizon + 2 * st.ds, 2.0)
         self._fine_cap = speed_cap(road, st.lateral_accel_max, np.minimum(self._fine_s, road.length))
         self._unserved = list(np.sort(np.asarray(road.stops, dtype=float)))
-        self._schedule_start: float | None = None  # time [s] the vehicle passed the schedule's start
         self._next_multistart = 0.0
         self._multistart_sign = 1.0
+        self.reset_schedule()
+
+    def reset_schedule(self) -> None:
+        """Forgets the trip schedule's state (start crossing, lateness and its integral, lambda history)."""
+        self._schedule_start: float | None = None  # time [s] the vehicle passed the schedule's start
         self._late = 0.0
         self._late_integral = 0.0  # [s^2]
-        self._last_t = 0.0
-        self._last_s: tuple[float, float] | None = None
+        self._last_s: tuple[float, float] | None = None  # (t [s], s [m]) of the previous solve
         self.time_weights: list[float] = []
 
     def serve_stop(self, index: int) -> None:
@@ -277,21 +280,21 @@ class MpcController(ControllerBase):
         sched = self.settings.schedule
         if sched is None:
             return lam0
+        previous, self._last_s = self._last_s, (obs.t, obs.s)
         if self._schedule_start is None and obs.s >= sched.start:
-            if self._last_s is not None and obs.s > self._last_s[1]:  # interpolate the crossing of ``start``
-                t1, s1 = self._last_s
+            if previous is not None and obs.s > previous[1]:  # interpolate the crossing of ``start``
+                t1, s1 = previous
                 self._schedule_start = t1 + (obs.t - t1) * (sched.start - s1) / (obs.s - s1)
             else:
                 self._schedule_start = obs.t
-            self._last_t = obs.t
-        self._last_s = (obs.t, obs.s)
         if self._schedule_start is None:
             return lam0
         late = sched.lateness(obs.t, obs.s, self._schedule_start)
         if sched.integral_gain > 0:  # anti-windup: the integral term alone stays within +-max_log_change
+            # lateness integrated over time since the previous solve, from the crossing of ``start`` on
+            since = max(self._schedule_start, previous[0]) if previous is not None else self._schedule_start
             bound = sched.max_log_change / sched.integral_gain
-            self._late_integral = float(np.clip(self._late_integral + late * (obs.t - self._last_t), -bound, bound))
-        self._last_t = obs.t
+            self._late_integral = float(np.clip(self._late_integral + late * (obs.t - since), -bound, bound))
         lam = sched.time_weight(lam0, obs.t, obs.s, self._schedule_start, self._late_integral)
         self.time_weights.append(lam)  # the stats' time_weight_median covers the scheduled segment only
         self._late = late

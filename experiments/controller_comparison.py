@@ -355,7 +355,7 @@ class PairedTask:
     # the segment time is continuous in the knob
     knob: str = "lambda"
     time_factors: tuple[float, ...] = (0.99, 1.01)
-    terminal_value: str = "wheel"  # MpcSettings.terminal_value: "source" (m E_N / eta_i) or "wheel" (m E_N)
+    terminal_value: str = "source"  # MpcSettings.terminal_value: "source" (m E_N / eta_i) or "wheel" (m E_N)
     # [s] cold multi-start solves of every MPC run (MpcControllerSettings.multistart_period); None: 5 s with the
     # schedule knob (needed to leave a gear branch), off with the lambda knob (sessions 1-2)
     multistart_period: float | None = None

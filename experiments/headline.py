@@ -54,7 +54,7 @@ def headline_tasks(cases: list[str], roads: dict[str, list[str]], seeds: int, co
                    search_runs: int | None = None, weight_factors: tuple[float, ...] | None = None,
                    truck_warmup: float = 0.0, metric: str = "net", car_warmup: float = 0.0,
                    knob: str = "lambda", time_factors: tuple[float, ...] | None = None,
-                   terminal_value: str = "wheel", schedule_gain: float | None = None,
+                   terminal_value: str = "source", schedule_gain: float | None = None,
                    schedule_pilot: bool = False, multistart_period: float | None = None) -> list[PairedTask]:
     """One task per (case, road, condition, seed); roads: {case: [road, ...]}; search_runs / weight_factors
     override :class:`PairedTask`'s (fewer runs per seed on a loaded machine); truck_warmup [m]: warm-up before

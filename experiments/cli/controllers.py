@@ -220,7 +220,7 @@ def register_headline(benchmark_app: typer.Typer) -> None:
                                             "oracle pilot run (its median lambda over the segment)"),
         multistart_period: float = typer.Option(-1.0, help="[s] cold multi-start MPC solves this often (leave a "
                                                 "gear branch); < 0: 5 s with the schedule knob, off with lambda"),
-        terminal_value: str = typer.Option("wheel", help="MPC value of the kinetic energy at the horizon end: "
+        terminal_value: str = typer.Option("source", help="MPC value of the kinetic energy at the horizon end: "
                                            "source (m E_N / eta_i) or wheel (m E_N, sessions 1-2)"),
     ) -> None:
         """MPC with the oracle / abc / online force model against cruise control at equal trip time, paired over

@@ -12,9 +12,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from roadload.controllers.base import ControllerError
+from roadload.controllers.base import ControllerError, Observation
 from roadload.controllers.mpc import MpcError, MpcSettings, OcpSolver, Preview
-from roadload.controllers.mpc_controller import TripSchedule
+from roadload.controllers.mpc_controller import MpcController, MpcControllerSettings, TripSchedule
 from roadload.controllers.vehicle_models import abc_parameters, energy_model_from_spec
 from roadload.experiments.controller_comparison import TRUCK_MPC, PairedTask
 from roadload.presets import truck_spec
@@ -99,3 +99,19 @@ def test_trip_schedule_raises_lambda_when_late_and_lowers_it_when_early():
         PairedTask("truck_15t", "long_grades", 0, knob="speed")
     with pytest.raises(ValueError, match="net"):
         PairedTask("truck_15t", "long_grades", 0, knob="schedule", metric="raw")
+
+
+def test_schedule_feedback_crosses_start_between_solves_and_integrates_lateness_from_there():
+    """The controller's lambda feedback: the start crossing is interpolated between two solves, and the integral
+    term sums lateness x time since the previous solve, counted from the crossing (not from the solve before it)."""
+    sched = TripSchedule(start=1000.0, end=3000.0, duration=100.0, integral_gain=0.002)
+    ctrl = MpcController(MpcControllerSettings(mpc=replace(TRUCK_MPC, time_weight=1e5), schedule=sched))
+    ctrl.reset_schedule()
+    lam = [ctrl.time_weight(Observation(t=t, s=s, v=20.0, a=0.0)) for t, s in
+           [(0.0, 960.0), (4.0, 1040.0), (9.0, 1130.0), (15.0, 1250.0)]]
+    assert lam[0] == 1e5 and ctrl._schedule_start == pytest.approx(2.0)  # 1000 m crossed half way between solves
+    late = [sched.lateness(t, s, 2.0) for t, s in [(4.0, 1040.0), (9.0, 1130.0), (15.0, 1250.0)]]
+    integral = late[0] * (4.0 - 2.0) + late[1] * 5.0 + late[2] * 6.0
+    assert ctrl._late_integral == pytest.approx(integral)
+    assert lam[3] == pytest.approx(sched.time_weight(1e5, 15.0, 1250.0, 2.0, integral))
+    assert ctrl.time_weights == pytest.approx(lam[1:])

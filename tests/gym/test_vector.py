@@ -87,27 +87,38 @@ def test_each_sub_env_equals_the_single_env_next_step_autoreset(config):
     assert min(episodes) >= 1, f"no autoreset exercised: {episodes}"
 
 
-def test_same_step_autoreset_reports_the_final_observation():
-    n, seed, config = 2, 5, {"route_length": 120.0}
-    venv = EcoDriveVectorEnv(n, config=config, autoreset_mode="same_step")
+def _same_step_rollout(config, n, seed, steps, action_low, rng_seed, check_final) -> int:
+    """Random actions in [action_low, 1] through the same-step vector env and n single envs side by side: rewards and
+    observations equal, ``check_final(vinfo, i, o, inf)`` at every termination / truncation of sub-env i (before the
+    single env resets; it returns the reset info check), returns the number of finished episodes."""
+    venv = EcoDriveVectorEnv(n, config=dict(config), autoreset_mode="same_step")
     venv.reset(seed=seed)
     singles, _ = _singles(config, n, seed)
-    rng = np.random.default_rng(1)
+    rng = np.random.default_rng(rng_seed)
     finals = 0
-    for _ in range(300):
-        a = rng.uniform(0.0, 1.0, (n, 1)).astype(np.float32)
+    for _ in range(steps):
+        a = rng.uniform(action_low, 1.0, (n, 1)).astype(np.float32)
         vobs, vr, vte, vtr, vinfo = venv.step(a)
         for i, env in enumerate(singles):
             o, r, te, tr, inf = env.step(a[i])
             _close(vr[i], r, "reward")
             if te or tr:
                 finals += 1
-                assert vinfo["_final_obs"][i]
-                _close(vinfo["final_obs"][i], o, "final obs")
-                _close(vinfo["final_info"]["s"][i], inf["s"], "final info s")
+                after_reset = check_final(vinfo, i, o, inf)
                 o, inf = env.reset()
+                after_reset(inf)
             _close(vobs[i], o, "obs")
-    assert finals >= 2
+    return finals
+
+
+def test_same_step_autoreset_reports_the_final_observation():
+    def check(vinfo, i, o, inf):
+        assert vinfo["_final_obs"][i]
+        _close(vinfo["final_obs"][i], o, "final obs")
+        _close(vinfo["final_info"]["s"][i], inf["s"], "final info s")
+        return lambda reset_info: None
+
+    assert _same_step_rollout({"route_length": 120.0}, 2, 5, 300, 0.0, 1, check) >= 2
 
 
 def test_bad_input_is_named():
@@ -246,27 +257,14 @@ def test_same_step_final_info_has_the_single_env_terms_and_the_new_episode_info(
     """Same-step autoreset through terminations with the speed shield on (city road, stops): final_info carries the
     last step's terms / costs / return costs of the single env, and the info of a reset sub-env is the single env's
     reset info (no terms)."""
-    n, seed = 3, 8
     config = {"route_length": 120.0, "road": "city", "speed_shield": True, "shield_margin": 4.0}
-    venv = EcoDriveVectorEnv(n, config=dict(config), autoreset_mode="same_step")
-    venv.reset(seed=seed)
-    singles, _ = _singles(config, n, seed)
-    rng = np.random.default_rng(3)
-    finals = 0
-    for _ in range(400):
-        a = rng.uniform(0.2, 1.0, (n, 1)).astype(np.float32)
-        vobs, vr, vte, vtr, vinfo = venv.step(a)
-        for i, env in enumerate(singles):
-            o, r, te, tr, inf = env.step(a[i])
-            _close(vr[i], r, "reward")
-            if te or tr:
-                finals += 1
-                assert vinfo["_final_info"][i]
-                _check_info(vinfo["final_info"], i, inf, with_terms=True)
-                o, inf = env.reset()
-                _check_info(vinfo, i, inf, with_terms=False)
-            _close(vobs[i], o, "obs")
-    assert finals >= 3
+
+    def check(vinfo, i, o, inf):
+        assert vinfo["_final_info"][i]
+        _check_info(vinfo["final_info"], i, inf, with_terms=True)
+        return lambda reset_info: _check_info(vinfo, i, reset_info, with_terms=False)
+
+    assert _same_step_rollout(config, 3, 8, 400, 0.2, 3, check) >= 3
 
 
 def test_openmp_runtime_loaded_by_torch_is_detected():

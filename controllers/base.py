@@ -11,7 +11,7 @@ and friction braking. Subclasses only provide ``wheel_force(obs)`` [N].
 from __future__ import annotations
 
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -43,11 +43,13 @@ class Observation:
 
 @dataclass(frozen=True)
 class Command:
-    """Wheel forces [N], each >= 0: traction, regenerative braking and friction braking."""
+    """Wheel forces [N], each >= 0: traction, regenerative braking and friction braking; ``gear``: a requested gear
+    (1-based, the plant's numbering) or None for the transmission's own shift strategy."""
 
     traction: float
     regen: float
     brake: float
+    gear: int | None = None
 
     @property
     def net(self) -> float:
@@ -148,7 +150,13 @@ class ControllerBase:
                 self.events["non_finite_command"] += 1
                 force = -self.params().mass * 1.0
         force = self._guard(obs, force)
-        return split_wheel_force(force, obs.v, self.ctx.energy, self.ratio(obs))
+        cmd = split_wheel_force(force, obs.v, self.ctx.energy, self.ratio(obs))
+        gear = self.gear_request(obs)
+        return cmd if gear is None else replace(cmd, gear=gear)
+
+    def gear_request(self, obs: Observation) -> int | None:
+        """The gear to request this step (1-based), or None: the transmission shifts by its own strategy."""
+        return None
 
     def _stop_force(self, obs: Observation) -> float | None:
         """Final stop manoeuvre at the next stop: constant deceleration to the stop line, hold, dwell, go."""

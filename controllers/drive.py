@@ -58,6 +58,7 @@ class DriveSettings:
     # from time_weight (mpc_controller.TripSchedule); None: the fixed time weight
     target_time: float | None = None
     multistart_period: float = 0.0  # [s] MPC only: cold multi-start solves (MpcControllerSettings); 0 = off
+    gear_command: bool = False  # MPC only, ICE: request the MPC's planned gear (MpcControllerSettings.gear_command)
     # shape of the target schedule: (positions [m], elapsed fraction of target_time [-]); None: linear in distance
     target_shape: tuple[tuple[float, ...], tuple[float, ...]] | None = None
     schedule_gain: float = 20.0  # P gain of the target schedule's lambda feedback (TripSchedule.gain)
@@ -146,7 +147,8 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
                                       shape_s=st.target_shape[0] if st.target_shape else (),
                                       shape_fraction=st.target_shape[1] if st.target_shape else ()))
         controller = MpcController(MpcControllerSettings(mpc=mpc_settings, schedule=schedule,
-                                                         multistart_period=st.multistart_period))
+                                                         multistart_period=st.multistart_period,
+                                                         gear_command=st.gear_command))
     elif st.controller == "cruise":
         controller = CruiseController(st.cruise)
     else:

@@ -71,6 +71,17 @@ class SourceEnergyModel:
         retarder in fuel cut (zero fuel, the ``regen`` force of an ICE costs nothing in :meth:`source_power`)."""
         return self.max_regen_power > 0 and self.max_regen_torque > 0
 
+    def gear_with_hysteresis(self, v: float, previous: int | None, band: float) -> int:
+        """Gear index (0-based) of the speed-based shift rule held within +-``band`` [m/s] of each shift speed:
+        the previous gear is kept while v stays between the gears of v - band and v + band (no shift hunting when
+        the speed hovers at a shift speed); the rule's own gear without a previous one. 0 for an EV."""
+        if self.kind == "ev":
+            return 0
+        low, high = int(self.gear_for_speed(v - band)), int(self.gear_for_speed(v + band))
+        if previous is None:
+            return int(self.gear_for_speed(v))
+        return min(max(previous, low), high)
+
     def gear_for_speed(self, v) -> np.ndarray:
         """Gear index (0-based) from the speed-based shift rule; always 0 for an EV."""
         v = np.asarray(v, dtype=float)

@@ -117,10 +117,19 @@ class MpcControllerSettings:
     # (issue 14, session 3). 0 = off
     multistart_period: float = 0.0
     multistart_step: float = 4.0  # [m/s]
+    # ICE: request the gear of the MPC's own shift rule (SourceEnergyModel.shift_speeds, the gear its fuel model
+    # plans with) instead of leaving the transmission to its load-dependent strategy, as predictive powertrain
+    # control does; held within +-gear_band [m/s] of a shift speed, from gear_min_speed [m/s] up (below: the
+    # transmission's launch and low gears). Without it, the plant downshifts under load where the plan assumed
+    # the higher gear, and a 0.1 m/s difference in cruise speed changes the fuel of a whole climb (issue 14,
+    # session 5)
+    gear_command: bool = False
+    gear_band: float = 0.5  # [m/s]
+    gear_min_speed: float = 10.0  # [m/s]
 
     def __post_init__(self) -> None:
         for name in ("replan_period", "speed_gain", "lookahead_time", "plan_tolerance", "min_plan_left",
-                     "multistart_period", "multistart_step"):
+                     "multistart_period", "multistart_step", "gear_band", "gear_min_speed"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ControllerError(f"MpcControllerSettings.{name}: must be a finite number >= 0, got {value!r}")
@@ -155,6 +164,7 @@ class MpcController(ControllerBase):
         self._unserved = list(np.sort(np.asarray(road.stops, dtype=float)))
         self._next_multistart = 0.0
         self._multistart_sign = 1.0
+        self._gear: int | None = None  # 0-based gear of the last request
         self.reset_schedule()
 
     def reset_schedule(self) -> None:
@@ -299,6 +309,17 @@ class MpcController(ControllerBase):
         self.time_weights.append(lam)  # the stats' time_weight_median covers the scheduled segment only
         self._late = late
         return lam
+
+    def gear_request(self, obs: Observation) -> int | None:
+        """With ``gear_command`` on an ICE: the shift rule's gear (1-based) at the measured speed, with hysteresis;
+        None (the transmission decides) otherwise and below ``gear_min_speed``."""
+        st = self.settings
+        en = self.ctx.energy
+        if not st.gear_command or en.kind != "ice" or obs.v < st.gear_min_speed:
+            self._gear = None
+            return None
+        self._gear = en.gear_with_hysteresis(obs.v, self._gear, st.gear_band)
+        return self._gear + 1
 
     def wheel_force(self, obs: Observation) -> float:
         stale = self.plan is not None and obs.s > self.plan.s[-2]

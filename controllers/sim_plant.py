@@ -49,7 +49,7 @@ class SimulatorPlant:
 
     def step(self, cmd: Command | None) -> PlantStep:
 
-        action = None if cmd is None else Action(cmd.traction, cmd.regen, cmd.brake)
+        action = None if cmd is None else Action(cmd.traction, cmd.regen, cmd.brake, gear=cmd.gear)
         r = self.sim.step(action, n_substeps=self.substeps)
         return PlantStep(self._obs(r), float(r.source_energy), bool(r.done))
 

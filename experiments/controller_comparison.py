@@ -359,6 +359,14 @@ class PairedTask:
     # [s] cold multi-start solves of every MPC run (MpcControllerSettings.multistart_period); None: 5 s with the
     # schedule knob (needed to leave a gear branch), off with the lambda knob (sessions 1-2)
     multistart_period: float | None = None
+    # every MPC run requests the gear of its own shift rule (MpcControllerSettings.gear_command, ICE only; the
+    # cruise control and human baselines keep the transmission's strategy)
+    gear_command: bool = False
+    # extra runs of a force model whose runs at lambda* x factors all miss T_ref by more than ``model_reach``
+    # (e.g. the online MPC on the other cruise branch of a truck at every lambda): a lambda search for that model
+    # alone, so its energy at T_ref comes from a local fit rather than the seed being dropped; 0 = off
+    model_search_runs: int = 0
+    model_reach: float = 0.01
     schedule_gain: float = 20.0  # schedule knob: P gain of the lambda feedback (TripSchedule.gain)
     schedule_pilot: bool = False  # schedule knob: lambda_0 from one oracle pilot run (see run_paired_task)
     schedule_shape: str = "linear"  # schedule knob: "linear" in distance or "cruise" (cruise control's time profile)
@@ -373,6 +381,10 @@ class PairedTask:
         if not all(math.isfinite(f) and 0.5 < f < 2.0 for f in self.time_factors):
             raise ValueError(f"PairedTask.time_factors: factors of the cruise time in (0.5, 2), got "
                              f"{self.time_factors}")
+        if not (isinstance(self.model_search_runs, int) and self.model_search_runs >= 0):
+            raise ValueError(f"PairedTask.model_search_runs: an integer >= 0, got {self.model_search_runs!r}")
+        if not (math.isfinite(self.model_reach) and 0 < self.model_reach < 0.5):
+            raise ValueError(f"PairedTask.model_reach: a relative time in (0, 0.5), got {self.model_reach}")
         if not (math.isfinite(self.warmup) and self.warmup >= 0):
             raise ValueError(f"PairedTask.warmup must be a finite distance >= 0 m, got {self.warmup}")
 
@@ -447,7 +459,7 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
         multistart = task.multistart_period if task.multistart_period is not None else (
             5.0 if task.knob == "schedule" else 0.0)
         settings = replace(base, controller="mpc", force_model=fm, time_weight=lam, wrong_model=errors,
-                           multistart_period=multistart)
+                           multistart_period=multistart, gear_command=task.gear_command)
         if target is not None:
             settings = replace(settings, target_time=target,
                                schedule_gain=task.schedule_gain,
@@ -490,6 +502,10 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
             factors = task.weight_factors if spec == "oracle" else (1.0, *task.weight_factors)
             for f in factors:
                 mpc(spec, lam_star * f)
+            tried = [(lam_star * f, t) for f, (t, _) in zip(factors, points.get(spec, [])[-len(factors):])]
+            if spec != "oracle" and task.model_search_runs > 0:
+                _search_model_lambda(lambda lam, spec=spec: mpc(spec, lam).metrics[time_key], tried, t_ref,
+                                     task.model_search_runs, task.model_reach, task.tol)
     fit = fit_energy_at_time(points, t_ref)
     cruise_fit = fit_energy_at_time({"cruise": cruise_pts}, t_ref, window=0.08)
     # the other metric on the same runs (before/after comparison of the resolution): its own reference time
@@ -509,6 +525,33 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
             "energy_at_tref_J": fit.energy, "nearest_time_error": fit.nearest, "spanned": fit.spanned,
             "fit_residual_std": fit.residual_std, "fit_slope": fit.slope, "fit_curvature": fit.curvature,
             "runs": runs_out, **extra}
+
+
+def _search_model_lambda(run, tried: list[tuple[float, float]], t_ref: float, max_runs: int, reach: float,
+                         tol: float) -> None:
+    """Extra runs ``run(lambda) -> T`` of one force model when every run in ``tried`` [(lambda [J/s], T [s])] missed
+    T_ref by more than ``reach`` and all lie on one side of it: lambda x 2 (all slower) or / 2 (all faster) until
+    a run lands on the other side, then log-lambda interpolation inside the bracket (kept 10 % from its ends;
+    a gear branch makes T jump, so it may end in the gap), at most ``max_runs`` runs or until within ``tol``."""
+    hist = [(lam, t) for lam, t in tried if math.isfinite(t)]
+    if not hist or min(abs(t / t_ref - 1.0) for _, t in hist) <= reach:
+        return
+    if min(t for _, t in hist) <= t_ref <= max(t for _, t in hist):
+        return  # the runs span T_ref: the local fit interpolates
+    for _ in range(max_runs):
+        slow = [h for h in hist if h[1] > t_ref]  # lambda too small
+        fast = [h for h in hist if h[1] <= t_ref]
+        if slow and fast:
+            (l1, t1), (l2, t2) = max(slow), min(fast)
+            x1, x2 = math.log(l1), math.log(l2)
+            x = x1 + (t_ref - t1) * (x2 - x1) / (t2 - t1)
+            lam = math.exp(min(max(x, x1 + 0.1 * (x2 - x1)), x2 - 0.1 * (x2 - x1)))
+        else:
+            lam = 2.0 * max(hist)[0] if slow else 0.5 * min(hist)[0]
+        t = run(lam)
+        hist.append((lam, t if math.isfinite(t) else float("inf")))
+        if abs(t / t_ref - 1.0) <= tol:
+            return
 
 
 def schedule_shape(log: pd.DataFrame, start: float, end: float, step: float = 100.0

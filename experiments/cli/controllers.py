@@ -220,6 +220,11 @@ def register_headline(benchmark_app: typer.Typer) -> None:
                                             "oracle pilot run (its median lambda over the segment)"),
         multistart_period: float = typer.Option(-1.0, help="[s] cold multi-start MPC solves this often (leave a "
                                                 "gear branch); < 0: 5 s with the schedule knob, off with lambda"),
+        model_search_runs: int = typer.Option(0, help="extra lambda-search runs of a force model whose runs all "
+                                              "miss the reference time by > 1 % (e.g. on the other cruise branch)"),
+        gear_command: bool = typer.Option(False, "--mpc-gear", help="ICE: every MPC run requests the gear of its own "
+                                          "shift rule (predictive powertrain control); the baselines keep the "
+                                          "transmission's load-dependent strategy"),
         terminal_value: str = typer.Option("source", help="MPC value of the kinetic energy at the horizon end: "
                                            "source (m E_N / eta_i) or wheel (m E_N, sessions 1-2)"),
     ) -> None:
@@ -260,12 +265,15 @@ def register_headline(benchmark_app: typer.Typer) -> None:
             _fail(f"--weight-factors: comma-separated numbers or 'none', got {weight_factors!r}")
         if search_runs < 1:
             _fail(f"--search-runs: at least 1, got {search_runs}")
+        if model_search_runs < 0:
+            _fail(f"--model-search-runs: 0 or more, got {model_search_runs}")
         tasks = headline_tasks(cases, roads, seeds, conds, human=True, quick=quick, first_seed=first_seed,
                                search_runs=None if quick else search_runs, weight_factors=None if quick else factors,
                                truck_warmup=truck_warmup, metric=metric, car_warmup=car_warmup, knob=knob,
                                time_factors=t_factors, terminal_value=terminal_value,
                                schedule_gain=schedule_gain, schedule_pilot=schedule_pilot,
-                               multistart_period=None if multistart_period < 0 else multistart_period)
+                               multistart_period=None if multistart_period < 0 else multistart_period,
+                               gear_command=gear_command, model_search_runs=model_search_runs)
         summary, failures = run_paired(tasks, out, scheduler=scheduler, workers=workers, description="headline",
                                        merge=list(merge))
         if summary.empty:

@@ -69,3 +69,32 @@ def test_model_search_settings_are_checked():
         cc.PairedTask("truck_15t", "long_grades", 0, model_search_runs=-1)
     with pytest.raises(ValueError, match="model_reach"):
         cc.PairedTask("truck_15t", "long_grades", 0, model_reach=float("nan"))
+
+
+def test_headline_cli_passes_the_gear_command_and_model_search_to_every_task(monkeypatch, tmp_path):
+    """`roadload benchmark headline --mpc-gear --model-search-runs N` reaches every PairedTask (the sweep itself is
+    replaced: only the plumbing is under test), and a negative N is refused with the option's name."""
+    from typer.testing import CliRunner
+
+    from roadload.experiments.cli import _load, app
+
+    _load()
+    import roadload.experiments.cli.controllers as cli_controllers
+
+    seen = []
+
+    def fake_run_paired(tasks, out, **kw):  # no runs: the command then stops with "every task failed"
+        seen.extend(tasks)
+        return pd.DataFrame(), []
+
+    monkeypatch.setattr(cli_controllers, "run_paired", fake_run_paired)
+    runner = CliRunner()
+    args = ["benchmark", "headline", "--vehicles", "truck_15t", "--seeds", "2", "--out", str(tmp_path)]
+    res = runner.invoke(app, [*args, "--mpc-gear", "--model-search-runs", "2"])
+    assert len(seen) == 2, res.output
+    assert all(t.gear_command and t.model_search_runs == 2 for t in seen)
+    seen.clear()
+    runner.invoke(app, args)
+    assert seen and not any(t.gear_command or t.model_search_runs for t in seen)  # off by default
+    bad = runner.invoke(app, [*args, "--model-search-runs", "-1"])
+    assert bad.exit_code != 0 and "--model-search-runs" in bad.output

@@ -22,6 +22,7 @@ Model (shared by the three road classes, parameters in ``_CLASSES`` and each gen
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -449,4 +450,5 @@ def long_grades(seed: int, length: float = 12_000.0, step: float = 5.0, speed_li
                        speed_limit=np.full_like(s, speed_limit_kmh * KMH), stops=np.zeros(0), meta=meta)
 
 
-GENERATORS = {"hilly": hilly, "motorway": motorway, "city": city, "long_grades": long_grades}
+GENERATORS: dict[str, Callable[..., RoadProfile]] = {"hilly": hilly, "motorway": motorway, "city": city,
+                                                  "long_grades": long_grades}

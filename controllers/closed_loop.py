@@ -13,13 +13,15 @@ position, :func:`crossing`) linearly inside that last step.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import math
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 import numpy as np
 import pandas as pd
 
 from .base import Command, DriveContext, Observation
+from .force_model import ForceModel
 
 VIOLATION_TOLERANCE = 0.1  # [m/s] numerical tolerance above the posted limit
 
@@ -51,6 +53,38 @@ class Controller(Protocol):
     def act(self, obs: Observation) -> Command | None: ...
 
     def stats(self) -> dict[str, Any]: ...
+
+
+class Handover:
+    """``first`` drives until position ``switch`` [m], ``second`` from there on (e.g. cruise control drives the
+    warm-up of every paired run, so each MPC starts the measured segment in the same state and the online estimator
+    has learnt from the same samples). ``first_force_model``: the force model ``first`` plans with (e.g. the fixed
+    abc model, so the warm-up does not depend on the run's force model); the run's own force model still observes
+    every sample once, through ``first`` or ``second``. Stats are the second's."""
+
+    def __init__(self, first: Controller, second: Controller, switch: float,
+                 first_force_model: ForceModel | None = None) -> None:
+        if not (math.isfinite(switch) and switch >= 0):
+            raise ValueError(f"Handover.switch: a finite position >= 0 m, got {switch}")
+        self.first, self.second, self.switch = first, second, float(switch)
+        self.first_force_model = first_force_model
+        self.name = second.name
+        self._ctx: DriveContext | None = None
+
+    def reset(self, ctx: DriveContext) -> None:
+        self._ctx = ctx
+        self.second.reset(ctx)
+        self.first.reset(ctx if self.first_force_model is None else replace(ctx, force_model=self.first_force_model))
+
+    def act(self, obs: Observation) -> Command | None:
+        if obs.s >= self.switch:
+            return self.second.act(obs)
+        if self.first_force_model is not None and self._ctx is not None:
+            self._ctx.force_model.observe(obs.sample)  # the run's model learns from the warm-up too
+        return self.first.act(obs)
+
+    def stats(self) -> dict[str, Any]:
+        return self.second.stats()
 
 
 def run_closed_loop(controller: Controller, plant: Plant, ctx: DriveContext, max_time: float | None = None,

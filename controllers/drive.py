@@ -18,7 +18,7 @@ from roadload.road_profiles import RoadProfile
 from roadload.vehicle import VehicleSpec
 
 from .base import ControllerError, DriveContext
-from .closed_loop import Controller, RunResult, run_closed_loop
+from .closed_loop import Controller, Handover, RunResult, run_closed_loop
 from .cruise import CruiseController, CruiseSettings
 from .energy import SourceEnergyModel, with_loss_error
 from .force_model import FORCE_MODEL_NAMES, ErroredForceModel, FixedForceModel, ForceModel, OracleForceModel
@@ -59,6 +59,9 @@ class DriveSettings:
     target_time: float | None = None
     multistart_period: float = 0.0  # [s] MPC only: cold multi-start solves (MpcControllerSettings); 0 = off
     gear_command: bool = False  # MPC only, ICE: request the MPC's planned gear (MpcControllerSettings.gear_command)
+    # MPC only, with measure_from > 0: who drives the warm-up [0, measure_from). "mpc": the MPC itself; "cruise":
+    # cruise control (``cruise`` settings) for every run, the MPC takes over at measure_from (closed_loop.Handover)
+    warmup_driver: str = "mpc"
     # shape of the target schedule: (positions [m], elapsed fraction of target_time [-]); None: linear in distance
     target_shape: tuple[tuple[float, ...], tuple[float, ...]] | None = None
     schedule_gain: float = 20.0  # P gain of the target schedule's lambda feedback (TripSchedule.gain)
@@ -72,6 +75,8 @@ class DriveSettings:
             raise ControllerError(f"time_weight: must be a finite number >= 0 [J/s], got {self.time_weight}")
         if self.target_time is not None and not (math.isfinite(self.target_time) and self.target_time > 0):
             raise ControllerError(f"target_time: must be a finite number > 0 [s] or None, got {self.target_time}")
+        if self.warmup_driver not in ("mpc", "cruise"):
+            raise ControllerError(f"warmup_driver: 'mpc' or 'cruise', got {self.warmup_driver!r}")
         if not (math.isfinite(self.dt) and self.dt > 0):
             raise ControllerError(f"dt: must be a finite number > 0 [s], got {self.dt}")
 
@@ -149,6 +154,9 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
         controller = MpcController(MpcControllerSettings(mpc=mpc_settings, schedule=schedule,
                                                          multistart_period=st.multistart_period,
                                                          gear_command=st.gear_command))
+        if st.warmup_driver == "cruise" and st.measure_from > 0:
+            # cruise control on the nominal abc model: the same warm-up whatever the run's force model
+            controller = Handover(CruiseController(st.cruise), controller, st.measure_from, FixedForceModel(abc))
     elif st.controller == "cruise":
         controller = CruiseController(st.cruise)
     else:

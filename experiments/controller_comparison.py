@@ -367,6 +367,10 @@ class PairedTask:
     # alone, so its energy at T_ref comes from a local fit rather than the seed being dropped; 0 = off
     model_search_runs: int = 0
     model_reach: float = 0.01
+    # who drives the warm-up of the MPC runs: "mpc" (each MPC itself) or "cruise" (cruise control for every run: the
+    # measured segment then starts in the same state for every force model, and the online estimator has learnt
+    # from the same samples; DriveSettings.warmup_driver)
+    warmup_driver: str = "mpc"
     schedule_gain: float = 20.0  # schedule knob: P gain of the lambda feedback (TripSchedule.gain)
     schedule_pilot: bool = False  # schedule knob: lambda_0 from one oracle pilot run (see run_paired_task)
     schedule_shape: str = "linear"  # schedule knob: "linear" in distance or "cruise" (cruise control's time profile)
@@ -381,6 +385,8 @@ class PairedTask:
         if not all(math.isfinite(f) and 0.5 < f < 2.0 for f in self.time_factors):
             raise ValueError(f"PairedTask.time_factors: factors of the cruise time in (0.5, 2), got "
                              f"{self.time_factors}")
+        if self.warmup_driver not in ("mpc", "cruise"):
+            raise ValueError(f"PairedTask.warmup_driver: 'mpc' or 'cruise', got {self.warmup_driver!r}")
         if not (isinstance(self.model_search_runs, int) and self.model_search_runs >= 0):
             raise ValueError(f"PairedTask.model_search_runs: an integer >= 0, got {self.model_search_runs!r}")
         if not (math.isfinite(self.model_reach) and 0 < self.model_reach < 0.5):
@@ -459,7 +465,8 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
         multistart = task.multistart_period if task.multistart_period is not None else (
             5.0 if task.knob == "schedule" else 0.0)
         settings = replace(base, controller="mpc", force_model=fm, time_weight=lam, wrong_model=errors,
-                           multistart_period=multistart, gear_command=task.gear_command)
+                           multistart_period=multistart, gear_command=task.gear_command,
+                           warmup_driver=task.warmup_driver)
         if target is not None:
             settings = replace(settings, target_time=target,
                                schedule_gain=task.schedule_gain,

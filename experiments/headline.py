@@ -56,7 +56,8 @@ def headline_tasks(cases: list[str], roads: dict[str, list[str]], seeds: int, co
                    knob: str = "lambda", time_factors: tuple[float, ...] | None = None,
                    terminal_value: str = "source", schedule_gain: float | None = None,
                    schedule_pilot: bool = False, multistart_period: float | None = None,
-                   gear_command: bool = False, model_search_runs: int = 0) -> list[PairedTask]:
+                   gear_command: bool = False, model_search_runs: int = 0,
+                   warmup_driver: str = "mpc") -> list[PairedTask]:
     """One task per (case, road, condition, seed); roads: {case: [road, ...]}; search_runs / weight_factors
     override :class:`PairedTask`'s (fewer runs per seed on a loaded machine); truck_warmup [m]: warm-up before
     the trucks' measured segment."""
@@ -64,7 +65,7 @@ def headline_tasks(cases: list[str], roads: dict[str, list[str]], seeds: int, co
     extra: dict = dict(QUICK) if quick else {}
     extra.update(metric=metric, knob=knob, terminal_value=terminal_value, schedule_pilot=schedule_pilot,
                  multistart_period=multistart_period, gear_command=gear_command,
-                 model_search_runs=model_search_runs)
+                 model_search_runs=model_search_runs, warmup_driver=warmup_driver)
     if schedule_gain is not None:
         extra["schedule_gain"] = schedule_gain
     if time_factors is not None:

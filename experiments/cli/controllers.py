@@ -222,6 +222,8 @@ def register_headline(benchmark_app: typer.Typer) -> None:
                                                 "gear branch); < 0: 5 s with the schedule knob, off with lambda"),
         model_search_runs: int = typer.Option(0, help="extra lambda-search runs of a force model whose runs all "
                                               "miss the reference time by > 1 % (e.g. on the other cruise branch)"),
+        warmup_driver: str = typer.Option("mpc", help="who drives the warm-up of the MPC runs: mpc (each MPC) or "
+                                          "cruise (cruise control for every run: same state at the segment start)"),
         gear_command: bool = typer.Option(False, "--mpc-gear", help="ICE: every MPC run requests the gear of its own "
                                           "shift rule (predictive powertrain control); the baselines keep the "
                                           "transmission's load-dependent strategy"),
@@ -265,6 +267,8 @@ def register_headline(benchmark_app: typer.Typer) -> None:
             _fail(f"--weight-factors: comma-separated numbers or 'none', got {weight_factors!r}")
         if search_runs < 1:
             _fail(f"--search-runs: at least 1, got {search_runs}")
+        if warmup_driver not in ("mpc", "cruise"):
+            _fail(f"--warmup-driver: mpc or cruise, got {warmup_driver!r}")
         if model_search_runs < 0:
             _fail(f"--model-search-runs: 0 or more, got {model_search_runs}")
         tasks = headline_tasks(cases, roads, seeds, conds, human=True, quick=quick, first_seed=first_seed,
@@ -273,7 +277,8 @@ def register_headline(benchmark_app: typer.Typer) -> None:
                                time_factors=t_factors, terminal_value=terminal_value,
                                schedule_gain=schedule_gain, schedule_pilot=schedule_pilot,
                                multistart_period=None if multistart_period < 0 else multistart_period,
-                               gear_command=gear_command, model_search_runs=model_search_runs)
+                               gear_command=gear_command, model_search_runs=model_search_runs,
+                               warmup_driver=warmup_driver)
         summary, failures = run_paired(tasks, out, scheduler=scheduler, workers=workers, description="headline",
                                        merge=list(merge))
         if summary.empty:

@@ -77,9 +77,9 @@ class SourceEnergyModel:
         the speed hovers at a shift speed); the rule's own gear without a previous one. 0 for an EV."""
         if self.kind == "ev":
             return 0
-        low, high = int(self.gear_for_speed(v - band)), int(self.gear_for_speed(v + band))
         if previous is None:
             return int(self.gear_for_speed(v))
+        low, high = int(self.gear_for_speed(v - band)), int(self.gear_for_speed(v + band))
         return min(max(previous, low), high)
 
     def gear_for_speed(self, v) -> np.ndarray:

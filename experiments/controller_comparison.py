@@ -509,8 +509,8 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
             factors = task.weight_factors if spec == "oracle" else (1.0, *task.weight_factors)
             for f in factors:
                 mpc(spec, lam_star * f)
-            tried = [(lam_star * f, t) for f, (t, _) in zip(factors, points.get(spec, [])[-len(factors):])]
             if spec != "oracle" and task.model_search_runs > 0:
+                tried = [(lam_star * f, t) for f, (t, _) in zip(factors, points[spec][-len(factors):])]
                 _search_model_lambda(lambda lam, spec=spec: mpc(spec, lam).metrics[time_key], tried, t_ref,
                                      task.model_search_runs, task.model_reach, task.tol)
     fit = fit_energy_at_time(points, t_ref)

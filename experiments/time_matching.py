@@ -115,6 +115,17 @@ class LocalFit:
     n_points: int
 
 
+def _nearest_and_spanned(runs: dict[str, list[tuple[float, float]]], target_time: float
+                         ) -> tuple[dict[str, float], dict[str, bool]]:
+    """Per model: |T/T_target - 1| of its run closest in time, and whether its runs bracket T_target."""
+    nearest, spanned = {}, {}
+    for n, pts in runs.items():
+        xs = [t / target_time - 1.0 for t, e in pts if math.isfinite(t) and math.isfinite(e)]
+        nearest[n] = float(min(abs(v) for v in xs)) if xs else float("nan")
+        spanned[n] = bool(xs) and min(xs) <= 0.0 <= max(xs)
+    return nearest, spanned
+
+
 def fit_energy_at_time(runs: dict[str, list[tuple[float, float]]], target_time: float, window: float = 0.06,
                        quadratic: bool = True, min_spread: float = 0.002) -> LocalFit:
     """Energy of every force model at exactly ``target_time`` [s] from a JOINT local fit over trip time.
@@ -153,11 +164,7 @@ def fit_energy_at_time(runs: dict[str, list[tuple[float, float]]], target_time: 
         close = np.abs(x) <= min_spread
         energy = {n: float(np.mean([yy for (nn, _), yy, c in zip(rows, y, close) if nn == n and c]))
                   if any(nn == n and c for (nn, _), c in zip(rows, close)) else float("nan") for n in names}
-        nearest, spanned = {}, {}
-        for n, pts in runs.items():
-            xs = [t / target_time - 1.0 for t, e in pts if math.isfinite(t) and math.isfinite(e)]
-            nearest[n] = float(min(abs(v) for v in xs)) if xs else float("nan")
-            spanned[n] = bool(xs) and min(xs) <= 0.0 <= max(xs)
+        nearest, spanned = _nearest_and_spanned(runs, target_time)
         return LocalFit({**out_nan, **energy}, nearest, spanned, float("nan"), float("nan"), float("nan"),
                         len(rows))
     cols = [np.array([1.0 if r[0] == n else 0.0 for r in rows]) for n in names] + [x]
@@ -168,11 +175,7 @@ def fit_energy_at_time(runs: dict[str, list[tuple[float, float]]], target_time: 
     resid = y_arr - a @ coef
     dof = max(len(rows) - a.shape[1], 1)
     energy = {n: float(coef[i] * e_ref) for i, n in enumerate(names)}
-    nearest, spanned = {}, {}
-    for n, pts in runs.items():
-        xs = [t / target_time - 1.0 for t, e in pts if math.isfinite(t) and math.isfinite(e)]
-        nearest[n] = float(min(abs(v) for v in xs)) if xs else float("nan")
-        spanned[n] = bool(xs) and min(xs) <= 0.0 <= max(xs)
+    nearest, spanned = _nearest_and_spanned(runs, target_time)
     return LocalFit({**out_nan, **energy}, nearest, spanned, float(np.sqrt(np.sum(resid ** 2) / dof)),
                     float(coef[len(names)]), float(coef[len(names) + 1]) if a.shape[1] > len(names) + 1 else 0.0,
                     len(rows))

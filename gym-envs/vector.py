@@ -82,15 +82,9 @@ _SPEED_LIMIT = RouteTable.SPEED_LIMIT
 
 # --------------------------------------------------------------------------------------------- compiled kernels
 @njit(cache=True)
-def _observe_one(X, E, table, preview, stops, n_stops, scale, low, high, buf, la, out):
-    """The single env's 'state' observation (EcoDriveEnv._observe) for one vehicle -> out (float32)."""
-    _look_ahead(table, PREVIEW_GRID, preview, X[S_POS], la)
-    _observe_from_look_ahead(X, E, la, stops, n_stops, scale, low, high, buf, out)
-
-
-@njit(cache=True)
 def _observe_from_look_ahead(X, E, la, stops, n_stops, scale, low, high, buf, out):
-    """_observe_one with the route table's look-ahead la (rows at s + preview) already read."""
+    """The single env's 'state' observation (EcoDriveEnv._observe) for one vehicle -> out (float32), from the
+    route table's look-ahead la (rows at s + preview, read by _look_ahead)."""
     s = X[S_POS]
     buf[0] = X[S_V]
     buf[1] = X[S_A]
@@ -116,12 +110,6 @@ def _observe_from_look_ahead(X, E, la, stops, n_stops, scale, low, high, buf, ou
         elif o > high[j]:
             o = high[j]
         out[j] = np.float32(o)
-
-
-@njit(cache=True)
-def _speed_limit_at(table, s, zero, one):
-    _look_ahead(table, PREVIEW_GRID, zero, s, one)
-    return one[_SPEED_LIMIT, 0]
 
 
 @njit(inline="always", cache=True)
@@ -174,7 +162,7 @@ def _gather_info(i, x, e, ret_costs, tm, cs, with_terms, info, ints, road_seed):
 @njit(cache=True)
 def _step_range(lo, hi, active, u, X, P, tabs, ti, road, road_n, stops, stops_n, cycle, rng, cmd, log, n_sub, F,
                 E, table, table_n, envelope, preview, rstops, rstops_n, W, dt, lat_lim, stop_speed,
-                scale, low, high, obs, reward, terms, costs, ret_costs, term, trunc, buf, la, zero, one,
+                scale, low, high, obs, reward, terms, costs, ret_costs, term, trunc, buf, la,
                 info, ints, road_seed):
     """One env step (EcoDriveEnv.step) of vehicles lo..hi-1 as named stages per vehicle: action (clip to [-1, 1],
     speed shield), physics (the simulator core), speed limit, reward terms, done flags, 'state' observation and
@@ -263,7 +251,7 @@ def _step_range(lo, hi, active, u, X, P, tabs, ti, road, road_n, stops, stops_n,
 @njit(parallel=True, cache=True)
 def _step_threads(n_chunks, active, u, X, P, tabs, ti, road, road_n, stops, stops_n, cycle, rng, cmd, log, n_sub,
                   F, E, table, table_n, envelope, preview, rstops, rstops_n, W, dt, lat_lim, stop_speed, scale, low,
-                  high, obs, reward, terms, costs, ret_costs, term, trunc, buf, la, zero, one, info, ints,
+                  high, obs, reward, terms, costs, ret_costs, term, trunc, buf, la, info, ints,
                   road_seed):
     """_step_range over n_chunks contiguous blocks of vehicles, one numba thread each."""
     n = X.shape[0]
@@ -271,7 +259,7 @@ def _step_threads(n_chunks, active, u, X, P, tabs, ti, road, road_n, stops, stop
         _step_range(c * n // n_chunks, (c + 1) * n // n_chunks, active, u, X, P, tabs, ti, road, road_n, stops,
                     stops_n, cycle, rng, cmd, log, n_sub, F, E, table, table_n, envelope, preview, rstops, rstops_n,
                     W, dt, lat_lim, stop_speed, scale, low, high, obs, reward, terms, costs, ret_costs, term, trunc,
-                    buf, la, zero, one, info, ints, road_seed)
+                    buf, la, info, ints, road_seed)
 
 
 @njit(cache=True)
@@ -415,9 +403,6 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
         self._trunc = np.zeros(n, dtype=bool)
         self._buf = np.zeros((n, n_obs))
         self._la = np.zeros((n, 4, self._preview.size))
-        self._zero = np.zeros(1)
-        self._zeros = np.zeros((n, 1))
-        self._one = np.zeros((n, 4, 1))
         self._road_seed = np.zeros(n, dtype=np.int64)
         self._gear = np.zeros(n, dtype=np.int64)
         self._sims: list[Simulator | None] = [None] * n
@@ -538,11 +523,13 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
         e[E_TIME_LIMIT] = cfg.time_limit if cfg.time_limit is not None else 2.0 * route.route_time + 30.0
         e[E_LENGTH] = route.length
         e[E_ROUTE_TIME] = route.route_time
-        e[E_LIMIT] = _speed_limit_at(self._table[i, :, :self._table_n[i]], self._X[i, S_POS], self._zero,
-                                     self._one[i])
+        # the look-ahead at the start position: column 0 (preview 0 m) is the speed limit, as in the compiled step
+        la = self._la[i]
+        _look_ahead(self._table[i, :, :self._table_n[i]], PREVIEW_GRID, self._preview, self._X[i, S_POS], la)
+        e[E_LIMIT] = la[_SPEED_LIMIT, 0]
         self._ret_costs[i] = 0.0
-        _observe_one(self._X[i], e, self._table[i, :, :self._table_n[i]], self._preview, self._rstops[i],
-                     self._rstops_n[i], self._scale, self._low, self._high, self._buf[i], self._la[i], self._obs[i])
+        _observe_from_look_ahead(self._X[i], e, la, self._rstops[i], self._rstops_n[i], self._scale, self._low,
+                                 self._high, self._buf[i], self._obs[i])
 
     def _reset_one(self, i: int, seed: int | None, options: dict[str, Any] | None) -> None:
         if seed is not None:
@@ -640,7 +627,7 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
                           self._W, cfg.control_period, cfg.lateral_acceleration_limit, cfg.stop_speed, self._scale,
                           self._low, self._high, self._obs)
             self._args_tail = (self._terms, self._costs, self._ret_costs)
-            self._args_work = (self._buf, self._la, self._zeros, self._one)
+            self._args_work = (self._buf, self._la)
         return self._args
 
     def _step_compiled(self, active: np.ndarray, u: np.ndarray, reward: np.ndarray, term: np.ndarray,

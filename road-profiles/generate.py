@@ -172,8 +172,12 @@ class _Layout:
 
     def curve(self, start: float, radius: float, heading_change: float, direction: int, transition: float,
               c: _Curves, design_speed: float) -> float:
-        """Adds one clothoid-arc-clothoid curve at ``start`` [m]; returns where it ends [m]."""
+        """Adds one clothoid-arc-clothoid curve at ``start`` [m]; returns where it ends [m]. A curve past the grid
+        (``beyond``: a road built only in part) is counted, not built: it changes no grid value."""
         ends = _curve_ends(start, radius, heading_change, transition)
+        self.curves += 1
+        if self.beyond(start, c):
+            return ends[3]
         kappa = direction / radius
         self.kappa_knots += [(ends[0], 0.0), (ends[1], kappa), (ends[2], kappa), (ends[3], 0.0)]
         if c.bank is not None:
@@ -181,18 +185,12 @@ class _Layout:
             phi = -direction * np.arctan(q)
             self.bank_knots += [(ends[0], 0.0), (ends[1], phi), (ends[2], phi), (ends[3], 0.0)]
         self.restrict(ends[0] - c.lead, ends[3], _posted(np.sqrt(c.lateral_acceleration * radius)))
-        self.curves += 1
         return ends[3]
 
     def beyond(self, start: float, c: _Curves) -> bool:
         """True when a curve starting at ``start`` [m] (advisory from ``start - lead``) lies wholly past the grid
         and its last cell: it changes no grid value (curvature, bank and limit are 0 / unchanged there)."""
         return start - c.lead > self.s[-1] + (self.s[1] - self.s[0])
-
-    def skip(self, start: float, radius: float, heading_change: float, transition: float) -> float:
-        """A curve past the grid (``beyond``): only counted; returns where it ends [m], as ``curve`` would."""
-        self.curves += 1
-        return _curve_ends(start, radius, heading_change, transition)[3]
 
     def restrict(self, start: float, end: float, limit: float) -> None:
         """The limit lowered to ``limit`` [m/s] where start <= s <= end [m] (s is the increasing grid: a slice)."""
@@ -280,11 +278,10 @@ def _open_road(rng: np.random.Generator, s: np.ndarray, c: _Curves, zone_limit: 
         transition = _clamp(radius / c.transition_ratio, *c.transition)
         transition = min(transition, radius * heading / 2)  # the two spirals alone must not exceed the turn
         direction = 1 if rng.random() < 0.5 else -1
-        if layout.beyond(pos, c):
-            pos = layout.skip(pos, radius, heading, transition)
-        else:
-            design = min(float(np.interp(pos, s, zone_limit)), np.sqrt(c.lateral_acceleration * radius))
-            pos = layout.curve(pos, radius, heading, direction, transition, c, design)
+        # the design speed sets the bank only; a curve past a partly built road needs none (saves np.interp)
+        design = 0.0 if layout.beyond(pos, c) else min(float(np.interp(pos, s, zone_limit)),
+                                                         np.sqrt(c.lateral_acceleration * radius))
+        pos = layout.curve(pos, radius, heading, direction, transition, c, design)
         pos += rng.uniform(*c.straight)
     return layout
 
@@ -389,21 +386,15 @@ def city(seed: int, length: float = 8_000.0, step: float = 5.0, keep: float | No
             radius = rng.uniform(10.0, 25.0)
             transition = rng.uniform(5.0, 10.0)
             direction = 1 if rng.random() < 0.5 else -1
-            if layout.beyond(pos, c):
-                pos = layout.skip(pos, radius, np.pi / 2, transition)
-            else:
-                pos = layout.curve(pos, radius, np.pi / 2, direction, transition, c, 0.0)
+            pos = layout.curve(pos, radius, np.pi / 2, direction, transition, c, 0.0)
             turns += 1
         gap = rng.uniform(80.0, 300.0)
         if rng.random() < 0.2 and gap > 150.0:
             radius = float(np.exp(rng.uniform(*np.log(c.radius))))
             heading = np.radians(rng.uniform(*c.heading_change))
             transition = min(_clamp(radius / c.transition_ratio, *c.transition), radius * heading / 2)
-            direction = 1 if rng.random() < 0.5 else -1
-            if layout.beyond(pos + 0.2 * gap, c):
-                bend_end = layout.skip(pos + 0.2 * gap, radius, heading, transition)
-            else:
-                bend_end = layout.curve(pos + 0.2 * gap, radius, heading, direction, transition, c, 0.0)
+            bend_end = layout.curve(pos + 0.2 * gap, radius, heading, 1 if rng.random() < 0.5 else -1,
+                                    transition, c, 0.0)
             gap = max(gap, bend_end - pos + 30.0)
         pos += gap
     return _profile("city", seed, s, grade, layout, [x for x in stops if x <= s[-1]],

@@ -395,6 +395,13 @@ def wind(X, P, heading, dt, rng):
 
 # ================================================================================ command
 @stage
+def _regen_capacity_if_braking(force, P, tabs, ti, gear, mode, omega_e, v, phi):
+    """regen_capacity [N] for a braking request (force < 0); 0 otherwise, where allocate() does not read it (the
+    capacity costs two loss-map look-ups per substep)."""
+    return regen_capacity(P, tabs, ti, gear, mode, omega_e, v, phi) if force < 0.0 else 0.0
+
+
+@stage
 def command(X, P, tabs, ti, road, stops, cycle, rng, cmd, ridx, s, v, theta, dt, gear, mode, omega_e, phi):
     """The wheel-force request [N] split into traction, regenerative and friction braking, the steering angle
     [rad] and a gear request (-1: automatic) — from the built-in driver, a signed wheel force through the default
@@ -403,12 +410,14 @@ def command(X, P, tabs, ti, road, stops, cycle, rng, cmd, ridx, s, v, theta, dt,
     use = cmd[C_USE_DRIVER]
     if 0.5 < use < 1.5:  # built-in driver
         f_dem = driver_force(X, P, road, stops, cycle, rng, ridx, s, v, theta, dt)
-        traction, regen, friction = allocate(f_dem, regen_capacity(P, tabs, ti, gear, mode, omega_e, v, phi))
+        traction, regen, friction = allocate(f_dem, _regen_capacity_if_braking(f_dem, P, tabs, ti, gear, mode,
+                                                                                omega_e, v, phi))
         steer = steering_law(X, P, road, s, v)
     else:
         if use > 1.5:  # signed wheel force through the default allocator
-            traction, regen, friction = allocate(cmd[C_TRACTION], regen_capacity(P, tabs, ti, gear, mode, omega_e,
-                                                                                 v, phi))
+            f_cmd = cmd[C_TRACTION]
+            traction, regen, friction = allocate(f_cmd, _regen_capacity_if_braking(f_cmd, P, tabs, ti, gear, mode,
+                                                                                    omega_e, v, phi))
         else:
             traction = cmd[C_TRACTION]
             regen = cmd[C_REGEN]

@@ -46,7 +46,12 @@ def jit(fn=None, *, refcount: bool = True):
 
     ``refcount=False`` compiles without numba's reference counting (``_nrt=False``) — for a kernel that allocates
     nothing and passes its arrays to inline stages: every array handed to an inlined stage would otherwise cost an
-    atomic increment / decrement pair per call."""
+    atomic increment / decrement pair per call.
+
+    ``error_model="numpy"``: a float division by zero gives inf / NaN instead of raising, so numba emits no zero
+    check and branch per division (about 30 per substep; 7 % of the batched physics). The kernels' divisors are
+    validated positive where the spec is built (mass, radii, gear ratios, strictly increasing table axes); results
+    are bitwise those of the checked build wherever that one did not raise."""
     if fn is None:
         return lambda f: jit(f, refcount=refcount)
     # numba.core.config creates its settings (CACHE_DIR, ...) at runtime from the environment: getattr/setattr
@@ -54,9 +59,9 @@ def jit(fn=None, *, refcount: bool = True):
     setattr(config, "CACHE_DIR", CACHE_DIR)
     try:
         if refcount:
-            return numba.njit(cache=True)(fn)
+            return numba.njit(cache=True, error_model="numpy")(fn)
         # _nrt is numba's private switch for reference counting; its njit overloads do not list it
-        return numba.njit(cache=True, _nrt=False)(fn)  # type: ignore[call-overload]
+        return numba.njit(cache=True, _nrt=False, error_model="numpy")(fn)  # type: ignore[call-overload]
     finally:
         setattr(config, "CACHE_DIR", old)
 

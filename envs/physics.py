@@ -376,14 +376,13 @@ def rolling_coefficients(P, s):
 
 
 @stage
-def wind(X, P, heading, dt, rng):
+def wind(X, P, heading, a_g, q_g, rng):
     """Wind speed v_w >= 0 [m/s] and its angle psi_w to the vehicle's heading [rad] (eq. 2.8): mean wind plus
-    first-order Gauss-Markov gusts of speed and direction (time constant P_WIND_GUST_TAU [s])."""
+    first-order Gauss-Markov gusts of speed and direction: x_k+1 = a_g x_k + sigma q_g n_k with a_g = exp(-dt / tau_g),
+    q_g = sqrt(1 - a_g^2) (substep_constants)."""
     wind_s = 0.0
     wind_a = 0.0
     if P[P_WIND_ON] > 0.5:
-        a_g = math.exp(-dt / P[P_WIND_GUST_TAU])
-        q_g = math.sqrt(1.0 - a_g * a_g)
         X[S_GUST] = a_g * X[S_GUST] + P[P_WIND_GUST_STD] * q_g * rng_normal(rng)
         X[S_WIND_DIR_DEV] = a_g * X[S_WIND_DIR_DEV] + P[P_WIND_DIR_STD] * q_g * rng_normal(rng)
         wind_s = P[P_WIND_MEAN] + X[S_GUST]
@@ -485,10 +484,10 @@ def lateral_single_track(X, P, steer, v, mass, c_f, c_r, bank, cth, dt):
 
 
 @stage
-def cornering_resistance(fy_f, fy_r, alpha_f, alpha_r, c_f, toe, v):
+def cornering_resistance(fy_f, fy_r, alpha_f, alpha_r, c_f, toe, sin_toe, v):
     """F_Wc + F_Wt [N]: cornering resistance F_y12 sin(alpha_12) + F_y34 sin(alpha_34) (eq. 2.13-2.15) plus the
     toe-in resistance c_12 delta_toe sin(delta_toe) (section 2.4.5), faded in below 0.5 m/s."""
-    return fy_f * math.sin(alpha_f) + fy_r * math.sin(alpha_r) + c_f * toe * math.sin(toe) * min(1.0, v / 0.5)
+    return fy_f * math.sin(alpha_f) + fy_r * math.sin(alpha_r) + c_f * toe * sin_toe * min(1.0, v / 0.5)
 
 
 @stage
@@ -584,10 +583,10 @@ def wheel_torque(P, tabs, ti, bev, gear, mode, t_e, t_c, omega_e, w_in, r, v, ph
 
 # ================================================================================ brakes
 @stage
-def brakes(X, P, friction, r, dt):
+def brakes(X, P, friction, r, a_b):
     """Friction brakes: the command F_B = sum p_B A_B r_B mu / r_W [N] is split front/rear, the line pressures
     p_B [Pa] follow with a first-order lag, the pad friction mu depends on the disc temperature (and a random
-    walk) when enabled. Returns (mu, F_B front [N], F_B rear [N])."""
+    walk) when enabled; a_b = exp(-dt / tau_B) (substep_constants). Returns (mu, F_B front [N], F_B rear [N])."""
     mu = P[P_MU0]
     if P[P_PAD_ON] > 0.5:
         mu = P[P_MU0] * (1.0 + P[P_PAD_TCOEF] * (X[S_DISC_T] - P[P_PAD_TREF])) + X[S_MU_RW]
@@ -595,7 +594,6 @@ def brakes(X, P, friction, r, dt):
     f_brk = max(0.0, friction)
     pf_cmd = _clip(P[P_BRAKE_SHARE] * f_brk * r / (2.0 * P[P_AB_F] * P[P_RB_F] * P[P_MU0]), 0.0, P[P_P_MAX])
     pr_cmd = _clip((1.0 - P[P_BRAKE_SHARE]) * f_brk * r / (2.0 * P[P_AB_R] * P[P_RB_R] * P[P_MU0]), 0.0, P[P_P_MAX])
-    a_b = math.exp(-dt / P[P_BRAKE_TAU])
     X[S_PBF] = a_b * X[S_PBF] + (1.0 - a_b) * pf_cmd
     X[S_PBR] = a_b * X[S_PBR] + (1.0 - a_b) * pr_cmd
     f_bf = 2.0 * X[S_PBF] * P[P_AB_F] * P[P_RB_F] * mu / r
@@ -615,7 +613,10 @@ def rolling_resistance(fr0, fr1, fr4, v, mass, cth, bank):
     """F_r = f_r(v) m_V g cos(theta) cos(phi_r) tanh(v / 0.1 m/s) [N] with f_r(v) = f_r0 + f_r1 v + f_r4 v^4
     (eq. 2.9, 2.10), smoothed at standstill. Returns (f_r(v), F_r)."""
     fr = fr0 + fr1 * v + fr4 * v * v * v * v
-    return fr, fr * mass * G * cth * math.cos(bank) * math.tanh(v / 0.1)
+    # cos(0) = 1 and tanh(x) = 1 for x >= 22 are exact in double precision: both calls are skipped there
+    cos_bank = math.cos(bank) if bank != 0.0 else 1.0
+    smooth = math.tanh(v / 0.1) if v < 2.5 else 1.0
+    return fr, fr * mass * G * cth * cos_bank * smooth
 
 
 @stage
@@ -843,10 +844,28 @@ def log_drivetrain(row, X, P, v_new, yaw, t_e, omega_new, gear, mode, mu, phi, p
 
 
 # ================================================================================ one substep
-@jit(refcount=False)
-def substep(X, P, tabs, ti, road, stops, cycle, rng, cmd, log):
-    """Advance the state X by one step dt = P[P_DT] and write one log row (a sequence of the stages above)."""
+@stage
+def substep_constants(P):
+    """Factors that depend on P only, computed once per advance / run call instead of once per substep (the same
+    expressions, so the results are bitwise those of the per-substep form): brake-pressure lag a_b = exp(-dt /
+    tau_B), sin(delta_toe), gust factors a_g = exp(-dt / tau_g), q_g = sqrt(1 - a_g^2) (0, 0 without wind)."""
     dt = P[P_DT]
+    a_b = math.exp(-dt / P[P_BRAKE_TAU])
+    sin_toe = math.sin(P[P_TOE])
+    a_g = 0.0
+    q_g = 0.0
+    if P[P_WIND_ON] > 0.5:
+        a_g = math.exp(-dt / P[P_WIND_GUST_TAU])
+        q_g = math.sqrt(1.0 - a_g * a_g)
+    return a_b, sin_toe, a_g, q_g
+
+
+@jit(refcount=False)
+def substep(X, P, tabs, ti, road, stops, cycle, rng, cmd, log, constants):
+    """Advance the state X by one step dt = P[P_DT] and write one log row (a sequence of the stages above);
+    ``constants`` = substep_constants(P)."""
+    dt = P[P_DT]
+    a_b, sin_toe, a_g, q_g = constants
     t = X[S_T]
     s = X[S_POS]
     v = X[S_V]
@@ -862,7 +881,7 @@ def substep(X, P, tabs, ti, road, stops, cycle, rng, cmd, log):
     c_f = P[P_CF] * cs_mult
     c_r = P[P_CR] * cs_mult
     cxa = P[P_CW] * P[P_AREA] * X[S_DRAGF]
-    wind_s, wind_a = wind(X, P, heading, dt, rng)
+    wind_s, wind_a = wind(X, P, heading, a_g, q_g, rng)
     phi = oil_loss_factor(P, X[S_OIL_T]) if P[P_OIL_ON] > 0.5 else 1.0
     gear = int(X[S_GEAR])
     mode = int(X[S_MODE])
@@ -874,7 +893,7 @@ def substep(X, P, tabs, ti, road, stops, cycle, rng, cmd, log):
 
     delta, beta, yaw, alpha_f, alpha_r, fy_f, fy_r, spec_fy, a_y = lateral_single_track(
         X, P, steer, v, mass, c_f, c_r, bank, cth, dt)
-    f_corner = cornering_resistance(fy_f, fy_r, alpha_f, alpha_r, c_f, P[P_TOE], v)
+    f_corner = cornering_resistance(fy_f, fy_r, alpha_f, alpha_r, c_f, P[P_TOE], sin_toe, v)
     path_following(X, v, beta, yaw, kappa, dt)
 
     if bev:
@@ -891,7 +910,7 @@ def substep(X, P, tabs, ti, road, stops, cycle, rng, cmd, log):
     t_w, loss_g, loss_d = wheel_torque(P, tabs, ti, bev, gear, mode, t_e, t_c, omega_e, w_in, r, v, phi)
     f_drive = t_w / r
 
-    mu, f_bf, f_br = brakes(X, P, friction, r, dt)
+    mu, f_bf, f_br = brakes(X, P, friction, r, a_b)
     f_b = f_bf + f_br
 
     f_cl = climbing_force(mass, sth)
@@ -937,8 +956,9 @@ def is_done(X, P):
 @jit(refcount=False)
 def advance(X, P, tabs, ti, road, stops, cycle, rng, cmd, log, n_substeps):
     """n_substeps substeps with a constant command (the step API)."""
+    constants = substep_constants(P)
     for _ in range(n_substeps):
-        substep(X, P, tabs, ti, road, stops, cycle, rng, cmd, log)
+        substep(X, P, tabs, ti, road, stops, cycle, rng, cmd, log, constants)
 
 
 @jit(refcount=False)
@@ -946,7 +966,8 @@ def run(X, P, tabs, ti, road, stops, cycle, rng, cmd, log, max_substeps):
     """Substeps until the trip is done (end of road / cycle, duration, distance) or max_substeps; returns the
     number of substeps run."""
     n = 0
+    constants = substep_constants(P)
     while n < max_substeps and not is_done(X, P):
-        substep(X, P, tabs, ti, road, stops, cycle, rng, cmd, log)
+        substep(X, P, tabs, ti, road, stops, cycle, rng, cmd, log, constants)
         n += 1
     return n

@@ -29,7 +29,7 @@ from .layout import (
     P_DRV_VAR_STD, P_DRV_VAR_TAU, P_FR0, P_L, P_MASS0, R_CRUISE, R_CURV, R_VPLAN, S_BETA, S_DRV_F, S_DRV_I,
     S_DRV_VAR, S_DRV_VAR2, S_DWELL, S_DWELL_LEFT, S_EPSI, S_EY, S_STOP_IDX, S_T,
 )
-from .numerics import rng_normal, rng_uniform, road_value, road_value_at
+from .numerics import rng_normal, rng_uniform, road_value, road_value_at, road_value_near
 
 
 @dataclass
@@ -122,10 +122,11 @@ def pack_driver(P: np.ndarray, cfg: DriverConfig, understeer_gradient: float, rh
 
 
 @jit
-def steering_law(X, P, road, s, v):
-    """Wheel steer angle delta_W [rad] from curvature preview and look-ahead lateral error (module doc)."""
+def steering_law(X, P, road, ridx, s, v):
+    """Wheel steer angle delta_W [rad] from curvature preview and look-ahead lateral error (module doc); ridx: the
+    road segment at s, where the preview search starts."""
     gain = P[P_L] + P[P_DRV_EG] * v * v
-    kappa = road_value_at(road, R_CURV, s + P[P_DRV_PREVIEW] * v)
+    kappa = road_value_near(road, R_CURV, s + P[P_DRV_PREVIEW] * v, ridx)
     look = P[P_DRV_LOOKAHEAD] * v
     if look < 5.0:
         look = 5.0
@@ -148,7 +149,7 @@ def driver_force(X, P, road, stops, cycle, rng, ridx, s, v, theta, dt):
         if v_des < 0.05 and v_next < 0.05:
             hold = True
     else:
-        v_plan = road_value_at(road, R_VPLAN, s + 0.7 * v)
+        v_plan = road_value_near(road, R_VPLAN, s + 0.7 * v, ridx)
         k = int(X[S_STOP_IDX])
         n_stops = stops.shape[0]
         while k < n_stops and X[S_DWELL] < 0.5 and s > stops[k] + 2.0:
@@ -189,7 +190,7 @@ def driver_force(X, P, road, stops, cycle, rng, ridx, s, v, theta, dt):
             hold = v < 0.05
         # anticipate the plan's deceleration (v dv/ds over the next ~2 s)
         look = 2.0 * v + 5.0
-        v_ahead = road_value_at(road, R_VPLAN, s + look)
+        v_ahead = road_value_near(road, R_VPLAN, s + look, ridx)
         if v_stop < v_ahead:
             v_ahead = v_stop
         if v_ahead < v_des:

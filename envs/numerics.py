@@ -179,11 +179,18 @@ def road_value(road, row, i, s):
 
 @jit
 def road_value_at(road, row, s):
-    """road[row] at any s (binary search; for previews)."""
+    """road[row] at any s (binary search)."""
+    return road_value_near(road, row, s, -1)
+
+
+@jit
+def road_value_near(road, row, s, idx):
+    """road[row] at s [m], the segment searched from index idx onwards (road_locate; -1: binary search) — for a
+    preview a few grid steps ahead of the vehicle's cached index. Clamped to the profile ends."""
     n = road.shape[1]
     if s <= road[0, 0]:
         return road[row, 0]
     if s >= road[0, n - 1]:
         return road[row, n - 1]
-    i = road_locate(road[0], s, -1)
+    i = road_locate(road[0], s, idx)
     return road_value(road, row, i, s)

@@ -411,7 +411,7 @@ def command(X, P, tabs, ti, road, stops, cycle, rng, cmd, ridx, s, v, theta, dt,
         f_dem = driver_force(X, P, road, stops, cycle, rng, ridx, s, v, theta, dt)
         traction, regen, friction = allocate(f_dem, _regen_capacity_if_braking(f_dem, P, tabs, ti, gear, mode,
                                                                                 omega_e, v, phi))
-        steer = steering_law(X, P, road, s, v)
+        steer = steering_law(X, P, road, ridx, s, v)
     else:
         if use > 1.5:  # signed wheel force through the default allocator
             f_cmd = cmd[C_TRACTION]
@@ -424,7 +424,7 @@ def command(X, P, tabs, ti, road, stops, cycle, rng, cmd, ridx, s, v, theta, dt,
             gear_req = int(cmd[C_GEAR_REQ])
         steer = cmd[C_STEER]
         if math.isnan(steer):  # NaN: the built-in steering law keeps the vehicle on the road
-            steer = steering_law(X, P, road, s, v)
+            steer = steering_law(X, P, road, ridx, s, v)
     return traction, regen, friction, steer, gear_req
 
 

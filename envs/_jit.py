@@ -3,6 +3,8 @@
 numba's on-disk cache is keyed by the time stamp of the file that holds a function, but the core's functions
 inline each other and the index constants of ``layout.py`` across files; a change in one file would leave stale
 machine code in the others. The cache directory therefore carries a hash of all core sources.
+:func:`dependent_jit` does the same for a kernel outside the core that calls into it (the native vector env):
+its cache carries the hash of the core and of the kernel's own sources.
 """
 
 from __future__ import annotations
@@ -11,7 +13,9 @@ import hashlib
 import os
 import shutil
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numba
 from numba.core import config
@@ -21,16 +25,18 @@ _SOURCES = ("_jit.py", "layout.py", "numerics.py", "drivetrain.py", "driver.py",
 STAMP = hashlib.sha1(b"".join((_HERE / f).read_bytes() for f in _SOURCES)).hexdigest()[:12]
 
 
-def _cache_dir() -> str:
-    for base in (_HERE / "__pycache__", Path(tempfile.gettempdir()) / "roadload-numba"):
-        d = base / f"numba-{STAMP}"
+def _cache_dir(home: Path = _HERE, prefix: str = "numba-", stamp: str = STAMP) -> str:
+    """``home/__pycache__/<prefix><stamp>`` (or the same under the temp folder when that is not writable); the
+    folders of earlier stamps with the same prefix are removed."""
+    for base in (home / "__pycache__", Path(tempfile.gettempdir()) / "roadload-numba"):
+        d = base / f"{prefix}{stamp}"
         try:
             d.mkdir(parents=True, exist_ok=True)
             probe = d / f".probe-{os.getpid()}"
             probe.write_bytes(b"")
             probe.unlink()
-            for old in base.glob("numba-*"):  # caches of earlier sources are dead weight
-                if old.name != d.name:
+            for old in base.glob(f"{prefix}*"):  # caches of earlier sources are dead weight
+                if old.name != d.name and len(old.name) == len(d.name):
                     shutil.rmtree(old, ignore_errors=True)
             return str(d)
         except OSError:
@@ -54,14 +60,17 @@ def jit(fn=None, *, refcount: bool = True):
     are bitwise those of the checked build wherever that one did not raise."""
     if fn is None:
         return lambda f: jit(f, refcount=refcount)
+    # _nrt is numba's private switch for reference counting; its njit overloads do not list it
+    return _njit_cached(fn, CACHE_DIR) if refcount else _njit_cached(fn, CACHE_DIR, _nrt=False)
+
+
+def _njit_cached(fn: Any, cache_dir: str, **options: Any) -> Any:
+    """``njit(cache=True, error_model="numpy", **options)`` caching into cache_dir."""
     # numba.core.config creates its settings (CACHE_DIR, ...) at runtime from the environment: getattr/setattr
     old = getattr(config, "CACHE_DIR")
-    setattr(config, "CACHE_DIR", CACHE_DIR)
+    setattr(config, "CACHE_DIR", cache_dir)
     try:
-        if refcount:
-            return numba.njit(cache=True, error_model="numpy")(fn)
-        # _nrt is numba's private switch for reference counting; its njit overloads do not list it
-        return numba.njit(cache=True, _nrt=False, error_model="numpy")(fn)  # type: ignore[call-overload]
+        return numba.njit(cache=True, error_model="numpy", **options)(fn)
     finally:
         setattr(config, "CACHE_DIR", old)
 
@@ -70,3 +79,17 @@ def stage(fn):
     """``njit(inline="always")``: one named stage of a kernel, inlined into its caller in numba's IR, so a kernel
     written as a short sequence of stage calls compiles to the same single loop body as one long function."""
     return numba.njit(inline="always")(fn)
+
+
+def dependent_jit(*sources: str | Path) -> Callable[..., Any]:
+    """A decorator factory for kernels outside the core that call it: ``@kernel(parallel=True)`` or ``@kernel()``
+    is ``njit(cache=True, error_model="numpy", ...)`` with the cache in a folder keyed by the hash of the core
+    sources and of ``sources`` (the kernel's module and every module whose jitted functions it calls). numba would
+    otherwise keep serving machine code with the old core inlined after an edit of the core (editable installs)."""
+    paths = [Path(f).resolve() for f in sources]
+    stamp = hashlib.sha1(STAMP.encode() + b"".join(p.read_bytes() for p in paths)).hexdigest()[:12]
+    cache_dir = _cache_dir(paths[0].parent, f"numba-{paths[0].stem}-", stamp)
+
+    def kernel(**options: Any) -> Callable[[Any], Any]:
+        return lambda fn: _njit_cached(fn, cache_dir, **options)
+    return kernel

@@ -43,9 +43,10 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
 import numba
-from numba import njit, prange
+from numba import prange
 
 from roadload.envs import physics
+from roadload.envs._jit import dependent_jit
 from roadload.envs.layout import (C_GEAR_REQ, C_STEER, C_TRACTION, C_USE_DRIVER, N_CMD, N_LOG, N_PARAMS, N_ROAD,
                                   N_STATE, S_A, S_AY, S_E_SOURCE, S_GEAR, S_NLOG, S_POS, S_T, S_V)
 from roadload.envs.simulator import Simulator
@@ -53,8 +54,13 @@ from roadload.gym.actions import BOUND_TOLERANCE, validate_actions
 from roadload.gym.config import SPACE_FIELDS_ECODRIVE, EcoDriveConfig, GymConfigError, make_config, updated_config
 from roadload.gym.ecodrive import (PREVIEW_GRID, STOP_HORIZON, DriveScales, RouteTable, _look_ahead, cut_profile,
                                    observation_layout, shield_command)
+from roadload.gym import ecodrive as _ecodrive
 from roadload.presets import get_preset
 from roadload.road_profiles import RoadProfile, load_profile_start
+
+kernel = dependent_jit(__file__, _ecodrive.__file__)
+"""The decorator of this module's compiled kernels: their cache is keyed by the core's sources, this module's and
+ecodrive.py's (whose compiled look-ahead and shield they call)."""
 
 COST_NAMES = ("energy", "time", "speeding", "lateral", "stop", "jerk", "progress")
 """Reward terms, in the order of ``info['terms']`` / ``info['costs']`` (EcoDriveEnv)."""
@@ -81,7 +87,7 @@ _SPEED_LIMIT = RouteTable.SPEED_LIMIT
 
 
 # --------------------------------------------------------------------------------------------- compiled kernels
-@njit(cache=True)
+@kernel()
 def _observe_from_look_ahead(X, E, la, stops, n_stops, scale, low, high, buf, out):
     """The single env's 'state' observation (EcoDriveEnv._observe) for one vehicle -> out (float32), from the
     route table's look-ahead la (rows at s + preview, read by _look_ahead)."""
@@ -112,7 +118,7 @@ def _observe_from_look_ahead(X, E, la, stops, n_stops, scale, low, high, buf, ou
         out[j] = np.float32(o)
 
 
-@njit(inline="always", cache=True)
+@kernel(inline="always")
 def _set_command(c, ui, v, F):
     """The simulator command of a normalised action ui in [-1, 1] at speed v [m/s]: wheel force ui x the peak
     traction force (capped by peak power / v) or ui x the full brake force [N]
@@ -123,7 +129,7 @@ def _set_command(c, ui, v, F):
     c[C_GEAR_REQ] = -1.0
 
 
-@njit(cache=True)
+@kernel()
 def advance_range(lo, hi, active, u, X, P, tabs, ti, road, road_n, stops, stops_n, cycle, rng, cmd, log, n_sub, F):
     """The bare batched physics for vehicles lo..hi-1: for every active vehicle i, the wheel force of command u[i]
     (DriveScales ``F = (peak traction force, peak power, full brake force)``) held for n_sub substeps of the
@@ -138,7 +144,7 @@ def advance_range(lo, hi, active, u, X, P, tabs, ti, road, road_n, stops, stops_
                         log[i], n_sub)
 
 
-@njit(inline="always", cache=True)
+@kernel(inline="always")
 def _gather_info(i, x, e, ret_costs, tm, cs, with_terms, info, ints, road_seed):
     """Stage 'info' of vehicle i: the single env's info values (EcoDriveEnv._info; terms / costs only for a vehicle
     that stepped, zeros otherwise) -> column i of the info block (float rows I_*) and of the integer block (gear,
@@ -159,7 +165,7 @@ def _gather_info(i, x, e, ret_costs, tm, cs, with_terms, info, ints, road_seed):
         info[I_COSTS + k, i] = cs[k] if with_terms else 0.0
 
 
-@njit(cache=True)
+@kernel()
 def _step_range(lo, hi, active, u, X, P, tabs, ti, road, road_n, stops, stops_n, cycle, rng, cmd, log, n_sub, F,
                 E, table, table_n, envelope, preview, rstops, rstops_n, W, dt, lat_lim, stop_speed,
                 scale, low, high, obs, reward, terms, costs, ret_costs, term, trunc, buf, la,
@@ -248,7 +254,7 @@ def _step_range(lo, hi, active, u, X, P, tabs, ti, road, road_n, stops, stops_n,
         _gather_info(i, x, e, ret_costs, tm, cs, True, info, ints, road_seed)
 
 
-@njit(parallel=True, cache=True)
+@kernel(parallel=True)
 def _step_threads(n_chunks, active, u, X, P, tabs, ti, road, road_n, stops, stops_n, cycle, rng, cmd, log, n_sub,
                   F, E, table, table_n, envelope, preview, rstops, rstops_n, W, dt, lat_lim, stop_speed, scale, low,
                   high, obs, reward, terms, costs, ret_costs, term, trunc, buf, la, info, ints,
@@ -262,14 +268,14 @@ def _step_threads(n_chunks, active, u, X, P, tabs, ti, road, road_n, stops, stop
                     buf, la, info, ints, road_seed)
 
 
-@njit(cache=True)
+@kernel()
 def _gather_info_all(X, E, ret_costs, terms, costs, info, ints, road_seed):
     """Stage 'info' of every vehicle without terms (the info of reset())."""
     for i in range(X.shape[0]):
         _gather_info(i, X[i], E[i], ret_costs, terms[i], costs[i], False, info, ints, road_seed)
 
 
-@njit(cache=True)
+@kernel()
 def _actions_in_bounds(u, tol):
     """True when every action is finite and inside [-1 - tol, 1 + tol] (the fast path of the action check)."""
     for j in range(u.size):
@@ -278,7 +284,7 @@ def _actions_in_bounds(u, tol):
     return True
 
 
-@njit(parallel=True, cache=True)
+@kernel(parallel=True)
 def _advance_threads(n_chunks, active, u, X, P, tabs, ti, road, road_n, stops, stops_n, cycle, rng, cmd, log,
                      n_sub, F):
     n = X.shape[0]

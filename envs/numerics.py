@@ -167,6 +167,13 @@ def road_locate(s_axis, s, idx):
 @jit
 def road_value(road, row, i, s):
     """Linear interpolation of road[row] at s inside segment i (clamped to the profile ends)."""
+    return road_blend(road, row, i, road_weight(road, i, s))
+
+
+@jit
+def road_weight(road, i, s):
+    """Weight w in [0, 1] of s in segment i: s = (1 - w) s_i + w s_i+1 (clamped); one division shared by every row
+    read at the same s (road_blend)."""
     s0 = road[0, i]
     s1 = road[0, i + 1]
     w = (s - s0) / (s1 - s0)
@@ -174,6 +181,12 @@ def road_value(road, row, i, s):
         w = 0.0
     elif w > 1.0:
         w = 1.0
+    return w
+
+
+@jit
+def road_blend(road, row, i, w):
+    """(1 - w) road[row, i] + w road[row, i + 1]."""
     return road[row, i] * (1.0 - w) + road[row, i + 1] * w
 
 

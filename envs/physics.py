@@ -268,7 +268,7 @@ from .layout import (
     S_WIND_DIR_DEV,
     S_YAW,
 )
-from .numerics import rng_normal, rng_uniform, road_locate, road_value
+from .numerics import rng_normal, rng_uniform, road_blend, road_locate, road_value, road_weight
 
 LATERAL_VALIDITY_LIMIT = 4.0  # m/s^2, single-track model validity (section 2.5.1)
 
@@ -336,13 +336,14 @@ def road_attributes(X, P, road, s):
     design bank, limited)."""
     ridx = road_locate(road[R_S], s, int(X[S_RIDX]))
     X[S_RIDX] = ridx
-    theta = road_value(road, R_GRADE, ridx, s)
-    kappa = road_value(road, R_CURV, ridx, s)
-    heading = road_value(road, R_HEAD, ridx, s)
-    elev = road_value(road, R_ELEV, ridx, s)
+    w = road_weight(road, ridx, s)
+    theta = road_blend(road, R_GRADE, ridx, w)
+    kappa = road_blend(road, R_CURV, ridx, w)
+    heading = road_blend(road, R_HEAD, ridx, w)
+    elev = road_blend(road, R_ELEV, ridx, w)
     bank = 0.0
     if P[P_BANK_ON] > 0.5:
-        bank = P[P_BANK_SCALE] * road_value(road, R_BANK, ridx, s) + _clip(P[P_BANK_GAIN] * kappa, -P[P_BANK_MAX],
+        bank = P[P_BANK_SCALE] * road_blend(road, R_BANK, ridx, w) + _clip(P[P_BANK_GAIN] * kappa, -P[P_BANK_MAX],
                                                                          P[P_BANK_MAX])
     return ridx, theta, kappa, heading, elev, bank
 
@@ -623,8 +624,11 @@ def rolling_resistance(fr0, fr1, fr4, v, mass, cth, bank):
 def aero_drag(rho, cxa, v, wind_s, wind_a, yaw_drag):
     """F_a = rho_a/2 c_w A_V u_x v_a (1 + k sin^2 psi_a) [N] (eq. 2.7) with the approach velocity (eq. 2.8a)
     u_x = v - v_w cos psi_w, u_y = -v_w sin psi_w, v_a = |u| [m/s]."""
-    u_x = v - wind_s * math.cos(wind_a)
-    u_y = -wind_s * math.sin(wind_a)
+    u_x = v
+    u_y = 0.0
+    if wind_s != 0.0:  # in still air u = (v, 0) exactly: no trigonometry
+        u_x = v - wind_s * math.cos(wind_a)
+        u_y = -wind_s * math.sin(wind_a)
     v_a = math.sqrt(u_x * u_x + u_y * u_y)
     sin2 = (u_y * u_y) / (v_a * v_a) if v_a > 1e-9 else 0.0
     return 0.5 * rho * cxa * u_x * v_a * (1.0 + yaw_drag * sin2)

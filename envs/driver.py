@@ -121,7 +121,7 @@ def pack_driver(P: np.ndarray, cfg: DriverConfig, understeer_gradient: float, rh
     P[P_DRV_RHO] = rho_nominal
 
 
-@jit
+@jit(inline=True)
 def steering_law(X, P, road, ridx, s, v):
     """Wheel steer angle delta_W [rad] from curvature preview and look-ahead lateral error (module doc); ridx: the
     road segment at s, where the preview search starts."""

@@ -28,7 +28,7 @@ from .numerics import invert_through_map, table1, table2
 from .packing import pack_vehicle
 
 
-@jit
+@jit(inline=True)
 def gear_ratio(P, gear):
     """i_G(G); 0 for neutral."""
     if gear < 1:
@@ -36,7 +36,7 @@ def gear_ratio(P, gear):
     return P[P_RATIO0 + gear - 1]
 
 
-@jit
+@jit(inline=True)
 def source_side_inertia(P, gear):
     """Inertia on the engine side of the clutch [kg m^2]: I_E + I_C + I_G(G) (I_G lumped to the input side)."""
     j = P[P_I_SOURCE] + P[P_I_CLUTCH]
@@ -45,7 +45,7 @@ def source_side_inertia(P, gear):
     return j
 
 
-@jit
+@jit(inline=True)
 def wheel_side_mass(P, mass):
     """m_V + (4 I_W + i_D^2 I_D) / r_W^2 [kg]: translational mass plus the inertias that always turn with the
     wheels."""
@@ -53,13 +53,13 @@ def wheel_side_mass(P, mass):
     return mass + (P[P_IW4] + P[P_ID] * P[P_ID] * P[P_I_DIFF]) / (r * r)
 
 
-@jit
+@jit(inline=True)
 def speed_ratio(P, gear):
     """k(G) = i_G i_D / r_W: gearbox input speed [rad/s] per vehicle speed [m/s]."""
     return gear_ratio(P, gear) * P[P_ID] / P[P_RW]
 
 
-@jit
+@jit(inline=True)
 def _fade(omega):
     if omega >= 1.0:
         return 1.0
@@ -68,7 +68,7 @@ def _fade(omega):
     return omega
 
 
-@jit
+@jit(inline=True)
 def oil_loss_factor(P, oil_temperature):
     """phi(T_oil) = 1 + (phi_cold - 1) clip((T_warm - T_oil)/(T_warm - 293.15), 0, 1.5)."""
     x = (P[P_OIL_WARM] - oil_temperature) / (P[P_OIL_WARM] - STANDARD_TEMPERATURE)
@@ -79,7 +79,7 @@ def oil_loss_factor(P, oil_temperature):
     return 1.0 + (P[P_OIL_COLD_FACTOR] - 1.0) * x
 
 
-@jit
+@jit(inline=True)
 def forward_wheel_torque(P, tabs, ti, gear, torque_in, omega_in, phi):
     """(T_W, gearbox loss, differential loss) for gearbox input torque T_G and speed omega_G (eq. 2.17).
     Neutral (gear 0): no input torque, only the differential's spin loss."""
@@ -96,7 +96,7 @@ def forward_wheel_torque(P, tabs, ti, gear, torque_in, omega_in, phi):
     return t_d * i_d - loss_d, loss_g, loss_d
 
 
-@jit
+@jit(inline=True)
 def inverse_wheel_torque(P, tabs, ti, gear, wheel_torque, omega_in, phi):
     """Gearbox input torque T_G that delivers the wheel torque T_W at input speed omega_G (exact inverse of
     ``forward_wheel_torque``)."""
@@ -106,7 +106,7 @@ def inverse_wheel_torque(P, tabs, ti, gear, wheel_torque, omega_in, phi):
     return invert_through_map(tabs, ti, T_GBLOSS + gear - 1, i_g, phi * _fade(omega_in), omega_in, t_d)
 
 
-@jit
+@jit(inline=True)
 def torque_limits(P, tabs, ti, omega, v):
     """(T_min, T_max) of the engine / motor at shaft speed omega [rad/s]; ICE: drag and full-load curves with a
     rev limit; BEV: torque/power limits and the regen limit, regen faded out below 1.5 m/s."""
@@ -129,7 +129,7 @@ def torque_limits(P, tabs, ti, omega, v):
     return t_drag, t_max
 
 
-@jit
+@jit(inline=True)
 def fuel_power(P, tabs, ti, omega, torque):
     """Fuel power P_fuel(omega, T_E) [W] from the fuel map; zero at or below the drag curve (fuel cut)."""
     if torque <= table1(tabs, ti, T_DRAG, omega) + 1e-6:
@@ -138,13 +138,13 @@ def fuel_power(P, tabs, ti, omega, torque):
     return p if p > 0.0 else 0.0
 
 
-@jit
+@jit(inline=True)
 def motor_electric_power(P, tabs, ti, omega, torque):
     """Electric power of the motor P_el = T omega + P_loss(omega, T) [W] (positive = drawn from the battery)."""
     return torque * omega + table2(tabs, ti, T_MOTORLOSS, omega, torque)
 
 
-@jit
+@jit(inline=True)
 def battery_current(P, terminal_power):
     """Battery current I [A] for terminal power P = V_oc I - R I^2 (positive = discharge)."""
     voc = P[P_BAT_VOC]
@@ -157,7 +157,7 @@ def battery_current(P, terminal_power):
     return (voc - math.sqrt(disc)) / (2.0 * res)
 
 
-@jit
+@jit(inline=True)
 def regen_capacity(P, tabs, ti, gear, mode, omega_e, v, phi):
     """Largest braking force [N] the engine (drag, fuel cut) or motor (regen limit) can put on the wheels now."""
     if gear < 1 or (mode != MODE_LOCKED and P[P_KIND_BEV] < 0.5):
@@ -168,7 +168,7 @@ def regen_capacity(P, tabs, ti, gear, mode, omega_e, v, phi):
     return f if f > 0.0 else 0.0
 
 
-@jit
+@jit(inline=True)
 def allocate(force, capacity):
     """Split a signed wheel force [N] into (traction, regen, friction): regen first, friction for the rest."""
     if force >= 0.0:

@@ -22,7 +22,7 @@ _S31 = np.uint64(31)
 _S11 = np.uint64(11)
 
 
-@jit
+@jit(inline=True)
 def rng_next(rng):
     """Next 64-bit output of splitmix64; ``rng`` is a uint64[1] state array."""
     rng[0] += _GOLDEN
@@ -32,13 +32,13 @@ def rng_next(rng):
     return z ^ (z >> _S31)
 
 
-@jit
+@jit(inline=True)
 def rng_uniform(rng):
     """Uniform in [0, 1)."""
     return float(rng_next(rng) >> _S11) * (1.0 / 9007199254740992.0)
 
 
-@jit
+@jit(inline=True)
 def rng_normal(rng):
     """Standard normal (Box-Muller)."""
     u1 = rng_uniform(rng)
@@ -48,7 +48,7 @@ def rng_normal(rng):
     return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
 
 
-@jit
+@jit(inline=True)
 def segment(tabs, off, n, x):
     """Index i and weight w with x = (1-w) a[i] + w a[i+1] on the increasing axis tabs[off:off+n], clamped."""
     if x <= tabs[off]:
@@ -66,7 +66,7 @@ def segment(tabs, off, n, x):
     return lo, (x - tabs[off + lo]) / (tabs[off + lo + 1] - tabs[off + lo])
 
 
-@jit
+@jit(inline=True)
 def table1(tabs, ti, k, x):
     """Curve k at x (linear, clamped)."""
     ox = ti[k, 0]
@@ -76,7 +76,7 @@ def table1(tabs, ti, k, x):
     return tabs[oy + i] * (1.0 - w) + tabs[oy + i + 1] * w
 
 
-@jit
+@jit(inline=True)
 def table1_inverse(tabs, ti, k, y):
     """x with curve_k(x) = y for a strictly increasing curve (linear, clamped)."""
     ox = ti[k, 0]
@@ -86,7 +86,7 @@ def table1_inverse(tabs, ti, k, y):
     return tabs[ox + i] * (1.0 - w) + tabs[ox + i + 1] * w
 
 
-@jit
+@jit(inline=True)
 def table2(tabs, ti, k, x, y):
     """Map k at (x, y) (bilinear, clamped)."""
     ox = ti[k, 0]
@@ -102,7 +102,7 @@ def table2(tabs, ti, k, x, y):
             + u * ((1.0 - w) * tabs[b] + w * tabs[b + 1]))
 
 
-@jit
+@jit(inline=True)
 def invert_through_map(tabs, ti, k, ratio, scale, speed, target):
     """Solve T*ratio - scale*f_k(T, speed) = target for T, f_k piecewise linear in T (x axis) at fixed speed.
 
@@ -131,7 +131,7 @@ def invert_through_map(tabs, ti, k, ratio, scale, speed, target):
     return t_prev + (target - g_prev) / ratio
 
 
-@jit
+@jit(inline=True)
 def _bisect(s_axis, s):
     n = s_axis.shape[0]
     if s <= s_axis[0]:
@@ -149,7 +149,7 @@ def _bisect(s_axis, s):
     return lo
 
 
-@jit
+@jit(inline=True)
 def road_locate(s_axis, s, idx):
     """Index i with s_axis[i] <= s < s_axis[i+1] (clamped), starting at the cached index idx (monotone travel)."""
     n = s_axis.shape[0]
@@ -164,13 +164,13 @@ def road_locate(s_axis, s, idx):
     return idx
 
 
-@jit
+@jit(inline=True)
 def road_value(road, row, i, s):
     """Linear interpolation of road[row] at s inside segment i (clamped to the profile ends)."""
     return road_blend(road, row, i, road_weight(road, i, s))
 
 
-@jit
+@jit(inline=True)
 def road_weight(road, i, s):
     """Weight w in [0, 1] of s in segment i: s = (1 - w) s_i + w s_i+1 (clamped); one division shared by every row
     read at the same s (road_blend)."""
@@ -184,19 +184,19 @@ def road_weight(road, i, s):
     return w
 
 
-@jit
+@jit(inline=True)
 def road_blend(road, row, i, w):
     """(1 - w) road[row, i] + w road[row, i + 1]."""
     return road[row, i] * (1.0 - w) + road[row, i + 1] * w
 
 
-@jit
+@jit(inline=True)
 def road_value_at(road, row, s):
     """road[row] at any s (binary search)."""
     return road_value_near(road, row, s, -1)
 
 
-@jit
+@jit(inline=True)
 def road_value_near(road, row, s, idx):
     """road[row] at s [m], the segment searched from index idx onwards (road_locate; -1: binary search) — for a
     preview a few grid steps ahead of the vehicle's cached index. Clamped to the profile ends."""

@@ -539,24 +539,21 @@ def source_torques(X, P, tabs, ti, bev, gear, mode, gear_req, omega_e, w_in, j_s
     Returns (omega_E [rad/s], T_E, T_C)."""
     t_c = 0.0
     t_e = 0.0
-    if bev:
+    locked = bev or mode == MODE_LOCKED
+    if locked:
         omega_e = w_in
-        t_min, t_max = torque_limits(P, tabs, ti, omega_e, v)
-        if gear_req == 0:
-            t_e = 0.0
-        else:
-            t_e = _clip(inverse_wheel_torque(P, tabs, ti, 1, f_req * r, omega_e, phi), t_min, t_max)
-        t_c = t_e
-    elif mode == MODE_LOCKED:
-        omega_e = w_in
-        t_min, t_max = torque_limits(P, tabs, ti, omega_e, v)
-        t_e = _clip(inverse_wheel_torque(P, tabs, ti, gear, f_req * r, omega_e, phi), t_min, t_max)
+    t_min, t_max = torque_limits(P, tabs, ti, omega_e, v)
+    # the source torque that yields the wheel force request (eq. 2.17 inverted at the gearbox input speed), where
+    # the mode uses it: locked (a BEV unless sailing) or slipping
+    t_req = 0.0
+    if (bev and gear_req != 0) or (not bev and (mode == MODE_LOCKED or mode == MODE_SLIP)):
+        t_req = _clip(inverse_wheel_torque(P, tabs, ti, 1 if bev else gear, f_req * r, w_in, phi), t_min, t_max)
+    if locked:
+        t_e = t_req
         t_c = t_e
     else:
-        t_min, t_max = torque_limits(P, tabs, ti, omega_e, v)
         target = P[P_IDLE]
         if mode == MODE_SLIP:
-            t_req = _clip(inverse_wheel_torque(P, tabs, ti, gear, f_req * r, w_in, phi), t_min, t_max)
             slip = omega_e - w_in
             if slip > 0.0:
                 t_c = max(0.0, t_req)
@@ -575,11 +572,16 @@ def source_torques(X, P, tabs, ti, bev, gear, mode, gear_req, omega_e, w_in, j_s
 def wheel_torque(P, tabs, ti, bev, gear, mode, t_e, t_c, omega_e, w_in, r, v, phi):
     """Wheel torque T_W [N m] through gearbox and differential (eq. 2.17, with their load-dependent losses):
     from T_E when locked, from the clutch torque T_C when slipping. Returns (T_W, gearbox loss, diff. loss)."""
-    if gear == 0:
-        return forward_wheel_torque(P, tabs, ti, 0, 0.0, P[P_ID] / r * v, phi)
-    if bev or mode == MODE_LOCKED:
-        return forward_wheel_torque(P, tabs, ti, gear, t_e, omega_e, phi)
-    return forward_wheel_torque(P, tabs, ti, gear, t_c, w_in, phi)
+    if gear == 0:  # neutral: the differential's spin loss at its input speed
+        torque_in = 0.0
+        omega_in = P[P_ID] / r * v
+    elif bev or mode == MODE_LOCKED:
+        torque_in = t_e
+        omega_in = omega_e
+    else:
+        torque_in = t_c
+        omega_in = w_in
+    return forward_wheel_torque(P, tabs, ti, gear, torque_in, omega_in, phi)
 
 
 # ================================================================================ brakes

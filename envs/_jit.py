@@ -61,9 +61,9 @@ def jit(fn=None, *, refcount: bool = True, inline: bool = False):
 
     ``inline=True`` (numba's ``forceinline``): LLVM inlines the function into every compiled caller. numba passes an
     array to a called function as seven machine words plus an exception status, so a call of a table look-up cost
-    more than the look-up; inlining the look-up and drive-train helpers and the steering law made the batched physics 1.38x
-    faster with bitwise-identical results and the same compile time. ``stage`` inlines in numba's IR instead, which
-    compiled the same helpers 6x slower."""
+    more than the look-up; inlining the look-up and drive-train helpers and the steering law made the batched
+    physics 1.38x faster with bitwise-identical results and the same compile time. ``stage`` inlines in numba's IR
+    instead, which compiled the same helpers 6x slower."""
     if fn is None:
         return lambda f: jit(f, refcount=refcount, inline=inline)
     options: dict[str, Any] = {"forceinline": True} if inline else {}

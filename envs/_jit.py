@@ -100,4 +100,5 @@ def dependent_jit(*sources: str | Path) -> Callable[..., Any]:
 
     def kernel(**options: Any) -> Callable[[Any], Any]:
         return lambda fn: _njit_cached(fn, cache_dir, **options)
+    kernel.cache_dir = cache_dir  # type: ignore[attr-defined]
     return kernel

@@ -1,0 +1,105 @@
+"""Are the simulator core's trajectories bitwise those of another commit? For speed work that must not change a
+single bit: every preset on a motorway, a city and a hilly road, without and with all effects, built-in driver,
+the whole truth log and the final state; plus the native vector env (random actions, observations, rewards).
+
+    python scripts/check_core_identity.py --ref 8efaaad          # the working tree against commit 8efaaad
+    python scripts/check_core_identity.py --quick                 # CI smoke run: HEAD, one short configuration
+
+``--ref`` is exported with ``git archive`` into a temporary package tree (scripts/_refcompare.py); each side runs
+in its own process and dumps its arrays, which are then compared. Exit status 1 when any array differs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _refcompare import REPO, export_commit  # noqa: E402
+
+PRESETS = ("gt_rwd", "gt_awd", "bmw_i3", "truck_40t")
+ROADS = ("motorway", "city", "hilly")
+
+
+def dump(out: Path, quick: bool) -> None:
+    """Run every configuration in this process (whichever roadload PYTHONPATH selects) and save the arrays."""
+    from roadload.envs import Simulator, physics
+    from roadload.envs.layout import C_USE_DRIVER
+    from roadload.gym.vector import EcoDriveVectorEnv
+    from roadload.road_profiles import load_profile
+
+    arrays: dict[str, np.ndarray] = {}
+    presets, roads, effects = (("bmw_i3",), ("city",), (None,)) if quick else (PRESETS, ROADS, (None, "all"))
+    n = 2000 if quick else 30_000  # substeps (10 ms each)
+    for vehicle in presets:
+        for road in roads:
+            for eff in effects:
+                sim = Simulator(vehicle, load_profile(road, seed=3, length=20_000.0), effects=eff, seed=2)
+                sim._ensure_capacity(n + 1)
+                sim._cmd[C_USE_DRIVER] = 1.0
+                X, rng = sim.X.copy(), sim._rng.copy()
+                done = physics.run(X, sim.P, sim.tabs, sim.ti, sim._road, sim._stops, sim._cycle, rng, sim._cmd,
+                                   sim._log, n)
+                key = f"{vehicle}/{road}/{eff or 'none'}"
+                arrays[f"{key}/log"] = sim._log[:, :done].copy()
+                arrays[f"{key}/state"] = X
+    envs, steps = (8, 50) if quick else (64, 1500)
+    env = EcoDriveVectorEnv(envs, threads=1)
+    obs, _ = env.reset(seed=0)
+    actions = np.random.default_rng(0).uniform(-1, 1, (steps, envs, 1)).astype(np.float32)
+    trace_obs, trace_reward = [obs], []
+    for k in range(steps):
+        obs, reward, _, _, _ = env.step(actions[k])
+        trace_obs.append(obs)
+        trace_reward.append(reward)
+    arrays["vector_env/observations"] = np.asarray(trace_obs)
+    arrays["vector_env/rewards"] = np.asarray(trace_reward)
+    np.savez(out, **arrays)
+
+
+def side(pythonpath: str | None, out: Path, quick: bool) -> None:
+    env = dict(os.environ)
+    if pythonpath:
+        env["PYTHONPATH"] = pythonpath
+    else:
+        env.pop("PYTHONPATH", None)
+    args = [sys.executable, str(Path(__file__).resolve()), "--dump", str(out)] + (["--quick"] if quick else [])
+    subprocess.run(args, check=True, env=env, cwd=tempfile.gettempdir())
+
+
+def compare(ref: str, quick: bool) -> int:
+    with tempfile.TemporaryDirectory(prefix="roadload-identity-") as tmp:
+        pkg = export_commit(ref, Path(tmp))
+        old, new = Path(tmp) / "old.npz", Path(tmp) / "new.npz"
+        side(str(pkg), old, quick)
+        side(None, new, quick)
+        a, b = np.load(old), np.load(new)
+        differ = []
+        for key in a.files:
+            if key not in b.files or a[key].shape != b[key].shape or not np.array_equal(a[key], b[key],
+                                                                                       equal_nan=True):
+                differ.append(key)
+        values = sum(a[k].size for k in a.files)
+    print(f"{ref} vs working tree ({REPO}): {len(a.files)} arrays ({values:,} values) compared, "
+          f"{len(differ)} differ")
+    for key in differ:
+        print(f"  differs: {key}")
+    return 1 if differ else 0
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--ref", default="HEAD", help="git commit to compare the working tree with (default HEAD)")
+    ap.add_argument("--quick", action="store_true", help="one short configuration (CI smoke run)")
+    ap.add_argument("--dump", type=Path, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.dump:
+        dump(args.dump, args.quick)
+    else:
+        sys.exit(compare(args.ref, args.quick))

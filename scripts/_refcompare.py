@@ -22,8 +22,18 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 
+class RefError(SystemExit):
+    """A commit to compare with that git does not know (the scripts exit with this message, no traceback)."""
+
+
 def export_commit(ref: str, dest: Path) -> Path:
-    """``git archive ref`` laid out as an importable package tree under ``dest``; returns the PYTHONPATH entry."""
+    """``git archive ref`` laid out as an importable package tree under ``dest``; returns the PYTHONPATH entry.
+    Raises RefError when ref names no commit of the repository."""
+    known = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--verify", "--quiet", f"{ref}^{{commit}}"],
+                           capture_output=True)
+    if known.returncode != 0:
+        raise RefError(f"commit to compare with: {ref!r} is not a commit of {REPO} (expected a hash, branch or tag "
+                       "that `git rev-parse` resolves)")
     blob = subprocess.run(["git", "-C", str(REPO), "archive", ref], check=True, capture_output=True).stdout
     src = dest / "src"
     with tarfile.open(fileobj=io.BytesIO(blob)) as tar:

@@ -133,20 +133,8 @@ def invert_through_map(tabs, ti, k, ratio, scale, speed, target):
 
 @jit(inline=True)
 def _bisect(s_axis, s):
-    n = s_axis.shape[0]
-    if s <= s_axis[0]:
-        return 0
-    if s >= s_axis[n - 1]:
-        return n - 2
-    lo = 0
-    hi = n - 1
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if s_axis[mid] <= s:
-            lo = mid
-        else:
-            hi = mid
-    return lo
+    """Segment index of s on the increasing axis s_axis (clamped): segment()'s search on a whole array."""
+    return segment(s_axis, 0, s_axis.shape[0], s)[0]
 
 
 @jit(inline=True)

@@ -12,7 +12,7 @@ import roadload.presets  # noqa: F401  (a broken import must fail, not skip)
 from roadload.experiments.cli import _load, app  # noqa: E402
 
 _spec = importlib.util.spec_from_file_location("handmade",
-                                               Path(__file__).parents[1] / "estimators" / "test_pipeline_stages.py")
+                                               Path(__file__).parents[2] / "estimators" / "test_pipeline_stages.py")
 hm = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(hm)
 

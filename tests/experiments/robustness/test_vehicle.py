@@ -97,5 +97,5 @@ def test_windup_on_vehicle_cruise_and_stenlund_gustafsson_bounds_it():
     for name in ("SGMKF", "SGIVMKF"):                     # Stenlund-Gustafsson keeps P at its desired value
         assert growth[(name, 0.0)] < 1.01 and growth[(name, 600.0)] < 1.01
     # finding: with the chapter-5 κ = 1e-5 the Levenberg-Marquardt regularisation of RRLM does not bound the
-    # wind-up on vehicle data (it does with the κ = 0.1 of experiment 3.3, see test_robustness_claims)
+    # wind-up on vehicle data (it does with the κ = 0.1 of experiment 3.3, see test_claims.py)
     assert abs(growth[("RRLM", 600.0)] - growth[("RLM", 600.0)]) < 0.05 * growth[("RLM", 600.0)]

@@ -320,13 +320,13 @@ def exp_3_7(seeds: int, out: Path) -> dict:
 EXPERIMENTS = {"3.1": exp_3_1, "3.3": exp_3_3, "3.4": exp_3_4, "3.6": exp_3_6, "3.7": exp_3_7}
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--out", type=Path, default=Path("out/ch3"))
     ap.add_argument("--only", type=str, default=",".join(EXPERIMENTS))
     ap.add_argument("--quick", action="store_true", help="tiny run for CI: 1 seed, temporary output folder")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     if args.quick:
         args.seeds, args.out = 1, Path(tempfile.mkdtemp(prefix="roadload-ch3-"))
     print(f"settings not given by the text: X̂_0 = 0, P_0 = 100 I, σ̂_0 = 1, Q̂_0 = 1, η = 0.01, "
@@ -335,7 +335,3 @@ def main() -> None:
         t0 = time.perf_counter()
         EXPERIMENTS[key.strip()](args.seeds, args.out)
         print(f"({time.perf_counter() - t0:.1f} s)")
-
-
-if __name__ == "__main__":
-    main()

@@ -1,10 +1,11 @@
-"""Resolution study of the headline comparison (issue 14): the SAME stored closed-loop runs (runs.json of
+"""Resolution study of the headline comparison: the SAME stored closed-loop runs (runs.json of
 ``roadload benchmark headline``) matched with the old metric (first control step past the road end, raw source
 energy) and the new one (crossings interpolated, energy net of the kinetic energy left at arrival), over time
 windows of the local fit. Prints the paired difference vs the oracle, its 1-sigma resolution and the fit residual.
 
 Usage: python scripts/headline_resolution.py RUNS.json [RUNS.json ...] [--out table.csv]
-       python scripts/headline_resolution.py --quick   (runs the tiny headline first, into ./headline_quick)
+       python scripts/headline_resolution.py --quick   (the tiny headline's ./headline_quick/runs.json, run first if
+                                                        absent)
 """
 
 import argparse
@@ -15,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from roadload.experiments.cli import main as cli_main
 from roadload.experiments.controller_comparison import _mean_ci, refit_results
+from roadload.experiments.headline_refit import tiny_headline_runs
 from roadload.fileio import save_figure, write_text
 from roadload.tables import markdown_table
 
@@ -84,22 +85,16 @@ def arrival_figure(results: list[dict], path: Path, model: str = "online") -> Pa
     return save_figure(fig, path, dpi=120)
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", nargs="*", type=Path)
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--figure", type=Path, default=None, help="PNG: online vs oracle per seed over the arrival "
                     "speed difference, raw and net metric")
     ap.add_argument("--quick", action="store_true")
-    a = ap.parse_args()
+    a = ap.parse_args(argv)
     if a.quick:
-        sys.argv = ["roadload", "benchmark", "headline", "--quick", "--out", "headline_quick", "--workers", "1"]
-        try:
-            cli_main()
-        except SystemExit as exc:
-            if exc.code:
-                raise
-        a.runs = [Path("headline_quick/runs.json")]
+        a.runs = [tiny_headline_runs()]
     if not a.runs:
         sys.exit("give one or more runs.json files of `roadload benchmark headline` (or --quick)")
     results = [r for p in a.runs for r in json.loads(p.read_text())]
@@ -110,7 +105,3 @@ def main() -> int:
     if a.figure:
         arrival_figure(results, a.figure)
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

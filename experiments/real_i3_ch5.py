@@ -1,4 +1,4 @@
-"""Chapter 5 on real data: the BMW i3 trips of ../shared/data/bmw_i3_tum (issue 5).
+"""Chapter 5 on real data: the BMW i3 trips of ../shared/data/bmw_i3_tum.
 
 Every trip runs through the chapter-5 pipeline (the log is 10 Hz already; no steering signal, so no path
 curvature and no M4) with M0 (spec-sheet abc values of the i3 preset: c_w 0.29, A 2.38 m², f_r0, 1400 kg with
@@ -70,13 +70,13 @@ def evaluate_i3_trip(path: str) -> dict:
     return {"medse": medse, "mass": mass, "masses": masses, "info": info}
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", type=Path, default=Path("out/real_i3"))
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--limit", type=int, default=None)
     ap.add_argument("--quick", action="store_true", help="tiny run for CI: 3 trips, 1 worker, temporary output")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     if args.quick:
         args.limit, args.workers = 3, 1
         args.out = Path(tempfile.mkdtemp(prefix="roadload-i3-"))
@@ -159,7 +159,3 @@ def main() -> None:
     md += ["# Trips", "", markdown_table(info.drop(columns=["notes"]), floatfmt=".4g"), ""]
     write_text(out / "report.md", "\n".join(md) + "\n")
     print(f"report: {out / 'report.md'}")
-
-
-if __name__ == "__main__":
-    main()

@@ -1,6 +1,6 @@
 """Build real road profiles (grade + curvature over distance) from the real logs of ../shared/data.
 
-- CANedge drives (sessions 164 and 165): grade from GNSS altitude (accuracy-filtered, smoothed over 150 m),
+- CANedge drives (logs 00000164 and 00000165): grade from GNSS altitude (accuracy-filtered, smoothed over 150 m),
   curvature from the IMU yaw rate (gyro bias at standstill removed, smoothed over 40 m); the pitch- and
   course-based variants are compared and the agreement stored in the profile metadata.
 - BMW i3 trips (--bmw TripA01 ...): grade from the map elevation (1 m quantised, smoothed over 150 m); the i3
@@ -10,7 +10,7 @@ The files are generated, not committed: they land in road-profiles/real/ (or --o
 JSON format, with source and licence in their metadata. Load one with
 ``roadload profiles show road-profiles/real/canedge_164.json``.
 
-    /work/venv/bin/python scripts/make_real_profiles.py [--out DIR] [--bmw TripA01 TripA06]
+    python scripts/make_real_profiles.py [--out DIR] [--bmw TripA01 TripA06]
 """
 
 from __future__ import annotations
@@ -27,7 +27,8 @@ from roadload.io.importer import import_log
 from roadload.io.mapping import load_mapping
 from roadload.io.profiles import profile_from_trip, save_trip_profile
 
-ROOT = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[1]
+"""The source tree of an editable install; the script passes its own repository instead."""
 CANEDGE_SOURCE = ("CSS-Electronics/api-examples examples/other/matlab-basics/LOG_datastore/3BA199E2 "
                   "(snapshot f7932bac), session {session}, via ../shared/data/css_canedge_gnss_obd")
 
@@ -80,13 +81,15 @@ def _describe(prof, path: Path) -> None:
         print(f"    cross-check: {prof.meta['cross_check']}")
 
 
-def main() -> int:
+def main(argv: list[str] | None = None, repo: Path = REPO) -> int:
+    """The command line (``scripts/make_real_profiles.py``); the profiles go to ``repo``/road-profiles/real unless
+    ``--out`` or ``--quick`` says otherwise. Returns the exit status."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, default=ROOT / "road-profiles" / "real")
+    ap.add_argument("--out", type=Path, default=repo / "road-profiles" / "real")
     ap.add_argument("--bmw", nargs="*", default=["TripA01", "TripA06"], help="BMW i3 trips to convert")
     ap.add_argument("--quick", action="store_true",
                     help="tiny run for CI: one BMW trip, written to a temporary folder (not the package's real/)")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     if args.quick:
         args.out, args.bmw = Path(tempfile.mkdtemp(prefix="roadload-profiles-")), args.bmw[:1]
     base = shared_data_dir()
@@ -97,7 +100,3 @@ def main() -> int:
     files = canedge_profiles(base, args.out, 1 if args.quick else None) + bmw_profiles(base, args.out, args.bmw)
     print(f"wrote {len(files)} profiles to {args.out}")
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

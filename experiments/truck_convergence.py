@@ -1,4 +1,4 @@
-"""Online M4-RRLM estimate vs distance on the trucks (issue 14): how long a warm-up the online MPC needs.
+"""Online M4-RRLM estimate vs distance on the trucks: how long a warm-up the online MPC needs.
 
 Usage: python scripts/truck_convergence.py --out DIR [--seeds 3] [--length 16000] [--workers 2]
        python scripts/truck_convergence.py --quick   (15 t and 40 t, 1 seed, 3 km)
@@ -22,7 +22,7 @@ def _run(args: tuple[str, int, float]) -> dict:
     return convergence_run(*args)
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("truck_convergence"))
     ap.add_argument("--seeds", type=int, default=3)
@@ -30,7 +30,7 @@ def main() -> int:
     ap.add_argument("--cases", default="truck_15t,truck_25t,truck_40t")
     ap.add_argument("--workers", type=int, default=None)
     ap.add_argument("--quick", action="store_true")
-    a = ap.parse_args()
+    a = ap.parse_args(argv)
     if a.quick:
         a.seeds, a.length, a.cases = 1, 3000.0, "truck_15t,truck_40t"
     if a.seeds < 1 or not a.length > 1000.0:
@@ -52,7 +52,3 @@ def main() -> int:
     print(markdown_table(table.round(2)))
     print(f"wall {time.perf_counter() - t0:.0f} s, load average {os.getloadavg()[0]:.2f}; wrote {a.out}")
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,9 +1,9 @@
-"""Trip time and energy of the truck's closed-loop MPC over a fine grid of time weights lambda (issue 14, session 3).
+"""Trip time and energy of the truck's closed-loop MPC over a fine grid of time weights lambda.
 
 Measures whether the closed-loop trip time is continuous and monotone in lambda on one paired-comparison seed
 (the headline's road, warm-up and plant), and saves the speed traces so the trajectories of neighbouring lambda
 can be compared. ``--variant`` selects the MPC's terminal kinetic-energy value (``source``: m E_N / eta_i, the
-fix; ``wheel``: m E_N, sessions 1-2).
+default; ``wheel``: m E_N, the earlier value, which undervalues kinetic energy by eta_i on an ICE).
 
     python scripts/truck_lambda_scan.py --case truck_15t --seed 0 --lams 100000:200000:11 --out scan.json
     python scripts/truck_lambda_scan.py --quick
@@ -93,7 +93,3 @@ def main(argv: list[str] | None = None) -> None:
     print(f"wall {time.perf_counter() - t0:.1f} s")
     if a.out is not None:
         write_text(a.out, json.dumps({"args": {k: str(v) for k, v in vars(a).items()}, "runs": rows}))
-
-
-if __name__ == "__main__":
-    main()

@@ -5,23 +5,18 @@ the whole truth log and the final state; plus the native vector env (random acti
     python scripts/check_core_identity.py --ref 8efaaad          # the working tree against commit 8efaaad
     python scripts/check_core_identity.py --quick                 # CI smoke run: HEAD, one short configuration
 
-``--ref`` is exported with ``git archive`` into a temporary package tree (scripts/_refcompare.py); each side runs
-in its own process and dumps its arrays, which are then compared. Exit status 1 when any array differs.
+``--ref`` is exported with ``git archive`` into a temporary package tree (:mod:`.refcompare`); each side runs this
+file in its own process and dumps its arrays, which are then compared. Exit status 1 when any array differs. This
+file runs against an old package tree too: it imports from roadload only what every commit has.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _refcompare import REPO, export_commit  # noqa: E402
 
 PRESETS = ("gt_rwd", "gt_awd", "bmw_i3", "truck_40t")
 ROADS = ("motorway", "city", "hilly")
@@ -63,22 +58,19 @@ def dump(out: Path, quick: bool) -> None:
     np.savez(out, **arrays)
 
 
-def side(pythonpath: str | None, out: Path, quick: bool) -> None:
-    env = dict(os.environ)
-    if pythonpath:
-        env["PYTHONPATH"] = pythonpath
-    else:
-        env.pop("PYTHONPATH", None)
-    args = [sys.executable, str(Path(__file__).resolve()), "--dump", str(out)] + (["--quick"] if quick else [])
-    subprocess.run(args, check=True, env=env, cwd=tempfile.gettempdir())
+def compare(ref: str, quick: bool, repo: Path | None = None) -> int:
+    """Dump the arrays of commit ``ref`` (of the git repository ``repo``, default: the source tree of this file)
+    and of the working tree, each in its own process, and count the arrays that differ; returns the exit status."""
+    # imported here, not at the top: this file also runs against old package trees that lack the module
+    from roadload.experiments.benchmarks.refcompare import REPO, export_commit, run_file
 
-
-def compare(ref: str, quick: bool) -> int:
+    repo = repo or REPO
     with tempfile.TemporaryDirectory(prefix="roadload-identity-") as tmp:
-        pkg = export_commit(ref, Path(tmp))
+        pkg = export_commit(ref, Path(tmp), repo)
         old, new = Path(tmp) / "old.npz", Path(tmp) / "new.npz"
-        side(str(pkg), old, quick)
-        side(None, new, quick)
+        for pythonpath, out in ((str(pkg), old), (None, new)):
+            run_file(Path(__file__).resolve(), ["--dump", str(out)] + (["--quick"] if quick else []), pythonpath,
+                     quiet=False)
         a, b = np.load(old), np.load(new)
         differ = []
         for key in a.files:
@@ -86,20 +78,25 @@ def compare(ref: str, quick: bool) -> int:
                                                                                        equal_nan=True):
                 differ.append(key)
         values = sum(a[k].size for k in a.files)
-    print(f"{ref} vs working tree ({REPO}): {len(a.files)} arrays ({values:,} values) compared, "
+    print(f"{ref} vs working tree ({repo}): {len(a.files)} arrays ({values:,} values) compared, "
           f"{len(differ)} differ")
     for key in differ:
         print(f"  differs: {key}")
     return 1 if differ else 0
 
 
-if __name__ == "__main__":
+def main(argv: list[str] | None = None, repo: Path | None = None) -> int:
+    """The check's command line (``scripts/check_core_identity.py``); returns the exit status."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--ref", default="HEAD", help="git commit to compare the working tree with (default HEAD)")
     ap.add_argument("--quick", action="store_true", help="one short configuration (CI smoke run)")
     ap.add_argument("--dump", type=Path, help=argparse.SUPPRESS)
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     if args.dump:
         dump(args.dump, args.quick)
-    else:
-        sys.exit(compare(args.ref, args.quick))
+        return 0
+    return compare(args.ref, args.quick, repo)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

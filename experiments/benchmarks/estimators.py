@@ -13,9 +13,10 @@ inputs and a constant as regressors, output noise and 5 % outliers):
 Usage: python scripts/bench_estimators.py [--samples 20000] [--repeats 30] [--trips 8] [--quick]
        python scripts/bench_estimators.py --compare main [--rounds 3]   # old commit vs working tree
 
-``--compare REF`` exports commit REF (``git archive``) into a temporary package tree, runs this script on it and
-on the working tree interleaved ``--rounds`` times, and prints new/old ratios of each figure relative to the
-hand-written loop of its own run (> 1: the working tree is faster).
+``--compare REF`` exports commit REF (``git archive``, :mod:`.refcompare`) into a temporary package tree, runs
+this module on it and on the working tree interleaved ``--rounds`` times, and prints new/old ratios of each
+figure relative to the hand-written loop of its own run (> 1: the working tree is faster). This file runs
+against an old package tree too: it imports from roadload only what every commit has.
 """
 
 from __future__ import annotations
@@ -120,7 +121,9 @@ def print_comparison(old: list[dict], new: list[dict], ref: str) -> None:
     print(f"hand-written loop: {o:.2f} (old runs) / {n:.2f} (new runs) M samples per CPU-second")
 
 
-def main() -> None:
+def main(argv: list[str] | None = None, repo: Path | None = None) -> None:
+    """The benchmark's command line (``scripts/bench_estimators.py``); ``repo``: the git repository of
+    ``--compare`` (default: the source tree of this file)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--samples", type=int, default=20_000)
     ap.add_argument("--repeats", type=int, default=30)
@@ -128,17 +131,18 @@ def main() -> None:
     ap.add_argument("--online-samples", type=int, default=2_000)
     ap.add_argument("--quick", action="store_true", help="tiny sizes for a smoke run (< 60 s)")
     ap.add_argument("--json", type=Path, help="also write the figures as JSON here")
-    ap.add_argument("--compare", metavar="REF", help="git commit to compare against (same session, interleaved)")
+    ap.add_argument("--compare", metavar="REF", help="git commit to compare against (in this run, interleaved)")
     ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds of --compare")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     if args.quick:
         args.samples, args.repeats, args.trips, args.online_samples = 2_000, 3, 2, 200
     if args.compare:
-        from _refcompare import compare
+        # imported here, not at the top: this file also runs against old package trees that lack the module
+        from roadload.experiments.benchmarks.refcompare import REPO, compare
 
         sub = ["--samples", str(args.samples), "--repeats", str(args.repeats), "--trips", str(args.trips),
                "--online-samples", str(args.online_samples)]
-        old, new = compare(Path(__file__).resolve(), sub, args.compare, args.rounds)
+        old, new = compare(Path(__file__).resolve(), sub, args.compare, args.rounds, repo or REPO)
         print_comparison(old, new, args.compare)
         return
     T = args.samples

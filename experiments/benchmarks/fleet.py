@@ -1,4 +1,4 @@
-"""Speed and findings of the chapter-5 fleet benchmark (issue 5).
+"""Speed and findings of the chapter-5 fleet benchmark.
 
 Generates the simulated fleet into a cache folder when absent (generation is timed separately and may take
 longer), then runs the whole benchmark (>= 80 trips x 11 model-estimator combinations x 5 horizons) from the
@@ -20,7 +20,7 @@ from roadload.experiments.fleet import (check_findings, generate_fleet, run_benc
                                        write_report)
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--trips", type=int, default=84)
     ap.add_argument("--seed", type=int, default=2012)
@@ -33,7 +33,7 @@ def main() -> None:
                     help="sensitivity experiment: outlier events of SIZE N (1 s bursts) starting with probability "
                          "RATE per triggered sample, added to F_xV after preprocessing (not part of the simulator)")
     ap.add_argument("--quick", action="store_true", help="tiny run for CI: 3 trips, 0.3 h, in a temporary cache")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     if args.quick:
         args.trips, args.hours, args.workers = 3, 8.4, 1
         args.cache = args.cache or Path(tempfile.mkdtemp(prefix="roadload-fleet-"))
@@ -68,7 +68,3 @@ def main() -> None:
         verdict = {True: "reproduced", False: "NOT reproduced", None: "undecided"}[f["reproduced"]]
         print(f"- {f['finding']}: {verdict}. {f['evidence']}")
     print(f"report: {report}")
-
-
-if __name__ == "__main__":
-    main()

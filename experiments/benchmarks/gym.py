@@ -13,15 +13,16 @@ Table 2: per thread count, native / bare and native / DummyVecEnv, and the targe
 Table 3 (unless --no-classic): single / can observation / DummyVecEnv / SubprocVecEnv x n, EcoHighway-v0 and
 highway-env's highway-fast-v0. Random actions in [-1, 1], resets included.
 
-    python scripts/bench_gym.py --no-classic --threads 1,2       # the native-env figures (issue 17), ~1 min
+    python scripts/bench_gym.py --no-classic --threads 1,2       # the native-env figures, ~1 min
     python scripts/bench_gym.py [--seconds 5] [--native 256] [--n-envs 2] [--threads 1,2]     # everything
     python scripts/bench_gym.py --quick                                       # CI smoke run (< 60 s)
     python scripts/bench_gym.py --compare e7237e4 --threads 1,2 [--rounds 2]  # old commit vs working tree
 
-``--compare REF`` exports commit REF (``git archive``, scripts/_refcompare.py) and runs the native-env table on
+``--compare REF`` exports commit REF (``git archive``, :mod:`.refcompare`) and runs the native-env table on
 it and on the working tree, interleaved ``--rounds`` times (old, new, old, new, ...: both see the same machine
 load), and prints per thread count the native env's wall and per-CPU-second rates, old and new, their ratio and
 native / bare of each (the bare batched physics is the same code in both, so it also shows how the load moved).
+This file runs against an old package tree too: it imports from roadload only what every commit has.
 """
 
 import os
@@ -34,7 +35,6 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 import argparse  # noqa: E402
 import json  # noqa: E402
 import statistics  # noqa: E402
-import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import pandas as pd  # noqa: E402
@@ -45,7 +45,7 @@ from roadload.experiments.rl import (load_average, native_ratios, print_table, r
 from roadload.gym.vector import openmp_wait_policy  # noqa: E402
 
 TARGET_STEPS_PER_S = 300_000
-"""Issue 17: native vector env steps/s (wall) at N = 256 on the 2-core machine."""
+"""Target of the native vector env: steps/s (wall) at N = 256 on the 2-core machine."""
 
 
 def _thread_counts(text: str) -> tuple[int, ...]:
@@ -59,14 +59,15 @@ def _thread_counts(text: str) -> tuple[int, ...]:
     return counts
 
 
-def compare_with(args: argparse.Namespace) -> None:
-    """--compare: the native-env table of commit args.compare and of the working tree, interleaved."""
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from _refcompare import compare
+def compare_with(args: argparse.Namespace, repo: Path | None) -> None:
+    """--compare: the native-env table of commit args.compare (of the git repository ``repo``, default: the source
+    tree of this file) and of the working tree, interleaved."""
+    # imported here, not at the top: this file also runs against old package trees that lack the module
+    from roadload.experiments.benchmarks.refcompare import REPO, compare
 
     bench = ["--no-classic", "--seconds", str(args.seconds), "--native", str(args.native), "--dummy",
              str(args.dummy), "--threads", ",".join(str(t) for t in args.threads)]
-    old, new = compare(Path(__file__).resolve(), bench, args.compare, args.rounds)
+    old, new = compare(Path(__file__).resolve(), bench, args.compare, args.rounds, repo or REPO)
     console = Console(width=150)
     rows = []
     for t in args.threads:
@@ -90,7 +91,8 @@ def compare_with(args: argparse.Namespace) -> None:
                   "batched physics with the same threads (wall, cpu)")
 
 
-if __name__ == "__main__":
+def main(argv: list[str] | None = None, repo: Path | None = None) -> None:
+    """The benchmark's command line (``scripts/bench_gym.py``); ``repo``: the git repository of ``--compare``."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=5.0, help="measurement time per row [s]")
     ap.add_argument("--native", type=int, default=256, help="sub-envs of the native vector env")
@@ -104,12 +106,12 @@ if __name__ == "__main__":
     ap.add_argument("--json", metavar="PATH", help="also write the native-env ratios table as JSON")
     ap.add_argument("--compare", metavar="REF", help="old (commit REF) against new (working tree), interleaved")
     ap.add_argument("--rounds", type=int, default=2, help="interleaved rounds of --compare")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     if args.quick:
         args.seconds, args.native, args.dummy, args.no_classic = 0.5, 32, 4, True
     if args.compare:
-        compare_with(args)
-        sys.exit(0)
+        compare_with(args, repo)
+        return
     console = Console(width=150)
     cores = os.cpu_count()
     load0 = load_average()
@@ -137,3 +139,7 @@ if __name__ == "__main__":
         print_table(console, table.drop(columns=["episodes"]),
                     f"environment steps per second ({cores} cores, load average {load:.1f})", "{:.1f}")
         console.print(f"EcoDrive-v0 / highway-fast-v0 single-process steps/s: {speed_ratio(table):.0f}x")
+
+
+if __name__ == "__main__":
+    main()

@@ -10,7 +10,6 @@ Best of --repeat runs (the first run also pays imports and file-cache misses; it
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 
 from roadload.data import shared_data_dir
@@ -40,12 +39,12 @@ def run_once(folder, mapping):
             "channels": len(trip.channels)}
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--cantools", action="store_true", help="also time cantools' per-frame decoding")
     ap.add_argument("--quick", action="store_true", help="tiny run for CI: one session, one repetition")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     if args.quick:
         args.repeat = 1
     base = shared_data_dir()
@@ -99,7 +98,3 @@ def compare_cantools(folder, mapping) -> None:
     t_ct = time.perf_counter() - t0
     print(f"decode only, {folder.name}: vectorised {len(frames) / t_vec:.3g} frames/s, cantools per frame "
           f"{n / t_ct:.3g} frames/s ({t_ct / t_vec:.0f}x)")
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -3,11 +3,11 @@
 Drives a closed loop (the controller's own force model as plant, so only the solver is timed) over a generated
 hilly road and a city route and records every solve: wall-clock time (time.perf_counter) and process CPU time
 (time.process_time, robust when other jobs load the machine), iterations and failures. Prints a table and, with
---out, writes it as CSV. Targets (issue): IPOPT warm median <= 5 ms and p99 <= 20 ms; QP median <= 2 ms. IPOPT
+--out, writes it as CSV. Targets: IPOPT warm median <= 5 ms and p99 <= 20 ms; QP median <= 2 ms. IPOPT
 runs at the default warm-start tolerance (1e-4) and at 1e-6 for reference: the closed-loop energies show what the
 looser tolerance costs.
 
-The heavy truck (``--vehicle truck_40t``, issue 14): its MPC (40 nodes x 50 m = 2 km horizon, the settings of the
+The heavy truck (``--vehicle truck_40t``): its MPC (40 nodes x 50 m = 2 km horizon, the settings of the
 truck comparison) on generated long grades (``--roads long_grades``), target IPOPT warm median <= 10 ms; the
 car's 100-node problem on the same machine in the same run is the reference (``--vehicle bmw_i3,truck_40t``
 prints both and the ratio).
@@ -70,14 +70,14 @@ def _bench(vehicle, road_name, road, mpc, energy, params) -> dict:
             "run_wall_s": wall_run}
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--roads", default="hilly,city")
     ap.add_argument("--length", type=float, default=6000.0, help="road length [m]")
     ap.add_argument("--vehicle", default="bmw_i3", help="comma-separated presets (bmw_i3, truck_40t, ...)")
     ap.add_argument("--out", default=None)
     ap.add_argument("--quick", action="store_true", help="tiny run (1.5 km, IPOPT tol 1e-4 only)")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     length = 1500.0 if args.quick else args.length
     solvers = (("ipopt", 1e-4),) if args.quick else (("ipopt", 1e-4), ("ipopt", 1e-6), ("osqp", 1e-4))
     rows = []
@@ -110,7 +110,3 @@ def main() -> None:
     if args.out:
         table.to_csv(args.out, index=False)
         print(f"wrote {args.out}")
-
-
-if __name__ == "__main__":
-    main()

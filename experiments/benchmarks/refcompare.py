@@ -1,9 +1,10 @@
-"""Same-session old/new comparison for the benchmark scripts: export a git commit of roadload into a temporary
-package tree and run a benchmark script against it and against the working tree, interleaved.
+"""Old/new comparison in one run for the benchmarks: export a git commit of roadload into a temporary package
+tree and run a benchmark module against it and against the working tree, interleaved.
 
 The export follows ``[tool.setuptools.package-dir]`` of the commit's pyproject.toml (``roadload`` = ``core/``,
-``roadload.envs`` = ``envs/``, ...), so ``PYTHONPATH=<tree>`` imports the old package ahead of the editable
-install. Each run writes its figures as JSON; the caller divides them.
+``roadload.envs`` = ``envs/``, ...), so ``PYTHONPATH=<tree>`` imports the old package ahead of the installed
+one. The benchmark module itself runs from the working tree in both children (its file is run as ``__main__``,
+so an old commit needs none of it); each child writes its figures as JSON and the caller divides them.
 """
 
 from __future__ import annotations
@@ -19,22 +20,28 @@ import tempfile
 import tomllib
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
+"""The source tree of an editable install (experiments/benchmarks/ -> the repository root); the scripts pass
+their own repository instead, which also works from an installed copy."""
+
+# a child runs a module file as __main__ through runpy: unlike ``python FILE`` this does not put the file's folder
+# (experiments/benchmarks/, whose simulator.py, gym.py, ... would shadow top-level modules) first on sys.path
+_RUN_FILE = "import runpy, sys; sys.argv = sys.argv[1:]; runpy.run_path(sys.argv[0], run_name='__main__')"
 
 
 class RefError(SystemExit):
     """A commit to compare with that git does not know (the scripts exit with this message, no traceback)."""
 
 
-def export_commit(ref: str, dest: Path) -> Path:
-    """``git archive ref`` laid out as an importable package tree under ``dest``; returns the PYTHONPATH entry.
-    Raises RefError when ref names no commit of the repository."""
-    known = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--verify", "--quiet", f"{ref}^{{commit}}"],
+def export_commit(ref: str, dest: Path, repo: Path = REPO) -> Path:
+    """``git archive ref`` of ``repo`` laid out as an importable package tree under ``dest``; returns the
+    PYTHONPATH entry. Raises RefError when ref names no commit of the repository."""
+    known = subprocess.run(["git", "-C", str(repo), "rev-parse", "--verify", "--quiet", f"{ref}^{{commit}}"],
                            capture_output=True)
     if known.returncode != 0:
-        raise RefError(f"commit to compare with: {ref!r} is not a commit of {REPO} (expected a hash, branch or tag "
+        raise RefError(f"commit to compare with: {ref!r} is not a commit of {repo} (expected a hash, branch or tag "
                        "that `git rev-parse` resolves)")
-    blob = subprocess.run(["git", "-C", str(REPO), "archive", ref], check=True, capture_output=True).stdout
+    blob = subprocess.run(["git", "-C", str(repo), "archive", ref], check=True, capture_output=True).stdout
     src = dest / "src"
     with tarfile.open(fileobj=io.BytesIO(blob)) as tar:
         tar.extractall(src, filter="data")
@@ -49,30 +56,38 @@ def export_commit(ref: str, dest: Path) -> Path:
     return pkg
 
 
-def run_json(script: Path, args: list[str], pythonpath: str | None) -> dict:
-    """Run ``script args --json <tmp>`` (with PYTHONPATH when given) and return its JSON figures."""
-    with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as f:
-        out = Path(f.name)
+def run_file(path: Path, args: list[str], pythonpath: str | None, quiet: bool = True) -> None:
+    """Run the module file ``path`` as ``__main__`` with ``args`` in a child process whose roadload is the one
+    under ``pythonpath`` (an exported commit) or, without it, the installed one; raises on a non-zero exit."""
     env = dict(os.environ)
     if pythonpath:
         env["PYTHONPATH"] = pythonpath
     else:
         env.pop("PYTHONPATH", None)
+    subprocess.run([sys.executable, "-c", _RUN_FILE, str(path), *args], check=True, env=env,
+                   cwd=tempfile.gettempdir(), stdout=subprocess.DEVNULL if quiet else None)
+
+
+def run_json(path: Path, args: list[str], pythonpath: str | None) -> dict:
+    """Run the benchmark module file ``path`` with ``args --json <tmp>`` (see :func:`run_file`) and return its
+    JSON figures."""
+    with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as f:
+        out = Path(f.name)
     try:
-        subprocess.run([sys.executable, str(script), *args, "--json", str(out)], check=True, env=env,
-                       cwd=tempfile.gettempdir(), stdout=subprocess.DEVNULL)
+        run_file(path, [*args, "--json", str(out)], pythonpath)
         return json.loads(out.read_text())
     finally:
         out.unlink(missing_ok=True)
 
 
-def compare(script: Path, args: list[str], ref: str, rounds: int = 3) -> tuple[list[dict], list[dict]]:
-    """Figures of ``script`` on commit ``ref`` and on the working tree, ``rounds`` times each, interleaved
-    (old, new, old, new, ...), so both see the same machine load. Returns (old runs, new runs)."""
+def compare(path: Path, args: list[str], ref: str, rounds: int = 3,
+            repo: Path = REPO) -> tuple[list[dict], list[dict]]:
+    """Figures of the benchmark module file ``path`` on commit ``ref`` and on the working tree, ``rounds`` times
+    each, interleaved (old, new, old, new, ...), so both see the same machine load. Returns (old runs, new runs)."""
     with tempfile.TemporaryDirectory(prefix="roadload-ref-") as tmp:
-        pkg = export_commit(ref, Path(tmp))
+        pkg = export_commit(ref, Path(tmp), repo)
         old, new = [], []
         for _ in range(rounds):
-            old.append(run_json(script, args, str(pkg)))
-            new.append(run_json(script, args, None))
+            old.append(run_json(path, args, str(pkg)))
+            new.append(run_json(path, args, None))
     return old, new

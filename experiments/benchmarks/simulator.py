@@ -1,18 +1,43 @@
-"""Simulator speed benchmark: simulated seconds per wall-clock / CPU second at 100 Hz with all sensors and
-effects on, peak memory, and step-API throughput. Used by ``scripts/bench_simulator.py`` and
-``roadload benchmark simulator``."""
+"""Simulator speed: simulated seconds per wall-clock (and CPU) second at 100 Hz with all sensors and effects on,
+peak memory of that run, step-API throughput, and the compiled core alone against a hand-written reference loop.
+
+    python scripts/bench_simulator.py [--duration 3600] [--repeats 3] [--quick]
+    python scripts/bench_simulator.py --compare main [--rounds 3] [--quick]
+
+Core figure: substeps per CPU-second of ``physics.run`` (built-in driver, all effects, the log written) on a
+prepared simulator state, divided by the rate of a hand-written compiled point-mass loop (road-load equations
+2.5-2.10, a PI speed controller, a 6-channel log) measured in the same run: a machine-independent ratio.
+``--compare REF`` exports commit REF (``git archive``) into a temporary package tree and runs this module on
+it and on the working tree, interleaved ``--rounds`` times, and prints old/new ratios of the core and trip figures.
+``--ab REF`` loads REF's ``envs/physics.py`` into this process (next to the working tree's other modules, which
+must still fit it) and alternates old and new ``run`` call by call on the same state: the ratio least disturbed
+by a changing machine load.
+
+Target: >= 1000x real time, i.e. a one-hour trip in under 3.6 s on one core. ``roadload benchmark simulator``
+prints :func:`report`. This file runs against an old package tree too (``--compare``): it imports from roadload
+only what every commit has.
+"""
 
 from __future__ import annotations
 
+import argparse
+import json
+import math
 import resource
+import statistics
 import time
 import tracemalloc
 import warnings
+from pathlib import Path
 
 import numpy as np
+from numba import njit
 
-from roadload.envs.simulator import Action, LateralValidityWarning, Simulator, simulate
+from roadload.envs import Simulator, physics
+from roadload.envs.layout import C_USE_DRIVER
+from roadload.envs.simulator import Action, LateralValidityWarning, simulate
 from roadload.road_profiles import load_profile
+from roadload.units import STANDARD_AIR_DENSITY, G
 
 
 def _road(length: float, seed: int):
@@ -87,6 +112,184 @@ def report(duration: float = 3600.0, repeats: int = 3) -> str:
     return "\n".join(lines)
 
 
-if __name__ == "__main__":  # pragma: no cover
-    np.set_printoptions(precision=3)
-    print(report())
+@njit(cache=True)
+def reference_loop(n, dt, mass, cxa, f_r, v_set, log):
+    """Hand-written reference: point-mass longitudinal model with a PI speed controller (eq. 2.5-2.10 road load,
+    sinusoidal grade), explicit Euler at dt [s], one 6-channel log row per step. Returns the final speed."""
+    g = G
+    v = 0.0
+    s = 0.0
+    integ = 0.0
+    for i in range(n):
+        theta = 0.03 * math.sin(s / 400.0)
+        f_cl = mass * g * math.sin(theta)
+        f_roll = f_r * mass * g * math.cos(theta) * math.tanh(v / 0.1)
+        f_aero = 0.5 * STANDARD_AIR_DENSITY * cxa * v * v
+        err = v_set - v
+        integ += err * dt
+        f_drive = mass * (0.8 * err + 0.05 * integ)
+        f_drive = min(max(f_drive, -8000.0), 6000.0)
+        a = (f_drive - f_cl - f_roll - f_aero) / mass
+        v = max(0.0, v + a * dt)
+        s += v * dt
+        j = i % log.shape[1]
+        log[0, j] = i * dt
+        log[1, j] = s
+        log[2, j] = v
+        log[3, j] = a
+        log[4, j] = f_drive
+        log[5, j] = f_aero + f_roll + f_cl
+    return v
+
+
+def reference_rate(n: int, repeats: int) -> float:
+    """Best substeps per CPU-second of :func:`reference_loop`."""
+    log = np.zeros((6, n))
+    reference_loop(10, 0.01, 1500.0, 0.6, 0.01, 25.0, log)
+    best = 0.0
+    for _ in range(repeats):
+        c0 = time.process_time()
+        reference_loop(n, 0.01, 1500.0, 0.6, 0.01, 25.0, log)
+        best = max(best, n / max(time.process_time() - c0, 1e-9))
+    return best
+
+
+def core_rate(vehicle: str, n: int, repeats: int) -> float:
+    """Best substeps per CPU-second of the compiled core ``physics.run`` (built-in driver, all effects) from a
+    prepared simulator state (the same start state for every repeat)."""
+    sim = Simulator(vehicle, load_profile("motorway", seed=1, length=max(60_000.0, n * 0.45)), effects="all",
+                    seed=1)
+    sim._ensure_capacity(n + 1)
+    sim._cmd[C_USE_DRIVER] = 1.0
+    X0, rng0 = sim.X.copy(), sim._rng.copy()
+    best = 0.0
+    for r in range(repeats + 1):  # the first run compiles / loads the cache
+        X, rng = X0.copy(), rng0.copy()
+        c0 = time.process_time()
+        done = physics.run(X, sim.P, sim.tabs, sim.ti, sim._road, sim._stops, sim._cycle, rng, sim._cmd, sim._log, n)
+        if r:
+            best = max(best, done / max(time.process_time() - c0, 1e-9))
+    return best
+
+
+def ab_core(ref: str, vehicle: str, n: int, repeats: int, repo: Path) -> float:
+    """new/old substeps per CPU-second of ``physics.run``, old = REF's physics.py (from the git repository
+    ``repo``) loaded in this process, alternated call by call (best of ``repeats`` each)."""
+    import importlib.util
+    import subprocess
+    import tempfile
+
+    src = subprocess.run(["git", "-C", str(repo), "show", f"{ref}:envs/physics.py"],
+                         check=True, capture_output=True, text=True).stdout
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(physics.__file__).with_name(f"_physics_ab_{Path(tmp).name}.py")
+        path.write_text(src)
+        try:
+            spec = importlib.util.spec_from_file_location(f"roadload.envs.{path.stem}", path)
+            old = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(old)
+            sim = Simulator(vehicle, load_profile("motorway", seed=1, length=max(60_000.0, n * 0.45)),
+                            effects="all", seed=1)
+            sim._ensure_capacity(n + 1)
+            sim._cmd[C_USE_DRIVER] = 1.0
+            X0, rng0 = sim.X.copy(), sim._rng.copy()
+            best = {"old": 0.0, "new": 0.0}
+            for r in range(repeats + 1):
+                for label, mod in (("old", old), ("new", physics)):
+                    X, rng = X0.copy(), rng0.copy()
+                    c0 = time.process_time()
+                    done = mod.run(X, sim.P, sim.tabs, sim.ti, sim._road, sim._stops, sim._cycle, rng, sim._cmd,
+                                   sim._log, n)
+                    if r:
+                        best[label] = max(best[label], done / max(time.process_time() - c0, 1e-9))
+        finally:
+            path.unlink(missing_ok=True)
+            from roadload.envs._jit import CACHE_DIR
+
+            for stale in Path(CACHE_DIR).rglob(f"*{path.stem}*") if CACHE_DIR else ():
+                stale.unlink(missing_ok=True)  # numba cache entries of the temporary module
+    return best["new"] / best["old"]
+
+
+def measure(duration: float, repeats: int, core_substeps: int) -> dict:
+    """All figures of one run (JSON-able)."""
+    warnings.simplefilter("ignore", LateralValidityWarning)
+    ref = reference_rate(core_substeps, repeats)
+    out: dict = {"reference_substeps_per_s": ref}
+    for vehicle in ("gt_rwd", "bmw_i3"):
+        core = core_rate(vehicle, core_substeps, repeats)
+        trip = trip_speed(duration, vehicle, repeats)
+        out[vehicle] = {"core_substeps_per_s": core, "core_over_reference": core / ref,
+                        "trip_realtime_factor_cpu": trip["realtime_factor_cpu"],
+                        "trip_realtime_factor_wall": trip["realtime_factor_wall"],
+                        "trip_over_reference": trip["realtime_factor_cpu"] * 100.0 / ref,
+                        "peak_traced_MB": trip["peak_traced_MB"], "samples": trip["samples"]}
+    out["step_api"] = step_speed(n_steps=max(200, int(duration * 5)))
+    return out
+
+
+def print_figures(res: dict, duration: float, repeats: int) -> None:
+    ref = res["reference_substeps_per_s"]
+    print(f"hand-written reference loop (point mass, PI driver): {ref / 1e6:.2f} M substeps per CPU-second")
+    for vehicle in ("gt_rwd", "bmw_i3"):
+        r = res[vehicle]
+        print(f"{vehicle}: core {r['core_substeps_per_s'] / 1e6:.3f} M substeps/s = {r['core_over_reference']:.4f} "
+              f"x reference; trip of {duration:.0f} s ({r['samples']} samples, all effects and sensors): "
+              f"{r['trip_realtime_factor_cpu']:.0f}x real time (CPU), {r['trip_realtime_factor_wall']:.0f}x (wall), "
+              f"best of {repeats}; peak traced memory {r['peak_traced_MB']:.0f} MB")
+    print("step API (bmw_i3, 10 substeps = 0.1 s per step, CPU time): "
+          + ", ".join(f"{k} {v:.0f}" for k, v in res["step_api"].items()))
+
+
+def print_comparison(old: list[dict], new: list[dict], ref: str) -> None:
+    print(f"old = commit {ref}, new = working tree; {len(old)} interleaved rounds; figures relative to the "
+          "hand-written reference loop of the same run; ratio new/old of the medians (> 1: new is faster)")
+    print(f"{'figure':<44s} {'old':>10s} {'new':>10s} {'new/old':>8s}   per round new/old")
+    for vehicle in ("gt_rwd", "bmw_i3"):
+        for key in ("core_over_reference", "trip_over_reference"):
+            o = [r[vehicle][key] for r in old]
+            n = [r[vehicle][key] for r in new]
+            rounds = " ".join(f"{b / a:.3f}" for a, b in zip(o, n))
+            print(f"{vehicle + ' ' + key:<44s} {statistics.median(o):10.4f} {statistics.median(n):10.4f} "
+                  f"{statistics.median(n) / statistics.median(o):8.3f}   {rounds}")
+
+
+def main(argv: list[str] | None = None, repo: Path | None = None) -> None:
+    """The benchmark's command line (``scripts/bench_simulator.py``); ``repo``: the git repository of
+    ``--compare`` and ``--ab`` (default: the source tree of this file)."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--duration", type=float, default=3600.0, help="simulated seconds per trip run")
+    ap.add_argument("--repeats", type=int, default=3, help="runs per figure (best is reported)")
+    ap.add_argument("--core-substeps", type=int, default=200_000, help="substeps per core / reference run")
+    ap.add_argument("--quick", action="store_true", help="tiny sizes for a smoke run (< 60 s)")
+    ap.add_argument("--json", type=Path, help="also write the figures as JSON here")
+    ap.add_argument("--compare", metavar="REF", help="git commit to compare against (in this run, interleaved)")
+    ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds of --compare")
+    ap.add_argument("--ab", metavar="REF", help="in-process A/B of the core against REF's physics.py")
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.duration, args.repeats, args.core_substeps = 60.0, 2, 20_000
+    if args.ab or args.compare:
+        # imported here, not at the top: this file also runs against old package trees that lack the module
+        from roadload.experiments.benchmarks.refcompare import REPO, compare
+
+        git_repo = repo or REPO
+        if args.ab:
+            for vehicle in ("gt_rwd", "bmw_i3"):
+                ratio = ab_core(args.ab, vehicle, args.core_substeps, max(args.repeats, 5), git_repo)
+                print(f"{vehicle}: core new/old = {ratio:.3f} (physics.run, {args.core_substeps} substeps, best of "
+                      f"{max(args.repeats, 5)} alternated runs, CPU clock; old = {args.ab}:envs/physics.py)")
+            return
+        sub = ["--duration", str(args.duration), "--repeats", str(args.repeats),
+               "--core-substeps", str(args.core_substeps)]
+        old, new = compare(Path(__file__).resolve(), sub, args.compare, args.rounds, git_repo)
+        print_comparison(old, new, args.compare)
+        return
+    res = measure(args.duration, args.repeats, args.core_substeps)
+    print_figures(res, args.duration, args.repeats)
+    if args.json:
+        args.json.write_text(json.dumps(res))
+
+
+if __name__ == "__main__":
+    main()

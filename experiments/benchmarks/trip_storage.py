@@ -50,12 +50,12 @@ def run_child(mode: str, seconds: float, out: str, precision: str) -> tuple[floa
     return usage.ru_maxrss / 1024.0, cpu, size
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hours", type=float, nargs="+", default=[1.0, 4.0], help="simulated durations [h]")
     ap.add_argument("--quick", action="store_true", help="tiny run for CI: 5 and 10 simulated minutes")
     ap.add_argument("--no-exact", action="store_true", help="skip the precision='exact' file-size row")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     hours = [5 / 60, 10 / 60] if args.quick else sorted(args.hours)
     if args.quick:
         args.no_exact = True
@@ -86,7 +86,3 @@ def main() -> None:
         print(f"peak RSS growth: {(r2 - r1) / (h2 - h1):.1f} MB per simulated hour "
               f"({h1:g} h -> {h2:g} h: {r1:.0f} -> {r2:.0f} MB); extrapolated to 24 h: "
               f"{r1 + (r2 - r1) / (h2 - h1) * (24 - h1):.0f} MB")
-
-
-if __name__ == "__main__":
-    main()

@@ -54,13 +54,13 @@ def profile(n_envs: int, steps: int, threads: int) -> dict[str, float]:
             "resets": count[0], "setup_ms": spent["setups"] / max(count[0], 1) * 1e3}
 
 
-if __name__ == "__main__":
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--threads", type=int, default=1, help="numba threads of the env")
     ap.add_argument("--steps", type=int, default=3000, help="batch steps measured")
     ap.add_argument("--native", type=int, default=256, help="sub-envs")
     ap.add_argument("--quick", action="store_true", help="tiny run for CI")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     if args.quick:
         args.steps, args.native = 200, 32
     r = profile(args.native, args.steps, args.threads)

@@ -18,7 +18,7 @@ from roadload.envs.simulator import simulate
 from roadload.trip import Trip, TripError
 from roadload.envs.plotting import plot_trip
 from roadload.envs.effects import describe_effects
-from roadload.experiments.bench_simulator import report
+from roadload.experiments.benchmarks.simulator import report
 
 from .errors import fail
 

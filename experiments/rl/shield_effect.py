@@ -30,12 +30,12 @@ def counted(policy, prev_index: int):
     return wrapped, state
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--policy", default=None, help="a saved SB3 policy (ppo_ecodrive.zip); none = full throttle")
     ap.add_argument("--roads", type=int, default=len(HELD_OUT_SEEDS), help="held-out roads")
     ap.add_argument("--quick", action="store_true", help="full throttle on one road")
-    a = ap.parse_args()
+    a = ap.parse_args(argv)
     if a.quick:
         a.policy, a.roads = None, 1
     policy = sb3_policy(load_policy(a.policy)) if a.policy else (lambda obs: np.ones(1, dtype=np.float32))
@@ -54,7 +54,3 @@ def main() -> None:
                   f"{m['speed_violations']:10d}  {m['max_excess_kmh']:14.1f}  "
                   f"{st['capped'] / max(st['steps'], 1):11.1%}")
         print(f"shield {'on' if shield else 'off'}: mean cost {np.mean(costs):.1f} kJ")
-
-
-if __name__ == "__main__":
-    main()

@@ -1,7 +1,8 @@
-"""Run the estimator robustness sweeps (issue 8) with >= 20 seeds and print the figures.
+"""Run the estimator robustness sweeps with >= 20 seeds and print the figures (``scripts/robustness_sweeps.py``;
+``roadload benchmark robustness`` runs the same sweeps without the printed figures).
 
-    /work/venv/bin/python scripts/robustness_sweeps.py --backend synthetic --out /tmp/robustness_synthetic
-    /work/venv/bin/python scripts/robustness_sweeps.py --backend vehicle --out /tmp/robustness_vehicle
+    python scripts/robustness_sweeps.py --backend synthetic --out /tmp/robustness_synthetic
+    python scripts/robustness_sweeps.py --backend vehicle --out /tmp/robustness_vehicle
 
 Prints the breakdown points (median [IQR] over seeds), the ranking per failure mode, the check against the
 decision tree (figure 3.17) and the wall time; the tables, PNG curves and summary.md go to --out.
@@ -27,7 +28,7 @@ def _f(x: float) -> str:
     return "∞" if np.isinf(x) else f"{x:.3g}"
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--backend", default="synthetic", choices=("synthetic", "vehicle"))
     ap.add_argument("--sweeps", nargs="*", default=None, help="sweep names (default: all of the backend)")
@@ -44,7 +45,7 @@ def main() -> None:
                     help="rebuild the report from a results.csv of an earlier run instead of sweeping")
     ap.add_argument("--quick", action="store_true",
                     help="tiny run for CI: the first sweep, 2 seeds, 2 estimators, short records, temporary output")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     specs = sweep_specs(args.backend)
     if args.quick:
         args.sweeps = args.sweeps or list(specs)[:1]
@@ -107,7 +108,3 @@ def main() -> None:
               + (f" [{c['note']}]" if c["note"] else ""))
     for task, err in failed[:20]:
         print(f"  failed: {task}: {err}")
-
-
-if __name__ == "__main__":
-    main()

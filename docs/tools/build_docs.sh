@@ -1,16 +1,16 @@
 #!/usr/bin/env bash
 # Build the documentation site strictly, execute every code block of its pages and smoke-run the examples.
-#   scripts/build_docs.sh [--quick] [--skip-examples] [SITE_DIR]      (SITE_DIR defaults to /tmp/site)
-# Steps: (1) the generated reference tables are current (scripts/gen_docs_reference.py --check);
+#   docs/tools/build_docs.sh [--quick] [--skip-examples] [SITE_DIR]      (SITE_DIR defaults to /tmp/site)
+# Steps: (1) the generated reference tables are current (docs/tools/gen_reference.py --check);
 # (2) mkdocs build --strict (a broken link, anchor, nav entry or API reference fails);
 # (3) pytest --markdown-docs on docs/index.md, docs/guides and docs/reference (tiny sizes, ~1-2 min on 2 cores),
 #     then their shell blocks (.ci/doc_commands.py);
 # (4) every examples/*.py with --quick (< ~1 min each), unless --skip-examples.
-# --quick is accepted for the scripts/ convention; the runs are always the small ones.
+# --quick is accepted like the scripts' --quick; the runs are always the small ones.
 # mkdocstrings (griffe) reads the package from a non-editable copy: setuptools package-dir maps roadload to core/,
 # roadload.envs to envs/, ..., which griffe can follow neither in the source tree nor through an editable install.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 site=/tmp/site
 examples=1
 for arg in "$@"; do
@@ -22,7 +22,7 @@ for arg in "$@"; do
   esac
 done
 export NO_MKDOCS_2_WARNING=1 MPLBACKEND=Agg
-python scripts/gen_docs_reference.py --check
+python docs/tools/gen_reference.py --check
 pkg=$(mktemp -d /tmp/roadload_docs_pkg.XXXXXX)
 trap 'rm -rf "$pkg"' EXIT
 python -m pip install -q --no-deps --target "$pkg" . 2>&1 | { grep -v -e "^$" -e "Running pip as the 'root' user" || true; }

@@ -1,8 +1,8 @@
 """Regenerate the tables of the reference pages from the code, so the docs cannot drift from it.
 
-    python scripts/gen_docs_reference.py            # rewrite the generated blocks in docs/reference/*.md
-    python scripts/gen_docs_reference.py --check    # exit 1 naming the stale pages (CI; tests/experiments)
-    python scripts/gen_docs_reference.py --quick    # = --check (the CI smoke run of every script; writes nothing)
+    python docs/tools/gen_reference.py            # rewrite the generated blocks in docs/reference/*.md
+    python docs/tools/gen_reference.py --check    # exit 1 naming the stale pages (docs/tools/build_docs.sh, tests/docs)
+    python docs/tools/gen_reference.py --quick    # = --check (writes nothing)
 
 A generated block sits between ``<!-- BEGIN generated: NAME -->`` and ``<!-- END generated: NAME -->`` in a page;
 everything outside the markers is hand-written. Blocks: the estimator catalogue (roadload.estimators.CATALOG),
@@ -19,7 +19,7 @@ import sys
 import tomllib
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 REFERENCE = ROOT / "docs" / "reference"
 
 # the reference text's numbers for each part of a composition (Rhode 2018, chapter 3)
@@ -204,7 +204,7 @@ def main() -> int:
                 from roadload.fileio import write_text
                 write_text(page, new)
     if args.check and stale:
-        print(f"stale generated reference pages: {stale}; run python scripts/gen_docs_reference.py", file=sys.stderr)
+        print(f"stale generated reference pages: {stale}; run python docs/tools/gen_reference.py", file=sys.stderr)
         return 1
     print(("up to date: " if args.check else "written: ") + ", ".join(stale or ["nothing changed"]))
     return 0

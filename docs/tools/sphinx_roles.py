@@ -1,7 +1,7 @@
 """Griffe extension for the API pages: Sphinx roles in docstrings (:func:`x`, :class:`~a.B`, ...) become code spans.
 
 roadload's docstrings use Sphinx cross-reference roles; mkdocstrings' Google-style parser would print them
-verbatim. Loaded by mkdocs.yml (mkdocstrings -> python -> options -> extensions) from scripts/docs_ext/.
+verbatim. Loaded by mkdocs.yml (mkdocstrings -> python -> options -> extensions) from docs/tools/.
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_generated_reference_tables_are_current():
-    run = subprocess.run([sys.executable, "scripts/gen_docs_reference.py", "--check"], cwd=ROOT,
+    run = subprocess.run([sys.executable, "docs/tools/gen_reference.py", "--check"], cwd=ROOT,
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr + run.stdout
 

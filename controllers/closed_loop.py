@@ -5,7 +5,7 @@ violations (samples with v above the posted limit + ``VIOLATION_TOLERANCE``: num
 above, largest excess), RMS jerk [m/s^3] of the true acceleration, solver time median / p99 [s] and the number of
 fallbacks (MPC only), plus the controller's event counters.
 
-Arrival (issue 14): ``trip_time`` is the first control step with s >= road length, so it is quantised to the
+Arrival: ``trip_time`` is the first control step with s >= road length, so it is quantised to the
 control period dt (0.1 s = 0.08 % of a 2 min trip, worth ~0.2 % of energy on the steep energy-time curve).
 ``arrival_time`` / ``arrival_energy_J`` / ``arrival_speed`` interpolate the crossing of the road end (or of any
 position, :func:`crossing`) linearly inside that last step.

@@ -66,7 +66,7 @@ class MpcSettings:
     speed_margin: float = 0.3  # planned speed stays this far below the limit [m/s]
     time_weight: float = 3000.0  # lambda [J/s]: energy worth one second of trip time
     # value of the kinetic energy left at the horizon end: "source" = m E_N / eta_i (what it costs at the source,
-    # Willans line; = m E_N for an EV), "wheel" = m E_N (sessions 1-2: undervalues it by eta_i on an ICE)
+    # Willans line; = m E_N for an EV), "wheel" = m E_N (the earlier value: undervalues it by eta_i on an ICE)
     terminal_value: str = "source"
     accel_weight: float = 0.05  # comfort term [kJ per (m/s^2)^2 per segment, times mass/1000]
     solver: str = "ipopt"

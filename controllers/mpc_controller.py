@@ -41,7 +41,7 @@ def get_solver(settings: MpcSettings, energy: SourceEnergyModel) -> OcpSolver:
 @dataclass(frozen=True)
 class TripSchedule:
     """A trip-time target for the measured segment [start, end] [m]: ``duration`` [s] from the moment the vehicle
-    passes ``start`` (issue 14, session 3: the continuous time knob of the truck comparison).
+    passes ``start`` (the continuous time knob of the truck comparison).
 
     The controller keeps lambda of the MPC objective on schedule by feedback on the lateness
     e = t - t_sched(s), t_sched linear in distance over the segment [s]:
@@ -56,7 +56,7 @@ class TripSchedule:
     duration: float
     gain: float = 20.0
     # k_i [1/s^2]: ln lambda += k_i * integral of e dt; 0 = off (0.01 wound lambda up to 30 x on a power-limited
-    # truck and made energy a rough function of time: fit residual 0.98 %, session 3)
+    # truck and made energy a rough function of time: fit residual 0.98 %)
     integral_gain: float = 0.0
     time_floor: float = 30.0  # [s]
     max_log_change: float = 4.0
@@ -113,16 +113,15 @@ class MpcControllerSettings:
     schedule: TripSchedule | None = None  # trip-time target: lambda by feedback (TripSchedule); None: fixed lambda
     # [s] every this often a second IPOPT solve starts cold from a plan cruising ``multistart_step`` [m/s] faster or
     # slower (behind / ahead of schedule; alternating without one) and replaces the warm-started plan when its
-    # objective is lower: the truck's NLP has two local cruise optima (gears), and warm starts never leave one
-    # (issue 14, session 3). 0 = off
+    # objective is lower: the truck's NLP has two local cruise optima (gears), and warm starts never leave one.
+    # 0 = off
     multistart_period: float = 0.0
     multistart_step: float = 4.0  # [m/s]
     # ICE: request the gear of the MPC's own shift rule (SourceEnergyModel.shift_speeds, the gear its fuel model
     # plans with) instead of leaving the transmission to its load-dependent strategy, as predictive powertrain
     # control does; held within +-gear_band [m/s] of a shift speed, from gear_min_speed [m/s] up (below: the
     # transmission's launch and low gears). Without it, the plant downshifts under load where the plan assumed
-    # the higher gear, and a 0.1 m/s difference in cruise speed changes the fuel of a whole climb (issue 14,
-    # session 5)
+    # the higher gear, and a 0.1 m/s difference in cruise speed changes the fuel of a whole climb
     gear_command: bool = False
     gear_band: float = 0.5  # [m/s]
     gear_min_speed: float = 10.0  # [m/s]

@@ -75,7 +75,7 @@ __all__ = [
     "setting_names", "weight",
 ]
 
-# chapter 5: tractive-force model structures, the preprocessing pipeline and its evaluation (issue 5)
+# chapter 5: tractive-force model structures, the preprocessing pipeline and its evaluation
 from .models import (M0, M3, M4, ModelError, ModelStructure, NominalParameters, Term, get_model,  # noqa: E402
                      model_names, register_model)
 from .pipeline import (PipelineError, PipelineResult, PipelineSettings, VehicleKnowledge,  # noqa: E402

@@ -214,7 +214,7 @@ def write_outputs(results: list[dict[str, Any]], failures: list[str], out: Path)
     return table, summary
 
 
-# ================================================================================ paired comparison (issue 14)
+# ============================================================================================= paired comparison
 # Per (vehicle case, road, condition, seed) every force model drives the SAME road (generated from the seed, or
 # the seed-th window of a real grade profile), seed and plant, at several time weights around the cruise-control
 # trip time; a joint local fit of energy over trip time (time_matching.fit_energy_at_time) gives each model's
@@ -349,7 +349,7 @@ class PairedTask:
     # "net": segment time and source energy net of the kinetic energy left at arrival, crossings interpolated
     # (drive.net_energy_metrics); "raw": the first control step past the road end and its source energy
     metric: str = "net"
-    # the time knob (session 3): "lambda" = fixed time weight per run, matched by a search over lambda (the
+    # the time knob: "lambda" = fixed time weight per run, matched by a search over lambda (the
     # truck's trip time jumps between two gear branches); "schedule" = every model targets the segment time
     # T_cruise x (1, *time_factors) by lambda feedback with multi-start solves (DriveSettings.target_time), so
     # the segment time is continuous in the knob
@@ -357,7 +357,7 @@ class PairedTask:
     time_factors: tuple[float, ...] = (0.99, 1.01)
     terminal_value: str = "source"  # MpcSettings.terminal_value: "source" (m E_N / eta_i) or "wheel" (m E_N)
     # [s] cold multi-start solves of every MPC run (MpcControllerSettings.multistart_period); None: 5 s with the
-    # schedule knob (needed to leave a gear branch), off with the lambda knob (sessions 1-2)
+    # schedule knob (needed to leave a gear branch), off with the lambda knob
     multistart_period: float | None = None
     # every MPC run requests the gear of its own shift rule (MpcControllerSettings.gear_command, ICE only; the
     # cruise control and human baselines keep the transmission's strategy)
@@ -669,8 +669,9 @@ def format_difference(mean: float, se: float, lo: float, hi: float) -> str:
 def refit_results(results: list[dict[str, Any]], metric: str = "net", window: float = 0.06,
                   quadratic: bool = True) -> list[dict[str, Any]]:
     """The stored runs of run_paired_task refitted with another metric / time window / fit order (the
-    resolution study of issue 14: same closed-loop runs, different matching). The reference time is the
-    cruise-control time of the nominal set speed when the oracle matched it, else the oracle's closest run."""
+    resolution study of experiments/headline_resolution.py: same closed-loop runs, different matching). The
+    reference time is the cruise-control time of the nominal set speed when the oracle matched it, else the
+    oracle's closest run."""
     if metric not in METRICS:
         raise ValueError(f"metric: choose one of {sorted(METRICS)}, got {metric!r}")
     time_key, energy_key = METRICS[metric]

@@ -1,4 +1,4 @@
-"""The headline comparison and the sensitivity map (issue 14): tasks, runs on the sweep runner, tables, figures.
+"""The headline comparison and the sensitivity map of the controllers: tasks, runs on the sweep runner, tables, figures.
 
 ``headline_tasks`` / ``sensitivity_tasks`` build :class:`~roadload.experiments.controller_comparison.PairedTask`
 lists; :func:`run_paired` runs them through :func:`roadload.sweep.run_sweep` (local processes or Dask) and
@@ -227,7 +227,7 @@ def finite(x: float) -> bool:
     return isinstance(x, float) and math.isfinite(x)
 
 
-# ------------------------------------------------------------------- online estimate vs distance (trucks, issue 14)
+# -------------------------------------------------------------------------- online estimate vs distance (trucks)
 def convergence_run(case: str, seed: int, length: float) -> dict[str, Any]:
     """One online-MPC drive of a truck case on a ``length`` [m] long-grades road (time weight: the case's start
     value): the M4-RRLM estimate after every update against the truth, by position. Truth: the plant's mass and

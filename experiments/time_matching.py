@@ -5,7 +5,7 @@ secant/bisection steps in (log lambda, time) until |T - T_target| <= tol * T_tar
 tolerance within ``max_runs`` are returned flagged (``matched`` False) with the closest run, never silently.
 :meth:`MatchedRun.energy_at_target` interpolates the energy to exactly the target time between bracketing runs.
 That linear interpolation overstates the energy on the convex energy-time curve when the bracket is wide; the
-paired comparison (issue 14) uses :func:`fit_energy_at_time` instead: runs at several time weights around the
+paired comparison uses :func:`fit_energy_at_time` instead: runs at several time weights around the
 match and a joint local quadratic fit of energy over trip time.
 """
 
@@ -97,7 +97,7 @@ def match_trip_time(run: Callable[[float], RunResult], target_time: float, tol: 
     return MatchedRun(best, best_lam, target_time, ok, len(history), trace, time_key)
 
 
-# ------------------------------------------------------------------------------------------- local fit (issue 14)
+# ------------------------------------------------------------------------------------------------------ local fit
 @dataclass
 class LocalFit:
     """Energy at exactly the target time from a joint local fit over trip time (see :func:`fit_energy_at_time`).
@@ -157,7 +157,7 @@ def fit_energy_at_time(runs: dict[str, list[tuple[float, float]]], target_time: 
     x = np.array([r[1] for r in rows])
     # the slope is identified only by the spread of trip time WITHIN a model's runs: without it the shared slope
     # would be the between-model difference in energy over their difference in time (a force model's effect
-    # booked as an energy-time trade-off, session 3: 40 t seed 5). Then only runs within min_spread of the
+    # booked as an energy-time trade-off, as on the 40 t truck, seed 5). Then only runs within min_spread of the
     # target count, level only, and a model without one gets NaN
     within = x - np.array([np.mean([xx for (nn, _), xx in zip(rows, x) if nn == r[0]]) for r in rows])
     if float(np.max(np.abs(within), initial=0.0)) < min_spread:

@@ -184,7 +184,7 @@ def _car_truck_cases(vehicles: str) -> list[str]:
 
 
 def register_headline(benchmark_app: typer.Typer) -> None:
-    """``roadload benchmark headline`` and ``roadload benchmark sensitivity`` (issue 14)."""
+    """``roadload benchmark headline`` and ``roadload benchmark sensitivity``."""
     @benchmark_app.command("headline")
     def headline_cmd(
         out: Path = typer.Option(..., help="output folder: runs.json, summary.csv, headline.md, headline.png"),
@@ -228,7 +228,7 @@ def register_headline(benchmark_app: typer.Typer) -> None:
                                           "shift rule (predictive powertrain control); the baselines keep the "
                                           "transmission's load-dependent strategy"),
         terminal_value: str = typer.Option("source", help="MPC value of the kinetic energy at the horizon end: "
-                                           "source (m E_N / eta_i) or wheel (m E_N, sessions 1-2)"),
+                                           "source (m E_N / eta_i) or wheel (m E_N, the earlier value)"),
     ) -> None:
         """MPC with the oracle / abc / online force model against cruise control at equal trip time, paired over
         seeds, with the 1-sigma resolution and 95 % CIs of every difference."""

@@ -1,4 +1,4 @@
-"""Estimator robustness testbed (issue 8): outliers, poor excitation and drift, swept to breakdown.
+"""Estimator robustness testbed: outliers, poor excitation and drift, swept to breakdown.
 
 A *scenario* is (base trip configuration, fault injection spec, seed). Faults on vehicle trips are injected by
 the simulator's sensor layer (``roadload.envs``), so the faults swept here are exactly the ones a user of

@@ -1,4 +1,4 @@
-"""The base gap of a test world (issue 13): with nothing withheld, how far the matched roadload vehicle's force
+"""The base gap of a test world: with nothing withheld, how far the matched roadload vehicle's force
 balance plus the sim's floor (what the diagnosis compares against) stays from the world's logged tractive force,
 per speed bin. Variants: ``before`` (the sim at roadload's default 20 °C ambient, floor fitted by plain least
 squares, rcond 1e-8: the state the 20-30 N gap was measured in), ``ambient`` (the matched sim config at the

@@ -1,4 +1,4 @@
-"""Arrival metrics of the closed loop (issue 14): crossings interpolated inside the step, net of kinetic energy."""
+"""Arrival metrics of the closed loop: crossings interpolated inside the step, net of kinetic energy."""
 
 from dataclasses import replace
 

@@ -1,4 +1,4 @@
-"""closed_loop.Handover and DriveSettings.warmup_driver (issue 14, session 5): cruise control drives every paired
+"""closed_loop.Handover and DriveSettings.warmup_driver: cruise control drives every paired
 run's warm-up, so the MPCs start the measured segment in the same state whatever their force model. Before, each
 MPC drove its own warm-up: on a 40 t truck the online MPC entered a descent 2.4 m/s faster than the oracle, and the
 net-energy metric charged that kinetic energy at fuel cost (+4.5 MJ) although both then braked on the descent."""

@@ -1,5 +1,5 @@
 """The online force model's inertial mass: the pipeline takes the rotating parts out of F_xV, so the estimate's
-m_V is the body mass and the MPC must add (I_red + I_W)/r_W^2 back (issue 14, item 5)."""
+m_V is the body mass and the MPC must add (I_red + I_W)/r_W^2 back."""
 
 import pytest
 

@@ -1,4 +1,4 @@
-"""The heavy truck (issue 14): preset, engine brake in the MPC's energy model, the speed-band cruise control and
+"""The heavy truck: preset, engine brake in the MPC's energy model, the speed-band cruise control and
 the deliberately wrong force model of the sensitivity map."""
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""The MPC's gear command (issue 14, session 5): an ICE plant shifts by its own load-dependent strategy, while the
+"""The MPC's gear command: an ICE plant shifts by its own load-dependent strategy, while the
 MPC's fuel model plans with a speed-only shift rule. On a climb the plant downshifted where the plan assumed the
 higher gear, so a 0.1 m/s difference in cruise speed between two force models changed the fuel of the whole climb
 by ~4 % (truck 15 t, long grades seed 6). ``gear_command`` makes the plant drive the planned gear."""

@@ -1,4 +1,4 @@
-"""Issue 14, session 3: why the truck's closed-loop trip time jumps with the time weight, and the fixes.
+"""Why the truck's closed-loop trip time jumps with the time weight, and the fixes.
 
 Cause 1 (a defect): the MPC valued the kinetic energy left at the horizon end at m E_N (wheel work) although the
 objective counts fuel; on a diesel (eta_i ~ 0.47) each J of kinetic energy costs ~2.1 J of fuel, so the plan
@@ -56,7 +56,8 @@ def test_terminal_value_at_source_cost_keeps_the_cruise_speed_to_the_horizon_end
     assert all(pl.success for pl in plans.values())
     # m E_N / eta_i: steady cruise on a flat road holds its speed over the whole 2 km horizon
     assert np.ptp(plans["source"].v[5:]) < 0.1
-    # m E_N (sessions 1-2): the plan sells kinetic energy it paid 1/eta_i for -> coasts down > 5 m/s at the end
+    # m E_N (the earlier terminal value): the plan sells kinetic energy it paid 1/eta_i for -> coasts down > 5 m/s
+    # at the end
     assert plans["wheel"].v[5] - plans["wheel"].v[-1] > 5.0
     with pytest.raises(MpcError, match="terminal_value"):
         MpcSettings(terminal_value="fuel")

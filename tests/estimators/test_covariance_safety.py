@@ -1,4 +1,4 @@
-"""The covariance safety net of the recursive kernel (issue 16 item 6): P stays finite, symmetric, positive
+"""The covariance safety net of the recursive kernel: P stays finite, symmetric, positive
 definite and bounded under any input, overflow-scale samples are skipped and counted, ignored settings are
 rejected."""
 

@@ -47,7 +47,7 @@ def test_covariance_health_classifies_indefinite_bounded_and_healthy_p():
     indefinite = np.array([[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
     assert K.covariance_health(x, indefinite, work, 1e6, 3, True, True)[0] == K.P_CORRUPT
     assert K.covariance_health(x, indefinite, work, 1e6, 3, True, False)[0] == K.P_HEALTHY
-    negative = np.diag([1.0, -4.5e307, 1.0])  # the failure of issue 16: |diag| is what is reported
+    negative = np.diag([1.0, -4.5e307, 1.0])  # a P that once overflowed to -4.5e307: |diag| is what is reported
     status, pmax = K.covariance_health(x, negative, work, 1e6, 3, True, False)
     assert status == K.P_CORRUPT and pmax == 4.5e307
     assert K.covariance_health(x, 1e7 * healthy, work, 1e6, 3, True, True)[0] == K.P_ABOVE_BOUND

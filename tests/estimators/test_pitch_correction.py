@@ -1,4 +1,4 @@
-"""Eq. 5.2 with and without the body-pitch correction (issue 14): the accelerometer reads dv/dt + g sin(theta +
+"""Eq. 5.2 with and without the body-pitch correction: the accelerometer reads dv/dt + g sin(theta +
 k dv/dt), so the uncorrected gradient angle carries k dv/dt."""
 
 import numpy as np

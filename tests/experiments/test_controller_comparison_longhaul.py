@@ -1,4 +1,4 @@
-"""The real long-haul grade windows of the truck comparison (issue 14, session 3): distinct, non-overlapping,
+"""The real long-haul grade windows of the truck comparison: distinct, non-overlapping,
 graded, and no silent repeats past the last window. Needs the shared data (skips without it)."""
 
 import numpy as np

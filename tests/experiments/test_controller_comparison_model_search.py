@@ -1,4 +1,4 @@
-"""run_paired_task's per-model lambda search (issue 14, session 5): a force model whose runs at lambda* x factors
+"""run_paired_task's per-model lambda search: a force model whose runs at lambda* x factors
 all land on the other side of T_ref (the online truck MPC on the slow cruise branch at every lambda) gets extra runs
 that bracket T_ref, instead of the seed being dropped from the table. Closed loop replaced by an analytic one."""
 

@@ -1,4 +1,4 @@
-"""Equal-time matching by a joint local fit, paired CIs and the force-model spec parser (issue 14)."""
+"""Equal-time matching by a joint local fit, paired CIs and the force-model spec parser."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""The truck convergence table (issue 14): estimate error by distance from the online estimate's history."""
+"""The truck convergence table: estimate error by distance from the online estimate's history."""
 
 import pytest
 

@@ -1,4 +1,4 @@
-"""The joint local fit must not book a force model's effect as an energy-time trade-off (issue 14, session 3):
+"""The joint local fit must not book a force model's effect as an energy-time trade-off:
 when no model's runs spread in time, the shared slope is not identified."""
 
 import math

@@ -315,7 +315,7 @@ def test_matched_sim_config_carries_the_world_ambient(independent_case):
 def test_matched_independent_vehicle_reproduces_the_world_base_forces():
     """Nothing withheld: the matched sim (balance + floor) against the world's logged tractive force, per speed
     bin. Before the floor's truncated fit and the world's ambient in the sim config the bins above 80 km/h sat
-    25-47 N off over 3 x 900 s (issue 13: Δf_r1 ≈ -3e-5 named with nothing withheld); now within 6 N there and
+    25-47 N off over 3 x 900 s (Δf_r1 ≈ -3e-5 named with nothing withheld); now within 6 N there and
     10 N anywhere (3 x 300 s here; the floor's own sensitivity is tests/sim2real/test_floor.py)."""
     tab = base_gap("independent", seed=0, duration=300.0)
     after = tab[(tab.variant == "after") & (tab["speed [km/h]"] != "all") & (tab.n >= 200)]

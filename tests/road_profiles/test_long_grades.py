@@ -1,4 +1,4 @@
-"""The heavy-truck road generator: long 3-6 % grades (issue 14)."""
+"""The heavy-truck road generator: long 3-6 % grades."""
 
 import numpy as np
 

@@ -1,6 +1,6 @@
 """The sim's floor (sim2real.floor) must not turn a small air-density difference between the sim's own trips and
 the recorded ones into a force gap: its basis is nearly collinear, and the plain least-squares fit of before put
-cancelling coefficients on the undetermined direction (issue 13: a 20-47 N "rolling_speed" with nothing
+cancelling coefficients on the undetermined direction (a 20-47 N "rolling_speed" with nothing
 withheld on the independent and FASTSim worlds)."""
 
 from __future__ import annotations

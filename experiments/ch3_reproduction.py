@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import tempfile
 import time
+from typing import Any
 from pathlib import Path
 
 import matplotlib
@@ -29,7 +30,7 @@ import roadload.estimators as E  # noqa: E402
 from roadload.estimators.synthetic import linear_miso, straight_line  # noqa: E402
 from roadload.fileio import save_figure
 
-ROBUST = dict(robust_scale=True, scale0=1.0, quantile0=1.0, learn_rate=0.01, p0=100.0)
+ROBUST: dict[str, Any] = dict(robust_scale=True, scale0=1.0, quantile0=1.0, learn_rate=0.01, p0=100.0)
 LAMBDA = 0.995
 
 
@@ -55,7 +56,7 @@ def exp_3_1(seeds: int, out: Path) -> dict:
         "LMS": E.least_median_of_squares,
         "LTS": E.least_trimmed_squares,
     }
-    cases = [("clean", {}), ("outlier", {}), ("good_leverage", {})] + [
+    cases: list[tuple[str, dict[str, float]]] = [("clean", {}), ("outlier", {}), ("good_leverage", {})] + [
         ("bad_leverage", {"bad_leverage_at": p}) for p in (10.0, 15.0, 20.0, 30.0, 50.0)]
     print(f"median |X̂ - 3| [IQR] over {seeds} seeds")
     print(f"{'case':<22s}" + "".join(f"{k:>28s}" for k in fits))
@@ -119,14 +120,15 @@ def _exp_3_3(seeds: int, out: Path, literal: bool, label: str) -> dict:
     datas = [linear_miso(seed=s, outliers_in_unexcited=literal) for s in range(seeds)]
     Xt = np.stack([d.X_true for d in datas])
     tag = "literal" if literal else "constant"
-    variants = {
+    variants: dict[str, tuple[str, dict[str, Any]]] = {
         "RLS": ("RLS", dict(forgetting=LAMBDA, **ROBUST, scale_forgetting=LAMBDA)),
         "RLM": ("RLM", dict(forgetting=LAMBDA, **ROBUST, scale_forgetting=LAMBDA)),
         "LM-RRLM k=0.1": ("RRLM", dict(forgetting=LAMBDA, kappa=0.1, **ROBUST, scale_forgetting=LAMBDA)),
         "Tik-RRLM k=0.001": ("RRLM", dict(forgetting=LAMBDA, kappa=1e-3, regularisation="tikhonov", **ROBUST,
                                           scale_forgetting=LAMBDA)),
     }
-    res = {k: _run_seeds(n, datas, **s) for k, (n, s) in variants.items()}
+    # full storage: every array of the results is present
+    res: dict[str, Any] = {k: _run_seeds(n, datas, **s) for k, (n, s) in variants.items()}
     sev = {k: E.sevn(Xt, r.X) for k, r in res.items()}
     t = datas[0].t
     w_all = t >= 100
@@ -195,11 +197,11 @@ def exp_3_4(seeds: int, out: Path) -> dict:
 
 def _exp_3_4(seeds: int, out: Path, frac: float) -> dict:
     print(f"\n=== Experiment 3.4: diag P̃ = [0 0.005 0.01 0.02], {frac:.0%} outliers, λ = 0.995, κ = 0.1, Huber ===")
-    kw = dict(input_noise_var=(0.0, 0.005, 0.01), output_noise_var=0.02, outlier_fraction=frac)
+    kw: dict[str, Any] = dict(input_noise_var=(0.0, 0.005, 0.01), output_noise_var=0.02, outlier_fraction=frac)
     datas = [linear_miso(seed=100 + s, **kw) for s in range(seeds)]
     Xt = np.stack([d.X_true for d in datas])
     base = dict(forgetting=LAMBDA, kappa=0.1, **ROBUST, scale_forgetting=LAMBDA)
-    res = {"LM-RRLM": _run_seeds("RRLM", datas, **base),
+    res: dict[str, Any] = {"LM-RRLM": _run_seeds("RRLM", datas, **base),
            "LM-RRIVM A(t-2)": _run_seeds("RRIVM", datas, instrument_delay=2, **base)}
     t = datas[0].t
     late = t >= 7000
@@ -225,9 +227,10 @@ def _exp_3_4(seeds: int, out: Path, frac: float) -> dict:
           f"validation MSE (measured A, B) lower for RRLM in {int(np.sum(b['mse'] < a['mse']))}/{seeds}; "
           f"vs true output with true inputs lower for RRIVM in {int(np.sum(a['mse_true'] < b['mse_true']))}/{seeds}")
     # RGTLS (Algorithm 3.8, neither robust nor regularised), with the true P̃ and with the NCE
-    for label, extra in (("RGTLS P̌ = P̃", {}), ("RGTLS + NCE", dict(nce=True))):
-        runs = [E.run("RGTLS", d.A, d.B, forgetting=LAMBDA, noise_covariance=[0.0, 0.005, 0.01, 0.02], **extra)
-                for d in datas]
+    rgtls: tuple[tuple[str, dict[str, Any]], ...] = (("RGTLS P̌ = P̃", {}), ("RGTLS + NCE", dict(nce=True)))
+    for label, extra in rgtls:
+        runs: list[Any] = [E.run("RGTLS", d.A, d.B, forgetting=LAMBDA, noise_covariance=[0.0, 0.005, 0.01, 0.02],
+                                  **extra) for d in datas]
         X = np.stack([r.X for r in runs])
         print(f"{label:<16s} SEVN t>=100: {q(E.sevn(Xt, X)[:, t_all(datas) >= 100].mean(axis=1))}")
     _two_estimator_figure(res, t, Xt, out / f"fig_3_14_rrlm_rrivm_{int(frac * 100)}pct.png")
@@ -252,10 +255,10 @@ def _two_estimator_figure(res, t, Xt, path) -> None:
 # ------------------------------------------------------------------------------------------ 3.6
 def exp_3_6(seeds: int, out: Path) -> dict:
     print("\n=== Experiment 3.6: X̄_3 random walk (σ = 1e-4), P̃ as in 3.4, instruments A(t-2), R = 0.02 ===")
-    kw = dict(input_noise_var=(0.0, 0.005, 0.01), output_noise_var=0.02, random_walk_std=1e-4)
+    kw: dict[str, Any] = dict(input_noise_var=(0.0, 0.005, 0.01), output_noise_var=0.02, random_walk_std=1e-4)
     datas = [linear_miso(seed=200 + s, **kw) for s in range(seeds)]
     Xt = np.stack([d.X_true for d in datas])
-    res = {
+    res: dict[str, Any] = {
         "LM-RRIVM": _run_seeds("RRIVM", datas, forgetting=LAMBDA, kappa=0.1, instrument_delay=2, **ROBUST,
                                scale_forgetting=LAMBDA),
         "LM-RIVMKF": _run_seeds("RIVMKF", datas, process_noise=[1e-6, 1e-8, 1e-5], output_noise=0.02, kappa=0.1,
@@ -287,8 +290,9 @@ def exp_3_6(seeds: int, out: Path) -> dict:
 def exp_3_7(seeds: int, out: Path) -> dict:
     print("\n=== Experiment 3.7: smoothing B of section 3.5.6 without outliers (noise var 0.1) ===")
     w = 20
-    rows = {"PKS λ=0.9 w=20 5 par.": [], "moving average 41 taps": [], "Savitzky-Golay 41/4": []}
-    rows_meas = {k: [] for k in rows}
+    rows: dict[str, list[float]] = {"PKS λ=0.9 w=20 5 par.": [], "moving average 41 taps": [],
+                                    "Savitzky-Golay 41/4": []}
+    rows_meas: dict[str, list[float]] = {k: [] for k in rows}
     for s in range(seeds):
         d = linear_miso(seed=300 + s, outlier_fraction=0.0)
         pks = E.pks_bank({"B": d.B}, window=w, order=4, forgetting=0.9).aligned("B")

@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import sys
 import tempfile
+from typing import Any
 from pathlib import Path
 
 import numpy as np
@@ -50,7 +51,10 @@ def evaluate_i3_trip(path: str) -> dict:
     true_mass = NOMINAL_MASS + payload if payload is not None else NOMINAL_MASS
     res = run_pipeline(trip, knowledge, until="decimated")
     slope = (accelerometer_gravity_slope(res.stages["decimated"]) if trip.has("grade") else float("nan"))
-    medse, mass, masses, info = [], [], {}, {}
+    medse: list[dict[str, Any]] = []
+    mass: list[dict[str, Any]] = []
+    masses: dict[tuple[str, str], float] = {}
+    info: dict[str, Any] = {}
     for source in GRADIENT_SOURCES:
         if source == "grade_channel" and not trip.has("grade"):
             continue                                         # e.g. TripA04: frozen elevation, no grade

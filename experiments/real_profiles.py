@@ -33,8 +33,16 @@ CANEDGE_SOURCE = ("CSS-Electronics/api-examples examples/other/matlab-basics/LOG
                   "(snapshot f7932bac), session {session}, via ../shared/data/css_canedge_gnss_obd")
 
 
+def _licence(mapping: str) -> str:
+    """The data licence of a shipped mapping: every profile made from real logs carries it in its metadata."""
+    licence = load_mapping(mapping).licence
+    if not licence:
+        raise ValueError(f"mapping {mapping!r} names no licence; a profile made from its logs must carry one")
+    return licence
+
+
 def canedge_profiles(base: Path, out: Path, limit: int | None = None) -> list[Path]:
-    licence = load_mapping("canedge_gnss_obd").licence
+    licence = _licence("canedge_gnss_obd")
     written = []
     for folder in sorted((base / "css_canedge_gnss_obd" / "raw_mf4").iterdir())[:limit]:
         session = folder.name.split("_")[-1].lstrip("0")
@@ -55,7 +63,7 @@ def canedge_profiles(base: Path, out: Path, limit: int | None = None) -> list[Pa
 
 
 def bmw_profiles(base: Path, out: Path, trips: list[str]) -> list[Path]:
-    licence = load_mapping("bmw_i3").licence
+    licence = _licence("bmw_i3")
     written = []
     for name in trips:
         trip = import_log(base / "bmw_i3_tum" / "data" / f"{name}.csv", "bmw-i3")

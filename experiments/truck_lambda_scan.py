@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from typing import Any
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
@@ -69,6 +70,7 @@ def main(argv: list[str] | None = None) -> None:
         lams, variants, a.warmup = lams[[0, len(lams) // 2, -1]], variants[-1:], 0.0
     t0 = time.perf_counter()
     targets = [float(x) for x in a.targets.split(",") if x.strip()]
+    jobs: list[tuple[Any, ...]]  # the arguments of run_one
     if targets:
         jobs = [(a.case, a.seed, float(lams[0]), a.warmup, var, a.road, a.force_model, tt)
                 for var in variants for tt in (targets[:2] if a.quick else targets)]

@@ -26,6 +26,8 @@ import json
 import os
 import statistics
 import time
+from collections.abc import Callable
+from typing import Any
 from pathlib import Path
 
 import numba
@@ -93,7 +95,7 @@ def best_rates(cases: dict, repeats: int) -> tuple[dict, dict]:
     return wall, cpu
 
 
-ESTIMATORS = {
+ESTIMATORS: dict[str, dict[str, Any]] = {
     "RLS": {"forgetting": 0.999},
     "RRLM": {"forgetting": 0.999, "kappa": 1e-5, "scale0": 0.5, "quantile0": 0.1},
     "SGMKF": {"output_noise": 0.1, "desired_covariance": [1e-5, 1e-6, 1e-6, 1e-6], "scale0": 0.5, "quantile0": 0.1},
@@ -155,7 +157,8 @@ def main(argv: list[str] | None = None, repo: Path | None = None) -> None:
         P = 100.0 * np.eye(4)
         out = np.empty((T, 4))
         hand_rls4(A, B, 0.999, X, P, out)
-    cases = {"hand": (hand, T)}
+    # name (or (estimator, store)) -> (run, samples per run)
+    cases: dict[Any, tuple[Callable[[], Any], int]] = {"hand": (hand, T)}
     m = args.online_samples
     K = args.trips
     AK = np.ascontiguousarray(np.broadcast_to(A, (K, T, 4)))

@@ -22,24 +22,28 @@ import argparse
 import os
 import platform
 import time
+from collections.abc import Callable
+from typing import Any, cast
 
 import numpy as np
 import pandas as pd
 from roadload.controllers.base import DriveContext
-from roadload.controllers.closed_loop import run_closed_loop
+from roadload.controllers.closed_loop import Plant, run_closed_loop
 from roadload.controllers.force_model import FixedForceModel
 from roadload.controllers.mpc import MpcSettings
 from roadload.controllers.mpc_controller import MpcController, MpcControllerSettings
 from roadload.controllers.plant import ModelPlant
 from roadload.controllers.vehicle_models import abc_parameters, energy_model_from_spec
 from roadload.experiments.controller_comparison import TRUCK_MPC
-from roadload.road_profiles import city, hilly, long_grades
+from roadload.road_profiles import RoadProfile, city, hilly, long_grades
+
+ROADS: dict[str, Callable[..., RoadProfile]] = {"hilly": hilly, "city": city, "long_grades": long_grades}
 
 
 def _bench(vehicle, road_name, road, mpc, energy, params) -> dict:
     settings = MpcControllerSettings(mpc=mpc)
     ctl = MpcController(settings)
-    plans = []
+    plans: list[tuple[bool, Any]] = []  # (warm-started, plan) of every solve
     orig = ctl._replan
 
     def spy(obs, _orig=orig, _ctl=ctl, _plans=plans):
@@ -48,10 +52,11 @@ def _bench(vehicle, road_name, road, mpc, energy, params) -> dict:
         if _ctl.plan is not None and _ctl.plan is not before:
             _plans.append((before is not None, _ctl.plan))
 
-    ctl._replan = spy
+    ctl._replan = spy  # type: ignore[method-assign]  # the benchmark records every solve's plan
     ctx = DriveContext(road, energy, FixedForceModel(params))
     t0 = time.perf_counter()
-    res = run_closed_loop(ctl, ModelPlant(road, params, energy), ctx)
+    # the MPC commands every step, so the plant never needs a driver of its own (step(None))
+    res = run_closed_loop(ctl, cast(Plant, ModelPlant(road, params, energy)), ctx)
     wall_run = time.perf_counter() - t0
     warm = [p for w, p in plans if w]
     cold = [p for w, p in plans if not w]
@@ -88,7 +93,7 @@ def main(argv: list[str] | None = None) -> None:
         for road_name in args.roads.split(","):
             if truck != (road_name == "long_grades"):
                 continue  # trucks on long grades, cars on the car roads
-            road = {"hilly": hilly, "city": city, "long_grades": long_grades}[road_name](seed=1, length=length)
+            road = ROADS[road_name](seed=1, length=length)
             for solver, warm_tol in solvers:
                 base = TRUCK_MPC if truck else MpcSettings(n_nodes=100, ds=20.0)
                 mpc = MpcSettings(**{**base.__dict__, "solver": solver, "warm_tol": warm_tol,

@@ -186,6 +186,8 @@ def ab_core(ref: str, vehicle: str, n: int, repeats: int, repo: Path) -> float:
         path.write_text(src)
         try:
             spec = importlib.util.spec_from_file_location(f"roadload.envs.{path.stem}", path)
+            if spec is None or spec.loader is None:
+                raise RuntimeError(f"--ab: cannot load {ref}'s physics.py from {path}")
             old = importlib.util.module_from_spec(spec)
             spec.loader.exec_module(old)
             sim = Simulator(vehicle, load_profile("motorway", seed=1, length=max(60_000.0, n * 0.45)),

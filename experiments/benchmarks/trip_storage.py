@@ -41,6 +41,8 @@ def run_child(mode: str, seconds: float, out: str, precision: str) -> tuple[floa
     proc = subprocess.Popen([sys.executable, "-c", CHILD, mode, str(seconds), out, precision],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     _, status, usage = os.wait4(proc.pid, 0)
+    if proc.stdout is None or proc.stderr is None:  # both are pipes (Popen above); this narrows their type
+        raise RuntimeError("run_child: the child's output pipes are missing")
     stdout, stderr = proc.stdout.read(), proc.stderr.read()
     proc.returncode = os.waitstatus_to_exitcode(status)
     if proc.returncode != 0:

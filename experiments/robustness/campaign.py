@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import tempfile
 import time
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -55,7 +56,8 @@ def main(argv: list[str] | None = None) -> None:
     if args.out is None:
         ap.error("--out is required (or --quick)")
     if args.from_results:
-        results, failed = pd.read_csv(args.from_results), []
+        results = pd.read_csv(args.from_results)
+        failed: list[tuple[Any, str]] = []
         names = [n for n in (args.sweeps or list(specs)) if n in set(results["sweep"])]
         args.seeds = int(results["seed"].nunique())
         report = write_report(results, args.out, args.bound, failed)

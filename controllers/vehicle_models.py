@@ -22,9 +22,7 @@ from roadload.vehicle import VehicleSpec
 
 from .energy import SourceEnergyModel, fit_loss_polynomial
 
-from roadload.envs.drivetrain import (battery_current, fuel_power, inverse_wheel_torque, motor_electric_power,
-                                          speed_ratio, torque_limits)
-from roadload.envs.packing import pack_vehicle
+from roadload.envs.powertrain import Powertrain
 from roadload.envs import get_preset
 from roadload.estimators.models import coast_down_coefficients
 
@@ -74,7 +72,7 @@ def energy_model_from_spec(vehicle: VehicleSpec | str) -> SourceEnergyModel:
 
 def _fit_energy(spec: VehicleSpec) -> SourceEnergyModel:
 
-    P, tabs, ti = pack_vehicle(spec)
+    pt = Powertrain(spec)
     d = spec.drivetrain
     r = float(spec.tires.dynamic_radius)
     speeds = np.linspace(3.0, 40.0, 38)
@@ -86,16 +84,16 @@ def _fit_energy(spec: VehicleSpec) -> SourceEnergyModel:
         voc = float(battery.open_circuit_voltage)
         w_list, t_list, loss = [], [], []
         for v in speeds:
-            omega = float(speed_ratio(P, 1)) * v
-            t_min, t_max = torque_limits(P, tabs, ti, omega, v)
+            omega = pt.speed_ratio(1) * v
+            t_min, t_max = pt.torque_limits(omega, v)
             # the operating region of eco-driving: |P_mech| <= 60 kW
             f_hi = min(t_max * ratio / r * 0.95, 60e3 / v)
             f_lo = max(t_min * ratio / r * 0.95, -60e3 / v)
             for f in np.linspace(f_lo, f_hi, 25):
-                t_m = float(inverse_wheel_torque(P, tabs, ti, 1, f * r, omega, 1.0))
+                t_m = pt.source_torque(1, f * r, omega)
                 if not (t_min <= t_m <= t_max):
                     continue
-                p_src = voc * float(battery_current(P, float(motor_electric_power(P, tabs, ti, omega, t_m)) + aux))
+                p_src = voc * pt.battery_current(pt.motor_electric_power(omega, t_m) + aux)
                 w_list.append(omega)
                 t_list.append(f * r / ratio)
                 loss.append(p_src - f * v - aux)
@@ -116,18 +114,18 @@ def _fit_energy(spec: VehicleSpec) -> SourceEnergyModel:
     rows, target = [], []
     for gear in range(1, d.n_gears + 1):
         for v in speeds:
-            omega = float(speed_ratio(P, gear)) * v
+            omega = pt.speed_ratio(gear) * v
             if not e.idle_speed <= omega <= e.max_speed:
                 continue
-            t_drag, t_max = torque_limits(P, tabs, ti, omega, v)
+            t_drag, t_max = pt.torque_limits(omega, v)
             ratio = ratios[gear - 1]
             for f in np.linspace(50.0, min(0.9 * t_max * ratio / r, power_cap / v), 15):
-                t_e = float(inverse_wheel_torque(P, tabs, ti, gear, f * r, omega, 1.0))
+                t_e = pt.source_torque(gear, f * r, omega)
                 if not (t_drag < t_e <= t_max):
                     continue
                 torque_w = f * r / ratio
                 rows.append([f * v, 1.0, omega, omega ** 2, torque_w ** 2, (f * v) ** 2])
-                target.append(float(fuel_power(P, tabs, ti, omega, t_e)))
+                target.append(pt.fuel_power(omega, t_e))
     from scipy.optimize import nnls
 
     a = np.asarray(rows)

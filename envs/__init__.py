@@ -31,6 +31,9 @@ Step API (used by the MPC and the gym environments; stable)
     for ICE, battery [J] for BEV), source_energy_total, tractive_force, lateral_acceleration, grade, curvature,
     bank, speed_limit (road at s), done (end of road / cycle).
 ``sim.state``               the latest StepResult
+``sim.vehicle_state``       the live state (``VehicleState``: time, position, speed, mass, gear, engine_speed, the
+                            energy ledger, ... by name, SI; ``position`` and ``speed`` settable between steps)
+``sim.parameters``          the packed vehicle / effect / driver parameters by name (``VehicleParameters``)
 ``sim.true_parameters()``   dict of the CURRENT true lumped parameters: mass, rolling_resistance_f0/f1/f4,
                             drag_area, air_density, aero_coefficient (rho/2 c_x A), wind_speed, wind_angle,
                             cornering_stiffness(_front/_rear), brake_friction_coefficient, drivetrain_loss_factor,
@@ -42,12 +45,15 @@ Step API (used by the MPC and the gym environments; stable)
 ``sim.run(duration=None, distance=None, progress=None)``  continue with the built-in driver
 ``sim.energy_ledger()``     cumulative energies [J]: source, shaft work, losses by component, climbing work, kinetic
 
+Compiled batch step: ``roadload.envs.batch`` (``Fleet``: N vehicles advanced from another numba kernel through
+packed records, the same core). ``Powertrain(spec)``: the simulator's drive-train (eq. 2.17) evaluated from Python.
+
 Throughput (``scripts/bench_simulator.py``, CPU time on one core): a one-hour 100 Hz trip with all sensors and
 effects in ~0.8 s (~4500x real time, ~430 MB peak); ``step`` with 10 substeps ~14 us (~70 000 steps/s);
 ``observe`` ~13 us. The first import compiles the jitted core (~20-40 s) into a cache under ``__pycache__``.
 Effects: ``EFFECTS`` (names, equations, parameters with defaults); the scheduled ones (wind_ramp, mass_ramp,
-drag_area_ramp, rolling_resistance_ramp: onset / ramp in time or distance) are applied between substeps by
-``schedules.py`` and show in the truth channels. Lateral accelerations above ~4 m/s^2 raise a
+drag_area_ramp, rolling_resistance_ramp: onset / ramp in time or distance) are applied by the core before every
+substep (``schedules.py`` packs them) and show in the truth channels. Lateral accelerations above ~4 m/s^2 raise a
 ``LateralValidityWarning`` (single-track model validity, section 2.5.1).
 """
 
@@ -55,10 +61,12 @@ from .driver import DriverConfig
 from .effects import EFFECTS, EffectsConfig, EffectsError, describe_effects
 from roadload.presets import PRESETS, get_preset
 from .sensors import SensorConfigError
+from .powertrain import Powertrain
 from .simulator import Action, LateralValidityWarning, SimulationError, Simulator, StepResult, simulate
+from .state import VehicleParameters, VehicleState
 
 SensorConfig = __import__("roadload.vehicle", fromlist=["SensorSpec"]).SensorSpec  # alias: the sensor set
 
 __all__ = ["Action", "DriverConfig", "EFFECTS", "EffectsConfig", "EffectsError", "LateralValidityWarning",
-           "PRESETS", "SensorConfig", "SensorConfigError", "SimulationError", "Simulator", "StepResult",
-           "describe_effects", "get_preset", "simulate"]
+           "PRESETS", "Powertrain", "SensorConfig", "SensorConfigError", "SimulationError", "Simulator", "StepResult",
+           "VehicleParameters", "VehicleState", "describe_effects", "get_preset", "simulate"]

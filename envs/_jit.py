@@ -1,8 +1,9 @@
 """``jit``: numba ``njit(cache=True)`` with a cache that is invalidated when ANY simulator-core source changes.
 
 numba's on-disk cache is keyed by the time stamp of the file that holds a function, but the core's functions
-inline each other and the index constants of ``layout.py`` across files; a change in one file would leave stale
-machine code in the others. The cache directory therefore carries a hash of all core sources.
+inline each other and the record types of ``layout.py`` across files; a change in one file would leave stale
+machine code in the others. The cache directory therefore carries a hash of all core sources (with the batch-step
+API of ``batch.py``, whose functions other kernels inline).
 :func:`dependent_jit` does the same for a kernel outside the core that calls into it (the native vector env):
 its cache carries the hash of the core and of the kernel's own sources.
 """
@@ -21,7 +22,7 @@ import numba
 from numba.core import config
 
 _HERE = Path(__file__).resolve().parent
-_SOURCES = ("_jit.py", "layout.py", "numerics.py", "drivetrain.py", "driver.py", "physics.py")
+_SOURCES = ("_jit.py", "layout.py", "numerics.py", "drivetrain.py", "driver.py", "physics.py", "batch.py")
 STAMP = hashlib.sha1(b"".join((_HERE / f).read_bytes() for f in _SOURCES)).hexdigest()[:12]
 
 
@@ -89,13 +90,15 @@ def stage(fn):
     return numba.njit(inline="always")(fn)
 
 
-def dependent_jit(*sources: str | Path) -> Callable[..., Any]:
+def dependent_jit(*sources: str | Path, core_stamp: str | None = None) -> Callable[..., Any]:
     """A decorator factory for kernels outside the core that call it: ``@kernel(parallel=True)`` or ``@kernel()``
     is ``njit(cache=True, error_model="numpy", ...)`` with the cache in a folder keyed by the hash of the core
     sources and of ``sources`` (the kernel's module and every module whose jitted functions it calls). numba would
-    otherwise keep serving machine code with the old core inlined after an edit of the core (editable installs)."""
+    otherwise keep serving machine code with the old core inlined after an edit of the core (editable installs).
+    ``core_stamp``: the hash of the core sources (default: this installation's, ``STAMP``)."""
     paths = [Path(f).resolve() for f in sources]
-    stamp = hashlib.sha1(STAMP.encode() + b"".join(p.read_bytes() for p in paths)).hexdigest()[:12]
+    core = STAMP if core_stamp is None else core_stamp
+    stamp = hashlib.sha1(core.encode() + b"".join(p.read_bytes() for p in paths)).hexdigest()[:12]
     cache_dir = _cache_dir(paths[0].parent, f"numba-{paths[0].stem}-", stamp)
 
     def kernel(**options: Any) -> Callable[[Any], Any]:

@@ -49,7 +49,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._jit import dependent_jit
+from . import physics
+from ._jit import dependent_jit, jit
+from .layout import COMMAND_DRIVER, COMMAND_FORCES, COMMAND_WHEEL_FORCE, N_LOG, N_ROAD, VEHICLE, Route, Tables
+from .simulator import SimulationError, Simulator
+from .state import VehicleState
 
 SUBSTEP_SECONDS = 0.01
 """Physics step [s] (100 Hz): ``advance_vehicle(records, i, n)`` moves vehicle i by n x 0.01 s."""
@@ -84,74 +88,181 @@ class Fleet:
     kernel that reads the state only; with capacity > 0 rows are written until the log is full)."""
 
     def __init__(self, n_vehicles: int, log_capacity: int = 0) -> None:
-        raise NotImplementedError("the batch-step API is being implemented (signatures fixed)")
+        for name, value, low in (("n_vehicles", n_vehicles, 1), ("log_capacity", log_capacity, 0)):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+                raise SimulationError(f"{name}: expected an integer >= {low}, got {value!r}")
+        n = int(n_vehicles)
+        self._vehicles = np.zeros(n, VEHICLE)
+        self._roads = np.zeros((n, N_ROAD, 2))
+        self._stops = np.zeros((n, 1))
+        self._log = np.zeros((n, N_LOG, int(log_capacity)))
+        self._cycle = np.zeros((2, 2))
+        self._cycle[0, 1] = 1.0  # a valid (unused) drive cycle: time axis 0, 1 s
+        self._tables: Tables | None = None
+        self._records: FleetRecords | None = None
+        self._shared: Simulator | None = None
+
+    @classmethod
+    def sharing(cls, simulator: Simulator) -> Fleet:
+        """A fleet of one vehicle that *is* ``simulator``: its records are the simulator's own arrays, so a compiled
+        kernel that advances vehicle 0 advances the simulator, its truth log included. Call
+        ``simulator.reserve_log(n_substeps)`` before and ``simulator.refresh()`` after each advance, and read
+        :attr:`records` for every call (a reset or a growing log replaces the simulator's arrays)."""
+        vehicle, tables, _, _, cycle = simulator._core_records()
+        if cycle is not None:
+            raise SimulationError("simulator: a drive-cycle simulator cannot join a fleet (its vehicles follow roads)")
+        fleet = cls(1)
+        fleet._shared = simulator
+        fleet._vehicles = vehicle
+        fleet._tables = tables
+        return fleet
 
     @property
     def n_vehicles(self) -> int:
         """Number of slots."""
-        raise NotImplementedError
+        return int(self._vehicles.shape[0])
 
-    def load(self, i: int, simulator: object) -> None:
+    def load(self, i: int, simulator: Simulator) -> None:
         """Slot i <- the simulator's packed vehicle, effects, driver settings, road, stops and current state (a
         copy; ``simulator`` is a :class:`roadload.envs.Simulator`, not a drive-cycle one). The first load sets the
         fleet's vehicle spec; a simulator of another spec raises ``SimulationError``. May grow the arrays: read
         :attr:`records` again afterwards."""
-        raise NotImplementedError
+        if self._shared is not None:
+            raise SimulationError("load: this fleet shares its simulator's arrays (Fleet.sharing); build a new one")
+        if not isinstance(simulator, Simulator):
+            raise SimulationError(f"simulator: expected a roadload.envs.Simulator, got {type(simulator).__name__}")
+        if isinstance(i, bool) or not isinstance(i, (int, np.integer)) or not 0 <= i < self.n_vehicles:
+            raise SimulationError(f"slot: expected an integer in 0..{self.n_vehicles - 1}, got {i!r}")
+        vehicle, tables, road, stops, cycle = simulator._core_records()
+        if cycle is not None:
+            raise SimulationError("simulator: a drive-cycle simulator cannot join a fleet (its vehicles follow roads)")
+        self._adopt_tables(tables)
+        self._road_slot(road.shape[1])[i, :, :road.shape[1]] = road
+        self._stop_slot(max(stops.size, 1))[i, :stops.size] = stops
+        self._vehicles[i] = vehicle[0]
+        self._vehicles[i]["road_points"] = road.shape[1]
+        self._vehicles[i]["stop_count"] = stops.size
+        self._vehicles[i]["state"]["log_rows"] = 0.0  # the fleet's own log starts empty
+
+    def _adopt_tables(self, tables: Tables) -> None:
+        if self._tables is None:
+            self._tables = tables
+            self._records = None
+        elif tables is not self._tables and not (np.array_equal(tables.values, self._tables.values)
+                                                  and np.array_equal(tables.descriptors, self._tables.descriptors)):
+            raise SimulationError("simulator: its vehicle spec differs from the fleet's (one spec per fleet: the "
+                                  "drive-train tables are shared)")
+
+    def _road_slot(self, points: int) -> np.ndarray:
+        if self._roads.shape[2] < points:
+            self._roads = _grown(self._roads, points)
+            self._records = None
+        return self._roads
+
+    def _stop_slot(self, count: int) -> np.ndarray:
+        if self._stops.shape[1] < count:
+            self._stops = _grown(self._stops, count)
+            self._records = None
+        return self._stops
 
     @property
     def records(self) -> FleetRecords:
         """The packed records to pass to a compiled kernel (the fleet's own arrays, no copy)."""
-        raise NotImplementedError
+        if self._tables is None:
+            raise SimulationError("fleet: no vehicle loaded yet (Fleet.load(i, simulator) first)")
+        if self._shared is not None:
+            return self._shared_records(self._shared)
+        if self._records is None:
+            self._records = FleetRecords(self._vehicles, self._tables.values, self._tables.descriptors, self._roads,
+                                         self._stops, self._cycle, self._log)
+        return self._records
 
-    def state(self, i: int) -> object:
+    def _shared_records(self, simulator: Simulator) -> FleetRecords:
+        """The records of a sharing fleet: views of the simulator's current arrays."""
+        vehicle, tables, road, stops, _ = simulator._core_records()
+        vehicle[0]["road_points"] = road.shape[1]
+        vehicle[0]["stop_count"] = stops.size
+        return FleetRecords(vehicle, tables.values, tables.descriptors, road[None], stops[None], self._cycle,
+                            simulator._log[None])
+
+    def state(self, i: int) -> VehicleState:
         """A typed Python view (:class:`roadload.envs.VehicleState`) of slot i's state: read every field, set
         ``position`` and ``speed``."""
-        raise NotImplementedError
+        if not 0 <= i < self.n_vehicles:
+            raise IndexError(f"slot {i}: the fleet has {self.n_vehicles} vehicles")
+        return VehicleState(self._vehicles, i)
+
+
+def _grown(arr: np.ndarray, width: int) -> np.ndarray:
+    """``arr`` with its last axis zero-padded to ``width``."""
+    new = np.zeros(arr.shape[:-1] + (width,), dtype=arr.dtype)
+    new[..., :arr.shape[-1]] = arr
+    return new
 
 
 # --------------------------------------------------------------------------------------------- compiled functions
-# (numba njit; callable from another compiled kernel and from Python)
-
-def state_of(records: FleetRecords, i: int):  # -> the state record of vehicle i
+@jit(inline=True)
+def state_of(records, i):
     """The state record of vehicle i (a view: it changes when the vehicle is advanced); fields in the module
     docstring, e.g. ``state_of(records, i).speed`` [m/s]."""
-    raise NotImplementedError
+    return records.vehicles[i].state
 
 
-def command_wheel_force(records: FleetRecords, i: int, force: float, steer: float) -> None:
+@jit(inline=True)
+def command_wheel_force(records, i, force, steer):
     """Hold a signed wheel force ``force`` [N] for vehicle i: >= 0 traction, < 0 braking (regeneration / engine
     drag first, friction brakes for the rest); ``steer``: front wheel angle [rad], NaN for the built-in steering
     law that follows the road; automatic gears."""
-    raise NotImplementedError
+    c = records.vehicles[i].command
+    c.mode = COMMAND_WHEEL_FORCE
+    c.traction = force
+    c.steer = steer
+    c.gear = -1.0
 
 
-def command_forces(records: FleetRecords, i: int, traction: float, regen: float, friction: float, steer: float,
-                   gear: int) -> None:
+@jit(inline=True)
+def command_forces(records, i, traction, regen, friction, steer, gear):
     """Hold explicit wheel forces for vehicle i [N, each >= 0]: traction, regeneration (ICE: engine drag) and
     friction brakes; ``steer`` [rad] or NaN (built-in steering law); ``gear``: -1 shift strategy, 0 neutral /
     sailing, 1..n a requested gear."""
-    raise NotImplementedError
+    c = records.vehicles[i].command
+    c.mode = COMMAND_FORCES
+    c.traction = traction
+    c.regen = regen
+    c.friction = friction
+    c.steer = steer
+    c.gear = gear
 
 
-def command_driver(records: FleetRecords, i: int) -> None:
+@jit(inline=True)
+def command_driver(records, i):
     """Let the built-in driver (speed limits, curves, stops) command vehicle i."""
-    raise NotImplementedError
+    records.vehicles[i].command.mode = COMMAND_DRIVER
 
 
-def advance_vehicle(records: FleetRecords, i: int, n_substeps: int) -> None:
+@jit(inline=True)
+def advance_vehicle(records, i, n_substeps):
     """Advance vehicle i by ``n_substeps`` x SUBSTEP_SECONDS with its command held (the simulator core: drive-train,
     brakes, lateral model, effects, energy ledger; a truth-log row per substep while the log has room)."""
-    raise NotImplementedError
+    v = records.vehicles[i]
+    route = Route(records.roads[i, :, :v.road_points], records.stops[i, :v.stop_count], records.cycle)
+    physics.advance(v.state, v.params, v.command, Tables(records.table_values, records.table_index), route,
+                    records.log[i], n_substeps)
 
 
-def advance_vehicles(records: FleetRecords, active: np.ndarray, n_substeps: int) -> None:
+@jit
+def advance_vehicles(records, active, n_substeps):
     """:func:`advance_vehicle` for every vehicle i with ``active[i]`` (bool array of length N)."""
-    raise NotImplementedError
+    for i in range(records.vehicles.shape[0]):
+        if active[i]:
+            advance_vehicle(records, i, n_substeps)
 
 
-def vehicle_done(records: FleetRecords, i: int) -> bool:
+@jit(inline=True)
+def vehicle_done(records, i):
     """True when vehicle i has reached the end of its road."""
-    raise NotImplementedError
+    v = records.vehicles[i]
+    return physics.is_done(v.state, v.params)
 
 
 __all__ = ["SUBSTEP_SECONDS", "Fleet", "FleetRecords", "advance_vehicle", "advance_vehicles", "command_driver",

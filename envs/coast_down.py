@@ -2,7 +2,7 @@
 
 F_road(v) = m g f_r(v) (eq. 2.9/2.10) + rho_a/2 c_x A_V v^2 (eq. 2.7, no wind) + X_12 delta_toe sin(delta_toe)
 (toe-in, section 2.4.5) + the drive-train's zero-load spin losses (warm oil, eq. 2.17), at the wheels [N].
-The spin losses come from the simulator's loss maps (:mod:`.drivetrain`), which is why this lives in envs and not
+The spin losses come from the simulator's loss maps (:mod:`.powertrain`), which is why this lives in envs and not
 with the lumped road-load model of :mod:`roadload.road_load`.
 """
 
@@ -15,7 +15,7 @@ import numpy as np
 from roadload.units import G, STANDARD_AIR_DENSITY
 from roadload.vehicle import VehicleSpec
 
-from .drivetrain import neutral_drag_force
+from .powertrain import Powertrain
 
 __all__ = ["neutral_road_load", "road_load_coefficients"]
 
@@ -28,7 +28,7 @@ def neutral_road_load(spec: VehicleSpec, speed, air_density: float = STANDARD_AI
     t = spec.tires
     toe = t.cornering_stiffness_front * t.toe_in * math.sin(t.toe_in)
     return (m * G * t.rolling_resistance_coefficient(v) + 0.5 * air_density * spec.aero.drag_area * v ** 2 + toe
-            + neutral_drag_force(spec, v))
+            + Powertrain(spec).neutral_drag_force(v))
 
 
 def road_load_coefficients(spec: VehicleSpec, v_min: float = 15 / 3.6, v_max: float = 130 / 3.6,

@@ -23,12 +23,7 @@ import numpy as np
 from roadload.units import G
 
 from ._jit import jit
-from .layout import (
-    P_AREA, P_CW, P_CYCLE_MODE, P_DRV_ALAT, P_DRV_AMAX, P_DRV_BMAX, P_DRV_BPLAN, P_DRV_DWELL_MAX, P_DRV_DWELL_MIN,
-    P_DRV_EG, P_DRV_KI, P_DRV_LOOKAHEAD, P_DRV_MARGIN, P_DRV_PEDAL_TAU, P_DRV_PREVIEW, P_DRV_RHO, P_DRV_TAU,
-    P_DRV_VAR_STD, P_DRV_VAR_TAU, P_FR0, P_L, P_MASS0, R_CRUISE, R_CURV, R_VPLAN, S_BETA, S_DRV_F, S_DRV_I,
-    S_DRV_VAR, S_DRV_VAR2, S_DWELL, S_DWELL_LEFT, S_EPSI, S_EY, S_STOP_IDX, S_T,
-)
+from .layout import R_CRUISE, R_CURV, R_VPLAN
 from .numerics import rng_normal, rng_uniform, road_value, road_value_at, road_value_near
 
 
@@ -102,123 +97,173 @@ def cruise_stretches(distance: np.ndarray, fraction: float, stretch_length: floa
     return flags
 
 
-def pack_driver(P: np.ndarray, cfg: DriverConfig, understeer_gradient: float, rho_nominal: float) -> None:
-    P[P_DRV_ALAT] = cfg.lateral_acceleration_limit
-    P[P_DRV_AMAX] = cfg.max_acceleration
-    P[P_DRV_BMAX] = cfg.max_deceleration
-    P[P_DRV_BPLAN] = cfg.planning_deceleration
-    P[P_DRV_TAU] = cfg.speed_time_constant
-    P[P_DRV_KI] = cfg.integral_gain
-    P[P_DRV_VAR_STD] = cfg.speed_variation_std
-    P[P_DRV_VAR_TAU] = cfg.speed_variation_time_constant
-    P[P_DRV_LOOKAHEAD] = cfg.steering_lookahead_time
-    P[P_DRV_PREVIEW] = cfg.steering_preview_time
-    P[P_DRV_DWELL_MIN] = cfg.dwell_min
-    P[P_DRV_DWELL_MAX] = cfg.dwell_max
-    P[P_DRV_MARGIN] = cfg.speed_margin
-    P[P_DRV_PEDAL_TAU] = cfg.pedal_time_constant
-    P[P_DRV_EG] = understeer_gradient
-    P[P_DRV_RHO] = rho_nominal
+def pack_driver(params: np.void, cfg: DriverConfig, understeer_gradient: float, rho_nominal: float) -> None:
+    """Write the driver settings (and the vehicle's understeer gradient [s^2/m], the air density [kg/m^3] the driver
+    assumes) into a parameter record."""
+    values = {
+        "driver_lateral_acceleration": cfg.lateral_acceleration_limit, "driver_max_acceleration": cfg.max_acceleration,
+        "driver_max_deceleration": cfg.max_deceleration, "driver_planning_deceleration": cfg.planning_deceleration,
+        "driver_speed_time_constant": cfg.speed_time_constant, "driver_integral_gain": cfg.integral_gain,
+        "driver_variation_std": cfg.speed_variation_std,
+        "driver_variation_time_constant": cfg.speed_variation_time_constant,
+        "steering_lookahead_time": cfg.steering_lookahead_time, "steering_preview_time": cfg.steering_preview_time,
+        "dwell_min": cfg.dwell_min, "dwell_max": cfg.dwell_max, "driver_speed_margin": cfg.speed_margin,
+        "pedal_time_constant": cfg.pedal_time_constant, "understeer_gradient": understeer_gradient,
+        "driver_air_density": rho_nominal,
+    }
+    for name, value in values.items():
+        params[name] = value
 
 
 @jit(inline=True)
-def steering_law(X, P, road, ridx, s, v):
+def steering_law(x, p, road, ridx):
     """Wheel steer angle delta_W [rad] from curvature preview and look-ahead lateral error (module doc); ridx: the
-    road segment at s, where the preview search starts."""
-    gain = P[P_L] + P[P_DRV_EG] * v * v
-    kappa = road_value_near(road, R_CURV, s + P[P_DRV_PREVIEW] * v, ridx)
-    look = P[P_DRV_LOOKAHEAD] * v
+    road segment at the vehicle's position, where the preview search starts."""
+    s = x.position
+    v = x.speed
+    gain = p.wheelbase + p.understeer_gradient * v * v
+    kappa = road_value_near(road, R_CURV, s + p.steering_preview_time * v, ridx)
+    look = p.steering_lookahead_time * v
     if look < 5.0:
         look = 5.0
-    e_l = X[S_EY] + look * (X[S_EPSI] + X[S_BETA])
+    e_l = x.lateral_offset + look * (x.heading_error + x.side_slip_angle)
     return gain * kappa - gain * 2.0 * e_l / (look * look)
 
 
-@jit
-def driver_force(X, P, road, stops, cycle, rng, ridx, s, v, theta, dt):
-    """Signed wheel-force demand [N] of the built-in driver (road mode or drive-cycle mode)."""
-    g = G
-    m = P[P_MASS0]
-    t = X[S_T]
-    a_ff = 0.0
-    hold = False
-    if P[P_CYCLE_MODE] > 0.5:
-        v_des = road_value_at(cycle, 1, t + 0.1)
-        v_next = road_value_at(cycle, 1, t + 1.1)
-        a_ff = v_next - v_des
-        if v_des < 0.05 and v_next < 0.05:
-            hold = True
-    else:
-        v_plan = road_value_near(road, R_VPLAN, s + 0.7 * v, ridx)
-        k = int(X[S_STOP_IDX])
-        n_stops = stops.shape[0]
-        while k < n_stops and X[S_DWELL] < 0.5 and s > stops[k] + 2.0:
-            k += 1  # passed a stop without halting (e.g. external control before)
-        v_stop = 1e9
-        if k < n_stops:
-            if X[S_DWELL] > 0.5:
-                v_stop = 0.0
-                X[S_DWELL_LEFT] -= dt
-                if X[S_DWELL_LEFT] <= 0.0:
-                    X[S_DWELL] = 0.0
-                    k += 1
-            else:
-                d = stops[k] - s - 1.0
-                if d < 0.0:
-                    d = 0.0
-                v_stop = math.sqrt(2.0 * P[P_DRV_BPLAN] * d)
-                if d < 4.0 and v < 0.3:
-                    X[S_DWELL] = 1.0
-                    X[S_DWELL_LEFT] = P[P_DRV_DWELL_MIN] + (P[P_DRV_DWELL_MAX] - P[P_DRV_DWELL_MIN]) * rng_uniform(rng)
-                    v_stop = 0.0
-        X[S_STOP_IDX] = k
-        v_target = v_plan if v_plan < v_stop else v_stop
-        # natural speed variation, frozen in cruise stretches (poor excitation)
-        if road_value(road, R_CRUISE, ridx, s) < 0.5:
-            a = math.exp(-dt / P[P_DRV_VAR_TAU])
-            X[S_DRV_VAR] = a * X[S_DRV_VAR] + P[P_DRV_VAR_STD] * math.sqrt(1.0 - a * a) * rng_normal(rng)
-            X[S_DRV_VAR2] += (X[S_DRV_VAR] - X[S_DRV_VAR2]) * dt / 4.0  # smooth the variation (4 s low-pass)
-            v_des = v_target - P[P_DRV_MARGIN] + X[S_DRV_VAR2]
+@jit(inline=True)
+def _cycle_target(x, cycle):
+    """Drive-cycle mode: (desired speed [m/s] 0.1 s ahead, feed-forward acceleration [m/s^2] over the next second,
+    hold at standstill)."""
+    t = x.time
+    v_des = road_value_at(cycle, 1, t + 0.1)
+    v_next = road_value_at(cycle, 1, t + 1.1)
+    return v_des, v_next - v_des, v_des < 0.05 and v_next < 0.05
+
+
+@jit(inline=True)
+def _stop_speed(x, p, stops):
+    """Speed limit [m/s] of the next stop line: sqrt(2 b_plan d) on the approach, 0 while dwelling (the dwell is
+    drawn uniform in [dwell_min, dwell_max] on arrival); a stop passed without halting is skipped. 1e9: none."""
+    s = x.position
+    dt = p.dt
+    k = int(x.stop_index)
+    n_stops = stops.shape[0]
+    while k < n_stops and x.dwelling < 0.5 and s > stops[k] + 2.0:
+        k += 1  # passed a stop without halting (e.g. external control before)
+    v_stop = 1e9
+    if k < n_stops:
+        if x.dwelling > 0.5:
+            v_stop = 0.0
+            x.dwell_left -= dt
+            if x.dwell_left <= 0.0:
+                x.dwelling = 0.0
+                k += 1
         else:
-            v_des = v_target - P[P_DRV_MARGIN]
-        if v_des > v_target:
-            v_des = v_target
-        if v_des < 0.0:
-            v_des = 0.0
-        if v_stop == 0.0 or v_target < 0.3:
-            v_des = 0.0
-            hold = v < 0.05
-        # anticipate the plan's deceleration (v dv/ds over the next ~2 s)
-        look = 2.0 * v + 5.0
-        v_ahead = road_value_near(road, R_VPLAN, s + look, ridx)
-        if v_stop < v_ahead:
-            v_ahead = v_stop
-        if v_ahead < v_des:
-            a_ff = (v_ahead * v_ahead - v_des * v_des) / (2.0 * look)
-    if hold:
-        X[S_DRV_I] = 0.0
-        X[S_DRV_F] = -0.3 * m * g
-        return X[S_DRV_F]
+            d = stops[k] - s - 1.0
+            if d < 0.0:
+                d = 0.0
+            v_stop = math.sqrt(2.0 * p.driver_planning_deceleration * d)
+            if d < 4.0 and x.speed < 0.3:
+                x.dwelling = 1.0
+                x.dwell_left = p.dwell_min + (p.dwell_max - p.dwell_min) * rng_uniform(x)
+                v_stop = 0.0
+    x.stop_index = k
+    return v_stop
+
+
+@jit(inline=True)
+def _varied_speed(x, p, road, ridx, v_target):
+    """The desired speed below the target by the margin, with the natural speed variation (Ornstein-Uhlenbeck,
+    low-passed over 4 s; frozen in the cruise stretches of poor excitation), limited to [0, v_target]."""
+    dt = p.dt
+    if road_value(road, R_CRUISE, ridx, x.position) < 0.5:
+        a = math.exp(-dt / p.driver_variation_time_constant)
+        x.driver_speed_variation = (a * x.driver_speed_variation
+                                    + p.driver_variation_std * math.sqrt(1.0 - a * a) * rng_normal(x))
+        # smooth the variation (4 s low-pass)
+        x.driver_speed_variation_smooth += (x.driver_speed_variation - x.driver_speed_variation_smooth) * dt / 4.0
+        v_des = v_target - p.driver_speed_margin + x.driver_speed_variation_smooth
+    else:
+        v_des = v_target - p.driver_speed_margin
+    if v_des > v_target:
+        v_des = v_target
+    if v_des < 0.0:
+        v_des = 0.0
+    return v_des
+
+
+@jit(inline=True)
+def _road_target(x, p, road, stops, ridx):
+    """Road mode: (desired speed [m/s] from the speed plan 0.7 s ahead, the next stop and the speed variation,
+    feed-forward deceleration anticipating the plan v dv/ds over ~2 s [m/s^2], hold at standstill)."""
+    s = x.position
+    v = x.speed
+    v_plan = road_value_near(road, R_VPLAN, s + 0.7 * v, ridx)
+    v_stop = _stop_speed(x, p, stops)
+    v_target = v_plan if v_plan < v_stop else v_stop
+    v_des = _varied_speed(x, p, road, ridx, v_target)
+    hold = False
+    if v_stop == 0.0 or v_target < 0.3:
+        v_des = 0.0
+        hold = v < 0.05
+    a_ff = 0.0
+    look = 2.0 * v + 5.0
+    v_ahead = road_value_near(road, R_VPLAN, s + look, ridx)
+    if v_stop < v_ahead:
+        v_ahead = v_stop
+    if v_ahead < v_des:
+        a_ff = (v_ahead * v_ahead - v_des * v_des) / (2.0 * look)
+    return v_des, a_ff, hold
+
+
+@jit(inline=True)
+def _desired_acceleration(x, p, v_des, a_ff):
+    """a_des = clip(a_ff + (v_des - v) / tau, -b_max, a_max(v)) (-0.6 m/s^2 at least on the final approach to a
+    stop), and the integral term of the speed error while unsaturated (limited to 0.3 g)."""
+    v = x.speed
     err = v_des - v
-    a_max = P[P_DRV_AMAX] * (1.0 - 0.5 * min(1.0, v / 40.0))
-    a_des = a_ff + err / P[P_DRV_TAU]
+    a_max = p.driver_max_acceleration * (1.0 - 0.5 * min(1.0, v / 40.0))
+    a_des = a_ff + err / p.driver_speed_time_constant
     if v_des == 0.0 and a_des > -0.6:
         a_des = -0.6  # final approach to a stop: gentle constant deceleration
     saturated = False
     if a_des > a_max:
         a_des = a_max
         saturated = True
-    elif a_des < -P[P_DRV_BMAX]:
-        a_des = -P[P_DRV_BMAX]
+    elif a_des < -p.driver_max_deceleration:
+        a_des = -p.driver_max_deceleration
         saturated = True
     if not saturated and v_des > 0.5:
-        X[S_DRV_I] += P[P_DRV_KI] * err * dt / P[P_DRV_TAU]
-        lim = 0.3 * g
-        if X[S_DRV_I] > lim:
-            X[S_DRV_I] = lim
-        elif X[S_DRV_I] < -lim:
-            X[S_DRV_I] = -lim
-    f_res = m * g * (math.sin(theta) + P[P_FR0] * math.cos(theta)) + 0.5 * P[P_DRV_RHO] * P[P_CW] * P[P_AREA] * v * v
-    f = 1.05 * m * a_des + f_res + m * X[S_DRV_I]
-    X[S_DRV_F] += (f - X[S_DRV_F]) * dt / (P[P_DRV_PEDAL_TAU] + dt)  # pedal / brake actuation lag
-    return X[S_DRV_F]
+        x.driver_integral += p.driver_integral_gain * err * p.dt / p.driver_speed_time_constant
+        lim = 0.3 * G
+        if x.driver_integral > lim:
+            x.driver_integral = lim
+        elif x.driver_integral < -lim:
+            x.driver_integral = -lim
+    return a_des
+
+
+@jit
+def driver_force(x, p, route, ridx, theta):
+    """Signed wheel-force demand [N] of the built-in driver (road mode or drive-cycle mode; module doc): the
+    desired acceleration with the nominal vehicle's resistances F = 1.05 m a_des + m g (sin theta + f_r0 cos theta)
+    + rho/2 c_w A v^2 + m I, through the pedal lag; at standstill a hold force -0.3 m g. ridx: the road segment at
+    the vehicle's position, theta: the grade there [rad]."""
+    road, stops, cycle = route
+    m = p.mass_nominal
+    if p.cycle_mode > 0.5:
+        v_des, a_ff, hold = _cycle_target(x, cycle)
+    else:
+        v_des, a_ff, hold = _road_target(x, p, road, stops, ridx)
+    if hold:
+        x.driver_integral = 0.0
+        x.driver_force = -0.3 * m * G
+        return x.driver_force
+    v = x.speed
+    dt = p.dt
+    a_des = _desired_acceleration(x, p, v_des, a_ff)
+    f_res = (m * G * (math.sin(theta) + p.rolling_f0 * math.cos(theta))
+             + 0.5 * p.driver_air_density * p.drag_coefficient * p.frontal_area * v * v)
+    f = 1.05 * m * a_des + f_res + m * x.driver_integral
+    x.driver_force += (f - x.driver_force) * dt / (p.pedal_time_constant + dt)  # pedal / brake actuation lag
+    return x.driver_force

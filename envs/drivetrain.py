@@ -14,49 +14,43 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from roadload.units import STANDARD_TEMPERATURE
 
 from ._jit import jit
 
-from .layout import (
-    MODE_LOCKED, P_BAT_R, P_BAT_VOC, P_ID, P_IGEAR0, P_IW4, P_I_CLUTCH, P_I_DIFF, P_I_SOURCE, P_KIND_BEV,
-    P_MAX_POWER, P_MAX_SPEED, P_MAX_TORQUE, P_OIL_COLD_FACTOR, P_OIL_WARM, P_RATIO0, P_REGEN_P, P_REGEN_T, P_RW,
-    T_DIFFLOSS, T_DRAG, T_FUEL, T_FULLLOAD, T_GBLOSS, T_MOTORLOSS,
-)
+from .layout import MODE_LOCKED, T_DIFFLOSS, T_DRAG, T_FUEL, T_FULLLOAD, T_GBLOSS, T_MOTORLOSS
 from .numerics import invert_through_map, table1, table2
-from .packing import pack_vehicle
 
 
 @jit(inline=True)
-def gear_ratio(P, gear):
+def gear_ratio(p, gear):
     """i_G(G); 0 for neutral."""
     if gear < 1:
         return 0.0
-    return P[P_RATIO0 + gear - 1]
+    return p.gear_ratio[gear - 1]
 
 
 @jit(inline=True)
-def source_side_inertia(P, gear):
+def source_side_inertia(p, gear):
     """Inertia on the engine side of the clutch [kg m^2]: I_E + I_C + I_G(G) (I_G lumped to the input side)."""
-    j = P[P_I_SOURCE] + P[P_I_CLUTCH]
+    j = p.source_inertia + p.clutch_inertia
     if gear >= 1:
-        j += P[P_IGEAR0 + gear - 1]
+        j += p.gear_inertia[gear - 1]
     return j
 
 
 @jit(inline=True)
-def wheel_side_mass(P, mass):
+def wheel_side_mass(p, mass):
     """m_V + (4 I_W + i_D^2 I_D) / r_W^2 [kg]: translational mass plus the inertias that always turn with the
     wheels."""
-    r = P[P_RW]
-    return mass + (P[P_IW4] + P[P_ID] * P[P_ID] * P[P_I_DIFF]) / (r * r)
+    r = p.wheel_radius
+    return mass + (p.wheel_inertia_4 + p.final_drive * p.final_drive * p.differential_inertia) / (r * r)
 
 
 @jit(inline=True)
-def speed_ratio(P, gear):
+def speed_ratio(p, gear):
     """k(G) = i_G i_D / r_W: gearbox input speed [rad/s] per vehicle speed [m/s]."""
-    return gear_ratio(P, gear) * P[P_ID] / P[P_RW]
+    return gear_ratio(p, gear) * p.final_drive / p.wheel_radius
 
 
 @jit(inline=True)
@@ -69,86 +63,86 @@ def _fade(omega):
 
 
 @jit(inline=True)
-def oil_loss_factor(P, oil_temperature):
+def oil_loss_factor(p, oil_temperature):
     """phi(T_oil) = 1 + (phi_cold - 1) clip((T_warm - T_oil)/(T_warm - 293.15), 0, 1.5)."""
-    x = (P[P_OIL_WARM] - oil_temperature) / (P[P_OIL_WARM] - STANDARD_TEMPERATURE)
+    x = (p.oil_warm_temperature - oil_temperature) / (p.oil_warm_temperature - STANDARD_TEMPERATURE)
     if x < 0.0:
         x = 0.0
     elif x > 1.5:
         x = 1.5
-    return 1.0 + (P[P_OIL_COLD_FACTOR] - 1.0) * x
+    return 1.0 + (p.oil_cold_loss_factor - 1.0) * x
 
 
 @jit(inline=True)
-def forward_wheel_torque(P, tabs, ti, gear, torque_in, omega_in, phi):
+def forward_wheel_torque(p, tables, gear, torque_in, omega_in, phi):
     """(T_W, gearbox loss, differential loss) for gearbox input torque T_G and speed omega_G (eq. 2.17).
     Neutral (gear 0): no input torque, only the differential's spin loss."""
-    i_d = P[P_ID]
+    i_d = p.final_drive
     if gear < 1:
         omega_d = omega_in  # caller passes the differential input speed in neutral
-        loss_d = phi * _fade(omega_d) * table2(tabs, ti, T_DIFFLOSS, 0.0, omega_d)
+        loss_d = phi * _fade(omega_d) * table2(tables, T_DIFFLOSS, 0.0, omega_d)
         return -loss_d, 0.0, loss_d
-    i_g = P[P_RATIO0 + gear - 1]
-    loss_g = phi * _fade(omega_in) * table2(tabs, ti, T_GBLOSS + gear - 1, torque_in, omega_in)
+    i_g = p.gear_ratio[gear - 1]
+    loss_g = phi * _fade(omega_in) * table2(tables, T_GBLOSS + gear - 1, torque_in, omega_in)
     t_d = torque_in * i_g - loss_g
     omega_d = omega_in / i_g
-    loss_d = phi * _fade(omega_d) * table2(tabs, ti, T_DIFFLOSS, t_d, omega_d)
+    loss_d = phi * _fade(omega_d) * table2(tables, T_DIFFLOSS, t_d, omega_d)
     return t_d * i_d - loss_d, loss_g, loss_d
 
 
 @jit(inline=True)
-def inverse_wheel_torque(P, tabs, ti, gear, wheel_torque, omega_in, phi):
+def inverse_wheel_torque(p, tables, gear, wheel_torque, omega_in, phi):
     """Gearbox input torque T_G that delivers the wheel torque T_W at input speed omega_G (exact inverse of
     ``forward_wheel_torque``)."""
-    i_g = P[P_RATIO0 + gear - 1]
+    i_g = p.gear_ratio[gear - 1]
     omega_d = omega_in / i_g
-    t_d = invert_through_map(tabs, ti, T_DIFFLOSS, P[P_ID], phi * _fade(omega_d), omega_d, wheel_torque)
-    return invert_through_map(tabs, ti, T_GBLOSS + gear - 1, i_g, phi * _fade(omega_in), omega_in, t_d)
+    t_d = invert_through_map(tables, T_DIFFLOSS, p.final_drive, phi * _fade(omega_d), omega_d, wheel_torque)
+    return invert_through_map(tables, T_GBLOSS + gear - 1, i_g, phi * _fade(omega_in), omega_in, t_d)
 
 
 @jit(inline=True)
-def torque_limits(P, tabs, ti, omega, v):
+def torque_limits(p, tables, omega, v):
     """(T_min, T_max) of the engine / motor at shaft speed omega [rad/s]; ICE: drag and full-load curves with a
     rev limit; BEV: torque/power limits and the regen limit, regen faded out below 1.5 m/s."""
-    if P[P_KIND_BEV] > 0.5:
+    if p.is_bev > 0.5:
         w = omega if omega > 1.0 else 1.0
-        t_max = min(P[P_MAX_TORQUE], P[P_MAX_POWER] / w)
-        if omega > P[P_MAX_SPEED]:
+        t_max = min(p.max_torque, p.max_power / w)
+        if omega > p.max_engine_speed:
             t_max = 0.0
         fade = v / 1.5
         if fade > 1.0:
             fade = 1.0
         elif fade < 0.0:
             fade = 0.0
-        t_min = -min(P[P_REGEN_T], P[P_REGEN_P] / w) * fade
+        t_min = -min(p.regen_torque_limit, p.regen_power_limit / w) * fade
         return t_min, t_max
-    t_drag = table1(tabs, ti, T_DRAG, omega)
-    t_max = table1(tabs, ti, T_FULLLOAD, omega)
-    if omega > P[P_MAX_SPEED]:
+    t_drag = table1(tables, T_DRAG, omega)
+    t_max = table1(tables, T_FULLLOAD, omega)
+    if omega > p.max_engine_speed:
         t_max = t_drag
     return t_drag, t_max
 
 
 @jit(inline=True)
-def fuel_power(P, tabs, ti, omega, torque):
+def fuel_power(p, tables, omega, torque):
     """Fuel power P_fuel(omega, T_E) [W] from the fuel map; zero at or below the drag curve (fuel cut)."""
-    if torque <= table1(tabs, ti, T_DRAG, omega) + 1e-6:
+    if torque <= table1(tables, T_DRAG, omega) + 1e-6:
         return 0.0
-    p = table2(tabs, ti, T_FUEL, omega, torque)
+    p = table2(tables, T_FUEL, omega, torque)
     return p if p > 0.0 else 0.0
 
 
 @jit(inline=True)
-def motor_electric_power(P, tabs, ti, omega, torque):
+def motor_electric_power(p, tables, omega, torque):
     """Electric power of the motor P_el = T omega + P_loss(omega, T) [W] (positive = drawn from the battery)."""
-    return torque * omega + table2(tabs, ti, T_MOTORLOSS, omega, torque)
+    return torque * omega + table2(tables, T_MOTORLOSS, omega, torque)
 
 
 @jit(inline=True)
-def battery_current(P, terminal_power):
-    """Battery current I [A] for terminal power P = V_oc I - R I^2 (positive = discharge)."""
-    voc = P[P_BAT_VOC]
-    res = P[P_BAT_R]
+def battery_current(p, terminal_power):
+    """Battery current I [A] for terminal power p = V_oc I - R I^2 (positive = discharge)."""
+    voc = p.battery_open_circuit_voltage
+    res = p.battery_resistance
     if res <= 0.0:
         return terminal_power / voc
     disc = voc * voc - 4.0 * res * terminal_power
@@ -158,13 +152,13 @@ def battery_current(P, terminal_power):
 
 
 @jit(inline=True)
-def regen_capacity(P, tabs, ti, gear, mode, omega_e, v, phi):
+def regen_capacity(p, tables, gear, mode, omega_e, v, phi):
     """Largest braking force [N] the engine (drag, fuel cut) or motor (regen limit) can put on the wheels now."""
-    if gear < 1 or (mode != MODE_LOCKED and P[P_KIND_BEV] < 0.5):
+    if gear < 1 or (mode != MODE_LOCKED and p.is_bev < 0.5):
         return 0.0
-    t_min, t_max = torque_limits(P, tabs, ti, omega_e, v)
-    t_w, lg, ld = forward_wheel_torque(P, tabs, ti, gear, t_min, omega_e, phi)
-    f = -t_w / P[P_RW]
+    t_min, t_max = torque_limits(p, tables, omega_e, v)
+    t_w, lg, ld = forward_wheel_torque(p, tables, gear, t_min, omega_e, phi)
+    f = -t_w / p.wheel_radius
     return f if f > 0.0 else 0.0
 
 
@@ -177,21 +171,3 @@ def allocate(force, capacity):
     if regen > capacity:
         regen = capacity
     return 0.0, regen, -force - regen
-
-
-def neutral_drag_force(spec, speed) -> np.ndarray:
-    """Drive-train drag [N] at the wheels with zero drive torque, warm oil: ICE in neutral (differential spin loss),
-    BEV with zero motor torque (single-speed gearbox + differential). Used for the coast-down road load."""
-
-    P, tabs, ti = pack_vehicle(spec)
-    r = spec.tires.dynamic_radius
-    out = []
-    for v in np.atleast_1d(np.asarray(speed, dtype=float)):
-        if spec.drivetrain.kind == "bev":
-            omega = speed_ratio(P, 1) * v
-            t_w, _, _ = forward_wheel_torque(P, tabs, ti, 1, 0.0, omega, 1.0)
-        else:
-            t_w, _, _ = forward_wheel_torque(P, tabs, ti, 0, 0.0, spec.drivetrain.final_drive * v / r, 1.0)
-        out.append(-t_w / r)
-    res = np.asarray(out)
-    return res if np.ndim(speed) else res[0]

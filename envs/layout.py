@@ -1,254 +1,291 @@
-"""Index layout of the flat arrays the jitted simulator core works on.
+"""Storage of the jitted simulator core (private to ``roadload.envs``): named record types and the log / road / table
+layouts.
 
-The numba core (``physics.py``, ``driver.py``) takes a handful of flat float64 arrays instead of Python objects so
-that one call costs a few microseconds: ``X`` (state), ``P`` (parameters), ``tabs`` + ``ti`` (lookup tables and
-their descriptors), ``road`` (road attributes over distance), ``cmd`` (the command) and ``log`` (one row per
-10-ms substep). The indices below are plain module-level integer constants (numba freezes them at compile time;
-ruff and mypy resolve every name): ``S_*`` state, ``P_*`` parameters, ``L_*`` log columns, ``C_*`` command,
-``R_*`` road rows, ``T_*`` tables. The name lists (``STATE``, ``PARAMS``, ...) give the same order as strings;
-:func:`_check_layout` verifies at import that constants and lists agree.
+The numba core works on numpy structured records, one per vehicle, so that a kernel reads ``x.speed`` or
+``p.wheel_radius`` instead of an index: ``VEHICLE`` = {``state``: STATE, ``params``: PARAMS, ``command``: COMMAND,
+``road_points``, ``stop_count``}. Each field list below gives (name, SI unit, meaning) once; the dtypes are built
+from it. Outside ``envs/`` the state is read through :class:`roadload.envs.VehicleState` and advanced through
+:mod:`roadload.envs.batch`; an import-linter contract keeps this module private.
+
+The truth log (one column per 10-ms substep, one row per channel: ``L_*``), the road attributes over distance
+(``R_*`` rows) and the drive-train tables (``T_*``) stay flat float arrays with named row constants; numba freezes
+them at compile time. :func:`_check_layout` verifies at import that the constants agree with their name lists.
 """
 
 from __future__ import annotations
 
-# ---------------------------------------------------------------------------------------------------- state X
-STATE = [
-    "T", "POS", "V", "A", "NLOG",
-    # drive-train
-    "GEAR", "MODE", "OMEGA_E", "SLIP_TIMER", "LAST_SHIFT", "TE", "TC", "PBF", "PBR", "SOC",
-    # lateral
-    "BETA", "YAW", "DELTA", "EY", "EPSI", "AY", "AY_MAX", "AY_WARN_N",
-    # drifting quantities
-    "MASS", "DRAGF", "WIN_OPEN", "SUN_OPEN", "GUST", "WIND_DIR_DEV", "OIL_T", "DISC_T", "MU_RW", "PAYLOAD_STOP",
-    # road / driver bookkeeping
-    "RIDX", "STOP_IDX", "DWELL", "DWELL_LEFT", "DRV_I", "DRV_VAR", "DRV_VAR2", "DRV_F", "CYC_IDX",
-    # energy ledger (cumulative) [J]
-    "E_SOURCE", "W_SHAFT", "D_GEARBOX", "D_DIFF", "D_CLUTCH", "D_BRAKE", "D_ROLL", "D_AERO", "D_CORNER", "W_CLIMB",
-    "E_PAYLOAD_PE",
-]
-S_T = 0
-S_POS = 1
-S_V = 2
-S_A = 3
-S_NLOG = 4
-# drive-train
-S_GEAR = 5
-S_MODE = 6
-S_OMEGA_E = 7
-S_SLIP_TIMER = 8
-S_LAST_SHIFT = 9
-S_TE = 10
-S_TC = 11
-S_PBF = 12
-S_PBR = 13
-S_SOC = 14
-# lateral
-S_BETA = 15
-S_YAW = 16
-S_DELTA = 17
-S_EY = 18
-S_EPSI = 19
-S_AY = 20
-S_AY_MAX = 21
-S_AY_WARN_N = 22
-# drifting quantities
-S_MASS = 23
-S_DRAGF = 24
-S_WIN_OPEN = 25
-S_SUN_OPEN = 26
-S_GUST = 27
-S_WIND_DIR_DEV = 28
-S_OIL_T = 29
-S_DISC_T = 30
-S_MU_RW = 31
-S_PAYLOAD_STOP = 32
-# road / driver bookkeeping
-S_RIDX = 33
-S_STOP_IDX = 34
-S_DWELL = 35
-S_DWELL_LEFT = 36
-S_DRV_I = 37
-S_DRV_VAR = 38
-S_DRV_VAR2 = 39
-S_DRV_F = 40
-S_CYC_IDX = 41
-# energy ledger (cumulative) [J]
-S_E_SOURCE = 42
-S_W_SHAFT = 43
-S_D_GEARBOX = 44
-S_D_DIFF = 45
-S_D_CLUTCH = 46
-S_D_BRAKE = 47
-S_D_ROLL = 48
-S_D_AERO = 49
-S_D_CORNER = 50
-S_W_CLIMB = 51
-S_E_PAYLOAD_PE = 52
+import re
+from typing import NamedTuple
 
-# ---------------------------------------------------------------------------------------------------- params P
-PARAMS = [
-    "DT", "KIND_BEV", "DRIVEN", "N_GEARS",
-    # body / tires / aero
-    "MASS0", "L", "LF", "LR", "IZ", "TRACK_F", "TRACK_R", "PITCH_GRAD", "ROLL_GRAD",
-    "RW", "IW4", "FR0", "FR1", "FR4", "CF", "CR", "CX_SLIP", "TOE",
-    "CW", "AREA", "YAW_DRAG",
-    # drive-train
-    "ID", "I_DIFF", "I_CLUTCH", "I_SOURCE", "IDLE", "MAX_SPEED", "MAX_TORQUE", "MAX_POWER", "REGEN_T", "REGEN_P",
-    "UP_LO", "UP_HI", "DN_LO", "DN_HI", "SHIFT_MIN", "SYNC_TAU", "MAX_SLIP", "LAUNCH", "LOCK_SLIP",
-    "OIL_WARM", "OIL_COLD_FACTOR", "OIL_TAU",
-    "BAT_CAP", "BAT_VOC", "BAT_R", "AUX_P",
-    # brakes
-    "AB_F", "AB_R", "RB_F", "RB_R", "MU0", "BRAKE_SHARE", "P_MAX", "DISC_C", "DISC_H", "DISC_HV", "BRAKE_TAU",
-    # environment
-    "T_AMB", "P_AMB",
-    # effects (flag + parameters)
-    "WIND_ON", "WIND_MEAN", "WIND_DIR", "WIND_GUST_STD", "WIND_GUST_TAU", "WIND_DIR_STD",
-    "PAYLOAD_ON", "PAYLOAD_STD", "PAYLOAD_MIN", "PAYLOAD_MAX",
-    "WARM_ON", "WARM_FACTOR", "WARM_DIST",
-    "WINTER_ON", "WINTER_RR", "WINTER_CS",
-    "DRAG_ON", "DRAG_ROOFBOX", "DRAG_WIN", "DRAG_SUN", "DRAG_RATE",
-    "BANK_ON", "BANK_SCALE", "BANK_GAIN", "BANK_MAX",
-    "WET_ON", "WET_FACTOR", "WET_F1",
-    "OIL_ON", "OIL_START",
-    "PAD_ON", "PAD_TCOEF", "PAD_TREF", "PAD_RW_STD",
-    "BARO_ON", "BARO_H", "AUX_ON", "AUX_EXTRA",
-    # driver
-    "DRV_ALAT", "DRV_AMAX", "DRV_BMAX", "DRV_BPLAN", "DRV_TAU", "DRV_KI", "DRV_VAR_STD", "DRV_VAR_TAU",
-    "DRV_LOOKAHEAD", "DRV_PREVIEW", "DRV_DWELL_MIN", "DRV_DWELL_MAX", "DRV_MARGIN", "DRV_EG",
-    "DRV_RHO", "DRV_PEDAL_TAU", "STEER_MAX",
-    # run limits
-    "T_END", "S_END", "ROAD_LEN", "CYCLE_MODE",
-]
-P_DT = 0
-P_KIND_BEV = 1
-P_DRIVEN = 2
-P_N_GEARS = 3
-# body / tires / aero
-P_MASS0 = 4
-P_L = 5
-P_LF = 6
-P_LR = 7
-P_IZ = 8
-P_TRACK_F = 9
-P_TRACK_R = 10
-P_PITCH_GRAD = 11
-P_ROLL_GRAD = 12
-P_RW = 13
-P_IW4 = 14
-P_FR0 = 15
-P_FR1 = 16
-P_FR4 = 17
-P_CF = 18
-P_CR = 19
-P_CX_SLIP = 20
-P_TOE = 21
-P_CW = 22
-P_AREA = 23
-P_YAW_DRAG = 24
-# drive-train
-P_ID = 25
-P_I_DIFF = 26
-P_I_CLUTCH = 27
-P_I_SOURCE = 28
-P_IDLE = 29
-P_MAX_SPEED = 30
-P_MAX_TORQUE = 31
-P_MAX_POWER = 32
-P_REGEN_T = 33
-P_REGEN_P = 34
-P_UP_LO = 35
-P_UP_HI = 36
-P_DN_LO = 37
-P_DN_HI = 38
-P_SHIFT_MIN = 39
-P_SYNC_TAU = 40
-P_MAX_SLIP = 41
-P_LAUNCH = 42
-P_LOCK_SLIP = 43
-P_OIL_WARM = 44
-P_OIL_COLD_FACTOR = 45
-P_OIL_TAU = 46
-P_BAT_CAP = 47
-P_BAT_VOC = 48
-P_BAT_R = 49
-P_AUX_P = 50
-# brakes
-P_AB_F = 51
-P_AB_R = 52
-P_RB_F = 53
-P_RB_R = 54
-P_MU0 = 55
-P_BRAKE_SHARE = 56
-P_P_MAX = 57
-P_DISC_C = 58
-P_DISC_H = 59
-P_DISC_HV = 60
-P_BRAKE_TAU = 61
-# environment
-P_T_AMB = 62
-P_P_AMB = 63
-# effects (flag + parameters)
-P_WIND_ON = 64
-P_WIND_MEAN = 65
-P_WIND_DIR = 66
-P_WIND_GUST_STD = 67
-P_WIND_GUST_TAU = 68
-P_WIND_DIR_STD = 69
-P_PAYLOAD_ON = 70
-P_PAYLOAD_STD = 71
-P_PAYLOAD_MIN = 72
-P_PAYLOAD_MAX = 73
-P_WARM_ON = 74
-P_WARM_FACTOR = 75
-P_WARM_DIST = 76
-P_WINTER_ON = 77
-P_WINTER_RR = 78
-P_WINTER_CS = 79
-P_DRAG_ON = 80
-P_DRAG_ROOFBOX = 81
-P_DRAG_WIN = 82
-P_DRAG_SUN = 83
-P_DRAG_RATE = 84
-P_BANK_ON = 85
-P_BANK_SCALE = 86
-P_BANK_GAIN = 87
-P_BANK_MAX = 88
-P_WET_ON = 89
-P_WET_FACTOR = 90
-P_WET_F1 = 91
-P_OIL_ON = 92
-P_OIL_START = 93
-P_PAD_ON = 94
-P_PAD_TCOEF = 95
-P_PAD_TREF = 96
-P_PAD_RW_STD = 97
-P_BARO_ON = 98
-P_BARO_H = 99
-P_AUX_ON = 100
-P_AUX_EXTRA = 101
-# driver
-P_DRV_ALAT = 102
-P_DRV_AMAX = 103
-P_DRV_BMAX = 104
-P_DRV_BPLAN = 105
-P_DRV_TAU = 106
-P_DRV_KI = 107
-P_DRV_VAR_STD = 108
-P_DRV_VAR_TAU = 109
-P_DRV_LOOKAHEAD = 110
-P_DRV_PREVIEW = 111
-P_DRV_DWELL_MIN = 112
-P_DRV_DWELL_MAX = 113
-P_DRV_MARGIN = 114
-P_DRV_EG = 115
-P_DRV_RHO = 116
-P_DRV_PEDAL_TAU = 117
-P_STEER_MAX = 118
-# run limits
-P_T_END = 119
-P_S_END = 120
-P_ROAD_LEN = 121
-P_CYCLE_MODE = 122
+import numpy as np
+
+MAX_GEARS = 12
+
+
+def _table(text: str) -> tuple[tuple[str, str, str], ...]:
+    """(name, unit, meaning) rows of a text table whose columns are separated by two or more spaces."""
+    rows = tuple(tuple(re.split(r"\s{2,}", line.strip(), maxsplit=2)) for line in text.strip().splitlines())
+    if any(len(row) != 3 or not row[0].isidentifier() for row in rows):
+        raise RuntimeError(f"layout: a field table row is not 'name  unit  meaning': {rows}")
+    return rows  # type: ignore[return-value]
+
+
+# ---------------------------------------------------------------------------------------------------- state
+STATE_FIELDS = _table("""
+time                           s      trip time t
+position                       m      distance s driven along the road
+speed                          m/s    vehicle speed v >= 0
+acceleration                   m/s^2  longitudinal acceleration of the last substep
+log_rows                       -      truth-log rows written
+gear                           -      engaged gear G (0: neutral)
+clutch_mode                    -      clutch: 0 open, 1 slipping, 2 locked
+engine_speed                   rad/s  engine / motor speed omega_E
+slip_time                      s      time the clutch has been slipping
+last_shift_time                s      time of the last gear change
+engine_torque                  N m    engine / motor torque T_E
+clutch_torque                  N m    clutch torque T_C
+brake_pressure_front           Pa     front brake line pressure
+brake_pressure_rear            Pa     rear brake line pressure
+state_of_charge                -      battery state of charge (BEV)
+side_slip_angle                rad    side-slip angle beta
+yaw_rate                       rad/s  yaw rate r
+wheel_steer_angle              rad    front wheel steer angle delta
+lateral_offset                 m      lateral offset e_y to the road centre line
+heading_error                  rad    heading error e_psi to the road
+lateral_acceleration           m/s^2  lateral acceleration a_y
+lateral_acceleration_peak      m/s^2  largest |a_y| so far (signed)
+lateral_warning_count          -      substeps with |a_y| above the single-track validity limit
+mass                           kg     vehicle mass m_V (incl. payload)
+drag_area_factor               -      drag-area factor (roof box, windows, sunroof)
+windows_open                   -      windows open (0/1)
+sunroof_open                   -      sunroof open (0/1)
+gust_speed                     m/s    wind gust speed deviation
+wind_direction_deviation       rad    wind direction deviation
+oil_temperature                K      gearbox oil temperature
+brake_disc_temperature         K      brake disc temperature
+pad_friction_walk              -      random walk of the brake pad friction coefficient
+payload_stop_index             -      next stop where the payload may change
+road_index                     -      road segment at the position (search start)
+stop_index                     -      next stop line of the built-in driver
+dwelling                       -      driver halted at a stop (0/1)
+dwell_left                     s      time left at the stop
+driver_integral                m/s^2  integral term of the driver's speed control
+driver_speed_variation         m/s    driver's natural speed variation (Ornstein-Uhlenbeck)
+driver_speed_variation_smooth  m/s    the speed variation low-passed (4 s)
+driver_force                   N      driver's wheel-force demand after the pedal lag
+source_energy                  J      fuel or battery energy used
+shaft_work                     J      shaft work T_E omega_E
+gearbox_loss                   J      gearbox dissipation
+differential_loss              J      differential dissipation
+clutch_loss                    J      clutch dissipation
+brake_loss                     J      brake dissipation (incl. hold force)
+rolling_loss                   J      rolling-resistance work
+aero_loss                      J      aerodynamic drag work
+cornering_loss                 J      cornering and toe-in resistance work
+climbing_work                  J      climbing work
+payload_potential_energy       J      potential energy of payload changes
+mass_ramp_applied              kg     mass the mass_ramp schedule has added so far
+""")
+"""(name, unit, meaning) of every state field (float64), then ``random_state`` (uint64, the splitmix64 state)."""
+
+STATE = np.dtype([(name, np.float64) for name, _, _ in STATE_FIELDS] + [("random_state", np.uint64)])
+
+# ---------------------------------------------------------------------------------------------------- parameters
+PARAM_FIELDS = _table("""
+dt                              s            physics step
+is_bev                          -            1: battery-electric, 0: combustion engine
+driven_axle                     -            0 rear, 1 front, 2 all
+n_gears                         -            number of gears
+mass_nominal                    kg           vehicle mass without payload m_V,0 (ramped by mass_ramp)
+wheelbase                       m            wheelbase l
+cg_to_front                     m            centre of gravity to front axle l_12
+cg_to_rear                      m            centre of gravity to rear axle l_34
+yaw_inertia                     kg m^2       yaw inertia
+track_front                     m            front track width
+track_rear                      m            rear track width
+pitch_gradient                  rad/(m/s^2)  body pitch per longitudinal acceleration
+roll_gradient                   rad/(m/s^2)  body roll per lateral acceleration
+wheel_radius                    m            dynamic wheel radius r_W
+wheel_inertia_4                 kg m^2       inertia of the four wheels 4 I_W
+rolling_f0                      -            rolling resistance f_r0
+rolling_f1                      s/m          rolling resistance f_r1
+rolling_f4                      s^4/m^4      rolling resistance f_r4
+cornering_stiffness_front       N/rad        front axle cornering stiffness c_12
+cornering_stiffness_rear        N/rad        rear axle cornering stiffness c_34
+longitudinal_stiffness          N            tyre longitudinal slip stiffness c_xW
+toe_in                          rad          toe-in angle delta_toe
+drag_coefficient                -            drag coefficient c_w (ramped by drag_area_ramp)
+frontal_area                    m^2          frontal area A_V
+yaw_drag_factor                 -            drag increase with sin^2 of the yaw angle
+final_drive                     -            final drive ratio i_D
+differential_inertia            kg m^2       differential inertia I_D
+clutch_inertia                  kg m^2       clutch inertia I_C
+source_inertia                  kg m^2       engine / motor inertia I_E
+idle_speed                      rad/s        engine idle speed
+max_engine_speed                rad/s        engine / motor speed limit
+max_torque                      N m          largest source torque
+max_power                       W            motor power limit (BEV)
+regen_torque_limit              N m          regeneration torque limit (BEV)
+regen_power_limit               W            regeneration power limit (BEV)
+upshift_speed_low               rad/s        upshift engine speed at zero load
+upshift_speed_high              rad/s        upshift engine speed at full load
+downshift_speed_low             rad/s        downshift engine speed at zero load
+downshift_speed_high            rad/s        downshift engine speed at full load
+shift_interval                  s            shortest time between shifts
+sync_time_constant              s            engine speed governor time constant while slipping
+max_slip_time                   s            clutch locks after slipping this long
+launch_speed                    rad/s        engine speed during launch
+lock_slip_speed                 rad/s        clutch locks below this slip speed
+oil_warm_temperature            K            warm gearbox oil temperature
+oil_cold_loss_factor            -            loss factor phi of cold oil
+oil_time_constant               s            oil warm-up time constant
+battery_capacity                J            battery capacity
+battery_open_circuit_voltage    V            battery open-circuit voltage
+battery_resistance              ohm          battery internal resistance
+auxiliary_power                 W            auxiliary power (BEV)
+brake_area_front                m^2          front brake piston area
+brake_area_rear                 m^2          rear brake piston area
+brake_radius_front              m            front brake effective radius
+brake_radius_rear               m            rear brake effective radius
+pad_friction                    -            nominal pad friction coefficient
+brake_front_share               -            front share of the brake force
+brake_pressure_max              Pa           largest brake line pressure
+disc_heat_capacity              J/K          brake disc heat capacity
+disc_cooling                    W/K          brake disc cooling at standstill
+disc_cooling_speed              W s/(K m)    brake disc cooling per speed
+brake_time_constant             s            brake pressure lag
+ambient_temperature             K            ambient temperature T_a
+ambient_pressure                Pa           ambient pressure p_a at zero elevation
+wind_on                         -            effect 'wind' (0/1)
+wind_mean_speed                 m/s          mean wind speed (ramped by wind_ramp)
+wind_direction                  rad          wind direction (ramped by wind_ramp)
+wind_gust_std                   m/s          gust speed standard deviation
+wind_gust_time_constant         s            gust time constant
+wind_direction_std              rad          wind direction standard deviation
+payload_on                      -            effect 'payload' (0/1)
+payload_change_std              kg           payload change at a stop (std)
+payload_min                     kg           smallest payload
+payload_max                     kg           largest payload
+tire_warmup_on                  -            effect 'tire_warmup' (0/1)
+tire_cold_factor                -            rolling-resistance factor of cold tyres
+tire_warmup_distance            m            tyre warm-up distance constant
+winter_tires_on                 -            effect 'winter_tires' (0/1)
+winter_rolling_factor           -            winter-tyre rolling-resistance factor
+winter_cornering_factor         -            winter-tyre cornering-stiffness factor
+drag_area_on                    -            effect 'drag_area' (0/1)
+drag_roof_box                   -            drag-area increase of the roof box
+drag_windows                    -            drag-area increase with open windows
+drag_sunroof                    -            drag-area increase with the sunroof open
+drag_toggle_rate                1/h          window / sunroof toggles per hour
+road_bank_on                    -            effect 'road_bank' (0/1)
+bank_scale                      -            factor on the measured bank
+superelevation_gain             rad m        design bank per curvature
+bank_max                        rad          largest design bank
+wet_road_on                     -            effect 'wet_road' (0/1)
+wet_rolling_factor              -            wet-road rolling-resistance factor
+wet_f1                          s/m          wet-road addition to f_r1
+oil_temperature_on              -            effect 'oil_temperature' (0/1)
+oil_start_temperature           K            oil temperature at the start
+pad_drift_on                    -            effect 'brake_pad_drift' (0/1)
+pad_temperature_coefficient     1/K          pad friction change per disc temperature
+pad_reference_temperature       K            disc temperature of the nominal pad friction
+pad_random_walk_std             1/s^0.5      pad friction random walk
+barometric_on                   -            effect 'barometric' (0/1)
+barometric_scale_height         m            barometric scale height
+auxiliary_load_on               -            effect 'auxiliary_load' (0/1)
+auxiliary_load                  W            additional auxiliary power
+driver_lateral_acceleration     m/s^2        driver's lateral acceleration limit
+driver_max_acceleration         m/s^2        driver's largest acceleration
+driver_max_deceleration         m/s^2        driver's largest deceleration
+driver_planning_deceleration    m/s^2        driver's planning deceleration
+driver_speed_time_constant      s            driver's speed time constant
+driver_integral_gain            1/s          driver's integral gain
+driver_variation_std            m/s          driver's speed variation std
+driver_variation_time_constant  s            driver's speed variation time constant
+steering_lookahead_time         s            steering look-ahead time
+steering_preview_time           s            steering curvature preview time
+dwell_min                       s            shortest stop
+dwell_max                       s            longest stop
+driver_speed_margin             m/s          driver's margin below the plan
+understeer_gradient             s^2/m        understeer gradient EG of the steering law
+driver_air_density              kg/m^3       air density the driver assumes
+pedal_time_constant             s            pedal / brake actuation time constant
+steer_max                       rad          largest wheel steer angle
+time_end                        s            run limit: trip time
+distance_end                    m            run limit: position
+road_length                     m            road length
+cycle_mode                      -            1: follow the drive cycle, 0: the road
+schedules_on                    -            1: a scheduled effect (ramp) is enabled
+base_mass_nominal               kg           unscheduled nominal mass
+base_drag_coefficient           -            unscheduled drag coefficient
+base_rolling_f0                 -            unscheduled f_r0
+base_rolling_f1                 s/m          unscheduled f_r1
+base_rolling_f4                 s^4/m^4      unscheduled f_r4
+""")
+"""(name, unit, meaning) of every scalar parameter (float64)."""
+
+RAMP = np.dtype([("on", np.float64), ("onset", np.float64), ("length", np.float64), ("by_distance", np.float64),
+                 ("start", np.float64), ("final", np.float64)])
+"""A scheduled quantity q = start + (final - start) clip((x - onset) / length, 0, 1), x = time [s] or position [m]
+(``by_distance``); length 0: a step at the onset."""
+
+RAMPS = ("ramp_wind_speed", "ramp_wind_direction", "ramp_mass", "ramp_drag", "ramp_rolling")
+
+PARAMS = np.dtype([(name, np.float64) for name, _, _ in PARAM_FIELDS]
+                  + [("gear_ratio", np.float64, (MAX_GEARS,)), ("gear_inertia", np.float64, (MAX_GEARS,))]
+                  + [(name, RAMP) for name in RAMPS])
+"""Scalar parameters, gear ratios i_G(G) [-] and gearbox inertias I_G(G) [kg m^2] of gears 1..12, ramps."""
+
+# ---------------------------------------------------------------------------------------------------- command
+COMMAND_FIELDS = _table("""
+traction  N    traction force (signed wheel force in mode 2)
+regen     N    regenerative braking force
+friction  N    friction brake force
+steer     rad  front wheel angle (NaN: built-in steering law)
+gear      -    gear request (-1: shift strategy)
+mode      -    0 explicit forces, 1 built-in driver, 2 signed wheel force
+""")
+
+COMMAND = np.dtype([(name, np.float64) for name, _, _ in COMMAND_FIELDS])
+COMMAND_FORCES, COMMAND_DRIVER, COMMAND_WHEEL_FORCE = 0.0, 1.0, 2.0
+"""Values of ``command.mode``."""
+
+VEHICLE = np.dtype([("state", STATE), ("params", PARAMS), ("command", COMMAND), ("road_points", np.int64),
+                    ("stop_count", np.int64)])
+"""One vehicle of the core: state, parameters, held command, and the number of road points / stop lines of its
+route (the used part of a fleet's padded road and stop arrays)."""
+
+
+class Tables(NamedTuple):
+    """The drive-train tables of a vehicle spec: ``values`` (float64, all curves and maps back to back) and
+    ``descriptors`` (int64 (N_TABLES, 5): per table offset_x, n_x, offset_y, n_y, offset_values; numerics.py)."""
+
+    values: np.ndarray
+    descriptors: np.ndarray
+
+
+class Route(NamedTuple):
+    """What one vehicle drives on: ``road`` (N_ROAD rows over the distance grid, ``R_*``), ``stops`` (stop-line
+    positions [m], increasing) and ``cycle`` (2 rows: time [s], speed [m/s] of a drive cycle to follow)."""
+
+    road: np.ndarray
+    stops: np.ndarray
+    cycle: np.ndarray
+
+
+def field_index(*path: str) -> int:
+    """Position of a float64 field of VEHICLE in ``vehicle_array.view(np.float64)`` (e.g. ``("state", "speed")``):
+    the Python side reads single fields through that view (a structured-field read costs 4x more)."""
+    dtype, offset = VEHICLE, 0
+    for name in path:
+        if dtype.fields is None or name not in dtype.fields:
+            raise KeyError(f"{'.'.join(path)}: no such field of the vehicle record")
+        sub, off = dtype.fields[name][:2]
+        dtype, offset = sub, offset + off
+    if dtype != np.float64:
+        raise KeyError(f"{'.'.join(path)}: not a float64 field")
+    return offset // 8
+
 
 # ---------------------------------------------------------------------------------------------------- log columns
 LOG = [
@@ -315,15 +352,6 @@ L_FCORNER = 53
 L_DRAGF = 54
 L_DISC_T = 55
 
-# ---------------------------------------------------------------------------------------------------- command
-CMD = ["TRACTION", "REGEN", "FRICTION", "STEER", "GEAR_REQ", "USE_DRIVER"]
-C_TRACTION = 0
-C_REGEN = 1
-C_FRICTION = 2
-C_STEER = 3
-C_GEAR_REQ = 4
-C_USE_DRIVER = 5
-
 # ---------------------------------------------------------------------------------------------------- road rows
 ROAD = ["S", "GRADE", "CURV", "BANK", "VLIM", "HEAD", "ELEV", "VPLAN", "CRUISE"]
 R_S = 0
@@ -346,30 +374,23 @@ T_DIFFLOSS = 4
 T_STEER = 5
 T_GBLOSS = 6
 
-N_STATE = len(STATE)
-N_PARAMS = len(PARAMS)
 N_LOG = len(LOG)
-N_CMD = len(CMD)
 N_ROAD = len(ROAD)
-N_TABLES = len(TABLES) - 1 + 12  # GBLOSS for up to 12 gears
+N_TABLES = len(TABLES) - 1 + MAX_GEARS  # GBLOSS for up to MAX_GEARS gears
 
 MODE_OPEN = 0
 MODE_SLIP = 1
 MODE_LOCKED = 2
 
-# gear ratios i_G(G) and gearbox inertias I_G(G) follow the named parameters in P
-MAX_GEARS = 12
-P_RATIO0 = N_PARAMS
-P_IGEAR0 = N_PARAMS + MAX_GEARS
-N_P_TOTAL = N_PARAMS + 2 * MAX_GEARS
-
 
 def _check_layout() -> None:
     """Every name list entry has its constant at its position (an edit of one without the other fails here)."""
-    for prefix, names in (("S_", STATE), ("P_", PARAMS), ("L_", LOG), ("C_", CMD), ("R_", ROAD), ("T_", TABLES)):
+    for prefix, names in (("L_", LOG), ("R_", ROAD), ("T_", TABLES)):
         for i, name in enumerate(names):
             if globals().get(prefix + name) != i:
                 raise RuntimeError(f"layout: {prefix + name} must be {i} (position in the name list)")
+    if VEHICLE.itemsize % 8:
+        raise RuntimeError("layout: VEHICLE must be a whole number of float64 words")
 
 
 _check_layout()

@@ -1,9 +1,10 @@
 """Jitted numerical helpers of the simulator core: a small seeded random generator and table interpolation.
 
-The generator is splitmix64 on a per-simulator ``uint64[1]`` state array, so several simulators in one process
-never share random state (numba's ``np.random`` is process-global). Tables live in one flat float64 array
-``tabs``; row k of the int64 descriptor array ``ti`` is (offset_x, n_x, offset_y, n_y, offset_values) where for a
-1-D curve offset_y points to the n_x values and for a 2-D map values[i][j] = f(x[i], y[j]) are stored row-major.
+The generator is splitmix64 on the ``random_state`` field (uint64) of a vehicle's state record, so several
+simulators in one process never share random state (numba's ``np.random`` is process-global). Tables live in one
+flat float64 array ``tables.values``; row k of the int64 descriptor array ``tables.descriptors`` is (offset_x, n_x,
+offset_y, n_y, offset_values) where for a 1-D curve offset_y points to the n_x values and for a 2-D map
+values[i][j] = f(x[i], y[j]) are stored row-major.
 """
 
 from __future__ import annotations
@@ -23,28 +24,28 @@ _S11 = np.uint64(11)
 
 
 @jit(inline=True)
-def rng_next(rng):
-    """Next 64-bit output of splitmix64; ``rng`` is a uint64[1] state array."""
-    rng[0] += _GOLDEN
-    z = rng[0]
+def rng_next(x):
+    """Next 64-bit output of splitmix64 on the state record's ``random_state``."""
+    x.random_state += _GOLDEN
+    z = x.random_state
     z = (z ^ (z >> _S30)) * _M1
     z = (z ^ (z >> _S27)) * _M2
     return z ^ (z >> _S31)
 
 
 @jit(inline=True)
-def rng_uniform(rng):
+def rng_uniform(x):
     """Uniform in [0, 1)."""
-    return float(rng_next(rng) >> _S11) * (1.0 / 9007199254740992.0)
+    return float(rng_next(x) >> _S11) * (1.0 / 9007199254740992.0)
 
 
 @jit(inline=True)
-def rng_normal(rng):
+def rng_normal(x):
     """Standard normal (Box-Muller)."""
-    u1 = rng_uniform(rng)
+    u1 = rng_uniform(x)
     if u1 < 1e-300:
         u1 = 1e-300
-    u2 = rng_uniform(rng)
+    u2 = rng_uniform(x)
     return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
 
 
@@ -67,8 +68,9 @@ def segment(tabs, off, n, x):
 
 
 @jit(inline=True)
-def table1(tabs, ti, k, x):
+def table1(tables, k, x):
     """Curve k at x (linear, clamped)."""
+    tabs, ti = tables
     ox = ti[k, 0]
     n = ti[k, 1]
     oy = ti[k, 2]
@@ -77,18 +79,9 @@ def table1(tabs, ti, k, x):
 
 
 @jit(inline=True)
-def table1_inverse(tabs, ti, k, y):
-    """x with curve_k(x) = y for a strictly increasing curve (linear, clamped)."""
-    ox = ti[k, 0]
-    n = ti[k, 1]
-    oy = ti[k, 2]
-    i, w = segment(tabs, oy, n, y)
-    return tabs[ox + i] * (1.0 - w) + tabs[ox + i + 1] * w
-
-
-@jit(inline=True)
-def table2(tabs, ti, k, x, y):
+def table2(tables, k, x, y):
     """Map k at (x, y) (bilinear, clamped)."""
+    tabs, ti = tables
     ox = ti[k, 0]
     nx = ti[k, 1]
     oy = ti[k, 2]
@@ -103,12 +96,13 @@ def table2(tabs, ti, k, x, y):
 
 
 @jit(inline=True)
-def invert_through_map(tabs, ti, k, ratio, scale, speed, target):
+def invert_through_map(tables, k, ratio, scale, speed, target):
     """Solve T*ratio - scale*f_k(T, speed) = target for T, f_k piecewise linear in T (x axis) at fixed speed.
 
     Exact for the bilinear map (clamped beyond the torque axis, where the left side has slope ``ratio``);
     requires ratio > scale * df/dT (true for any physical loss map).
     """
+    tabs, ti = tables
     ox = ti[k, 0]
     nx = ti[k, 1]
     oy = ti[k, 2]

@@ -66,66 +66,17 @@ class SensorModel:
                                     f"{1.0 / dt:g} Hz")
         self.decimation = int(round(step))
         self.names = [n for n, c in sensors.channels.items() if c.enabled]
-        for n in self.names:
-            if n not in SUPPORTED_CHANNELS:
-                raise SensorConfigError(f"sensors.channels.{n}: the simulator does not produce this channel; "
-                                        f"supported: {sorted(SUPPORTED_CHANNELS)}")
-            if n in ("battery_voltage", "battery_current") and vehicle.drivetrain.kind != "bev":
-                raise SensorConfigError(f"sensors.channels.{n}: only a 'bev' drive-train has a traction battery")
-        nch = len(self.names)
+        self._check_channels(vehicle)
         cs = [sensors.channels[n] for n in self.names]
         self.noise = np.array([c.noise_std for c in cs])
         self.resolution = np.array([c.resolution for c in cs])
-        self.bias = np.array([c.bias for c in cs])
-        latency = np.array([c.latency for c in cs])
-        if effects.enabled("sensor_latency"):
-            latency = latency + float(effects.params("sensor_latency")["extra"])
-        self.delay = np.round(latency / dt).astype(np.int64)
-        if effects.enabled("sensor_bias"):
-            g = np.random.default_rng([self.seed, 4])
-            ref = np.array([BIAS_REFERENCE.get(n, 0.0) for n in self.names])
-            self.bias = self.bias + g.standard_normal(nch) * ref * float(effects.params("sensor_bias")["scale"])
-        self.gain_error = sensors.drive_torque_gain_error
-        self.offset = sensors.drive_torque_offset
-        if effects.enabled("torque_model_error"):
-            p = effects.params("torque_model_error")
-            self.gain_error, self.offset = float(p["gain_error"]), float(p["offset"])
-
-        def group(which: str, explicit: str = "", effect: str = "") -> np.ndarray:
-            if explicit:
-                wanted = [w.strip() for w in explicit.split("+") if w.strip()]
-                unknown = [w for w in wanted if w not in self.names]
-                if unknown or not wanted:
-                    raise SensorConfigError(f"effect {effect!r} parameter 'channel': unknown or disabled channel(s) "
-                                            f"{unknown or [explicit]}; enabled channels: {self.names}")
-                return np.array([n in wanted for n in self.names], dtype=bool)
-            sel: Sequence[str]
-            if which == "inputs":
-                sel = INPUT_CHANNELS
-            elif which == "outputs":
-                sel = OUTPUT_CHANNELS
-            else:
-                sel = [n for n in self.names if n not in DISCRETE_CHANNELS]
-            return np.array([n in sel for n in self.names], dtype=bool)
-
+        self._errors(effects, np.array([c.bias for c in cs]), np.array([c.latency for c in cs]))
         self.outliers = effects.params("sensor_outliers") if effects.enabled("sensor_outliers") else None
         if self.outliers is not None:
-            self.outlier_on = group(str(self.outliers["channels"]), str(self.outliers.get("channel", "")),
-                                    "sensor_outliers")
-            self.outlier_size = np.array([c.outlier_scale for c in cs]) * float(self.outliers["magnitude"])
-            burst = float(self.outliers.get("burst_length", 1.0))
-            if burst != round(burst):
-                raise SensorConfigError(f"effect 'sensor_outliers' parameter 'burst_length': must be a whole number "
-                                        f"of samples, got {burst!r}")
-            self.burst_length = int(burst)
+            self._outlier_setup(self.outliers, np.array([c.outlier_scale for c in cs]))
         self.dropouts = effects.params("sensor_dropouts") if effects.enabled("sensor_dropouts") else None
         if self.dropouts is not None:
-            self.dropout_on = group(str(self.dropouts["channels"]), str(self.dropouts.get("channel", "")),
-                                    "sensor_dropouts")
-            self.missing_mode = self.dropouts["mode"] == "missing"
-            if self.missing_mode and self.dropouts.get("channel", ""):
-                raise SensorConfigError("effect 'sensor_dropouts': parameter 'channel' needs mode 'nan' (mode "
-                                        "'missing' removes whole samples of every channel)")
+            self._dropout_setup(self.dropouts)
         self._cache: OrderedDict[int, tuple[np.ndarray, np.ndarray | None, np.ndarray | None]] = OrderedDict()
         st = vehicle.steering
         self._steer_x = np.asarray(st.wheel_angle, float)
@@ -133,6 +84,69 @@ class SensorModel:
         # log column each channel reads (for the vectorised single-sample path)
         special = {"vehicle_speed": L_V, "steering_wheel_angle": L_DELTA, "drive_torque": L_TE, "gear": L_GEAR}
         self._col = np.array([_SIMPLE.get(n, special.get(n, 0)) for n in self.names], dtype=np.int64)
+
+    def _check_channels(self, vehicle: VehicleSpec) -> None:
+        """Every enabled channel is one the simulator produces (battery channels need a BEV)."""
+        for n in self.names:
+            if n not in SUPPORTED_CHANNELS:
+                raise SensorConfigError(f"sensors.channels.{n}: the simulator does not produce this channel; "
+                                        f"supported: {sorted(SUPPORTED_CHANNELS)}")
+            if n in ("battery_voltage", "battery_current") and vehicle.drivetrain.kind != "bev":
+                raise SensorConfigError(f"sensors.channels.{n}: only a 'bev' drive-train has a traction battery")
+
+    def _errors(self, effects: EffectsConfig, bias: np.ndarray, latency: np.ndarray) -> None:
+        """Biases (plus a seeded random bias per channel with 'sensor_bias'), latencies in substeps (plus the
+        extra of 'sensor_latency') and the drive-torque gain error / offset ('torque_model_error' replaces
+        them)."""
+        if effects.enabled("sensor_latency"):
+            latency = latency + float(effects.params("sensor_latency")["extra"])
+        self.delay = np.round(latency / self.dt).astype(np.int64)
+        self.bias = bias
+        if effects.enabled("sensor_bias"):
+            g = np.random.default_rng([self.seed, 4])
+            ref = np.array([BIAS_REFERENCE.get(n, 0.0) for n in self.names])
+            self.bias = self.bias + g.standard_normal(len(self.names)) * ref * float(
+                effects.params("sensor_bias")["scale"])
+        self.gain_error = self.spec.drive_torque_gain_error
+        self.offset = self.spec.drive_torque_offset
+        if effects.enabled("torque_model_error"):
+            p = effects.params("torque_model_error")
+            self.gain_error, self.offset = float(p["gain_error"]), float(p["offset"])
+
+    def _group(self, which: str, explicit: str = "", effect: str = "") -> np.ndarray:
+        """Which enabled channels an effect acts on: the explicit '+'-separated list, else 'inputs', 'outputs' or
+        all continuous channels."""
+        if explicit:
+            wanted = [w.strip() for w in explicit.split("+") if w.strip()]
+            unknown = [w for w in wanted if w not in self.names]
+            if unknown or not wanted:
+                raise SensorConfigError(f"effect {effect!r} parameter 'channel': unknown or disabled channel(s) "
+                                        f"{unknown or [explicit]}; enabled channels: {self.names}")
+            return np.array([n in wanted for n in self.names], dtype=bool)
+        sel: Sequence[str]
+        if which == "inputs":
+            sel = INPUT_CHANNELS
+        elif which == "outputs":
+            sel = OUTPUT_CHANNELS
+        else:
+            sel = [n for n in self.names if n not in DISCRETE_CHANNELS]
+        return np.array([n in sel for n in self.names], dtype=bool)
+
+    def _outlier_setup(self, p: dict, scale: np.ndarray) -> None:
+        self.outlier_on = self._group(str(p["channels"]), str(p.get("channel", "")), "sensor_outliers")
+        self.outlier_size = scale * float(p["magnitude"])
+        burst = float(p.get("burst_length", 1.0))
+        if burst != round(burst):
+            raise SensorConfigError(f"effect 'sensor_outliers' parameter 'burst_length': must be a whole number "
+                                    f"of samples, got {burst!r}")
+        self.burst_length = int(burst)
+
+    def _dropout_setup(self, p: dict) -> None:
+        self.dropout_on = self._group(str(p["channels"]), str(p.get("channel", "")), "sensor_dropouts")
+        self.missing_mode = p["mode"] == "missing"
+        if self.missing_mode and p.get("channel", ""):
+            raise SensorConfigError("effect 'sensor_dropouts': parameter 'channel' needs mode 'nan' (mode "
+                                    "'missing' removes whole samples of every channel)")
 
     @property
     def units(self) -> dict[str, str]:
@@ -178,42 +192,16 @@ class SensorModel:
         return [(c * CHUNK + int(st), float(sg), m) for st, sg, m in zip(starts, signs, mags)]
 
     def _chunk(self, c: int) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """(additive errors (channels, CHUNK), NaN mask or None, missing-sample mask or None) of chunk c (cached)."""
         hit = self._cache.get(c)
         if hit is not None:
             return hit
-        nch = len(self.names)
-        add = np.empty((nch, CHUNK))
-        for j in range(nch):
-            g = np.random.default_rng([self.seed, 1, j, c])
-            add[j] = self.bias[j] + self.noise[j] * g.standard_normal(CHUNK) if self.noise[j] > 0 else self.bias[j]
-            if self.outliers is not None and self.outlier_on[j] and self.burst_length > 1:
-                for cc in (c - 1, c):
-                    if cc < 0:
-                        continue
-                    for start, sign, mags in self._outlier_bursts(j, cc):
-                        a = max(start - c * CHUNK, 0)
-                        b = min(start + mags.size - c * CHUNK, CHUNK)
-                        if b > a:
-                            off = a - (start - c * CHUNK)
-                            add[j, a:b] += sign * mags[off:off + b - a]
-            elif self.outliers is not None and self.outlier_on[j]:
-                go = np.random.default_rng([self.seed, 2, j, c])
-                u = go.random(CHUNK)
-                idx = np.flatnonzero(u < float(self.outliers["rate"]))
-                if idx.size:
-                    signs = np.where(go.random(idx.size) < 0.5, -1.0, 1.0)
-                    add[j, idx] += signs * self.outlier_size[j] * (1.0 + np.abs(go.standard_normal(idx.size)))
+        add = np.empty((len(self.names), CHUNK))
+        for j in range(len(self.names)):
+            self._channel_errors(j, c, add[j])
         nan = missing = None
         if self.dropouts is not None:
-            drop = np.zeros(CHUNK, dtype=bool)
-            for cc in (c - 1, c):
-                if cc < 0:
-                    continue
-                for start, length in self._dropout_runs(cc):
-                    a = max(start - c * CHUNK, 0)
-                    b = min(start + length - c * CHUNK, CHUNK)
-                    if b > a:
-                        drop[a:b] = True
+            drop = self._dropped(c)
             if self.missing_mode:
                 missing = drop
             else:
@@ -223,6 +211,40 @@ class SensorModel:
         while len(self._cache) > 4:
             self._cache.popitem(last=False)
         return out
+
+    def _channel_errors(self, j: int, c: int, add: np.ndarray) -> None:
+        """Bias, seeded noise and outliers (single samples, or bursts that may start in the chunk before) of
+        channel j in chunk c -> add."""
+        g = np.random.default_rng([self.seed, 1, j, c])
+        add[:] = self.bias[j] + self.noise[j] * g.standard_normal(CHUNK) if self.noise[j] > 0 else self.bias[j]
+        if self.outliers is None or not self.outlier_on[j]:
+            return
+        if self.burst_length > 1:
+            for cc in (c - 1, c):
+                for start, sign, mags in (self._outlier_bursts(j, cc) if cc >= 0 else ()):
+                    a = max(start - c * CHUNK, 0)
+                    b = min(start + mags.size - c * CHUNK, CHUNK)
+                    if b > a:
+                        off = a - (start - c * CHUNK)
+                        add[a:b] += sign * mags[off:off + b - a]
+            return
+        go = np.random.default_rng([self.seed, 2, j, c])
+        u = go.random(CHUNK)
+        idx = np.flatnonzero(u < float(self.outliers["rate"]))
+        if idx.size:
+            signs = np.where(go.random(idx.size) < 0.5, -1.0, 1.0)
+            add[idx] += signs * self.outlier_size[j] * (1.0 + np.abs(go.standard_normal(idx.size)))
+
+    def _dropped(self, c: int) -> np.ndarray:
+        """Samples of chunk c inside a dropout (events that start in this chunk or the one before)."""
+        drop = np.zeros(CHUNK, dtype=bool)
+        for cc in (c - 1, c):
+            for start, length in (self._dropout_runs(cc) if cc >= 0 else ()):
+                a = max(start - c * CHUNK, 0)
+                b = min(start + length - c * CHUNK, CHUNK)
+                if b > a:
+                    drop[a:b] = True
+        return drop
 
     def _quantise(self, values: np.ndarray, j: int) -> np.ndarray:
         res = self.resolution[j]

@@ -30,31 +30,32 @@ from .drivetrain import regen_capacity as _regen_capacity
 from .drivetrain import oil_loss_factor, speed_ratio
 from .effects import EffectsConfig
 from .layout import (
-    C_FRICTION, C_GEAR_REQ, C_REGEN, C_STEER, C_TRACTION, C_USE_DRIVER, L_A, L_ACC_X_SENS, L_ACC_Y_SENS, L_AY,
-    L_BANK, L_BETA, L_CLUTCH, L_CSF, L_CSR, L_CURV, L_CXA, L_DELTA, L_DISC_T, L_DRAGF, L_ELEV, L_ESRC, L_FAERO,
-    L_FBRAKE, L_FCLIMB, L_FCORNER, L_FR, L_FR0, L_FR1, L_FR4, L_FROLL, L_FX, L_GEAR, L_GRADE, L_HEAD, L_IBAT,
-    L_LOSSF, L_MASS, L_MU, L_OIL, L_PAMB, L_PATHCURV, L_PBF, L_PBR, L_POS, L_PSRC, L_RHO, L_RIM, L_SOC, L_T, L_TAMB,
-    L_TE, L_V, L_VBAT, L_WE, L_WFL, L_WFR, L_WIND_A, L_WIND_S, L_WRL, L_WRR, L_YAW, MODE_LOCKED, MODE_OPEN,
-    MODE_SLIP, N_CMD, N_LOG, N_ROAD, N_STATE, P_AREA, P_AUX_EXTRA, P_AUX_ON, P_BANK_GAIN, P_BANK_MAX, P_BANK_ON,
-    P_BANK_SCALE, P_BARO_H, P_BARO_ON, P_CF, P_CR, P_CW, P_CYCLE_MODE, P_DN_LO, P_DRAG_ON, P_DRAG_RATE,
-    P_DRAG_ROOFBOX, P_DRAG_SUN, P_DRAG_WIN, P_FR0, P_FR1, P_FR4, P_IDLE, P_KIND_BEV, P_L, P_LF, P_LR, P_MU0,
-    P_N_GEARS, P_OIL_ON, P_OIL_START, P_OIL_WARM, P_PAD_ON, P_PAD_RW_STD, P_PAD_TCOEF, P_PAD_TREF, P_PAYLOAD_MAX,
-    P_PAYLOAD_MIN, P_PAYLOAD_ON, P_PAYLOAD_STD, P_P_AMB, P_ROAD_LEN, P_RW, P_S_END, P_T_AMB, P_T_END, P_WARM_DIST,
-    P_WARM_FACTOR, P_WARM_ON, P_WET_F1, P_WET_FACTOR, P_WET_ON, P_WIND_DIR, P_WIND_DIR_STD, P_WIND_GUST_STD,
-    P_WIND_GUST_TAU, P_WIND_MEAN, P_WIND_ON, P_WINTER_CS, P_WINTER_ON, P_WINTER_RR, R_BANK, R_CRUISE, R_CURV,
-    R_ELEV, R_GRADE, R_HEAD, R_S, R_VLIM, R_VPLAN, S_A, S_AY, S_AY_MAX, S_AY_WARN_N, S_DISC_T, S_DRAGF, S_D_AERO,
-    S_D_BRAKE, S_D_CLUTCH, S_D_CORNER, S_D_DIFF, S_D_GEARBOX, S_D_ROLL, S_E_PAYLOAD_PE, S_E_SOURCE, S_GEAR,
-    S_LAST_SHIFT, S_MASS, S_MODE, S_NLOG, S_OIL_T, S_OMEGA_E, S_POS, S_RIDX, S_SOC, S_T, S_TE, S_V, S_W_CLIMB,
-    S_W_SHAFT,
+    L_A, L_ACC_X_SENS, L_ACC_Y_SENS, L_AY, L_BANK, L_BETA, L_CLUTCH, L_CSF, L_CSR, L_CURV, L_CXA, L_DELTA, L_DISC_T,
+    L_DRAGF, L_ELEV, L_ESRC, L_FAERO, L_FBRAKE, L_FCLIMB, L_FCORNER, L_FR, L_FR0, L_FR1, L_FR4, L_FROLL, L_FX, L_GEAR,
+    L_GRADE, L_HEAD, L_IBAT, L_LOSSF, L_MASS, L_MU, L_OIL, L_PAMB, L_PATHCURV, L_PBF, L_PBR, L_POS, L_PSRC, L_RHO,
+    L_RIM, L_SOC, L_T, L_TAMB, L_TE, L_V, L_VBAT, L_WE, L_WFL, L_WFR, L_WIND_A, L_WIND_S, L_WRL, L_WRR, L_YAW,
+    MODE_LOCKED, MODE_OPEN, MODE_SLIP, N_LOG, N_ROAD, R_BANK, R_CRUISE, R_CURV, R_ELEV, R_GRADE, R_HEAD, R_S, R_VLIM,
+    R_VPLAN, VEHICLE, COMMAND_DRIVER, COMMAND_FORCES, COMMAND_WHEEL_FORCE, Tables, field_index,
 )
 from .numerics import road_value_at
 from .packing import pack_vehicle
 from roadload.presets import get_preset
-from .schedules import Schedules
+from .schedules import pack_schedules
 from .sensors import SensorModel
+from .state import VehicleParameters, VehicleState
 from .drivetrain import source_side_inertia, wheel_side_mass
 
 DT = 0.01  # s, physics step (100 Hz)
+
+# positions of the fields the step path reads and writes in the vehicle record's float view (Python reads a word of
+# a float64 view 4x faster than a structured field)
+_T, _POS, _V, _A, _NLOG, _GEAR, _MODE, _OMEGA, _TE, _AY, _AY_MAX, _AY_WARN, _E_SOURCE = (
+    field_index("state", name) for name in ("time", "position", "speed", "acceleration", "log_rows", "gear",
+                                            "clutch_mode", "engine_speed", "engine_torque", "lateral_acceleration",
+                                            "lateral_acceleration_peak", "lateral_warning_count", "source_energy"))
+_T_END, _S_END = field_index("params", "time_end"), field_index("params", "distance_end")
+_C_MODE, _C_TRACTION, _C_REGEN, _C_FRICTION, _C_STEER, _C_GEAR = (
+    field_index("command", name) for name in ("mode", "traction", "regen", "friction", "steer", "gear"))
 
 # truth channels of the Trip: catalogue name -> log column
 TRUTH_COLUMNS = {
@@ -191,30 +192,43 @@ class Simulator:
         self._check_seed(seed)
         self.seed = int(seed)
 
-        self.P, self.tabs, self.ti = pack_vehicle(self.vehicle, DT)
-        self._pack_effects()
-        self._P_packed = self.P.copy()  # vehicle + effects, the start of on_road's parameters
+        params, self._tables = pack_vehicle(self.vehicle, DT)
+        self._pack_effects(params)
+        self._params_packed = params  # vehicle + effects, the start of on_road's parameters
+        self._new_records()
         self._pack_road()
         self.reset(seed)
 
+    def _new_records(self) -> None:
+        """The vehicle record of the core (state, parameters, command; module layout.py) and its views."""
+        self._vehicle = np.zeros(1, VEHICLE)
+        self._vehicle["params"] = self._params_packed
+        self._words = self._vehicle.view(np.float64)  # the step path's fast field access (_T, _POS, ...)
+        self._x, self._p = self._vehicle[0]["state"], self._vehicle[0]["params"]
+        self.vehicle_state = VehicleState(self._vehicle)
+        """The live state of the vehicle (:class:`roadload.envs.VehicleState`, SI units)."""
+        self.parameters = VehicleParameters(self._vehicle)
+        """The packed parameters of the vehicle, effects and driver (:class:`roadload.envs.VehicleParameters`)."""
+
     def _pack_road(self) -> None:
-        """Schedules, driver and the road (or drive cycle) on top of the packed vehicle and effects in self.P."""
-        road = self.road
-        self._schedules = Schedules(self.effects, self.P)
+        """Schedules, driver and the road (or drive cycle) on top of the packed vehicle and effects; the result is the
+        parameter record every reset starts from."""
+        road, p = self.road, self._p
+        self._scheduled = pack_schedules(self.effects, p)
         rho_nom = float(air_density(self.effects.ambient_temperature, self.effects.ambient_pressure))
-        pack_driver(self.P, self.driver, self.vehicle.understeer_gradient(), rho_nom)
-        self.P[P_ROAD_LEN] = road.length
+        pack_driver(p, self.driver, self.vehicle.understeer_gradient(), rho_nom)
+        p["road_length"] = road.length
         self._road = self._build_road()
         self._stops = np.ascontiguousarray(np.sort(np.asarray(road.stops, dtype=float)))
         if self.cycle is not None:
-            self.P[P_CYCLE_MODE] = 1.0
+            p["cycle_mode"] = 1.0
             self._cycle = np.ascontiguousarray(np.vstack([self.cycle.time - self.cycle.time[0], self.cycle.speed]))
             self._stops = np.zeros(0)
         else:
             self._cycle = np.zeros((2, 2))
             self._cycle[0, 1] = 1.0
-        self._cmd = np.zeros(N_CMD)
         self._log = np.zeros((N_LOG, 0))  # column-major: one contiguous array per channel (allocated by reset)
+        self._params_start = p.copy()
         self._vplan_base = self._road[R_VPLAN].copy()
         self._stops_all = self._stops
 
@@ -231,7 +245,7 @@ class Simulator:
         self._check_seed(seed)
         new = copy.copy(self)
         new.road = road
-        new.P = self._P_packed.copy()
+        new._new_records()
         new._pack_road()
         new.reset(seed, initial_speed)
         return new
@@ -242,44 +256,41 @@ class Simulator:
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise SimulationError(f"seed: expected an integer >= 0, got {seed!r}")
 
-    def _pack_effects(self) -> None:
-        P, e = self.P, self.effects
-        P[P_T_AMB] = e.ambient_temperature
-        P[P_P_AMB] = e.ambient_pressure
+    def _pack_effects(self, params: np.ndarray) -> None:
+        """The effects' switches and parameters into the (0-d) parameter record."""
+        e = self.effects
+        values: dict[str, Any] = {"ambient_temperature": e.ambient_temperature, "ambient_pressure": e.ambient_pressure}
 
-        def on(name: str, flag: int) -> dict[str, Any]:
-            P[flag] = 1.0 if e.enabled(name) else 0.0
-            return e.params(name)
+        def on(name: str, flag: str, **fields: str) -> dict[str, Any]:
+            """Switch ``flag`` of effect ``name``; its parameters (keys) into the record fields (values)."""
+            values[flag] = 1.0 if e.enabled(name) else 0.0
+            p = e.params(name)
+            values.update({field: p[key] for key, field in fields.items()})
+            return p
 
-        p = on("wind", P_WIND_ON)
-        P[P_WIND_MEAN], P[P_WIND_DIR] = p["mean_speed"], p["direction"]
-        P[P_WIND_GUST_STD], P[P_WIND_GUST_TAU], P[P_WIND_DIR_STD] = (p["gust_std"], p["gust_time_constant"],
-                                                                     p["direction_std"])
-        p = on("payload", P_PAYLOAD_ON)
-        P[P_PAYLOAD_STD], P[P_PAYLOAD_MIN], P[P_PAYLOAD_MAX] = p["change_std"], p["min_payload"], p["max_payload"]
+        on("wind", "wind_on", mean_speed="wind_mean_speed", direction="wind_direction", gust_std="wind_gust_std",
+           gust_time_constant="wind_gust_time_constant", direction_std="wind_direction_std")
+        p = on("payload", "payload_on", change_std="payload_change_std", min_payload="payload_min",
+               max_payload="payload_max")
         if self.vehicle.body.mass + p["min_payload"] <= 0:
             raise SimulationError("effect 'payload' parameter 'min_payload': would make the mass <= 0")
-        p = on("tire_warmup", P_WARM_ON)
-        P[P_WARM_FACTOR], P[P_WARM_DIST] = p["cold_factor"], p["distance_constant"]
-        p = on("winter_tires", P_WINTER_ON)
-        P[P_WINTER_RR], P[P_WINTER_CS] = p["rolling_factor"], p["cornering_factor"]
-        p = on("drag_area", P_DRAG_ON)
-        P[P_DRAG_ROOFBOX], P[P_DRAG_WIN], P[P_DRAG_SUN], P[P_DRAG_RATE] = (p["roof_box"], p["windows"],
-                                                                           p["sunroof"], p["toggle_rate"])
-        p = on("road_bank", P_BANK_ON)
-        P[P_BANK_SCALE], P[P_BANK_GAIN], P[P_BANK_MAX] = p["scale"], p["superelevation_gain"], p["max_bank"]
-        p = on("wet_road", P_WET_ON)
-        P[P_WET_FACTOR], P[P_WET_F1] = p["rolling_factor"], p["water_f1"]
-        p = on("oil_temperature", P_OIL_ON)
-        start = p["start_temperature"]
-        P[P_OIL_START] = e.ambient_temperature if (isinstance(start, float) and math.isnan(start)) else start
-        p = on("brake_pad_drift", P_PAD_ON)
-        P[P_PAD_TCOEF], P[P_PAD_TREF], P[P_PAD_RW_STD] = (p["temperature_coefficient"], p["reference_temperature"],
-                                                          p["random_walk_std"])
-        p = on("barometric", P_BARO_ON)
-        P[P_BARO_H] = p["scale_height"]
-        p = on("auxiliary_load", P_AUX_ON)
-        P[P_AUX_EXTRA] = p["power"]
+        on("tire_warmup", "tire_warmup_on", cold_factor="tire_cold_factor", distance_constant="tire_warmup_distance")
+        on("winter_tires", "winter_tires_on", rolling_factor="winter_rolling_factor",
+           cornering_factor="winter_cornering_factor")
+        on("drag_area", "drag_area_on", roof_box="drag_roof_box", windows="drag_windows", sunroof="drag_sunroof",
+           toggle_rate="drag_toggle_rate")
+        on("road_bank", "road_bank_on", scale="bank_scale", superelevation_gain="superelevation_gain",
+           max_bank="bank_max")
+        on("wet_road", "wet_road_on", rolling_factor="wet_rolling_factor", water_f1="wet_f1")
+        start = on("oil_temperature", "oil_temperature_on")["start_temperature"]
+        values["oil_start_temperature"] = (e.ambient_temperature if (isinstance(start, float) and math.isnan(start))
+                                           else start)
+        on("brake_pad_drift", "pad_drift_on", temperature_coefficient="pad_temperature_coefficient",
+           reference_temperature="pad_reference_temperature", random_walk_std="pad_random_walk_std")
+        on("barometric", "barometric_on", scale_height="barometric_scale_height")
+        on("auxiliary_load", "auxiliary_load_on", power="auxiliary_load")
+        for name, value in values.items():
+            params[name] = value
 
     def _build_road(self) -> np.ndarray:
         rd = self.road
@@ -313,42 +324,27 @@ class Simulator:
         else:
             self._road[R_CRUISE] = 0.0
         self._hold_cruise_speed()
-        self._rng = np.array([np.random.default_rng([self.seed, 100]).integers(0, 2 ** 63)], dtype=np.uint64)
         self.sensor_model = SensorModel(self.vehicle, self.sensors, self.effects, self.seed, DT)
-        P = self.P
-        self._schedules.restore(P)
-        P[P_T_END] = np.inf
-        P[P_S_END] = np.inf
-        X = np.zeros(N_STATE)
-        v = self.initial_speed
-        X[S_V] = v
-        X[S_LAST_SHIFT] = -1e9
-        X[S_RIDX] = 0
         pay = self.effects.params("payload")
-        X[S_MASS] = self.vehicle.body.mass + (float(pay["initial_payload"]) if self.effects.enabled("payload") else 0.0)
-        if X[S_MASS] <= 0:
+        payload = float(pay["initial_payload"]) if self.effects.enabled("payload") else 0.0
+        if self.vehicle.body.mass + payload <= 0:
             raise SimulationError("effect 'payload' parameter 'initial_payload': makes the mass <= 0")
-        X[S_DRAGF] = 1.0 + (P[P_DRAG_ROOFBOX] if P[P_DRAG_ON] > 0.5 else 0.0)
-        X[S_OIL_T] = P[P_OIL_START] if P[P_OIL_ON] > 0.5 else P[P_OIL_WARM]
-        X[S_DISC_T] = P[P_T_AMB]
+        self._vehicle[0]["params"] = self._params_start  # undoes the schedules and run limits of the last trip
+        self._vehicle["state"] = 0
+        x, p = self._x, self._p
+        x["random_state"] = np.random.default_rng([self.seed, 100]).integers(0, 2 ** 63)
+        v = self.initial_speed
+        x["speed"] = v
+        x["last_shift_time"] = -1e9
+        physics.set_initial_mass(self._vehicle, payload)
+        x["drag_area_factor"] = 1.0 + (p["drag_roof_box"] if p["drag_area_on"] > 0.5 else 0.0)
+        oil_on = p["oil_temperature_on"] > 0.5
+        x["oil_temperature"] = p["oil_start_temperature"] if oil_on else p["oil_warm_temperature"]
+        x["brake_disc_temperature"] = p["ambient_temperature"]
         d = self.vehicle.drivetrain
-        X[S_SOC] = d.require_battery().initial_soc if d.kind == "bev" else 0.0
-        if P[P_KIND_BEV] > 0.5:
-            X[S_GEAR], X[S_MODE] = 1, MODE_LOCKED
-            X[S_OMEGA_E] = speed_ratio(P, 1) * v
-        else:
-            gear = 1
-            for g in range(1, int(P[P_N_GEARS]) + 1):
-                if speed_ratio(P, g) * v >= max(1.3 * P[P_IDLE], 1.2 * P[P_DN_LO]):
-                    gear = g
-            X[S_GEAR] = gear
-            if speed_ratio(P, gear) * v >= P[P_IDLE]:
-                X[S_MODE], X[S_OMEGA_E] = MODE_LOCKED, speed_ratio(P, gear) * v
-            else:
-                X[S_MODE], X[S_OMEGA_E] = MODE_OPEN, P[P_IDLE]
-        self.X = X
-        if self._schedules.active:
-            self._schedules.apply(X, P)
+        x["state_of_charge"] = d.require_battery().initial_soc if d.kind == "bev" else 0.0
+        x["gear"], x["clutch_mode"], x["engine_speed"] = self._initial_gear(v)
+        physics.start_schedules(self._vehicle)
         self._log = np.zeros((N_LOG, self._log_capacity))
         self._log_base = 0  # absolute substep of log column 0 (> 0 once a streamed run dropped old substeps)
         self._flushed = 0  # substeps already written to a TripWriter
@@ -356,6 +352,20 @@ class Simulator:
         self._last_energy = 0.0
         self._result = self._make_result(0.0)
         return self._result
+
+    def _initial_gear(self, v: float) -> tuple[int, int, float]:
+        """(gear, clutch mode, engine speed [rad/s]) at speed v [m/s]: BEV locked in its gear; ICE the highest gear
+        whose engine speed is above 1.3 x idle and 1.2 x the low-load downshift speed, locked when above idle."""
+        p = self._p
+        if p["is_bev"] > 0.5:
+            return 1, MODE_LOCKED, speed_ratio(p, 1) * v
+        gear = 1
+        for g in range(1, int(p["n_gears"]) + 1):
+            if speed_ratio(p, g) * v >= max(1.3 * p["idle_speed"], 1.2 * p["downshift_speed_low"]):
+                gear = g
+        if speed_ratio(p, gear) * v >= p["idle_speed"]:
+            return gear, MODE_LOCKED, speed_ratio(p, gear) * v
+        return gear, MODE_OPEN, p["idle_speed"]
 
     def _hold_cruise_speed(self) -> None:
         """poor_excitation with hold_speed 'yes': one constant planned speed per cruise stretch (the lowest of the
@@ -378,8 +388,19 @@ class Simulator:
         rd[R_VPLAN] = speed_plan(self.road.distance, self.road.curvature, limit, self.driver)
         self._stops = np.ascontiguousarray(self._stops[keep])
 
+    def reserve_log(self, n_substeps: int) -> None:
+        """Room in the truth log for ``n_substeps`` more substeps (it grows by doubling): for a compiled kernel that
+        advances this simulator through ``roadload.envs.batch.Fleet.sharing``."""
+        self._ensure_capacity(n_substeps)
+
+    def refresh(self) -> StepResult:
+        """The state after a compiled kernel advanced this simulator (``Fleet.sharing``): updates ``state`` (this
+        step's source energy counted from the last step or refresh) and warns once about lateral accelerations
+        beyond the single-track model's validity."""
+        return self._after_advance()
+
     def _ensure_capacity(self, extra: int) -> None:
-        n = int(self.X[S_NLOG])
+        n = int(self._words[_NLOG])
         if n + extra > self._log.shape[1]:
             new = np.zeros((N_LOG, max(2 * self._log.shape[1], n + extra)))
             new[:, :n] = self._log[:, :n]
@@ -388,20 +409,20 @@ class Simulator:
     def step(self, action: Action | float | None = None, n_substeps: int = 10) -> StepResult:
         """Advance n_substeps x 10 ms with a constant command: an Action, a signed wheel force [N] (split by the
         default allocator: regen first, then friction brakes), or None (the built-in driver)."""
-        cmd = self._cmd
+        w = self._words
         if action is None:
-            cmd[C_USE_DRIVER] = 1.0
+            w[_C_MODE] = COMMAND_DRIVER
         elif isinstance(action, Action):
             tr, rg, fb = action.traction_force, action.regen_force, action.friction_brake_force
             if not (tr >= 0 and rg >= 0 and fb >= 0) or not math.isfinite(tr + rg + fb):
                 raise SimulationError(f"action: forces must be finite and >= 0 N, got traction={tr!r}, "
                                       f"regen={rg!r}, friction={fb!r}")
-            cmd[C_USE_DRIVER] = 0.0
-            cmd[C_TRACTION] = tr
-            cmd[C_REGEN] = rg
-            cmd[C_FRICTION] = fb
-            cmd[C_STEER] = np.nan if action.steer is None else action.steer
-            cmd[C_GEAR_REQ] = -1.0 if action.gear is None else action.gear
+            w[_C_MODE] = COMMAND_FORCES
+            w[_C_TRACTION] = tr
+            w[_C_REGEN] = rg
+            w[_C_FRICTION] = fb
+            w[_C_STEER] = np.nan if action.steer is None else action.steer
+            w[_C_GEAR] = -1.0 if action.gear is None else action.gear
             if action.gear is not None and not 0 <= action.gear <= self.vehicle.drivetrain.n_gears:
                 raise SimulationError(f"action.gear: must be in 0..{self.vehicle.drivetrain.n_gears}, got "
                                       f"{action.gear!r}")
@@ -409,33 +430,31 @@ class Simulator:
             f = float(action)
             if not math.isfinite(f):
                 raise SimulationError(f"action: wheel force must be finite, got {action!r}")
-            cmd[C_USE_DRIVER] = 2.0
-            cmd[C_TRACTION] = f
-            cmd[C_STEER] = np.nan
-            cmd[C_GEAR_REQ] = -1.0
+            w[_C_MODE] = COMMAND_WHEEL_FORCE
+            w[_C_TRACTION] = f
+            w[_C_STEER] = np.nan
+            w[_C_GEAR] = -1.0
         if n_substeps < 1:
             raise SimulationError(f"n_substeps: must be >= 1, got {n_substeps!r}")
-        if int(self.X[S_NLOG]) + n_substeps > self._log.shape[1]:
+        if int(w[_NLOG]) + n_substeps > self._log.shape[1]:
             self._ensure_capacity(n_substeps)
-        if self._schedules.active:
-            for _ in range(n_substeps):
-                self._schedules.apply(self.X, self.P)
-                physics.advance(self.X, self.P, self.tabs, self.ti, self._road, self._stops, self._cycle, self._rng,
-                                cmd, self._log, 1)
-        else:
-            physics.advance(self.X, self.P, self.tabs, self.ti, self._road, self._stops, self._cycle, self._rng, cmd,
-                            self._log, n_substeps)
-        if self.X[S_AY_WARN_N] > 0 and not self._warned:
+        physics.advance_one(self._vehicle, *self._tables, self._road, self._stops, self._cycle, self._log, n_substeps)
+        return self._after_advance()
+
+    def _after_advance(self) -> StepResult:
+        """The StepResult after the core advanced the vehicle (and the lateral-validity warning, once)."""
+        w = self._words
+        if w[_AY_WARN] > 0 and not self._warned:
             self._warn_lateral()
-        e = self.X[S_E_SOURCE]
+        e = w[_E_SOURCE]
         self._result = self._make_result(e - self._last_energy)
         self._last_energy = e
         return self._result
 
     def _make_result(self, d_energy: float) -> StepResult:
-        X = self.X
-        n = int(X[S_NLOG])
-        s = X[S_POS]
+        w = self._words
+        n = int(w[_NLOG])
+        s = w[_POS]
         if n:
             row = self._log[:, n - 1]
             fx, grade, curv, bank = row[L_FX], row[L_GRADE], row[L_CURV], row[L_BANK]
@@ -443,18 +462,19 @@ class Simulator:
             fx = 0.0
             at = self.road.at(s)
             grade, curv, bank = float(at["grade"]), float(at["curvature"]), 0.0
-        return StepResult(t=X[S_T], s=s, v=X[S_V], a=X[S_A], gear=int(X[S_GEAR]), engine_speed=X[S_OMEGA_E],
-                          engine_torque=X[S_TE],
-                          clutch=1.0 if X[S_MODE] == MODE_LOCKED else (0.5 if X[S_MODE] == MODE_SLIP else 0.0),
-                          source_energy=d_energy, source_energy_total=X[S_E_SOURCE], tractive_force=fx,
-                          lateral_acceleration=X[S_AY], grade=grade, curvature=curv, bank=bank,
-                          speed_limit=road_value_at(self._road, R_VLIM, s), done=bool(physics.is_done(X, self.P)))
+        mode = w[_MODE]
+        return StepResult(t=w[_T], s=s, v=w[_V], a=w[_A], gear=int(w[_GEAR]), engine_speed=w[_OMEGA],
+                          engine_torque=w[_TE],
+                          clutch=1.0 if mode == MODE_LOCKED else (0.5 if mode == MODE_SLIP else 0.0),
+                          source_energy=d_energy, source_energy_total=w[_E_SOURCE], tractive_force=fx,
+                          lateral_acceleration=w[_AY], grade=grade, curvature=curv, bank=bank,
+                          speed_limit=road_value_at(self._road, R_VLIM, s), done=self.done)
 
     def _warn_lateral(self) -> None:
         self._warned = True
         warnings.warn(LateralValidityWarning(
-            f"lateral acceleration reached {self.X[S_AY_MAX]:.2f} m/s^2 (above 4 m/s^2, where the single-track "
-            f"model is no longer valid, section 2.5.1) at t={self.X[S_T]:.1f} s, s={self.X[S_POS]:.0f} m"),
+            f"lateral acceleration reached {self._words[_AY_MAX]:.2f} m/s^2 (above 4 m/s^2, where the single-track "
+            f"model is no longer valid, section 2.5.1) at t={self._words[_T]:.1f} s, s={self._words[_POS]:.0f} m"),
             stacklevel=3)
 
     # ------------------------------------------------------------------ whole trips
@@ -464,94 +484,86 @@ class Simulator:
         """Drive with the built-in driver (or the drive cycle) until the end of the road / cycle, or for the given
         duration [s] / distance [m] from now, whichever comes first. With a ``writer`` (see :meth:`trip_writer`)
         every chunk of ``chunk_seconds`` is written to it and dropped from memory."""
-        X, P = self.X, self.P
+        w = self._words
+        horizon = self._set_run_limits(duration, distance)
+        t0, s0 = w[_T], w[_POS]
+        max_steps = int(math.ceil(horizon / DT)) + 1
+        if writer is None:  # with a writer, the log holds one chunk at a time
+            self._reserve_log(max_steps, horizon)
+        w[_C_MODE] = COMMAND_DRIVER
+        chunk = max(1, int(chunk_seconds / DT))
+        done = 0
+        while done < max_steps and not self.done:
+            n = min(chunk, max_steps - done)
+            self._ensure_capacity(n)
+            done += physics.run_one(self._vehicle, *self._tables, self._road, self._stops, self._cycle, self._log, n)
+            if progress is not None:
+                progress(self._run_fraction(t0, s0, horizon))
+            if writer is not None:
+                self._flush(writer)
+        if writer is not None:
+            self._flush(writer)
+        if not self.done:
+            warnings.warn(f"trip stopped after {w[_T] - t0:.0f} s at s={w[_POS]:.0f} m without reaching the end "
+                          f"of road {self.road.name!r} (vehicle too slow or stuck)", RuntimeWarning, stacklevel=2)
+        w[_T_END] = np.inf
+        w[_S_END] = np.inf
+        self._after_advance()
+
+    def _set_run_limits(self, duration: float | None, distance: float | None) -> float:
+        """Check duration [s] / distance [m] of a run, set the core's time / distance limits (inf: none) and return
+        the horizon [s] the run is sized for (the whole cycle, the duration, or the distance at 2 m/s plus stops)."""
+        w = self._words
         if duration is not None and not (math.isfinite(duration) and duration > 0):
             raise SimulationError(f"duration: must be a positive number of seconds, got {duration!r}")
         if distance is not None and not (math.isfinite(distance) and distance > 0):
             raise SimulationError(f"distance: must be a positive number of metres, got {distance!r}")
-        remaining = self.road.length - X[S_POS]
+        remaining = self.road.length - w[_POS]
         if distance is not None and distance > remaining + 1e-6:
             raise SimulationError(f"distance: {distance:g} m exceeds the {remaining:.0f} m left on road "
                                   f"{self.road.name!r}")
-        t0 = X[S_T]
+        t0 = w[_T]
         if self.cycle is not None:
-            horizon = self.cycle.duration - t0
-            if duration is not None:
-                horizon = min(horizon, duration)
+            horizon = self.cycle.duration - t0 if duration is None else min(self.cycle.duration - t0, duration)
         elif duration is not None:
             horizon = duration
         else:
             dist = remaining if distance is None else distance
             horizon = dist / 2.0 + self._stops.size * (self.driver.dwell_max + 30.0) + 600.0
-        P[P_T_END] = t0 + horizon if (duration is not None or self.cycle is not None) else np.inf
-        P[P_S_END] = X[S_POS] + distance if distance is not None else np.inf
-        max_steps = int(math.ceil(horizon / DT)) + 1
-        if writer is not None:
-            pass  # the log holds one chunk at a time
-        elif P[P_T_END] < np.inf:
-            self._ensure_capacity(max_steps)
-        else:  # expected duration from the speed plan, so the log rarely has to grow
-            rd = self._road
-            plan = np.maximum(0.5 * (rd[R_VPLAN, 1:] + rd[R_VPLAN, :-1]), 3.0)
-            expect = float(np.sum(np.diff(rd[R_S]) / plan)) + self._stops.size * (self.driver.dwell_max + 20.0)
-            self._ensure_capacity(int(min(1.15 * expect, horizon) / DT))
-        self._cmd[C_USE_DRIVER] = 1.0
-        chunk = max(1, int(chunk_seconds / DT))
-        done = 0
-        while done < max_steps and not physics.is_done(X, P):
-            n = min(chunk, max_steps - done)
-            self._ensure_capacity(n)
-            if self._schedules.active:
-                done += self._run_scheduled(n)
-            else:
-                done += physics.run(X, P, self.tabs, self.ti, self._road, self._stops, self._cycle, self._rng,
-                                    self._cmd, self._log, n)
-            if progress is not None:
-                frac = (X[S_T] - t0) / horizon if P[P_T_END] < np.inf else (
-                    (X[S_POS] - (P[P_S_END] - distance if distance else 0.0)) / max(dist if distance is None
-                                                                                    else distance, 1e-9))
-                progress(min(1.0, max(0.0, float(frac))))
-            if writer is not None:
-                self._flush(writer)
-        if writer is not None:
-            self._flush(writer)
-        if not physics.is_done(X, P):
-            warnings.warn(f"trip stopped after {X[S_T] - t0:.0f} s at s={X[S_POS]:.0f} m without reaching the end "
-                          f"of road {self.road.name!r} (vehicle too slow or stuck)", RuntimeWarning, stacklevel=2)
-        P[P_T_END] = np.inf
-        P[P_S_END] = np.inf
-        if X[S_AY_WARN_N] > 0 and not self._warned:
-            self._warn_lateral()
-        e = X[S_E_SOURCE]
-        self._result = self._make_result(e - self._last_energy)
-        self._last_energy = e
+        w[_T_END] = t0 + horizon if (duration is not None or self.cycle is not None) else np.inf
+        w[_S_END] = w[_POS] + distance if distance is not None else np.inf
+        return horizon
 
-    def _run_scheduled(self, n: int) -> int:
-        """Up to n substeps with the scheduled effects: whole chunks while every schedule is constant (stopping
-        at the next onset), the schedule applied before every substep while a ramp is under way."""
-        X, P = self.X, self.P
-        done = 0
-        while done < n and not physics.is_done(X, P):
-            lim = self._schedules.limits(X)
-            self._schedules.apply(X, P)
-            if lim is None:
-                done += physics.run(X, P, self.tabs, self.ti, self._road, self._stops, self._cycle, self._rng,
-                                    self._cmd, self._log, 1)
-                continue
-            t_end, s_end = P[P_T_END], P[P_S_END]
-            P[P_T_END], P[P_S_END] = min(t_end, lim[0]), min(s_end, lim[1])
-            try:
-                k = physics.run(X, P, self.tabs, self.ti, self._road, self._stops, self._cycle, self._rng,
-                                self._cmd, self._log, n - done)
-            finally:
-                P[P_T_END], P[P_S_END] = t_end, s_end
-            if k == 0:  # at an onset: one substep with the schedule applied
-                k = physics.run(X, P, self.tabs, self.ti, self._road, self._stops, self._cycle, self._rng,
-                                self._cmd, self._log, 1)
-                if k == 0:
-                    break
-            done += k
-        return done
+    def _reserve_log(self, max_steps: int, horizon: float) -> None:
+        """Room in the truth log for the run: max_steps with a time limit, else the duration the speed plan
+        expects (so the log rarely has to grow)."""
+        if self._words[_T_END] < np.inf:
+            self._ensure_capacity(max_steps)
+            return
+        rd = self._road
+        plan = np.maximum(0.5 * (rd[R_VPLAN, 1:] + rd[R_VPLAN, :-1]), 3.0)
+        expect = float(np.sum(np.diff(rd[R_S]) / plan)) + self._stops.size * (self.driver.dwell_max + 20.0)
+        self._ensure_capacity(int(min(1.15 * expect, horizon) / DT))
+
+    def _run_fraction(self, t0: float, s0: float, horizon: float) -> float:
+        """Progress of a run in [0, 1]: elapsed time over the horizon with a time limit, else the distance driven
+        over the distance to go (to the distance limit or the end of the road)."""
+        w = self._words
+        if w[_T_END] < np.inf:
+            frac = (w[_T] - t0) / horizon
+        else:
+            goal = w[_S_END] if w[_S_END] < np.inf else self.road.length
+            frac = (w[_POS] - s0) / max(goal - s0, 1e-9)
+        return min(1.0, max(0.0, float(frac)))
+
+    @property
+    def done(self) -> bool:
+        """End of the road (or drive cycle) reached, or the limit of the current run."""
+        return bool(physics.done_one(self._vehicle))
+
+    def _core_records(self) -> tuple[np.ndarray, Tables, np.ndarray, np.ndarray, np.ndarray | None]:
+        """(vehicle record array, tables, road rows, stop lines, drive cycle or None): what Fleet.load copies."""
+        return self._vehicle, self._tables, self._road, self._stops, (None if self.cycle is None else self._cycle)
 
     # ------------------------------------------------------------------ queries
     @property
@@ -561,40 +573,43 @@ class Simulator:
     def energy_ledger(self) -> dict[str, float]:
         """Cumulative energies [J] since reset: source (fuel/battery), shaft work T_E omega_E, dissipation by
         component, climbing work (= m g delta h for constant mass), and the kinetic energy now."""
-        X = self.X
-        return {"source": X[S_E_SOURCE], "shaft_work": X[S_W_SHAFT], "gearbox_loss": X[S_D_GEARBOX],
-                "differential_loss": X[S_D_DIFF], "clutch_loss": X[S_D_CLUTCH], "brake_loss": X[S_D_BRAKE],
-                "rolling_loss": X[S_D_ROLL], "aero_loss": X[S_D_AERO], "cornering_loss": X[S_D_CORNER],
-                "climbing_work": X[S_W_CLIMB], "payload_potential": X[S_E_PAYLOAD_PE],
+        x = self.vehicle_state
+        return {"source": x.source_energy, "shaft_work": x.shaft_work, "gearbox_loss": x.gearbox_loss,
+                "differential_loss": x.differential_loss, "clutch_loss": x.clutch_loss, "brake_loss": x.brake_loss,
+                "rolling_loss": x.rolling_loss, "aero_loss": x.aero_loss, "cornering_loss": x.cornering_loss,
+                "climbing_work": x.climbing_work, "payload_potential": x.payload_potential_energy,
                 "kinetic_energy": self.kinetic_energy()}
 
     def kinetic_energy(self) -> float:
         """Translational + rotational kinetic energy [J] of the longitudinal model now."""
+        x = self.vehicle_state
+        m_w = wheel_side_mass(self._p, x.mass)
+        return 0.5 * m_w * x.speed ** 2 + 0.5 * source_side_inertia(self._p, int(x.gear)) * x.engine_speed ** 2
 
-        X, P = self.X, self.P
-        gear = int(X[S_GEAR])
-        m_w = wheel_side_mass(P, X[S_MASS])
-        return 0.5 * m_w * X[S_V] ** 2 + 0.5 * source_side_inertia(P, gear) * X[S_OMEGA_E] ** 2
+    def _loss_factor(self) -> float:
+        """The drive-train's oil-temperature loss factor phi now (1 without the oil_temperature effect)."""
+        p = self._p
+        return oil_loss_factor(p, self._x["oil_temperature"]) if p["oil_temperature_on"] > 0.5 else 1.0
 
     def true_parameters(self) -> dict[str, float]:
         """Current true lumped parameters (for oracle controllers / evaluation), SI units."""
-        X, P = self.X, self.P
-        n = int(X[S_NLOG])
+        x, p = self.vehicle_state, self._p
+        n = int(x.log_rows)
         row = self._log[:, n - 1] if n else None
-        v = X[S_V]
-        mass = X[S_MASS]
+        v = x.speed
+        mass = x.mass
         if row is None:  # before the first step: nominal values
-            fr0, fr1, fr4 = P[P_FR0], P[P_FR1], P[P_FR4]
-            rho = P[P_P_AMB] / (R_AIR * P[P_T_AMB])
-            cxa = P[P_CW] * P[P_AREA] * X[S_DRAGF]
-            csf, csr, ws, wa, mu, grade, curv, bank = P[P_CF], P[P_CR], 0.0, 0.0, P[P_MU0], 0.0, 0.0, 0.0
+            fr0, fr1, fr4 = p["rolling_f0"], p["rolling_f1"], p["rolling_f4"]
+            rho = p["ambient_pressure"] / (R_AIR * p["ambient_temperature"])
+            cxa = p["drag_coefficient"] * p["frontal_area"] * x.drag_area_factor
+            csf, csr, mu = p["cornering_stiffness_front"], p["cornering_stiffness_rear"], p["pad_friction"]
+            ws = wa = grade = curv = bank = 0.0
         else:
             fr0, fr1, fr4, rho, cxa = row[L_FR0], row[L_FR1], row[L_FR4], row[L_RHO], row[L_CXA]
             csf, csr, ws, wa, mu = row[L_CSF], row[L_CSR], row[L_WIND_S], row[L_WIND_A], row[L_MU]
             grade, curv, bank = row[L_GRADE], row[L_CURV], row[L_BANK]
-        lf, lr, wb = P[P_LF], P[P_LR], P[P_L]
+        lf, lr, wb = p["cg_to_front"], p["cg_to_rear"], p["wheelbase"]
         c_eq = 1.0 / (4.0 * (lr ** 2 / csf + lf ** 2 / csr) / wb ** 2)
-        phi = oil_loss_factor(P, X[S_OIL_T]) if P[P_OIL_ON] > 0.5 else 1.0
         a, b, c = RoadLoadParameters.from_physical(float(mass), float(fr0), float(fr1), float(fr4), float(cxa),
                                                    float(rho)).coast_down   # eq. 5.4 of the current truth
         return {
@@ -602,28 +617,28 @@ class Simulator:
             "rolling_resistance_coefficient": fr0 + fr1 * v + fr4 * v ** 4, "drag_area": cxa, "air_density": rho,
             "aero_coefficient": c, "wind_speed": ws, "wind_angle": wa,
             "cornering_stiffness_front": csf, "cornering_stiffness_rear": csr, "cornering_stiffness": c_eq,
-            "brake_friction_coefficient": mu, "drivetrain_loss_factor": phi, "oil_temperature": X[S_OIL_T],
-            "ambient_temperature": P[P_T_AMB], "ambient_pressure": P[P_P_AMB], "grade": grade, "curvature": curv,
-            "bank": bank, "wheel_radius": P[P_RW], "effective_mass": self.vehicle.effective_mass(int(X[S_GEAR]), mass),
+            "brake_friction_coefficient": mu, "drivetrain_loss_factor": self._loss_factor(),
+            "oil_temperature": x.oil_temperature, "ambient_temperature": p["ambient_temperature"],
+            "ambient_pressure": p["ambient_pressure"], "grade": grade, "curvature": curv, "bank": bank,
+            "wheel_radius": p["wheel_radius"], "effective_mass": self.vehicle.effective_mass(int(x.gear), mass),
             "a": a, "b": b, "c": c,
         }
 
     def regen_capacity(self) -> float:
         """Largest braking force [N] the engine drag / motor regen can apply now."""
-        X = self.X
-        phi = oil_loss_factor(self.P, X[S_OIL_T]) if self.P[P_OIL_ON] > 0.5 else 1.0
-        return float(_regen_capacity(self.P, self.tabs, self.ti, int(X[S_GEAR]), int(X[S_MODE]), X[S_OMEGA_E],
-                                     X[S_V], phi))
+        x = self.vehicle_state
+        return float(_regen_capacity(self._p, self._tables, int(x.gear), int(x.clutch_mode), x.engine_speed, x.speed,
+                                     self._loss_factor()))
 
     def observe(self) -> dict[str, float] | None:
         """The latest CAN-like sensor sample (measured channels, SI), None before the first step."""
         self._check_whole_log("observe")
-        return self.sensor_model.sample(self._log, int(self.X[S_NLOG]))
+        return self.sensor_model.sample(self._log, int(self._words[_NLOG]))
 
     def truth_log(self) -> np.ndarray:
         """The raw truth log so far (rows = 10-ms substeps, columns = ``layout.LOG``); a view, do not modify."""
         self._check_whole_log("truth_log")
-        return self._log[:, : int(self.X[S_NLOG])].T
+        return self._log[:, : int(self._words[_NLOG])].T
 
     def _check_whole_log(self, what: str) -> None:
         if self._log_base > 0:
@@ -672,16 +687,18 @@ class Simulator:
                                  copy=False)
         else:
             truth = pd.DataFrame(log[cols, start - base:stop - base].T, columns=["t", *truth_map], copy=False)
-        truth["cornering_stiffness"] = 1.0 / (4.0 * (self.P[P_LR] ** 2 / truth["cornering_stiffness_front"]
-                                                    + self.P[P_LF] ** 2 / truth["cornering_stiffness_rear"])
-                                              / self.P[P_L] ** 2)
+        p = self._p
+        truth["cornering_stiffness"] = 1.0 / (4.0 * (p["cg_to_rear"] ** 2 / truth["cornering_stiffness_front"]
+                                                    + p["cg_to_front"] ** 2 / truth["cornering_stiffness_rear"])
+                                              / p["wheelbase"] ** 2)
         return truth
 
     def _trip_meta(self, name: str | None) -> dict[str, Any]:
         warn = []
-        if self.X[S_AY_WARN_N] > 0:
-            warn.append(f"lateral acceleration above 4 m/s^2 in {int(self.X[S_AY_WARN_N])} samples (max "
-                        f"{self.X[S_AY_MAX]:.2f} m/s^2): single-track model outside its validity")
+        x = self.vehicle_state
+        if x.lateral_warning_count > 0:
+            warn.append(f"lateral acceleration above 4 m/s^2 in {int(x.lateral_warning_count)} samples (max "
+                        f"{x.lateral_acceleration_peak:.2f} m/s^2): single-track model outside its validity")
         return {
             "source": "sim",
             "name": name or f"sim-{self.vehicle.name}-{self.road.name}-{self.seed}",
@@ -699,7 +716,7 @@ class Simulator:
 
     def to_trip(self, name: str | None = None) -> Trip:
         """The Trip of everything stepped since reset: measured channels (sensor model) + truth + metadata."""
-        n = int(self.X[S_NLOG])
+        n = int(self._words[_NLOG])
         if n == 0:
             raise SimulationError("to_trip: nothing simulated yet (call step() or run() first)")
         self._check_whole_log("to_trip")
@@ -724,7 +741,7 @@ class Simulator:
     def _flush(self, writer: TripWriter) -> None:
         """Write the substeps simulated since the last flush to the writer, then drop all but the log history the
         sensor latencies reach back to."""
-        n_rel = int(self.X[S_NLOG])
+        n_rel = int(self._words[_NLOG])
         stop = self._log_base + n_rel
         if stop > self._flushed:
             measured, truth = self._frames(self._flushed, stop, views=True)
@@ -733,7 +750,7 @@ class Simulator:
         keep = self.sensor_model.max_delay + self.sensor_model.decimation
         if n_rel > keep:
             self._log[:, :keep] = self._log[:, n_rel - keep:n_rel]
-            self.X[S_NLOG] = keep
+            self._words[_NLOG] = keep
             self._log_base += n_rel - keep
 
 

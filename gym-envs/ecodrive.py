@@ -1,5 +1,10 @@
 """``roadload/EcoDrive-v0``: drive a vehicle preset along a road profile with preview, minimising source energy
-and time (gymnasium env on top of :class:`roadload.envs.simulator.Simulator`).
+and time (gymnasium env on top of the simulator's compiled batch step, :mod:`roadload.envs.batch`).
+
+One step, one implementation: the single env is :class:`EcoBatch` with one sub-env, the native vector env
+(:mod:`roadload.gym.vector`) the same with N; both run the compiled step of :mod:`roadload.gym.ecodrive_kernel`
+(action, physics, reward, done flags, 'state' observation, info). The single env's batch shares the episode's
+:class:`~roadload.envs.Simulator` (its truth log, CAN sensors, ``to_trip()``, ``true_parameters()``).
 
 Action: ``u`` in [-1, 1] (Box, shape (1,)), a normalised wheel-force command held for one control period
 (default 0.1 s = 10 physics steps at 100 Hz). u >= 0 asks for traction u * min(F_peak, P_max / max(v, 1 m/s));
@@ -11,7 +16,8 @@ SHIELD_GAIN * (v_env(s) - v), where v_env is the braking envelope of the speed l
 ``shield_margin`` (:meth:`RouteTable.braking_envelope`). The capped command is what the vehicle gets and what
 ``previous_command`` reports.
 
-Observation: see :data:`OBSERVATION_DOC` (built by :func:`observation_layout`) and the README table. Every entry is
+Observation: an observation type built by :func:`observation_factory` from ``config.observation`` ('state',
+'can', 'can+estimates'; :data:`OBSERVATION_TYPES`), its entries listed by :func:`observation_layout`. Every entry is
 an SI value divided by a fixed scale (``obs_scaling='normalized'``, default) or the raw SI value (``'si'``).
 
 Reward: ``-scale * (energy + time * dt + speeding * (v - v_lim)+ dt + lateral * (|a_y| - a_y,max)+ dt
@@ -26,34 +32,35 @@ from __future__ import annotations
 import bisect
 import math
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from numba import njit
 
+from roadload.envs import LateralValidityWarning, Simulator
+from roadload.envs.batch import Fleet, FleetRecords
 from roadload.road_profiles import RoadProfile, load_profile_start
 from roadload.units import G
 from roadload.vehicle import VehicleSpec
 
 from roadload.gym.actions import validate_action
 from roadload.gym.config import (SPACE_FIELDS_ECODRIVE, EcoDriveConfig, GymConfigError, make_config, updated_config)
+from roadload.gym.ecodrive_kernel import (COST_NAMES, EPISODE, INFO_ROWS, I_COSTS, I_RETURN, I_TERMS, N_INFO,
+                                          NO_SHIELD, PREVIEW_GRID, SETTINGS, SPEED_LIMIT, STOP_HORIZON,
+                                          EcoOutputs, EcoRecords, braking_envelope, gather_info_all, look_ahead,
+                                          route_rows, scaled_observation, start_episode, step_range)
 from roadload.presets import get_preset
-from roadload.envs.simulator import LateralValidityWarning, Simulator
 from roadload.controllers.online import OnlineForceModel
 from roadload.estimators.knowledge import knowledge_for_preset
 from roadload.controllers.sim_plant import SimulatorPlant
 
 FULL_BRAKE_DECELERATION = 0.5 * G
 """Deceleration [m/s^2] asked for by u = -1 (before resistances)."""
-PREVIEW_GRID = 1.0
-"""Resolution [m] of the resampled route table the preview reads."""
 MIN_SCHEDULE_SPEED = 2.0
 """Lowest schedule speed [m/s] (very tight curves)."""
-STOP_HORIZON = 1000.0
-"""Distance to the next stop is reported up to this value [m] (= 'no stop ahead')."""
 
 # fixed scales of the normalised observation (SI value / scale)
 SCALE = {"v": 30.0, "a": 3.0, "grade": 0.05, "curvature": 0.01, "speed_limit": 30.0, "time_deficit": 60.0,
@@ -111,55 +118,6 @@ def cut_profile(profile: RoadProfile, length: float | None) -> RoadProfile:
                        stops=profile.stops[profile.stops <= length], meta=dict(profile.meta))
 
 
-@njit(inline="always", cache=True)
-def _grid_cell(x, n):
-    """Grid position x (in grid steps) clamped to [0, n - 1.001] -> (cell index i, fraction f in [0, 1))."""
-    if x < 0.0:
-        x = 0.0
-    elif x > n - 1.001:
-        x = n - 1.001
-    i = int(x)
-    return i, x - i
-
-
-@njit(cache=True)
-def _look_ahead(table, grid, points, s, out):
-    """Linear interpolation of every row of ``table`` (uniform grid step ``grid`` [m]) at s + points -> out."""
-    n = table.shape[1]
-    for j in range(points.size):
-        i, f = _grid_cell((s + points[j]) / grid, n)
-        for r in range(table.shape[0]):
-            out[r, j] = table[r, i] * (1.0 - f) + table[r, i + 1] * f
-
-
-SHIELD_GAIN = 2.0
-"""Gain of the speed shield [1/(m/s)]: the command is capped at SHIELD_GAIN * (v_envelope - v)."""
-
-
-@njit(cache=True)
-def _braking_envelope(limit, grid, margin, decel, out):
-    """Backward pass: out[k] = min over y >= x_k of sqrt((v_lim(y) - margin)^2 + 2 decel (y - x_k)) on the grid."""
-    n = limit.size
-    nxt = max(limit[n - 1] - margin, 0.0)
-    out[n - 1] = nxt
-    for k in range(n - 2, -1, -1):
-        own = max(limit[k] - margin, 0.0)
-        reach = math.sqrt(nxt * nxt + 2.0 * decel * grid)
-        nxt = own if own < reach else reach
-        out[k] = nxt
-
-
-@njit(cache=True)
-def shield_command(envelope, n, s, v, u):
-    """The speed shield: the command u capped at SHIELD_GAIN * (v_env(s) - v), clipped to [-1, 1], with v_env the
-    braking envelope (RouteTable.braking_envelope, first n grid points) linearly interpolated at s [m], v [m/s]."""
-    i, f = _grid_cell(s / PREVIEW_GRID, n)
-    cap = SHIELD_GAIN * (envelope[i] * (1.0 - f) + envelope[i + 1] * f - v)
-    if cap < -1.0:
-        cap = -1.0
-    return u if u < cap else cap
-
-
 class RouteTable:
     """A road profile resampled on a uniform grid for fast preview look-ups, plus the schedule.
 
@@ -190,18 +148,18 @@ class RouteTable:
         """Highest speed [m/s] on the grid from which braking at ``deceleration`` [m/s^2] keeps the speed
         ``margin`` [m/s] under every speed limit ahead (the speed shield's envelope)."""
         out = np.empty(self.table.shape[1])
-        _braking_envelope(self.table[self.SPEED_LIMIT], PREVIEW_GRID, margin, deceleration, out)
+        braking_envelope(self.table[SPEED_LIMIT], PREVIEW_GRID, margin, deceleration, out)
         return out
 
     def look_ahead(self, s: float) -> np.ndarray:
         """(4, len(preview)) grade [rad], curvature [1/m], speed limit [m/s], schedule time [s] at s + preview
         (a view, overwritten by the next call)."""
-        _look_ahead(self.table, PREVIEW_GRID, self.preview, s, self._out)
+        look_ahead(self.table, PREVIEW_GRID, self.preview, s, self._out)
         return self._out
 
     def at(self, s: float) -> np.ndarray:
         """(4,) grade, curvature, speed limit, schedule time at s (a view, overwritten by the next call)."""
-        _look_ahead(self.table, PREVIEW_GRID, self._zero, s, self._one)
+        look_ahead(self.table, PREVIEW_GRID, self._zero, s, self._one)
         return self._one[:, 0]
 
     def next_stop(self, s: float) -> float:
@@ -216,34 +174,378 @@ class RouteTable:
         return self.stops[bisect.bisect_right(self.stops, s0):bisect.bisect_right(self.stops, s1)]
 
 
-# --------------------------------------------------------------------------------------------- observation layout
+# --------------------------------------------------------------------------------------------- observation types
 CAN_CHANNELS = ("vehicle_speed", "accel_x", "drive_torque", "engine_speed", "brake_pressure_front")
 ESTIMATE_NAMES = ("mass", "c0", "c2")
+ObservationRow = tuple[str, str, float, float, float]
 
 
-def observation_layout(config: EcoDriveConfig) -> list[tuple[str, str, float, float, float]]:
-    """(name, SI unit, scale, low, high) of each observation entry, in order; low/high are the SI bounds the
-    observation is clipped to (generous physical ranges)."""
-    points = (0.0, *config.preview_distances)
-    if config.observation == "state":
-        rows = [("v", "m/s", SCALE["v"], 0.0, 100.0), ("a", "m/s^2", SCALE["a"], -50.0, 50.0)]
-    else:
-        rows = [("can_vehicle_speed", "m/s", SCALE["v"], -5.0, 100.0),
+class ObservationType:
+    """One observation mode of EcoDrive-v0 (highway-env's observation types are the model): its entries
+    (name, SI unit, scale, low, high; low / high are the SI bounds the observation is clipped to) and how the single
+    env builds it. Every mode ends with the same route rows (ecodrive_kernel.route_rows): grade, curvature and
+    speed limit at s + preview, time deficit, remaining distance, next stop, previous command."""
+
+    name = ""
+    batched = False
+    """True when the compiled step builds it (the native vector env batches only such a mode)."""
+
+    def __init__(self, config: EcoDriveConfig) -> None:
+        self.config = config
+        points = (0.0, *config.preview_distances)
+        self.layout: list[ObservationRow] = self.vehicle_rows() + [
+            *((f"grade@{d:g}m", "rad", SCALE["grade"], -0.5, 0.5) for d in points),
+            *((f"curvature@{d:g}m", "1/m", SCALE["curvature"], -1.0, 1.0) for d in points),
+            *((f"speed_limit@{d:g}m", "m/s", SCALE["speed_limit"], 0.0, 100.0) for d in points),
+            ("time_deficit", "s", SCALE["time_deficit"], -1e5, 1e5),
+            ("remaining_distance", "m", SCALE["remaining"], 0.0, 1e6),
+            ("next_stop_distance", "m", SCALE["next_stop"], 0.0, STOP_HORIZON),
+            ("previous_command", "1", SCALE["u_prev"], -1.0, 1.0),
+        ] + self.extra_rows()
+
+    def vehicle_rows(self) -> list[ObservationRow]:
+        """The entries before the route rows."""
+        raise NotImplementedError
+
+    def extra_rows(self) -> list[ObservationRow]:
+        """The entries after the route rows."""
+        return []
+
+    def bounds(self) -> np.ndarray:
+        """(3, n) scale, low / scale, high / scale of the entries (scale 1 with ``obs_scaling='si'``)."""
+        scale = np.array([1.0 if self.config.obs_scaling == "si" else row[2] for row in self.layout])
+        return np.vstack([scale, np.array([row[3] for row in self.layout]) / scale,
+                          np.array([row[4] for row in self.layout]) / scale])
+
+    def space(self) -> spaces.Box:
+        b = self.bounds()
+        return spaces.Box(b[1].astype(np.float32), b[2].astype(np.float32), shape=(len(self.layout),),
+                          dtype=np.float32)
+
+    def simulator(self, spec: VehicleSpec, profile: RoadProfile, cfg: EcoDriveConfig, seed: int) -> Simulator | None:
+        """The episode's simulator when the mode needs its own (None: the env builds it)."""
+        return None
+
+    def start(self, env: EcoDriveEnv) -> None:
+        """After the episode setup (reset)."""
+
+    def update(self, env: EcoDriveEnv) -> None:
+        """After a step (the new substeps are in the simulator's truth log)."""
+
+    def observe(self, env: EcoDriveEnv) -> np.ndarray:
+        """The observation now (float32)."""
+        raise NotImplementedError
+
+
+class StateObservation(ObservationType):
+    """'state': true speed v [m/s] and acceleration a [m/s^2], then the route rows at the true position; built by
+    the compiled step."""
+
+    name = "state"
+    batched = True
+
+    def vehicle_rows(self) -> list[ObservationRow]:
+        return [("v", "m/s", SCALE["v"], 0.0, 100.0), ("a", "m/s^2", SCALE["a"], -50.0, 50.0)]
+
+    def observe(self, env: EcoDriveEnv) -> np.ndarray:
+        return env.batch.obs[0].copy()
+
+
+class CanObservation(ObservationType):
+    """'can': the noisy CAN channels vehicle_speed [m/s], accel_x [m/s^2, incl. g sin(theta)], drive_torque [N m],
+    engine_speed [rad/s], brake_pressure_front [Pa] (a dropout holds the last value), then the route rows at the
+    position dead-reckoned from the CAN speed (what a controller without GNSS / map matching knows)."""
+
+    name = "can"
+
+    def vehicle_rows(self) -> list[ObservationRow]:
+        return [("can_vehicle_speed", "m/s", SCALE["v"], -5.0, 100.0),
                 ("can_accel_x", "m/s^2", SCALE["a"], -50.0, 50.0),
                 ("can_drive_torque", "N*m", SCALE["drive_torque"], -5000.0, 5000.0),
                 ("can_engine_speed", "rad/s", SCALE["engine_speed"], -100.0, 3000.0),
                 ("can_brake_pressure_front", "Pa", SCALE["brake_pressure"], -1e6, 5e7)]
-    rows += [(f"grade@{d:g}m", "rad", SCALE["grade"], -0.5, 0.5) for d in points]
-    rows += [(f"curvature@{d:g}m", "1/m", SCALE["curvature"], -1.0, 1.0) for d in points]
-    rows += [(f"speed_limit@{d:g}m", "m/s", SCALE["speed_limit"], 0.0, 100.0) for d in points]
-    rows += [("time_deficit", "s", SCALE["time_deficit"], -1e5, 1e5),
-             ("remaining_distance", "m", SCALE["remaining"], 0.0, 1e6),
-             ("next_stop_distance", "m", SCALE["next_stop"], 0.0, STOP_HORIZON),
-             ("previous_command", "1", SCALE["u_prev"], -1.0, 1.0)]
-    if config.observation == "can+estimates":
-        rows += [("estimated_mass", "kg", SCALE["mass"], 0.0, 1e5), ("estimated_c0", "N", SCALE["c0"], -1e5, 1e5),
-                 ("estimated_c2", "kg/m", SCALE["c2"], -1e3, 1e3)]
-    return rows
+
+    def start(self, env: EcoDriveEnv) -> None:
+        self.hold = np.zeros(len(CAN_CHANNELS))
+        self.hold[0] = env.config.initial_speed
+        self.position = 0.0
+        self.sample: dict[str, float] | None = None
+
+    def update(self, env: EcoDriveEnv) -> None:
+        sample = env.simulator.observe()
+        if sample is not None:
+            for j, name in enumerate(CAN_CHANNELS):
+                x = sample.get(name, 0.0)
+                if x == x:  # NaN (dropout): hold the last valid value
+                    self.hold[j] = x
+        self.position += self.hold[0] * env.config.control_period
+        self.sample = sample
+
+    def fill(self, env: EcoDriveEnv, buf: np.ndarray) -> int:
+        """The CAN channels and the route rows into buf; returns the index after them."""
+        b = env.batch
+        k = len(CAN_CHANNELS)
+        buf[:k] = self.hold
+        la = b.look_ahead[0]
+        look_ahead(b.tables[0, :, :b.episodes[0]["table_points"]], PREVIEW_GRID, b.preview, self.position, la)
+        route_rows(buf, k, la, env.simulator.vehicle_state.time, self.position, b.episodes[0], b.stops[0])
+        return k + 3 * la.shape[1] + 4
+
+    def observe(self, env: EcoDriveEnv) -> np.ndarray:
+        buf = env.batch.obs_work[0]
+        self.fill(env, buf)
+        out = np.empty(buf.size, dtype=np.float32)
+        scaled_observation(buf, env.batch.bounds, out)
+        return out
+
+
+class CanEstimatesObservation(CanObservation):
+    """'can+estimates': 'can' plus the running estimates of mass [kg], c0 [N] and c2 [kg/m] of roadload's online
+    force model (the chapter-5 pipeline + a catalogue estimator, model M4) on the episode's CAN samples."""
+
+    name = "can+estimates"
+
+    def extra_rows(self) -> list[ObservationRow]:
+        return [("estimated_mass", "kg", SCALE["mass"], 0.0, 1e5), ("estimated_c0", "N", SCALE["c0"], -1e5, 1e5),
+                ("estimated_c2", "kg/m", SCALE["c2"], -1e3, 1e3)]
+
+    def simulator(self, spec: VehicleSpec, profile: RoadProfile, cfg: EcoDriveConfig, seed: int) -> Simulator:
+        # the controllers' plant adapter owns the simulator: its can_window() feeds the online estimator the CAN
+        # samples exactly as in the MPC's closed loop
+        plant = SimulatorPlant(spec, profile, effects=cfg.effects, seed=seed, dt=cfg.control_period)
+        self._can_window = plant.can_window
+        return plant.sim
+
+    def start(self, env: EcoDriveEnv) -> None:
+        super().start(env)
+        self.estimator = _make_online_estimator(env.config, self._can_window)
+
+    def update(self, env: EcoDriveEnv) -> None:
+        super().update(env)
+        if self.sample is not None:
+            self.estimator.observe(self.sample)
+
+    def observe(self, env: EcoDriveEnv) -> np.ndarray:
+        buf = env.batch.obs_work[0]
+        k = self.fill(env, buf)
+        p = self.estimator.parameters()
+        buf[k:k + 3] = (p.mass, p.c0, p.c2)
+        out = np.empty(buf.size, dtype=np.float32)
+        scaled_observation(buf, env.batch.bounds, out)
+        return out
+
+
+OBSERVATION_TYPES: dict[str, type[ObservationType]] = {
+    t.name: t for t in (StateObservation, CanObservation, CanEstimatesObservation)}
+"""The observation modes by ``config.observation``."""
+
+
+def observation_factory(config: EcoDriveConfig) -> ObservationType:
+    """The observation type of ``config.observation``."""
+    try:
+        return OBSERVATION_TYPES[config.observation](config)
+    except KeyError:
+        raise GymConfigError(f"observation: expected one of {sorted(OBSERVATION_TYPES)}, got "
+                             f"{config.observation!r}") from None
+
+
+def observation_layout(config: EcoDriveConfig) -> list[ObservationRow]:
+    """(name, SI unit, scale, low, high) of each observation entry, in order; low/high are the SI bounds the
+    observation is clipped to (generous physical ranges)."""
+    return observation_factory(config).layout
+
+
+# --------------------------------------------------------------------------------------------- episodes in records
+class EcoBatch:
+    """N EcoDrive-v0 episodes in the packed records of the compiled step (:mod:`roadload.gym.ecodrive_kernel`): the
+    single env holds one, the native vector env N. ``observation``: the type whose bounds the compiled 'state'
+    observation uses. ``shared`` (N = 1): the fleet is the episode's simulator itself (Fleet.sharing), so its truth
+    log, CAN sensors and ``to_trip()`` follow the steps; otherwise each episode's simulator is copied into a fleet
+    slot (and not advanced itself)."""
+
+    def __init__(self, n: int, config: EcoDriveConfig, observation: ObservationType, shared: bool = False) -> None:
+        if shared and n != 1:
+            raise GymConfigError("EcoBatch: a batch that shares its simulator holds one episode")
+        self.n = n
+        self.shared = shared
+        self.bounds = observation.bounds()
+        self.preview = np.array((0.0, *config.preview_distances))  # column 0 = at s: the speed limit
+        n_obs = self.bounds.shape[1]
+        self.episodes = np.zeros(n, EPISODE)
+        self.settings = np.zeros(1, SETTINGS)
+        self.tables = np.zeros((n, 4, 2))
+        self.envelopes = np.full((n, 2), NO_SHIELD)
+        self.stops = np.zeros((n, 1))
+        self.look_ahead = np.zeros((n, 4, self.preview.size))
+        self.obs_work = np.zeros((n, n_obs))
+        self.obs = np.zeros((n, n_obs), dtype=np.float32)
+        self.reward = np.zeros(n)
+        self.terminated = np.zeros(n, dtype=bool)
+        self.truncated = np.zeros(n, dtype=bool)
+        self.fleet = None if shared else Fleet(n)
+        self.fleet_shared: Fleet | None = None
+        self.simulators: list[Simulator | None] = [None] * n
+        self.routes: list[RouteTable | None] = [None] * n
+        self.profiles: list[RoadProfile | None] = [None] * n
+        self._keys: list[tuple | None] = [None] * n
+        self._templates: dict[tuple, Simulator] = {}  # per vehicle and effects: the simulator new roads start from
+        self._observation = observation
+        self._records: EcoRecords | None = None
+
+    # ------------------------------------------------------------------ episode setup
+    def setup(self, i: int, cfg: EcoDriveConfig, road_seed: int, sim_seed: int) -> None:
+        """Sub-env i starts an episode of ``cfg`` on road seed ``road_seed`` with simulator seed ``sim_seed``:
+        the road, simulator and route table are built when they changed, else the simulator is reset; then the
+        records, the start look-ahead, observation and info."""
+        key = (cfg.vehicle, cfg.road, road_seed, cfg.route_length, repr(cfg.effects), cfg.preview_distances,
+               cfg.schedule_speed_fraction, cfg.lateral_acceleration_limit)
+        if key != self._keys[i]:
+            self._new_route(i, cfg, key, road_seed, sim_seed)
+        else:
+            self._simulator(i).reset(seed=sim_seed, initial_speed=cfg.initial_speed)
+        sim, route = self._simulator(i), self.routes[i]
+        if route is None:
+            raise GymConfigError(f"sub-env {i}: no episode set up (its first setup failed)")
+        if self.fleet is not None:
+            self.fleet.load(i, sim)
+        else:
+            self.fleet_shared = Fleet.sharing(sim)
+        self._settings(cfg, sim.vehicle)
+        e = self.episodes[i]
+        nt = route.table.shape[1]
+        e["table_points"] = nt
+        e["stop_count"] = len(route.stops)
+        self._grow("envelopes", nt, NO_SHIELD)[i] = NO_SHIELD
+        if cfg.speed_shield:
+            self.envelopes[i, :nt] = route.braking_envelope(cfg.shield_margin, cfg.shield_deceleration)
+        for name in ("speed_limit", "previous_command", "previous_acceleration", "last_source_energy"):
+            e[name] = 0.0
+        e["return_costs"] = 0.0
+        e["time_limit"] = cfg.time_limit if cfg.time_limit is not None else 2.0 * route.route_time + 30.0
+        e["route_length"] = route.length
+        e["route_time"] = route.route_time
+        start_episode(i, self.fleet_records(), self.records, self._outputs(np.empty((N_INFO, self.n)),
+                                                                            np.empty((2, self.n), dtype=np.int64)))
+
+    def _new_route(self, i: int, cfg: EcoDriveConfig, key: tuple, road_seed: int, sim_seed: int) -> None:
+        """Road, simulator (a fresh one for the first episode of a vehicle and effects, else that one moved to the
+        new road: the same state, bit for bit, without packing the vehicle again) and route table of sub-env i."""
+        try:
+            loaded = load_profile_start(cfg.road, cfg.route_length, seed=road_seed)
+            if not isinstance(loaded, RoadProfile):
+                raise GymConfigError(f"road: {cfg.road!r} is not a road profile")
+            profile = cut_profile(loaded, cfg.route_length)
+            spec = get_preset(cfg.vehicle)
+            sim = self._observation.simulator(spec, profile, cfg, sim_seed)
+            if sim is None:
+                sim = self._simulator_on(spec, profile, cfg, sim_seed)
+        except GymConfigError:
+            raise
+        except ValueError as exc:  # RoadProfileError, SimulationError, EffectsError, VehicleSpecError
+            raise GymConfigError(f"cannot build the episode: {exc}") from exc
+        route = RouteTable(profile, self.preview, cfg.schedule_speed_fraction, cfg.lateral_acceleration_limit)
+        self.simulators[i], self.routes[i], self.profiles[i], self._keys[i] = sim, route, profile, key
+        self.episodes[i]["road_seed"] = road_seed
+        nt = route.table.shape[1]
+        self._grow("tables", nt)[i, :, :nt] = route.table
+        stops = np.asarray(route.stops, dtype=float)
+        self._grow("stops", max(stops.size, 1))[i, :stops.size] = stops
+
+    def _simulator_on(self, spec: VehicleSpec, profile: RoadProfile, cfg: EcoDriveConfig, seed: int) -> Simulator:
+        template = self._templates.get((cfg.vehicle, repr(cfg.effects)))
+        if template is not None:
+            return template.on_road(profile, seed, cfg.initial_speed)
+        sim = Simulator(spec, profile, cfg.effects, None, seed, initial_speed=cfg.initial_speed,
+                        log_capacity=(1 << 14) if self.shared else cfg.n_substeps)
+        self._templates[(cfg.vehicle, repr(cfg.effects))] = sim
+        return sim
+
+    def _settings(self, cfg: EcoDriveConfig, spec: VehicleSpec) -> None:
+        """The shared settings: reward weights, control period, limits, substeps and the vehicle's drive scales."""
+        st = self.settings[0]
+        w = cfg.reward
+        st["weights"] = (w.energy, w.time, w.speeding, w.lateral, w.stop, w.jerk, w.progress, w.scale)
+        st["control_period"] = cfg.control_period
+        st["lateral_limit"] = cfg.lateral_acceleration_limit
+        st["stop_speed"] = cfg.stop_speed
+        st["n_substeps"] = cfg.n_substeps
+        drive = DriveScales.from_spec(spec)
+        st["peak_traction_force"] = drive.peak_traction_force
+        st["peak_power"] = drive.peak_power
+        st["full_brake_force"] = drive.full_brake_force
+
+    def _grow(self, name: str, width: int, fill: float = 0.0) -> np.ndarray:
+        arr = getattr(self, name)
+        if arr.shape[-1] < width:
+            new = np.full(arr.shape[:-1] + (width,), fill, dtype=arr.dtype)
+            new[..., :arr.shape[-1]] = arr
+            setattr(self, name, new)
+            self._records = None
+            arr = new
+        return arr
+
+    def _simulator(self, i: int) -> Simulator:
+        sim = self.simulators[i]
+        if sim is None:
+            raise GymConfigError(f"sub-env {i}: no episode set up (its first setup failed)")
+        return sim
+
+    # ------------------------------------------------------------------ records and steps
+    @property
+    def records(self) -> EcoRecords:
+        """The episode records of the compiled step (rebuilt when an array grew)."""
+        if self._records is None:
+            self._records = EcoRecords(self.episodes, self.settings, self.tables, self.envelopes, self.stops,
+                                       self.preview, self.bounds, self.look_ahead, self.obs_work)
+        return self._records
+
+    def fleet_records(self) -> FleetRecords:
+        """The vehicles' records (the shared simulator's own arrays for a shared batch)."""
+        fleet = self.fleet if self.fleet is not None else self.fleet_shared
+        if fleet is None:
+            raise GymConfigError("EcoDrive: no episode set up (its first setup failed)")
+        return fleet.records
+
+    def _outputs(self, info: np.ndarray, ints: np.ndarray) -> EcoOutputs:
+        return EcoOutputs(self.obs, self.reward, self.terminated, self.truncated, info, ints)
+
+    def step(self, active: np.ndarray, u: np.ndarray, stepper: Callable[..., None] | None = None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """One compiled step of the active sub-envs with commands u (float64 (n,)); the others idle. Returns
+        (reward, terminated, truncated, info block, integer info block), fresh arrays. ``stepper``: a kernel with
+        step_range's arguments after (lo, hi) (the vector env's threaded one)."""
+        n = self.n
+        reward = np.empty(n)
+        term = np.empty(n, dtype=bool)
+        trunc = np.empty(n, dtype=bool)
+        info = np.empty((N_INFO, n))
+        ints = np.empty((2, n), dtype=np.int64)
+        if self.shared:
+            self._simulator(0).reserve_log(int(self.settings[0]["n_substeps"]))
+        out = EcoOutputs(self.obs, reward, term, trunc, info, ints)
+        if stepper is None:
+            step_range(0, n, active, u, self.fleet_records(), self.records, out)
+        else:
+            stepper(active, u, self.fleet_records(), self.records, out)
+        return reward, term, trunc, info, ints
+
+    def info_blocks(self) -> tuple[np.ndarray, np.ndarray]:
+        """(info block, integer info block) of every sub-env now, without terms (the info of reset())."""
+        info = np.empty((N_INFO, self.n))
+        ints = np.empty((2, self.n), dtype=np.int64)
+        gather_info_all(self.fleet_records(), self.records, self._outputs(info, ints))
+        return info, ints
+
+
+def info_of(info: np.ndarray, ints: np.ndarray, i: int, with_terms: bool) -> dict[str, Any]:
+    """The single env's info dict of column i of the info blocks: t, s, v, a [SI], gear, speed_limit, total source
+    energy [J], road seed, route length [m], schedule time [s], return costs; terms and costs after a step."""
+    out: dict[str, Any] = {k: (float(info[r, i]) if r >= 0 else int(ints[-1 - r, i])) for k, r in INFO_ROWS}
+    out["return_costs"] = {k: float(info[I_RETURN + j, i]) for j, k in enumerate(COST_NAMES)}
+    if with_terms:
+        out["terms"] = {k: float(info[I_TERMS + j, i]) for j, k in enumerate(COST_NAMES)}
+        out["costs"] = {k: float(info[I_COSTS + j, i]) for j, k in enumerate(COST_NAMES)}
+    return out
 
 
 # --------------------------------------------------------------------------------------------- the env
@@ -261,72 +563,20 @@ class EcoDriveEnv(gym.Env):
             raise GymConfigError(f"render_mode: EcoDrive-v0 renders only 'rgb_array', got {render_mode!r}")
         self.render_mode = render_mode
         self.config: EcoDriveConfig = make_config(EcoDriveConfig, config, **overrides)
-        self.layout = observation_layout(self.config)
-        n_obs = len(self.layout)
-        self._scale = np.array([1.0 if self.config.obs_scaling == "si" else row[2] for row in self.layout])
-        self._low = np.array([row[3] for row in self.layout]) / self._scale
-        self._high = np.array([row[4] for row in self.layout]) / self._scale
-        self.observation_space = spaces.Box(self._low.astype(np.float32), self._high.astype(np.float32),
-                                            shape=(n_obs,), dtype=np.float32)
+        self.observation_type = observation_factory(self.config)
+        self.layout = self.observation_type.layout
+        self.observation_space = self.observation_type.space()
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
-        self._sim: Simulator | None = None
-        self._sim_key: tuple | None = None
-        self._estimator: OnlineForceModel | None = None  # observation mode 'can+estimates' only
+        self.batch = EcoBatch(1, self.config, self.observation_type, shared=True)
+        self._active = np.ones(1, dtype=bool)
         # build once now so that a bad road / vehicle / effect fails at construction, not mid-episode
         self._setup(self.config, road_seed=self.config.road_seed if self.config.road_seed is not None
                     else self.config.road_seed_range[0], sim_seed=0)
 
-    # ------------------------------------------------------------------ episode setup
     def _setup(self, cfg: EcoDriveConfig, road_seed: int, sim_seed: int) -> None:
-        key = (cfg.vehicle, cfg.road, road_seed, cfg.route_length, repr(cfg.effects), cfg.preview_distances,
-               cfg.schedule_speed_fraction, cfg.lateral_acceleration_limit)
-        if key != self._sim_key:
-            try:
-                loaded = load_profile_start(cfg.road, cfg.route_length, seed=road_seed)
-                if not isinstance(loaded, RoadProfile):
-                    raise GymConfigError(f"road: {cfg.road!r} is not a road profile")
-                profile = cut_profile(loaded, cfg.route_length)
-                spec = get_preset(cfg.vehicle)
-                self._can_window = None
-                if cfg.observation == "can+estimates":
-                    # the controllers' plant adapter owns the simulator here: its can_window() feeds the online
-                    # estimator the CAN samples exactly as in the MPC's closed loop
-                    plant = SimulatorPlant(spec, profile, effects=cfg.effects, seed=sim_seed, dt=cfg.control_period)
-                    self._sim, self._can_window = plant.sim, plant.can_window
-                else:
-                    self._sim = Simulator(spec, profile, cfg.effects, None, sim_seed,
-                                          initial_speed=cfg.initial_speed)
-            except GymConfigError:
-                raise
-            except ValueError as exc:  # RoadProfileError, SimulationError, EffectsError, VehicleSpecError
-                raise GymConfigError(f"cannot build the episode: {exc}") from exc
-            self._spec = spec
-            self._profile = profile
-            self._route = RouteTable(profile, np.array((0.0, *cfg.preview_distances)), cfg.schedule_speed_fraction,
-                                     cfg.lateral_acceleration_limit)
-            self._drive = DriveScales.from_spec(spec)
-            self._elevation = profile.elevation()
-            self._sim_key = key
-            self._road_seed = road_seed
-        self._time_limit = (cfg.time_limit if cfg.time_limit is not None
-                            else 2.0 * self._route.route_time + 30.0)
-        self._state = self.simulator.reset(seed=sim_seed, initial_speed=cfg.initial_speed)
-        if cfg.observation == "can+estimates":
-            self._estimator = _make_online_estimator(cfg, self._can_window)
-        self._dt = cfg.control_period
-        self._n_sub = cfg.n_substeps
-        self._u_prev = 0.0
-        self._a_prev = 0.0
-        self._s_hat = 0.0
-        self._can = None
-        self._can_hold = np.zeros(len(CAN_CHANNELS))
-        self._can_hold[0] = cfg.initial_speed
-        self._return_costs = dict.fromkeys(("energy", "time", "speeding", "lateral", "stop", "jerk", "progress"),
-                                           0.0)
-        self._limit = float(self._route.at(self._state.s)[RouteTable.SPEED_LIMIT])
-        self._obs_buf = np.zeros(len(self.layout))
-        self._envelope = (self._route.braking_envelope(cfg.shield_margin, cfg.shield_deceleration)
-                          if cfg.speed_shield else None)
+        self.batch.setup(0, cfg, road_seed, sim_seed)
+        self._state = self.simulator.state
+        self.observation_type.start(self)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
@@ -334,111 +584,22 @@ class EcoDriveEnv(gym.Env):
         road_seed = (cfg.road_seed if cfg.road_seed is not None
                      else int(self.np_random.integers(*cfg.road_seed_range)))
         sim_seed = int(self.np_random.integers(0, 2 ** 31 - 1))
-        self.config = cfg
+        self.config = self.observation_type.config = cfg
         self._setup(cfg, road_seed, sim_seed)
-        return self._observe(), self._info()
+        info, ints = self.batch.info_blocks()
+        return self.observation_type.observe(self), info_of(info, ints, 0, with_terms=False)
 
-    # ------------------------------------------------------------------ step
     def step(self, action):
-        u = float(validate_action(action, self.action_space)[0])
-        u = -1.0 if u < -1.0 else (1.0 if u > 1.0 else u)
-        cfg = self.config
-        w = cfg.reward
-        st0 = self._state
-        if self._envelope is not None:
-            u = float(shield_command(self._envelope, self._envelope.size, st0.s, st0.v, u))
-        limit0 = self._limit
-        force = self._drive.wheel_force(u, st0.v)
+        u = np.array([validate_action(action, self.action_space)[0]], dtype=np.float64)
+        reward, term, trunc, info, ints = self.batch.step(self._active, u)
         with warnings.catch_warnings():
             # the simulator warns (once per episode) when |a_y| > 4 m/s^2; the env penalises lateral excess
             # above its comfort limit and reports it in info['terms'] instead
             warnings.simplefilter("ignore", LateralValidityWarning)
-            st = self._sim.step(force, self._n_sub)
-        self._state = st
-        self._limit = float(self._route.at(st.s)[RouteTable.SPEED_LIMIT])
-        dt = self._dt
-        if cfg.observation != "state":
-            self._update_can()
-        # raw terms
-        speeding = max(0.0, 0.5 * (st0.v + st.v - limit0 - self._limit)) * dt
-        lateral = max(0.0, abs(st.lateral_acceleration) - cfg.lateral_acceleration_limit) * dt
-        stop = 0.0
-        for s_stop in self._route.stops_crossed(st0.s, st.s):
-            frac = (s_stop - st0.s) / max(st.s - st0.s, 1e-9)
-            if st0.v + frac * (st.v - st0.v) > cfg.stop_speed:
-                stop += 1.0
-        jerk = (st.a - self._a_prev) / dt
-        terminated = bool(st.s >= self._route.length - 1e-6)
-        truncated = bool(not terminated and st.t >= self._time_limit - 1e-9)
-        progress = min(st.s, self._route.length) - min(st0.s, self._route.length)
-        energy = float(st.source_energy)
-        terms = {"energy": energy, "time": dt, "speeding": speeding, "lateral": lateral, "stop": stop,
-                 "jerk": jerk * jerk * dt, "progress": progress}
-        costs = {"energy": w.energy * energy, "time": w.time * dt, "speeding": w.speeding * speeding,
-                 "lateral": w.lateral * lateral, "stop": w.stop * stop, "jerk": w.jerk * terms["jerk"],
-                 "progress": -w.progress * progress}
-        total = 0.0
-        acc = self._return_costs
-        for k, c in costs.items():
-            total += c
-            acc[k] += c
-        self._u_prev = u
-        self._a_prev = float(st.a)
-        info = self._info()
-        info["terms"] = terms
-        info["costs"] = costs
-        return self._observe(), -w.scale * total, terminated, truncated, info
-
-    def _update_can(self) -> None:
-        sample = self.simulator.observe()
-        hold = self._can_hold
-        if sample is not None:
-            for j, name in enumerate(CAN_CHANNELS):
-                x = sample.get(name, 0.0)
-                if x == x:  # NaN (dropout): hold the last valid value
-                    hold[j] = x
-        # dead-reckoned position from the CAN speed: what a controller without GNSS/map matching knows
-        self._s_hat += hold[0] * self._dt
-        if self._estimator is not None and sample is not None:
-            self._estimator.observe(sample)
-
-    # ------------------------------------------------------------------ observation / info
-    def _observe(self) -> np.ndarray:
-        cfg = self.config
-        st = self._state
-        buf = self._obs_buf
-        if cfg.observation == "state":
-            s = st.s
-            buf[0] = st.v
-            buf[1] = st.a
-            k = 2
-        else:
-            s = self._s_hat
-            k = len(CAN_CHANNELS)
-            buf[:k] = self._can_hold
-        la = self._route.look_ahead(s)
-        m = la.shape[1]
-        buf[k:k + 3 * m] = la[:3].ravel()
-        k += 3 * m
-        buf[k] = st.t - la[RouteTable.SCHEDULE, 0]
-        buf[k + 1] = max(self._route.length - s, 0.0)
-        buf[k + 2] = self._route.next_stop(s)
-        buf[k + 3] = self._u_prev
-        if cfg.observation == "can+estimates":
-            if self._estimator is None:
-                raise GymConfigError("observation 'can+estimates': no online estimator yet (call reset() first)")
-            p = self._estimator.parameters()
-            buf[k + 4:k + 7] = (p.mass, p.c0, p.c2)
-        obs = buf / self._scale
-        np.clip(obs, self._low, self._high, out=obs)
-        return obs.astype(np.float32)
-
-    def _info(self) -> dict[str, Any]:
-        st = self._state
-        return {"t": float(st.t), "s": float(st.s), "v": float(st.v), "a": float(st.a), "gear": st.gear,
-                "speed_limit": self._limit, "source_energy_total": float(st.source_energy_total),
-                "road_seed": self._road_seed, "route_length": self._route.length,
-                "schedule_time": self._route.route_time, "return_costs": dict(self._return_costs)}
+            self._state = self.simulator.refresh()
+        self.observation_type.update(self)
+        return (self.observation_type.observe(self), float(reward[0]), bool(term[0]), bool(trunc[0]),
+                info_of(info, ints, 0, with_terms=True))
 
     def render(self) -> np.ndarray | None:
         """rgb_array (H=160, W=480, uint8): the elevation of the next 500 m (grey band: this metre's speed limit
@@ -448,9 +609,11 @@ class EcoDriveEnv(gym.Env):
         h, w_px, ahead = 160, 480, 500.0
         img = np.full((h, w_px, 3), 255, dtype=np.uint8)
         st = self._state
+        profile = self.route
+        elevation = profile.elevation()
         xs = st.s - 50.0 + np.arange(w_px) * ((ahead + 50.0) / w_px)
-        elev = np.interp(np.clip(xs, 0.0, self._route.length), self._profile.distance, self._elevation)
-        e0 = float(np.interp(st.s, self._profile.distance, self._elevation))
+        elev = np.interp(np.clip(xs, 0.0, profile.length), profile.distance, elevation)
+        e0 = float(np.interp(st.s, profile.distance, elevation))
         rows = np.clip((100 - (elev - e0) * 2.0).astype(int), 20, h - 1)
         for x in range(w_px):
             img[rows[x]:, x] = (200, 200, 200)
@@ -459,7 +622,7 @@ class EcoDriveEnv(gym.Env):
         img[max(cy - 8, 0):cy, max(cx - 6, 0):cx + 6] = (220, 30, 30)
         bar = int(min(st.v / 50.0, 1.0) * (w_px - 20))
         img[5:13, 10:10 + bar] = (40, 80, 220)
-        lim = int(min(self._limit / 50.0, 1.0) * (w_px - 20))
+        lim = int(min(self.batch.episodes[0]["speed_limit"] / 50.0, 1.0) * (w_px - 20))
         img[2:16, 10 + lim:12 + lim] = 0
         return img
 
@@ -467,20 +630,23 @@ class EcoDriveEnv(gym.Env):
     @property
     def simulator(self) -> Simulator:
         """The simulator of the current episode (e.g. ``true_parameters()``, ``to_trip()``)."""
-        if self._sim is None:
+        sim = self.batch.simulators[0]
+        if sim is None:
             raise GymConfigError("EcoDrive: no simulator (the episode setup failed; see the error it raised)")
-        return self._sim
+        return sim
 
     @property
     def route(self) -> RoadProfile:
         """The road profile of the current episode (cut to route_length)."""
-        return self._profile
+        profile = self.batch.profiles[0]
+        if profile is None:
+            raise GymConfigError("EcoDrive: no route (the episode setup failed; see the error it raised)")
+        return profile
 
 
-def _make_online_estimator(cfg: EcoDriveConfig, can_window) -> OnlineForceModel:
+def _make_online_estimator(cfg: EcoDriveConfig, can_window: Callable[[float], Any]) -> OnlineForceModel:
     """The running estimator of observation mode 'can+estimates': roadload.controllers' online force model (the
     chapter-5 pipeline + a catalog estimator, model M4) on the episode's CAN samples, updated every 10 s."""
-
     try:
         model = OnlineForceModel(knowledge_for_preset(cfg.vehicle), model="M4", estimator=cfg.estimator)
     except ValueError as exc:

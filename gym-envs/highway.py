@@ -48,7 +48,6 @@ from roadload.gym.actions import validate_action
 from roadload.gym.config import SPACE_FIELDS_HIGHWAY, EcoHighwayConfig, GymConfigError, make_config, updated_config
 from roadload.gym.ecodrive import DriveScales, cut_profile
 from roadload.presets import get_preset
-from roadload.envs.layout import S_MASS, S_W_CLIMB
 from roadload.envs.simulator import LateralValidityWarning, Simulator
 
 ROAD_LENGTH = 10_000.0
@@ -130,7 +129,7 @@ class RoadloadEgoVehicle(ControlledVehicle):
         a0 = self.plant.state.a
         s0 = self.plant.state.s
         v_plant0 = self.plant.state.v
-        climb0 = float(self.plant.X[S_W_CLIMB])
+        climb0 = float(self.plant.vehicle_state.climbing_work)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", LateralValidityWarning)
             st = self.plant.step(self.scales.wheel_force(self.command, v0), self.n_substeps)
@@ -141,8 +140,9 @@ class RoadloadEgoVehicle(ControlledVehicle):
         log = self.log
         log["energy"] += float(st.source_energy)
         log["distance"] += float(st.s - s0)
-        log["mechanical"] += (0.5 * float(self.plant.X[S_MASS]) * (float(st.v) ** 2 - float(v_plant0) ** 2)
-                              + float(self.plant.X[S_W_CLIMB]) - climb0)
+        x = self.plant.vehicle_state
+        log["mechanical"] += (0.5 * float(x.mass) * (float(st.v) ** 2 - float(v_plant0) ** 2)
+                              + float(x.climbing_work) - climb0)
         log["jerk"] += jerk * jerk * dt
         log["time"] += dt
         h_min = self._headway_min

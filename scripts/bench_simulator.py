@@ -3,7 +3,6 @@ whole trip with all sensors and effects, the step API (roadload.experiments.benc
 
     python scripts/bench_simulator.py [--duration 3600] [--repeats 3] [--quick]
     python scripts/bench_simulator.py --compare main [--rounds 3] [--quick]   # old commit vs working tree
-    python scripts/bench_simulator.py --ab 627017b                            # in-process A/B of physics.py
 """
 
 from pathlib import Path

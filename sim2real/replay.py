@@ -17,7 +17,6 @@ import numpy as np
 import pandas as pd
 
 from .simconfig import SimConfig
-from roadload.envs.layout import S_POS
 from roadload.envs.simulator import DT, Action, LateralValidityWarning, Simulator
 from roadload.road_profiles import RoadProfile
 
@@ -39,10 +38,10 @@ def simulator_replay(frame: pd.DataFrame, rows: np.ndarray, sim: SimConfig, wind
     trip = frame["trip"].to_numpy()
     with warnings.catch_warnings():
         return _replay(frame, rows, sim, window, seed, t_all, trip, DT, Action, LateralValidityWarning, Simulator,
-                       S_POS, RoadProfile)
+                       RoadProfile)
 
 
-def _replay(frame, rows, sim, window, seed, t_all, trip, DT, Action, LateralValidityWarning, Simulator, S_POS,
+def _replay(frame, rows, sim, window, seed, t_all, trip, DT, Action, LateralValidityWarning, Simulator,
             RoadProfile):
     sq, n, ends = 0.0, 0, []
     for k in pd.unique(trip[rows]):
@@ -78,7 +77,7 @@ def _replay(frame, rows, sim, window, seed, t_all, trip, DT, Action, LateralVali
             # model may exceed its validity; that is the recorded road, not an input error, so the warning is muted
             warnings.simplefilter("ignore", LateralValidityWarning)
             simulator.reset(seed, initial_speed=max(float(v[idx[0]]), 0.0))
-            simulator.X[S_POS] = pos[idx[0]]
+            simulator.vehicle_state.position = pos[idx[0]]
             err = np.zeros(idx.size)
             for m in range(idx.size - 1):
                 j = idx[m]

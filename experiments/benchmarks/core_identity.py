@@ -1,6 +1,7 @@
 """Are the simulator core's trajectories bitwise those of another commit? For speed work that must not change a
 single bit: every preset on a motorway, a city and a hilly road, without and with all effects, built-in driver,
-the whole truth log and the final state; plus the native vector env (random actions, observations, rewards).
+the whole truth log, the final step result, energy ledger and true parameters; plus the native vector env (random
+actions, observations, rewards).
 
     python scripts/check_core_identity.py --ref 8efaaad          # the working tree against commit 8efaaad
     python scripts/check_core_identity.py --quick                 # CI smoke run: HEAD, one short configuration
@@ -23,27 +24,31 @@ ROADS = ("motorway", "city", "hilly")
 
 
 def dump(out: Path, quick: bool) -> None:
-    """Run every configuration in this process (whichever roadload PYTHONPATH selects) and save the arrays."""
-    from roadload.envs import Simulator, physics
-    from roadload.envs.layout import C_USE_DRIVER
+    """Run every configuration in this process (whichever roadload PYTHONPATH selects) and save the arrays. Only the
+    public simulator API is used (Simulator.run, truth_log, state, energy_ledger, true_parameters), so that the same
+    function runs on older commits."""
+    import warnings
+    from dataclasses import astuple
+
+    from roadload.envs import LateralValidityWarning, Simulator
     from roadload.gym.vector import EcoDriveVectorEnv
     from roadload.road_profiles import load_profile
 
+    warnings.simplefilter("ignore", LateralValidityWarning)  # some presets overshoot curves of the hilly road
     arrays: dict[str, np.ndarray] = {}
     presets, roads, effects = (("bmw_i3",), ("city",), (None,)) if quick else (PRESETS, ROADS, (None, "all"))
     n = 2000 if quick else 30_000  # substeps (10 ms each)
     for vehicle in presets:
         for road in roads:
             for eff in effects:
-                sim = Simulator(vehicle, load_profile(road, seed=3, length=20_000.0), effects=eff, seed=2)
-                sim._ensure_capacity(n + 1)
-                sim._cmd[C_USE_DRIVER] = 1.0
-                X, rng = sim.X.copy(), sim._rng.copy()
-                done = physics.run(X, sim.P, sim.tabs, sim.ti, sim._road, sim._stops, sim._cycle, rng, sim._cmd,
-                                   sim._log, n)
+                sim = Simulator(vehicle, load_profile(road, seed=3, length=20_000.0), effects=eff, seed=2,
+                                log_capacity=n + 1)
+                sim.run(duration=n * 0.01)
                 key = f"{vehicle}/{road}/{eff or 'none'}"
-                arrays[f"{key}/log"] = sim._log[:, :done].copy()
-                arrays[f"{key}/state"] = X
+                arrays[f"{key}/log"] = sim.truth_log().copy()
+                arrays[f"{key}/state"] = np.array(astuple(sim.state)[:17], dtype=float)  # the fields every commit has
+                arrays[f"{key}/energy"] = np.array(list(sim.energy_ledger().values()))
+                arrays[f"{key}/truth"] = np.array(list(sim.true_parameters().values()), dtype=float)
     envs, steps = (8, 50) if quick else (64, 1500)
     env = EcoDriveVectorEnv(envs, threads=1)
     obs, _ = env.reset(seed=0)

@@ -4,14 +4,12 @@ peak memory of that run, step-API throughput, and the compiled core alone agains
     python scripts/bench_simulator.py [--duration 3600] [--repeats 3] [--quick]
     python scripts/bench_simulator.py --compare main [--rounds 3] [--quick]
 
-Core figure: substeps per CPU-second of ``physics.run`` (built-in driver, all effects, the log written) on a
-prepared simulator state, divided by the rate of a hand-written compiled point-mass loop (road-load equations
-2.5-2.10, a PI speed controller, a 6-channel log) measured in the same run: a machine-independent ratio.
-``--compare REF`` exports commit REF (``git archive``) into a temporary package tree and runs this module on
-it and on the working tree, interleaved ``--rounds`` times, and prints old/new ratios of the core and trip figures.
-``--ab REF`` loads REF's ``envs/physics.py`` into this process (next to the working tree's other modules, which
-must still fit it) and alternates old and new ``run`` call by call on the same state: the ratio least disturbed
-by a changing machine load.
+Core figure: substeps per CPU-second of ``Simulator.run`` (built-in driver, every effect but the scheduled ramps,
+the truth log written, no Trip built) from a reset simulator, divided by the rate of a hand-written compiled
+point-mass loop (road-load equations 2.5-2.10, a PI speed controller, a 6-channel log) measured in the same run: a
+machine-independent ratio. ``--compare REF`` exports commit REF (``git archive``) into a temporary package tree and
+runs this module on it and on the working tree, interleaved ``--rounds`` times, and prints old/new ratios of the
+core and trip figures.
 
 Target: >= 1000x real time, i.e. a one-hour trip in under 3.6 s on one core. ``roadload benchmark simulator``
 prints :func:`report`. This file runs against an old package tree too (``--compare``): it imports from roadload
@@ -33,8 +31,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from roadload.envs import Simulator, physics
-from roadload.envs.layout import C_USE_DRIVER
+from roadload.envs import EFFECTS, Simulator
 from roadload.envs.simulator import Action, LateralValidityWarning, simulate
 from roadload.road_profiles import load_profile
 from roadload.units import STANDARD_AIR_DENSITY, G
@@ -154,63 +151,24 @@ def reference_rate(n: int, repeats: int) -> float:
     return best
 
 
+SCHEDULED = ("wind_ramp", "mass_ramp", "drag_area_ramp", "rolling_resistance_ramp")
+
+
 def core_rate(vehicle: str, n: int, repeats: int) -> float:
-    """Best substeps per CPU-second of the compiled core ``physics.run`` (built-in driver, all effects) from a
-    prepared simulator state (the same start state for every repeat)."""
-    sim = Simulator(vehicle, load_profile("motorway", seed=1, length=max(60_000.0, n * 0.45)), effects="all",
-                    seed=1)
-    sim._ensure_capacity(n + 1)
-    sim._cmd[C_USE_DRIVER] = 1.0
-    X0, rng0 = sim.X.copy(), sim._rng.copy()
+    """Best substeps per CPU-second of the compiled core through ``Simulator.run`` (built-in driver, every effect but
+    the scheduled ramps) for n substeps from the same reset state every repeat."""
+    effects = [name for name in EFFECTS if name not in SCHEDULED]
+    sim = Simulator(vehicle, load_profile("motorway", seed=1, length=max(60_000.0, n * 0.45)), effects=effects,
+                    seed=1, log_capacity=n + 1)
     best = 0.0
     for r in range(repeats + 1):  # the first run compiles / loads the cache
-        X, rng = X0.copy(), rng0.copy()
+        sim.reset()
         c0 = time.process_time()
-        done = physics.run(X, sim.P, sim.tabs, sim.ti, sim._road, sim._stops, sim._cycle, rng, sim._cmd, sim._log, n)
+        sim.run(duration=n * 0.01)
+        cpu = time.process_time() - c0
         if r:
-            best = max(best, done / max(time.process_time() - c0, 1e-9))
+            best = max(best, round(float(sim.state.t) / 0.01) / max(cpu, 1e-9))
     return best
-
-
-def ab_core(ref: str, vehicle: str, n: int, repeats: int, repo: Path) -> float:
-    """new/old substeps per CPU-second of ``physics.run``, old = REF's physics.py (from the git repository
-    ``repo``) loaded in this process, alternated call by call (best of ``repeats`` each)."""
-    import importlib.util
-    import subprocess
-    import tempfile
-
-    src = subprocess.run(["git", "-C", str(repo), "show", f"{ref}:envs/physics.py"],
-                         check=True, capture_output=True, text=True).stdout
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(physics.__file__).with_name(f"_physics_ab_{Path(tmp).name}.py")
-        path.write_text(src)
-        try:
-            spec = importlib.util.spec_from_file_location(f"roadload.envs.{path.stem}", path)
-            if spec is None or spec.loader is None:
-                raise RuntimeError(f"--ab: cannot load {ref}'s physics.py from {path}")
-            old = importlib.util.module_from_spec(spec)
-            spec.loader.exec_module(old)
-            sim = Simulator(vehicle, load_profile("motorway", seed=1, length=max(60_000.0, n * 0.45)),
-                            effects="all", seed=1)
-            sim._ensure_capacity(n + 1)
-            sim._cmd[C_USE_DRIVER] = 1.0
-            X0, rng0 = sim.X.copy(), sim._rng.copy()
-            best = {"old": 0.0, "new": 0.0}
-            for r in range(repeats + 1):
-                for label, mod in (("old", old), ("new", physics)):
-                    X, rng = X0.copy(), rng0.copy()
-                    c0 = time.process_time()
-                    done = mod.run(X, sim.P, sim.tabs, sim.ti, sim._road, sim._stops, sim._cycle, rng, sim._cmd,
-                                   sim._log, n)
-                    if r:
-                        best[label] = max(best[label], done / max(time.process_time() - c0, 1e-9))
-        finally:
-            path.unlink(missing_ok=True)
-            from roadload.envs._jit import CACHE_DIR
-
-            for stale in Path(CACHE_DIR).rglob(f"*{path.stem}*") if CACHE_DIR else ():
-                stale.unlink(missing_ok=True)  # numba cache entries of the temporary module
-    return best["new"] / best["old"]
 
 
 def measure(duration: float, repeats: int, core_substeps: int) -> dict:
@@ -258,7 +216,7 @@ def print_comparison(old: list[dict], new: list[dict], ref: str) -> None:
 
 def main(argv: list[str] | None = None, repo: Path | None = None) -> None:
     """The benchmark's command line (``scripts/bench_simulator.py``); ``repo``: the git repository of
-    ``--compare`` and ``--ab`` (default: the source tree of this file)."""
+    ``--compare`` (default: the source tree of this file)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=3600.0, help="simulated seconds per trip run")
     ap.add_argument("--repeats", type=int, default=3, help="runs per figure (best is reported)")
@@ -267,21 +225,14 @@ def main(argv: list[str] | None = None, repo: Path | None = None) -> None:
     ap.add_argument("--json", type=Path, help="also write the figures as JSON here")
     ap.add_argument("--compare", metavar="REF", help="git commit to compare against (in this run, interleaved)")
     ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds of --compare")
-    ap.add_argument("--ab", metavar="REF", help="in-process A/B of the core against REF's physics.py")
     args = ap.parse_args(argv)
     if args.quick:
         args.duration, args.repeats, args.core_substeps = 60.0, 2, 20_000
-    if args.ab or args.compare:
+    if args.compare:
         # imported here, not at the top: this file also runs against old package trees that lack the module
         from roadload.experiments.benchmarks.refcompare import REPO, compare
 
         git_repo = repo or REPO
-        if args.ab:
-            for vehicle in ("gt_rwd", "bmw_i3"):
-                ratio = ab_core(args.ab, vehicle, args.core_substeps, max(args.repeats, 5), git_repo)
-                print(f"{vehicle}: core new/old = {ratio:.3f} (physics.run, {args.core_substeps} substeps, best of "
-                      f"{max(args.repeats, 5)} alternated runs, CPU clock; old = {args.ab}:envs/physics.py)")
-            return
         sub = ["--duration", str(args.duration), "--repeats", str(args.repeats),
                "--core-substeps", str(args.core_substeps)]
         old, new = compare(Path(__file__).resolve(), sub, args.compare, args.rounds, git_repo)

@@ -74,9 +74,8 @@ def test_step_api_actions_and_true_parameters(rolling_road):
     cap = sim.regen_capacity()
     assert 0 < cap < 5000
     r2 = sim.step(Action(friction_brake_force=3000.0), n_substeps=20)
-    log = sim.truth_log()
-    from roadload.envs.layout import L_PBF
-    assert log[-1, L_PBF] > 1e5  # friction braking shows as brake pressure
+    assert sim.vehicle_state.brake_pressure_front > 1e5  # friction braking shows as brake pressure
+    assert sim.to_trip().truth["brake_pressure_front"].iloc[-1] == sim.vehicle_state.brake_pressure_front
     p = sim.true_parameters()
     spec = get_preset("bmw_i3")
     assert p["mass"] == spec.body.mass
@@ -197,20 +196,20 @@ def test_on_road_equals_a_new_simulator_bitwise(vehicle, effects):
     from roadload.road_profiles import load_profile
 
     first = Simulator(vehicle, load_profile("hilly", seed=1), effects, seed=3, initial_speed=5.0)
-    x_first = first.X.copy()
+    x_first = first.vehicle_state.to_dict()
     road = load_profile("city", seed=7)
     swapped = first.on_road(road, seed=11, initial_speed=8.0)
     fresh = Simulator(vehicle, road, effects, seed=11, initial_speed=8.0)
-    for name in ("P", "_road", "_stops", "X", "_rng", "_cycle", "_cmd", "_vplan_base"):
-        assert np.array_equal(getattr(swapped, name), getattr(fresh, name)), name
+    for name in ("_vehicle", "_road", "_stops", "_cycle", "_vplan_base"):  # state, parameters, command, route
+        assert getattr(swapped, name).tobytes() == getattr(fresh, name).tobytes(), name
     rng = np.random.default_rng(0)
     for _ in range(300):
         force = float(rng.uniform(-3000.0, 3000.0))
         a, b = swapped.step(force, 10), fresh.step(force, 10)
-        assert np.array_equal(swapped.X, fresh.X)
+        assert swapped.vehicle_state == fresh.vehicle_state
         assert a.source_energy == b.source_energy
-    assert swapped.X[1] > 100.0  # it drove
-    assert np.array_equal(first.X, x_first)  # the template did not move
+    assert swapped.vehicle_state.position > 100.0  # it drove
+    assert first.vehicle_state.to_dict() == x_first  # the template did not move
     assert swapped.observe() == fresh.observe()
 
 

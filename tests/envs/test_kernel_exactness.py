@@ -11,9 +11,8 @@ import numpy as np
 import pytest
 from numba import njit
 from roadload.envs import Simulator
-from roadload.envs import _jit
+from roadload.envs import batch
 from roadload.envs import physics as ph
-from roadload.envs.layout import L_FBRAKE, L_IBAT, S_NLOG
 from roadload.envs.numerics import road_value_at, road_value_near
 from roadload.units import G
 
@@ -73,10 +72,9 @@ def test_one_call_of_n_substeps_equals_n_calls_of_one(hilly_road):
         many.step(force, n_substeps=10)
         for _ in range(10):
             one.step(force, n_substeps=1)
-    n = int(one.X[S_NLOG])
-    assert n == int(many.X[S_NLOG]) == 400
-    assert np.array_equal(one.X, many.X, equal_nan=True)
-    assert np.array_equal(one._log[:, :n], many._log[:, :n], equal_nan=True)
+    assert one.vehicle_state.log_rows == many.vehicle_state.log_rows == 400
+    assert one.vehicle_state == many.vehicle_state
+    assert np.array_equal(one.truth_log(), many.truth_log(), equal_nan=True)
 
 
 def test_regen_is_allocated_for_braking_only(straight_road):
@@ -86,21 +84,21 @@ def test_regen_is_allocated_for_braking_only(straight_road):
     rows = {}
     for name, force in (("traction", 800.0), ("regen", -800.0), ("friction", -12000.0)):
         sim.step(force, n_substeps=10)
-        rows[name] = sim._log[:, int(sim.X[S_NLOG]) - 1].copy()
-    assert rows["traction"][L_IBAT] > 0.0 and rows["traction"][L_FBRAKE] == 0.0
-    assert rows["regen"][L_IBAT] < 0.0 and rows["regen"][L_FBRAKE] == pytest.approx(0.0, abs=1.0)
-    assert rows["friction"][L_FBRAKE] > 3000.0
+        rows[name] = sim.to_trip().truth.iloc[-1]
+    assert rows["traction"]["battery_current"] > 0.0 and rows["traction"]["brake_force"] == 0.0
+    assert rows["regen"]["battery_current"] < 0.0 and rows["regen"]["brake_force"] == pytest.approx(0.0, abs=1.0)
+    assert rows["friction"]["brake_force"] > 3000.0
 
 
-def test_dependent_kernel_cache_follows_every_source(tmp_path, monkeypatch):
+def test_dependent_kernel_cache_follows_every_source(tmp_path):
     module, callee = tmp_path / "kernels.py", tmp_path / "helpers.py"
     module.write_text("x = 1\n")
     callee.write_text("y = 1\n")
-    first = _jit.dependent_jit(module, callee).cache_dir
-    assert _jit.dependent_jit(module, callee).cache_dir == first  # unchanged sources: the same cache
+    first = batch.dependent_jit(module, callee).cache_dir
+    assert batch.dependent_jit(module, callee).cache_dir == first  # unchanged sources: the same cache
     callee.write_text("y = 2\n")  # an edit of a module whose jitted code the kernels inline
-    second = _jit.dependent_jit(module, callee).cache_dir
+    second = batch.dependent_jit(module, callee).cache_dir
     assert second != first and not (tmp_path / "__pycache__" / first.rsplit("/", 1)[-1]).exists()
     assert second.startswith(str(tmp_path / "__pycache__" / "numba-kernels-"))
-    monkeypatch.setattr(_jit, "STAMP", "0" * 12)  # an edit of the simulator core
-    assert _jit.dependent_jit(module, callee).cache_dir != second
+    # an edit of the simulator core (another hash of its sources)
+    assert batch.dependent_jit(module, callee, core_stamp="0" * 12).cache_dir != second

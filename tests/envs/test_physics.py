@@ -124,12 +124,11 @@ def test_single_track_steady_yaw_rate_gain(speed):
     force = float(neutral_road_load(spec, speed)) + 40.0
     for _ in range(80):  # 8 s
         res = sim.step(Action(traction_force=force, steer=delta), n_substeps=10)
-    yaw = sim.truth_log()[-1]
-    from roadload.envs.layout import L_V, L_YAW
-    gain = yaw[L_YAW] / delta
-    expected = spec.yaw_rate_gain(yaw[L_V])
+    last = sim.to_trip().truth.iloc[-1]
+    gain = last["yaw_rate"] / delta
+    expected = spec.yaw_rate_gain(last["speed"])
     assert gain == pytest.approx(expected, rel=0.01)
     # and the kinematic (Ackermann) gain v/l differs by the understeer term at speed
     if speed >= 20.0:
-        assert abs(gain - yaw[L_V] / spec.body.wheelbase) / gain > 0.05
-    assert res.lateral_acceleration == pytest.approx(yaw[L_V] * yaw[L_YAW], rel=0.02)
+        assert abs(gain - last["speed"] / spec.body.wheelbase) / gain > 0.05
+    assert res.lateral_acceleration == pytest.approx(last["speed"] * last["yaw_rate"], rel=0.02)

@@ -216,7 +216,7 @@ def test_can_estimates_mode_runs_the_online_estimator():
     for _ in range(350):  # 35 s: three estimator updates (every 10 s)
         v = obs[names.index("can_vehicle_speed")]
         obs, *_ = env.step(np.array([np.clip(0.3 * (25.0 - v), -1, 1)], dtype=np.float32))
-    assert env.unwrapped._estimator.updates >= 3 and env.unwrapped._estimator.rows > 100
+    assert env.unwrapped.observation_type.estimator.updates >= 3 and env.unwrapped.observation_type.estimator.rows > 100
     assert not np.array_equal(obs[k:], nominal)  # the estimate moved
     truth = env.unwrapped.simulator.true_parameters()
     assert obs[k] == pytest.approx(truth["mass"], rel=0.1)

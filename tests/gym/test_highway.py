@@ -10,7 +10,6 @@ import pytest
 import roadload  # noqa: F401
 from roadload.gym.config import GymConfigError
 from roadload.gym.ecodrive import DriveScales
-from roadload.envs.layout import S_W_CLIMB
 from roadload.envs.simulator import Simulator
 
 FAST = dict(vehicles_count=8, duration=10.0)
@@ -145,7 +144,7 @@ def _return_and_end(policy, road, reward=None):
     env = gym.make("roadload/EcoHighway-v0", config=cfg)
     _, info = env.reset(seed=0)
     sim = env.unwrapped.simulator
-    v0, climb0 = info["speed"], sim.X[S_W_CLIMB]
+    v0, climb0 = info["speed"], sim.vehicle_state.climbing_work
     ret, mech, done = 0.0, 0.0, False
     while not done:
         _, r, te, tr, info = env.step(np.array([policy(info["speed"])], dtype=np.float32))
@@ -155,7 +154,8 @@ def _return_and_end(policy, road, reward=None):
     assert not info["crashed"]
     m = sim.vehicle.body.mass
     # the episode sum is the final minus the initial mechanical energy (kinetic + climbing work)
-    assert mech == pytest.approx(0.5 * m * (info["speed"] ** 2 - v0 ** 2) + sim.X[S_W_CLIMB] - climb0, rel=1e-9)
+    assert mech == pytest.approx(0.5 * m * (info["speed"] ** 2 - v0 ** 2) + sim.vehicle_state.climbing_work - climb0,
+                                 rel=1e-9)
     return ret, info["speed"], info["s"]
 
 

@@ -1,0 +1,57 @@
+"""How many parameters the compiled kernels take: every numba function of the given source folders, found by
+reading the sources (no import, no compilation).
+
+A kernel is a function decorated with numba's ``njit`` / ``jit`` or one of roadload's wrappers of it (``jit``,
+``stage``, ``kernel`` from ``dependent_jit``, with or without a call). Counted: the positional and keyword
+parameters of its ``def``. The simulator's kernels take a few packed records (state, parameters, command, tables,
+route) instead of dozens of arrays and scalars; ``scripts/kernel_signatures.py`` prints the table and the largest
+count and fails above a limit.
+"""
+
+from __future__ import annotations
+
+import ast
+from dataclasses import dataclass
+from pathlib import Path
+
+KERNEL_DECORATORS = frozenset({"njit", "jit", "stage", "kernel", "generated_jit"})
+"""Decorator names (bare or called, plain or as an attribute such as ``numba.njit``) that make a kernel."""
+
+
+@dataclass(frozen=True)
+class KernelSignature:
+    """One compiled kernel: source file (relative to the repository), line, name and number of parameters."""
+
+    path: str
+    line: int
+    name: str
+    parameters: int
+
+
+def _decorator_name(node: ast.expr) -> str:
+    target = node.func if isinstance(node, ast.Call) else node
+    if isinstance(target, ast.Attribute):
+        return target.attr
+    return target.id if isinstance(target, ast.Name) else ""
+
+
+def _parameter_count(fn: ast.FunctionDef) -> int:
+    a = fn.args
+    return len(a.posonlyargs) + len(a.args) + len(a.kwonlyargs) + (a.vararg is not None) + (a.kwarg is not None)
+
+
+def file_kernels(path: Path, root: Path) -> list[KernelSignature]:
+    """The kernels defined in one Python source file."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    return [KernelSignature(str(path.relative_to(root)), node.lineno, node.name, _parameter_count(node))
+            for node in ast.walk(tree) if isinstance(node, ast.FunctionDef)
+            and any(_decorator_name(d) in KERNEL_DECORATORS for d in node.decorator_list)]
+
+
+def kernel_signatures(folders: list[Path], root: Path) -> list[KernelSignature]:
+    """Every kernel under the folders (recursively), largest parameter count first, then by file and line."""
+    missing = [str(f) for f in folders if not f.is_dir()]
+    if missing:
+        raise FileNotFoundError(f"source folders not found: {missing} (expected folders under {root})")
+    found = [k for folder in folders for path in sorted(folder.rglob("*.py")) for k in file_kernels(path, root)]
+    return sorted(found, key=lambda k: (-k.parameters, k.path, k.line))

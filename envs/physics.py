@@ -678,18 +678,19 @@ def source_energy(x, p, tables, bev, omega_avg, t_e, dt):
 
 # ================================================================================ vehicle mass
 @stage
-def set_mass(x, p, mass_nominal, payload):
-    """The one writer of the vehicle mass: m_V = m_V,0 + payload [kg], with m_V,0 the nominal mass (ramped by the
-    mass_ramp schedule) and the payload (initial payload, changed at stops by the payload effect)."""
+def set_mass(x, p, mass_nominal, mass):
+    """The one writer of the vehicle mass m_V [kg] and of the nominal mass m_V,0 [kg] its payload is counted from:
+    at the start m_V = m_V,0 + the initial payload, at a stop m_V,0 + the new payload (payload effect), and the
+    mass_ramp schedule moves m_V,0 and m_V together."""
     p.mass_nominal = mass_nominal
-    x.mass = mass_nominal + payload
+    x.mass = mass
 
 
 @jit(refcount=False)
 def set_initial_mass(vehicle, payload):
     """Vehicle 0 of ``vehicle`` (a VEHICLE array) starts with m_V = m_V,0 + payload [kg] (Simulator.reset)."""
     v = vehicle[0]
-    set_mass(v.state, v.params, v.params.mass_nominal, payload)
+    set_mass(v.state, v.params, v.params.mass_nominal, v.params.mass_nominal + payload)
 
 
 # ================================================================================ slow (drifting) states
@@ -731,7 +732,7 @@ def slow_states(x, p, route, mass, v, v_new, v_avg, f_b, f_hold, ridx):
             elif new_payload > p.payload_max:
                 new_payload = 2.0 * p.payload_max - new_payload
             new_payload = _clip(new_payload, p.payload_min, p.payload_max)
-            set_mass(x, p, p.mass_nominal, new_payload)
+            set_mass(x, p, p.mass_nominal, p.mass_nominal + new_payload)
             x.payload_potential_energy += (new_payload - payload) * G * road_value(route.road, R_ELEV, ridx, s_now)
             kst += 1
         x.payload_stop_index = kst
@@ -753,18 +754,17 @@ def ramp_value(ramp, t, s):
 @stage
 def apply_schedules(x, p):
     """The scheduled effects at the current t, s, applied before every substep: mean wind speed and direction,
-    the nominal mass (m_V,0 + ramp, payload kept), the drag coefficient c_w (1 + ramp) and f_r0, f_r1, f_r4
-    (1 + ramp) from their unscheduled values."""
+    the nominal mass m_V,0 + ramp (the vehicle mass moves with it), the drag coefficient c_w (1 + ramp) and f_r0,
+    f_r1, f_r4 (1 + ramp) from their unscheduled values."""
     t = x.time
     s = x.position
     if p.ramp_wind_speed.on > 0.5:
         p.wind_mean_speed = ramp_value(p.ramp_wind_speed, t, s)
         p.wind_direction = ramp_value(p.ramp_wind_direction, t, s)
-    if p.ramp_mass.on > 0.5:
+    if p.ramp_mass.on > 0.5:  # the payload changed at stops stays on top of the ramped nominal mass
         d = ramp_value(p.ramp_mass, t, s)
-        if d != x.mass_ramp_applied:
-            set_mass(x, p, p.base_mass_nominal + d, x.mass - p.mass_nominal)
-            x.mass_ramp_applied = d
+        set_mass(x, p, p.base_mass_nominal + d, x.mass + (d - x.mass_ramp_applied))
+        x.mass_ramp_applied = d
     if p.ramp_drag.on > 0.5:
         p.drag_coefficient = p.base_drag_coefficient * (1.0 + ramp_value(p.ramp_drag, t, s))
     if p.ramp_rolling.on > 0.5:

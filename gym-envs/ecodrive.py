@@ -49,13 +49,16 @@ from roadload.vehicle import VehicleSpec
 from roadload.gym.actions import validate_action
 from roadload.gym.config import (SPACE_FIELDS_ECODRIVE, EcoDriveConfig, GymConfigError, make_config, updated_config)
 from roadload.gym.ecodrive_kernel import (COST_NAMES, EPISODE, INFO_ROWS, I_COSTS, I_RETURN, I_TERMS, N_INFO,
-                                          NO_SHIELD, PREVIEW_GRID, SETTINGS, SPEED_LIMIT, STOP_HORIZON,
+                                          NO_SHIELD, PREVIEW_GRID, SETTINGS, SHIELD_GAIN, SPEED_LIMIT, STOP_HORIZON,
                                           EcoOutputs, EcoRecords, braking_envelope, gather_info_all, look_ahead,
                                           route_rows, scaled_observation, start_episode, step_range)
 from roadload.presets import get_preset
 from roadload.controllers.online import OnlineForceModel
 from roadload.estimators.knowledge import knowledge_for_preset
 from roadload.controllers.sim_plant import SimulatorPlant
+
+__all__ = ["DriveScales", "EcoBatch", "EcoDriveEnv", "OBSERVATION_TYPES", "ObservationType", "PREVIEW_GRID",
+           "RouteTable", "SHIELD_GAIN", "STOP_HORIZON", "cut_profile", "observation_factory", "observation_layout"]
 
 FULL_BRAKE_DECELERATION = 0.5 * G
 """Deceleration [m/s^2] asked for by u = -1 (before resistances)."""

@@ -65,11 +65,12 @@ def _step_threads(n_chunks, active, u, fleet, eco, out):
 @kernel()
 def _advance_range(lo, hi, active, u, fleet, settings):
     """The bare batched physics of vehicles lo..hi-1: for every active vehicle i, the wheel force of command u[i]
-    (DriveScales in ``settings``) held for n substeps of the simulator core."""
+    (DriveScales in the SETTINGS record settings[0]) held for n substeps of the simulator core."""
+    cfg = settings[0]
     for i in range(lo, hi):
         if active[i]:
-            command_wheel_force(fleet, i, wheel_force(settings, u[i], state_of(fleet, i).speed), np.nan)
-            advance_vehicle(fleet, i, settings.n_substeps)
+            command_wheel_force(fleet, i, wheel_force(cfg, u[i], state_of(fleet, i).speed), np.nan)
+            advance_vehicle(fleet, i, cfg.n_substeps)
 
 
 @kernel()
@@ -317,7 +318,7 @@ class EcoDriveVectorEnv(gym.vector.VectorEnv):
         """Only the batched physics of one env step (no reward, observation, info, autoreset): the reference the
         benchmark compares the env step with."""
         u = np.asarray(actions, dtype=np.float64).reshape(self.num_envs)
-        fleet, settings = self.batch.fleet_records(), self.batch.settings[0]
+        fleet, settings = self.batch.fleet_records(), self.batch.settings
         if self.threads > 1:
             _advance_threads(self.threads, self._all_active, u, fleet, settings)
         else:

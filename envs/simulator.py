@@ -203,12 +203,27 @@ class Simulator:
         """The vehicle record of the core (state, parameters, command; module layout.py) and its views."""
         self._vehicle = np.zeros(1, VEHICLE)
         self._vehicle["params"] = self._params_packed
-        self._words = self._vehicle.view(np.float64)  # the step path's fast field access (_T, _POS, ...)
+        self._views()
+
+    def _views(self) -> None:
+        """The views of the vehicle record: float words (the step path's fast field access, _T, _POS, ...), state
+        and parameter records, and the typed public views."""
+        self._words = self._vehicle.view(np.float64)
         self._x, self._p = self._vehicle[0]["state"], self._vehicle[0]["params"]
         self.vehicle_state = VehicleState(self._vehicle)
         """The live state of the vehicle (:class:`roadload.envs.VehicleState`, SI units)."""
         self.parameters = VehicleParameters(self._vehicle)
         """The packed parameters of the vehicle, effects and driver (:class:`roadload.envs.VehicleParameters`)."""
+
+    _VIEWS = ("_words", "_x", "_p", "vehicle_state", "parameters")
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled / deep-copied without the views of the vehicle record (a copy would detach them from it)."""
+        return {k: v for k, v in self.__dict__.items() if k not in self._VIEWS}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._views()
 
     def _pack_road(self) -> None:
         """Schedules, driver and the road (or drive cycle) on top of the packed vehicle and effects; the result is the

@@ -227,3 +227,17 @@ def test_on_road_refuses_a_drive_cycle_simulator_and_bad_roads():
     cycle_sim = Simulator("bmw_i3", DriveCycle("ramp", t, np.minimum(t, 15.0)))
     with pytest.raises(SimulationError, match="drive-cycle"):
         cycle_sim.on_road(load_profile("hilly", seed=2), seed=1)
+
+
+def test_a_copied_or_pickled_simulator_keeps_its_state_views(straight_road):
+    import copy
+    import pickle
+
+    sim = Simulator("bmw_i3", straight_road(), seed=2, initial_speed=10.0)
+    sim.step(800.0, 20)
+    for clone in (copy.deepcopy(sim), pickle.loads(pickle.dumps(sim))):
+        assert clone.vehicle_state == sim.vehicle_state
+        a, b = clone.step(-500.0, 30), sim.step(-500.0, 30)
+        assert a == b and clone.vehicle_state.speed == a.v  # the view follows the clone's own record
+        sim.reset(seed=2, initial_speed=10.0)
+        sim.step(800.0, 20)

@@ -101,6 +101,7 @@ class Fleet:
         self._tables: Tables | None = None
         self._records: FleetRecords | None = None
         self._shared: Simulator | None = None
+        self._shared_key: tuple[int, int, int] = (0, 0, 0)
 
     @classmethod
     def sharing(cls, simulator: Simulator) -> Fleet:
@@ -178,12 +179,18 @@ class Fleet:
         return self._records
 
     def _shared_records(self, simulator: Simulator) -> FleetRecords:
-        """The records of a sharing fleet: views of the simulator's current arrays."""
+        """The records of a sharing fleet: views of the simulator's current arrays (rebuilt when a reset or a
+        growing log replaced one of them)."""
         vehicle, tables, road, stops, _ = simulator._core_records()
-        vehicle[0]["road_points"] = road.shape[1]
-        vehicle[0]["stop_count"] = stops.size
-        return FleetRecords(vehicle, tables.values, tables.descriptors, road[None], stops[None], self._cycle,
-                            simulator._log[None])
+        log = simulator._log
+        key = (id(road), id(stops), id(log))
+        if self._records is None or key != self._shared_key:
+            vehicle[0]["road_points"] = road.shape[1]
+            vehicle[0]["stop_count"] = stops.size
+            self._records = FleetRecords(vehicle, tables.values, tables.descriptors, road[None], stops[None],
+                                         self._cycle, log[None])
+            self._shared_key = key
+        return self._records
 
     def state(self, i: int) -> VehicleState:
         """A typed Python view (:class:`roadload.envs.VehicleState`) of slot i's state: read every field, set

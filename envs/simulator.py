@@ -408,10 +408,17 @@ class Simulator:
         advances this simulator through ``roadload.envs.batch.Fleet.sharing``."""
         self._ensure_capacity(n_substeps)
 
-    def refresh(self) -> StepResult:
+    def refresh(self, warn: bool = True) -> StepResult:
         """The state after a compiled kernel advanced this simulator (``Fleet.sharing``): updates ``state`` (this
-        step's source energy counted from the last step or refresh) and warns once about lateral accelerations
-        beyond the single-track model's validity."""
+        step's source energy counted from the last step or refresh) and, with ``warn``, warns once about lateral
+        accelerations beyond the single-track model's validity. A truth log that ran out of room (no
+        ``reserve_log`` before the advance) is a SimulationError."""
+        if int(self._words[_NLOG]) > self._log.shape[1]:
+            raise SimulationError(f"refresh: the truth log holds {self._log.shape[1]} substeps but "
+                                  f"{int(self._words[_NLOG])} were advanced; call reserve_log(n_substeps) before "
+                                  f"each advance")
+        if not warn:
+            self._warned = True
         return self._after_advance()
 
     def _ensure_capacity(self, extra: int) -> None:

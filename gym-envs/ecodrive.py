@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import bisect
 import math
-import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -40,7 +39,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from roadload.envs import LateralValidityWarning, Simulator
+from roadload.envs import Simulator
 from roadload.envs.batch import Fleet, FleetRecords
 from roadload.road_profiles import RoadProfile, load_profile_start
 from roadload.units import G
@@ -48,7 +47,7 @@ from roadload.vehicle import VehicleSpec
 
 from roadload.gym.actions import validate_action
 from roadload.gym.config import (SPACE_FIELDS_ECODRIVE, EcoDriveConfig, GymConfigError, make_config, updated_config)
-from roadload.gym.ecodrive_kernel import (COST_NAMES, EPISODE, INFO_ROWS, I_COSTS, I_RETURN, I_TERMS, N_INFO,
+from roadload.gym.ecodrive_kernel import (COST_NAMES, EPISODE, INFO_ROWS, I_COSTS, I_RETURN, I_TERMS, N_COSTS, N_INFO,
                                           NO_SHIELD, PREVIEW_GRID, SETTINGS, SHIELD_GAIN, SPEED_LIMIT, STOP_HORIZON,
                                           EcoOutputs, EcoRecords, braking_envelope, gather_info_all, look_ahead,
                                           route_rows, scaled_observation, start_episode, step_range)
@@ -543,11 +542,12 @@ class EcoBatch:
 def info_of(info: np.ndarray, ints: np.ndarray, i: int, with_terms: bool) -> dict[str, Any]:
     """The single env's info dict of column i of the info blocks: t, s, v, a [SI], gear, speed_limit, total source
     energy [J], road seed, route length [m], schedule time [s], return costs; terms and costs after a step."""
-    out: dict[str, Any] = {k: (float(info[r, i]) if r >= 0 else int(ints[-1 - r, i])) for k, r in INFO_ROWS}
-    out["return_costs"] = {k: float(info[I_RETURN + j, i]) for j, k in enumerate(COST_NAMES)}
+    col, icol = info[:, i].tolist(), ints[:, i].tolist()
+    out: dict[str, Any] = {k: (col[r] if r >= 0 else icol[-1 - r]) for k, r in INFO_ROWS}
+    out["return_costs"] = dict(zip(COST_NAMES, col[I_RETURN:I_RETURN + N_COSTS]))
     if with_terms:
-        out["terms"] = {k: float(info[I_TERMS + j, i]) for j, k in enumerate(COST_NAMES)}
-        out["costs"] = {k: float(info[I_COSTS + j, i]) for j, k in enumerate(COST_NAMES)}
+        out["terms"] = dict(zip(COST_NAMES, col[I_TERMS:I_TERMS + N_COSTS]))
+        out["costs"] = dict(zip(COST_NAMES, col[I_COSTS:I_COSTS + N_COSTS]))
     return out
 
 
@@ -595,11 +595,9 @@ class EcoDriveEnv(gym.Env):
     def step(self, action):
         u = np.array([validate_action(action, self.action_space)[0]], dtype=np.float64)
         reward, term, trunc, info, ints = self.batch.step(self._active, u)
-        with warnings.catch_warnings():
-            # the simulator warns (once per episode) when |a_y| > 4 m/s^2; the env penalises lateral excess
-            # above its comfort limit and reports it in info['terms'] instead
-            warnings.simplefilter("ignore", LateralValidityWarning)
-            self._state = self.simulator.refresh()
+        # no warning when |a_y| > 4 m/s^2 (the simulator's, once per episode): the env penalises lateral excess
+        # above its comfort limit and reports it in info['terms'] instead
+        self._state = self.simulator.refresh(warn=False)
         self.observation_type.update(self)
         return (self.observation_type.observe(self), float(reward[0]), bool(term[0]), bool(trunc[0]),
                 info_of(info, ints, 0, with_terms=True))

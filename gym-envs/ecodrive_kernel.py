@@ -207,7 +207,7 @@ def scaled_observation(buf, bounds, out):
         out[j] = np.float32(o)
 
 
-@kernel()
+@kernel(inline="always")
 def observe_state(i, fleet, eco, out):
     """The 'state' observation of sub-env i -> out.obs[i]: speed [m/s], acceleration [m/s^2], then the route rows
     at the true position (look-ahead eco.look_ahead[i] already filled)."""

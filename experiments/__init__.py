@@ -9,6 +9,7 @@ each; ``scripts/`` holds their thin entry points (argument parsing lives here, i
 - RL: ``rl/`` (training, evaluation, highway, speed-shield effect);
 - sim-to-real: ``sim2real_selftest`` and its test worlds ``worlds/``;
 - data: ``real_profiles`` (road profiles from the real logs);
-- ``benchmarks/``: speed of every layer and the bitwise identity check, with old/new comparisons;
+- ``benchmarks/``: speed of every layer and the bitwise identity check, with old/new comparisons, and the
+  parameter count of the compiled kernels (``kernel_signatures``);
 - ``cli/``: the ``roadload`` command line, one module per command group.
 """

@@ -34,9 +34,9 @@ def _without_log_rows(state: dict[str, float]) -> dict[str, float]:
 
 
 def test_a_compiled_kernel_advances_a_fleet_exactly_as_the_simulators_step():
+    setups = (("city", 1, None, 0.0), ("hilly", 2, "all", 8.0), ("motorway", 3, "wind", 20.0))
     sims = [Simulator("bmw_i3", load_profile(road, seed=seed, length=3000.0), effects=eff, seed=seed,
-                      initial_speed=v0)
-            for road, seed, eff, v0 in (("city", 1, None, 0.0), ("hilly", 2, "all", 8.0), ("motorway", 3, "wind", 20.0))]
+                      initial_speed=v0) for road, seed, eff, v0 in setups]
     fleet = Fleet(len(sims))
     for i, sim in enumerate(sims):
         fleet.load(i, sim)

@@ -6,10 +6,13 @@ A kernel is a function decorated with numba's ``njit`` / ``jit`` or one of roadl
 parameters of its ``def``. The simulator's kernels take a few packed records (state, parameters, command, tables,
 route) instead of dozens of arrays and scalars; ``scripts/kernel_signatures.py`` prints the table and the largest
 count and fails above a limit.
+
+    python scripts/kernel_signatures.py [--folders envs gym-envs] [--limit 12] [--quick]
 """
 
 from __future__ import annotations
 
+import argparse
 import ast
 from dataclasses import dataclass
 from pathlib import Path
@@ -55,3 +58,25 @@ def kernel_signatures(folders: list[Path], root: Path) -> list[KernelSignature]:
         raise FileNotFoundError(f"source folders not found: {missing} (expected folders under {root})")
     found = [k for folder in folders for path in sorted(folder.rglob("*.py")) for k in file_kernels(path, root)]
     return sorted(found, key=lambda k: (-k.parameters, k.path, k.line))
+
+
+def main(argv: list[str] | None = None, repo: Path | None = None) -> int:
+    """The check's command line (``scripts/kernel_signatures.py``): one line per kernel, largest first (the ten
+    largest with ``--quick``), then the largest count; returns 1 when it exceeds ``--limit``. ``repo``: the source
+    tree (default: the one of this file)."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--folders", nargs="+", default=["envs", "gym-envs"], help="source folders under the repository")
+    ap.add_argument("--limit", type=int, default=12, help="largest parameter count allowed (exit 1 above it)")
+    ap.add_argument("--quick", action="store_true", help="print only the ten largest (CI smoke run)")
+    args = ap.parse_args(argv)
+    root = repo or Path(__file__).resolve().parents[2]
+    kernels = kernel_signatures([root / f for f in args.folders], root)
+    if not kernels:
+        print(f"no numba kernels under {args.folders}")
+        return 0
+    for k in kernels[:10] if args.quick else kernels:
+        print(f"{k.parameters:3d}  {k.path}:{k.line}  {k.name}")
+    top = kernels[0]
+    print(f"{len(kernels)} kernels; largest kernel signature: {top.parameters} parameters ({top.path}:{top.line} "
+          f"{top.name}); limit {args.limit}")
+    return 1 if top.parameters > args.limit else 0

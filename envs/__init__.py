@@ -29,7 +29,7 @@ Step API (used by the MPC and the gym environments; stable)
     * None: the built-in driver decides (speed limits, curves, stops, drive cycle).
 ``StepResult`` fields: t, s, v, a, gear, engine_speed, engine_torque, clutch, source_energy (this step: fuel [J]
     for ICE, battery [J] for BEV), source_energy_total, tractive_force, lateral_acceleration, grade, curvature,
-    bank, speed_limit (road at s), done (end of road / cycle).
+    bank, speed_limit (road at s), done (end of road / cycle), mass (m_V with payload [kg]).
 ``sim.state``               the latest StepResult
 ``sim.vehicle_state``       the live state (``VehicleState``: time, position, speed, mass, gear, engine_speed, the
                             energy ledger, ... by name, SI; ``position`` and ``speed`` settable between steps)

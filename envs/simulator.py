@@ -49,10 +49,11 @@ DT = 0.01  # s, physics step (100 Hz)
 
 # positions of the fields the step path reads and writes in the vehicle record's float view (Python reads a word of
 # a float64 view 4x faster than a structured field)
-_T, _POS, _V, _A, _NLOG, _GEAR, _MODE, _OMEGA, _TE, _AY, _AY_MAX, _AY_WARN, _E_SOURCE = (
+_T, _POS, _V, _A, _NLOG, _GEAR, _MODE, _OMEGA, _TE, _AY, _AY_MAX, _AY_WARN, _E_SOURCE, _MASS = (
     field_index("state", name) for name in ("time", "position", "speed", "acceleration", "log_rows", "gear",
                                             "clutch_mode", "engine_speed", "engine_torque", "lateral_acceleration",
-                                            "lateral_acceleration_peak", "lateral_warning_count", "source_energy"))
+                                            "lateral_acceleration_peak", "lateral_warning_count", "source_energy",
+                                            "mass"))
 _T_END, _S_END = field_index("params", "time_end"), field_index("params", "distance_end")
 _C_MODE, _C_TRACTION, _C_REGEN, _C_FRICTION, _C_STEER, _C_GEAR = (
     field_index("command", name) for name in ("mode", "traction", "regen", "friction", "steer", "gear"))
@@ -105,7 +106,8 @@ class Action:
 class StepResult:
     """State after a step (SI): time, distance, speed, acceleration, gear, engine/motor speed and torque, clutch,
     source energy used in this step and in total (fuel [J] for ICE, battery [J] for BEV), tractive force, lateral
-    acceleration, road attributes at s, and done (end of road / cycle / duration / distance)."""
+    acceleration, road attributes at s, done (end of road / cycle / duration / distance) and the vehicle mass m_V
+    [kg] (with payload; ``sim.vehicle_state`` has every state field)."""
 
     t: float
     s: float
@@ -124,6 +126,7 @@ class StepResult:
     bank: float
     speed_limit: float
     done: bool
+    mass: float
 
 
 def _road_from_cycle(cycle: DriveCycle) -> RoadProfile:
@@ -490,7 +493,7 @@ class Simulator:
                           clutch=1.0 if mode == MODE_LOCKED else (0.5 if mode == MODE_SLIP else 0.0),
                           source_energy=d_energy, source_energy_total=w[_E_SOURCE], tractive_force=fx,
                           lateral_acceleration=w[_AY], grade=grade, curvature=curv, bank=bank,
-                          speed_limit=road_value_at(self._road, R_VLIM, s), done=self.done)
+                          speed_limit=road_value_at(self._road, R_VLIM, s), done=self.done, mass=w[_MASS])
 
     def _warn_lateral(self) -> None:
         self._warned = True

@@ -324,7 +324,7 @@ def _moved(fit: dict, ref: dict) -> bool:
 
 def found_against_reference(case: WorldCaseResult, reference: WorldCaseResult | None) -> bool:
     """The scoring rule for a withheld effect, one for every world and sim (documented in
-    docs/results/worlds.md). The effect is **found** when a catalog candidate that stands for it
+    docs/results/sim2real.md). The effect is **found** when a catalog candidate that stands for it
 
     1. is an accepted effect (force or energy side) that the reference diagnosis (same sim, same seed's drives,
        nothing withheld) does not accept, or accepts with parameters >= 2.58 combined standard errors away; or

@@ -52,7 +52,7 @@ def _load() -> None:
 def main() -> None:
     # libgomp reads OMP_WAIT_POLICY once, when it is loaded, and loading the commands loads it (torch, via
     # stable-baselines3): set the native vector env's default here, first, or `roadload train --threads 2` spins
-    # idle OpenMP threads (32k instead of 160k steps/s at load 4.6, docs/results/vector_env_speed.md)
+    # idle OpenMP threads (32k instead of 160k steps/s at load 4.6, docs/results/scale.md)
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     _load()
     app()

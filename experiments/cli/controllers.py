@@ -52,15 +52,15 @@ DRIVE_METRICS = {"arrived": ("arrived", "", "{}"), "energy_kWh": ("energy", "kWh
                  "trip_time": ("trip time", "s", "{:.1f}"), "speed_violations": ("speed violations", "", "{:d}"),
                  "max_excess_kmh": ("max excess", "km/h", "{:.2f}"), "rms_jerk": ("RMS jerk", "m/s^3", "{:.3f}"),
                  "solve_time_median": ("solve time median", "ms", "{:.1f}"),
-                 "solve_time_p99": ("solve time p99", "ms", "{:.1f}"), "fallbacks": ("fallbacks", "", "{:d}"),
-                 "ctl_relaxed_plans": ("relaxed plans", "", "{:d}")}
+                 "solve_time_p99": ("solve time p99", "ms", "{:.1f}"), "fallbacks": ("fallbacks", "", "{:d}")}
 
 
 def metric_lines(m: dict) -> list[str]:
-    """The drive metrics rounded and with their units, e.g. ``   trip time: 362.4 [s]``."""
+    """The drive metrics rounded and with their units, e.g. ``   trip time: 362.4 [s]``; for the MPC, what its
+    plans could not meet and what the fallback did (:mod:`roadload.controllers.mpc_controller`)."""
     out = []
     for key, (label, unit, fmt) in DRIVE_METRICS.items():
-        if key not in m and key != "ctl_relaxed_plans":
+        if key not in m:
             continue
         value = m.get(key, 0)
         if unit == "ms":
@@ -71,7 +71,31 @@ def metric_lines(m: dict) -> list[str]:
         except (ValueError, TypeError):
             text = str(value)
         out.append(f"{label:>20}: {text}" + (f" [{unit}]" if unit and text != "-" else ""))
-    return out
+    return out + feasibility_lines(m)
+
+
+def feasibility_lines(m: dict) -> list[str]:
+    """MPC runs: relaxed / infeasible plans out of all solves, with what they mean, the fallback brake's steps and
+    the worst violation (nothing for the other controllers)."""
+    if "ctl_relaxed_plans" not in m and "ctl_solves" not in m:
+        return []
+    solves = int(m.get("ctl_solves", 0))
+    relaxed, infeasible = int(m.get("ctl_relaxed_plans", 0)), int(m.get("ctl_infeasible_plans", 0))
+    lines = [f"{'relaxed plans':>20}: {relaxed} of {solves} solves "
+             + ("(every plan met every stop and speed cap within the comfort limits)" if relaxed == 0 else
+                "(plans that could not meet a stop, a speed cap or its margin within the comfort limits; the "
+                "solver planned the hardest comfortable braking instead)"),
+             f"{'infeasible plans':>20}: {infeasible} of {solves} solves"
+             + ("" if infeasible == 0 else " (the solver found no plan; the named constraint could not be met)")]
+    brakes = int(m.get("ctl_fallback_brake", 0))
+    if brakes:
+        comfort, emergency = int(m.get("ctl_comfort_brake_steps", 0)), int(m.get("ctl_emergency_brake_steps", 0))
+        lines.append(f"{'fallback brake':>20}: {brakes} solves ({comfort} control steps at the maximum comfort "
+                     f"deceleration, {emergency} emergency-braking)")
+    worst = m.get("ctl_worst_violation") or ""
+    if worst:
+        lines.append(f"{'worst violation':>20}: {worst}")
+    return lines
 
 
 def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:

@@ -413,7 +413,10 @@ class TripWriter:
 
     def __exit__(self, exc_type, exc, tb) -> Literal[False]:
         if self._writer is not None and not self._closed:
-            self._writer.close()
+            try:  # the file is discarded either way; closing after a failed write (a full disk) may fail as well,
+                self._writer.close()  # and must not keep the temporary file from being removed
+            except Exception:
+                pass
         if exc_type is None and not self._closed:
             exc_type, exc = TripError, TripError(f"{self.path}: TripWriter left without close(meta)")
             self._ctx.__exit__(exc_type, exc, None)

@@ -3,8 +3,9 @@
 Every command callback is wrapped by :func:`guarded`: bad input (any roadload error class, a pydantic validation
 error, a missing/unwritable file, a bad option value) is printed as one plain line ``error: <what>`` on stderr,
 without Rich markup interpretation (so ``[km/h]`` in a message stays), and the command exits with code 2. Anything
-else is an internal error: one line, exit code 1. Tracebacks only with the global ``--debug`` (or
-``ROADLOAD_DEBUG=1``).
+else is an internal error: one line, exit code 1 (a write that ran out of room,
+:class:`roadload.fileio.OutputSpaceError`, too, without the word "internal"). Tracebacks only with the global
+``--debug`` (or ``ROADLOAD_DEBUG=1``).
 
 Before a command runs, its arguments get generic checks: seeds (``seed``, ``*_seed``) must be >= 0, float options
 must be finite, and ``out`` paths are checked with :func:`roadload.fileio.check_output_path` (a path with a suffix
@@ -24,7 +25,7 @@ import click
 import pydantic
 import typer
 
-from roadload.fileio import check_output_path
+from roadload.fileio import OutputSpaceError, check_output_path
 
 #: typer >= 0.2x vendors its own click: its usage errors (typer.BadParameter) derive from this class
 _TYPER_CLICK_EXCEPTION: type[Exception] = next(c for c in typer.BadParameter.__mro__ if c.__name__ == "ClickException")
@@ -113,6 +114,8 @@ def guarded(fn: Callable[..., Any]) -> Callable[..., Any]:
                 raise
             if is_bad_input(exc):
                 fail(describe(exc))
+            if isinstance(exc, OutputSpaceError):  # the machine ran out of room: not a bug, say what and where
+                fail(describe(exc), code=INTERNAL_EXIT)
             fail(f"internal {type(exc).__name__}: {describe(exc)} (rerun with --debug for the traceback)",
                  code=INTERNAL_EXIT)
 

@@ -26,7 +26,7 @@ import pandas as pd
 
 from roadload.fileio import write_json, write_text
 from roadload.tables import markdown_table, write_csv
-from roadload.trip import Trip
+from roadload.trip import Trip, TripError
 
 from roadload.estimators.evaluation import (ESTIMATORS, GRAY_BOX_MODELS, HORIZONS, MIN_TRAINING, P_MAX,
                                             combination_name, common_trips, default_combinations, evaluate_trip,
@@ -132,20 +132,38 @@ def simulate_planned_trip(entry: dict[str, Any]) -> Trip:
     return trip
 
 
-def _generate_one(task: tuple[dict[str, Any], str]) -> str:
+def stored_trip_problem(path: Path, entry: dict[str, Any]) -> str | None:
+    """Why a stored trip cannot be reused for a planned entry (unreadable, or another trip), None if it can."""
+    try:
+        info = Trip.read_info(path)
+    except (TripError, OSError) as exc:
+        return f"unreadable ({exc})"
+    stored = (info["meta"] or {}).get("fleet")
+    planned = json.loads(json.dumps({k: v for k, v in entry.items() if k != "effects"}))
+    if stored != planned:
+        return "holds another planned trip"
+    return None
+
+
+def _generate_one(task: tuple[dict[str, Any], str]) -> dict[str, str]:
+    """Simulate one planned trip unless a valid file of it is stored; a corrupt or foreign file is simulated again
+    (reported as rebuilt), never trusted."""
     entry, folder = task
     path = Path(folder) / f"{entry['name']}.parquet"
-    if not path.exists():
+    problem = stored_trip_problem(path, entry) if path.exists() else "missing"
+    if problem is not None:
         simulate_planned_trip(entry).save(path)
-    return str(path)
+    return {"path": str(path), "status": "stored" if problem is None else "simulated" if problem == "missing"
+            else f"rebuilt: the stored file was {problem}"}
 
 
 def generate_fleet(folder: str | os.PathLike, n_trips: int = 84, seed: int = 2012, total_hours: float = 20.0,
                    scheduler: str | None = None, workers: int | None = None, progress: bool = True
                    ) -> dict[str, Any]:
-    """Simulate the planned fleet into `folder` (trip files + plan.json); trips already there are kept.
+    """Simulate the planned fleet into `folder` (trip files + plan.json); valid trips already there are kept (a run
+    stopped mid-way resumes), corrupt or foreign ones are simulated again.
 
-    Returns {"folder", "plan", "trips": [paths], "failed": [(name, error)]}."""
+    Returns {"folder", "plan", "trips": [paths], "failed": [(name, error)], "rebuilt": [(name, why)]}."""
 
     folder = Path(folder)
     plan = plan_fleet(n_trips, seed, total_hours)
@@ -159,8 +177,10 @@ def generate_fleet(folder: str | os.PathLike, n_trips: int = 84, seed: int = 201
                            "n_trips": n_trips, "total_hours": total_hours, "plan": plan})
     outcomes = run_sweep(_generate_one, [(e, str(folder)) for e in plan], scheduler=scheduler, workers=workers,
                          progress=progress, description="simulating fleet")
-    return {"folder": str(folder), "plan": plan, "trips": [o.value for o in outcomes if o.ok],
-            "failed": [(o.task[0]["name"], o.error) for o in outcomes if not o.ok]}
+    rebuilt = [(Path(o.value["path"]).stem, o.value["status"]) for o in outcomes
+               if o.ok and o.value["status"].startswith("rebuilt")]
+    return {"folder": str(folder), "plan": plan, "trips": [o.value["path"] for o in outcomes if o.ok],
+            "failed": [(o.task[0]["name"], o.error) for o in outcomes if not o.ok], "rebuilt": rebuilt}
 
 
 # ================================================================================ evaluation of stored trips
@@ -179,6 +199,7 @@ class BenchmarkTask:
     p_max: float = P_MAX
     settings: PipelineSettings = field(default_factory=PipelineSettings)
     output_outliers: tuple[float, float] | None = None
+    file_stamp: str = ""  # size and modification time of the trip file (a checkpointed result is for this file)
 
 
 def inject_output_outliers(states: pd.DataFrame, rate: float, size: float, seed: int,
@@ -246,13 +267,21 @@ class BenchmarkResult:
 
 
 def run_benchmark(paths: Sequence[str | os.PathLike], scheduler: str | None = None, workers: int | None = None,
-                  progress: bool = True, **task_options: Any) -> BenchmarkResult:
-    """Evaluate stored trips through the sweep runner; failed trips are reported, not raised."""
+                  progress: bool = True, checkpoint: str | os.PathLike | None = None,
+                  **task_options: Any) -> BenchmarkResult:
+    """Evaluate stored trips through the sweep runner; failed trips are reported, not raised. ``checkpoint``: a
+    folder where each trip's evaluation is stored as it finishes (a stopped run resumes; a trip file that changed
+    since is evaluated again)."""
 
-    tasks = [BenchmarkTask(str(p), **task_options) for p in paths]
+    def stamp(p: str | os.PathLike) -> str:
+        st = os.stat(p) if checkpoint is not None and os.path.exists(p) else None
+        return f"{st.st_size}-{st.st_mtime_ns}" if st is not None else ""
+
+    tasks = [BenchmarkTask(str(p), file_stamp=stamp(p), **task_options) for p in paths]
     t0 = time.perf_counter()
     outcomes = run_sweep(evaluate_stored_trip, tasks, scheduler=scheduler, workers=workers, progress=progress,
-                         description="chapter-5 benchmark")
+                         description="chapter-5 benchmark", checkpoint=checkpoint,
+                         name=lambda task: Path(task.path).stem)
     wall = time.perf_counter() - t0
     medse, mass, infos = [], [], []
     timing = {"loading": 0.0, "preprocessing": 0.0, "estimation": 0.0, "evaluation": 0.0}

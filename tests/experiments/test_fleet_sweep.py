@@ -1,6 +1,7 @@
 """The fleet benchmark on a tiny fleet: local vs. Dask LocalCluster identical, failed trips reported, report files."""
 
 import dataclasses
+from pathlib import Path
 import pandas as pd
 import pytest
 
@@ -35,6 +36,16 @@ def test_generation_is_cached_and_regenerable(tiny_fleet, tmp_path):
     fresh = generate_fleet(tmp_path / "fresh", n_trips=3, seed=7, total_hours=0.12, workers=1, progress=False)
     assert Trip.load(fresh["trips"][0]).equals(Trip.load(paths[0]))
     assert len(again["trips"]) == 1
+    # a truncated trip file and a file holding another planned trip are detected and simulated again
+    import shutil
+
+    broken, foreign = Path(fresh["trips"][1]), Path(fresh["trips"][2])
+    broken.write_bytes(broken.read_bytes()[:5000])
+    shutil.copy(fresh["trips"][0], foreign)
+    redo = generate_fleet(tmp_path / "fresh", n_trips=3, seed=7, total_hours=0.12, workers=1, progress=False)
+    assert [name for name, _ in redo["rebuilt"]] == [broken.stem, foreign.stem]
+    assert "unreadable" in redo["rebuilt"][0][1] and "holds another planned trip" in redo["rebuilt"][1][1]
+    assert Trip.load(broken).equals(Trip.load(paths[1])) and Trip.load(foreign).equals(Trip.load(paths[2]))
 
 
 def test_local_and_dask_give_identical_results_and_failures_are_reported(tiny_fleet, tmp_path):
@@ -43,7 +54,13 @@ def test_local_and_dask_give_identical_results_and_failures_are_reported(tiny_fl
     bad = tmp_path / "broken.parquet"
     bad.write_bytes(b"not a parquet file")
     paths.append(bad)
-    local = run_benchmark(paths, workers=1, progress=False, horizons=(300, 600), min_training=300)
+    local = run_benchmark(paths, workers=1, progress=False, horizons=(300, 600), min_training=300,
+                          checkpoint=tmp_path / "units")
+    # every trip's evaluation was stored as it finished: a second run resumes them and gives the same tables
+    resumed = run_benchmark(paths, workers=1, progress=False, horizons=(300, 600), min_training=300,
+                            checkpoint=tmp_path / "units")
+    pd.testing.assert_frame_equal(resumed.medse, local.medse)
+    assert len(list((tmp_path / "units").glob("*.json"))) == 3  # the broken trip failed: nothing stored
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=":0") as cluster:
         dask = run_benchmark(paths, scheduler=cluster, progress=False, horizons=(300, 600), min_training=300)

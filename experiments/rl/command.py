@@ -69,7 +69,8 @@ def load_trained(algo: str, out_dir: Path) -> TrainResult:
 def train_and_evaluate(algos: list[str], timesteps: int, out_dir: Path, n_envs: int, seed: int,
                        env_config: dict[str, Any], vec: str, eval_every: int, road_seeds, console=None,
                        controllers: tuple[str, ...] = ("cruise", "mpc"), evaluate_only: bool = False,
-                       skip_evaluation: bool = False, threads: int = 1) -> dict[str, Any]:
+                       skip_evaluation: bool = False, threads: int = 1, checkpoint_every: int = 0
+                       ) -> dict[str, Any]:
     """The whole workflow of ``roadload train`` / scripts/train_rl.py: train each algorithm (or, with
     ``evaluate_only``, load what an earlier run saved in ``out_dir``), write the learning curve PNG, evaluate on
     held-out roads with the baselines, write CSV tables; returns paths and tables."""
@@ -90,7 +91,10 @@ def train_and_evaluate(algos: list[str], timesteps: int, out_dir: Path, n_envs: 
                 task = bar.add_task(f"training {algo.upper()}", total=timesteps)
                 res = train_policy(algo, timesteps, out_dir, n_envs=n_envs, seed=seed, env_config=env_config,
                                    vec=vec, eval_every=eval_every, threads=threads,
-                                   progress=lambda n: bar.update(task, completed=n))
+                                   progress=lambda n: bar.update(task, completed=n),
+                                   checkpoint_every=checkpoint_every)
+                if res.extra["resume"].startswith(("resumed", "checkpoint")):
+                    console.print(f"{algo.upper()}: {res.extra['resume']}")
                 curve = res.curve
                 write_csv(out_dir / f"{algo}_learning_curve.csv", curve)
             results.append(res)
@@ -137,6 +141,9 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                                       "mpc (oracle force model), mpc_online (online RRLM force model)"),
         evaluate_only: bool = typer.Option(False, help="no training: evaluate the policies saved in --out"),
         skip_evaluation: bool = typer.Option(False, help="train and plot only, no held-out evaluation"),
+        checkpoint_every: int = typer.Option(50_000, min=0, help="save the training state every this many steps "
+                                             "[steps] in --out; the same command after a crash continues from "
+                                             "the last one (0 = off)"),
     ) -> None:
         """Train PPO / SAC on EcoDrive-v0, save the policies, and compare them on held-out roads with cruise
         control and the MPC (energy, time, violations)."""
@@ -157,7 +164,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                 raise RLError(f"--baselines: unknown {bad}; choose from {sorted(CONTROLLER_BASELINES)}")
             res = train_and_evaluate(algos, timesteps, out, n_envs, seed, env_config, vec, eval_every, seeds,
                                      console, controllers=ctl, evaluate_only=evaluate_only,
-                                     skip_evaluation=skip_evaluation, threads=threads)
+                                     skip_evaluation=skip_evaluation, threads=threads,
+                                     checkpoint_every=checkpoint_every)
         except ValueError as exc:  # RLError, GymConfigError
             _fail(str(exc))
         for r in res["results"]:

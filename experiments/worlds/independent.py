@@ -32,7 +32,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-import numba
+from roadload.jitcache import cached_njit
 import numpy as np
 from roadload.units import KELVIN, R_AIR, STANDARD_PRESSURE, G
 from roadload.vehicle import (
@@ -177,7 +177,7 @@ CURRENT = Column("I_HV [A]", "battery_current", "A", 1)
 TIME_HEADER = "t [s]"
 
 
-@numba.njit(cache=True)
+@cached_njit
 def _interp_uniform(x, ds, y):
     k = x / ds
     i = int(k)
@@ -189,7 +189,7 @@ def _interp_uniform(x, ds, y):
     return y[i] * (1 - f) + y[i + 1] * f
 
 
-@numba.njit(cache=True)
+@cached_njit
 def _drive(n, dt, ds, grade, kappa, v_plan, v_free, stops, taps, p, eff, ambient, dwell):
     """The numba loop. p: vehicle parameters (see :func:`_params`); eff: (mass add, f_r cold factor - 1, d_tire,
     loss cold factor - 1, tau_oil, aux add, cornering factor scale, drag factor, wind speed, wind from);

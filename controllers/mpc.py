@@ -141,6 +141,7 @@ SEGMENT0_FRACTIONS = np.linspace(0.0, 1.0, 11)[1:]
 #: what each constraint name of :class:`ConstraintViolation` means
 CONSTRAINTS = {
     "stop": "stop line: the speed at the stop may not exceed stop_speed",
+    "stop_node": "the grid node before a stop line (capped at stop_speed), while the line itself is within reach",
     "speed_cap": "speed cap: posted limit or curve cap sqrt(a_y,max / |kappa|)",
     "speed_margin": "speed margin: the plan keeps speed_margin below each cap",
     "speed_floor": "speed floor: the plan never goes slower than speed_floor",
@@ -353,17 +354,22 @@ class OcpSolver:
         ramps from a_prev down to -decel_max as fast as the NLP's jerk constraint allows,
         a_k = max(a_{k-1} - j_max ds / v_k, -decel_max), E_{k+1} = E_k + a_k ds (floored at the speed floor).
         Braking harder at every segment lowers every later speed, so this greedy sequence is the lowest."""
+        return self._braking(v0, len(preview.s), a_prev)[0]
+
+    def _braking(self, v0: float, n_nodes: int, a_prev: float) -> tuple[np.ndarray, np.ndarray]:
+        """(speed [m/s] at each node, acceleration [m/s^2] of each segment) of :meth:`braking_reach`."""
         st = self.settings
         e_floor = 0.5 * st.speed_floor ** 2
         e = 0.5 * max(v0, st.speed_floor) ** 2
         a = min(max(a_prev, -st.decel_max), st.accel_max)
-        out = np.empty(len(preview.s))
-        out[0] = math.sqrt(2.0 * e)
-        for k in range(1, len(out)):
+        speed, accel = np.empty(n_nodes), np.empty(max(n_nodes - 1, 0))
+        speed[0] = math.sqrt(2.0 * e)
+        for k in range(1, n_nodes):
             a = max(a - st.jerk_max * st.ds / math.sqrt(2.0 * e), -st.decel_max)
+            accel[k - 1] = a
             e = max(e + a * st.ds, e_floor)
-            out[k] = math.sqrt(2.0 * e)
-        return out
+            speed[k] = math.sqrt(2.0 * e)
+        return speed, accel
 
     def planning_cap(self, preview: Preview) -> np.ndarray:
         """The cap [m/s] the plan is asked to meet at each node: the preview cap less the margin, floored at the
@@ -521,9 +527,10 @@ class OcpSolver:
     def relaxations(self, v0: float, a_prev: float, preview: Preview, plan: Plan | None = None
                     ) -> list[ConstraintViolation]:
         """One violation per run of consecutive relaxed nodes (a stop, a stretch of a lower cap): the node where
-        the plan (or, without a converged plan, the comfort-braking reach) exceeds the cap most. A stop, or a cap
-        exceeded by more than VIOLATION_TOLERANCE, is a ``stop`` / ``speed_cap`` violation; one met only by eating
-        into the margin is a ``speed_margin`` violation."""
+        the plan (or, without a converged plan, the comfort-braking reach) exceeds the cap most. A stop line out of
+        comfortable reach, or a cap exceeded by more than VIOLATION_TOLERANCE, is a ``stop`` / ``speed_cap``
+        violation; one met only by eating into the margin is ``speed_margin``, and a stop whose line is within
+        reach while the grid node before it is not is ``stop_node``."""
         st = self.settings
         cap = self.planning_cap(preview)
         reach = self.braking_reach(v0, preview, a_prev)
@@ -551,8 +558,15 @@ class OcpSolver:
             if near.size:
                 stop = float(near[0])
                 need = v0 ** 2 / (2.0 * max(stop - float(s[0]), 1e-9))
-                out.append(ConstraintViolation("stop", stop, float(actual[worst]), float(speed[worst]), "m/s",
-                                               need, f"comfort limit {st.decel_max:g} m/s^2"))
+                # the grid caps the node before the line: the line itself may still be within comfortable reach
+                at_line = self._reach_at(v0, a_prev, s, stop)
+                if at_line <= float(actual[worst]) + VIOLATION_TOLERANCE:
+                    out.append(ConstraintViolation("stop_node", stop, float(actual[worst]), float(speed[worst]),
+                                                   "m/s", need, f"the line itself is reached at {at_line:.3g} m/s "
+                                                   f"within the comfort limits"))
+                else:
+                    out.append(ConstraintViolation("stop", stop, float(actual[worst]), float(speed[worst]), "m/s",
+                                                   need, f"comfort limit {st.decel_max:g} m/s^2"))
             elif speed[worst] > actual[worst] + VIOLATION_TOLERANCE:
                 need = max(v0 ** 2 - actual[worst] ** 2, 0.0) / (2.0 * dist)
                 out.append(ConstraintViolation("speed_cap", float(s[worst]), float(actual[worst]),
@@ -566,6 +580,14 @@ class OcpSolver:
                                                f"{VIOLATION_TOLERANCE:g} m/s"))
             k = end + 1
         return out
+
+    def _reach_at(self, v0: float, a_prev: float, s: np.ndarray, position: float) -> float:
+        """Lowest speed [m/s] reachable at ``position`` [m] inside the grid s within the comfort limits (the braking
+        of :meth:`braking_reach` continued to that point; 0 if it stops before)."""
+        speed, accel = self._braking(v0, len(s), a_prev)
+        k = int(np.clip(np.searchsorted(s, position, side="right") - 1, 0, len(accel) - 1))
+        e = 0.5 * speed[k] ** 2 + accel[k] * (position - float(s[k]))
+        return math.sqrt(max(e, 0.0))
 
     def contradictions(self, v0: float, a_prev: float, preview: Preview) -> list[ConstraintViolation]:
         """Limits that contradict each other before any solve: a cap ahead below the speed floor (the plan cannot

@@ -158,3 +158,15 @@ def test_emergency_decel_below_comfort_is_refused():
     ctl = MpcController(MpcControllerSettings())
     with pytest.raises(ControllerError, match=r"emergency_decel: must be >= .* decel_max = 2 m/s\^2, got 1.5"):
         ctl.reset(DriveContext(road, ENERGY, FixedForceModel(PARAMS), emergency_decel=1.5))
+
+
+def test_a_stop_line_within_reach_is_not_run_though_its_grid_node_is_not():
+    """20.5 m/s, stop line at 118 m: the node before it (100 m) cannot get under 1 m/s at 2 m/s^2 (4.5 m/s), but the
+    line can (braking from here stops the car at 105 m): relaxed on the grid node, no hard stop violation, so the
+    closed loop does not brake harder than planned."""
+    ocp = get_solver(MpcSettings(n_nodes=N, ds=DS), ENERGY)
+    cap = np.full(N + 1, 30.0)
+    cap[5:7] = 1.0
+    plan = ocp.solve(20.5, 0.0, preview(cap, stops=np.array([118.0])), PARAMS)
+    assert not plan.success and [v.constraint for v in plan.violations] == ["stop_node"], plan.status
+    assert "the line itself is reached at 0 m/s" in plan.status

@@ -69,7 +69,7 @@ def cached_vectorize(signatures: list[str], **options: Any) -> Callable[[Callabl
     from numba.np.ufunc.dufunc import DUFunc
 
     def wrap(fn: Callable[..., Any]) -> Any:
-        ufunc = DUFunc(fn, cache=True, **options)
+        ufunc: Any = DUFunc(fn, cache=True, **options)
         ufunc._dispatcher.cache = CheckedCache(ufunc._dispatcher.py_func)  # before any signature is loaded
         for signature in signatures:
             ufunc.add(signature)

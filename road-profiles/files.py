@@ -413,7 +413,7 @@ def load_gpx(path: str | os.PathLike, *, name: str | None = None, licence: str =
         inf = np.flatnonzero(np.isinf(values))
         if inf.size:
             raise ProfileFileError(f"{path}: point {int(inf[0])} has a non-finite {label} {values[inf[0]]:g}")
-    stamps = [p.time for p in points]
+    stamps = [getattr(p, "time", None) for p in points]  # track, route and way points all carry one in GPX
     if any(s is not None for s in stamps):
         known = [s for s in stamps if s is not None]
         first = known[0]

@@ -84,20 +84,16 @@ def round_significant(values: np.ndarray, bits: int) -> np.ndarray:
     the step of a binary grid relative to each value's magnitude: 2^-(bits-1) x 2^exponent. NaN and inf pass
     unchanged. Zeroed low mantissa bits are what makes a smooth signal compress."""
     x = np.ascontiguousarray(values)
-    uint: type[np.unsignedinteger[Any]]
-    if x.dtype == np.float32:
-        uint, mant = np.uint32, 23
-    elif x.dtype == np.float64:
-        uint, mant = np.uint64, 52
-    else:
+    if x.dtype not in (np.float32, np.float64):
         raise TypeError(f"round_significant: float32 or float64 expected, got {x.dtype}")
-    drop = mant - (bits - 1)
+    uint = np.dtype(np.uint32 if x.dtype == np.float32 else np.uint64)
+    drop = (23 if x.dtype == np.float32 else 52) - (bits - 1)
     if drop <= 0:
         return x.copy()
     b = x.view(uint)
-    one = uint(1)
-    half = (one << uint(drop - 1)) - one + ((b >> uint(drop)) & one)
-    out = ((b + half) & ~((one << uint(drop)) - one)).view(x.dtype)
+    one, shift = np.array(1, dtype=uint), np.array(drop, dtype=uint)
+    half = (one << (shift - one)) - one + ((b >> shift) & one)   # round half to even on the kept bits
+    out = ((b + half) & ~((one << shift) - one)).view(x.dtype)
     finite = np.isfinite(x)
     return np.where(finite & np.isfinite(out), out, x)
 

@@ -31,6 +31,7 @@ import numpy as np
 import pandas as pd
 
 from .channels import unit_of
+from .registry import did_you_mean
 from .trip_schema import TripError
 from .trip_storage import (FORMAT_VERSION, PRECISIONS, RESERVED_COLUMNS, TRUTH_PREFIX, TripParts, TripWriter,
                            iter_trip_chunks, open_trip_file, read_trip_file, resolutions_from_meta,
@@ -193,7 +194,8 @@ class Trip:
         """Raise TripError naming every required measured channel this trip lacks."""
         missing = [n for n in names if n not in self.measured.columns]
         if missing:
-            raise TripError(f"trip {self.meta.get('name', '?')!r} lacks required channels {missing}; "
+            hints = "".join(did_you_mean(n, self.channels) for n in missing)
+            raise TripError(f"trip {self.meta.get('name', '?')!r} lacks required channels {missing}{hints}; "
                             f"it has {self.channels}")
 
     def channel(self, name: str) -> np.ndarray:
@@ -206,7 +208,8 @@ class Trip:
         if self.truth is None:
             raise TripError(f"trip {self.meta.get('name', '?')!r} has no ground truth (not simulated)")
         if name not in self.truth.columns:
-            raise TripError(f"ground truth has no channel {name!r}; it has {list(self.truth.columns)}")
+            raise TripError(f"ground truth has no channel {name!r}{did_you_mean(name, self.truth.columns)}; it has "
+                            f"{list(self.truth.columns)}")
         return self.truth[name].to_numpy(dtype=float)
 
     def to_pandas(self, include_truth: bool = False) -> pd.DataFrame:

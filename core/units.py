@@ -130,3 +130,8 @@ def si_unit_problem(unit: str) -> str | None:
             return (f"{unit!r} is not an SI unit expression (SI symbols {sorted(SI_SYMBOLS)} joined by '*' and '/', "
                     f"integer powers as '^n', e.g. 'm/s^2', 'N*m', '1')")
     return None
+
+
+def unit_label(unit: str) -> str:
+    """A unit as printed after a number: ``[m/s]``; dimensionless ``'1'`` as ``[-]`` (a bare 1 reads as a number)."""
+    return "[-]" if unit in ("1", "") else f"[{unit}]"

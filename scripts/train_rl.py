@@ -13,7 +13,7 @@ import tempfile
 
 import typer
 
-from roadload.experiments.rl import register
+from roadload.experiments.cli.rl import register
 
 QUICK = ["--algo", "ppo", "--timesteps", "2048", "--eval-every", "0", "--held-out", "1", "--baselines", "cruise"]
 

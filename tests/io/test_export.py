@@ -107,13 +107,10 @@ def test_unknown_format():
 
 
 def test_cli_export_then_import(tmp_path):
-    import typer
     from typer.testing import CliRunner
 
-    from roadload.experiments.cli.io import register
+    from roadload.experiments.cli import app
 
-    app = typer.Typer()
-    register(app, typer.Typer())
     trip = _trip(duration=5.0)
     trip.save(tmp_path / "sim.parquet")
     runner = CliRunner()

@@ -116,8 +116,10 @@ def test_threads_reach_the_native_env_of_the_training_path(tmp_path):
     import typer
     from typer.testing import CliRunner
 
+    from roadload.experiments.cli.rl import register
+
     app = typer.Typer(add_completion=False)
-    rl_command.register(app, typer.Typer())
+    register(app, typer.Typer())
     res = CliRunner().invoke(app, ["--threads", "0", "--algo", "ppo", "--timesteps", "64", "--out", str(tmp_path),
                                    "--eval-every", "0", "--skip-evaluation"])
     assert res.exit_code != 0 and "threads" in res.output, res.output

@@ -5,8 +5,9 @@ CAN frames decoded through a DBC).
 ``import_log(path, "mf4")`` reads such a file through a mapping (``"format": "mf4"``, sources = MDF channel names).
 Without a mapping file, every signal named like a measured channel of the catalogue (roadload.channels) maps to it,
 its unit converted to SI (signals named ``truth/...`` -- ground truth a roadload export may carry -- and names the
-catalogue does not know are listed in the import report, not imported). A roadload export therefore re-imports as
-the same measured channels, equal within their resolution.
+catalogue does not know are listed in ``meta["unmapped_signals"]``, not imported). A roadload export therefore
+re-imports as the same measured channels, equal within their resolution (but for the importer's counted repairs, such
+as small negative speeds clipped to 0).
 """
 
 from __future__ import annotations
@@ -53,11 +54,10 @@ def read_mdf_signals(path: str | Path, report: ImportReport) -> tuple[SignalSet,
             signals[sig.name] = Signal(np.asarray(sig.timestamps, dtype=float), np.asarray(sig.samples),
                                        sig.unit or None)
         info: dict[str, Any] = {"t0_unix": float(mdf.header.start_time.timestamp())}
-        for attachment in getattr(mdf, "attachments", []):
-            if getattr(attachment, "file_name", None) is not None and Path(str(attachment.file_name)).name \
-                    == META_ATTACHMENT:
+        for index, attachment in enumerate(getattr(mdf, "attachments", [])):
+            if Path(str(getattr(attachment, "file_name", ""))).name == META_ATTACHMENT:
                 try:
-                    info["origin"] = json.loads(bytes(mdf.extract_attachment(attachment)[0]).decode("utf-8"))
+                    info["origin"] = json.loads(bytes(mdf.extract_attachment(index)[0]).decode("utf-8"))
                 except (ValueError, TypeError, IndexError):
                     report.note(f"MDF attachment {META_ATTACHMENT} is not readable JSON; ignored")
     finally:
@@ -96,12 +96,8 @@ def load_mdf_log(source: str | Path, mapping: Mapping | None = None, *, progress
     if progress:
         progress("read", 0.0)
     signals, info = read_mdf_signals(source, report)
-    if mapping is None:
+    if mapping is None:  # the signals it leaves out are listed in meta["unmapped_signals"]
         mapping = catalogue_mapping(signals, report)
-        ignored = sorted(n for n in signals if n not in MEASURED)
-        if ignored:
-            report.note(f"{len(ignored)} MDF signals are not measured catalogue channels and were not imported: "
-                        f"{ignored[:20]}")
     if progress:
         progress("map", 0.7)
     meta: dict[str, Any] = {"source": {"format": "mf4", "path": str(source), "bytes": Path(source).stat().st_size}}

@@ -84,7 +84,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         from roadload.experiments.rl import HELD_OUT_SEEDS, RLError
         from roadload.experiments.rl.command import _parse_config, print_table, train_and_evaluate
 
-        console = Console()
+        console = Console(soft_wrap=True)  # long lines whole, at any terminal width
         try:
             env_config = _parse_config(config_text)
             n_roads = len(HELD_OUT_SEEDS) if held_out is None else held_out

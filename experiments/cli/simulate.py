@@ -109,12 +109,16 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         with Progress(TextColumn("[bold]simulating[/bold] {task.description}"), BarColumn(),
                       TextColumn("{task.percentage:>5.1f}%"), TimeElapsedColumn(), console=Console(stderr=True),
                       transient=True) as bar:
-            task = bar.add_task(f"{spec.name} on {profile.name}", total=1.0)
+            # until the first chunk is done the bar cannot move (a first run compiles the simulator, holding the GIL
+            # that rich's refresh thread needs): say so, then show the vehicle and road
+            task = bar.add_task(f"{spec.name} on {profile.name} (starting; a first run compiles the simulator: "
+                                f"20-60 s)", total=1.0)
             # streamed: one Parquet row group per 5 min of driving, memory bounded by one chunk; each chunk
             # redraws the bar (the compiled simulator holds the GIL, so rich's refresh thread cannot run meanwhile)
             path = simulate(spec, profile, effects=cfg, sensors=sensor_spec, seed=seed,
                             duration=duration, distance=None if distance is None else distance * 1000.0,
-                            driver=driver, progress=lambda f: bar.update(task, completed=f, refresh=True), out=out,
+                            driver=driver, out=out, progress=lambda f: bar.update(
+                                task, completed=f, description=f"{spec.name} on {profile.name}", refresh=True),
                             precision=precision)
         info = Trip.read_info(path)
         t_first = None

@@ -72,8 +72,10 @@ def train_and_evaluate(algos: list[str], timesteps: int, out_dir: Path, n_envs: 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     results = []
+    # the bars on stderr, gone when done (stdout is for the results); redrawn at every update, as a compiled step
+    # can hold the GIL past the refresh thread's turn
     with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                  TimeElapsedColumn(), TimeRemainingColumn(), console=console) as bar:
+                  TimeElapsedColumn(), TimeRemainingColumn(), console=Console(stderr=True), transient=True) as bar:
         for algo in algos:
             if evaluate_only:
                 res = load_trained(algo, out_dir)
@@ -82,7 +84,7 @@ def train_and_evaluate(algos: list[str], timesteps: int, out_dir: Path, n_envs: 
                 task = bar.add_task(f"training {algo.upper()}", total=timesteps)
                 res = train_policy(algo, timesteps, out_dir, n_envs=n_envs, seed=seed, env_config=env_config,
                                    vec=vec, eval_every=eval_every, threads=threads,
-                                   progress=lambda n: bar.update(task, completed=n))
+                                   progress=lambda n: bar.update(task, completed=n, refresh=True))
                 curve = res.curve
                 write_csv(out_dir / f"{algo}_learning_curve.csv", curve)
             results.append(res)
@@ -102,7 +104,7 @@ def train_and_evaluate(algos: list[str], timesteps: int, out_dir: Path, n_envs: 
             policies["random"] = random_policy(space, seed)
         logs: dict[str, pd.DataFrame] = {}
         table, notes = evaluation_table(policies, env_config, road_seeds, controllers,
-                                        progress=lambda _m: bar.advance(task), logs=logs)
+                                        progress=lambda _m: bar.update(task, advance=1, refresh=True), logs=logs)
         profiles_png = plot_speed_profiles(logs, env_config, road_seeds[0], out_dir / "speed_profiles.png")
     table_path = out_dir / "evaluation.csv"
     summary = summarise(table)

@@ -54,8 +54,9 @@ def energy_summary(trip: Trip, distance_m: float) -> str:
     energy = (trip.meta.get("energy") or {}).get("source") if isinstance(trip.meta.get("energy"), dict) else None
     if energy is None or distance_m <= 0:
         return text
-    vehicle = trip.meta.get("vehicle") if isinstance(trip.meta.get("vehicle"), dict) else {}
-    kind = (vehicle.get("drivetrain") or {}).get("kind") if isinstance(vehicle.get("drivetrain"), dict) else None
+    vehicle = trip.meta.get("vehicle")
+    drivetrain = vehicle.get("drivetrain") if isinstance(vehicle, dict) else None
+    kind = drivetrain.get("kind") if isinstance(drivetrain, dict) else None
     per_100km = energy / distance_m * 1e5
     if kind == "bev":
         return f"{text}, battery energy {energy / 3.6e6:.2f} kWh ({per_100km / 3.6e6:.1f} kWh/100 km)"

@@ -57,7 +57,8 @@ def read_mdf_signals(path: str | Path, report: ImportReport) -> tuple[SignalSet,
         for index, attachment in enumerate(getattr(mdf, "attachments", [])):
             if Path(str(getattr(attachment, "file_name", ""))).name == META_ATTACHMENT:
                 try:
-                    info["origin"] = json.loads(bytes(mdf.extract_attachment(index)[0]).decode("utf-8"))
+                    data = mdf.extract_attachment(index)[0]
+                    info["origin"] = json.loads(data if isinstance(data, str) else bytes(data).decode("utf-8"))
                 except (ValueError, TypeError, IndexError):
                     report.note(f"MDF attachment {META_ATTACHMENT} is not readable JSON; ignored")
     finally:

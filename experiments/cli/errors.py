@@ -79,8 +79,9 @@ def describe(exc: BaseException) -> str:
     elif isinstance(exc, OSError) and exc.filename is not None:
         text = f"{exc.filename}: {exc.strerror or exc}"
     elif _is_validation_error(exc):
-        text = "; ".join(f"{'.'.join(str(p) for p in e['loc']) or exc.title}: {e['msg']} (got {e.get('input')!r})"
-                         for e in exc.errors())  # type: ignore[attr-defined]
+        error: Any = exc  # a pydantic ValidationError (pydantic is not imported here)
+        text = "; ".join(f"{'.'.join(str(p) for p in e['loc']) or error.title}: {e['msg']} (got {e.get('input')!r})"
+                         for e in error.errors())
     else:
         text = str(exc) or type(exc).__name__
     return one_line(text)

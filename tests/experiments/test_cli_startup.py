@@ -110,3 +110,12 @@ def test_a_missing_input_file_names_a_similar_one(tmp_path):
     (tmp_path / "trip_a.parquet").write_bytes(b"")
     res = RUNNER.invoke(app, ["export", str(tmp_path / "trip_b.parquet"), "--format", "csv"])
     assert res.exit_code == 2 and f"did you mean '{tmp_path / 'trip_a.parquet'}'" in res.output
+
+
+def test_import_roadload_stays_light_and_still_registers_the_gym_ids():
+    code = ("import sys, roadload, gymnasium\n"
+            "heavy = sorted({m.split('.')[0] for m in sys.modules} & {'pandas', 'pyarrow', 'pydantic', 'scipy', "
+            "'numba', 'torch', 'matplotlib', 'casadi'})\n"
+            "print(heavy, 'roadload/EcoDrive-v0' in gymnasium.registry, roadload.Trip.__name__)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.stdout.strip() == "[] True Trip", out.stdout + out.stderr

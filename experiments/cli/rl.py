@@ -70,6 +70,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         for a in algos:
             choose(a, ALGORITHMS, "--algo", "algorithm")
         choose(vec, VEC_MODES, "--vec", "vectorisation")
+        if threads < 1:
+            raise CliInputError(f"--threads: at least 1 numba thread, got {threads}")
         if held_out is not None and held_out < 1:
             raise CliInputError(f"--held-out: at least 1 road, got {held_out}")
         if timesteps < 1 and not evaluate_only:

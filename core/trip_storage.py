@@ -22,9 +22,8 @@ Storage precision
   float32 elsewhere. Measured channels are rounded to their sensor resolution (``Trip.load`` restores the exact grid
   value k x step); truth channels are rounded to :data:`TRUTH_SIGNIFICANT_BITS` significant bits (relative step
   2^-15 ~ 3e-5; float64 ones to 32 bits), which zeroes the low mantissa bits so that the file compresses. Parquet's
-  own encodings do the rest: dictionary for columns with few distinct values (gear, clutch, coarse sensors),
-  PLAIN for finely quantised channels (zstd finds their repeated 4-byte patterns), BYTE_STREAM_SPLIT for the rest,
-  ZSTD on top. About 13 MB per simulated hour at 100 Hz (scripts/bench_trip_storage.py).
+  own encodings do the rest: dictionary for enums and constants (gear, clutch, the mass), PLAIN for quantised
+  channels (zstd finds their repeated 4-byte patterns), BYTE_STREAM_SPLIT for the rest, ZSTD on top. About 13 MB per simulated hour at 100 Hz (scripts/bench_trip_storage.py).
 - ``exact``: every column in its own dtype, floats unrounded (bit for bit); ~5x larger.
 - ``packed`` (explicit opt-in): format 3, roadload's private integer codec. Its columns are integer codes and first
   differences that only roadload decodes -- pandas, polars, DuckDB and MATLAB read meaningless integers -- for
@@ -63,8 +62,9 @@ TRUTH_SIGNIFICANT_BITS = 15
 TRUTH_SIGNIFICANT_BITS_64 = 33
 #: a float32 column holds grid values k x step exactly recoverable while |k| < 2^22
 _F32_GRID_LIMIT = 2.0 ** 22
-#: columns with at most this many distinct values in the first chunk are dictionary-encoded
-_DICTIONARY_MAX = 1024
+#: columns with at most this many distinct values in the first chunk (enums such as gear and clutch, constants) are
+#: dictionary-encoded; for more, a dictionary saved no space and cost 4 MB of writer memory (1 h streamed, measured)
+_DICTIONARY_MAX = 16
 _ZSTD_LEVEL = 15
 
 

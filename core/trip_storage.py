@@ -23,7 +23,8 @@ Storage precision
   value k x step); truth channels are rounded to :data:`TRUTH_SIGNIFICANT_BITS` significant bits (relative step
   2^-15 ~ 3e-5; float64 ones to 32 bits), which zeroes the low mantissa bits so that the file compresses. Parquet's
   own encodings do the rest: dictionary for enums and constants (gear, clutch, the mass), PLAIN for quantised
-  channels (zstd finds their repeated 4-byte patterns), BYTE_STREAM_SPLIT for the rest, ZSTD on top. About 13 MB per simulated hour at 100 Hz (scripts/bench_trip_storage.py).
+  channels (zstd finds their repeated 4-byte patterns), BYTE_STREAM_SPLIT for the rest, ZSTD on top. About 13 MB
+  per simulated hour at 100 Hz (scripts/bench_trip_storage.py).
 - ``exact``: every column in its own dtype, floats unrounded (bit for bit); ~5x larger.
 - ``packed`` (explicit opt-in): format 3, roadload's private integer codec. Its columns are integer codes and first
   differences that only roadload decodes -- pandas, polars, DuckDB and MATLAB read meaningless integers -- for

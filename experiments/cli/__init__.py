@@ -153,8 +153,7 @@ class _BenchmarkGroup(_LazyGroup):
 
 
 app = typer.Typer(help="roadload: vehicle simulator, tractive-force estimators, eco-driving MPC, sim-to-real.",
-                  no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None, cls=_TopGroup,
-                  add_completion=False)
+                  no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None, cls=_TopGroup)
 benchmark_app = typer.Typer(help=COMMANDS["benchmark"][1], no_args_is_help=True, rich_markup_mode=None,
                             cls=_BenchmarkGroup)
 app.add_typer(benchmark_app, name="benchmark")

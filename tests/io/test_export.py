@@ -178,7 +178,7 @@ def simulated(tmp_path_factory, hilly_road):
     from roadload.envs.simulator import simulate
 
     path = tmp_path_factory.mktemp("exports") / "sim.parquet"
-    return simulate("bmw_i3", hilly_road, seed=2, duration=40.0, out=path)
+    return simulate("bmw_i3", hilly_road, seed=2, duration=60.0, out=path)
 
 
 def test_mdf4_export_opens_in_asammdf_with_units_and_reimports_within_resolution(tmp_path, simulated):
@@ -219,6 +219,18 @@ def test_mdf4_export_opens_in_asammdf_with_units_and_reimports_within_resolution
         assert int(clipped.sum()) == repaired.get(c, 0), c
         np.testing.assert_allclose(x[~clipped], y[~clipped], rtol=0, atol=max(step / 2, 1e-9), err_msg=c)
     assert "truth/tractive_force" in back.meta["unmapped_signals"]          # truth listed, not imported
+    assert not back.measured.isna().any().any()                            # the last sample survives the time base
+
+
+def test_the_time_base_keeps_a_last_sample_that_rounding_puts_past_the_span():
+    from roadload.io.resample import resample, uniform_time_base
+
+    t = np.cumsum(np.full(6000, 0.01))                 # an accumulated clock, as the simulator's: ends at 59.9999...
+    grid = uniform_time_base(t[0], t[-1], 100.0)      # 0.01 + 5999 / 100 = 60.0 > 59.99999999999663
+    assert grid.size == t.size and grid[-1] > t[-1]
+    for rule in ("linear", "hold", "nearest"):
+        out = resample(t, t * 2.0, grid, rule)
+        assert not np.isnan(out).any() and out[-1] == pytest.approx(120.0), rule
 
 
 def test_csv_export_has_a_units_row_and_exact_numbers(tmp_path, simulated):

@@ -11,9 +11,7 @@ All options: python scripts/train_rl.py --help (the same as ``roadload train``).
 
 import sys
 
-import typer
-
-from roadload.experiments.cli.rl import register
+from roadload.experiments.cli import main
 
 QUICK = ["--algo", "ppo", "--timesteps", "2048", "--eval-every", "0", "--held-out", "1", "--baselines", "cruise"]
 
@@ -24,6 +22,5 @@ if __name__ == "__main__":
         if "--out" not in args:
             args += ["--out", "out/rl_quick"]
         args = QUICK + args
-    app = typer.Typer(add_completion=False)
-    register(app, typer.Typer())
-    app(args)  # the only command of this app: train
+    sys.argv = ["roadload", "train", *args]
+    main()

@@ -25,7 +25,7 @@ How to add a command (the pattern every command module follows)
            ...
 
 3. List the command below in :data:`COMMANDS` (or :data:`BENCHMARKS`) with its module and the first line of its
-   docstring. tests/experiments/test_cli_startup.py checks that every listed line matches the command's own help
+   docstring. tests/experiments/cli/test_startup.py checks that every listed line matches the command's own help
    and that ``roadload --help`` imports none of the heavy dependencies.
 """
 

@@ -14,7 +14,7 @@ import typer
 from .errors import CliInputError, choose, fail, require_file
 
 #: import formats: roadload.io.mapping.FORMATS, repeated here so that the help and a refused format need not import
-#: the mapping layer (tests/experiments/test_cli_startup.py checks they agree); and the default mapping per format
+#: the mapping layer (tests/experiments/cli/test_startup.py checks they agree); and the default mapping per format
 IMPORT_FORMATS = ("dbc-mf4", "candump", "blf", "asc", "comma2k19", "bmw-i3", "openxc", "csv", "mf4")
 DEFAULT_MAPPING_HELP = ("mapping JSON file or packaged name (default per format: csv -> plain_csv, dbc-mf4 -> "
                         "canedge_gnss_obd, comma2k19 -> comma2k19_rav4, bmw-i3 -> bmw_i3, openxc -> openxc, mf4 -> "

@@ -14,7 +14,7 @@ import typer
 from .errors import CliInputError, choose, fail
 
 #: algorithms and table baselines the command accepts (roadload.experiments.rl: _algo_class, CONTROLLER_BASELINES
-#: plus the random policy), here so that a typo is refused before torch loads; tests/experiments/test_cli_startup.py
+#: plus the random policy), here so that a typo is refused before torch loads; tests/experiments/cli/test_startup.py
 #: checks they agree
 ALGORITHMS = ("ppo", "sac")
 BASELINES = ("cruise", "mpc", "mpc_online", "random")

@@ -16,7 +16,7 @@ from typer.testing import CliRunner
 
 from roadload.experiments.cli import app
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 RUNNER = CliRunner()
 
 

@@ -2,7 +2,7 @@
 refused bad inputs, peak RSS, a 1-hour simulate (roadload.experiments.benchmarks.cli_startup).
 
     python scripts/bench_cli_startup.py                 # 7 interleaved rounds + the 1-hour simulate
-    python scripts/bench_cli_startup.py --quick         # CI smoke run: 2 rounds, no simulate
+    python scripts/bench_cli_startup.py --quick         # CI smoke run: 1 round, no simulate
 """
 
 from roadload.experiments.benchmarks.cli_startup import main

@@ -13,7 +13,7 @@ Targets (issue: a command line that starts at once): --help within 1.5x and a re
 reference; peak RSS of --help <= 150 MB and of a 1-hour simulate <= 250 MB. The 1-min load average is printed.
 
     python scripts/bench_cli_startup.py                 # 7 repeats + the 1-hour simulate
-    python scripts/bench_cli_startup.py --quick         # CI smoke run: 2 repeats, no simulate
+    python scripts/bench_cli_startup.py --quick         # CI smoke run: 1 round, no simulate
 """
 
 from __future__ import annotations
@@ -75,10 +75,10 @@ def simulate_hour(work: Path) -> tuple[float, float, float, int]:
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=7, help="interleaved rounds (median reported)")
-    ap.add_argument("--quick", action="store_true", help="CI smoke run: 2 rounds, no 1-hour simulate")
+    ap.add_argument("--quick", action="store_true", help="CI smoke run: 1 round, no 1-hour simulate")
     ap.add_argument("--no-simulate", action="store_true", help="skip the 1-hour simulate")
     args = ap.parse_args(argv)
-    repeats = 2 if args.quick else max(1, args.repeats)
+    repeats = 1 if args.quick else max(1, args.repeats)
     with tempfile.TemporaryDirectory(prefix="roadload-startup-") as tmp:
         work = Path(tmp)
         table = cases(work)

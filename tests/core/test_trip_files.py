@@ -173,3 +173,23 @@ def test_round_significant_keeps_the_named_bits():
     assert y[0] == 1.0 and y[1] == 1.0 and y[3] == 0.0 and np.isnan(y[4]) and np.isinf(y[5])
     assert abs(y[2] + 3.14159265) <= 3.14159265 * 2.0 ** -15
     assert np.all((y[[0, 1, 2, 6]].view(np.uint32) & np.uint32((1 << 9) - 1)) == 0)   # 9 low mantissa bits zero
+
+
+def test_a_format_1_file_loads_and_converts(tmp_path):
+    """Format 1: columns as they are, truth prefixed, the payload in the Arrow schema metadata."""
+    import pyarrow as pa
+
+    t = np.arange(20) / 100.0
+    table = pa.table({"t": t, "vehicle_speed": np.linspace(0.0, 2.0, 20), "truth/t": t,
+                      "truth/mass": np.full(20, 1900.0)})
+    payload = {"version": 1, "units": {"t": "s", "vehicle_speed": "m/s"}, "truth_units": {"t": "s", "mass": "kg"},
+               "meta": {"name": "old"}, "n_measured": 20, "n_truth": 20}
+    table = table.replace_schema_metadata({b"roadload": json.dumps(payload).encode()})
+    pq.write_table(table, tmp_path / "v1.parquet")
+    trip = Trip.load(tmp_path / "v1.parquet")
+    assert trip.meta == {"name": "old"} and trip.true("mass")[0] == 1900.0
+    np.testing.assert_array_equal(trip.channel("vehicle_speed"), np.linspace(0.0, 2.0, 20))
+    out = convert_trip_file(tmp_path / "v1.parquet", tmp_path / "v4.parquet")
+    assert Trip.read_info(out)["version"] == 4 and Trip.read_info(out)["precision"] == "exact"
+    assert Trip.load(out).equals(trip)
+    assert pq.read_schema(out).field("truth/mass").metadata[b"unit"] == b"kg"

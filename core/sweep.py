@@ -61,9 +61,12 @@ def _call(fn: Callable[[Any], Any], index: int, task: Any) -> TaskOutcome:
 def _progress_bar(total: int, description: str, enabled: bool):
     if not enabled:
         return None, None
+    from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    # on stderr, gone when done: stdout is for the results a command prints
+    bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                   console=Console(stderr=True), transient=True)
     bar.start()
     return bar, bar.add_task(description, total=total)
 

@@ -1,27 +1,19 @@
 """``roadload drive`` (one closed-loop drive with a controller) and ``roadload benchmark controllers`` (the
-comparison: table + figures)."""
+comparison: table + figures), ``benchmark headline`` and ``benchmark sensitivity``.
+
+Light at import (see the package docstring): CasADi (the MPC), the simulator, dask and matplotlib load inside the
+commands, after the arguments are checked."""
 
 from __future__ import annotations
 
-import os
-import time
-
 import json
 import math
+import os
+import time
 from pathlib import Path
 
 import typer
-from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-from roadload.experiments.controller_comparison import road_by_name
-from roadload.controllers.cruise import CruiseSettings
-from roadload.controllers.drive import DriveSettings, drive
-from roadload.sweep import run_sweep
-from roadload.experiments.controller_comparison import CONDITIONS, ComparisonTask, run_comparison_task, write_outputs
-from roadload.experiments.controller_comparison import VEHICLE_CASES
-from roadload.tables import markdown_table
-from roadload.experiments.headline import (headline_figure, headline_markdown, headline_tasks, run_paired,
-                                           sensitivity_figure, sensitivity_table, sensitivity_tasks)
+
 from roadload.fileio import write_text
 
 from .errors import fail
@@ -120,9 +112,15 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
     ) -> None:
         """Drive a road once in closed loop on the simulator and print energy, time, violations, jerk, solver
         time and fallbacks."""
-
         if out is not None and out.suffix != ".parquet":
             _fail(f"--out: trip files end in .parquet, got {out.name!r}")
+        from rich.console import Console
+        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+        from roadload.controllers.cruise import CruiseSettings
+        from roadload.controllers.drive import DriveSettings, drive
+        from roadload.experiments.controller_comparison import road_by_name
+
         try:
             settings = DriveSettings(controller=controller, force_model=force_model, solver=solver,
                                      time_weight=time_weight, model=model, estimator=estimator,
@@ -133,7 +131,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                           console=Console(stderr=True), transient=True) as bar:
                 task = bar.add_task(f"{controller}/{force_model} on {profile.name}", total=1.0)
                 res, plant = drive(vehicle, profile, effects=",".join(effects) or None, seed=seed, settings=settings,
-                                   progress=lambda f: bar.update(task, completed=f))
+                                   progress=lambda f: bar.update(task, completed=f, refresh=True))
         except typer.Exit:
             raise
         except (ValueError, FileNotFoundError, KeyError) as exc:
@@ -171,7 +169,9 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
     ) -> None:
         """Closed-loop comparison of MPC (oracle / abc / online) against cruise control and the human-like
         driver over roads x conditions at equal trip time; writes a Markdown/CSV table and PNG figures."""
-
+        from roadload.experiments.controller_comparison import (CONDITIONS, ComparisonTask, run_comparison_task,
+                                                                write_outputs)
+        from roadload.sweep import run_sweep
 
         cond_list = list(CONDITIONS) if conditions == "all" else [c.strip() for c in conditions.split(",") if c]
         bad = [c for c in cond_list if c not in CONDITIONS]
@@ -200,6 +200,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
 
 
 def _car_truck_cases(vehicles: str) -> list[str]:
+    from roadload.experiments.controller_comparison import VEHICLE_CASES
+
     cases = [v.strip() for v in vehicles.split(",") if v.strip()]
     bad = [c for c in cases if c not in VEHICLE_CASES]
     if bad:
@@ -256,6 +258,9 @@ def register_headline(benchmark_app: typer.Typer) -> None:
     ) -> None:
         """MPC with the oracle / abc / online force model against cruise control at equal trip time, paired over
         seeds, with the 1-sigma resolution and 95 % CIs of every difference."""
+        from roadload.experiments.controller_comparison import CONDITIONS
+        from roadload.experiments.headline import headline_figure, headline_markdown, headline_tasks, run_paired
+
         if metric not in ("net", "raw"):
             _fail(f"--metric: net or raw, got {metric!r}")
         if not (schedule_gain >= 0):
@@ -334,6 +339,9 @@ def register_headline(benchmark_app: typer.Typer) -> None:
     ) -> None:
         """Energy penalty at equal time vs force-model error (mass, rolling resistance, drag area, grade bias,
         drive-train losses; one at a time and jointly) against the oracle MPC: table and figure per vehicle."""
+        from roadload.experiments.headline import run_paired, sensitivity_figure, sensitivity_table, sensitivity_tasks
+        from roadload.tables import markdown_table
+
         cases = ["car"] if quick else _car_truck_cases(vehicles)
         seeds = 2 if quick else seeds
         if seeds < 2:

@@ -1,4 +1,7 @@
-"""``roadload diagnose`` and ``roadload sim2real selftest``."""
+"""``roadload diagnose`` and ``roadload sim2real selftest``.
+
+Light at import (see the package docstring): roadload.sim2real, the simulator and the test worlds load inside the
+commands, after the arguments are checked."""
 
 from __future__ import annotations
 
@@ -6,16 +9,6 @@ from pathlib import Path
 from typing import Optional
 
 import typer
-from roadload.trip import Trip
-from roadload.sim2real.errors import DiagnosisError
-from roadload.sim2real.catalog import DEFAULT_CANDIDATES
-from roadload.sim2real.diagnose import DiagnosisSettings, diagnose
-from roadload.sim2real.report import write_report
-from roadload.sim2real.simconfig import SimConfig
-from roadload.experiments.sim2real_selftest import WORLD_NAMES, run_world
-from roadload.fileio import write_json
-from roadload.io import import_log
-from roadload.io.report import LogImportError
 
 from .errors import describe, fail
 
@@ -41,6 +34,11 @@ def load_trips(paths: list[Path], fmt: str | None, mapping: str | None = None) -
     """Trips from Trip Parquet files, or raw logs through ``roadload.io.import_log`` when ``fmt`` is given (e.g.
     'csv' with ``mapping``, default the packaged plain_csv mapping; 'bmw-i3'). A folder yields its trip files
     only (:data:`TRIP_SUFFIXES` of the format; JSON documents such as mappings or vehicle files are skipped)."""
+    from roadload.io import import_log
+    from roadload.io.report import LogImportError
+    from roadload.sim2real.errors import DiagnosisError
+    from roadload.trip import Trip
+
     if mapping is not None and not fmt:
         raise DiagnosisError("--mapping needs --format (the import format of the raw logs, e.g. csv)")
     files: list[Path] = []
@@ -98,6 +96,11 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         from rich.console import Console
         from rich.progress import Progress
 
+        from roadload.sim2real.catalog import DEFAULT_CANDIDATES
+        from roadload.sim2real.diagnose import DiagnosisSettings, diagnose
+        from roadload.sim2real.errors import DiagnosisError
+        from roadload.sim2real.report import write_report
+        from roadload.sim2real.simconfig import SimConfig
 
         console = Console()
         try:
@@ -141,6 +144,9 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         """Withheld effects identified blind on a test world; nothing withheld and an effect outside the catalog
         must give no acceptance. Prints the confusion table per seed and the summary."""
         from rich.console import Console
+
+        from roadload.experiments.sim2real_selftest import WORLD_NAMES, run_world
+        from roadload.fileio import write_json
 
         console = Console()
         if world not in WORLD_NAMES:

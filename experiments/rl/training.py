@@ -194,8 +194,11 @@ def load_policy(path: Path):
     return _algo_class(algo).load(str(path), device="cpu")
 
 
-def plot_learning_curves(results: list[TrainResult], path: Path) -> Path:
-    """PNG: training episode returns (rolling mean over 20 episodes) and validation returns vs timesteps."""
+def plot_learning_curves(results: list[TrainResult], path: Path) -> Path | None:
+    """PNG: training episode returns (rolling mean over 20 episodes) and validation returns vs timesteps; None (and
+    no file) when no run has a point to plot -- a short run without a finished episode or validation."""
+    if not any(len(res.curve) for res in results):
+        return None
     import matplotlib
 
     matplotlib.use("Agg")
@@ -206,8 +209,8 @@ def plot_learning_curves(results: list[TrainResult], path: Path) -> Path:
         c = res.curve
         tr = c[c.kind == "train"]
         if len(tr):
-            line, = ax.plot(tr.timesteps, tr.value.rolling(20, min_periods=1).mean(), lw=1.2, alpha=0.8,
-                            label=f"{res.algo.upper()} training episodes (rolling mean 20)")
+            line, = ax.plot(tr.timesteps, tr.value.rolling(20, min_periods=1).mean(), "-" if len(tr) > 1 else "o",
+                            lw=1.2, alpha=0.8, label=f"{res.algo.upper()} training episodes (rolling mean 20)")
             color = line.get_color()
         else:
             color = None

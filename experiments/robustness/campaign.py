@@ -11,7 +11,6 @@ decision tree (figure 3.17) and the wall time; the tables, PNG curves and summar
 from __future__ import annotations
 
 import argparse
-import tempfile
 import time
 from typing import Any
 
@@ -117,14 +116,15 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--from-results", default=None,
                     help="rebuild the report from a results.csv of an earlier run instead of sweeping")
     ap.add_argument("--quick", action="store_true",
-                    help="tiny run for CI: the first sweep, 2 seeds, 2 estimators, short records, temporary output")
+                    help="tiny run for CI: the first sweep, 2 seeds, 2 estimators, short records, output in "
+                         "out/robustness_quick unless --out is given")
     args = ap.parse_args(argv)
     specs = sweep_specs(args.backend)
     if args.quick:
         args.sweeps = args.sweeps or list(specs)[:1]
         args.seeds, args.estimators, args.workers = 2, args.estimators or ["RLS", "RRLM"], 1
         args.duration = args.duration or DURATION[args.backend] / 10
-        args.out = args.out or tempfile.mkdtemp(prefix="roadload-robustness-")
+        args.out = args.out or "out/robustness_quick"
     if args.out is None:
         ap.error("--out is required (or --quick)")
     results, failed, names, report = _run_or_rebuild(args, specs)
@@ -133,3 +133,4 @@ def main(argv: list[str] | None = None) -> None:
     _print_checks(report)
     for task, err in failed[:20]:
         print(f"  failed: {task}: {err}")
+    print(f"\nreport (tables, PNG curves, summary.md) in {args.out}")

@@ -92,13 +92,27 @@ def _spec(cls: type[T]) -> type[T]:
     return spec_dataclass(_CONFIG, _spec_error)(cls)
 
 
+def _declared_bounds(info: FieldInfo | None) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(json_schema_extra, {gt/ge/lt/le: bound}) of a field's declaration (empty for an undeclared field)."""
+    if info is None:
+        return {}, {}
+    extra = dict(info.json_schema_extra) if isinstance(info.json_schema_extra, dict) else {}
+    bounds = {k: getattr(m, k) for m in info.metadata for k in ("gt", "ge", "lt", "le")
+              if getattr(m, k, None) is not None}
+    return extra, bounds
+
+
+def _interval_text(bounds: dict[str, Any]) -> str:
+    """The interval of gt/ge/lt/le bounds, e.g. ``(0, 1]`` (``(-inf`` / ``inf)`` on an open side)."""
+    lo = f"({bounds['gt']:g}" if "gt" in bounds else (f"[{bounds['ge']:g}" if "ge" in bounds else "(-inf")
+    hi = f"{bounds['lt']:g})" if "lt" in bounds else (f"{bounds['le']:g}]" if "le" in bounds else "inf)")
+    return f"{lo}, {hi}"
+
+
 def _bound_text(value: Any, info: FieldInfo | None) -> str:
     """The bound a number broke, from its declaration: > gt, the plausible range, or [ge, le]; with the unit."""
-    extra: dict[str, Any] = dict(info.json_schema_extra) if info is not None and isinstance(
-        info.json_schema_extra, dict) else {}
+    extra, bounds = _declared_bounds(info)
     unit = str(extra.get("unit", ""))
-    bounds = {k: getattr(m, k) for m in (info.metadata if info is not None else []) for k in ("gt", "ge", "lt", "le")
-              if getattr(m, k, None) is not None}
     u = f" [{unit}]" if unit else ""
     if not isinstance(value, (int, float)) or value != value or value in (float("inf"), float("-inf")):
         return f"must be a finite number{u}, got {value!r}"
@@ -109,9 +123,7 @@ def _bound_text(value: Any, info: FieldInfo | None) -> str:
         v_unit = "" if unit in ("", "1") else f" {unit}"
         return (f"{value!r}{v_unit} is outside the plausible range [{lo:g}, {hi:g}]{v_unit} of a road vehicle "
                 f"({info.description if info is not None else ''})")
-    lo_t = f"({bounds['gt']:g}" if "gt" in bounds else (f"[{bounds['ge']:g}" if "ge" in bounds else "(-inf")
-    hi_t = f"{bounds['lt']:g})" if "lt" in bounds else (f"{bounds['le']:g}]" if "le" in bounds else "inf)")
-    return f"must lie in {lo_t}, {hi_t}{u}, got {value!r}"
+    return f"must lie in {_interval_text(bounds)}{u}, got {value!r}"
 
 
 _TYPE_WORDS = {"float_type": "a number", "float_parsing": "a number", "int_type": "an integer",

@@ -14,6 +14,7 @@ import numpy as np
 
 from dataclasses import dataclass, field
 
+from roadload.road_load import RoadLoadParameters
 from roadload.road_profiles import RoadProfile
 from roadload.vehicle import VehicleSpec
 
@@ -114,10 +115,66 @@ def net_energy_metrics(metrics: dict, inertial_mass: float, energy: SourceEnergy
             + ke / energy.indicated_efficiency}
 
 
+def _force_model(st: DriveSettings, plant: SimulatorPlant, nominal: VehicleSpec | str, abc: RoadLoadParameters,
+                 energy: SourceEnergyModel) -> tuple[ForceModel, SourceEnergyModel]:
+    """The force model of ``st.force_model`` (MPC only: oracle, wrong, online; otherwise the fixed abc model of the
+    nominal vehicle) and the energy model (with the drive-train loss error of a 'wrong' model)."""
+    if st.controller == "mpc" and st.force_model == "oracle":
+        return OracleForceModel(plant.true_parameters), energy
+    if st.controller == "mpc" and st.force_model == "wrong":
+        errors = dict(st.wrong_model or {})
+        if errors.get("drivetrain_loss"):
+            energy = with_loss_error(energy, errors["drivetrain_loss"])
+        return ErroredForceModel(OracleForceModel(plant.true_parameters), errors), energy
+    if st.controller == "mpc" and st.force_model == "online":
+        online = OnlineForceModel(_knowledge(nominal), model=st.model, estimator=st.estimator,
+                                  pipeline_settings=st.pipeline)
+        online.attach(plant.can_window)
+        return online, energy
+    return FixedForceModel(abc), energy
+
+
+def _mpc_controller(st: DriveSettings, road: RoadProfile, abc: RoadLoadParameters) -> Controller:
+    """The MPC with its settings and target schedule (cruise control before ``measure_from`` with warm-up driver
+    'cruise')."""
+    mpc_settings = MpcSettings(**{**st.mpc.__dict__, "solver": st.solver, "time_weight": st.time_weight})
+    schedule = (None if st.target_time is None
+                else TripSchedule(start=st.measure_from, end=road.length, duration=st.target_time,
+                                  gain=st.schedule_gain,
+                                  shape_s=st.target_shape[0] if st.target_shape else (),
+                                  shape_fraction=st.target_shape[1] if st.target_shape else ()))
+    controller: Controller = MpcController(MpcControllerSettings(mpc=mpc_settings, schedule=schedule,
+                                                                 multistart_period=st.multistart_period,
+                                                                 gear_command=st.gear_command))
+    if st.warmup_driver == "cruise" and st.measure_from > 0:
+        # cruise control on the nominal abc model: the same warm-up whatever the run's force model
+        controller = Handover(CruiseController(st.cruise), controller, st.measure_from, FixedForceModel(abc))
+    return controller
+
+
+def _controller(st: DriveSettings, road: RoadProfile, abc: RoadLoadParameters) -> Controller:
+    """The controller of ``st.controller``: mpc, cruise or human."""
+    if st.controller == "mpc":
+        return _mpc_controller(st, road, abc)
+    if st.controller == "cruise":
+        return CruiseController(st.cruise)
+    return HumanDriver()
+
+
+def _online_history(force_model: OnlineForceModel, result: RunResult) -> dict:
+    """The online force model's description, with the position [m] of each estimate update."""
+    desc = force_model.describe()
+    hist = desc.get("history")
+    if hist and hist["t"]:  # where the estimate stood: position [m] of each update
+        desc["history"]["s"] = [float(x) for x in np.interp(hist["t"], result.log["t"], result.log["s"])]
+    return desc
+
+
 def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, seed: int = 0,
           settings: DriveSettings | None = None, progress=None, road_seed: int | None = None
           ) -> tuple[RunResult, SimulatorPlant]:
-    """Run one closed-loop drive (module docstring)."""
+    """Run one closed-loop drive (module docstring): plant, energy model, force model, controller, closed loop,
+    metrics."""
     st = settings or DriveSettings()
     road = resolve_road(road, seed if road_seed is None else road_seed)
     plant = SimulatorPlant(vehicle, road, effects=effects, seed=seed, dt=st.dt)
@@ -126,50 +183,15 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
     nominal = st.nominal_vehicle if st.nominal_vehicle is not None else (vehicle if isinstance(vehicle, str)
                                                                          else spec)
     abc = abc_parameters(nominal)
-    force_model: ForceModel
-    if st.controller == "mpc" and st.force_model == "oracle":
-        force_model = OracleForceModel(plant.true_parameters)
-    elif st.controller == "mpc" and st.force_model == "wrong":
-        errors = dict(st.wrong_model or {})
-        force_model = ErroredForceModel(OracleForceModel(plant.true_parameters), errors)
-        if errors.get("drivetrain_loss"):
-            energy = with_loss_error(energy, errors["drivetrain_loss"])
-    elif st.controller == "mpc" and st.force_model == "online":
-        online = OnlineForceModel(_knowledge(nominal), model=st.model, estimator=st.estimator,
-                                  pipeline_settings=st.pipeline)
-        online.attach(plant.can_window)
-        force_model = online
-    else:
-        force_model = FixedForceModel(abc)
+    force_model, energy = _force_model(st, plant, nominal, abc, energy)
     ctx = DriveContext(road=road, energy=energy, force_model=force_model, dt=st.dt,
                        lateral_accel_max=st.mpc.lateral_accel_max)
-    controller: Controller
-    if st.controller == "mpc":
-        mpc_settings = MpcSettings(**{**st.mpc.__dict__, "solver": st.solver, "time_weight": st.time_weight})
-        schedule = (None if st.target_time is None
-                    else TripSchedule(start=st.measure_from, end=road.length, duration=st.target_time,
-                                      gain=st.schedule_gain,
-                                      shape_s=st.target_shape[0] if st.target_shape else (),
-                                      shape_fraction=st.target_shape[1] if st.target_shape else ()))
-        controller = MpcController(MpcControllerSettings(mpc=mpc_settings, schedule=schedule,
-                                                         multistart_period=st.multistart_period,
-                                                         gear_command=st.gear_command))
-        if st.warmup_driver == "cruise" and st.measure_from > 0:
-            # cruise control on the nominal abc model: the same warm-up whatever the run's force model
-            controller = Handover(CruiseController(st.cruise), controller, st.measure_from, FixedForceModel(abc))
-    elif st.controller == "cruise":
-        controller = CruiseController(st.cruise)
-    else:
-        controller = HumanDriver()
+    controller = _controller(st, road, abc)
     result = run_closed_loop(controller, plant, ctx, progress=progress, measure_from=st.measure_from)
     result.metrics.update(net_energy_metrics(result.metrics, plant.true_parameters().inertial_mass, energy))
-    result.metrics.update(controller=st.controller, force_model=st.force_model if st.controller == "mpc" else "-",
-                          solver=st.solver if st.controller == "mpc" else "-",
-                          time_weight=st.time_weight if st.controller == "mpc" else float("nan"))
-    if hasattr(force_model, "describe") and st.force_model == "online" and st.controller == "mpc":
-        desc = force_model.describe()
-        hist = desc.get("history")
-        if hist and hist["t"]:  # where the estimate stood: position [m] of each update
-            desc["history"]["s"] = [float(x) for x in np.interp(hist["t"], result.log["t"], result.log["s"])]
-        result.metrics["online"] = desc
+    mpc = st.controller == "mpc"
+    result.metrics.update(controller=st.controller, force_model=st.force_model if mpc else "-",
+                          solver=st.solver if mpc else "-", time_weight=st.time_weight if mpc else float("nan"))
+    if isinstance(force_model, OnlineForceModel) and st.force_model == "online" and mpc:
+        result.metrics["online"] = _online_history(force_model, result)
     return result, plant

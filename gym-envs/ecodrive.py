@@ -29,7 +29,6 @@ Terminates when the route's end is reached, truncates at the time limit.
 
 from __future__ import annotations
 
-import bisect
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -143,8 +142,6 @@ class RouteTable:
         self.route_time = float(np.interp(self.length, s, schedule))
         self.stops = sorted(float(x) for x in profile.stops)
         self._out = np.zeros((4, self.preview.size))
-        self._zero = np.zeros(1)
-        self._one = np.zeros((4, 1))
 
     def braking_envelope(self, margin: float, deceleration: float) -> np.ndarray:
         """Highest speed [m/s] on the grid from which braking at ``deceleration`` [m/s^2] keeps the speed
@@ -158,22 +155,6 @@ class RouteTable:
         (a view, overwritten by the next call)."""
         look_ahead(self.table, PREVIEW_GRID, self.preview, s, self._out)
         return self._out
-
-    def at(self, s: float) -> np.ndarray:
-        """(4,) grade, curvature, speed limit, schedule time at s (a view, overwritten by the next call)."""
-        look_ahead(self.table, PREVIEW_GRID, self._zero, s, self._one)
-        return self._one[:, 0]
-
-    def next_stop(self, s: float) -> float:
-        """Distance [m] to the next stop line at or ahead of s (STOP_HORIZON when none within it)."""
-        k = bisect.bisect_left(self.stops, s)
-        if k >= len(self.stops):
-            return STOP_HORIZON
-        return min(self.stops[k] - s, STOP_HORIZON)
-
-    def stops_crossed(self, s0: float, s1: float) -> list[float]:
-        """Stop lines with s0 < stop <= s1."""
-        return self.stops[bisect.bisect_right(self.stops, s0):bisect.bisect_right(self.stops, s1)]
 
 
 # --------------------------------------------------------------------------------------------- observation types

@@ -190,8 +190,9 @@ def _interp_uniform(x, ds, y):
 
 
 @cached_njit
-def _drive(n, dt, ds, grade, kappa, v_plan, v_free, stops, taps, p, eff, ambient, dwell):
-    """The numba loop. p: vehicle parameters (see :func:`_params`); eff: (mass add, f_r cold factor - 1, d_tire,
+def _drive(n, dt, ds, road, v_plan, v_free, stops, taps, p, eff, ambient, dwell):
+    """The numba loop. road: grade [rad] and curvature [1/m] over distance (rows, grid step ds [m]); p: vehicle
+    parameters (see :func:`_params`); eff: (mass add, f_r cold factor - 1, d_tire,
     loss cold factor - 1, tau_oil, aux add, cornering factor scale, drag factor, wind speed, wind from);
     ambient: T_a(t) [K]; v_plan / v_free: target speeds over distance with / without the stops; stops [m];
     dwell [s] at each stop. Returns an array of states per step."""
@@ -216,8 +217,8 @@ def _drive(n, dt, ds, grade, kappa, v_plan, v_free, stops, taps, p, eff, ambient
     passing = False
     for k in range(n):
         t = k * dt
-        th = _interp_uniform(s, ds, grade)
-        ka = _interp_uniform(s, ds, kappa)
+        th = _interp_uniform(s, ds, road[0])
+        ka = _interp_uniform(s, ds, road[1])
         # driver: stops (dwell, then drive off), look-ahead target, own force estimate, regeneration first
         while j < stops.size and stops[j] < s - 10.0:
             j += 1
@@ -399,7 +400,7 @@ def simulate_trip(road_name: str, road_seed: int, rng: np.random.Generator, dura
     ambient = t_amb0 + drift * tt / max(duration, 1.0) + _ou(rng, n // 100 + 2, 1.0, 60.0, 0.3)[tt.astype(int)]
     v_free = planned_speed(replace_stops(prof), np.random.default_rng(plan_seed), accel=1.8, power_to_mass=45.0,
                            decel=2.3, brake_power_to_mass=80.0)
-    out = _drive(n, DT, ds, prof.grade, kappa, v_plan, v_free, np.asarray(prof.stops, float), taps,
+    out = _drive(n, DT, ds, np.vstack([prof.grade, kappa]), v_plan, v_free, np.asarray(prof.stops, float), taps,
                  _params(vehicle), effect_vector(withheld), ambient, float(rng.uniform(5.0, 12.0)))
     return log_channels(out, prof, ambient, rng, withheld, vehicle)
 

@@ -2,6 +2,7 @@
 limit (roadload.experiments.benchmarks.kernel_signatures, reads the sources, compiles nothing).
 
     python scripts/kernel_signatures.py [--folders envs gym-envs] [--limit 12]
+    python scripts/kernel_signatures.py --folders all                            # every package folder
     python scripts/kernel_signatures.py --quick                                  # CI smoke run: the ten largest
 """
 

@@ -1,13 +1,15 @@
 """How many parameters the compiled kernels take: every numba function of the given source folders, found by
 reading the sources (no import, no compilation).
 
-A kernel is a function decorated with numba's ``njit`` / ``jit`` or one of roadload's wrappers of it (``jit``,
-``stage``, ``kernel`` from ``dependent_jit``, with or without a call). Counted: the positional and keyword
-parameters of its ``def``. The simulator's kernels take a few packed records (state, parameters, command, tables,
+A kernel is a function decorated with numba's ``njit`` / ``jit`` / ``vectorize`` / ``cfunc``, one of roadload's
+wrappers of it (``jit``, ``stage``) or a module-level name bound to such a call (``kernel = dependent_jit(__file__)``,
+``_inline = njit(inline="always")``), with or without a call. Counted: the positional and keyword parameters of its
+``def``. The simulator's kernels take a few packed records (state, parameters, command, tables,
 route) instead of dozens of arrays and scalars; ``scripts/kernel_signatures.py`` prints the table and the largest
 count and fails above a limit.
 
     python scripts/kernel_signatures.py [--folders envs gym-envs] [--limit 12] [--quick]
+    python scripts/kernel_signatures.py --folders all          # every package folder (PACKAGE_FOLDERS)
 """
 
 from __future__ import annotations
@@ -17,8 +19,10 @@ import ast
 from dataclasses import dataclass
 from pathlib import Path
 
-KERNEL_DECORATORS = frozenset({"njit", "jit", "stage", "kernel", "generated_jit"})
+KERNEL_DECORATORS = frozenset({"njit", "jit", "stage", "kernel", "generated_jit", "vectorize", "guvectorize", "cfunc"})
 """Decorator names (bare or called, plain or as an attribute such as ``numba.njit``) that make a kernel."""
+KERNEL_FACTORIES = KERNEL_DECORATORS | {"dependent_jit"}
+"""Calls whose result, bound to a module-level name, is a kernel decorator too."""
 
 
 @dataclass(frozen=True)
@@ -29,6 +33,10 @@ class KernelSignature:
     line: int
     name: str
     parameters: int
+
+
+PACKAGE_FOLDERS = ("core", "road-profiles", "envs", "estimators", "controllers", "gym-envs", "sim2real", "experiments")
+"""The source folders of the package (pyproject's package-dir), what ``--folders all`` reads."""
 
 
 def _decorator_name(node: ast.expr) -> str:
@@ -43,12 +51,19 @@ def _parameter_count(fn: ast.FunctionDef) -> int:
     return len(a.posonlyargs) + len(a.args) + len(a.kwonlyargs) + (a.vararg is not None) + (a.kwarg is not None)
 
 
+def _decorator_aliases(tree: ast.Module) -> set[str]:
+    """Module-level names bound to a kernel decorator call (``kernel = dependent_jit(__file__)``)."""
+    return {t.id for node in tree.body if isinstance(node, ast.Assign) and isinstance(node.value, ast.Call)
+            and _decorator_name(node.value) in KERNEL_FACTORIES for t in node.targets if isinstance(t, ast.Name)}
+
+
 def file_kernels(path: Path, root: Path) -> list[KernelSignature]:
     """The kernels defined in one Python source file."""
     tree = ast.parse(path.read_text(), filename=str(path))
+    decorators = KERNEL_DECORATORS | _decorator_aliases(tree)
     return [KernelSignature(str(path.relative_to(root)), node.lineno, node.name, _parameter_count(node))
             for node in ast.walk(tree) if isinstance(node, ast.FunctionDef)
-            and any(_decorator_name(d) in KERNEL_DECORATORS for d in node.decorator_list)]
+            and any(_decorator_name(d) in decorators for d in node.decorator_list)]
 
 
 def kernel_signatures(folders: list[Path], root: Path) -> list[KernelSignature]:
@@ -65,14 +80,16 @@ def main(argv: list[str] | None = None, repo: Path | None = None) -> int:
     largest with ``--quick``), then the largest count; returns 1 when it exceeds ``--limit``. ``repo``: the source
     tree (default: the one of this file)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--folders", nargs="+", default=["envs", "gym-envs"], help="source folders under the repository")
+    ap.add_argument("--folders", nargs="+", default=["envs", "gym-envs"],
+                    help="source folders under the repository ('all': every package folder)")
     ap.add_argument("--limit", type=int, default=12, help="largest parameter count allowed (exit 1 above it)")
     ap.add_argument("--quick", action="store_true", help="print only the ten largest (CI smoke run)")
     args = ap.parse_args(argv)
     root = repo or Path(__file__).resolve().parents[2]
-    kernels = kernel_signatures([root / f for f in args.folders], root)
+    folders = list(PACKAGE_FOLDERS) if args.folders == ["all"] else args.folders
+    kernels = kernel_signatures([root / f for f in folders], root)
     if not kernels:
-        print(f"no numba kernels under {args.folders}")
+        print(f"no numba kernels under {folders}")
         return 0
     for k in kernels[:10] if args.quick else kernels:
         print(f"{k.parameters:3d}  {k.path}:{k.line}  {k.name}")

@@ -2,11 +2,11 @@
 reading the sources (no import, no compilation).
 
 A kernel is a function decorated with numba's ``njit`` / ``jit`` / ``vectorize`` / ``cfunc``, one of roadload's
-wrappers of it (``jit``, ``stage``) or a module-level name bound to such a call (``kernel = dependent_jit(__file__)``,
-``_inline = njit(inline="always")``), with or without a call. Counted: the positional and keyword parameters of its
-``def``. The simulator's kernels take a few packed records (state, parameters, command, tables,
-route) instead of dozens of arrays and scalars; ``scripts/kernel_signatures.py`` prints the table and the largest
-count and fails above a limit.
+wrappers of it (``jit``, ``stage``, ``cached_njit`` / ``cached_vectorize``) or a module-level name bound to such a call
+(``kernel = dependent_jit(__file__)``, ``_inline = njit(inline="always")``), with or without a call. Counted: the
+positional and keyword parameters of its ``def``. The simulator's kernels take a few packed records (state,
+parameters, command, tables, route) instead of dozens of arrays and scalars; ``scripts/kernel_signatures.py`` prints
+the table and the largest count and fails above a limit.
 
     python scripts/kernel_signatures.py [--folders envs gym-envs] [--limit 12] [--quick]
     python scripts/kernel_signatures.py --folders all          # every package folder (PACKAGE_FOLDERS)
@@ -19,7 +19,8 @@ import ast
 from dataclasses import dataclass
 from pathlib import Path
 
-KERNEL_DECORATORS = frozenset({"njit", "jit", "stage", "kernel", "generated_jit", "vectorize", "guvectorize", "cfunc"})
+KERNEL_DECORATORS = frozenset({"njit", "jit", "cached_njit", "stage", "kernel", "generated_jit", "vectorize",
+                               "cached_vectorize", "guvectorize", "cfunc"})
 """Decorator names (bare or called, plain or as an attribute such as ``numba.njit``) that make a kernel."""
 KERNEL_FACTORIES = KERNEL_DECORATORS | {"dependent_jit"}
 """Calls whose result, bound to a module-level name, is a kernel decorator too."""

@@ -40,7 +40,8 @@ MODULES: dict[str, tuple[str, ...]] = {
     "sim2real/selection.py": ("tests/sim2real/test_core.py", "tests/sim2real/test_robust.py",
                               "tests/sim2real/test_joint_base.py"),
     "sim2real/floor.py": ("tests/sim2real/test_floor.py",),
-    "experiments/time_matching.py": ("tests/experiments/test_time_matching.py",),
+    "experiments/time_matching.py": ("tests/experiments/test_time_matching.py",
+                                     "tests/experiments/test_time_matching_search.py"),
     "controllers/mpc.py": ("tests/controllers/test_mpc.py", "tests/controllers/test_mpc_feasibility.py",
                            "tests/controllers/test_command_jerk.py"),
     "controllers/mpc_controller.py": ("tests/controllers/test_mpc.py", "tests/controllers/test_mpc_feasibility.py",
@@ -54,7 +55,17 @@ _NO_UNITS = ("TripPayload's fields carry no unit and it allows extra keys, so fo
              "same with or without the model")
 _RAISE = 'raise TripMetadataError(f"{{path}}: {{format_errors(exc, {})}}") from None'
 _PAYLOAD = "x_parse_trip_payload: " + _RAISE.format("TripPayload, root='metadata'") + " -> "
+_XP = "numpy's sin and cos of a CasADi expression call the expression's own, so xp=np gives the same force"
 EQUIVALENT: dict[str, dict[str, str]] = {
+    "core/road_load.py": {
+        "x_road_load: return rolling + aero + climbing_force(m, grade, xp) + cornering -> "
+        "return rolling + aero + climbing_force(m, grade, ) + cornering": _XP,
+        "x_tractive_force: return road_load(speed, grade, curvature, p, xp) + m * acceleration -> "
+        "return road_load(speed, grade, curvature, p, ) + m * acceleration": _XP,
+        'xǁRoadLoadParametersǁfrom_truth: float(truth["air_density"]), c_y if c_y > 0 else None, headwind, -> '
+        'float(truth["air_density"]), c_y if c_y >= 0 else None, headwind,':
+            "a zero stiffness passed on is read as none by from_physical (k = 0 when c_yW is falsy)",
+    },
     "core/trip_schema.py": {
         _PAYLOAD + _RAISE.format("None, root='metadata'"): _NO_UNITS,
         _PAYLOAD + _RAISE.format("root='metadata'"): _NO_UNITS,

@@ -110,3 +110,15 @@ def test_boundaries_of_mass_and_rotational_mass():
     with pytest.raises(RoadLoadError, match=r"mass must be > 0 kg, got -1.0 kg"):
         RoadLoadParameters(mass=-1.0, c0=1.0)
     assert RoadLoadParameters(mass=1e-3, c0=0.0, rotational_mass=0.0).mass == 1e-3
+
+
+def test_parameter_vector_is_float_whatever_the_inputs():
+    """The MPC's parameter vector is float64 even when the parameters were given as integers."""
+    x = RoadLoadParameters(mass=1000, c0=100).as_vector()
+    assert x.dtype == np.float64 and x.tolist() == [1000.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+
+
+@pytest.mark.parametrize("stiffness,k_corner", [(0.5, 1500.0 ** 2 / 0.5), (-5.0, 0.0)])
+def test_any_positive_truth_stiffness_counts_and_a_negative_one_means_none(stiffness, k_corner):
+    p = RoadLoadParameters.from_truth({**TRUTH, "cornering_stiffness": stiffness})
+    assert p.k_corner == pytest.approx(k_corner)

@@ -39,7 +39,7 @@ MODULES: dict[str, tuple[str, ...]] = {
     "sim2real/stats.py": ("tests/sim2real/test_core.py", "tests/sim2real/test_stats_values.py"),
     "sim2real/selection.py": ("tests/sim2real/test_core.py", "tests/sim2real/test_robust.py",
                               "tests/sim2real/test_joint_base.py"),
-    "sim2real/floor.py": ("tests/sim2real/test_floor.py",),
+    "sim2real/floor.py": ("tests/sim2real/test_floor_fit.py", "tests/sim2real/test_floor.py"),
     "experiments/time_matching.py": ("tests/experiments/test_time_matching.py",
                                      "tests/experiments/test_time_matching_search.py"),
     "controllers/mpc.py": ("tests/controllers/test_mpc.py", "tests/controllers/test_mpc_feasibility.py",

@@ -72,6 +72,12 @@ EQUIVALENT: dict[str, dict[str, str]] = {
     },
 }
 
+# equivalent wherever they occur: (removed text, added text, why)
+EQUIVALENT_EVERYWHERE: tuple[tuple[str, str, str], ...] = (
+    ('float("nan")', 'float("NAN")', "float() reads 'nan' in any case"),
+    ("rcond=None)", ")", "numpy >= 2 defaults lstsq's rcond to None (machine precision)"),
+)
+
 TARGET = 0.85  # killed share of the non-equivalent mutants each module must reach
 KILLED = {1, 3}  # a selected test failed (3: pytest internal error)
 TIMEOUT = {36, 24, -24, 152, 255, -9}  # CPU limit reached, then killed: the mutant loops or crawls
@@ -148,6 +154,18 @@ def _signature(diff: str) -> str:
     return f"{removed} -> {added}"
 
 
+def _equivalent_everywhere(signature: str) -> str | None:
+    """Why a 'removed -> added' signature is equivalent by one of :data:`EQUIVALENT_EVERYWHERE`, else None."""
+    removed, _, added = signature.partition(" -> ")
+    for old, new, why in EQUIVALENT_EVERYWHERE:
+        at = removed.find(old)
+        while at >= 0:  # the mutation may hit any one occurrence
+            if removed[:at] + new + removed[at + len(old):] == added:
+                return why
+            at = removed.find(old, at + 1)
+    return None
+
+
 def collect(module: str, folder: Path, seconds: float, repo: Path = REPO) -> ModuleScore:
     """Count the outcomes stored in the staged run's meta file; name every survivor by its diff."""
     from mutmut.mutation.diff_apply import get_diff_for_mutant
@@ -169,9 +187,10 @@ def collect(module: str, folder: Path, seconds: float, repo: Path = REPO) -> Mod
                 continue
             function = name.rpartition(".")[2].partition("__mutmut_")[0]
             entry = f"{function}: {_signature(get_diff_for_mutant(name, path=staged))}"
-            if entry in known:
+            reason = known.get(entry) or _equivalent_everywhere(entry.partition(": ")[2])
+            if reason:
                 score.equivalent += 1
-                score.equivalents.append(f"{name}  {entry}  ({known[entry]})")
+                score.equivalents.append(f"{name}  {entry}  ({reason})")
                 continue
             if code in UNREACHED:
                 score.unreached += 1

@@ -4,6 +4,7 @@ the secant steps, the run budget, what is flagged unmatched, and the energy at e
 import math
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 from roadload.experiments.time_matching import MatchedRun, fit_energy_at_time, match_trip_time
@@ -146,3 +147,40 @@ def test_local_fit_without_runs_and_bad_target():
         fit_energy_at_time({}, 0.0)
     few = fit_energy_at_time({"a": [(198.0, 99.0), (202.0, 101.0)]}, 200.0)  # 2 runs: no curvature term
     assert few.curvature == 0.0 and few.energy["a"] == pytest.approx(100.0) and few.n_points == 2
+
+
+def test_local_fit_boundaries_are_inclusive():
+    # a run exactly on the window edge counts (250 / 200 - 1 = 0.25 exactly)
+    edge = fit_energy_at_time({"a": [(250.0, 7.0), (150.0, 3.0)]}, 200.0, window=0.25)
+    assert edge.n_points == 2 and edge.energy["a"] == pytest.approx(5.0)
+    # a run at exactly the target time spans it and is nearest at 0
+    at = fit_energy_at_time({"a": [(200.0, 4.0)]}, 200.0)
+    assert at.spanned == {"a": True} and at.nearest == {"a": 0.0} and at.energy == {"a": 4.0}
+    assert at.n_points == 1 and math.isnan(at.residual_std) and math.isnan(at.slope) and math.isnan(at.curvature)
+    # without time spread, a run exactly min_spread away still counts as close
+    close = fit_energy_at_time({"a": [(250.0, 6.0), (250.0, 8.0)]}, 200.0, window=0.3, min_spread=0.25)
+    assert close.energy == {"a": 7.0} and close.n_points == 2 and close.spanned == {"a": False}
+    assert close.nearest == {"a": 0.25}
+    # and a model whose runs are all further than min_spread gets NaN, while another model's close runs count
+    mixed = fit_energy_at_time({"far": [(210.0, 1.0)], "near": [(200.2, 2.0)]}, 200.0)
+    assert math.isnan(mixed.energy["far"]) and mixed.energy["near"] == 2.0 and mixed.n_points == 2
+    assert mixed.spanned == {"far": False, "near": False} and mixed.nearest["far"] == pytest.approx(0.05)
+    assert fit_energy_at_time({"a": [(0.2, 1.0)]}, 0.2).energy == {"a": 1.0}  # any target > 0 s is valid
+
+
+def test_local_fit_residual_scale_and_the_quadratic_threshold():
+    times = (190.0, 195.0, 200.0, 205.0, 210.0)
+    energies = (10.3, 10.0, 10.1, 9.7, 9.9)
+    fit = fit_energy_at_time({"a": list(zip(times, energies))}, 200.0, quadratic=False)
+    x = np.array(times) / 200.0 - 1.0
+    y = np.array(energies) / np.median(energies)
+    coef = np.polyfit(x, y, 1)
+    resid = y - np.polyval(coef, x)
+    assert fit.residual_std == pytest.approx(np.sqrt(np.sum(resid ** 2) / 3), rel=1e-9)  # 5 runs - 2 parameters
+    assert fit.slope == pytest.approx(coef[0], rel=1e-9) and fit.energy["a"] == pytest.approx(coef[1] * 10.0)
+    # one model needs 1 + 3 runs for the curvature term: with 4 it is fitted, with 3 it is not
+    quad = fit_energy_at_time({"a": list(zip(times[:4], energies[:4]))}, 200.0)
+    c2 = np.polyfit(x[:4], np.array(energies[:4]) / np.median(energies[:4]), 2)
+    assert quad.curvature == pytest.approx(c2[0], rel=1e-9) and quad.residual_std > 0.0
+    three = fit_energy_at_time({"a": list(zip(times[:3], energies[:3]))}, 200.0)
+    assert three.curvature == 0.0

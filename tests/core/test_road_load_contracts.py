@@ -114,7 +114,7 @@ def test_boundaries_of_mass_and_rotational_mass():
 
 def test_parameter_vector_is_float_whatever_the_inputs():
     """The MPC's parameter vector is float64 even when the parameters were given as integers."""
-    x = RoadLoadParameters(mass=1000, c0=100).as_vector()
+    x = RoadLoadParameters(mass=1000, c0=100, c1=0, c2=0, c4=0, k_corner=0, headwind=0, rotational_mass=0).as_vector()
     assert x.dtype == np.float64 and x.tolist() == [1000.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
 
 
@@ -122,3 +122,12 @@ def test_parameter_vector_is_float_whatever_the_inputs():
 def test_any_positive_truth_stiffness_counts_and_a_negative_one_means_none(stiffness, k_corner):
     p = RoadLoadParameters.from_truth({**TRUTH, "cornering_stiffness": stiffness})
     assert p.k_corner == pytest.approx(k_corner)
+
+
+def test_defaults_of_the_constructors_add_nothing():
+    assert RoadLoadParameters.from_coast_down(150.0, 2.0, 0.4, mass=1300.0).rotational_mass == 0.0
+    assert RoadLoadParameters.from_spec(get_preset("bmw_i3")).rotational_mass == 0.0
+    bare = RoadLoadParameters.from_physical(1200.0, 0.01)
+    assert (bare.c1, bare.c2, bare.c4, bare.k_corner, bare.headwind, bare.rotational_mass) == (0.0,) * 6
+    # a wind speed without an angle is a tailwind (psi_w = 0)
+    assert RoadLoadParameters.from_truth({**TRUTH, "wind_speed": 5.0}).headwind == pytest.approx(-5.0)

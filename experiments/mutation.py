@@ -1,0 +1,274 @@
+"""Mutation score of the pure-Python cores: mutmut (pinned dev dependency) run on one module at a time against the
+tests that target it, the score printed per module.
+
+Each module is staged on its own: the installed package layout (``src/roadload/...``, built from pyproject's
+package-dir mapping, package data included) plus the test folder, with a ``[tool.mutmut]`` table that mutates
+that one file and selects its targeted tests. ``PYTHONPATH`` points at the mutated tree, so a test that starts a
+subprocess runs the mutant too. The score counts killed mutants (a failing test, a timeout or a crash) over all
+mutants minus the known equivalent ones (:data:`EQUIVALENT`: same behaviour, no test can tell them apart); a
+surviving mutant or one that no selected test reaches counts against it.
+
+    python scripts/mutation_score.py                              # every module, one after the other
+    python scripts/mutation_score.py --module core/road_load.py --survivors
+    python scripts/mutation_score.py --quick                      # CI: one small module, its own tests
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+import tomllib
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+# module (repository path) -> the test files that target it (fast ones: every mutant reruns the tests that reach it)
+MODULES: dict[str, tuple[str, ...]] = {
+    "core/road_load.py": ("tests/core/test_road_load.py", "tests/core/test_road_load_contracts.py",
+                          "tests/envs/test_physics.py"),
+    "core/trip.py": ("tests/core/test_trip.py", "tests/envs/test_streaming.py", "tests/fuzz/test_fuzz_files.py"),
+    "core/trip_schema.py": ("tests/core/test_trip_schema.py", "tests/fuzz/test_fuzz_files.py",
+                            "tests/envs/test_streaming.py"),
+    "sim2real/stats.py": ("tests/sim2real/test_core.py", "tests/sim2real/test_stats_values.py"),
+    "sim2real/selection.py": ("tests/sim2real/test_core.py", "tests/sim2real/test_robust.py",
+                              "tests/sim2real/test_joint_base.py"),
+    "sim2real/floor.py": ("tests/sim2real/test_floor_fit.py", "tests/sim2real/test_floor.py"),
+    "experiments/time_matching.py": ("tests/experiments/test_time_matching.py",
+                                     "tests/experiments/test_time_matching_search.py"),
+    "controllers/mpc.py": ("tests/controllers/test_mpc.py", "tests/controllers/test_mpc_feasibility.py",
+                           "tests/controllers/test_command_jerk.py"),
+    "controllers/mpc_controller.py": ("tests/controllers/test_mpc.py", "tests/controllers/test_mpc_feasibility.py",
+                                      "tests/controllers/test_command_jerk.py"),
+    "envs/sensors.py": ("tests/envs/test_sensor_noise.py", "tests/envs/test_effects.py",
+                        "tests/envs/test_effects_gaps.py"),
+}
+
+# module -> {"function: removed line -> added line": why no test can tell the mutant from the original}
+_NO_UNITS = ("TripPayload's fields carry no unit and it allows extra keys, so format_errors words every error the "
+             "same with or without the model")
+_RAISE = 'raise TripMetadataError(f"{{path}}: {{format_errors(exc, {})}}") from None'
+_PAYLOAD = "x_parse_trip_payload: " + _RAISE.format("TripPayload, root='metadata'") + " -> "
+_XP = "numpy's sin and cos of a CasADi expression call the expression's own, so xp=np gives the same force"
+EQUIVALENT: dict[str, dict[str, str]] = {
+    "core/road_load.py": {
+        "x_road_load: return rolling + aero + climbing_force(m, grade, xp) + cornering -> "
+        "return rolling + aero + climbing_force(m, grade, ) + cornering": _XP,
+        "x_tractive_force: return road_load(speed, grade, curvature, p, xp) + m * acceleration -> "
+        "return road_load(speed, grade, curvature, p, ) + m * acceleration": _XP,
+        'xǁRoadLoadParametersǁfrom_truth: float(truth["air_density"]), c_y if c_y > 0 else None, headwind, -> '
+        'float(truth["air_density"]), c_y if c_y >= 0 else None, headwind,':
+            "a zero stiffness passed on is read as none by from_physical (k = 0 when c_yW is falsy)",
+        "xǁRoadLoadParametersǁfrom_vector: x = np.asarray(x, dtype=float).ravel() -> "
+        "x = np.asarray(x, dtype=None).ravel()": "map(float, x) converts every element to float anyway",
+        "xǁRoadLoadParametersǁfrom_vector: x = np.asarray(x, dtype=float).ravel() -> "
+        "x = np.asarray(x, ).ravel()": "map(float, x) converts every element to float anyway",
+    },
+    "core/trip_schema.py": {
+        _PAYLOAD + _RAISE.format("None, root='metadata'"): _NO_UNITS,
+        _PAYLOAD + _RAISE.format("root='metadata'"): _NO_UNITS,
+    },
+}
+
+# equivalent wherever they occur: (removed text, added text, why)
+EQUIVALENT_EVERYWHERE: tuple[tuple[str, str, str], ...] = (
+    ('float("nan")', 'float("NAN")', "float() reads 'nan' in any case"),
+    ("rcond=None)", ")", "numpy >= 2 defaults lstsq's rcond to None (machine precision)"),
+)
+
+TARGET = 0.85  # killed share of the non-equivalent mutants each module must reach
+KILLED = {1, 3}  # a selected test failed (3: pytest internal error)
+TIMEOUT = {36, 24, -24, 152, 255, -9}  # CPU limit reached, then killed: the mutant loops or crawls
+CRASH = {-11}
+UNREACHED = {5, 33}  # no selected test calls the mutated function
+
+
+@dataclass
+class ModuleScore:
+    """Outcome counts of one module's mutants and its score (killed / non-equivalent)."""
+
+    module: str
+    total: int = 0
+    killed: int = 0
+    timeout: int = 0
+    survived: int = 0
+    unreached: int = 0
+    equivalent: int = 0
+    other: int = 0
+    seconds: float = 0.0
+    survivors: list[str] = field(default_factory=list)  # "name: diff" of every live non-equivalent mutant
+    equivalents: list[str] = field(default_factory=list)
+
+    @property
+    def score(self) -> float:
+        live = self.total - self.equivalent
+        return (self.killed + self.timeout) / live if live else float("nan")
+
+
+def _package_dirs(repo: Path) -> dict[str, Path]:
+    """roadload package name -> its source folder, from pyproject's package-dir mapping."""
+    cfg = tomllib.loads((repo / "pyproject.toml").read_text())["tool"]["setuptools"]
+    return {pkg: repo / folder for pkg, folder in cfg["package-dir"].items()}
+
+
+def _staged_path(module: str, repo: Path = REPO) -> str:
+    """``src/roadload/...`` path of a repository module in the staged (installed) layout."""
+    src = (repo / module).resolve()
+    best = max(((pkg, folder) for pkg, folder in _package_dirs(repo).items() if src.is_relative_to(folder.resolve())),
+               key=lambda item: len(item[0]))
+    return str(Path("src", *best[0].split("."), src.relative_to(best[1].resolve())))
+
+
+def stage(module: str, tests: tuple[str, ...], folder: Path, repo: Path = REPO) -> Path:
+    """A fresh folder laid out as the installed package plus the tests, configured to mutate ``module``."""
+    if folder.exists():
+        shutil.rmtree(folder)
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", ".hypothesis")
+    dirs = _package_dirs(repo)
+    for pkg, source in sorted(dirs.items(), key=lambda item: item[0].count(".")):
+        target = folder / "src" / Path(*pkg.split("."))
+        nested = [Path(*p.split(".")[len(pkg.split(".")):]).parts[0] for p in dirs if p.startswith(pkg + ".")]
+        shutil.copytree(source, target, ignore=shutil.ignore_patterns(*nested, "__pycache__", "*.pyc"),
+                        dirs_exist_ok=True)
+    shutil.copytree(repo / "tests", folder / "tests", ignore=ignore)
+    table = {
+        "source_paths": ["src"],
+        "only_mutate": [_staged_path(module, repo)],
+        "pytest_add_cli_args": ["-p", "no:cacheprovider", "-m", "not slow"],
+        "pytest_add_cli_args_test_selection": list(tests),
+        "use_git_change_detection": False,
+    }
+    lines = ["", "[tool.mutmut]"] + [f"{key} = {json.dumps(value)}" for key, value in table.items()]
+    # exists before mutmut starts: an import that met PYTHONPATH's folder missing would cache it as absent
+    (folder / "mutants" / "src").mkdir(parents=True)
+    (folder / "pyproject.toml").write_text((repo / "pyproject.toml").read_text() + "\n".join(lines) + "\n")
+    return folder
+
+
+def _signature(diff: str) -> str:
+    """'function: removed -> added' of a mutant's unified diff (whitespace-insensitive, stable across renumbering)."""
+    removed = " / ".join(ln[1:].strip() for ln in diff.splitlines() if ln.startswith("-") and not ln.startswith("---"))
+    added = " / ".join(ln[1:].strip() for ln in diff.splitlines() if ln.startswith("+") and not ln.startswith("+++"))
+    return f"{removed} -> {added}"
+
+
+def _equivalent_everywhere(signature: str) -> str | None:
+    """Why a 'removed -> added' signature is equivalent by one of :data:`EQUIVALENT_EVERYWHERE`, else None."""
+    removed, _, added = signature.partition(" -> ")
+    for old, new, why in EQUIVALENT_EVERYWHERE:
+        at = removed.find(old)
+        while at >= 0:  # the mutation may hit any one occurrence
+            if removed[:at] + new + removed[at + len(old):] == added:
+                return why
+            at = removed.find(old, at + 1)
+    return None
+
+
+def collect(module: str, folder: Path, seconds: float, repo: Path = REPO) -> ModuleScore:
+    """Count the outcomes stored in the staged run's meta file; name every survivor by its diff."""
+    from mutmut.mutation.diff_apply import get_diff_for_mutant
+
+    staged = _staged_path(module, repo)
+    meta = json.loads((folder / "mutants" / f"{staged}.meta").read_text())
+    known = EQUIVALENT.get(module, {})
+    score = ModuleScore(module, seconds=round(seconds, 1))
+    cwd = os.getcwd()
+    os.chdir(folder)
+    try:
+        for name, code in sorted(meta["exit_code_by_key"].items()):
+            score.total += 1
+            if code in KILLED:
+                score.killed += 1
+                continue
+            if code in TIMEOUT or code in CRASH:
+                score.timeout += 1
+                continue
+            function = name.rpartition(".")[2].partition("__mutmut_")[0]
+            entry = f"{function}: {_signature(get_diff_for_mutant(name, path=staged))}"
+            reason = known.get(entry) or _equivalent_everywhere(entry.partition(": ")[2])
+            if reason:
+                score.equivalent += 1
+                score.equivalents.append(f"{name}  {entry}  ({reason})")
+                continue
+            if code in UNREACHED:
+                score.unreached += 1
+            elif code == 0:
+                score.survived += 1
+            else:
+                score.other += 1
+            score.survivors.append(f"{name} [{code}]  {entry}")
+    finally:
+        os.chdir(cwd)
+    return score
+
+
+def run_module(module: str, workdir: Path, children: int, only: str | None = None, repo: Path = REPO,
+               tests: tuple[str, ...] | None = None) -> ModuleScore:
+    """Stage ``module``, run mutmut on it (niced) and count the outcomes."""
+    tests = MODULES[module] if tests is None else tests
+    folder = stage(module, tests, workdir / module.replace("/", "__").removesuffix(".py"), repo)
+    env = {**os.environ, "PYTHONPATH": str(folder / "mutants" / "src"), "PYTHONDONTWRITEBYTECODE": "1"}
+    env.pop("MUTANT_UNDER_TEST", None)
+    cmd = ["nice", "-n", "15", sys.executable, "-c", "from mutmut.__main__ import cli; cli()", "run",
+           "--max-children", str(children)] + ([only] if only else [])
+    start = time.monotonic()
+    with open(folder / "mutmut.log", "w") as log:
+        res = subprocess.run(cmd, cwd=folder, env=env, stdout=log, stderr=subprocess.STDOUT)
+    if res.returncode != 0:
+        tail = (folder / "mutmut.log").read_text(errors="replace")[-3000:]
+        raise RuntimeError(f"mutmut failed on {module} (exit {res.returncode}); log {folder / 'mutmut.log'}:\n{tail}")
+    return collect(module, folder, time.monotonic() - start, repo)
+
+
+def _line(s: ModuleScore) -> str:
+    return (f"{s.module:32s} {s.total:5d} {s.killed:6d} {s.timeout:7d} {s.survived:8d} {s.unreached:9d} "
+            f"{s.equivalent:10d} {100 * s.score:6.1f} %  {'ok' if s.score >= TARGET else 'below'}  {s.seconds:7.0f} s")
+
+
+HEADER = (f"{'module':32s} {'total':>5s} {'killed':>6s} {'timeout':>7s} {'survived':>8s} {'unreached':>9s} "
+          f"{'equivalent':>10s} {'score':>8s}")
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--module", action="append", choices=sorted(MODULES), help="module(s) to run (default: all)")
+    ap.add_argument("--workdir", type=Path, default=Path(tempfile.gettempdir()) / "roadload-mutation",
+                    help="scratch folder of the staged copies (each module's is rebuilt on every run)")
+    ap.add_argument("--children", type=int, default=1, help="mutants tested at once (default 1: a shared machine)")
+    ap.add_argument("--survivors", action="store_true", help="list every surviving mutant with its diff")
+    ap.add_argument("--json", type=Path, help="write the per-module counts and survivors here")
+    ap.add_argument("--tests", help="comma-separated test files instead of the module's own selection")
+    ap.add_argument("--repo", type=Path, default=REPO, help="source tree to stage (default: this checkout)")
+    ap.add_argument("--quick", action="store_true", help="CI size: core/trip_schema.py against its own test file")
+    args = ap.parse_args(argv)
+    modules = ["core/trip_schema.py"] if args.quick else (args.module or list(MODULES))
+    tests = ("tests/core/test_trip_schema.py",) if args.quick else None
+    if args.tests:
+        tests = tuple(args.tests.split(","))
+    print(HEADER, flush=True)
+    scores = []
+    for module in modules:
+        s = run_module(module, args.workdir, args.children, None, args.repo, tests)
+        scores.append(s)
+        print(_line(s), flush=True)
+    for s in scores:
+        if args.survivors and s.survivors:
+            print(f"\n{s.module}: {len(s.survivors)} live mutants")
+            print("\n".join(f"  {line}" for line in s.survivors))
+        if s.equivalents:
+            print(f"\n{s.module}: {len(s.equivalents)} equivalent mutants")
+            print("\n".join(f"  {line}" for line in s.equivalents))
+    if args.json:
+        args.json.write_text(json.dumps([{**asdict(s), "score": s.score} for s in scores], indent=1))
+    if args.quick and not scores[0].total:
+        raise SystemExit("mutation run produced no mutants")
+
+
+if __name__ == "__main__":
+    main()

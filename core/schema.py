@@ -289,7 +289,7 @@ def check_field_types(obj: Any, error: Callable[[str], Exception]) -> None:
         elif kind is int:
             ok = isinstance(value, numbers.Integral) and not isinstance(value, bool)
         elif kind is bool:
-            ok = isinstance(value, bool) or type(value).__name__ == "bool_"  # numpy's bool too
+            ok = isinstance(value, bool) or getattr(getattr(value, "dtype", None), "kind", "") == "b"  # numpy's too
         else:
             ok = isinstance(value, kind)
         if not ok:

@@ -665,7 +665,7 @@ def _build_profile(data: dict, tmp: Path) -> Any:
         return RoadProfile("contract", a["distance"], a["grade"], a["curvature"], a["bank"], a["speed_limit"],
                            a["stops"])
     path = tmp / "contract_road.csv"
-    _write_roadload_csv(path, "road", {k: v for k, v in a.items() if k != "stops"}, a["stops"])
+    _write_roadload_csv(path, "road_profile", {k: v for k, v in a.items() if k != "stops"}, a["stops"])
     return load_profile_file(path)
 
 

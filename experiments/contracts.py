@@ -429,15 +429,29 @@ def trip_case(draw) -> Case:
 
 def _break_trip(case: Case, kind: str, name: str, draw) -> None:
     """Break the Trip arguments of `case` in one way; `broken` holds the names the error must mention."""
-    m, u = case.data["measured"], case.data["units"]
     case.note = kind
+    breaker = _break_units if kind in _UNIT_BREAKS else _break_samples
+    case.broken.append(breaker(case, kind, name, draw))
+    if kind not in _UNIT_BREAKS + _SAMPLE_BREAKS:
+        raise AssertionError(f"no way to break a Trip as {kind!r}")
+
+
+_UNIT_BREAKS = ("unit of wrong type", "units not a dict", "near-duplicate name", "non-SI unit",
+                "catalogue unit mismatch", "missing unit", "unit for absent channel", "reserved name", "empty name")
+
+
+_SAMPLE_BREAKS = ("unequal length", "t NaN", "t backwards", "non-numeric channel", "2-D channel",
+                  "truth unequal length", "missing t")
+
+
+def _break_units(case: Case, kind: str, name: str, draw) -> str:
+    """Units and channel names broken; returns the name the error must mention."""
+    m, u = case.data["measured"], case.data["units"]
     if kind == "unit of wrong type":
         u[name] = draw(st.sampled_from([3.6, None, ["m/s"], b"m/s"]))
     elif kind == "units not a dict":
         case.data["units"] = draw(st.sampled_from([list(u.values()), "SI", None, 1.0]))
         name = "units"
-    elif kind == "unequal length":
-        m[name] = m[name][:-1]
     elif kind == "near-duplicate name":
         twin = draw(st.sampled_from([name + " ", name.upper(), " " + name, name.replace("_", " _")]))
         if twin == name:
@@ -449,7 +463,24 @@ def _break_trip(case: Case, kind: str, name: str, draw) -> None:
         name = "custom_signal"
     elif kind == "catalogue unit mismatch":
         u[name] = draw(st.sampled_from(NON_SI))
-    elif kind == "t NaN":
+    elif kind == "missing unit":
+        del u[name]
+    elif kind == "unit for absent channel":
+        u["absent_channel"] = "m"
+        name = "absent_channel"
+    elif kind == "reserved name":
+        name = draw(st.sampled_from(["truth/speed", "measured_row"]))
+        m[name], u[name] = np.ones(len(m["t"])), "m"
+    elif kind == "empty name":
+        m[""], u[""] = np.ones(len(m["t"])), "m"
+        name = "''"
+    return name
+
+
+def _break_samples(case: Case, kind: str, name: str, draw) -> str:
+    """Time, lengths, shapes and types of the samples broken; returns the name the error must mention."""
+    m, u = case.data["measured"], case.data["units"]
+    if kind == "t NaN":
         m["t"] = m["t"].copy()
         m["t"][draw(st.integers(0, len(m["t"]) - 1))] = draw(st.sampled_from([np.nan, np.inf]))
         name = "t"
@@ -458,11 +489,8 @@ def _break_trip(case: Case, kind: str, name: str, draw) -> None:
         m["t"] = m["t"].copy()
         m["t"][i] = m["t"][i - 1] - draw(st.sampled_from([0.0, 0.005, 1.0]))
         name = "t"
-    elif kind == "missing unit":
-        del u[name]
-    elif kind == "unit for absent channel":
-        u["absent_channel"] = "m"
-        name = "absent_channel"
+    elif kind == "unequal length":
+        m[name] = m[name][:-1]
     elif kind == "non-numeric channel":
         m[name] = np.array(["x"] * len(m["t"]), dtype=object)
     elif kind == "2-D channel":
@@ -475,16 +503,10 @@ def _break_trip(case: Case, kind: str, name: str, draw) -> None:
         else:
             name = next(k for k in case.data["truth"] if k != "t")
             case.data["truth"][name] = case.data["truth"][name][:-1]
-    elif kind == "reserved name":
-        name = draw(st.sampled_from(["truth/speed", "measured_row"]))
-        m[name], u[name] = np.ones(len(m["t"])), "m"
-    elif kind == "empty name":
-        m[""], u[""] = np.ones(len(m["t"])), "m"
-        name = "''"
     elif kind == "missing t":
         del m["t"], u["t"]
         name = "'t'"
-    case.broken.append(name)
+    return name
 
 
 def _build_trip(data: dict) -> Any:

@@ -101,3 +101,10 @@ def test_controller_settings_refuse_wrong_types_naming_the_field():
         DriveSettings(gear_command=math.nan)
     with pytest.raises(ControllerError, match=r"DriveSettings\.measure_from: must be >= 0 \[m\]"):
         DriveSettings(measure_from=-5.0)
+
+
+def test_a_vanishing_policy_rate_is_a_clean_config_error_not_an_overflow():
+    from roadload.gym.config import EcoHighwayConfig, GymConfigError, make_config
+
+    with pytest.raises(GymConfigError, match="policy_frequency"):
+        make_config(EcoHighwayConfig, None, policy_frequency=5e-324)

@@ -61,7 +61,7 @@ class FieldSpec:
 
     def within(self, value: Any) -> bool:
         """True when `value` meets the field's type and declared bounds."""
-        if self.optional and value is None:
+        if (self.optional or self.nan_ok) and value is None:  # nan_ok: the JSON form writes NaN as None
             return True
         if self.kind in ("float", "int"):
             if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):

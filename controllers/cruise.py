@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from roadload.road_load import RoadLoadParameters
+from roadload.schema import check_field_types
 from .base import ControllerBase, ControllerError, DriveContext, Observation
 from .force_model import resistance_force
 from .safety import SpeedEnvelope
@@ -41,6 +42,7 @@ class CruiseSettings:
     overspeed: float = 0.0  # [m/s] truck speed band: downhill, no braking below v_ref + overspeed (0 = off)
 
     def __post_init__(self) -> None:
+        check_field_types(self, ControllerError)
         for name, value in self.__dict__.items():
             if isinstance(value, float) and not math.isfinite(value):
                 raise ControllerError(f"cruise {name}: must be a finite number, got {value}")

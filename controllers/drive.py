@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 from roadload.road_load import RoadLoadParameters
 from roadload.road_profiles import RoadProfile
+from roadload.schema import check_field_types
 from roadload.vehicle import VehicleSpec
 
 from .base import ControllerError, DriveContext
@@ -68,6 +69,7 @@ class DriveSettings:
     schedule_gain: float = 20.0  # P gain of the target schedule's lambda feedback (TripSchedule.gain)
 
     def __post_init__(self) -> None:
+        check_field_types(self, ControllerError)
         if self.controller not in CONTROLLERS:
             raise ControllerError(f"unknown controller {self.controller!r}; choose one of {CONTROLLERS}")
         if self.force_model not in FORCE_MODEL_NAMES:
@@ -80,6 +82,9 @@ class DriveSettings:
             raise ControllerError(f"warmup_driver: 'mpc' or 'cruise', got {self.warmup_driver!r}")
         if not (math.isfinite(self.dt) and self.dt > 0):
             raise ControllerError(f"dt: must be a finite number > 0 [s], got {self.dt}")
+        for name, unit in (("measure_from", "m"), ("multistart_period", "s"), ("schedule_gain", "1")):
+            if getattr(self, name) < 0:
+                raise ControllerError(f"DriveSettings.{name}: must be >= 0 [{unit}], got {getattr(self, name)}")
 
 
 def _knowledge(vehicle):

@@ -46,6 +46,7 @@ import scipy.sparse as sp
 
 from .energy import SourceEnergyModel
 from roadload.road_load import RoadLoadParameters
+from roadload.schema import check_field_types
 
 from .force_model import resistance_force
 from .safety import VIOLATION_TOLERANCE
@@ -86,6 +87,7 @@ class MpcSettings:
     sqp_iterations: int = 1  # QP path: linearise-solve rounds per control step (1 = real-time iteration)
 
     def __post_init__(self) -> None:
+        check_field_types(self, MpcError)
         for f in fields(self):
             value = getattr(self, f.name)
             if isinstance(value, float) and not math.isfinite(value):

@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from roadload.schema import check_field_types
 from .base import ControllerBase, ControllerError, DriveContext, Observation
 from .cruise import CruiseLaw, CruiseSettings
 from .energy import SourceEnergyModel
@@ -142,6 +143,7 @@ class MpcControllerSettings:
     gear_min_speed: float = 10.0  # [m/s]
 
     def __post_init__(self) -> None:
+        check_field_types(self, ControllerError)
         for name in ("replan_period", "speed_gain", "lookahead_time", "plan_tolerance", "min_plan_left",
                      "multistart_period", "multistart_step", "gear_band", "gear_min_speed"):
             value = getattr(self, name)

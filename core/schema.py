@@ -9,6 +9,8 @@ unknown key, the known keys.
 from __future__ import annotations
 
 import dataclasses
+import math
+import numbers
 import re
 import typing
 from typing import Any, Callable
@@ -17,7 +19,8 @@ import pydantic
 import pydantic.dataclasses
 from pydantic import BaseModel, ConfigDict
 
-__all__ = ["StrictModel", "format_errors", "field_unit", "loc_text", "field_info_at", "spec_dataclass"]
+__all__ = ["StrictModel", "format_errors", "field_unit", "loc_text", "field_info_at", "spec_dataclass",
+           "check_field_types"]
 
 
 class StrictModel(BaseModel):
@@ -244,3 +247,51 @@ def spec_dataclass(config: ConfigDict, error: Callable[[pydantic.ValidationError
         return typing.cast(type[_T], pcls)
 
     return wrap
+
+
+_SCALAR_WORDS = {float: "a finite number", int: "an integer", bool: "true or false", str: "a string"}
+
+
+def _scalar_of(tp: Any) -> tuple[type | None, bool]:
+    """(scalar type, None allowed) of a field annotation; (None, ...) for anything but float/int/bool/str."""
+    import types
+
+    optional = False
+    if typing.get_origin(tp) in (typing.Union, types.UnionType):
+        args = typing.get_args(tp)
+        optional = type(None) in args
+        rest = [a for a in args if a is not type(None)]
+        if len(rest) != 1:
+            return None, optional
+        tp = rest[0]
+    return (tp if tp in _SCALAR_WORDS else None), optional
+
+
+def check_field_types(obj: Any, error: Callable[[str], Exception]) -> None:
+    """Refuse a settings dataclass whose scalar field (float / int / bool / str, optionally ``| None``) holds a value
+    of another type, or a float field that is NaN or infinite: raises ``error("<Class>.<field>: must be ..., got
+    <value>")``. An int is a valid float; a bool is never a number. Call it first in ``__post_init__``, so that the
+    range checks after it compare numbers."""
+    import sys
+
+    namespace = vars(sys.modules[type(obj).__module__])
+    for f in dataclasses.fields(obj):
+        try:  # annotations are strings under ``from __future__ import annotations``
+            annotation = eval(f.type, namespace) if isinstance(f.type, str) else f.type  # noqa: S307
+        except Exception:  # noqa: BLE001 -- a type only imported for type checking: not a scalar field
+            continue
+        kind, optional = _scalar_of(annotation)
+        value = getattr(obj, f.name)
+        if kind is None or (optional and value is None):
+            continue
+        if kind is float:
+            ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+        elif kind is int:
+            ok = isinstance(value, numbers.Integral) and not isinstance(value, bool)
+        elif kind is bool:
+            ok = isinstance(value, bool) or getattr(getattr(value, "dtype", None), "kind", "") == "b"  # numpy's too
+        else:
+            ok = isinstance(value, kind)
+        if not ok:
+            raise error(f"{type(obj).__name__}.{f.name}: must be {_SCALAR_WORDS[kind]}"
+                        + (" or None" if optional else "") + f", got {value!r}")

@@ -139,13 +139,15 @@ class Trip:
     units: dict[str, str]
     meta: dict[str, Any] = field(default_factory=dict)
     truth: pd.DataFrame | None = None
-    truth_units: dict[str, str] = field(default_factory=dict)
+    truth_units: dict[str, str] = field(default_factory=dict)  # None is read as {}
 
     def __post_init__(self) -> None:
         self.measured = _as_frame(self.measured, "measured")
         _check_units_type(self.units, "units")
         self.units = dict(self.units)
         _check_frame(self.measured, self.units, "measured", truth=False)
+        if self.truth_units is None:  # "no truth units" as None, as for ``truth``
+            self.truth_units = {}
         _check_units_type(self.truth_units, "truth_units")
         self.truth_units = dict(self.truth_units)
         if self.truth is not None:

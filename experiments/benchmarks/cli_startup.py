@@ -4,6 +4,7 @@ Every case runs in a fresh process, interleaved with the reference (reference, c
 so that machine load hits them alike; each figure is the median over the repeats of wall time and CPU time (user +
 system, from wait4), and its ratio to the reference's median. Peak RSS comes from the same wait4. Cases:
 
+- ``python -c pass`` (the interpreter alone: the last column is each wall time against it);
 - ``roadload --help``;
 - refused bad input (exit code 2): a mapping file with a typo in a key, an unknown vehicle preset, an unknown import
   format, a missing trip file;
@@ -52,6 +53,7 @@ def cases(work: Path) -> dict[str, tuple[list[str], int]]:
     (work / "typo.json").write_text(json.dumps(mapping))
     (work / "log.csv").write_text("time_s,speed_kmh\n0,0\n0.01,0.1\n")
     return {
+        "python -c pass": ([sys.executable, "-c", "pass"], 0),
         "python -c 'import numpy, pandas'": ([sys.executable, "-c", "import numpy, pandas"], 0),
         "roadload --help": (cli + ["--help"], 0),
         "refused: mapping file with a typo": (cli + ["import", "log.csv", "--format", "csv", "--mapping",
@@ -90,10 +92,11 @@ def main(argv: list[str] | None = None) -> None:
         ref = "python -c 'import numpy, pandas'"
         ref_wall = statistics.median(s[0] for s in samples[ref])
         ref_cpu = statistics.median(s[1] for s in samples[ref])
+        bare_wall = statistics.median(s[0] for s in samples["python -c pass"])
         print(f"{repeats} interleaved rounds; 1-min load average {load0:.2f} at start, {os.getloadavg()[0]:.2f} "
               f"at end ({os.cpu_count()} CPUs)")
         print(f"{'case':40s} {'wall [s]':>9s} {'x ref':>6s} {'CPU [s]':>8s} {'x ref':>6s} {'peak RSS [MB]':>14s}  "
-              f"exit")
+              f"exit  {'x pass':>6s}")
         failed = []
         for name, (_, expected) in table.items():
             wall = statistics.median(s[0] for s in samples[name])
@@ -101,7 +104,7 @@ def main(argv: list[str] | None = None) -> None:
             rss = max(s[2] for s in samples[name])
             codes = sorted({s[3] for s in samples[name]})
             print(f"{name:40s} {wall:9.2f} {wall / ref_wall:6.2f} {cpu:8.2f} {cpu / ref_cpu:6.2f} {rss:14.0f}  "
-                  f"{','.join(map(str, codes))}")
+                  f"{','.join(map(str, codes)):4s}  {wall / bare_wall:6.2f}")
             if codes != [expected]:
                 failed.append(f"{name}: exit {codes}, expected {expected}")
         if not (args.quick or args.no_simulate):

@@ -181,3 +181,12 @@ def test_meta_must_be_a_dict():
     base = _trip(truth=False)
     with pytest.raises(TripError, match=r"meta: expected a dict of JSON-serialisable metadata, got list"):
         Trip(base.measured, base.units, ["name", "x"])
+
+
+def test_truth_units_none_means_no_truth_units():
+    m = pd.DataFrame({"t": [0.0, 0.1], "vehicle_speed": [1.0, 2.0]})
+    trip = Trip(m, {"t": "s", "vehicle_speed": "m/s"}, truth=None, truth_units=None)
+    assert trip.truth_units == {} and trip.truth is None
+    with pytest.raises(TripError, match="truth: no unit given for channels"):
+        Trip(m, {"t": "s", "vehicle_speed": "m/s"}, truth=pd.DataFrame({"t": [0.0, 0.1], "speed": [1.0, 2.0]}),
+             truth_units=None)

@@ -85,36 +85,36 @@ def main() -> None:
     diag = diagnose(trips, sim, settings,
                     progress=lambda what, frac: print(f"  [{time.perf_counter() - t0:5.0f} s] {what}"))
     paths = write_report(diag, Path(args.out))
-    fb, fa = diag.gap_before["force_residual"], diag.gap_after["force_residual"]
-    print(f"held-out force residual: median {fb['median']:.0f} -> {fa['median']:.0f} N, RMSE {fb['rmse']:.0f} -> "
-          f"{fa['rmse']:.0f} N (shrinkage {100 * diag.shrinkage('rmse'):.1f} %)")
+    fb, fa = diag.gap_before.force_residual, diag.gap_after.force_residual
+    print(f"held-out force residual: median {fb.median:.0f} -> {fa.median:.0f} N, RMSE {fb.rmse:.0f} -> "
+          f"{fa.rmse:.0f} N (shrinkage {100 * diag.shrinkage('rmse'):.1f} %)")
     if diag.gap_after_sim:
-        print(f"re-simulated: RMSE {diag.gap_after_sim['force_residual']['rmse']:.0f} N "
+        print(f"re-simulated: RMSE {diag.gap_after_sim.force_residual.rmse:.0f} N "
               f"(shrinkage {100 * diag.shrinkage('rmse', True):.1f} %)")
     print("base calibration (" + ("effects selected over it" if args.base_first else "reported only") + "):")
-    for b in diag.notes["base_calibration"]["parameters"]:
-        print(f"  {b['name']:40s} {b['value']:+.4g} ± {b['std_error']:.2g} {b['unit']}  RMS {b['size_rms']:.0f} N"
-              + ("  significant" if b["significant"] else ""))
-    for imp in diag.notes.get("implausible", []):
-        print(f"  not accepted, implausible: {imp['effect']}: {imp['reason']}")
+    for b in diag.base.parameters:
+        print(f"  {b.name:40s} {b.value:+.4g} ± {b.std_error:.2g} {b.unit}  RMS {b.size_rms:.0f} N"
+              + ("  significant" if b.significant else ""))
+    for imp in diag.notes.implausible:
+        print(f"  not accepted, implausible: {imp.effect}: {imp.reason}")
     print("ranking:")
     for r in diag.ranking[:8]:
-        print(f"  {r['name']:20s} held-out {100 * r['heldout_improvement']:6.1f} %  dAIC {r['delta_aic']:9.0f}  "
-              + ", ".join(f"{k}={v:.4g}±{r['std_errors'][k]:.2g}" for k, v in r["parameters"].items()))
-    print("forward selection:", [(s["effect"], s["reason"]) for s in diag.selection])
+        print(f"  {r.name:20s} held-out {100 * r.improvement:6.1f} %  dAIC {r.delta_aic:9.0f}  "
+              + ", ".join(f"{k}={v:.4g}±{r.std_errors[k]:.2g}" for k, v in r.parameters.items()))
+    print("forward selection:", [(s.effect, s.reason) for s in diag.selection])
     print("strongest departures before:")
-    for b in diag.notes["strongest_departures_before"]:
-        print(f"  {b['regime']:22s} {b['bin']:14s} median {b['median']:7.1f} N [{b['ci_low']:.0f}, {b['ci_high']:.0f}]"
-              f" share {100 * b['share']:.0f} %")
-    print("season:", [(r["bin"], round(r["median"], 1), r["n"]) for r in diag.regimes_before.get("season", [])])
-    print("unexplained:", [(b["regime"], b["bin"], round(b["median"], 1)) for b in diag.unexplained["departing_bins"]])
+    for b in diag.notes.strongest_departures_before:
+        print(f"  {b.regime:22s} {b.bin:14s} median {b.median:7.1f} N [{b.ci_low:.0f}, {b.ci_high:.0f}]"
+              f" share {100 * b.share:.0f} %")
+    print("season:", [(r.bin, round(r.median, 1), r.n) for r in diag.regimes_before.get("season", [])])
+    print("unexplained:", [(b.regime, b.bin, round(b.median, 1)) for b in diag.unexplained.departing_bins])
     if diag.energy:
         en = diag.energy
-        ee = en["electric_energy_per_distance"]
-        print(f"energy side: battery energy measured {ee['measured']:.2f}, sim {ee['sim_before']:.2f} kWh/100 km; "
-              f"power residual RMSE {en['power_residual_before']['rmse']:.0f} W; accepted "
-              f"{[e['name'] for e in en['effects']]}; ranking "
-              + ", ".join(f"{r['name']} {100 * r['heldout_improvement']:.1f} %" for r in en["ranking"]))
+        ee = en.electric_energy_per_distance
+        print(f"energy side: battery energy measured {ee.measured:.2f}, sim {ee.sim_before:.2f} kWh/100 km; "
+              f"power residual RMSE {en.power_residual_before.rmse:.0f} W; accepted "
+              f"{[e.name for e in en.effects]}; ranking "
+              + ", ".join(f"{r.name} {100 * r.improvement:.1f} %" for r in en.ranking))
     print(f"wrote {paths['report']} ({time.perf_counter() - t0:.0f} s)")
 
 

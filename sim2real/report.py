@@ -21,11 +21,12 @@ diagnosis.json (schema_version 1; SI units, forces in N, NaN written as null):
 - ``forward_selection``: steps {step, effect, shape, robust_loss_before, robust_loss_after (shares of the sim's
   original robust loss, :mod:`.robust`), relative_gain, gain_of_original, null_p, null_quantile, gain,
   reference_robust_loss, explained_fraction, size_rms, implausible, accepted, reason};
-- ``effects``: the accepted effects {name, parameters, std_errors, units, shape, heldout_gain,
-  explained_fraction, sim_switch, sim_parameters};
+- ``effects``: the accepted effects {name, description, shape, shape_name, shape_unit, parameters, std_errors,
+  units, heldout_gain, null_p, explained_fraction, sim_switch, sim_parameters};
 - ``energy_side`` (battery-electric only, else null): {power_residual_before/after (robust summaries, W),
-  electric_energy_per_distance {measured, sim_before, sim_after}, ranking, skipped_candidates,
-  forward_selection, effects} of the battery-power residual (:mod:`.energy`);
+  base_calibration (the energy base block, as below), electric_energy_per_distance {measured, sim_before,
+  sim_after}, ranking, skipped_candidates, forward_selection, effects (as above)} of the battery-power residual
+  (:mod:`.energy`);
 - ``unexplained``: {present, departing_bins [regime bins as above], reference_gain {relative, interval,
   significant}, reference_importance [{column, std, strongest_bin, strongest_effect}], rms_after};
 - ``notes``: pipeline notes per trip, baseline robust loss/AIC/BIC with the null's settings, strongest departures
@@ -46,8 +47,8 @@ import pandas as pd
 from roadload.fileio import atomic_path
 from roadload.fileio import save_figure
 
-from .diagnose import Diagnosis
 from .errors import DiagnosisError
+from .results import Diagnosis
 
 
 def _atomic_write(path: Path, write) -> None:
@@ -124,6 +125,18 @@ def _time_profile(f: pd.DataFrame, r: np.ndarray, valid: np.ndarray, sel: np.nda
     return q.index.to_numpy() + 0.5, q[0.25].to_numpy(), q[0.5].to_numpy(), q[0.75].to_numpy()
 
 
+def _finish_time_axes(fig, axes, path: Path, title: str, **legend) -> Path:
+    axes[0].set_title(title)
+    axes[1].set_title("after the identified effects")
+    for ax in axes:
+        ax.axhline(0, color="k", lw=0.6)
+        ax.set_ylabel("N")
+    axes[1].set_xlabel("time since start [min]")
+    axes[0].legend(**legend)
+    _save(fig, path)
+    return path
+
+
 def figure_residual_time(diag: Diagnosis, path: Path) -> Path:
     """Residual over time since start: per trip (30 s rolling median) for up to 8 trips; for more, the median
     over trips of the per-minute residual with its IQR, per season."""
@@ -144,15 +157,8 @@ def figure_residual_time(diag: Diagnosis, path: Path) -> Path:
                 n_trips = f["trip"][sel].nunique()
                 line, = ax.plot(x, med, lw=1.5, label=f"{season} ({n_trips} trips)")
                 ax.fill_between(x, lo, hi, color=line.get_color(), alpha=0.2)
-        axes[0].set_title("force residual: median over trips per minute since start (band: IQR), before")
-        axes[1].set_title("after the identified effects")
-        for ax in axes:
-            ax.axhline(0, color="k", lw=0.6)
-            ax.set_ylabel("N")
-        axes[1].set_xlabel("time since start [min]")
-        axes[0].legend(fontsize=8)
-        _save(fig, path)
-        return path
+        return _finish_time_axes(fig, axes, path, "force residual: median over trips per minute since start "
+                                 "(band: IQR), before", fontsize=8)
     for k in trips:
         sel = valid & (f["trip"] == k).to_numpy()
         if sel.sum() < 50:
@@ -160,15 +166,7 @@ def figure_residual_time(diag: Diagnosis, path: Path) -> Path:
         t = f["time_since_start"].to_numpy()[sel] / 60
         for ax, r in zip(axes, (f["residual"].to_numpy()[sel], residual_after[sel])):
             ax.plot(t, pd.Series(r).rolling(300, min_periods=30, center=True).median(), lw=1, label=str(k))
-    axes[0].set_title("force residual (30 s rolling median), before")
-    axes[1].set_title("after the identified effects")
-    for ax in axes:
-        ax.axhline(0, color="k", lw=0.6)
-        ax.set_ylabel("N")
-    axes[1].set_xlabel("time since start [min]")
-    axes[0].legend(fontsize=7, ncol=4)
-    _save(fig, path)
-    return path
+    return _finish_time_axes(fig, axes, path, "force residual (30 s rolling median), before", fontsize=7, ncol=4)
 
 
 def figure_regimes(diag: Diagnosis, path: Path) -> Path:
@@ -177,7 +175,7 @@ def figure_regimes(diag: Diagnosis, path: Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    rows = pd.DataFrame(diag.per_regime)
+    rows = pd.DataFrame([p.to_dict() for p in diag.per_regime])
     if rows.empty:
         fig = plt.figure(figsize=(4, 2))
         _save(fig, path)
@@ -206,9 +204,9 @@ def figure_ranking(diag: Diagnosis, path: Path) -> Path:
 
     rk = diag.ranking
     fig, ax = plt.subplots(figsize=(8, 0.35 * max(len(rk), 3) + 1))
-    names = [r["name"] for r in rk][::-1]
-    imp = [100 * r["heldout_improvement"] for r in rk][::-1]
-    colors = ["tab:green" if r["significant"] else "tab:gray" for r in rk][::-1]
+    names = [r.name for r in rk][::-1]
+    imp = [100 * r.improvement for r in rk][::-1]
+    colors = ["tab:green" if r.significant else "tab:gray" for r in rk][::-1]
     ax.barh(names, imp, color=colors)
     ax.axvline(0, color="k", lw=0.6)
     ax.set_xlabel("held-out MSE reduction alone [%] (green: significant)")
@@ -228,131 +226,159 @@ def _param_text(params: dict, se: dict, units: dict) -> str:
     return "; ".join(f"{k} = {v:.4g} ± {se.get(k, float('nan')):.2g} {units.get(k, '')}" for k, v in params.items())
 
 
-def markdown(diag: Diagnosis, figures: dict[str, str]) -> str:
-    d = diag
-    fb, fa = d.gap_before, d.gap_after
-    fs = d.gap_after_sim
-    L = [f"# Sim-to-real diagnosis: {d.sim['name']}", ""]
-    L += [f"Sim: vehicle `{d.sim['vehicle']}`, effects {sorted(d.sim['effects']['effects']) or 'none'}. "
+def _gap_table(d: Diagnosis) -> list[str]:
+    fb, fa, fs = d.gap_before, d.gap_after, d.gap_after_sim
+    L = [f"# Sim-to-real diagnosis: {d.sim.name}", ""]
+    L += [f"Sim: vehicle `{d.sim.vehicle.name}`, effects {sorted(d.sim.effects.to_dict()['effects']) or 'none'}. "
           f"Trips: {len(d.trips)} ({', '.join(map(str, d.trips[:8]))}{' …' if len(d.trips) > 8 else ''}). "
-          f"Held-out part: {d.split['n_test']} of {d.split['n_valid']} valid samples "
-          f"({d.split['n_test_segments']} segments of {d.settings['segment_length']:g} s); training in "
-          f"{d.split['n_folds']} CV folds. Sim floor RMS (the sim against its own balance): "
-          f"{_fmt(d.floor['residual_rms'])} N.", ""]
+          f"Held-out part: {d.split.n_test} of {d.split.n_valid} valid samples "
+          f"({d.split.n_test_segments} segments of {d.settings.segment_length:g} s); training in "
+          f"{d.split.n_folds} CV folds. Sim floor RMS (the sim against its own balance): "
+          f"{_fmt(d.floor.scale)} N.", ""]
     L += ["## Gap (held-out)", "", "| measure | before | after (fitted) | after (sim re-run) |", "|---|---|---|---|"]
 
     def row(name, get, nd=1):
         return f"| {name} | {_fmt(get(fb), nd)} | {_fmt(get(fa), nd)} | {_fmt(get(fs), nd) if fs else '–'} |"
-    L += [row("force residual median [N]", lambda g: g["force_residual"]["median"]),
-          row("force residual MAD [N]", lambda g: g["force_residual"]["mad"]),
-          row("force residual RMSE [N]", lambda g: g["force_residual"]["rmse"]),
-          row("force residual MEDSE [N²]", lambda g: g["force_residual"]["medse"], 0),
+    L += [row("force residual median [N]", lambda g: g.force_residual.median),
+          row("force residual MAD [N]", lambda g: g.force_residual.mad),
+          row("force residual RMSE [N]", lambda g: g.force_residual.rmse),
+          row("force residual MEDSE [N²]", lambda g: g.force_residual.medse, 0),
           row("replay through the simulator, speed RMS [m/s]",
-              lambda g: (g.get("replay_simulator") or {}).get("rms", float("nan")), 3),
-          row("replay speed error RMS, linearised [m/s]", lambda g: g["replay_speed_error"]["rms"], 3),
-          row("traction energy sim vs measured [%]", lambda g: 100 * g["energy_per_distance"]["relative_error"], 2)]
-    L += ["", f"Measured traction energy {_fmt(fb['energy_per_distance']['measured'], 2)} kWh/100 km. "
+              lambda g: g.replay_simulator.rms if g.replay_simulator else float("nan"), 3),
+          row("replay speed error RMS, linearised [m/s]", lambda g: g.replay_speed_error.rms, 3),
+          row("traction energy sim vs measured [%]", lambda g: 100 * g.energy_per_distance.relative_error, 2)]
+    L += ["", f"Measured traction energy {_fmt(fb.energy_per_distance.measured, 2)} kWh/100 km. "
           f"Shrinkage of the held-out RMSE: {100 * d.shrinkage('rmse'):.0f} % (fitted)"
           + (f", {100 * d.shrinkage('rmse', True):.0f} % (sim re-run with the effects on)" if fs else "") + ".", ""]
-    L += ["## Where the gap lies", ""]
-    dep = d.notes.get("strongest_departures_before", [])
+    return L
+
+
+def _where(d: Diagnosis, figures: dict[str, str]) -> list[str]:
+    L = ["## Where the gap lies", ""]
+    dep = d.notes.strongest_departures_before
     if dep:
         L += ["Regime bins whose median residual departs from 0 (block-bootstrap 95 % interval and notch exclude 0), "
               "largest first:", "", "| regime | bin | share | median [N] | 95 % CI [N] |", "|---|---|---|---|---|"]
-        L += [f"| {b['regime']} | {b['bin']} | {100 * b['share']:.0f} % | {_fmt(b['median'])} | "
-              f"{_fmt(b['ci_low'])} … {_fmt(b['ci_high'])} |" for b in dep]
+        L += [f"| {b.regime} | {b.bin} | {100 * b.share:.0f} % | {_fmt(b.median)} | "
+              f"{_fmt(b.ci_low)} … {_fmt(b.ci_high)} |" for b in dep]
     else:
         L += ["No regime bin departs significantly from 0."]
     ra = d.residual_analysis
-    strong = sorted(((k, v) for k, v in ra.items()), key=lambda kv: -kv[1]["max_abs"])[:4]
+    strong = sorted(ra.items(), key=lambda kv: -kv[1].max_abs)[:4]
     L += ["", "Residual analysis (eq. 3.4a/3.4b, correlation coefficients, white-noise bound "
-          f"±{ra['residual']['bound']:.3f}): " + ", ".join(f"{k} {v['max_abs']:.2f} at lag {v['lag']}"
-                                                        for k, v in strong) + ".", ""]
+          f"±{ra['residual'].bound:.3f}): " + ", ".join(f"{k} {v.max_abs:.2f} at lag {v.lag}"
+                                                      for k, v in strong) + ".", ""]
     for key in ("residual_map", "residual_time"):
         if key in figures:
             L += [f"![{key}]({figures[key]})", ""]
-    base = d.notes.get("base_calibration") or {}
-    if base.get("parameters"):
-        L += ["## Base calibration", "",
-              "The sim's base road load fitted to the trips (weighted least squares on the robust residual, "
-              "cluster-robust standard errors; significant: |value| >= 2.58 SE and RMS >= "
-              f"{_fmt(base.get('min_size'))} N). "
-              + ("The effects below are selected over this calibrated base." if base.get("used_for_effects")
-                 else "Effects are selected over the sim as is (use --base-first for a preset that is not the car)."),
-              "", "| base parameter | fitted change | SE | sim | calibrated | RMS [N] | significant |",
-              "|---|---|---|---|---|---|---|"]
-        for b in base["parameters"]:
-            ph = b["physical"]
-            L.append(f"| {b['name']} | {b['value']:+.4g} {b['unit']} | {b['std_error']:.2g} | {ph['sim']:.4g} | "
-                     f"{ph['calibrated']:.4g} {ph['unit']} | {_fmt(b['size_rms'])} | "
-                     f"{'yes' if b['significant'] else 'no'} |")
-        L += [""]
-    L += ["## Which effect", "", "Candidates alone (fitted on training, judged out-of-fold on the robust, "
-          "regime-normalised loss; null p from the wild block bootstrap):", "",
-          "| candidate | held-out gain | null p | significant | ΔAIC | ΔBIC | explained share | parameters |",
-          "|---|---|---|---|---|---|---|---|"]
+    return L
+
+
+def _base_block(d: Diagnosis) -> list[str]:
+    base = d.base
+    if not base.parameters:
+        return []
+    L = ["## Base calibration", "",
+         "The sim's base road load fitted to the trips (weighted least squares on the robust residual, "
+         "cluster-robust standard errors; significant: |value| >= 2.58 SE and RMS >= "
+         f"{_fmt(base.min_size)} N). "
+         + ("The effects below are selected over this calibrated base." if base.used_for_effects
+            else "Effects are selected over the sim as is (use --base-first for a preset that is not the car)."),
+         "", "| base parameter | fitted change | SE | sim | calibrated | RMS [N] | significant |",
+         "|---|---|---|---|---|---|---|"]
+    for b in base.parameters:
+        ph = b.physical
+        assert ph is not None
+        L.append(f"| {b.name} | {b.value:+.4g} {b.unit} | {b.std_error:.2g} | {ph.sim:.4g} | "
+                 f"{ph.calibrated:.4g} {ph.unit} | {_fmt(b.size_rms)} | {'yes' if b.significant else 'no'} |")
+    return L + [""]
+
+
+def _which(d: Diagnosis, figures: dict[str, str]) -> list[str]:
+    L = ["## Which effect", "", "Candidates alone (fitted on training, judged out-of-fold on the robust, "
+         "regime-normalised loss; null p from the wild block bootstrap):", "",
+         "| candidate | held-out gain | null p | significant | ΔAIC | ΔBIC | explained share | parameters |",
+         "|---|---|---|---|---|---|---|---|"]
     for r in d.ranking:
-        L.append(f"| {r['name']} | {100 * r['heldout_improvement']:.1f} % | {_fmt(r.get('null_p'), 3)} | "
-                 f"{'yes' if r['significant'] else 'no'} | "
-                 f"{_fmt(r['delta_aic'], 0)} | {_fmt(r['delta_bic'], 0)} | {_fmt(r['explained_fraction'], 2)} | "
-                 f"{_param_text(r['parameters'], r['std_errors'], r['units'])} |")
+        L.append(f"| {r.name} | {100 * r.improvement:.1f} % | {_fmt(r.null_p, 3)} | "
+                 f"{'yes' if r.significant else 'no'} | "
+                 f"{_fmt(r.delta_aic, 0)} | {_fmt(r.delta_bic, 0)} | {_fmt(r.explained_fraction, 2)} | "
+                 f"{_param_text(r.parameters, r.std_errors, r.units)} |")
     if d.skipped:
         L += ["", "Not fitted: " + "; ".join(f"{k} ({v})" for k, v in d.skipped.items()) + "."]
     L += ["", "Greedy forward selection:", ""]
-    L += [f"{s['step']}. {s['effect']}: robust out-of-fold loss {s['robust_loss_before']:.3f} → "
-          f"{s['robust_loss_after']:.3f} of the sim as is ({100 * s['gain_of_original']:.1f} % gain; null p = "
-          f"{s['null_p']:.3f}, null {100 * (1 - d.settings['alpha']):.0f} % quantile {100 * s['null_quantile']:.1f} %; "
-          f"fitted effect RMS {_fmt(s['size_rms'])}), {s['reason']}" for s in d.selection]
-    for imp in d.notes.get("implausible", []):
-        L += [f"- not accepted, implausible fit: **{imp['effect']}**: {imp['reason']}"]
+    L += [f"{s.step}. {s.effect}: robust out-of-fold loss {s.robust_loss_before:.3f} → "
+          f"{s.robust_loss_after:.3f} of the sim as is ({100 * s.gain_of_original:.1f} % gain; null p = "
+          f"{s.null_p:.3f}, null {100 * (1 - d.settings.alpha):.0f} % quantile {100 * s.null_quantile:.1f} %; "
+          f"fitted effect RMS {_fmt(s.size_rms)}), {s.reason}" for s in d.selection]
+    for imp in d.notes.implausible:
+        L += [f"- not accepted, implausible fit: **{imp.effect}**: {imp.reason}"]
     if "ranking" in figures:
         L += ["", f"![ranking]({figures['ranking']})"]
     L += ["", "## Identified effects", ""]
     if d.effects:
         for e in d.effects:
-            L += [f"- **{e['name']}** ({e['description']}): {_param_text(e['parameters'], e['std_errors'], e['units'])}"
-                  + (f", {e['shape_name']} = {e['shape']:g} {e['shape_unit']}" if e["shape"] is not None else "")
-                  + f"; simulator switch `{e['sim_switch']}` {e['sim_parameters']}"]
+            L += [f"- **{e.name}** ({e.description}): {_param_text(e.parameters, e.std_errors, e.units)}"
+                  + (f", {e.shape_name} = {e.shape:g} {e.shape_unit}" if e.shape is not None else "")
+                  + f"; simulator switch `{e.sim_switch}` {e.sim_parameters}"]
     else:
         L += ["None: no candidate gave a significant held-out gain that explains the gap."]
-    L += ["", "## How far it shrinks, per regime (held-out RMSE)", "", "| regime | bin | n | before [N] | after [N] | "
-          "remaining |", "|---|---|---|---|---|---|"]
+    return L
+
+
+def _how_far(d: Diagnosis, figures: dict[str, str]) -> list[str]:
+    L = ["", "## How far it shrinks, per regime (held-out RMSE)", "", "| regime | bin | n | before [N] | after [N] | "
+         "remaining |", "|---|---|---|---|---|---|"]
     for p in d.per_regime:
-        L.append(f"| {p['regime']} | {p['bin']} | {p['n']} | {_fmt(p['rmse_before'])} | {_fmt(p['rmse_after'])} | "
-                 f"{_fmt(100 * p['remaining'], 0)} % |")
+        L.append(f"| {p.regime} | {p.bin} | {p.n} | {_fmt(p.rmse_before)} | {_fmt(p.rmse_after)} | "
+                 f"{_fmt(100 * p.remaining, 0)} % |")
     if "regimes" in figures:
         L += ["", f"![regimes]({figures['regimes']})"]
+    return L
+
+
+def _energy(d: Diagnosis) -> list[str]:
     en = d.energy
-    if en:
-        ee = en["electric_energy_per_distance"]
-        L += ["", "## Energy side (traction battery)", "",
-              f"Battery energy while moving: measured {_fmt(ee['measured'], 2)}, sim {_fmt(ee['sim_before'], 2)}, "
-              f"sim with the identified auxiliary effects {_fmt(ee['sim_after'], 2)} kWh/100 km. Power residual "
-              f"median {_fmt(en['power_residual_before']['median'], 0)} → "
-              f"{_fmt(en['power_residual_after']['median'], 0)} W, "
-              f"RMSE {_fmt(en['power_residual_before']['rmse'], 0)} → {_fmt(en['power_residual_after']['rmse'], 0)} W.",
-              ""]
-        L += [f"- {r['name']}: held-out gain {100 * r['heldout_improvement']:.1f} %, "
-              f"{_param_text(r['parameters'], r['std_errors'], r['units'])}" for r in en["ranking"]]
-        L += ["", "Accepted: " + (", ".join(e["name"] for e in en["effects"]) or "none") + "."]
+    if not en:
+        return []
+    ee = en.electric_energy_per_distance
+    before, after = en.power_residual_before, en.power_residual_after
+    L = ["", "## Energy side (traction battery)", "",
+         f"Battery energy while moving: measured {_fmt(ee.measured, 2)}, sim {_fmt(ee.sim_before, 2)}, "
+         f"sim with the identified auxiliary effects {_fmt(ee.sim_after, 2)} kWh/100 km. Power residual "
+         f"median {_fmt(before.median, 0)} → {_fmt(after.median, 0)} W, "
+         f"RMSE {_fmt(before.rmse, 0)} → {_fmt(after.rmse, 0)} W.", ""]
+    L += [f"- {r.name}: held-out gain {100 * r.improvement:.1f} %, "
+          f"{_param_text(r.parameters, r.std_errors, r.units)}" for r in en.ranking]
+    L += ["", "Accepted: " + (", ".join(e.name for e in en.effects) or "none") + "."]
+    return L
+
+
+def _unexplained(d: Diagnosis) -> list[str]:
     un = d.unexplained
-    L += ["", "## Unexplained residual", ""]
-    if un["present"]:
-        L += [f"Held-out RMS after the identified effects: {_fmt(un['rms_after'])} N."]
-        if un["departing_bins"]:
-            L += ["Still departing from 0 (not forced onto a candidate):", ""]
-            L += [f"- {b['regime']} {b['bin']}: median {_fmt(b['median'])} N (95 % CI {_fmt(b['ci_low'])} … "
-                  f"{_fmt(b['ci_high'])}, {100 * b['share']:.0f} % of the held-out samples)"
-                  for b in un["departing_bins"]]
-        rg = un["reference_gain"]
-        if rg["significant"]:
-            L += ["", f"A regime-only reference model still removes {100 * rg['relative']:.1f} % of the original "
-                  f"held-out MSE; its strongest regime variables: "
-                  + ", ".join(f"{i['column']} (strongest bin {i['strongest_bin']}, {i['strongest_effect']:.0f} N)"
-                              for i in un["reference_importance"][:3]) + "."]
-    else:
-        L += ["None significant."]
-    return "\n".join(L) + "\n"
+    L = ["", "## Unexplained residual", ""]
+    if not un.present:
+        return L + ["None significant."]
+    L += [f"Held-out RMS after the identified effects: {_fmt(un.rms_after)} N."]
+    if un.departing_bins:
+        L += ["Still departing from 0 (not forced onto a candidate):", ""]
+        L += [f"- {b.regime} {b.bin}: median {_fmt(b.median)} N (95 % CI {_fmt(b.ci_low)} … "
+              f"{_fmt(b.ci_high)}, {100 * b.share:.0f} % of the held-out samples)" for b in un.departing_bins]
+    rg = un.reference_gain
+    if rg.significant:
+        L += ["", f"A regime-only reference model still removes {100 * rg.relative:.1f} % of the original "
+              f"held-out MSE; its strongest regime variables: "
+              + ", ".join(f"{i.column} (strongest bin {i.strongest_bin}, {i.strongest_effect:.0f} N)"
+                          for i in un.reference_importance[:3]) + "."]
+    return L
+
+
+def markdown(diag: Diagnosis, figures: dict[str, str]) -> str:
+    """report.md: the gap, where it lies, the base block, which effect, how far it shrinks, the energy side and the
+    unexplained residual."""
+    sections = (_gap_table(diag), _where(diag, figures), _base_block(diag), _which(diag, figures),
+                _how_far(diag, figures), _energy(diag), _unexplained(diag))
+    return "\n".join(line for section in sections for line in section) + "\n"
 
 
 def write_report(diag: Diagnosis, out: str | os.PathLike) -> dict[str, Path]:

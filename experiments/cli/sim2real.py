@@ -12,7 +12,7 @@ from roadload.sim2real.catalog import DEFAULT_CANDIDATES
 from roadload.sim2real.diagnose import DiagnosisSettings, diagnose
 from roadload.sim2real.report import write_report
 from roadload.sim2real.simconfig import SimConfig
-from roadload.experiments.sim2real_selftest import WORLD_NAMES, run_world
+from roadload.experiments.sim2real.selftest import WORLD_NAMES, print_run, run_world
 from roadload.fileio import write_json
 from roadload.io import import_log
 from roadload.io.report import LogImportError
@@ -116,16 +116,14 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
             paths = write_report(diag, out)
         except (DiagnosisError, ValueError) as exc:
             fail(describe(exc))
-        for imp in diag.notes.get("implausible", []):
-            console.print(f"[yellow]not accepted, implausible:[/yellow] {imp['effect']}: {imp['reason']}")
-        base = diag.notes.get("base_calibration") or {}
-        for row in base.get("parameters", []):
-            console.print(f"base: {row['name']} {row['value']:+.4g} ± {row['std_error']:.2g} {row['unit']}"
-                          + ("  (significant)" if row.get("significant") else ""))
+        for imp in diag.notes.implausible:
+            console.print(f"[yellow]not accepted, implausible:[/yellow] {imp.effect}: {imp.reason}")
+        for row in diag.base.parameters:
+            console.print(f"base: {row.name} {row.value:+.4g} ± {row.std_error:.2g} {row.unit}"
+                          + ("  (significant)" if row.significant else ""))
         eff = ", ".join(diag.identified) or "none"
-        console.print(f"identified: {eff}; held-out force RMSE {diag.gap_before['force_residual']['rmse']:.1f} -> "
-                      f"{diag.gap_after['force_residual']['rmse']:.1f} N; unexplained: "
-                      f"{diag.unexplained['present']}")
+        console.print(f"identified: {eff}; held-out force RMSE {diag.gap_before.force_residual.rmse:.1f} -> "
+                      f"{diag.gap_after.force_residual.rmse:.1f} N; unexplained: {diag.unexplained.present}")
         console.print(f"wrote {paths['report']}, {paths['json']}")
 
     @s2r.command("selftest")
@@ -151,16 +149,6 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
             fail(f"--seeds must be comma-separated integers, got {seeds!r}")
         names = [e.strip() for e in effects.split(",") if e.strip()] if effects else None
         run = run_world(world, seed_list, names, duration, vehicle=vehicle, say=console.print)
-        for sd in seed_list:
-            console.print(f"confusion, {world}, seed {sd} (rows withheld, columns first accepted):")
-            console.print(run.confusion(sd).to_string())
-        s = run.summary()
-        console.print(f"found (scoring rule: accepted or a base shift beyond the seed's nothing-withheld "
-                      f"reference) {s['found']}/{s['catalog_cases']}")
-        console.print(f"top-1 {s['top1_correct']}/{s['catalog_cases']}; withheld among the accepted "
-                      f"{s['among_accepted']}/{s['catalog_cases']}; false acceptances: nothing withheld "
-                      f"{s['false_acceptances_none']}/{s['none_cases']}, out-of-catalog "
-                      f"{s['false_acceptances_outside']}/{s['outside_cases']}; median held-out shrinkage "
-                      f"{100 * s['median_shrinkage_identified']:.1f} %")
+        print_run(run, seed_list, say=console.print)
         if out is not None:
             write_json(out / "selftest.json", run.to_dict(), default=float)

@@ -59,11 +59,15 @@ INERTIA_PARAMETER = "delta I_red/r_W^2 (all gears)"
 
 @dataclass
 class PhysicalValue(Record):
-    """A base parameter in the sim's own terms: the sim's value, the calibrated one and their unit."""
+    """A base parameter in the sim's own terms: the sim's value, the calibrated one and their unit; for the
+    drive-train efficiency the calibrated value is the efficiency in traction and ``calibrated_regen`` the one in
+    regeneration; ``flag`` says why a value is not physically plausible (an efficiency above 1 or below 0.7)."""
 
     sim: float
     calibrated: float
     unit: str
+    calibrated_regen: float | None = optional()
+    flag: str | None = optional()
 
 
 @dataclass
@@ -144,6 +148,23 @@ def base_columns(table: pd.DataFrame, model: SimForceModel, braking: np.ndarray,
     return (np.hstack(blocks) if blocks else np.zeros((len(table), 0))), info
 
 
+EFFICIENCY_PLAUSIBLE = (0.7, 1.0)
+
+
+def efficiency_value(eta_sim: float, epsilon: float) -> PhysicalValue:
+    """The drive-train efficiency the base block's loss error ε stands for. The pipeline turns the logged torque
+    into force with the sim's η (T i η / r_W in traction, T i / (η r_W) in regeneration), so a measured force
+    (1 + ε) times the true one in traction means η_t = η_sim / (1 + ε), and (1 - ε) times in regeneration
+    η_r = η_sim (1 - ε). Flagged when either leaves [0.7, 1]."""
+    eta_t, eta_r = eta_sim / (1.0 + epsilon), eta_sim * (1.0 - epsilon)
+    lo, hi = EFFICIENCY_PLAUSIBLE
+    bad = [f"{what} {eta:.3f}" for what, eta in (("traction", eta_t), ("regeneration", eta_r))
+           if not lo <= eta <= hi]
+    flag = (f"implausible efficiency: {', '.join(bad)} outside [{lo:g}, {hi:g}] (a base mismatch the efficiency "
+            "absorbs: mass, road load or the torque signal)") if bad else None
+    return PhysicalValue(eta_sim, eta_t, "eta in traction (eta in regeneration: calibrated_regen)", eta_r, flag)
+
+
 def _physical(model: SimForceModel, candidate: str, v: float) -> PhysicalValue:
     """The calibrated base value in the sim's own terms (mass [kg], drag area [m²], factors)."""
     if candidate == "mass_offset":
@@ -157,8 +178,7 @@ def _physical(model: SimForceModel, candidate: str, v: float) -> PhysicalValue:
     if candidate == "rotational_inertia":
         return PhysicalValue(0.0, v, "kg (added to the sim's reduced mass)")
     if candidate == "drive_efficiency":
-        return PhysicalValue(model.drivetrain_efficiency, model.drivetrain_efficiency * (1.0 + v),
-                             "eta (tractive force per drive force in traction; 1 / that ratio in regeneration)")
+        return efficiency_value(model.drivetrain_efficiency, v)
     return PhysicalValue(1.0, 1.0 + v, "x X_B")
 
 

@@ -36,12 +36,14 @@ from roadload.envs.simulator import simulate
 from roadload.road_profiles import load_profile
 from roadload.trip import Trip
 
-from .base import BaseBlock, base_calibration, energy_base_calibration, energy_base_columns
-from .catalog import DEFAULT_CANDIDATES, get_candidate
-from .energy import ELECTRIC_POWER, POWER_RESIDUAL, SIM_ELECTRIC_POWER, electric_energy_per_distance
+from .base import Z_SIGNIFICANT, BaseBlock, base_calibration, energy_base_calibration, energy_base_columns
+from .catalog import DEFAULT_CANDIDATES, DRIVE_FORCE, get_candidate
+from .energy import (ELECTRIC_POWER, POWER_RESIDUAL, SIM_ELECTRIC_POWER, SPEED_DERIVED,
+                     electric_energy_per_distance)
 from .errors import DiagnosisError
 from .floor import SimFloor, reduce_channels
 from .gap import GapMeasures, gap_measures
+from .pertrip import per_trip_sizes
 from .records import RobustSummary
 from .reference import AdditiveRegimeModel
 from .regimes import (DEFAULT_REGIMES, RegimeTable, ResidualCorrelation, get_regime, localise, residual_analysis,
@@ -86,7 +88,8 @@ class DiagnosisSettings:
     floor trips and recompute the gap ("after, simulator"); replay: feed the recorded forces and road into the
     simulator (before, and after with the effects on) and compare the speed traces (:mod:`.replay`);
     strict_candidates: a candidate the trips lack channels for is an error (the user asked for it by name)
-    instead of being skipped with the reason."""
+    instead of being skipped with the reason; energy_consistency: a force-side effect must agree with the
+    drive-torque signal gain the battery power shows (:func:`energy_consistency`; not with base_first)."""
 
     candidates: tuple[str, ...] = DEFAULT_CANDIDATES
     regimes: tuple[str, ...] = DEFAULT_REGIMES
@@ -113,6 +116,7 @@ class DiagnosisSettings:
     resimulate: bool = True
     replay: bool = True
     strict_candidates: bool = False
+    energy_consistency: bool = True
 
 
 def sim_trips(sim: SimConfig, roads: Sequence[tuple[str, int]], duration: float,
@@ -129,13 +133,13 @@ def sim_trips(sim: SimConfig, roads: Sequence[tuple[str, int]], duration: float,
 
 
 def fit_floor(sim: SimConfig, channels: set[str], settings: DiagnosisSettings,
-              trips: Sequence[Trip] | None = None, extra: tuple = ()) -> SimFloor:
-    """The sim's floor from its own trips reduced to ``channels`` (see :mod:`.floor`); ``extra``: (candidate,
-    shape) pairs whose regressors join the floor basis."""
+              trips: Sequence[Trip] | None = None, extra: tuple = (), rate: float | None = None) -> SimFloor:
+    """The sim's floor from its own trips reduced to ``channels`` and to the recorded trips' sample ``rate`` [Hz]
+    (see :mod:`.floor`); ``extra``: (candidate, shape) pairs whose regressors join the floor basis."""
     if not settings.floor_roads and trips is None:
         return SimFloor.none()
     own = list(trips) if trips is not None else sim_trips(sim, settings.floor_roads, settings.floor_duration)
-    own = [reduce_channels(t, channels) for t in own]
+    own = [reduce_channels(t, channels, rate) for t in own]
     tab = build_table(own, sim)
     f = tab.frame
     return SimFloor.fit(f, f["sim_balance"].to_numpy(), f["residual"].to_numpy(), f["valid"].to_numpy(bool),
@@ -198,6 +202,11 @@ class Run:
     def channels(self) -> set[str]:
         return set.intersection(*[set(t.channels) for t in self.real])
 
+    @property
+    def rate(self) -> float:
+        """The recorded trips' sample rate [Hz] (the lowest: the sim's floor trips are taken down to it)."""
+        return float(min(t.sample_rate for t in self.real))
+
 
 def stage_table(run: Run) -> DiagnosisTable:
     """Stage 1: the diagnosis table of the recorded trips against the sim's balance, without the floor."""
@@ -227,8 +236,8 @@ def stage_floor(run: Run, table: DiagnosisTable, split: Split, floor: SimFloor |
     """Stage 3: the sim's floor (fitted on its own trips unless given) added to the table's sim side."""
     run.stage("floor")
     if floor is None:
-        floor = fit_floor(run.sim, run.channels, run.settings, floor_trips)
-    with_floor = finish_table(table.frame, table.model, table.notes, floor)
+        floor = fit_floor(run.sim, run.channels, run.settings, floor_trips, rate=run.rate)
+    with_floor = finish_table(table.frame, table.model, table.notes, floor, table.trips)
     r = np.where(split.valid, with_floor.frame["residual"].to_numpy(dtype=float), np.nan)
     return FloorStage(floor, with_floor, r)
 
@@ -331,12 +340,43 @@ class RankStage:
     energy_skipped: dict[str, str] = field(default_factory=dict)
 
 
-def _selector(run: Run, table: DiagnosisTable, side: SideInput, name: str, min_size: float) -> Selector:
+def _selector(run: Run, table: DiagnosisTable, side: SideInput, name: str, min_size: float,
+              consistent: Callable | None = None) -> Selector:
     s = run.settings
     return Selector(table.frame, side.residual, side.split, table.model, robust=s.robust, n_boot=s.n_boot,
                     seed=s.seed, min_gain=s.min_gain, min_explained=s.min_explained, side=name, n_null=s.n_null,
                     alpha=s.alpha, clip=s.clip, plausible=plausibility_check(run.sim, table.model),
-                    min_size=min_size, base_design=side.base_design)
+                    min_size=min_size, base_design=side.base_design, consistent=consistent)
+
+
+def energy_consistency(block: BaseBlock | None, table: pd.DataFrame, split: Split, settings: DiagnosisSettings
+                       ) -> Callable | None:
+    """The force side's check against the battery power (None without it, or with the base calibrated first):
+    P_el,sim is computed from the logged torque and motor speed, so the energy base block's signed T_E ω_E term
+    measures the drive-torque signal gain ĝ (a speed-signal scale too where the motor speed comes from the
+    vehicle speed). A force-side candidate is inconsistent when the gain its fit implies
+    (:meth:`.catalog.CandidateEffect.torque_signal_gain`: 0 for a physical effect such as a mass or drag change)
+    differs from ĝ by >= 2.58 standard errors and that difference, as a force ĝ F_drive, is at least the size
+    gate and half the candidate's own fitted effect: a payload then cannot stand in for a torque signal reading
+    high, which scales the measured force the same way."""
+    p = block.parameter("torque_scale") if block is not None else None
+    if p is None or not np.isfinite(p.std_error) or not settings.energy_consistency or settings.base_first:
+        return None
+    g_hat, se = -p.value, p.std_error          # the block's coefficient of +T ω is -g
+    speed_derived = bool(table[SPEED_DERIVED].any()) if SPEED_DERIVED in table else False
+    f = np.nan_to_num(table[DRIVE_FORCE].to_numpy(dtype=float))[split.train]
+    rms_f = float(np.sqrt(np.mean(f ** 2))) if f.size else 0.0
+
+    def check(cand, params: dict, shape, size: float) -> str | None:
+        implied = cand.torque_signal_gain(params, shape, speed_derived)
+        diff = g_hat - implied
+        force = abs(diff) * rms_f
+        if abs(diff) >= Z_SIGNIFICANT * se and force >= max(settings.min_size, 0.5 * size):
+            return (f"inconsistent with the battery power: it shows a drive-torque signal gain of {g_hat:+.3f} ± "
+                    f"{se:.3f} where {cand.name} implies {implied:+.3f} (a {force:.0f} N force effect unexplained)")
+        return None
+
+    return check
 
 
 def _side_candidates(settings: DiagnosisSettings, side: str) -> list[str]:
@@ -348,7 +388,8 @@ def stage_rank(run: Run, fl: FloorStage, base: BaseStage) -> RankStage:
     cannot be fitted on these trips)."""
     run.stage("rank")
     s = run.settings
-    sel = _selector(run, fl.table, base.force, "force", s.min_size)
+    sel = _selector(run, fl.table, base.force, "force", s.min_size,
+                    energy_consistency(base.energy_block, fl.table.frame, base.force.split, s))
     ranked, skipped = sel.rank(_side_candidates(s, "force"))
     out = RankStage(sel, ranked, skipped)
     if s.strict_candidates:
@@ -367,11 +408,12 @@ def stage_rank(run: Run, fl: FloorStage, base: BaseStage) -> RankStage:
     return out
 
 
-def accepted_effects(sel: Selector, steps: list[SelectionStep]) -> tuple[list[Effect], np.ndarray]:
+def accepted_effects(sel: Selector, steps: list[SelectionStep], alpha: float = 0.01
+                     ) -> tuple[list[Effect], np.ndarray]:
     """The effects the selector accepted, fitted jointly on the training rows (with the base when it is refitted
     jointly: predicted with the design as fitted, so the base says nothing on braking rows and an effect's
     coefficients, conditional on it, are not extrapolated there), and the residual after them (one builder for
-    the force and the energy side)."""
+    the force and the energy side); each with its sizes per trip (:mod:`.pertrip`)."""
     y = sel.residual
     if not sel.chosen:
         return [], y.copy()
@@ -383,7 +425,8 @@ def accepted_effects(sel: Selector, steps: list[SelectionStep]) -> tuple[list[Ef
         step = next(st for st in steps if st.effect == cand.name)
         effects.append(Effect(cand.name, cand.description, shape, cand.shape_name, cand.shape_unit, params, errors,
                               units, step.gain_of_original, step.null_p, step.explained_fraction, cand.sim_effect,
-                              cand.sim_parameters(params, shape, sel.model)))
+                              cand.sim_parameters(params, shape, sel.model),
+                              per_trip_sizes(sel, sel.chosen, cand.name, alpha)))
     return effects, after
 
 
@@ -402,12 +445,13 @@ def stage_select(run: Run, fl: FloorStage, base: BaseStage, rank: RankStage) -> 
     """Stage 7: greedy forward selection per side; the accepted effects with their parameters."""
     run.stage("select")
     max_effects = run.settings.max_effects
+    alpha = run.settings.alpha
     steps = rank.force.forward(rank.force_ranked, max_effects=max_effects)
-    effects, r_after = accepted_effects(rank.force, steps)
+    effects, r_after = accepted_effects(rank.force, steps, alpha)
     energy = None
     if rank.energy is not None and base.energy is not None and base.energy_block is not None:
         e_steps = rank.energy.forward(rank.energy_ranked, max_effects=max_effects)
-        e_effects, e_after = accepted_effects(rank.energy, e_steps)
+        e_effects, e_after = accepted_effects(rank.energy, e_steps, alpha)
         energy = _energy_report(fl.table.frame, base, e_after, rank, e_steps, e_effects)
     return SelectStage(steps, effects, r_after, energy)
 
@@ -447,7 +491,7 @@ def stage_resimulate(run: Run, fl: FloorStage, split: Split, rank: RankStage, se
         if sim_after is None:
             return Resimulation(None, "an accepted effect has no simulator switch")
         extra = tuple((c.name, sh) for c, sh in rank.force.chosen)
-        floor_after = fit_floor(sim_after, run.channels, s, extra=extra)
+        floor_after = fit_floor(sim_after, run.channels, s, extra=extra, rate=run.rate)
         t_after = build_table(run.real, sim_after, floor=floor_after).frame
         if len(t_after) != len(fl.table.frame):
             return Resimulation(None, "the re-simulated table differs in length; skipped")
@@ -479,7 +523,8 @@ def stage_report(run: Run, fl: FloorStage, split: Split, gap: GapStage, base: Ba
     diag = Diagnosis(run.sim, list(pd.unique(table["trip"])), s, split.describe(), fl.floor, gap.gap_before,
                      gap_after, resim.gap, {k: v.rows for k, v in gap.regimes.items()}, per_regime,
                      gap.residual_analysis, rank.force_ranked, rank.force_skipped, sel.steps, sel.effects,
-                     unexplained, sel.energy, notes, table=fl.table, residual_after=r_after, test_rows=test)
+                     unexplained, sel.energy, notes, fl.table.trips, table=fl.table, residual_after=r_after,
+                     test_rows=test)
     run.progress("done", 1.0)
     return diag
 

@@ -44,10 +44,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from roadload.fileio import atomic_path
-from roadload.fileio import save_figure
+from roadload import fileio
+from roadload.fileio import atomic_path, save_figure
 
 from .errors import DiagnosisError
+from .records import jsonable
 from .results import Diagnosis
 
 
@@ -274,24 +275,69 @@ def _where(d: Diagnosis, figures: dict[str, str]) -> list[str]:
     return L
 
 
+def _physical_text(b) -> tuple[str, str]:
+    """(sim value, calibrated value with unit) of a base parameter; the efficiency in traction and regeneration."""
+    ph = b.physical
+    if ph is None:
+        return "–", "–"
+    if ph.calibrated_regen is not None:
+        text = f"η_t = {ph.calibrated:.3f}, η_r = {ph.calibrated_regen:.3f}"
+        return f"η = {ph.sim:.3f}", text + (f" (**{ph.flag}**)" if ph.flag else "")
+    return f"{ph.sim:.4g}", f"{ph.calibrated:.4g} {ph.unit}"
+
+
 def _base_block(d: Diagnosis) -> list[str]:
     base = d.base
     if not base.parameters:
         return []
-    L = ["## Base calibration", "",
+    L = ["## Base calibration (force side)", "",
          "The sim's base road load fitted to the trips (weighted least squares on the robust residual, "
          "cluster-robust standard errors; significant: |value| >= 2.58 SE and RMS >= "
          f"{_fmt(base.min_size)} N). "
          + ("The effects below are selected over this calibrated base." if base.used_for_effects
-            else "Effects are selected over the sim as is (use --base-first for a preset that is not the car)."),
+            else "Effects are selected over the sim as is (calibrate the sim on reference trips with "
+                 "`roadload calibrate`, or use --base-first, for a preset that is not the car)."),
          "", "| base parameter | fitted change | SE | sim | calibrated | RMS [N] | significant |",
          "|---|---|---|---|---|---|---|"]
     for b in base.parameters:
-        ph = b.physical
-        assert ph is not None
-        L.append(f"| {b.name} | {b.value:+.4g} {b.unit} | {b.std_error:.2g} | {ph.sim:.4g} | "
-                 f"{ph.calibrated:.4g} {ph.unit} | {_fmt(b.size_rms)} | {'yes' if b.significant else 'no'} |")
+        sim, cal = _physical_text(b)
+        L.append(f"| {b.name} | {b.value:+.4g} {b.unit} | {b.std_error:.2g} | {sim} | {cal} | {_fmt(b.size_rms)} | "
+                 f"{'yes' if b.significant else 'no'} |")
     return L + [""]
+
+
+def _energy_base(d: Diagnosis) -> list[str]:
+    block = d.energy_base
+    if block is None or not block.parameters:
+        return []
+    L = ["", "### Base calibration (energy side)", "",
+         "The battery-power residual fitted on a constant (auxiliary power), the motor loss |T_E ω_E| and the "
+         f"signed T_E ω_E (torque-signal gain); significant: |value| >= 2.58 SE and RMS >= {_fmt(block.min_size)} W.",
+         "", "| base parameter | fitted change | SE | RMS [W] | significant |", "|---|---|---|---|---|"]
+    L += [f"| {b.name} | {b.value:+.4g} {b.unit} | {b.std_error:.2g} | {_fmt(b.size_rms)} | "
+          f"{'yes' if b.significant else 'no'} |" for b in block.parameters]
+    return L
+
+
+def _per_trip(d: Diagnosis, e) -> list[str]:
+    """The per-trip sizes of an accepted effect next to the trips' metadata."""
+    pt = e.per_trip
+    if pt is None:
+        return []
+    info = {t.trip: t for t in d.trip_info}
+    params = list(pt.mean)
+    verdict = ("differ more than chance" if pt.differ else "do not differ more than chance")
+    mean = ", ".join(f"{k} = {v:.4g} {pt.units.get(k, '')}" for k, v in pt.mean.items())
+    L = ["", f"  Per trip (the sizes {verdict}: Wald χ² = {pt.chi2:.1f}, {pt.dof} dof, p = {pt.p_value:.2g}; "
+         f"mean {mean}):", "",
+         "  | trip | " + " | ".join(params) + " | date | ambient [°C] | payload [kg] | note |",
+         "  |---|" + "---|" * (len(params) + 4)]
+    for s in pt.sizes:
+        t = info.get(s.trip)
+        meta = (f"{t.date} | {_fmt(t.ambient_c)} | {_fmt(t.payload_kg, 0)} | {t.note}" if t else " | | | ")
+        L.append(f"  | {s.trip} | " + " | ".join(f"{s.values[p]:.4g} ± {s.std_errors[p]:.2g}" for p in params)
+                 + f" | {meta} |")
+    return L
 
 
 def _which(d: Diagnosis, figures: dict[str, str]) -> list[str]:
@@ -321,8 +367,9 @@ def _which(d: Diagnosis, figures: dict[str, str]) -> list[str]:
             L += [f"- **{e.name}** ({e.description}): {_param_text(e.parameters, e.std_errors, e.units)}"
                   + (f", {e.shape_name} = {e.shape:g} {e.shape_unit}" if e.shape is not None else "")
                   + f"; simulator switch `{e.sim_switch}` {e.sim_parameters}"]
+            L += _per_trip(d, e)
     else:
-        L += ["None: no candidate gave a significant held-out gain that explains the gap."]
+        L += [f"None on the force side: {why_none(d, 'force')}"]
     return L
 
 
@@ -350,8 +397,13 @@ def _energy(d: Diagnosis) -> list[str]:
          f"RMSE {_fmt(before.rmse, 0)} → {_fmt(after.rmse, 0)} W.", ""]
     L += [f"- {r.name}: held-out gain {100 * r.improvement:.1f} %, "
           f"{_param_text(r.parameters, r.std_errors, r.units)}" for r in en.ranking]
-    L += ["", "Accepted: " + (", ".join(e.name for e in en.effects) or "none") + "."]
-    return L
+    L += [f"{s.step}. {s.effect}: {100 * s.gain_of_original:.1f} % gain, null p = {s.null_p:.3f}, fitted effect RMS "
+          f"{_fmt(s.size_rms, 0)} W: {s.reason}" for s in en.forward_selection]
+    L += ["", "Accepted: " + (", ".join(e.name for e in en.effects) or f"none ({why_none(d, 'energy')})") + "."]
+    for e in en.effects:
+        L += [f"- **{e.name}** ({e.description}): {_param_text(e.parameters, e.std_errors, e.units)}"]
+        L += _per_trip(d, e)
+    return L + _energy_base(d)
 
 
 def _unexplained(d: Diagnosis) -> list[str]:
@@ -371,6 +423,31 @@ def _unexplained(d: Diagnosis) -> list[str]:
               + ", ".join(f"{i.column} (strongest bin {i.strongest_bin}, {i.strongest_effect:.0f} N)"
                           for i in un.reference_importance[:3]) + "."]
     return L
+
+
+def why_none(d: Diagnosis, side: str = "force") -> str:
+    """Why a side accepted nothing, in a sentence: the first selection step's reason, or that no candidate was
+    significant alone (the best one's gain and null p), and the significant base departures that say the sim is
+    not the car."""
+    en = d.energy
+    steps = d.selection if side == "force" else (en.forward_selection if en else [])
+    ranking = d.ranking if side == "force" else (en.ranking if en else [])
+    block = d.base if side == "force" else d.energy_base
+    if side == "energy" and en is None:
+        return "no battery power on the trips"
+    if steps:
+        why = f"the best candidate, {steps[0].effect}, was not accepted: {steps[0].reason}"
+    elif ranking:
+        best = ranking[0]
+        why = (f"no candidate was significant alone (best: {best.name}, held-out gain {100 * best.improvement:.1f} %,"
+               f" null p = {best.null_p:.3f}, fitted RMS {_fmt(best.size, 0)})")
+    else:
+        why = "no candidate could be fitted on these trips"
+    departing = [p.name for p in (block.parameters if block else []) if p.significant]
+    if departing and not (block and block.used_for_effects):
+        why += (f"; the base block departs significantly ({', '.join(departing)}): the sim is not the car - "
+                "calibrate it on reference trips (roadload calibrate) and diagnose against the calibration")
+    return why
 
 
 def markdown(diag: Diagnosis, figures: dict[str, str]) -> str:
@@ -396,4 +473,88 @@ def write_report(diag: Diagnosis, out: str | os.PathLike) -> dict[str, Path]:
         Path(tmp).write_text(text)
     _atomic_write(out / "report.md", w)
     paths["report"] = out / "report.md"
+    return paths
+
+
+# ------------------------------------------------------------------------------------------------ calibration
+def calibration_paths(out: str | os.PathLike) -> dict[str, Path]:
+    """The files :func:`write_calibration` writes for ``--out calibrated.json``: the spec itself, and beside it
+    ``calibrated_sim.json`` (a sim config: the spec at the reference trips' ambient temperature),
+    ``calibrated_calibration.json`` (the record), ``calibrated_calibration.md`` (the report) and
+    ``calibrated_residual.png`` (the figure)."""
+    spec = Path(out)
+    if spec.suffix.lower() != ".json":
+        raise DiagnosisError(f"--out: the calibrated sim is a JSON vehicle spec, so the name ends in .json; "
+                             f"got {spec.name!r}")
+    stem = spec.with_suffix("")
+    return {"spec": spec, "sim": Path(f"{stem}_sim.json"), "json": Path(f"{stem}_calibration.json"),
+            "report": Path(f"{stem}_calibration.md"), "figure": Path(f"{stem}_residual.png")}
+
+
+def figure_calibration_bins(cal, path: Path) -> Path:
+    """Median force residual per speed x acceleration bin on the held-out rows, before and after calibration."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    bins = pd.DataFrame([b.to_dict() for b in cal.bins])
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharey=True)
+    if bins.empty:
+        _save(fig, path)
+        return path
+    speeds = list(dict.fromkeys(bins["speed"]))
+    accels = list(dict.fromkeys(bins["acceleration"]))
+    maps = []
+    for col in ("median_before", "median_after"):
+        m = np.full((len(accels), len(speeds)), np.nan)
+        for _, row in bins.iterrows():
+            m[accels.index(row["acceleration"]), speeds.index(row["speed"])] = row[col]
+        maps.append(m)
+    lim = float(np.nanmax(np.abs(maps[0]))) if np.isfinite(maps[0]).any() else 1.0
+    for ax, m, title in zip(axes, maps, (f"sim as is ({cal.sim})", "calibrated sim")):
+        im = ax.imshow(m, cmap="RdBu_r", vmin=-lim, vmax=lim, aspect="auto", origin="lower")
+        ax.set_title(f"median force residual, {title}", fontsize=9)
+        ax.set_xticks(range(len(speeds)), speeds, rotation=30, ha="right", fontsize=7)
+        ax.set_xlabel("speed")
+    axes[0].set_yticks(range(len(accels)), accels, fontsize=7)
+    axes[0].set_ylabel("acceleration")
+    fig.colorbar(im, ax=axes, label="N (held-out rows)")
+    _save(fig, path)
+    return path
+
+
+def calibration_markdown(cal, figure: str | None = None) -> str:
+    """The calibration report: parameters with units, uncertainty and physical range; the held-out gap."""
+    h = cal.heldout
+    L = [f"# Calibration of {cal.sim} on {len(cal.trips)} reference trips", "",
+         f"Trips: {', '.join(cal.trips)}.", "",
+         "| parameter | sim | calibrated | ± SE | unit | prior SD (change) | physical range | fitted change | "
+         "determined by the trips | flag |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for p in cal.parameters:
+        L.append(f"| {p.description} | {p.sim:.4g} | {p.calibrated:.4g} | {p.calibrated_std:.2g} | {p.value_unit} | "
+                 f"{p.prior_std:.2g} {p.unit} | [{p.low:g}, {p.high:g}] | {p.symbol} = {p.delta:+.4g} "
+                 f"± {p.std_error:.2g} {p.unit} | {'yes' if p.determined else 'no (the prior)'} | {p.flag} |")
+    L += ["", "Held-out gap (the reference trips' held-out segments re-run against each sim, its own floor):", "",
+          "| residual | sim as is | calibrated | shrinkage |", "|---|---|---|---|",
+          f"| force RMSE [N] | {_fmt(h.force_before)} | {_fmt(h.force_after)} | {_fmt(100 * h.force_shrinkage, 0)} % |",
+          f"| battery power RMSE [W] | {_fmt(h.power_before, 0)} | {_fmt(h.power_after, 0)} | "
+          f"{_fmt(100 * h.power_shrinkage, 0)} % |",
+          f"| battery power median [W] | {_fmt(h.power_median_before, 0)} | {_fmt(h.power_median_after, 0)} | – |"]
+    if cal.notes:
+        L += ["", "Notes:", ""] + [f"- {n}" for n in cal.notes]
+    if figure:
+        L += ["", f"![median force residual per speed and acceleration bin]({figure})"]
+    return "\n".join(L) + "\n"
+
+
+def write_calibration(cal, out: str | os.PathLike) -> dict[str, Path]:
+    """The calibrated vehicle spec (``out``, a vehicle JSON every roadload tool reads), the calibration record,
+    its report and the residual figure beside it (:func:`calibration_paths`); each file atomically."""
+    paths = calibration_paths(out)
+    fileio.write_json(paths["spec"], cal.spec.to_dict())
+    fileio.write_json(paths["sim"], {"vehicle": paths["spec"].name, "effects": cal.sim_config.effects.to_dict(),
+                                     "name": cal.sim_config.name})
+    fileio.write_json(paths["json"], {"calibrated_spec": paths["spec"].name, **jsonable(cal.to_dict())})
+    figure_calibration_bins(cal, paths["figure"])
+    fileio.write_text(paths["report"], calibration_markdown(cal, paths["figure"].name))
     return paths

@@ -14,12 +14,13 @@ import pandas as pd
 from .base import BaseBlock
 from .floor import SimFloor
 from .gap import GapMeasures
-from .records import Record, RobustSummary, jsonable, plain
+from .pertrip import PerTripSizes
+from .records import Record, RobustSummary, jsonable, optional, plain
 from .reference import RegimeImportance
 from .regimes import RegimeBin, ResidualCorrelation
 from .selection import BaselineInfo, CandidateResult, SelectionStep, SplitSummary
 from .simconfig import SimConfig
-from .table import DiagnosisTable
+from .table import DiagnosisTable, TripInfo
 
 SCHEMA_VERSION = 1
 
@@ -28,7 +29,8 @@ SCHEMA_VERSION = 1
 class Effect(Record):
     """An accepted effect (force or energy side): the candidate, its fitted shape (e.g. τ) and parameters with
     block-robust standard errors and units, what it gained in the forward selection (share of the sim's original
-    robust loss, null p, explained share) and the simulator switch with the parameters it maps to."""
+    robust loss, null p, explained share), the simulator switch with the parameters it maps to, and its sizes per
+    trip with the test whether they differ (:mod:`.pertrip`)."""
 
     name: str
     description: str
@@ -43,6 +45,7 @@ class Effect(Record):
     explained_fraction: float
     sim_switch: str | None
     sim_parameters: dict[str, Any] | None
+    per_trip: PerTripSizes | None = optional()
 
 
 @dataclass
@@ -152,6 +155,7 @@ class Diagnosis:
     unexplained: Unexplained
     energy: EnergySide | None
     notes: Notes
+    trip_info: list[TripInfo] = field(default_factory=list)
     table: DiagnosisTable | None = field(default=None, repr=False)
     residual_after: np.ndarray | None = field(default=None, repr=False)
     test_rows: np.ndarray | None = field(default=None, repr=False)
@@ -196,7 +200,8 @@ class Diagnosis:
             "regimes": plain(self.regimes_before), "residual_analysis": plain(self.residual_analysis),
             "ranking": plain(self.ranking), "skipped_candidates": self.skipped,
             "forward_selection": plain(self.selection), "effects": plain(self.effects),
-            "unexplained": plain(self.unexplained), "energy_side": plain(self.energy), "notes": plain(self.notes)})
+            "unexplained": plain(self.unexplained), "energy_side": plain(self.energy), "notes": plain(self.notes),
+            "trip_metadata": plain(self.trip_info)})
 
 
 def per_regime_gap(table: pd.DataFrame, before: np.ndarray, after: np.ndarray, rows: np.ndarray,

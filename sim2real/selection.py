@@ -251,6 +251,7 @@ class Selector:
     plausible: Callable[[CandidateEffect, dict, float | None], str | None] | None = None
     min_size: float = 0.0
     base_design: np.ndarray | None = None
+    consistent: Callable[[CandidateEffect, dict, float | None, float], str | None] | None = None
     cols: dict[str, np.ndarray] = field(init=False)
     baseline_loss: np.ndarray = field(init=False)
 
@@ -525,17 +526,21 @@ class Selector:
     def _size_and_plausibility(self, chosen: list[tuple[CandidateEffect, float | None]], cand: CandidateEffect,
                                shape: float | None, accepted: bool) -> tuple[float, str | None]:
         """The RMS of the candidate's fitted contribution next to the chosen ones, and why its fitted value is no
-        plausible simulator setting (None when it is, or when the step is not accepted anyway)."""
+        plausible simulator setting or is inconsistent with the other side's evidence (``consistent``; None when it
+        is plausible, or when the step is not accepted anyway)."""
         try:
             d, fit = self.final_fit(chosen + [(cand, shape)])
         except DiagnosisError as exc:
             return float("nan"), str(exc)
         size = self.effect_size(d, fit, cand.name)
-        if not (accepted and self.plausible is not None):
+        if not (accepted and (self.plausible is not None or self.consistent is not None)):
             return size, None
         try:
             params = fitted_parameters(d, fit, cand.name)[0]
-            return size, self.plausible(cand, params, shape)
+            reason = self.plausible(cand, params, shape) if self.plausible is not None else None
+            if reason is None and self.consistent is not None:
+                reason = self.consistent(cand, params, shape, size)
+            return size, reason
         except DiagnosisError as exc:
             return size, str(exc)
 

@@ -46,6 +46,7 @@ from roadload.units import KELVIN, air_density
 from .energy import power_columns
 from .errors import DiagnosisError
 from .forcemodel import SimForceModel
+from .records import Record
 from .simconfig import SimConfig
 
 MIN_SPEED = 1.0               # m/s, slower samples are not diagnosed (standstill, creeping)
@@ -148,12 +149,39 @@ def brake_force_from_pressure(vehicle, p_front: np.ndarray, p_rear: np.ndarray) 
 
 
 @dataclass
+class TripInfo(Record):
+    """What a trip's metadata says about it: date, season, median ambient temperature [°C], extra payload [kg],
+    the logger's note, and the samples it has in the table."""
+
+    trip: str
+    date: str
+    season: str
+    ambient_c: float
+    payload_kg: float | None
+    note: str
+    samples: int
+
+    @classmethod
+    def of(cls, trip: Trip, name: str, frame: pd.DataFrame) -> "TripInfo":
+        ov = trip.meta.get("overview") or {}
+        amb = frame["ambient_temperature"].to_numpy(dtype=float)
+        amb = amb[np.isfinite(amb)]
+        payload = trip.meta.get("extra_payload_kg")
+        return cls(name, str(ov.get("Date") or trip.meta.get("date") or ""), str(frame["season"].iloc[0]),
+                   float(np.median(amb)) - KELVIN if amb.size else float("nan"),
+                   float(payload) if payload is not None else None,
+                   str(ov.get("Note") or trip.meta.get("note") or "").strip(), len(frame))
+
+
+@dataclass
 class DiagnosisTable:
-    """The table (see module doc), the sim's force model and notes (pipeline fallbacks, per trip)."""
+    """The table (see module doc), the sim's force model, notes (pipeline fallbacks, per trip) and each trip's
+    metadata."""
 
     frame: pd.DataFrame
     model: SimForceModel
     notes: dict[str, list[str]] = field(default_factory=dict)
+    trips: list[TripInfo] = field(default_factory=list)
 
     @property
     def residual(self) -> np.ndarray:
@@ -180,7 +208,7 @@ def build_table(trips: Sequence[Trip], sim: SimConfig, settings: PipelineSetting
         raise DiagnosisError("no trips given")
     knowledge = knowledge_from_spec(sim.vehicle)
     model = model or sim_force_model(sim)
-    frames, notes = [], {}
+    frames, notes, infos = [], {}, []
     names = set()
     for i, trip in enumerate(trips):
         check_trip(trip, sim, i)
@@ -194,8 +222,11 @@ def build_table(trips: Sequence[Trip], sim: SimConfig, settings: PipelineSetting
             raise DiagnosisError(f"trip {name!r}: {exc}") from None
         notes[name] = list(res.notes)
         frames.append(_trip_frame(trip, name, res, sim, knowledge, settings or PipelineSettings(), notes[name]))
+        infos.append(TripInfo.of(trip, name, frames[-1]))
     frame = pd.concat(frames, ignore_index=True)
-    return finish_table(frame, model, notes, floor)
+    out = finish_table(frame, model, notes, floor)
+    out.trips = infos
+    return out
 
 
 def _trip_frame(trip: Trip, name: str, res, sim: SimConfig, knowledge, st: PipelineSettings,
@@ -306,8 +337,8 @@ def _drive_columns(frame: pd.DataFrame, force: np.ndarray) -> None:
     frame["sim_drive_force_rate"] = rate
 
 
-def finish_table(frame: pd.DataFrame, model: SimForceModel, notes: dict | None = None, floor=None
-                 ) -> DiagnosisTable:
+def finish_table(frame: pd.DataFrame, model: SimForceModel, notes: dict | None = None, floor=None,
+                 trips: list[TripInfo] | None = None) -> DiagnosisTable:
     """Add sim_balance (the analytic balance), sim_force (balance + the sim's floor, :mod:`.floor`), residual,
     sim_drive_force(_rate) and valid (finite everywhere it matters)."""
     frame = frame.copy()
@@ -327,4 +358,4 @@ def finish_table(frame: pd.DataFrame, model: SimForceModel, notes: dict | None =
     frame["valid"] = valid
     if not valid.any():
         raise DiagnosisError("no valid samples in the trips (moving, drive-train engaged, finite states)")
-    return DiagnosisTable(frame, model, notes or {})
+    return DiagnosisTable(frame, model, notes or {}, list(trips or []))

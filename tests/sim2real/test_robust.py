@@ -177,4 +177,5 @@ def test_base_block_separates_a_payload_from_the_drivetrain_efficiency():
     e = eff["drive_efficiency"]
     assert e.significant and e.value == pytest.approx(0.04, abs=4 * e.std_error + 0.005)
     assert abs(eff["mass_offset"].value) < 15.0
-    assert e.physical.calibrated == pytest.approx(MODEL.drivetrain_efficiency * (1 + e.value))
+    assert e.physical.calibrated == pytest.approx(MODEL.drivetrain_efficiency / (1 + e.value))
+    assert e.physical.calibrated_regen == pytest.approx(MODEL.drivetrain_efficiency * (1 - e.value))

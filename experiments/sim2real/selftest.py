@@ -5,7 +5,9 @@ Worlds (``run_world``):
 
 - ``roadload``: roadload's own simulator drives the "real" trips with the effect switched on;
 - ``independent``, ``fastsim``, ``fastsim_conv``: test worlds that share no physics code with ``roadload.envs``
-  (:mod:`roadload.experiments.worlds`), logged as CSV and imported through the CSV importer.
+  (:mod:`roadload.experiments.worlds`), logged as CSV and imported through the CSV importer;
+- ``real``: the real BMW i3 trips with effects of known size injected into the logged channels, diagnosed
+  against a calibration of the trips as logged (:mod:`roadload.experiments.sim2real.real`).
 
 Per seed and withheld effect: 3 trips, diagnosed blind over the whole catalog. The out-of-catalog case (the
 drive torque reading 5 N m high between 50 and 70 km/h) must stay unexplained and be localised to that speed
@@ -31,6 +33,7 @@ from pathlib import Path
 
 from roadload.experiments.worlds import generate_case, supported_effects
 from roadload.fileio import write_json
+from roadload.sim2real.calibrate import CalibrationSettings, calibrate
 from roadload.sim2real.catalog import candidate_names, get_candidate
 from roadload.sim2real.diagnose import DiagnosisSettings, fit_floor, sim_trips
 from roadload.sim2real.floor import SimFloor
@@ -39,8 +42,9 @@ from roadload.trip import Trip
 
 from .harness import (NONE_WORLD, OUTSIDE_WORLD, DiagnosisCase, WorldCaseResult, WorldRun, case_line,
                       confusion_markdown, diagnose_case, failed_case, plot_confusion, summary_line)
+from .real import run_real_world
 
-WORLD_NAMES = ("roadload", "fastsim", "independent", "fastsim_conv")
+WORLD_NAMES = ("roadload", "fastsim", "independent", "fastsim_conv", "real")
 REAL_ROADS: tuple[tuple[str, int], ...] = (("hilly", 11), ("city", 12), ("motorway", 13))
 
 
@@ -106,11 +110,14 @@ def run_world(world: str, seeds: Sequence[int] = (0, 1, 2), effects: Sequence[st
     """The selftest on one world: for every seed and withheld effect (default: all the world supports, the
     out-of-catalog torque-map band and nothing withheld), 3 trips of ``duration`` s, diagnosed blind. ``vehicle``:
     a preset for the sim instead of the vehicle matched to the world (then the base is calibrated first);
-    ``sim``: a sim config to diagnose against. A failing case is kept with identified = 'error: ...'."""
+    ``sim``: a sim config to diagnose against (e.g. a calibrated one). The real world injects effects into the
+    real i3 trips instead (``effects`` as "EFFECT:SIZE"). A failing case is kept with identified = 'error: ...'."""
     say = say or (lambda msg: None)
     if world not in WORLD_NAMES:
         raise ValueError(f"unknown world {world!r}; choose one of {WORLD_NAMES}")
     settings = settings or DiagnosisSettings(resimulate=False, replay=False)
+    if world == "real":
+        return run_real_world(seeds, effects, settings, say)
     if vehicle is not None and sim is None:
         settings = DiagnosisSettings(**{**settings.__dict__, "base_first": True})
     own = sim or (SimConfig.load(vehicle) if vehicle else None)
@@ -140,13 +147,39 @@ def _run_cases(world: str, seeds: Sequence[int], names: Sequence[str], duration:
                 case = (_roadload_case(sim, name, seed, duration) if world == "roadload" and sim is not None
                         else _generated_case(world, name, seed, duration, root, sim))
                 if floor is None:
-                    floor = fit_floor(case.sim, set(case.trips[0].channels), settings)
+                    floor = fit_floor(case.sim, set(case.trips[0].channels), settings,
+                                      rate=min(t.sample_rate for t in case.trips))
                 res = diagnose_case(world, seed, name, case, settings, floor, t0)
             except Exception as exc:      # reported in the table, never dropped
                 res = failed_case(world, seed, name, exc, time.perf_counter() - t0)
             results.append(res)
             say(case_line(res))
     return results
+
+
+CALIBRATION_SEEDS = (100, 101)
+
+
+def calibrated_sim(world: str, vehicle: str = "bmw_i3", seeds: Sequence[int] = CALIBRATION_SEEDS,
+                   duration: float = 900.0, work: str | None = None, say: Callable[[str], None] | None = None
+                   ) -> SimConfig:
+    """The shipped preset ``vehicle`` calibrated on ``world``'s nothing-withheld trips of other ``seeds`` than the
+    selftest's (3 trips each): the reference the world's cases are then diagnosed against."""
+    with tempfile.TemporaryDirectory(prefix=f"s2r-cal-{world}-") as tmp:
+        root = Path(work) if work else Path(tmp)
+        preset = SimConfig.load(vehicle)
+        trips = []
+        for seed in seeds:
+            if world == "roadload":
+                trips += _roadload_case(preset, NONE_WORLD, seed, duration).trips
+            else:
+                trips += _generated_case(world, NONE_WORLD, seed, duration, root / "reference", None).trips
+        cal = calibrate(trips, preset, CalibrationSettings())
+    if say:
+        say(f"calibrated {vehicle} on {len(trips)} nothing-withheld trips of {world} (seeds {list(seeds)}): "
+            + ", ".join(f"{p.name} {p.calibrated:.4g}" for p in cal.parameters[:4])
+            + f"; held-out force RMSE {cal.heldout.force_before:.1f} -> {cal.heldout.force_after:.1f} N")
+    return cal.sim_config
 
 
 # ============================================================================================ command line
@@ -190,6 +223,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--effects", default=None, help="comma-separated withheld effects (default: all)")
     ap.add_argument("--duration", type=float, default=900.0, help="seconds per trip (3 trips per case)")
     ap.add_argument("--vehicle", default=None, help="a shipped preset as the sim (unmatched), e.g. bmw_i3")
+    ap.add_argument("--calibrate", action="store_true", help="with --vehicle: calibrate the preset on the world's "
+                                                             "nothing-withheld trips of seeds 100, 101 first and "
+                                                             "diagnose against the calibration")
     ap.add_argument("--quick", action="store_true", help="tiny run: independent world, seed 0, 240 s trips, "
                                                         "payload + none")
     ap.add_argument("--json", type=Path, default=None, help="write all results here")
@@ -210,8 +246,10 @@ def main(argv: list[str] | None = None) -> int:
     dump = {}
     for world in worlds:
         t0 = time.perf_counter()
+        sim = (calibrated_sim(world, args.vehicle, duration=duration, say=print)
+               if args.calibrate and args.vehicle and world != "real" else None)
         run = run_world(world, seeds, effects, duration, vehicle=args.vehicle, settings=settings,
-                        say=lambda m: print(m, flush=True))
+                        say=lambda m: print(m, flush=True), sim=sim)
         print_run(run, seeds, png=args.png, markdown=args.markdown)
         print(f"({time.perf_counter() - t0:.0f} s)")
         dump[world] = run.to_dict()

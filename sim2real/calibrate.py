@@ -38,8 +38,8 @@ parameter can stand in for it (a ratio error looks like an efficiency above 1 in
 Whether the battery power's signed T ω term is a torque-signal error is decided on the reference trips: the
 calibration runs with the torque-signal gain and offset fitted on the energy side and carried over to the force
 side, and with them kept at the sim's (a motor whose losses the sim's loss map does not shape, as in FASTSim,
-leaves a signed T ω term that is no signal error); the one with the lower held-out force RMSE is kept, and the
-notes say which.
+leaves a signed T ω term that is no signal error); the one that leaves less of the held-out gap on both sides
+(force RMSE after / before plus battery-power RMSE after / before) is kept, and the notes say which.
 
 The check: the reference trips are re-run against the written spec (its own floor, the same split) and the
 held-out gap (force and battery-power RMSE on the held-out segments) is compared with the sim's before.
@@ -612,8 +612,10 @@ def calibrate(trips: Sequence[Trip], sim: SimConfig, settings: CalibrationSettin
         other = next(v for v in variants if v[1] != signal)
         kept = "calibrated from the battery power" if signal else "kept at the sim's"
         alternative = "keeping them" if signal else "calibrating them from the battery power"
-        notes.append(f"torque-signal gain and offset {kept}: held-out force RMSE {heldout.force_after:.1f} N, "
-                     f"against {other[0]:.1f} N {alternative}")
+        h = other[4]
+        notes.append(f"torque-signal gain and offset {kept}: held-out force / battery-power RMSE "
+                     f"{heldout.force_after:.1f} N / {heldout.power_after:.0f} W, against {h.force_after:.1f} N / "
+                     f"{h.power_after:.0f} W {alternative}")
     say("done", 1.0)
     amb = table.frame["ambient_temperature"].to_numpy(dtype=float)
     amb = amb[np.isfinite(amb)]
@@ -637,8 +639,15 @@ def _variant(fl, spec: VehicleSpec, signal: bool, split: Split, first, run_of: C
         spec = calibrated_spec(spec, passes[-1])
     after = run_of(spec, settings.passes)
     heldout, bins = _heldout(first, stage_floor(after, stage_table(after), split, None, None), split)
-    return (heldout.force_after if np.isfinite(heldout.force_after) else np.inf, signal, spec, passes, heldout,
-            bins)
+    return (_score(heldout), signal, spec, passes, heldout, bins)
+
+
+def _score(h: HeldOutGap) -> float:
+    """What a variant leaves of the held-out gap on both sides it changes: force RMSE after / before plus battery
+    power RMSE after / before (the force side alone where there is no battery power)."""
+    terms = [h.force_after / h.force_before, h.power_after / h.power_before]
+    finite = [t for t in terms if np.isfinite(t)]
+    return float(sum(finite)) if finite else np.inf
 
 
 def _fit_pass(fl, split: Split, spec: VehicleSpec, settings: CalibrationSettings, signal: bool = True

@@ -154,7 +154,8 @@ def hvac_experiment(settings: DiagnosisSettings | None = None, say: Callable[[st
     ref = load_i3(LOW_HVAC_SUMMER)
     c0 = time.process_time()
     cal = calibrate(ref.trips, SimConfig.load("bmw_i3"))
-    say(f"calibrated on {len(ref.trips)} low-HVAC summer trips ({time.process_time() - c0:.1f} s cpu)")
+    say(f"calibrated on {len(ref.trips)} low-HVAC summer trips ({time.process_time() - c0:.1f} s cpu): "
+        + "; ".join(cal.notes))
     probe = diagnose(ref.trips, cal.sim_config, settings)
     ref_logged = logged_hvac(probe, ref)
     f = probe.table.frame if probe.table is not None else pd.DataFrame()

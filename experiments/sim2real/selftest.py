@@ -178,7 +178,8 @@ def calibrated_sim(world: str, vehicle: str = "bmw_i3", seeds: Sequence[int] = C
     if say:
         say(f"calibrated {vehicle} on {len(trips)} nothing-withheld trips of {world} (seeds {list(seeds)}): "
             + ", ".join(f"{p.name} {p.calibrated:.4g}" for p in cal.parameters[:4])
-            + f"; held-out force RMSE {cal.heldout.force_before:.1f} -> {cal.heldout.force_after:.1f} N")
+            + f"; held-out force RMSE {cal.heldout.force_before:.1f} -> {cal.heldout.force_after:.1f} N; "
+            + "; ".join(cal.notes))
     return cal.sim_config
 
 

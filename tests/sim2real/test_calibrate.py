@@ -35,7 +35,7 @@ MODEL, synth = _core.MODEL, _core.synth
 FLOOR = (("hilly", 9101),)
 SMALL = DiagnosisSettings(floor_roads=FLOOR, floor_duration=300.0, n_boot=60, n_null=99, resimulate=False,
                           replay=False)
-CAL = CalibrationSettings(floor_roads=FLOOR, floor_duration=300.0)
+CAL = CalibrationSettings(floor_roads=FLOOR, floor_duration=300.0, passes=1)
 
 
 @pytest.fixture(scope="module")

@@ -128,22 +128,33 @@ class GroupResult:
     cpu_seconds: float
 
 
+def _valid_weighted_mean(diag: Diagnosis, per_trip: dict[str, float]) -> float:
+    """The mean of per-trip values weighted by each trip's valid rows in the diagnosis table."""
+    f = diag.table.frame if diag.table is not None else pd.DataFrame()
+    w = {k: float(np.sum((f["trip"] == k).to_numpy() & f["valid"].to_numpy(bool))) for k in per_trip}
+    return sum(per_trip[k] * w[k] for k in per_trip) / max(sum(w.values()), 1.0)
+
+
+def _pearson(sizes: dict[str, float], logged: dict[str, float]) -> float:
+    """Pearson r of the per-trip sizes against the logged values over the trips both hold (nan under 3)."""
+    common = [k for k in sizes if k in logged]
+    if len(common) < 3:
+        return float("nan")
+    return float(np.corrcoef([sizes[k] for k in common], [logged[k] for k in common])[0, 1])
+
+
 def _group(name: str, diag: Diagnosis, logged: dict[str, float], reference: float, cpu: float) -> GroupResult:
     en = diag.energy
-    aux = next((e for e in (en.effects if en else []) if e.name == "auxiliary_power"), None)
+    energy_effects = en.effects if en else []
+    aux = next((e for e in energy_effects if e.name == "auxiliary_power"), None)
     pooled = aux.parameters["delta P_aux"] if aux else float("nan")
-    sizes = ({s.trip: s.values["delta P_aux"] for s in aux.per_trip.sizes} if aux and aux.per_trip else {})
-    mean = aux.per_trip.mean["delta P_aux"] if aux and aux.per_trip else pooled
-    rows = diag.table.frame if diag.table is not None else pd.DataFrame()
-    weights = {k: float(np.sum((rows["trip"] == k).to_numpy() & rows["valid"].to_numpy(bool))) for k in logged}
-    group_hvac = sum(logged[k] * weights[k] for k in logged) / max(sum(weights.values()), 1.0)
-    diff = group_hvac - reference
-    common = [k for k in sizes if k in logged]
-    r = float(np.corrcoef([sizes[k] for k in common], [logged[k] for k in common])[0, 1]) if len(common) > 2 \
-        else float("nan")
-    first_energy = en.effects[0].name if en and en.effects else "none"
+    per_trip = aux.per_trip if aux else None
+    sizes = {s.trip: s.values["delta P_aux"] for s in per_trip.sizes} if per_trip else {}
+    mean = per_trip.mean["delta P_aux"] if per_trip else pooled
+    diff = _valid_weighted_mean(diag, logged) - reference
+    first_energy = energy_effects[0].name if energy_effects else "none"
     return GroupResult(name, first_energy, diag.effects[0].name if diag.effects else "none", pooled, mean, diff,
-                       pooled / diff - 1.0, mean / diff - 1.0, sizes, logged, r, cpu)
+                       pooled / diff - 1.0, mean / diff - 1.0, sizes, logged, _pearson(sizes, logged), cpu)
 
 
 def hvac_experiment(settings: DiagnosisSettings | None = None, say: Callable[[str], None] = print
@@ -157,10 +168,7 @@ def hvac_experiment(settings: DiagnosisSettings | None = None, say: Callable[[st
     say(f"calibrated on {len(ref.trips)} low-HVAC summer trips ({time.process_time() - c0:.1f} s cpu): "
         + "; ".join(cal.notes))
     probe = diagnose(ref.trips, cal.sim_config, settings)
-    ref_logged = logged_hvac(probe, ref)
-    f = probe.table.frame if probe.table is not None else pd.DataFrame()
-    w = {k: float(np.sum((f["trip"] == k).to_numpy() & f["valid"].to_numpy(bool))) for k in ref_logged}
-    reference = sum(ref_logged[k] * w[k] for k in ref_logged) / max(sum(w.values()), 1.0)
+    reference = _valid_weighted_mean(probe, logged_hvac(probe, ref))
     say(f"calibration trips' logged HVAC: {reference:.0f} W; identified against their own calibration: "
         f"{probe.identified or 'nothing'}")
     winter = sorted(p.stem for p in i3_folder().glob("TripB*.csv"))

@@ -1,49 +1,208 @@
-"""Run the shell code blocks (```bash / ```sh) of Markdown pages in order, so a command the README or a guide
-tells users to run cannot rot unnoticed. Blocks that install or run the test suite (``pip install``, ``pytest``)
-are skipped: .ci/run runs those itself.
+"""Run the code blocks of Markdown pages in order and check their stored outputs, so that a command the README or a
+guide tells users to run -- and what the page says it prints -- cannot rot unnoticed.
 
-    python .ci/doc_commands.py README.md --workdir SCRATCH        # the README's commands in a scratch folder
-    python .ci/doc_commands.py docs/guides/*.md --workdir .        # the guides' commands, after their Python blocks
+Blocks that run: ```bash / ```sh (in a bash with ``-euo pipefail``), and with ``--python`` also ```python (each in a
+fresh namespace of one worker process, like separate ``python -c`` runs that share loaded modules). Blocks that
+install or run the test suite (``pip install``, ``pytest``) are skipped: .ci/run runs those itself.
+
+Stored outputs: a fenced block with the info string ``output`` right after a block that runs (nothing but blank
+lines between) holds what that block prints on stdout::
+
+    ```python
+    print(f"energy {energy:.3f} kWh")
+    ```
+
+    ```output
+    energy 0.128 kWh
+    ```
+
+It is compared with the printed text after stripping trailing spaces and leading/trailing blank lines; it must match
+exactly, except that ``...`` in the stored text matches any text (wall times, paths of temporary folders, dates,
+solver timings -- whatever differs from run to run; deterministic numbers are never elided). A block without an
+output block is only run. ``--update`` rewrites every stored output that no longer matches with what was printed
+(keep the ``...`` elisions by hand where the new text needs them).
+
+    python .ci/doc_commands.py README.md --workdir SCRATCH                  # the README's shell blocks
+    python .ci/doc_commands.py docs/guides/*.md --python --workdir .        # the guides: Python + shell + outputs
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
 import re
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 SETUP = re.compile(r"^\s*(pip install|pytest)\b", re.M)
+#: a fixed terminal width, so that tables rich lays out to the terminal print the same in CI and for a reader
+ENV = {**os.environ, "COLUMNS": "120", "MPLBACKEND": "Agg"}
+FENCE = re.compile(r"^```([\w-]*)[^\n]*\n(.*?)^```[ \t]*$", re.M | re.S)
+RUNS = {"bash": "shell", "sh": "shell", "python": "python"}
 
 
-def shell_blocks(text: str) -> list[str]:
-    return [m.group(1).strip() for m in re.finditer(r"^```(?:bash|sh)\n(.*?)^```", text, re.M | re.S)]
+@dataclass
+class Block:
+    """One fenced block that runs, with the stored output that follows it (if any)."""
+
+    kind: str                  # "shell" or "python"
+    code: str
+    line: int                  # 1-based line of the opening fence
+    expected: str | None       # the stored output, or None
+    output_span: tuple[int, int] | None = None  # character span of the output block's body in the page
+
+
+def page_blocks(text: str, python: bool) -> list[Block]:
+    """The blocks of a page that run (shell; python too when ``python``), each with its stored output."""
+    fences = list(FENCE.finditer(text))
+    blocks = []
+    for i, m in enumerate(fences):
+        kind = RUNS.get(m.group(1))
+        if kind is None or (kind == "python" and not python):
+            continue
+        block = Block(kind, m.group(2), text.count("\n", 0, m.start()) + 1, None)
+        nxt = fences[i + 1] if i + 1 < len(fences) else None
+        if nxt is not None and nxt.group(1) == "output" and not text[m.end():nxt.start()].strip():
+            block.expected, block.output_span = nxt.group(2), (nxt.start(2), nxt.end(2))
+        blocks.append(block)
+    return blocks
+
+
+def normalise(text: str) -> str:
+    return "\n".join(line.rstrip() for line in text.strip("\n").splitlines()).strip("\n")
+
+
+def matches(expected: str, actual: str) -> bool:
+    """``actual`` equals ``expected``, where ``...`` in ``expected`` stands for any text (across lines too)."""
+    pattern = ".*?".join(re.escape(part) for part in normalise(expected).split("..."))
+    return re.fullmatch(pattern, normalise(actual), flags=re.S) is not None
+
+
+def first_difference(expected: str, actual: str) -> str:
+    exp, act = normalise(expected).splitlines(), normalise(actual).splitlines()
+    for i in range(max(len(exp), len(act))):
+        e = exp[i] if i < len(exp) else "<end>"
+        a = act[i] if i < len(act) else "<end>"
+        if "..." not in e and e != a:
+            return f"first difference at output line {i + 1}:\n  stored:  {e}\n  printed: {a}"
+    return "the elided (...) lines do not line up"
+
+
+WORKER = r"""
+import contextlib, io, json, os, sys, traceback
+os.environ.setdefault("MPLBACKEND", "Agg")
+for raw in sys.stdin:
+    code = json.loads(raw)
+    out, ok = io.StringIO(), True
+    try:
+        with contextlib.redirect_stdout(out):
+            exec(compile(code, "<doc block>", "exec"), {"__name__": "__main__"})
+    except BaseException:
+        ok = False
+        out.write("\n" + traceback.format_exc())
+    sys.__stdout__.write("DOC-BLOCK-RESULT " + json.dumps({"ok": ok, "out": out.getvalue()}) + "\n")
+    sys.__stdout__.flush()
+"""
+
+
+class PythonWorker:
+    """One Python process that runs blocks one after the other, each in a fresh namespace."""
+
+    def __init__(self, workdir: Path) -> None:
+        self.proc = subprocess.Popen([sys.executable, "-u", "-c", WORKER], cwd=workdir, stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, text=True, env=ENV)
+
+    def run(self, code: str) -> tuple[bool, str]:
+        assert self.proc.stdin is not None and self.proc.stdout is not None
+        self.proc.stdin.write(json.dumps(code) + "\n")
+        self.proc.stdin.flush()
+        stray = []  # what a block wrote to the file descriptor directly (a subprocess, C code): part of its output
+        for line in self.proc.stdout:
+            if line.startswith("DOC-BLOCK-RESULT "):
+                result = json.loads(line[len("DOC-BLOCK-RESULT "):])
+                return result["ok"], "".join(stray) + result["out"]
+            stray.append(line)
+        return False, "".join(stray) + "\nthe Python worker died (see its stderr above)"
+
+    def close(self) -> None:
+        if self.proc.stdin is not None:
+            self.proc.stdin.close()
+        self.proc.wait(timeout=60)
+
+
+def run_page(page: Path, workdir: Path, python: bool, update: bool) -> tuple[int, int, list[str]]:
+    """(blocks run, outputs checked, failures) of one page; with ``update`` the page's stale outputs are rewritten."""
+    text = page.read_text(encoding="utf-8")
+    blocks = page_blocks(text, python)
+    worker = PythonWorker(workdir) if any(b.kind == "python" for b in blocks) else None
+    ran = checked = 0
+    failures: list[str] = []
+    new_outputs: list[tuple[tuple[int, int], str]] = []
+    try:
+        for block in blocks:
+            first = block.code.splitlines()[0][:100] if block.code.strip() else ""
+            where = f"{page}:{block.line}"
+            if block.kind == "shell" and SETUP.search(block.code):
+                print(f"skip: {where} (set-up / tests, run by .ci/run): {first}")
+                continue
+            t0 = time.perf_counter()
+            if block.kind == "shell":
+                run = subprocess.run(["bash", "-euo", "pipefail", "-c", block.code], cwd=workdir,
+                                     capture_output=True, text=True, env=ENV)
+                ok, out = run.returncode == 0, run.stdout
+                if not ok:
+                    out += f"\n(exit code {run.returncode})\n{run.stderr[-3000:]}"
+            else:
+                assert worker is not None
+                ok, out = worker.run(block.code)
+            ran += 1
+            if not ok:
+                failures.append(f"{where}: {block.kind} block failed: {first}\n{out[-3000:]}")
+                print(f"FAILED: {where} ({time.perf_counter() - t0:.0f} s): {first}")
+                break  # later blocks may depend on this one
+            status = "ok"
+            if block.expected is not None:
+                checked += 1
+                if not matches(block.expected, out):
+                    if update and block.output_span is not None:
+                        new_outputs.append((block.output_span, normalise(out) + "\n"))
+                        status = "updated"
+                    else:
+                        failures.append(f"{where}: stored output differs from what the block prints; "
+                                        f"{first_difference(block.expected, out)}\n--- printed ---\n{out[-3000:]}")
+                        status = "OUTPUT DIFFERS"
+            print(f"{status}: {where} ({time.perf_counter() - t0:.0f} s): {first}")
+    finally:
+        if worker is not None:
+            worker.close()
+    for (start, end), body in sorted(new_outputs, reverse=True):
+        text = text[:start] + body + text[end:]
+    if new_outputs:
+        page.write_text(text, encoding="utf-8")
+        print(f"updated {len(new_outputs)} stored outputs in {page}")
+    return ran, checked, failures
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("pages", type=Path, nargs="+")
     ap.add_argument("--workdir", type=Path, required=True)
+    ap.add_argument("--python", action="store_true", help="also run the ```python blocks")
+    ap.add_argument("--update", action="store_true", help="rewrite stored outputs that no longer match")
     args = ap.parse_args()
-    ran = 0
+    ran = checked = 0
+    failures: list[str] = []
     for page in args.pages:
-        for i, block in enumerate(shell_blocks(page.read_text(encoding="utf-8")), start=1):
-            first = block.splitlines()[0][:100]
-            if SETUP.search(block):
-                print(f"skip: {page} block {i} (set-up / tests, run by .ci/run): {first}")
-                continue
-            t0 = time.perf_counter()
-            run = subprocess.run(["bash", "-euo", "pipefail", "-c", block], cwd=args.workdir, capture_output=True,
-                                 text=True)
-            if run.returncode != 0:
-                print(f"FAILED: {page} block {i}: {first}\n{run.stdout[-3000:]}\n{run.stderr[-3000:]}")
-                return 1
-            ran += 1
-            print(f"ok: {page} block {i} ({time.perf_counter() - t0:.0f} s): {first}")
-    print(f"{ran} shell blocks ran")
-    return 0
+        r, c, f = run_page(page, args.workdir, args.python, args.update)
+        ran, checked, failures = ran + r, checked + c, failures + f
+    for failure in failures:
+        print(f"\nFAILED: {failure}")
+    print(f"{ran} blocks ran, {checked} stored outputs checked, {len(failures)} failures")
+    return 1 if failures else 0
 
 
 if __name__ == "__main__":

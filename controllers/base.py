@@ -6,6 +6,11 @@ CAN sample) and gets a :class:`Command` (traction / regenerative / friction-brak
 road's stops (constant-deceleration stop, dwell, then go), clipping every command by the safety envelope
 (:mod:`.safety`) and splitting the net wheel force into traction, regeneration (within the drive's limits)
 and friction braking. Subclasses only provide ``wheel_force(obs)`` [N].
+
+The stop manoeuvre brakes at the constant deceleration v^2 / (2 d) that stops the car at the line, and the
+envelope guard at what brings the speed back under the envelope; both at most ``DriveContext.emergency_decel``
+(an emergency brake when a stop or cap appears inside the comfort braking distance: the last step of the
+fallback chain, after the MPC's maximum-comfort brake, :mod:`.mpc_controller`).
 """
 
 from __future__ import annotations
@@ -68,6 +73,8 @@ class DriveContext:
     guard_decel: float = 2.5  # deceleration the safety envelope assumes [m/s^2]
     stop_decel: float = 1.5  # comfortable deceleration of the final stop manoeuvre [m/s^2]
     stop_dwell: float = 5.0  # standstill time at each stop [s]
+    emergency_decel: float = 6.0  # strongest deceleration any controller commands [m/s^2] (about 0.6 g: hard,
+    # still within what tyres give on a wet road)
 
 
 def split_wheel_force(force: float, v: float, energy: SourceEnergyModel, ratio: float) -> Command:
@@ -189,7 +196,7 @@ class ControllerBase:
             decel = obs.v ** 2 / (2.0 * max(d, 0.2))
             if d < 0.3:
                 decel = max(decel, 2.0)
-            return self.resistance(obs.v, obs.s) - m * decel
+            return self.resistance(obs.v, obs.s) - m * min(decel, ctx.emergency_decel)
         return None
 
     def _guard(self, obs: Observation, force: float) -> float:
@@ -200,7 +207,8 @@ class ControllerBase:
             return force
         params = self.params()
         env_decel = max(0.0, -self.envelope.slope(obs.s) * obs.v)
-        limit = self.resistance(obs.v, obs.s, params) - params.inertial_mass * (env_decel + 5.0 * excess)
+        decel = min(env_decel + 5.0 * excess, self.ctx.emergency_decel)
+        limit = self.resistance(obs.v, obs.s, params) - params.inertial_mass * decel
         if force > limit:
             self.events["guard_active_steps"] += 1
             return limit

@@ -22,8 +22,7 @@ import pandas as pd
 
 from .base import Command, DriveContext, Observation
 from .force_model import ForceModel
-
-VIOLATION_TOLERANCE = 0.1  # [m/s] numerical tolerance above the posted limit
+from .safety import VIOLATION_TOLERANCE
 
 
 class Plant(Protocol):

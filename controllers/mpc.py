@@ -9,11 +9,19 @@ Dynamics (v_mid = (v_k + v_{k+1})/2, resistance at the segment midpoint, grade/c
     t_{k+1} - t_k = ds / v_mid
 Comfort: a_k = (E_{k+1} - E_k)/ds in [a_min, a_max]; jerk (a_k - a_{k-1}) v_k / ds in [-j_max, j_max]
 (k = 0 uses the acceleration the previous plan commanded). Drive limits: F_t <= T_max i / r_W,
-F_t v_mid <= P_max, F_r likewise for regeneration. Speed cap as a bound E_k <= v_cap,k^2/2, where the cap
-(limit less a margin, curve and stop caps) is raised to what is reachable from the current speed at half the
-comfort deceleration, so a problem started above a cap stays feasible; the closed loop's safety envelope
-guarantees the actual limit (:mod:`roadload.controllers.safety`). The time state is substituted
-(t_N = sum ds / v_mid), leaving E and the three forces as decision variables.
+F_t v_mid <= P_max, F_r likewise for regeneration. Speed cap as a bound E_k <= v_cap,k^2/2 (limit less a margin,
+curve and stop caps). The time state is substituted (t_N = sum ds / v_mid), leaving E and the three forces as
+decision variables.
+
+Feasibility: a cap the car cannot get under from its current state even braking as hard as the comfort limits
+allow (the acceleration ramping from a_prev down to -decel_max at jerk_max, :meth:`OcpSolver.braking_reach`) is
+raised to that reach, so the solver still returns the best plan the comfort limits permit; such a plan is
+*relaxed*, never a success: ``Plan.success`` is False, ``Plan.status`` starts with ``relaxed:`` and
+``Plan.violations`` names each constraint not met (stop, speed cap, speed margin) with its position, limit and the
+planned value. Contradictory limits (a cap below the speed floor, a previous acceleration the jerk limit cannot
+bring inside the comfort bounds) are reported the same way, and a solve that does not converge is ``infeasible:``
+with the constraint that is violated most at the point where the solver stopped. The closed loop then applies its
+fallback (:mod:`.mpc_controller`: a maximum-comfort brake, then an emergency brake).
 
 Objective [kJ]: sum_k P_source(F_t, F_r, v_mid, i_k) ds / v_mid   (energy at the source, :mod:`.energy`)
     + lambda t_N  (time weight [J/s]) - m E_N  (kinetic energy left at the horizon end is worth its value)
@@ -40,6 +48,7 @@ from .energy import SourceEnergyModel
 from roadload.road_load import RoadLoadParameters
 
 from .force_model import resistance_force
+from .safety import VIOLATION_TOLERANCE
 
 
 class MpcError(ValueError):
@@ -123,14 +132,68 @@ class Preview:
     speed_cap: np.ndarray
     ratio: np.ndarray
     segment0_cap: np.ndarray | None = None  # cap [m/s] at s0 + x ds, x = SEGMENT0_FRACTIONS (inside segment 0)
+    stops: np.ndarray | None = None  # positions [m] of the stop lines whose caps the preview holds (reporting)
 
 
 SEGMENT0_FRACTIONS = np.linspace(0.0, 1.0, 11)[1:]
 
 
+#: what each constraint name of :class:`ConstraintViolation` means
+CONSTRAINTS = {
+    "stop": "stop line: the speed at the stop may not exceed stop_speed",
+    "stop_node": "the grid node before a stop line (capped at stop_speed), while the line itself is within reach",
+    "speed_cap": "speed cap: posted limit or curve cap sqrt(a_y,max / |kappa|)",
+    "speed_margin": "speed margin: the plan keeps speed_margin below each cap",
+    "speed_floor": "speed floor: the plan never goes slower than speed_floor",
+    "acceleration": "comfort acceleration bounds [-decel_max, accel_max]",
+    "jerk": "comfort jerk bound jerk_max",
+    "dynamics": "force balance: traction - regen - brake = inertial force + resistance",
+    "traction_force": "drive force limit (torque or power at the wheels)",
+    "brake_force": "friction-brake plus regenerative force limit",
+    "traction_power": "drive power limit",
+    "regen_power": "regenerative power limit",
+    "solver": "the solver stopped without converging",
+}
+
+
+@dataclass(frozen=True)
+class ConstraintViolation:
+    """A constraint of the MPC problem that a plan does not meet, or that contradicts another one.
+
+    ``constraint``: a key of :data:`CONSTRAINTS`; ``position`` [m] where (node or segment start); ``limit`` the
+    constraint's bound and ``value`` the plan's (for a relaxed cap: the planned speed; for an unreachable stop or
+    cap: the lowest speed reachable within the comfort limits), both in ``unit``; ``amount`` = how far beyond the
+    bound; ``required_decel`` [m/s^2]: the constant deceleration from the current state that would meet it
+    (NaN where not a speed bound)."""
+
+    constraint: str
+    position: float
+    limit: float
+    value: float
+    unit: str
+    required_decel: float = float("nan")
+    detail: str = ""
+
+    @property
+    def amount(self) -> float:
+        """How far the value lies beyond the bound [unit] (>= 0)."""
+        return abs(self.value - self.limit)
+
+    def describe(self) -> str:
+        text = (f"{self.constraint} at {self.position:.0f} m: {self.value:.3g} {self.unit} against a limit of "
+                f"{self.limit:.3g} {self.unit} (off by {self.amount:.3g} {self.unit})")
+        if math.isfinite(self.required_decel):
+            text += f", needs {self.required_decel:.2f} m/s^2 of deceleration"
+        return text + (f"; {self.detail}" if self.detail else "")
+
+
 @dataclass
 class Plan:
-    """A solved (or fallback) speed/force trajectory over distance."""
+    """A solved (or fallback) speed/force trajectory over distance.
+
+    ``success`` is True only when the solver converged *and* the plan meets every constraint of the preview;
+    ``converged`` is the solver's own verdict (``solver_status`` its message); ``violations`` lists what a relaxed
+    or infeasible plan does not meet (module docstring, Feasibility)."""
 
     s: np.ndarray  # node positions [m] (N+1)
     v: np.ndarray  # planned speed [m/s] (N+1)
@@ -147,12 +210,22 @@ class Plan:
     x: np.ndarray | None = field(default=None, repr=False)  # raw primal (for warm start)
     lam_x: np.ndarray | None = field(default=None, repr=False)
     lam_g: np.ndarray | None = field(default=None, repr=False)
-    relaxed_nodes: int = 0  # nodes whose speed cap was raised to what braking at decel_max can reach (0 = none)
+    relaxed_nodes: int = 0  # nodes ahead whose speed cap was raised to the comfort-braking reach (0 = none)
+    converged: bool = True  # the solver's verdict, whatever the constraints
+    solver_status: str = ""  # the solver's message (IPOPT return status / OSQP status)
+    violations: tuple[ConstraintViolation, ...] = ()
 
     @property
     def relaxed(self) -> bool:
         """True when the plan could not honour every speed cap / stop of the preview (caps were relaxed)."""
         return self.relaxed_nodes > 0
+
+    @property
+    def feasibility(self) -> str:
+        """'feasible', 'relaxed' (converged on relaxed constraints) or 'infeasible' (no converged plan)."""
+        if not self.converged:
+            return "infeasible"
+        return "relaxed" if self.violations else "feasible"
 
     @property
     def accel(self) -> np.ndarray:
@@ -223,6 +296,7 @@ class OcpSolver:
         self._blocks_g = [n, n, n, n, n]
         self._nlp = {"x": x, "p": p, "f": obj, "g": g}
         self._energy_fun = ca.Function("energy", [x, p], [energy * 1000.0])
+        self._g_fun = ca.Function("constraints", [x, p], [g])  # diagnosis of a solve that did not converge
         opts: dict[str, Any] = {"expand": True, "print_time": False, "error_on_fail": False,
                 "ipopt": {"print_level": 0, "sb": "yes", "max_iter": st.max_iterations, "tol": 1e-6,
                           "acceptable_tol": 1e-4, "acceptable_iter": 5, "mu_strategy": "adaptive",
@@ -275,17 +349,41 @@ class OcpSolver:
             self._qp_scale[:n + 1] = QP_E_SCALE
 
     # ------------------------------------------------------------------ problem data
-    def reachable_cap(self, v0: float, preview: Preview, a_prev: float = 0.0) -> np.ndarray:
-        """Per-node speed cap [m/s] used as a bound: the preview cap less the margin, floored at the speed
-        floor, and raised only where the car cannot get below it from v0 even braking at decel_max from here on
-        (optimistic, so the relaxation never applies to a cap the plan could still meet), so a problem started
-        above a cap stays feasible (up to the jerk ramp; a failure then falls back); the safety envelope of the
-        closed loop handles the actual limit."""
+    def braking_reach(self, v0: float, preview: Preview, a_prev: float = 0.0) -> np.ndarray:
+        """Lowest speed [m/s] at each node the plan can reach from v0 within the comfort limits: the acceleration
+        ramps from a_prev down to -decel_max as fast as the NLP's jerk constraint allows,
+        a_k = max(a_{k-1} - j_max ds / v_k, -decel_max), E_{k+1} = E_k + a_k ds (floored at the speed floor).
+        Braking harder at every segment lowers every later speed, so this greedy sequence is the lowest."""
+        return self._braking(v0, len(preview.s), a_prev)[0]
+
+    def _braking(self, v0: float, n_nodes: int, a_prev: float) -> tuple[np.ndarray, np.ndarray]:
+        """(speed [m/s] at each node, acceleration [m/s^2] of each segment) of :meth:`braking_reach`."""
         st = self.settings
-        cap = np.maximum(np.asarray(preview.speed_cap, float) - st.speed_margin, st.speed_floor)
-        dist = np.asarray(preview.s, float) - float(preview.s[0])
-        v0 = max(v0, st.speed_floor)
-        reach = np.sqrt(np.maximum(v0 ** 2 - 2.0 * st.decel_max * dist, 0.0))
+        e_floor = 0.5 * st.speed_floor ** 2
+        e = 0.5 * max(v0, st.speed_floor) ** 2
+        a = min(max(a_prev, -st.decel_max), st.accel_max)
+        speed, accel = np.empty(n_nodes), np.empty(max(n_nodes - 1, 0))
+        speed[0] = math.sqrt(2.0 * e)
+        for k in range(1, n_nodes):
+            a = max(a - st.jerk_max * st.ds / math.sqrt(2.0 * e), -st.decel_max)
+            accel[k - 1] = a
+            e = max(e + a * st.ds, e_floor)
+            speed[k] = math.sqrt(2.0 * e)
+        return speed, accel
+
+    def planning_cap(self, preview: Preview) -> np.ndarray:
+        """The cap [m/s] the plan is asked to meet at each node: the preview cap less the margin, floored at the
+        speed floor (the spatial form needs v > 0)."""
+        st = self.settings
+        return np.maximum(np.asarray(preview.speed_cap, float) - st.speed_margin, st.speed_floor)
+
+    def reachable_cap(self, v0: float, preview: Preview, a_prev: float = 0.0) -> np.ndarray:
+        """Per-node speed cap [m/s] used as a bound: :meth:`planning_cap`, raised (to the reach + 0.1 m/s) only
+        where the car cannot get below it from v0 even braking as hard as the comfort limits allow
+        (:meth:`braking_reach`), so a problem started above a cap stays solvable; the plan is then reported
+        relaxed (module docstring, Feasibility) and the closed loop brakes (:mod:`.mpc_controller`)."""
+        cap = self.planning_cap(preview)
+        reach = self.braking_reach(v0, preview, a_prev)
         return np.where(reach > cap, reach + 0.1, cap)
 
     def _bounds(self, v0: float, preview: Preview, params: RoadLoadParameters, a_prev: float = 0.0):
@@ -301,13 +399,14 @@ class OcpSolver:
         lbx[0] = ubx[0] = e0
         if preview.segment0_cap is not None:
             # inside segment 0 E is linear in s: E0 (1 - x) + E1 x <= c(x)^2/2 for every sampled x where the cap
-            # is below the current speed -> an upper bound on E1 (kept reachable at the comfort deceleration)
+            # is below the current speed -> an upper bound on E1 (kept reachable within the comfort limits)
             c = 0.5 * np.maximum(np.asarray(preview.segment0_cap, float) - st.speed_margin, st.speed_floor) ** 2
             x = SEGMENT0_FRACTIONS
             low = c < e0
             if low.any():
                 bound = float(np.min(e0 + (c[low] - e0) / x[low]))
-                ubx[1] = min(ubx[1], max(bound, e0 - st.decel_max * st.ds + 1e-3, e_floor + 1e-6))
+                e1_reach = 0.5 * float(self.braking_reach(v0, preview, a_prev)[1]) ** 2
+                ubx[1] = min(ubx[1], max(bound, e1_reach + 1e-3, e_floor + 1e-6))
         lbg = np.concatenate([np.zeros(n), np.full(n, -st.decel_max), np.full(n, -st.jerk_max),
                               np.full(2 * n, -inf)])
         ubg = np.concatenate([np.zeros(n), np.full(n, st.accel_max), np.full(n, st.jerk_max),
@@ -406,14 +505,163 @@ class OcpSolver:
             plan = self._solve_ipopt(v0, a_prev, preview, params, warm, time_weight, target_speed)
         else:
             plan = self._solve_qp(v0, a_prev, preview, params, warm, time_weight)
-        plan.relaxed_nodes = self.relaxed_nodes(v0, preview)
+        plan.relaxed_nodes = self.relaxed_nodes(v0, preview, a_prev)
+        plan.converged, plan.solver_status = plan.success, plan.status
+        found = self.contradictions(v0, a_prev, preview) + self.relaxations(v0, a_prev, preview, plan)
+        if not plan.converged:
+            found += self.diagnose(plan, a_prev, preview, params, time_weight)
+        plan.violations = tuple(found)
+        plan.success = plan.converged and not found
+        if found:
+            plan.status = (f"{plan.feasibility}: " + "; ".join(v.describe() for v in found[:3])
+                           + (f" (+{len(found) - 3} more)" if len(found) > 3 else "")
+                           + f" [solver: {plan.solver_status}]")
         return plan
 
-    def relaxed_nodes(self, v0: float, preview: Preview) -> int:
-        """Nodes whose cap :meth:`reachable_cap` had to raise (the car cannot brake below it from v0 in time)."""
+    def relaxed_nodes(self, v0: float, preview: Preview, a_prev: float = 0.0) -> int:
+        """Nodes ahead (node 0 is the current state) whose cap :meth:`reachable_cap` had to raise: the car cannot
+        brake below them from v0 within the comfort limits."""
+        raised = self.reachable_cap(v0, preview, a_prev) > self.planning_cap(preview) + 1e-9
+        return int(np.sum(raised[1:]))
+
+    def relaxations(self, v0: float, a_prev: float, preview: Preview, plan: Plan | None = None
+                    ) -> list[ConstraintViolation]:
+        """One violation per run of consecutive relaxed nodes (a stop, a stretch of a lower cap): the node where
+        the plan (or, without a converged plan, the comfort-braking reach) exceeds the cap most. A stop line out of
+        comfortable reach, or a cap exceeded by more than VIOLATION_TOLERANCE, is a ``stop`` / ``speed_cap``
+        violation; one met only by eating into the margin is ``speed_margin``, and a stop whose line is within
+        reach while the grid node before it is not is ``stop_node``."""
         st = self.settings
-        cap = np.maximum(np.asarray(preview.speed_cap, float) - st.speed_margin, st.speed_floor)
-        return int(np.sum(self.reachable_cap(v0, preview) > cap + 1e-9))
+        cap = self.planning_cap(preview)
+        reach = self.braking_reach(v0, preview, a_prev)
+        raised = reach > cap + 1e-9
+        raised[0] = False  # node 0 is the current state, not a decision
+        if not raised.any():
+            return []
+        s = np.asarray(preview.s, float)
+        actual = np.asarray(preview.speed_cap, float)
+        speed = plan.v if plan is not None and plan.converged else reach
+        stops = np.asarray(preview.stops if preview.stops is not None else [], float)
+        out: list[ConstraintViolation] = []
+        k = 1
+        while k < len(s):
+            if not raised[k]:
+                k += 1
+                continue
+            end = k
+            while end + 1 < len(s) and raised[end + 1]:
+                end += 1
+            run = np.arange(k, end + 1)
+            worst = int(run[np.argmax(speed[run] - actual[run])])
+            near = stops[(stops >= s[k] - st.ds) & (stops <= s[end] + st.ds)]
+            dist = max(float(s[worst] - s[0]), 1e-9)
+            if near.size:
+                stop = float(near[0])
+                need = v0 ** 2 / (2.0 * max(stop - float(s[0]), 1e-9))
+                # the grid caps the node before the line: the line itself may still be within comfortable reach
+                at_line = self._reach_at(v0, a_prev, s, stop)
+                if at_line <= float(actual[worst]) + VIOLATION_TOLERANCE:
+                    out.append(ConstraintViolation("stop_node", stop, float(actual[worst]), float(speed[worst]),
+                                                   "m/s", need, f"the line itself is reached at {at_line:.3g} m/s "
+                                                   f"within the comfort limits"))
+                else:
+                    out.append(ConstraintViolation("stop", stop, float(actual[worst]), float(speed[worst]), "m/s",
+                                                   need, f"comfort limit {st.decel_max:g} m/s^2"))
+            elif speed[worst] > actual[worst] + VIOLATION_TOLERANCE:
+                need = max(v0 ** 2 - actual[worst] ** 2, 0.0) / (2.0 * dist)
+                out.append(ConstraintViolation("speed_cap", float(s[worst]), float(actual[worst]),
+                                               float(speed[worst]), "m/s", need,
+                                               f"comfort limit {st.decel_max:g} m/s^2"))
+            else:
+                need = max(v0 ** 2 - cap[worst] ** 2, 0.0) / (2.0 * dist)
+                out.append(ConstraintViolation("speed_margin", float(s[worst]), float(cap[worst]),
+                                               float(speed[worst]), "m/s", need,
+                                               f"the cap itself ({actual[worst]:.3g} m/s) is met within "
+                                               f"{VIOLATION_TOLERANCE:g} m/s"))
+            k = end + 1
+        return out
+
+    def _reach_at(self, v0: float, a_prev: float, s: np.ndarray, position: float) -> float:
+        """Lowest speed [m/s] reachable at ``position`` [m] inside the grid s within the comfort limits (the braking
+        of :meth:`braking_reach` continued to that point; 0 if it stops before)."""
+        speed, accel = self._braking(v0, len(s), a_prev)
+        k = int(np.clip(np.searchsorted(s, position, side="right") - 1, 0, len(accel) - 1))
+        e = 0.5 * speed[k] ** 2 + accel[k] * (position - float(s[k]))
+        return math.sqrt(max(e, 0.0))
+
+    def contradictions(self, v0: float, a_prev: float, preview: Preview) -> list[ConstraintViolation]:
+        """Limits that contradict each other before any solve: a cap ahead below the speed floor (the plan cannot
+        go that slow), and a previous acceleration a_prev [m/s^2] that the jerk limit cannot bring inside the
+        comfort bounds within the first segment."""
+        st = self.settings
+        out: list[ConstraintViolation] = []
+        actual = np.asarray(preview.speed_cap, float)
+        low = np.flatnonzero(actual[1:] < st.speed_floor - 1e-9) + 1
+        if low.size:
+            k = int(low[np.argmin(actual[low])])
+            out.append(ConstraintViolation("speed_cap", float(preview.s[k]), float(actual[k]), st.speed_floor,
+                                           "m/s", detail=f"below the speed floor {st.speed_floor:g} m/s (the "
+                                           "planned speed cannot go lower)"))
+        step = st.jerk_max * st.ds / max(v0, st.speed_floor)  # the largest acceleration change in segment 0
+        if a_prev - step > st.accel_max + 1e-9 or a_prev + step < -st.decel_max - 1e-9:
+            bound = st.accel_max if a_prev > 0 else -st.decel_max
+            out.append(ConstraintViolation("jerk", float(preview.s[0]), st.jerk_max,
+                                           abs(a_prev - bound) * max(v0, st.speed_floor) / st.ds, "m/s^3",
+                                           detail=f"the previous acceleration {a_prev:.3g} m/s^2 cannot reach the "
+                                           f"comfort bounds [-{st.decel_max:g}, {st.accel_max:g}] m/s^2 within "
+                                           f"the first {st.ds:g} m"))
+        return out
+
+    def diagnose(self, plan: Plan, a_prev: float, preview: Preview, params: RoadLoadParameters,
+                 time_weight: float | None = None) -> list[ConstraintViolation]:
+        """A solve that did not converge: the constraint violated most (relative to its bound's scale) at the
+        point where the solver stopped, one entry per constraint kind; the solver's status when none is."""
+        if plan.x is None or not np.all(np.isfinite(plan.x)):
+            return [ConstraintViolation("solver", float(preview.s[0]), 0.0, float("nan"), "-",
+                                        detail=plan.solver_status or plan.status)]
+        n = self.n
+        _, _, lbg, ubg = self._bounds(float(plan.v[0]), preview, params, a_prev)
+        g = np.asarray(self._g_fun(plan.x, self._params(a_prev, preview, params, time_weight))).ravel()
+        over = np.maximum(g - ubg, 0.0) + np.maximum(lbg - g, 0.0)
+        blocks = (("dynamics", "kN"), ("acceleration", "m/s^2"), ("jerk", "m/s^3"), ("traction_power", "kW"),
+                  ("regen_power", "kW"))
+        found = []
+        for b, (name, unit) in enumerate(blocks):
+            rows = over[b * n:(b + 1) * n]
+            k = int(np.argmax(rows))
+            if rows[k] > 1e-4:
+                i = b * n + k
+                bound = ubg[i] if g[i] > ubg[i] else lbg[i]
+                violation = ConstraintViolation(name, float(preview.s[k]), float(bound), float(g[i]), unit)
+                if name == "dynamics":  # the force the balance needs beyond what the drive or brakes give
+                    violation = self._force_limit(plan, k, float(g[i]), preview, params)
+                found.append((rows[k] / max(abs(bound), 1.0), violation))
+        if not found:
+            return [ConstraintViolation("solver", float(preview.s[0]), 0.0, 0.0, "-",
+                                        detail=plan.solver_status or plan.status)]
+        return [v for _, v in sorted(found, key=lambda f: -f[0])]
+
+    def _force_limit(self, plan: Plan, k: int, residual: float, preview: Preview,
+                     params: RoadLoadParameters) -> ConstraintViolation:
+        """A force-balance residual [kN] of segment k read as the force limit it runs into: > 0, the motion needs
+        more traction than the drive gives (e.g. a climb too steep to hold the speed floor); < 0, more braking
+        than the brakes and regeneration give."""
+        en = self.energy
+        vm = max(0.5 * (float(plan.v[k]) + float(plan.v[k + 1])), 1e-3)
+        grade = float(preview.grade[k])
+        if residual > 0:
+            limit = min(float(np.asarray(en.max_traction_force(None, preview.ratio), float)[k]),
+                        en.max_power / vm) / 1000.0
+            return ConstraintViolation("traction_force", float(preview.s[k]), limit,
+                                       float(plan.traction[k]) / 1000.0 + residual, "kN",
+                                       detail=f"at {vm:.3g} m/s on a grade of {100 * math.tan(grade):.3g} %, the "
+                                       f"drive cannot give the force the speed floor {self.settings.speed_floor:g} "
+                                       f"m/s and the deceleration bound need")
+        limit = (en.brake_force_limit(params.mass) + float(np.asarray(en.max_regen_force(preview.ratio),
+                                                                        float)[k])) / 1000.0
+        return ConstraintViolation("brake_force", float(preview.s[k]), limit,
+                                   float(plan.regen[k] + plan.brake[k]) / 1000.0 - residual, "kN",
+                                   detail=f"on a grade of {100 * math.tan(grade):.3g} %")
 
     def _solve_ipopt(self, v0, a_prev, preview, params, warm, time_weight=None, target_speed=None) -> Plan:
         lbx, ubx, lbg, ubg = self._bounds(v0, preview, params, a_prev)

@@ -9,7 +9,22 @@ comfort bounds, with |dF/dt| <= m j_max.
 On a solver failure (not converged, infeasible, exception) it returns a safe command and counts the event:
 first the shifted previous plan (while it still covers ``min_plan_left`` metres and the speed is within
 ``plan_tolerance`` of it), otherwise the cruise-control law (:mod:`.cruise`) until the next successful solve.
-The safety envelope of :class:`~.base.ControllerBase` clips every command, so a fallback cannot exceed a limit.
+
+When a stop or a speed cap ahead cannot be met within the comfort limits (the plan is relaxed or infeasible with
+a ``stop`` / ``speed_cap`` violation, :class:`~.mpc.ConstraintViolation`), the plan is not followed. Instead:
+
+1. maximum-comfort brake: F = F_resist - m decel_max (jerk-limited like every command), while braking at
+   decel_max from the current state still meets the violated constraint's actual value (the margin is given up);
+2. emergency brake: F = F_resist - m a_req, a_req = (v^2 - v_lim^2) / (2 d) the constant deceleration that meets
+   it d metres ahead (v_lim = 0 at a stop line), at most ``DriveContext.emergency_decel``, without the comfort jerk
+   limit, once comfort braking no longer suffices.
+
+The controller re-plans every control step while it brakes and returns to the plan as soon as one meets every
+stop and cap again. Events: ``relaxed_plans`` / ``infeasible_plans`` (solves that did not meet every constraint),
+``fallback_brake`` (solves that started or continued a fallback brake), ``comfort_brake_steps`` and
+``emergency_brake_steps`` (control steps in each); ``stats()['worst_violation']`` describes the largest violation
+of the run. The safety envelope of :class:`~.base.ControllerBase` clips every command as well, so no fallback can
+exceed a limit the envelope can still keep.
 """
 
 from __future__ import annotations
@@ -24,7 +39,7 @@ import numpy as np
 from .base import ControllerBase, ControllerError, DriveContext, Observation
 from .cruise import CruiseLaw, CruiseSettings
 from .energy import SourceEnergyModel
-from .mpc import SEGMENT0_FRACTIONS, MpcSettings, OcpSolver, Plan, Preview
+from .mpc import SEGMENT0_FRACTIONS, ConstraintViolation, MpcSettings, OcpSolver, Plan, Preview
 from .safety import speed_cap
 
 _SOLVERS: dict[tuple[MpcSettings, SourceEnergyModel], OcpSolver] = {}
@@ -147,8 +162,11 @@ class MpcController(ControllerBase):
 
     # ------------------------------------------------------------------ lifecycle
     def reset(self, ctx: DriveContext) -> None:
-        super().reset(ctx)
         st = self.settings.mpc
+        if not ctx.emergency_decel >= st.decel_max:
+            raise ControllerError(f"DriveContext.emergency_decel: must be >= the MPC's comfort deceleration "
+                                  f"decel_max = {st.decel_max:g} m/s^2, got {ctx.emergency_decel}")
+        super().reset(ctx)
         self.ocp = get_solver(st, ctx.energy)
         self.plan: Plan | None = None
         self.mode = "mpc"
@@ -164,6 +182,8 @@ class MpcController(ControllerBase):
         self._next_multistart = 0.0
         self._multistart_sign = 1.0
         self._gear: int | None = None  # 0-based gear of the last request
+        self._brake_target: ConstraintViolation | None = None  # the stop / cap the fallback brake is meeting
+        self._worst: ConstraintViolation | None = None
         self.reset_schedule()
 
     def reset_schedule(self) -> None:
@@ -190,7 +210,11 @@ class MpcController(ControllerBase):
                    solve_time_p99=float(np.percentile(times, 99)) if times.size else float("nan"),
                    iterations_median=float(np.median(self.iterations)) if self.iterations else float("nan"),
                    time_weight_median=float(np.median(self.time_weights)) if self.time_weights else float("nan"),
-                   fallbacks=int(self.events["fallback_shifted_plan"] + self.events["fallback_cruise"]))
+                   fallbacks=int(self.events["fallback_shifted_plan"] + self.events["fallback_cruise"]
+                                 + self.events["fallback_brake"]),
+                   relaxed_plans=int(self.events["relaxed_plans"]),
+                   infeasible_plans=int(self.events["infeasible_plans"]),
+                   worst_violation=self._worst.describe() if self._worst is not None else "")
         return out
 
     # ------------------------------------------------------------------ preview
@@ -220,8 +244,9 @@ class MpcController(ControllerBase):
         ratio = np.full(n, en.gear_ratios[0]) if en.kind == "ice" else en.ratio_for_speed(v_guess)  # ICE: lowest
         # gear for the traction-force bound (the power constraint limits the rest); the objective's gear follows
         # the planned speed through the smooth shift rule
+        stops = np.array([x for x in self._unserved if s[0] - 1.0 <= x <= s[-1]], dtype=float)
         return Preview(s=s, grade=at["grade"], curvature=at["curvature"], speed_cap=cap, ratio=ratio,
-                       segment0_cap=seg0)
+                       segment0_cap=seg0, stops=stops)
 
     # ------------------------------------------------------------------ control
     def _replan(self, obs: Observation) -> None:
@@ -235,7 +260,7 @@ class MpcController(ControllerBase):
         t0 = time.perf_counter()
         try:
             plan = self.ocp.solve(obs.v, a_prev, preview, params, warm=self.plan, time_weight=lam)
-            ok = plan.success
+            ok = plan.converged
             if self.settings.multistart_period > 0 and obs.t >= self._next_multistart and self.plan is not None:
                 self._next_multistart = obs.t + self.settings.multistart_period
                 plan, ok = self._multistart(obs, a_prev, preview, params, lam, plan, ok)
@@ -246,9 +271,18 @@ class MpcController(ControllerBase):
         self.solve_times.append(plan.solve_time if plan is not None else time.perf_counter() - t0)
         if plan is not None:
             self.iterations.append(plan.iterations)
+            if plan.violations:  # counted in the run metrics (ctl_relaxed_plans, ctl_infeasible_plans)
+                self.events["relaxed_plans" if plan.converged else "infeasible_plans"] += 1
+                self._record_worst(plan.violations)
+            target = self._brake_target_of(plan, obs)
+            if target is not None:  # a stop or cap out of comfort reach: brake (module docstring)
+                self.events["fallback_brake"] += 1
+                self._brake_target = target
+                self.plan = plan if ok else self.plan  # kept as the next warm start
+                self.mode = "brake"
+                return
+        self._brake_target = None
         if ok and plan is not None:
-            if plan.relaxed:
-                self.events["relaxed_plans"] += 1  # counted in the run metrics (ctl_relaxed_plans)
             self.plan = plan
             if self.mode != "mpc":
                 self.mode = "mpc"
@@ -278,10 +312,47 @@ class MpcController(ControllerBase):
         ref = self.plan if self.plan is not None else plan
         target = float(np.mean(ref.v)) + sign * self.settings.multistart_step
         alt = self.ocp.solve(obs.v, a_prev, preview, params, time_weight=lam, target_speed=target)
-        if alt.success and (not ok or alt.objective < plan.objective - 1e-6 * abs(plan.objective)):
+        if alt.converged and (not ok or alt.objective < plan.objective - 1e-6 * abs(plan.objective)):
             self.events["multistart_switches"] += 1
             return alt, True
         return plan, ok
+
+    def _record_worst(self, violations: tuple[ConstraintViolation, ...]) -> None:
+        for v in violations:
+            if v.constraint in ("stop", "speed_cap") and (self._worst is None or self._worst.constraint not in (
+                    "stop", "speed_cap") or v.amount > self._worst.amount):
+                self._worst = v
+            elif self._worst is None:
+                self._worst = v
+
+    @staticmethod
+    def _brake_target_of(plan: Plan, obs: Observation) -> ConstraintViolation | None:
+        """The stop / speed-cap violation of a plan that needs the hardest braking (None: the plan meets every
+        stop and cap; a margin-only relaxation is not one)."""
+        hard = [v for v in plan.violations if v.constraint in ("stop", "speed_cap") and v.position > obs.s
+                and v.value > v.limit and obs.v > v.limit]
+        if not hard:
+            return None
+        return max(hard, key=lambda v: (obs.v ** 2 - v.limit ** 2) / (2.0 * (v.position - obs.s)))
+
+    def _fallback_brake(self, obs: Observation, resistance: float, m: float) -> float | None:
+        """The fallback brake's force [N] this step (module docstring), None when its target is met or passed."""
+        target = self._brake_target
+        if target is None:
+            return None
+        d = target.position - obs.s
+        v_lim = 0.0 if target.constraint == "stop" else target.limit
+        if d <= 0.0 or obs.v <= target.limit:
+            return None
+        required = (obs.v ** 2 - v_lim ** 2) / (2.0 * d)
+        st = self.settings
+        if required <= st.mpc.decel_max:
+            self.events["comfort_brake_steps"] += 1
+            self.mode = "brake"
+            return resistance - m * st.mpc.decel_max
+        self.events["emergency_brake_steps"] += 1
+        self.mode = "emergency"
+        return resistance - m * min(required, self.ctx.emergency_decel)
 
     def time_weight(self, obs: Observation) -> float:
         """lambda [J/s] of this solve: the settings' fixed value, or the schedule's feedback (TripSchedule)."""
@@ -322,11 +393,27 @@ class MpcController(ControllerBase):
 
     def wheel_force(self, obs: Observation) -> float:
         stale = self.plan is not None and obs.s > self.plan.s[-2]
-        if obs.t >= self._next_replan or stale or (self.plan is None and self.mode == "mpc"):
+        braking = self.mode in ("brake", "emergency")
+        if obs.t >= self._next_replan or stale or braking or (self.plan is None and self.mode == "mpc"):
             self._next_replan = obs.t + self.settings.replan_period
             self._replan(obs)
         m = self.params().inertial_mass
-        if self.mode == "cruise" or self.plan is None:
+        st = self.settings.mpc
+        res = self.resistance(obs.v, obs.s)
+        brake = None
+        if self.mode in ("brake", "emergency"):
+            brake = self._fallback_brake(obs, res, m)
+            if brake is None:  # target met or passed: back to the plan (or cruise control), re-plan next step
+                self._brake_target, self._next_replan = None, -np.inf
+                self.mode = "mpc" if self.plan is not None else "cruise"
+                if self.plan is None:
+                    self.cruise.restart(obs.v)
+        if brake is not None and self.mode == "emergency":  # no comfort bounds, no comfort jerk limit
+            self._last_force = brake
+            return brake
+        if brake is not None:
+            force = brake
+        elif self.mode == "cruise" or self.plan is None:
             force = self.cruise.force(obs)
         else:
             plan = self.plan
@@ -334,12 +421,10 @@ class MpcController(ControllerBase):
             force = float(plan.wheel_force[plan.segment_at(ahead)])
             force += m * self.settings.speed_gain * (float(plan.speed_at(obs.s)) - obs.v)
         # comfort: the acceleration this force gives under the controller's model stays within the bounds
-        st = self.settings.mpc
-        res = self.resistance(obs.v, obs.s)
         force = float(np.clip(force, res - m * st.decel_max, res + m * st.accel_max))
         # jerk limit on the command: |dF/dt| <= m j_max (the plan's accel is piecewise constant per segment)
         if self._last_force is not None:
-            step = m * self.settings.mpc.jerk_max * self.ctx.dt
+            step = m * st.jerk_max * self.ctx.dt
             force = float(np.clip(force, self._last_force - step, self._last_force + step))
         self._last_force = force
         return force

@@ -13,6 +13,9 @@ import numpy as np
 
 from roadload.road_profiles import RoadProfile
 
+VIOLATION_TOLERANCE = 0.1
+"""[m/s] A speed this little above a cap is numerical noise, not a violation (run metrics, MPC feasibility)."""
+
 
 def speed_cap(road: RoadProfile, lateral_accel_max: float, s=None) -> np.ndarray:
     """min(speed limit, sqrt(a_y,max/|kappa|)) [m/s] on the road's grid (or at positions s [m])."""

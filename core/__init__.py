@@ -1,9 +1,31 @@
-"""roadload: an open testbed for vehicle tractive-force estimation and eco-driving control."""
+"""roadload: an open testbed for vehicle tractive-force estimation and eco-driving control.
 
-from .trip import Trip, TripError
+``import roadload`` stays light (the ``roadload`` command imports it before it reads its arguments): ``Trip`` and
+``TripError`` load with their module on first use (PEP 562), and the gym ids below are registered with string entry
+points.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .trip import Trip, TripError
 
 __version__ = "0.1.0"
 __all__ = ["Trip", "TripError", "__version__"]
+_LAZY = {"Trip": ".trip", "TripError": ".trip_schema"}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name], __name__), name)
+    raise AttributeError(f"module 'roadload' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
 
 
 # --- gymnasium registration -------------------------------------------------------------------------------------

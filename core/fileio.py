@@ -2,9 +2,10 @@
 
 A writer gets a temporary path in the target's folder; only when it returns without error is the file moved into
 place (``os.replace`` is atomic on one file system), with the permissions a plain ``open()`` would have given.
-On any error the temporary file is removed and an existing target is left untouched. A write killed before it
-could clean up (SIGKILL, power loss) leaves ``.<name>.roadload-tmp-<pid>-<random><suffix>``; the next write to the
-same target removes such leftovers whose process is gone.
+On any error the temporary file is removed and an existing target is left untouched; a write that runs out of room
+(disk full, quota, ``ulimit -f``) raises :class:`OutputSpaceError` naming the path and what ran out. A write killed
+before it could clean up (SIGKILL, power loss) leaves ``.<name>.roadload-tmp-<pid>-<random><suffix>``; the next
+write to the same target removes such leftovers whose process is gone.
 
 :func:`check_output_path` validates an output path before any work starts (a directory where a file is expected,
 a parent that is a file, a folder that is not writable), so a long run never fails only at its last step.
@@ -12,6 +13,7 @@ a parent that is a file, a folder that is not writable), so a long run never fai
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import tempfile
@@ -25,6 +27,40 @@ TMP_MARK = ".roadload-tmp-"
 
 class OutputPathError(ValueError):
     """An output path cannot be written; the message names the path and what is wrong with it."""
+
+
+class OutputSpaceError(OSError):
+    """A write ran out of room (disk full, disk quota, or the file-size limit ``ulimit -f``); the message names the
+    path and says that the previous file, if any, is unchanged."""
+
+    def __str__(self) -> str:
+        return str(self.strerror)  # the message names the path and the cause (no "[Errno N]" prefix)
+
+
+_NO_ROOM = {errno.ENOSPC: "no space left on the device", errno.EFBIG: "the file-size limit (ulimit -f) was reached",
+            errno.EDQUOT: "the disk quota is exceeded"}
+_NO_ROOM_TEXT = {"No space left on device": errno.ENOSPC, "File too large": errno.EFBIG,
+                 "Disk quota exceeded": errno.EDQUOT}
+
+
+def _out_of_room(exc: BaseException | None) -> int | None:
+    """The errno of a write that ran out of room anywhere in the exception chain (libraries such as pyarrow
+    re-raise with the system message only), else None."""
+    seen = 0
+    while exc is not None and seen < 10:
+        if isinstance(exc, OSError) and exc.errno in _NO_ROOM:
+            return exc.errno
+        for text, code in _NO_ROOM_TEXT.items():
+            if text in str(exc):
+                return code
+        exc = exc.__cause__ or exc.__context__
+        seen += 1
+    return None
+
+
+def _room_error(path: Path, code: int, existed: bool) -> OutputSpaceError:
+    kept = "the previous file is unchanged" if existed else "nothing was written"
+    return OutputSpaceError(code, f"{path}: cannot write: {_NO_ROOM[code]}; {kept}")
 
 
 def _default_mode() -> int:
@@ -42,16 +78,26 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}{TMP_MARK}{os.getpid()}-",
-                               suffix=path.suffix if suffix is None else suffix, dir=path.parent)
+    existed = path.exists()
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}{TMP_MARK}{os.getpid()}-",
+                                   suffix=path.suffix if suffix is None else suffix, dir=path.parent)
+    except OSError as exc:
+        code = _out_of_room(exc)
+        if code is not None:
+            raise _room_error(path, code, existed) from exc
+        raise
     os.close(fd)
     try:
         yield Path(tmp)
         os.chmod(tmp, _default_mode())  # mkstemp creates 0600
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         if os.path.exists(tmp):
             os.unlink(tmp)
+        code = _out_of_room(exc)
+        if code is not None and not isinstance(exc, OutputSpaceError):
+            raise _room_error(path, code, existed) from exc
         raise
 
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from roadload.registry import did_you_mean
 from roadload.vehicle import (AeroSpec, BatterySpec, BodySpec, BrakeSpec, ChannelSensorSpec, Curve, DrivetrainSpec,
                               EngineSpec, Map2D, MotorSpec, SensorSpec, ShiftSpec, SteeringSpec, TireSpec,
                               VehicleSpec, VehicleSpecError)
@@ -294,7 +295,8 @@ PRESETS = tuple(_PRESETS)
 def get_preset(name: str) -> VehicleSpec:
     """A fresh copy of a preset vehicle spec; unknown names raise VehicleSpecError listing the presets."""
     if name not in _PRESETS:
-        raise VehicleSpecError(f"unknown vehicle preset {name!r}; presets: {sorted(_PRESETS)}")
+        raise VehicleSpecError(f"unknown vehicle preset {name!r}{did_you_mean(name, _PRESETS)}; presets: "
+                               f"{', '.join(_PRESETS)}")
     if name not in _CACHE:
         _CACHE[name] = _PRESETS[name]().to_dict()
     # validating the cached plain form builds a fresh, independent spec (faster than a deep copy of the parts)

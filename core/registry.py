@@ -1,14 +1,23 @@
 """One registry type for every "name -> thing" catalogue roadload keeps (model structures, candidate effects,
 regimes, road profiles): registration with an explicit replace, look-up by name or pass-through of an instance,
-and an error that lists the known names."""
+and an error that names the closest known name and lists them all."""
 
 from __future__ import annotations
 
-from typing import Callable, Generic, Iterator, TypeVar
+import difflib
+from typing import Callable, Generic, Iterable, Iterator, TypeVar
 
-__all__ = ["Registry"]
+__all__ = ["Registry", "did_you_mean"]
 
 T = TypeVar("T")
+
+
+def did_you_mean(value: object, choices: Iterable[object]) -> str:
+    """`` (did you mean 'x'?)`` naming the closest of ``choices`` to ``value`` (case-insensitive, difflib ratio
+    >= 0.6), or an empty string when none is close: the hint every "unknown name" message carries."""
+    options = {str(c).lower(): str(c) for c in choices}
+    close = difflib.get_close_matches(str(value).lower(), list(options), n=1, cutoff=0.6)
+    return f" (did you mean {options[close[0]]!r}?)" if close else ""
 
 
 class Registry(Generic[T]):
@@ -45,7 +54,8 @@ class Registry(Generic[T]):
             return name
         entry = self.find(name) if isinstance(name, str) else None
         if entry is None:
-            raise self.error(f"unknown {self.kind} {name!r}; known: {', '.join(self.names()) or '(none)'}")
+            raise self.error(f"unknown {self.kind} {name!r}{did_you_mean(name, self.names())}; known: "
+                             f"{', '.join(self.names()) or '(none)'}")
         return entry
 
     def find(self, name: str) -> T | None:

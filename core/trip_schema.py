@@ -1,9 +1,10 @@
-"""Schema of the metadata a Trip Parquet file carries (the ``roadload`` key of the Parquet schema metadata).
+"""Schema of the metadata a Trip Parquet file carries (the ``roadload`` key-value entry of the Parquet file), and
+the error types of the Trip contract.
 
 :func:`parse_trip_payload` checks it before ``Trip.load`` uses it: valid JSON, a known format version, units as
-``{channel: unit}``, row counts that fit the file, JSON-object metadata. Errors are :class:`TripMetadataError`
-naming the file and the field (``Trip.load`` re-raises them as ``TripError``), e.g.
-``trip.parquet: metadata.n_measured: missing required field``.
+``{channel: unit}`` (formats 1-3; format 4 keeps each unit in its column's Arrow field metadata), row counts that
+fit the file, JSON-object metadata. Errors are :class:`TripMetadataError` naming the file and the field
+(``Trip.load`` re-raises them as ``TripError``), e.g. ``trip.parquet: metadata.n_measured: missing required field``.
 """
 
 from __future__ import annotations
@@ -16,13 +17,19 @@ from pydantic import Field, ValidationError, model_validator
 
 from .schema import StrictModel, format_errors
 
-__all__ = ["TripPayload", "TripMetadataError", "parse_trip_payload", "SUPPORTED_VERSIONS"]
+__all__ = ["TripPayload", "TripError", "TripMetadataError", "parse_trip_payload", "SUPPORTED_VERSIONS"]
+
+
+class TripError(ValueError):
+    """A Trip (or a file claiming to be one) violates the Trip contract; the message names what."""
 
 
 class TripMetadataError(ValueError):
     """The metadata of a trip file is missing, not JSON or violates the schema; the message names file and field."""
 
-SUPPORTED_VERSIONS = (1, 2, 3)  # 2: streamed row groups, compact encodings; 3: + differenced integer columns
+#: 2: streamed row groups, compact encodings; 3: + differenced integer columns; 4: open layout (plain SI floats,
+#: Parquet's own encodings, units as Arrow field metadata)
+SUPPORTED_VERSIONS = (1, 2, 3, 4)
 
 
 class TripPayload(StrictModel):
@@ -31,7 +38,7 @@ class TripPayload(StrictModel):
     model_config = StrictModel.model_config | {"extra": "allow"}  # newer writers may add keys
 
     version: int = Field(ge=1, description="Trip file format version")
-    units: dict[str, str] = Field(description="unit of every measured channel")
+    units: dict[str, str] = Field(default_factory=dict, description="unit of every measured channel (formats 1-3)")
     truth_units: dict[str, str] = Field(default_factory=dict, description="unit of every truth channel")
     meta: dict[str, Any] = Field(default_factory=dict, description="JSON metadata of the trip")
     n_measured: int = Field(ge=0, description="rows of the measured frame")
@@ -44,6 +51,8 @@ class TripPayload(StrictModel):
         if self.version not in SUPPORTED_VERSIONS:
             raise ValueError(f"version {self.version} is not supported (this roadload reads {SUPPORTED_VERSIONS}); "
                              f"upgrade roadload")
+        if self.version < 4 and "units" not in self.model_fields_set:
+            raise ValueError(f"units: missing required field (format {self.version} keeps the units here)")
         return self
 
 

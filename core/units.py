@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 G = 9.80665  # m/s^2, standard gravity
@@ -102,3 +104,34 @@ def si_unit_of(unit: str) -> str:
     if unit not in _TO_SI:
         raise ValueError(f"unknown unit {unit!r}; known: {sorted(_TO_SI)}")
     return _TO_SI[unit][0]
+
+
+# SI symbols a unit expression may combine (coherent SI base and derived units; '1' = dimensionless)
+SI_SYMBOLS = frozenset({"m", "s", "kg", "K", "A", "mol", "cd", "rad", "sr", "Hz", "N", "Pa", "J", "W", "C", "V",
+                        "F", "ohm", "S", "Wb", "T", "H", "lm", "lx", "1"})
+_SI_FACTOR = re.compile(r"^(?P<sym>[A-Za-z]+|1)(\^-?\d+)?$")
+
+
+def si_unit_problem(unit: str) -> str | None:
+    """Why ``unit`` is not an SI unit expression, or None if it is one.
+
+    An SI unit expression is ``1`` or SI symbols (:data:`SI_SYMBOLS`) joined by ``*`` and ``/`` with integer powers
+    ``^n`` (``m/s^2``, ``N*m``, ``s^4/m^4``, ``kg/m^3``, ``1/m``). A known non-SI unit (``km/h``, ``bar``, ``degC``,
+    ``%``, ``rpm``) is named with the SI unit it converts to and how."""
+    if unit in _TO_SI and _TO_SI[unit][0] != unit:
+        si_unit, factor, offset = _TO_SI[unit]
+        how = f"x [{si_unit}] = x [{unit}] * {factor:.6g}" + (f" + {offset:g}" if offset else "")
+        return f"{unit!r} is not SI: convert to {si_unit!r} ({how}, roadload.units.to_si)"
+    if not unit or unit != unit.strip():
+        return f"{unit!r} is not a unit (empty or with surrounding whitespace)"
+    for part in re.split(r"[*/]", unit):
+        m = _SI_FACTOR.match(part)
+        if m is None or m.group("sym") not in SI_SYMBOLS:
+            return (f"{unit!r} is not an SI unit expression (SI symbols {sorted(SI_SYMBOLS)} joined by '*' and '/', "
+                    f"integer powers as '^n', e.g. 'm/s^2', 'N*m', '1')")
+    return None
+
+
+def unit_label(unit: str) -> str:
+    """A unit as printed after a number: ``[m/s]``; dimensionless ``'1'`` as ``[-]`` (a bare 1 reads as a number)."""
+    return "[-]" if unit in ("1", "") else f"[{unit}]"

@@ -19,26 +19,40 @@ from pathlib import Path
 from typing import Any
 
 import numba
-from numba.core import config
+
+from roadload.jitcache import cached_njit
 
 _HERE = Path(__file__).resolve().parent
 _SOURCES = ("_jit.py", "layout.py", "numerics.py", "drivetrain.py", "driver.py", "physics.py", "batch.py")
 STAMP = hashlib.sha1(b"".join((_HERE / f).read_bytes() for f in _SOURCES)).hexdigest()[:12]
 
 
+def _cache_bases(home: Path) -> tuple[Path, ...]:
+    """Where the hashed cache folders go: under ``$NUMBA_CACHE_DIR/roadload`` when the variable is set (one cache
+    for a read-only install, or shared by the workers of a cluster), else ``home/__pycache__``, else the temp
+    folder."""
+    shared = os.environ.get("NUMBA_CACHE_DIR", "")
+    if shared:
+        return (Path(shared) / "roadload",)
+    return (home / "__pycache__", Path(tempfile.gettempdir()) / "roadload-numba")
+
+
 def _cache_dir(home: Path = _HERE, prefix: str = "numba-", stamp: str = STAMP) -> str:
-    """``home/__pycache__/<prefix><stamp>`` (or the same under the temp folder when that is not writable); the
-    folders of earlier stamps with the same prefix are removed."""
-    for base in (home / "__pycache__", Path(tempfile.gettempdir()) / "roadload-numba"):
+    """``<base>/<prefix><stamp>`` for the first writable base of :func:`_cache_bases`; the folders of earlier
+    stamps with the same prefix are removed. Processes may start on an empty cache at the same time (Dask workers,
+    SubprocVecEnv): numba writes every index and data file through a temporary file and a rename, so a reader sees
+    a whole file or none, and a kernel two processes compile at once is compiled twice, not corrupted."""
+    for base in _cache_bases(home):
         d = base / f"{prefix}{stamp}"
         try:
             d.mkdir(parents=True, exist_ok=True)
             probe = d / f".probe-{os.getpid()}"
             probe.write_bytes(b"")
             probe.unlink()
-            for old in base.glob(f"{prefix}*"):  # caches of earlier sources are dead weight
-                if old.name != d.name and len(old.name) == len(d.name):
-                    shutil.rmtree(old, ignore_errors=True)
+            if not os.environ.get("NUMBA_CACHE_DIR"):  # a shared cache may serve other versions: left alone
+                for old in base.glob(f"{prefix}*"):  # caches of earlier sources are dead weight
+                    if old.name != d.name and len(old.name) == len(d.name):
+                        shutil.rmtree(old, ignore_errors=True)
             return str(d)
         except OSError:
             continue
@@ -74,14 +88,9 @@ def jit(fn=None, *, refcount: bool = True, inline: bool = False):
 
 
 def _njit_cached(fn: Any, cache_dir: str, **options: Any) -> Any:
-    """``njit(cache=True, error_model="numpy", **options)`` caching into cache_dir."""
-    # numba.core.config creates its settings (CACHE_DIR, ...) at runtime from the environment: getattr/setattr
-    old = getattr(config, "CACHE_DIR")
-    setattr(config, "CACHE_DIR", cache_dir)
-    try:
-        return numba.njit(cache=True, error_model="numpy", **options)(fn)
-    finally:
-        setattr(config, "CACHE_DIR", old)
+    """``njit(cache=True, error_model="numpy", **options)`` caching into cache_dir (a damaged cache file is rebuilt,
+    :mod:`roadload.jitcache`)."""
+    return cached_njit(fn, cache_dir=cache_dir, error_model="numpy", **options)
 
 
 def stage(fn):

@@ -23,7 +23,7 @@ l1       sgn u                                   1/max(|u|, 1e-6)               
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, vectorize
+from roadload.jitcache import cached_njit, cached_vectorize
 
 PSI_L2, PSI_HUBER, PSI_MYRIAD, PSI_CAUCHY, PSI_TUKEY, PSI_HAMPEL, PSI_L1L2, PSI_L1 = range(8)
 
@@ -69,7 +69,7 @@ def check_psi_params(name: str, params: tuple[float, float, float]) -> None:
         raise InfluenceError(f"hampel: need 0 < a < b < c, got a={c1}, b={c2}, c={c3}")
 
 
-@njit(cache=True, inline="always")
+@cached_njit(inline="always")
 def weight_scalar(kind: int, u: float, c1: float, c2: float, c3: float) -> float:
     """W = ψ(u)/u for one standardised output correction u (limit value at u = 0)."""
     if kind == PSI_L2:
@@ -106,7 +106,7 @@ def weight_scalar(kind: int, u: float, c1: float, c2: float, c3: float) -> float
     return 1.0 / au
 
 
-@vectorize(["float64(int64, float64, float64, float64, float64)"], cache=True)
+@cached_vectorize(["float64(int64, float64, float64, float64, float64)"])
 def _weight_vec(kind, u, c1, c2, c3):
     return weight_scalar(kind, u, c1, c2, c3)
 

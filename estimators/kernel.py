@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+from roadload.jitcache import cached_njit
 
 from .influence import PSI_L2, weight_scalar
 
@@ -440,7 +441,7 @@ def store_sample(t, X, P, r_prior, r_post, w, sigma2, out_X, out_Pdiag, out_rpri
 
 # ============================================================================ the record loop
 # _nrt=False: numba's private switch for reference counting, not listed in its njit overloads
-@njit(cache=True, nogil=True, _nrt=False)  # type: ignore[call-overload]
+@cached_njit(nogil=True, _nrt=False)
 def run_record(regressors, outputs, instruments, codes, settings, process_noise, desired_cov, transition, xmin,
                xmax, P0, X, P, scalars, instrument_ring, counters, out_X, out_Pdiag, out_rprior, out_rpost, out_w,
                out_scale, vectors, matrices, size_tag):

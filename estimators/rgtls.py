@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections import deque
 
 import numpy as np
-from numba import njit
+from roadload.jitcache import cached_njit
 
 from .config import EstimatorConfigError, _matrix
 from .pks import PolynomialKalmanSmoother
@@ -25,7 +25,7 @@ from .recursive import EstimationResult, EstimatorInputError, EstimatorState, ke
 _SKIP, _ROLLED, _BLOW, _T = 0, 1, 2, 3
 
 
-@njit(cache=True)
+@cached_njit
 def rgtls_record(A, B, Nz, use_nce, lam, lam_nce, blowup, X, P, Pc, ct, sc,
                  out_X, out_Pdiag, out_rprior, out_rpost, out_scale):
     """Algorithm 3.8 over a record; Nz (T×q) are NCE noise rows (NaN rows: no NCE update)."""

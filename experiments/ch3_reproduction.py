@@ -14,7 +14,6 @@ Usage: python scripts/reproduce_ch3.py [--seeds 20] [--out out/ch3] [--only 3.3,
 from __future__ import annotations
 
 import argparse
-import tempfile
 import time
 from typing import Any
 from pathlib import Path
@@ -327,15 +326,19 @@ EXPERIMENTS = {"3.1": exp_3_1, "3.3": exp_3_3, "3.4": exp_3_4, "3.6": exp_3_6, "
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=20)
-    ap.add_argument("--out", type=Path, default=Path("out/ch3"))
+    ap.add_argument("--out", type=Path, default=None, help="output folder (default out/ch3; --quick: out/ch3_quick)")
     ap.add_argument("--only", type=str, default=",".join(EXPERIMENTS))
-    ap.add_argument("--quick", action="store_true", help="tiny run for CI: 1 seed, temporary output folder")
+    ap.add_argument("--quick", action="store_true", help="tiny run for CI: 1 seed, output in out/ch3_quick unless "
+                                                         "--out is given")
     args = ap.parse_args(argv)
     if args.quick:
-        args.seeds, args.out = 1, Path(tempfile.mkdtemp(prefix="roadload-ch3-"))
+        args.seeds = 1
+    if args.out is None:
+        args.out = Path("out/ch3_quick" if args.quick else "out/ch3")
     print(f"settings not given by the text: X̂_0 = 0, P_0 = 100 I, σ̂_0 = 1, Q̂_0 = 1, η = 0.01, "
           f"σ̂² forgetting = λ; figures in {args.out}/")
     for key in args.only.split(","):
         t0 = time.perf_counter()
         EXPERIMENTS[key.strip()](args.seeds, args.out)
         print(f"({time.perf_counter() - t0:.1f} s)")
+    print(f"figures and tables in {args.out}")

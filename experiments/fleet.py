@@ -26,7 +26,7 @@ import pandas as pd
 
 from roadload.fileio import write_json, write_text
 from roadload.tables import markdown_table, write_csv
-from roadload.trip import Trip
+from roadload.trip import Trip, TripError
 
 from roadload.estimators.evaluation import (ESTIMATORS, GRAY_BOX_MODELS, HORIZONS, MIN_TRAINING, P_MAX,
                                             combination_name, common_trips, default_combinations, evaluate_trip,
@@ -132,20 +132,38 @@ def simulate_planned_trip(entry: dict[str, Any]) -> Trip:
     return trip
 
 
-def _generate_one(task: tuple[dict[str, Any], str]) -> str:
+def stored_trip_problem(path: Path, entry: dict[str, Any]) -> str | None:
+    """Why a stored trip cannot be reused for a planned entry (unreadable, or another trip), None if it can."""
+    try:
+        info = Trip.read_info(path)
+    except (TripError, OSError) as exc:
+        return f"unreadable ({exc})"
+    stored = (info["meta"] or {}).get("fleet")
+    planned = json.loads(json.dumps({k: v for k, v in entry.items() if k != "effects"}))
+    if stored != planned:
+        return "holds another planned trip"
+    return None
+
+
+def _generate_one(task: tuple[dict[str, Any], str]) -> dict[str, str]:
+    """Simulate one planned trip unless a valid file of it is stored; a corrupt or foreign file is simulated again
+    (reported as rebuilt), never trusted."""
     entry, folder = task
     path = Path(folder) / f"{entry['name']}.parquet"
-    if not path.exists():
+    problem = stored_trip_problem(path, entry) if path.exists() else "missing"
+    if problem is not None:
         simulate_planned_trip(entry).save(path)
-    return str(path)
+    return {"path": str(path), "status": "stored" if problem is None else "simulated" if problem == "missing"
+            else f"rebuilt: the stored file was {problem}"}
 
 
 def generate_fleet(folder: str | os.PathLike, n_trips: int = 84, seed: int = 2012, total_hours: float = 20.0,
                    scheduler: str | None = None, workers: int | None = None, progress: bool = True
                    ) -> dict[str, Any]:
-    """Simulate the planned fleet into `folder` (trip files + plan.json); trips already there are kept.
+    """Simulate the planned fleet into `folder` (trip files + plan.json); valid trips already there are kept (a run
+    stopped mid-way resumes), corrupt or foreign ones are simulated again.
 
-    Returns {"folder", "plan", "trips": [paths], "failed": [(name, error)]}."""
+    Returns {"folder", "plan", "trips": [paths], "failed": [(name, error)], "rebuilt": [(name, why)]}."""
 
     folder = Path(folder)
     plan = plan_fleet(n_trips, seed, total_hours)
@@ -159,8 +177,10 @@ def generate_fleet(folder: str | os.PathLike, n_trips: int = 84, seed: int = 201
                            "n_trips": n_trips, "total_hours": total_hours, "plan": plan})
     outcomes = run_sweep(_generate_one, [(e, str(folder)) for e in plan], scheduler=scheduler, workers=workers,
                          progress=progress, description="simulating fleet")
-    return {"folder": str(folder), "plan": plan, "trips": [o.value for o in outcomes if o.ok],
-            "failed": [(o.task[0]["name"], o.error) for o in outcomes if not o.ok]}
+    rebuilt = [(Path(o.value["path"]).stem, o.value["status"]) for o in outcomes
+               if o.ok and o.value["status"].startswith("rebuilt")]
+    return {"folder": str(folder), "plan": plan, "trips": [o.value["path"] for o in outcomes if o.ok],
+            "failed": [(o.task[0]["name"], o.error) for o in outcomes if not o.ok], "rebuilt": rebuilt}
 
 
 # ================================================================================ evaluation of stored trips
@@ -179,6 +199,7 @@ class BenchmarkTask:
     p_max: float = P_MAX
     settings: PipelineSettings = field(default_factory=PipelineSettings)
     output_outliers: tuple[float, float] | None = None
+    file_stamp: str = ""  # size and modification time of the trip file (a checkpointed result is for this file)
 
 
 def inject_output_outliers(states: pd.DataFrame, rate: float, size: float, seed: int,
@@ -246,13 +267,21 @@ class BenchmarkResult:
 
 
 def run_benchmark(paths: Sequence[str | os.PathLike], scheduler: str | None = None, workers: int | None = None,
-                  progress: bool = True, **task_options: Any) -> BenchmarkResult:
-    """Evaluate stored trips through the sweep runner; failed trips are reported, not raised."""
+                  progress: bool = True, checkpoint: str | os.PathLike | None = None,
+                  **task_options: Any) -> BenchmarkResult:
+    """Evaluate stored trips through the sweep runner; failed trips are reported, not raised. ``checkpoint``: a
+    folder where each trip's evaluation is stored as it finishes (a stopped run resumes; a trip file that changed
+    since is evaluated again)."""
 
-    tasks = [BenchmarkTask(str(p), **task_options) for p in paths]
+    def stamp(p: str | os.PathLike) -> str:
+        st = os.stat(p) if checkpoint is not None and os.path.exists(p) else None
+        return f"{st.st_size}-{st.st_mtime_ns}" if st is not None else ""
+
+    tasks = [BenchmarkTask(str(p), file_stamp=stamp(p), **task_options) for p in paths]
     t0 = time.perf_counter()
     outcomes = run_sweep(evaluate_stored_trip, tasks, scheduler=scheduler, workers=workers, progress=progress,
-                         description="chapter-5 benchmark")
+                         description="chapter-5 benchmark", checkpoint=checkpoint,
+                         name=lambda task: Path(task.path).stem)
     wall = time.perf_counter() - t0
     medse, mass, infos = [], [], []
     timing = {"loading": 0.0, "preprocessing": 0.0, "estimation": 0.0, "evaluation": 0.0}
@@ -272,58 +301,62 @@ def run_benchmark(paths: Sequence[str | os.PathLike], scheduler: str | None = No
 
 
 # ================================================================================ the text's findings
-def check_findings(result: BenchmarkResult, horizon: int = 900) -> list[dict[str, Any]]:
-    """Which findings of sections 5.8/5.9 the results reproduce, with the evidence (numbers) for each."""
-    out: list[dict[str, Any]] = []
-    tab = result.medse_table(horizon).set_index("combination")
-    gray = [c for c in tab.index if c != "M0"]
-    if "M0" not in tab.index or not gray or tab["m"].min() == 0:
-        return [{"finding": "all", "reproduced": None, "evidence": f"no complete results at k = {horizon}"}]
-
-    # 1. M0 significantly worse than every gray-box combination
+def _finding_m0_worse(tab: pd.DataFrame, gray: list[str]) -> dict[str, Any]:
+    """Finding 1 (fig. 5.9): M0 is significantly worse than every gray-box combination."""
     worse = [c for c in gray if tab.loc["M0", "median"] > tab.loc[c, "median"]
              and significantly_different(tab.loc["M0"], tab.loc[c])]
-    out.append({"finding": "M0 significantly worse than every gray-box combination (fig. 5.9)",
-                "reproduced": len(worse) == len(gray),
-                "evidence": f"M0 median {tab.loc['M0', 'median']:.4g} N², notch "
-                            f"[{tab.loc['M0', 'notch_low']:.4g}, {tab.loc['M0', 'notch_high']:.4g}]; significantly "
-                            f"worse than {len(worse)}/{len(gray)} gray-box combinations"
-                            + ("" if len(worse) == len(gray) else f" (not: {sorted(set(gray) - set(worse))})")})
-    # 2. M4-RRLM lowest median and smallest IQR
+    return {"finding": "M0 significantly worse than every gray-box combination (fig. 5.9)",
+            "reproduced": len(worse) == len(gray),
+            "evidence": f"M0 median {tab.loc['M0', 'median']:.4g} N², notch "
+                        f"[{tab.loc['M0', 'notch_low']:.4g}, {tab.loc['M0', 'notch_high']:.4g}]; significantly "
+                        f"worse than {len(worse)}/{len(gray)} gray-box combinations"
+                        + ("" if len(worse) == len(gray) else f" (not: {sorted(set(gray) - set(worse))})")}
+
+
+def _finding_m4_rrlm_best(tab: pd.DataFrame, gray: list[str]) -> dict[str, Any] | None:
+    """Finding 2: M4-RRLM has the lowest median MEDSE and the smallest IQR (None without M4-RRLM)."""
+    key = "M4-RRLM"
+    if key not in tab.index:
+        return None
     best_med = tab.loc[gray, "median"].idxmin()
     best_iqr = tab.loc[gray, "iqr"].idxmin()
-    key = "M4-RRLM"
-    if key in tab.index:
-        sig = [c for c in gray if c != key and significantly_different(tab.loc[key], tab.loc[c])
-               and tab.loc[c, "median"] > tab.loc[key, "median"]]
-        out.append({"finding": "M4-RRLM has the lowest median MEDSE and the smallest IQR",
-                    "reproduced": best_med == key and best_iqr == key,
-                    "evidence": f"lowest median: {best_med} ({tab.loc[best_med, 'median']:.4g}); smallest IQR: "
-                                f"{best_iqr} ({tab.loc[best_iqr, 'iqr']:.4g}); M4-RRLM median "
-                                f"{tab.loc[key, 'median']:.4g}, IQR {tab.loc[key, 'iqr']:.4g}; significantly "
-                                f"better than {len(sig)} of {len(gray) - 1} other gray-box combinations"})
-    # 3. M4 better than M3 (per estimator, medians)
+    sig = [c for c in gray if c != key and significantly_different(tab.loc[key], tab.loc[c])
+           and tab.loc[c, "median"] > tab.loc[key, "median"]]
+    return {"finding": "M4-RRLM has the lowest median MEDSE and the smallest IQR",
+            "reproduced": best_med == key and best_iqr == key,
+            "evidence": f"lowest median: {best_med} ({tab.loc[best_med, 'median']:.4g}); smallest IQR: "
+                        f"{best_iqr} ({tab.loc[best_iqr, 'iqr']:.4g}); M4-RRLM median "
+                        f"{tab.loc[key, 'median']:.4g}, IQR {tab.loc[key, 'iqr']:.4g}; significantly "
+                        f"better than {len(sig)} of {len(gray) - 1} other gray-box combinations"}
+
+
+def _finding_m4_beats_m3(tab: pd.DataFrame) -> dict[str, Any]:
+    """Finding 3: M4 predicts better than M3, per estimator (medians)."""
     pairs = [(e, tab.loc[f"M3-{e}", "median"], tab.loc[f"M4-{e}", "median"]) for e in ESTIMATORS
              if f"M3-{e}" in tab.index and f"M4-{e}" in tab.index]
     better = [e for e, m3, m4 in pairs if m4 < m3]
-    out.append({"finding": "M4 predicts better than M3",
-                "reproduced": len(better) == len(pairs) and len(pairs) > 0,
-                "evidence": "; ".join(f"{e}: M3 {m3:.4g} vs M4 {m4:.4g}" for e, m3, m4 in pairs)})
-    # 4. SGIVMKF the best mass estimator
-    if not result.mass.empty and result.mass["nmse"].notna().any():
-        mt = result.mass_table().set_index("combination")
-        mt = mt[mt["m"] > 0]
-        best = mt["median"].idxmax()
-        out.append({"finding": "SGIVMKF gives the best mass estimates (fig. 5.10, M4-SGIVMKF best)",
-                    "reproduced": best.endswith("SGIVMKF"),
-                    "evidence": "median mass NMSE: " + ", ".join(f"{c} {mt.loc[c, 'median']:.5f}"
-                                                                 for c in mt["median"].sort_values(
-                                                                     ascending=False).index)
-                                + f" (m = {int(mt['m'].max())} converged trips)"})
-    # 5. RLS and RGTLS unstable under outliers: share of trips where the prediction fails (MEDSE > 2x RRLM's)
-    d = result.medse[result.medse["horizon"] == horizon]
-    piv = d.pivot_table(index="trip", columns="combination", values="medse")
-    info = result.trips.set_index("trip") if not result.trips.empty else pd.DataFrame()
+    return {"finding": "M4 predicts better than M3",
+            "reproduced": len(better) == len(pairs) and len(pairs) > 0,
+            "evidence": "; ".join(f"{e}: M3 {m3:.4g} vs M4 {m4:.4g}" for e, m3, m4 in pairs)}
+
+
+def _finding_sgivmkf_mass(result: BenchmarkResult) -> dict[str, Any] | None:
+    """Finding 4 (fig. 5.10): SGIVMKF gives the best mass estimates (None without converged mass results)."""
+    if result.mass.empty or not result.mass["nmse"].notna().any():
+        return None
+    mt = result.mass_table().set_index("combination")
+    mt = mt[mt["m"] > 0]
+    best = mt["median"].idxmax()
+    ranked = mt["median"].sort_values(ascending=False).index
+    return {"finding": "SGIVMKF gives the best mass estimates (fig. 5.10, M4-SGIVMKF best)",
+            "reproduced": best.endswith("SGIVMKF"),
+            "evidence": "median mass NMSE: " + ", ".join(f"{c} {mt.loc[c, 'median']:.5f}" for c in ranked)
+                        + f" (m = {int(mt['m'].max())} converged trips)"}
+
+
+def _prediction_failures(piv: pd.DataFrame, info: pd.DataFrame) -> list[tuple[str, str, float, float]]:
+    """Per gray-box combination other than RRLM: (combination, estimator, share of trips whose MEDSE exceeds 2x
+    the same model's RRLM, the same share over the trips with outliers)."""
     rows = []
     for model in GRAY_BOX_MODELS:
         ref = piv.get(f"{model}-RRLM")
@@ -341,21 +374,41 @@ def check_findings(result: BenchmarkResult, horizon: int = 900) -> list[dict[str
                 mask = ok & info.reindex(piv.index)["outliers"].fillna(False).astype(bool)
                 fail_out = float((ratio[mask] > 2.0).mean()) if mask.any() else float("nan")
             rows.append((c, e, fail, fail_out))
-    if rows:
-        share = {e: float(np.nanmean([r[2] for r in rows if r[1] == e])) for e in ESTIMATORS if e != "RRLM"}
-        nonrobust = [share.get("RLS", np.nan), share.get("RGTLS", np.nan)]
-        robust = [share.get("SGMKF", np.nan), share.get("SGIVMKF", np.nan)]
-        tails = ""
-        if "outlier_share" in info and "max_output_correction" in info:
-            tails = (f"; outliers as the estimators see them (M3-RRLM ΔB): median share beyond 5 robust σ "
-                     f"{np.nanmedian(info['outlier_share']):.4f}, median of the per-trip largest |ΔB| "
-                     f"{np.nanmedian(info['max_output_correction']):.0f} N")
-        out.append({"finding": "RLS and RGTLS are unstable under outliers (fig. 5.4/5.8)",
-                    "reproduced": bool(np.nanmin(nonrobust) > np.nanmax(robust)),
-                    "evidence": "share of trips with MEDSE > 2x the same model's RRLM (all trips / trips with "
-                                "outliers): " + ", ".join(f"{c} {f:.2f}/{fo:.2f}" for c, _, f, fo in rows)
-                                + tails})
-    return out
+    return rows
+
+
+def _finding_outlier_instability(result: BenchmarkResult, horizon: int) -> dict[str, Any] | None:
+    """Finding 5 (fig. 5.4/5.8): RLS and RGTLS are unstable under outliers, measured as the share of trips where
+    the prediction fails (MEDSE > 2x the same model's RRLM); None without RRLM references."""
+    d = result.medse[result.medse["horizon"] == horizon]
+    piv = d.pivot_table(index="trip", columns="combination", values="medse")
+    info = result.trips.set_index("trip") if not result.trips.empty else pd.DataFrame()
+    rows = _prediction_failures(piv, info)
+    if not rows:
+        return None
+    share = {e: float(np.nanmean([r[2] for r in rows if r[1] == e])) for e in ESTIMATORS if e != "RRLM"}
+    nonrobust = [share.get("RLS", np.nan), share.get("RGTLS", np.nan)]
+    robust = [share.get("SGMKF", np.nan), share.get("SGIVMKF", np.nan)]
+    tails = ""
+    if "outlier_share" in info and "max_output_correction" in info:
+        tails = (f"; outliers as the estimators see them (M3-RRLM ΔB): median share beyond 5 robust σ "
+                 f"{np.nanmedian(info['outlier_share']):.4f}, median of the per-trip largest |ΔB| "
+                 f"{np.nanmedian(info['max_output_correction']):.0f} N")
+    return {"finding": "RLS and RGTLS are unstable under outliers (fig. 5.4/5.8)",
+            "reproduced": bool(np.nanmin(nonrobust) > np.nanmax(robust)),
+            "evidence": "share of trips with MEDSE > 2x the same model's RRLM (all trips / trips with "
+                        "outliers): " + ", ".join(f"{c} {f:.2f}/{fo:.2f}" for c, _, f, fo in rows) + tails}
+
+
+def check_findings(result: BenchmarkResult, horizon: int = 900) -> list[dict[str, Any]]:
+    """Which findings of sections 5.8/5.9 the results reproduce, with the evidence (numbers) for each."""
+    tab = result.medse_table(horizon).set_index("combination")
+    gray = [c for c in tab.index if c != "M0"]
+    if "M0" not in tab.index or not gray or tab["m"].min() == 0:
+        return [{"finding": "all", "reproduced": None, "evidence": f"no complete results at k = {horizon}"}]
+    findings = [_finding_m0_worse(tab, gray), _finding_m4_rrlm_best(tab, gray), _finding_m4_beats_m3(tab),
+                _finding_sgivmkf_mass(result), _finding_outlier_instability(result, horizon)]
+    return [f for f in findings if f is not None]
 
 
 def single_trip_figures(path: str | os.PathLike, out_dir: str | os.PathLike, model: str = "M3") -> list[Path]:
@@ -379,6 +432,60 @@ def single_trip_figures(path: str | os.PathLike, out_dir: str | os.PathLike, mod
     return files
 
 
+def _report_head(result: BenchmarkResult, title: str) -> list[str]:
+    """The report's title, counts, failed trips and time split (Markdown lines)."""
+    md = [f"# {title}", "", f"{len(result.trips)} trips evaluated, {len(result.failed)} failed.", ""]
+    if result.failed:
+        md += ["## Failed trips", ""] + [f"- {n}: {e}" for n, e in result.failed] + [""]
+    t = result.timing
+    md += ["## Time", "", "| stage | seconds (summed over workers) |", "|---|---|"]
+    md += [f"| {k} | {t[k]:.2f} |" for k in ("loading", "preprocessing", "estimation", "evaluation") if k in t]
+    md += [f"| wall clock | {t.get('wall', float('nan')):.2f} |", ""]
+    return md
+
+
+def _medse_section(result: BenchmarkResult, out: Path, horizon: int, order: list[str], figures: bool) -> list[str]:
+    """The MEDSE table (CSV + Markdown) and notched box plot of one horizon; no lines without results."""
+    d = result.medse[result.medse["horizon"] == horizon]
+    if d.empty:
+        return []
+    tab = notch_table(common_trips(d))
+    tab["order"] = tab["combination"].map({c: i for i, c in enumerate(order)})
+    tab = tab.sort_values("order").drop(columns="order")
+    write_csv(out / f"medse_k{horizon}.csv", tab)
+    m = int(tab["m"].max()) if len(tab) else 0
+    if figures and len(tab) and m > 0:
+        save(plot_notched_boxplot(common_trips(d), "medse", order=[c for c in order if c in set(d["combination"])],
+                                  ylabel="MEDSE [N²]", title=f"prediction MEDSE, k = {horizon}, m = {m} trips"),
+             out / f"medse_boxplot_k{horizon}.png")
+    return [f"## MEDSE of the tractive-force prediction, k = {horizon} (trips with every combination: m = {m})", "",
+            markdown_table(tab, floatfmt=".4g"), ""]
+
+
+def _mass_section(result: BenchmarkResult, out: Path, order: list[str], figures: bool) -> list[str]:
+    """The mass NMSE table (CSV + Markdown) and its box plot; no lines without mass results."""
+    if result.mass.empty:
+        return []
+    mt = result.mass_table()
+    write_csv(out / "mass_nmse.csv", mt)
+    if figures and mt["m"].max() > 0:
+        mass_order = [c for c in order if c in set(result.mass["combination"])]
+        save(plot_notched_boxplot(result.mass, "nmse", order=mass_order, log=False, ylabel="mass NMSE [-]",
+                                  title="mass NMSE (best = 1)"),
+             out / "mass_nmse_boxplot.png")
+    return [f"## Mass NMSE after the convergence test (P_t < P_max = {P_MAX} on SGMKF)", "",
+            markdown_table(mt, floatfmt=".5g"), ""]
+
+
+def _findings_section(result: BenchmarkResult, out: Path) -> list[str]:
+    """The text's findings (CSV + Markdown list) at the default horizon."""
+    findings = check_findings(result)
+    write_csv(out / "findings.csv", pd.DataFrame(findings))
+    verdicts = {True: "reproduced", False: "NOT reproduced", None: "undecided"}
+    return ["## Findings of the text", ""] + [f"- **{f['finding']}**: {verdicts[f['reproduced']]}. {f['evidence']}"
+                                              for f in findings]
+
+
 def write_report(result: BenchmarkResult, out_dir: str | os.PathLike, horizons: Sequence[int] = HORIZONS,
                  figures: bool = True, title: str = "chapter-5 benchmark") -> Path:
     """Tables (CSV + one Markdown report) and figures (PNG) of a benchmark into out_dir; returns the report."""
@@ -388,45 +495,11 @@ def write_report(result: BenchmarkResult, out_dir: str | os.PathLike, horizons: 
     write_csv(out / "mass_per_trip.csv", result.mass)
     write_csv(out / "trips.csv", result.trips)
     order = [combination_name(m, e) for m, e in default_combinations()]
-    md = [f"# {title}", "", f"{len(result.trips)} trips evaluated, {len(result.failed)} failed.", ""]
-    if result.failed:
-        md += ["## Failed trips", ""] + [f"- {n}: {e}" for n, e in result.failed] + [""]
-    t = result.timing
-    md += ["## Time", "", "| stage | seconds (summed over workers) |", "|---|---|"]
-    md += [f"| {k} | {t[k]:.2f} |" for k in ("loading", "preprocessing", "estimation", "evaluation") if k in t]
-    md += [f"| wall clock | {t.get('wall', float('nan')):.2f} |", ""]
+    md = _report_head(result, title)
     for k in horizons:
-        d = result.medse[result.medse["horizon"] == k]
-        if d.empty:
-            continue
-        tab = notch_table(common_trips(d))
-        tab["order"] = tab["combination"].map({c: i for i, c in enumerate(order)})
-        tab = tab.sort_values("order").drop(columns="order")
-        write_csv(out / f"medse_k{k}.csv", tab)
-        md += [f"## MEDSE of the tractive-force prediction, k = {k} (trips with every combination: "
-               f"m = {int(tab['m'].max()) if len(tab) else 0})", "", markdown_table(tab, floatfmt=".4g"), ""]
-        if figures and len(tab) and tab["m"].max() > 0:
-
-            save(plot_notched_boxplot(common_trips(d), "medse", order=[c for c in order if c in set(d["combination"])],
-                                      ylabel="MEDSE [N²]", title=f"prediction MEDSE, k = {k}, "
-                                                                 f"m = {int(tab['m'].max())} trips"),
-                 out / f"medse_boxplot_k{k}.png")
-    if not result.mass.empty:
-        mt = result.mass_table()
-        write_csv(out / "mass_nmse.csv", mt)
-        md += [f"## Mass NMSE after the convergence test (P_t < P_max = {P_MAX} on SGMKF)", "",
-               markdown_table(mt, floatfmt=".5g"), ""]
-        if figures and mt["m"].max() > 0:
-            mass_order = [c for c in order if c in set(result.mass["combination"])]
-            save(plot_notched_boxplot(result.mass, "nmse", order=mass_order, log=False, ylabel="mass NMSE [-]",
-                                      title="mass NMSE (best = 1)"),
-                 out / "mass_nmse_boxplot.png")
-    findings = check_findings(result)
-    write_csv(out / "findings.csv", pd.DataFrame(findings))
-    md += ["## Findings of the text", ""]
-    for f in findings:
-        verdict = {True: "reproduced", False: "NOT reproduced", None: "undecided"}[f["reproduced"]]
-        md += [f"- **{f['finding']}**: {verdict}. {f['evidence']}"]
+        md += _medse_section(result, out, k, order, figures)
+    md += _mass_section(result, out, order, figures)
+    md += _findings_section(result, out)
     report = out / "report.md"
     write_text(report, "\n".join(md) + "\n")
     return report

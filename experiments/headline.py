@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import math
-from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +26,7 @@ from roadload.road_profiles import long_grades
 from roadload.tables import markdown_table
 from roadload.units import G
 from roadload.fileio import write_text
-from roadload.sweep import run_sweep
+from roadload.sweep import read_unit, run_sweep
 from roadload.fileio import save_figure
 
 SENSITIVITY_ERRORS: dict[str, tuple[float, ...]] = {
@@ -95,10 +94,14 @@ def run_paired(tasks: list[PairedTask], out: Path, scheduler: str | None = None,
                description: str = "paired comparison", merge: list[Path] | None = None
                ) -> tuple[pd.DataFrame, list[str]]:
     """Run the tasks on the sweep runner, write runs.json and summary.csv/.md; returns (summary, failures).
-    merge: runs.json files of earlier runs (other seeds) summarised together with these."""
+
+    Every finished task is stored at once in ``out/tasks/`` (a checkpointed sweep, :mod:`roadload.sweep`): a run
+    that is stopped or killed keeps its finished seeds, and running the same command again computes only the
+    rest (the tables equal those of an uninterrupted run). merge: runs.json files of earlier runs (other seeds),
+    or their tasks/ folders, summarised together with these."""
     out.mkdir(parents=True, exist_ok=True)
-    outcomes = run_sweep(partial(run_and_store, folder=str(out / "tasks")), tasks, scheduler=scheduler,
-                         workers=workers, description=description)
+    outcomes = run_sweep(run_paired_task, tasks, scheduler=scheduler, workers=workers, description=description,
+                         checkpoint=out / "tasks", name=task_name)
     results = [o.value for o in outcomes if o.ok]
     for path in merge or []:
         results += load_stored(Path(path)) if Path(path).is_dir() else json.loads(Path(path).read_text())
@@ -113,19 +116,28 @@ def run_paired(tasks: list[PairedTask], out: Path, scheduler: str | None = None,
     return summary, failures
 
 
-def run_and_store(task: PairedTask, folder: str) -> dict[str, Any]:
-    """run_paired_task, its result also written to ``folder``/<case>_<road>_<condition>_<seed>.json as soon as
-    it is done (a long sweep that is stopped keeps its finished seeds: :func:`load_stored`)."""
-    result = run_paired_task(task)
-    path = Path(folder) / f"{task.case}_{task.road}_{task.condition}_{task.seed}.json"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    write_text(path, json.dumps(result, default=_json_default))
-    return result
+def task_name(task: PairedTask) -> str:
+    """Readable prefix of a task's stored result: <case>_<road>_<condition>_<seed>."""
+    return f"{task.case}_{task.road}_{task.condition}_{task.seed}"
 
 
 def load_stored(folder: Path) -> list[dict[str, Any]]:
-    """The per-task results that :func:`run_and_store` wrote into ``folder``."""
-    return [json.loads(p.read_text()) for p in sorted(Path(folder).glob("*.json"))]
+    """The per-task results stored in a run's tasks/ folder (checkpoint unit files; plain result files of older
+    runs too). A file that is corrupt or not a result is refused with its name, never silently summarised."""
+    out = []
+    for p in sorted(Path(folder).glob("*.json")):
+        value, problem = read_unit(p)
+        if problem is None:
+            out.append(value)
+            continue
+        try:
+            doc = json.loads(p.read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise ValueError(f"{p}: not a stored result ({problem}; {exc})") from None
+        if not (isinstance(doc, dict) and "format" not in doc and "task" in doc):
+            raise ValueError(f"{p}: not a stored result ({problem})")
+        out.append(doc)
+    return out
 
 
 def _json_default(x: Any):

@@ -23,7 +23,9 @@ class GymConfigError(ValueError):
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+    # allow_inf_nan=False: every float option (tuples and the reward weights included) must be finite; NaN passes
+    # no range check and inf passes every lower bound
+    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True, allow_inf_nan=False)
 
 
 def _check_vehicle(name: str) -> str:
@@ -229,7 +231,30 @@ class EcoHighwayConfig(_Strict):
 SPACE_FIELDS_HIGHWAY = ("lane_changes", "observed_vehicles")
 
 
-def _format(exc: ValidationError, what: str) -> str:
+def _number(x: float) -> str:
+    return str(int(x)) if float(x).is_integer() else repr(float(x))
+
+
+def _expected(cls: type[BaseModel], loc: tuple) -> str:
+    """'; expected: <description with unit>, <bounds>' of the field at ``loc`` (nested models followed), or ''."""
+    model: Any = cls
+    info = None
+    for part in loc:
+        fields = getattr(model, "model_fields", None)
+        if not isinstance(part, str) or fields is None or part not in fields:
+            break
+        info = fields[part]
+        model = info.annotation
+    if info is None:
+        return ""
+    ops = (("gt", ">"), ("ge", ">="), ("lt", "<"), ("le", "<="))
+    bounds = [f"{op} {_number(getattr(m, key))}" for m in info.metadata for key, op in ops
+              if getattr(m, key, None) is not None]
+    text = ", ".join(x for x in [info.description or "", " and ".join(bounds)] if x)
+    return f"; expected: {text}" if text else ""
+
+
+def _format(exc: ValidationError, what: str, cls: type[BaseModel] | None = None) -> str:
     lines = []
     for err in exc.errors():
         loc = ".".join(str(p) for p in err["loc"]) or "(config)"
@@ -238,7 +263,8 @@ def _format(exc: ValidationError, what: str) -> str:
         else:
             got = err.get("input")
             got_s = "" if isinstance(got, dict) else f" (got {got!r})"
-            lines.append(f"  {loc}: {err['msg']}{got_s}")
+            hint = _expected(cls, tuple(err["loc"])) if cls is not None else ""
+            lines.append(f"  {loc}: {err['msg']}{got_s}{hint}")
     return f"invalid {what} configuration:\n" + "\n".join(lines)
 
 
@@ -263,7 +289,7 @@ def make_config(cls: type[_Strict], base: _Strict | dict | None = None, **overri
     try:
         return cls.model_validate(data)
     except ValidationError as exc:
-        raise GymConfigError(_format(exc, cls.__name__)) from None
+        raise GymConfigError(_format(exc, cls.__name__, cls)) from None
 
 
 def updated_config(config: _Strict, options: dict[str, Any] | None, space_fields: tuple[str, ...]) -> Any:

@@ -21,7 +21,7 @@ Reward: scale * (progress * dx - energy * E_source + mechanical_energy * dM - co
 ``info['terms']``. dM is the change of the ego's mechanical energy over the step, kinetic 0.5 m v^2 plus potential
 (the simulator's climbing work m g dh) [J]; its episode sum is the final minus the initial mechanical energy, i.e. a
 terminal credit for the speed and height left at the cutoff, paid as they change (without it, braking from the
-initial speed and regenerating its kinetic energy beat driving on: docs/results/scale.md). Terminates on a
+initial speed and regenerating its kinetic energy beat driving on: docs/results/rl.md). Terminates on a
 collision, truncates at ``duration``.
 """
 

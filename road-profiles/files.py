@@ -36,7 +36,12 @@ _ALIASES = {
     "lon": ("lon", "lng", "long", "longitude", "lon_deg"),
     "distance": ("distance", "distance_m", "dist", "s", "s_m"),
     "elevation": ("elevation", "elevation_m", "ele", "alt", "altitude", "altitude_m", "height", "z"),
+    "time": ("time", "time_s", "t", "timestamp", "datetime", "date_time"),
 }
+#: what each track column is, with its unit (for error messages)
+_ROLES = {"lat": "latitude [deg]", "lon": "longitude [deg]", "distance": "cumulative distance [m]",
+          "elevation": "elevation [m]", "heading": "heading [deg or rad, heading_unit]",
+          "time": "time [s] or a date-time"}
 
 
 class ProfileFileError(RoadProfileError):
@@ -95,14 +100,52 @@ def save_profile(profile: RoadProfile | DriveCycle, path: str | os.PathLike) -> 
     return path
 
 
+# --------------------------------------------------------------------------------------------- input checks
+
+def _check_name(path: Path, name: Any) -> str:
+    """A profile name from a file: a non-empty string without surrounding white space."""
+    if not isinstance(name, str) or not name.strip() or name != name.strip():
+        raise ProfileFileError(f"{path}: name must be a non-empty string without leading or trailing spaces, got "
+                               f"{name!r}")
+    return name
+
+
+def _check_units(path: Path, units: Any, expected: dict[str, str], where: str) -> None:
+    """The ``units`` a file declares must be the SI units roadload stores (the values are read as such)."""
+    if units is None:
+        return
+    if not isinstance(units, dict):
+        raise ProfileFileError(f"{path}: 'units' ({where}) must map field names to unit strings, got {units!r}; "
+                               f"expected {expected}")
+    for field_name, unit in units.items():
+        if field_name not in expected:
+            raise ProfileFileError(f"{path}: units.{field_name} ({where}): unknown field; the fields are "
+                                   f"{sorted(expected)}")
+        if unit != expected[field_name]:
+            raise ProfileFileError(f"{path}: units.{field_name} ({where}) is {unit!r}; expected "
+                                   f"{expected[field_name]!r} (profile files store SI values)")
+
+
+def _check_time_order(path: Path, seconds: np.ndarray, label: str, where: str = "row") -> None:
+    """Refuse a time base that runs backwards (samples out of driving order); missing times are skipped."""
+    known = np.flatnonzero(np.isfinite(seconds))
+    back = np.flatnonzero(np.diff(seconds[known]) < 0)
+    if back.size:
+        i, j = int(known[back[0]]), int(known[back[0] + 1])
+        raise ProfileFileError(f"{path}: {label} runs backwards at {where} {j}: {seconds[j]:g} s after "
+                               f"{seconds[i]:g} s (at {where} {i}); expected time in driving order [s]")
+
+
 # --------------------------------------------------------------------------------------------- load
 
 def _build(kind: str, name: str, meta: dict, arrays: dict[str, Any], stops, path: Path) -> RoadProfile | DriveCycle:
+    _check_name(path, name)
     try:
         if kind == CYCLE_FORMAT:
             for column in ("time", "speed"):
                 if column not in arrays:
                     raise ProfileFileError(f"{path}: drive cycle without the {column!r} field")
+            _check_time_order(path, np.asarray(arrays["time"], float), "time", "sample")
             return DriveCycle(name=name, time=arrays["time"], speed=arrays["speed"], grade=arrays.get("grade"),
                               meta=meta)
         missing = [c for c in PROFILE_COLUMNS if c not in arrays]
@@ -127,9 +170,18 @@ def _load_json(path: Path) -> RoadProfile | DriveCycle:
     if doc.get("version") != VERSION:
         raise ProfileFileError(f"{path}: unsupported version {doc.get('version')!r} (expected {VERSION})")
     keys = PROFILE_COLUMNS if doc["format"] == PROFILE_FORMAT else ("time", "speed", "grade")
+    _check_units(path, doc.get("units"), PROFILE_UNITS if doc["format"] == PROFILE_FORMAT else CYCLE_UNITS, "JSON")
     arrays = {k: _numeric(path, k, doc[k]) for k in keys if doc.get(k) is not None}
-    return _build(doc["format"], str(doc.get("name", path.stem)), dict(doc.get("meta") or {}), arrays,
+    return _build(doc["format"], doc.get("name", path.stem), _meta(path, doc.get("meta")), arrays,
                   doc.get("stops"), path)
+
+
+def _meta(path: Path, meta: Any) -> dict:
+    if meta is None:
+        return {}
+    if not isinstance(meta, dict):
+        raise ProfileFileError(f"{path}: 'meta' must be a JSON object, got {meta!r}")
+    return dict(meta)
 
 
 def _numeric(path: Path, field: str, values) -> np.ndarray:
@@ -145,8 +197,14 @@ def _load_roadload_csv(path: Path, first_line: str) -> RoadProfile | DriveCycle:
         header = json.loads(header_text) if header_text else {}
     except json.JSONDecodeError as exc:
         raise ProfileFileError(f"{path}: the header line is not valid JSON ({exc})") from exc
+    if not isinstance(header, dict):
+        raise ProfileFileError(f"{path}: the header line must hold a JSON object, got {header!r}")
+    if kind not in (PROFILE_FORMAT, CYCLE_FORMAT):
+        raise ProfileFileError(f"{path}: unknown header {kind!r}; expected {PROFILE_FORMAT!r} or {CYCLE_FORMAT!r}")
     if header.get("version", VERSION) != VERSION:
         raise ProfileFileError(f"{path}: unsupported version {header.get('version')!r} (expected {VERSION})")
+    _check_units(path, header.get("units"), PROFILE_UNITS if kind == PROFILE_FORMAT else CYCLE_UNITS,
+                 "header line")
     frame = _read_frame(path, skiprows=1)
     arrays = {}
     for column in frame.columns:
@@ -155,7 +213,7 @@ def _load_roadload_csv(path: Path, first_line: str) -> RoadProfile | DriveCycle:
         if text_bad.size:
             raise ProfileFileError(f"{path}: column {column!r} has a non-numeric value at row {int(text_bad[0])}")
         arrays[column] = values
-    return _build(kind, str(header.get("name", path.stem)), dict(header.get("meta") or {}), arrays,
+    return _build(kind, header.get("name", path.stem), _meta(path, header.get("meta")), arrays,
                   header.get("stops"), path)
 
 
@@ -197,38 +255,79 @@ def load_profile_file(path: str | os.PathLike, **kw) -> RoadProfile | DriveCycle
 # --------------------------------------------------------------------------------------------- tracks
 
 def _column(frame: pd.DataFrame, path: Path, role: str, given: str | None, required: bool = False) -> np.ndarray | None:
+    name = _column_name(frame, path, role, given, required)
+    return None if name is None else _numeric_column(frame, path, name, role)
+
+
+def _column_name(frame: pd.DataFrame, path: Path, role: str, given: str | None, required: bool = False) -> str | None:
+    """The column holding ``role``: ``given``, else the one column whose name is an alias of the role (two such
+    columns are ambiguous and refused)."""
     if given is not None:
         if given not in frame.columns:
             raise ProfileFileError(f"{path}: no column {given!r} for {role}; columns are {list(frame.columns)}")
-        name = given
-    else:
-        lower = {c.lower(): c for c in frame.columns}
-        found = next((lower[a] for a in _ALIASES[role] if a in lower), None)
-        if found is None:
-            if required:
-                raise ProfileFileError(f"{path}: no {role} column (looked for {list(_ALIASES[role])}); "
-                                       f"columns are {list(frame.columns)} - pass {role}=<column name>")
-            return None
-        name = found
+        return given
+    found = [c for c in frame.columns if c.lower() in _ALIASES[role]]
+    if len(found) > 1:
+        raise ProfileFileError(f"{path}: columns {found} all look like the {_ROLES[role]}; pass {role}=<column "
+                               f"name> to choose one")
+    if not found:
+        if required:
+            raise ProfileFileError(f"{path}: no {role} column (looked for {list(_ALIASES[role])}); "
+                                   f"columns are {list(frame.columns)} - pass {role}=<column name>")
+        return None
+    return found[0]
+
+
+def _numeric_column(frame: pd.DataFrame, path: Path, name: str, role: str) -> np.ndarray:
+    """A numeric column: an empty cell is a missing value (NaN); text or +-inf is refused with its row."""
     values = pd.to_numeric(frame[name], errors="coerce").to_numpy(float)
     text_bad = np.flatnonzero(np.isnan(values) & frame[name].notna().to_numpy())
     if text_bad.size:
-        raise ProfileFileError(f"{path}: column {name!r} has a non-numeric value at row {int(text_bad[0])}")
+        i = int(text_bad[0])
+        raise ProfileFileError(f"{path}: column {name!r} has a non-numeric value {frame[name].iloc[i]!r} at row "
+                               f"{i}; expected the {_ROLES[role]}")
+    inf = np.flatnonzero(np.isinf(values))
+    if inf.size:
+        i = int(inf[0])
+        raise ProfileFileError(f"{path}: column {name!r} has a non-finite value {values[i]:g} at row {i}; expected "
+                               f"a finite {_ROLES[role]} (an empty cell marks a missing one)")
     return values
+
+
+def _time_column(frame: pd.DataFrame, path: Path, given: str | None) -> np.ndarray | None:
+    """Seconds from the track's time column (numbers [s] or date-times), None without one."""
+    name = _column_name(frame, path, "time", given)
+    if name is None:
+        return None
+    if pd.api.types.is_numeric_dtype(frame[name]):
+        return _numeric_column(frame, path, name, "time")
+    stamps = pd.to_datetime(frame[name], errors="coerce", utc=True, format="mixed")
+    bad = np.flatnonzero(stamps.isna().to_numpy() & frame[name].notna().to_numpy())
+    if bad.size:
+        i = int(bad[0])
+        raise ProfileFileError(f"{path}: column {name!r} has a value {frame[name].iloc[i]!r} at row {i} that is "
+                               f"neither seconds nor a date-time; expected the {_ROLES['time']}")
+    first = stamps.dropna()
+    if first.empty:
+        return None
+    return ((stamps - first.iloc[0]).dt.total_seconds()).to_numpy(float)
 
 
 def load_track_csv(path: str | os.PathLike, *, lat: str | None = None, lon: str | None = None,
                    distance: str | None = None, elevation: str | None = None, heading: str | None = None,
-                   heading_unit: str = "deg", heading_reference: str = "course", name: str | None = None,
-                   licence: str = "unknown (user file)", **profile_kw) -> RoadProfile:
+                   heading_unit: str = "deg", heading_reference: str = "course", time: str | None = None,
+                   name: str | None = None, licence: str = "unknown (user file)", **profile_kw) -> RoadProfile:
     """A RoadProfile from a CSV track: lat/lon [deg] or distance [m], plus optional elevation [m] and heading.
 
     Column names are found case-insensitively among common aliases (lat/latitude, lon/lng/longitude,
-    distance/s, elevation/ele/alt/altitude) or given explicitly. With lat/lon the curvature comes from the
-    positions (distance by haversine unless a distance column is given); with distance only, from ``heading``
-    (``heading_reference`` "course" = clockwise from north, "math" = counter-clockwise from east; unit "deg" or
-    "rad") or 0. Rows with missing lat/lon are dropped (counted in meta repairs). Other keyword arguments go to
-    ``profile_from_track`` (step, elevation_window, heading_window, default_speed_limit, ...).
+    distance/s, elevation/ele/alt/altitude, time/t/timestamp) or given explicitly; two columns that both match a
+    role are refused as ambiguous. With lat/lon the curvature comes from the positions (distance by haversine
+    unless a distance column is given); with distance only, from ``heading`` (``heading_reference`` "course" =
+    clockwise from north, "math" = counter-clockwise from east; unit "deg" or "rad") or 0. A time column (seconds
+    or date-times) must not run backwards: rows out of driving order would be driven in the wrong order. Rows with
+    missing lat/lon are dropped (counted in meta repairs); text or +-inf in a numeric column is refused with its
+    row. Other keyword arguments go to ``profile_from_track`` (step, elevation_window, heading_window,
+    default_speed_limit, ...).
     """
     path = Path(path)
     frame = _read_frame(path)
@@ -236,11 +335,14 @@ def load_track_csv(path: str | os.PathLike, *, lat: str | None = None, lon: str 
     lon_v = _column(frame, path, "lon", lon)
     dist_v = _column(frame, path, "distance", distance)
     ele_v = _column(frame, path, "elevation", elevation)
+    time_v = _time_column(frame, path, time)
+    if time_v is not None:
+        _check_time_order(path, time_v, f"column {_column_name(frame, path, 'time', time)!r}")
     head_v = None
     if heading is not None:
         if heading not in frame.columns:
             raise ProfileFileError(f"{path}: no column {heading!r} for heading; columns are {list(frame.columns)}")
-        head_v = pd.to_numeric(frame[heading], errors="coerce").to_numpy(float)
+        head_v = _numeric_column(frame, path, heading, "heading")
         if heading_unit not in ("deg", "rad"):
             raise ValueError(f"heading_unit must be 'deg' or 'rad', got {heading_unit!r}")
         if heading_reference not in ("course", "math"):
@@ -307,6 +409,16 @@ def load_gpx(path: str | os.PathLike, *, name: str | None = None, licence: str =
     lat = np.array([p.latitude for p in points], dtype=float)
     lon = np.array([p.longitude for p in points], dtype=float)
     ele = np.array([np.nan if p.elevation is None else p.elevation for p in points], dtype=float)
+    for label, values in (("latitude [deg]", lat), ("longitude [deg]", lon), ("elevation [m]", ele)):
+        inf = np.flatnonzero(np.isinf(values))
+        if inf.size:
+            raise ProfileFileError(f"{path}: point {int(inf[0])} has a non-finite {label} {values[inf[0]]:g}")
+    stamps = [getattr(p, "time", None) for p in points]  # track, route and way points all carry one in GPX
+    if any(s is not None for s in stamps):
+        known = [s for s in stamps if s is not None]
+        first = known[0]
+        seconds = np.array([np.nan if s is None else _seconds_between(path, first, s) for s in stamps])
+        _check_time_order(path, seconds, "the point time", "point")
     track_name = name or next((t.name for t in gpx.tracks if t.name), None) or path.stem
     meta = {"source": str(path.name), "licence": licence, "gpx_points": len(points)}
     try:
@@ -315,3 +427,11 @@ def load_gpx(path: str | os.PathLike, *, name: str | None = None, licence: str =
                                   xy=xy, name=track_name, meta=meta, **profile_kw)
     except RoadProfileError as exc:
         raise ProfileFileError(f"{path}: {exc}") from exc
+
+
+def _seconds_between(path: Path, first, stamp) -> float:
+    try:
+        return float((stamp - first).total_seconds())
+    except TypeError as exc:  # a time zone on some points only
+        raise ProfileFileError(f"{path}: point times mix time zones ({first.isoformat()} and "
+                               f"{stamp.isoformat()}); expected one time base") from exc

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from roadload.registry import Registry
+from roadload.registry import Registry, did_you_mean
 
 from . import cycles, generate, real_routes
 from .files import load_profile_file
@@ -104,8 +104,10 @@ def load_profile(name_or_path: str | os.PathLike, seed: int = 0, **kw) -> RoadPr
     path = Path(text)
     if path.suffix.lower() in _SUFFIXES or path.exists():
         return load_profile_file(path, **kw)
-    raise UnknownProfileError(f"unknown road profile {text!r}: not a registered name and not a .json/.csv/.gpx "
-                              f"file; known names: {', '.join(known_profiles())}")
+    names = known_profiles()
+    raise UnknownProfileError(f"unknown road profile {text!r}{did_you_mean(text, names)}: not a registered name and "
+                              f"not a .json/.csv/.gpx file; known names ({len(names)}, with descriptions: roadload "
+                              f"profiles list): {', '.join(names)}")
 
 
 def load_profile_start(name_or_path: str | os.PathLike, length: float | None, seed: int = 0

@@ -1,8 +1,8 @@
 """Effect of EcoDrive-v0's speed shield on a trained policy: the same policy on the held-out roads with the shield
 on and off (roadload.experiments.rl.shield_effect).
 
-    python scripts/shield_effect.py --policy docs/results/scale_rl/ppo_ecodrive.zip    # a saved SB3 policy
-    python scripts/shield_effect.py --quick                                             # CI: full throttle, 1 road
+    python scripts/shield_effect.py --policy out/rl/ppo_ecodrive.zip   # saved by scripts/train_rl.py --out out/rl
+    python scripts/shield_effect.py --quick                            # CI: full throttle, 1 road
 """
 
 from roadload.experiments.rl.shield_effect import main

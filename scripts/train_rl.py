@@ -3,17 +3,15 @@ learning curve and evaluate on held-out roads against cruise control and the MPC
 
     python scripts/train_rl.py --timesteps 300000 --out out/rl            # = roadload train ...
     python scripts/train_rl.py --evaluate-only --out out/rl               # re-evaluate saved policies
-    python scripts/train_rl.py --quick                                    # tiny run for CI (PPO, 2k steps)
+    python scripts/train_rl.py --quick                                    # tiny run for CI (PPO, 2k steps,
+                                                                          # into out/rl_quick unless --out)
 
 All options: python scripts/train_rl.py --help (the same as ``roadload train``).
 """
 
 import sys
-import tempfile
 
-import typer
-
-from roadload.experiments.rl import register
+from roadload.experiments.cli import main
 
 QUICK = ["--algo", "ppo", "--timesteps", "2048", "--eval-every", "0", "--held-out", "1", "--baselines", "cruise"]
 
@@ -22,8 +20,7 @@ if __name__ == "__main__":
     if "--quick" in args:
         args = [a for a in args if a != "--quick"]
         if "--out" not in args:
-            args += ["--out", tempfile.mkdtemp(prefix="roadload-rl-")]
+            args += ["--out", "out/rl_quick"]
         args = QUICK + args
-    app = typer.Typer(add_completion=False)
-    register(app, typer.Typer())
-    app(args)  # the only command of this app: train
+    sys.argv = ["roadload", "train", *args]
+    main()

@@ -1,6 +1,12 @@
 """Shared fixtures: the shared driving data, and the road profiles several test modules drive on (built once per
 session; their arrays are read-only so no test can change the road another test sees)."""
 
+import os
+
+# libgomp reads OMP_WAIT_POLICY once, when torch first loads it: set the native vector env's policy before any test
+# imports torch, as the roadload command does, or a multi-threaded vector env warns that it cannot take effect
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
 from typing import Any, Callable
 
 import numpy as np

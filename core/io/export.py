@@ -1,4 +1,19 @@
-"""Simulated trips out as real CAN traffic: a project DBC, frames at the channel rates, candump / BLF / MDF4 logs.
+"""Trips out: files other tools open (:func:`export_file`: ASAM MDF4, CSV with a units row, MATLAB .mat) and
+real CAN traffic (:func:`export_trip`: a project DBC, frames at the channel rates, candump / BLF / MDF4 logs).
+
+File exports (``roadload export TRIP --format mf4|csv|mat``) carry the measured channels in SI with their units
+(and, with ``truth=True``, the ground truth of a simulated trip as ``truth/<name>``):
+
+- ``mf4``: one channel group for the measured channels on their time base (one for the truth), each channel with
+  its unit and catalogue description; the trip metadata as the embedded attachment ``roadload_meta.json``. asammdf,
+  CANape, INCA and MATLAB's ``mdfRead`` open it; ``roadload import FILE --format mf4`` reads it back (equal within
+  each channel's resolution; the imported trip starts at t = 0, ``meta["t0_unix"]`` keeps the start).
+- ``csv``: a header row of channel names, a second row of units, then one row per sample (``t`` first; truth
+  columns on the rows of their own time base, empty elsewhere); numbers written to round-trip exactly.
+- ``mat``: MATLAB v5 file with structs ``measured`` and ``truth`` (one field per channel), ``units`` and
+  ``truth_units`` (one string per channel) and ``meta_json`` (the metadata as JSON text).
+
+CAN traffic:
 
 The DBC is built from the sensor model: every exported channel becomes one signal whose scale equals the
 sensor's quantisation step (``ChannelSensorSpec.resolution``; channels without quantisation get
@@ -15,19 +30,23 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..channels import MEASURED
-from ..fileio import write_text
-from ..trip import Trip
+import pandas as pd
+
+from ..channels import MEASURED, TRUTH
+from ..fileio import atomic_path, write_text
+from ..presets import get_preset
+from ..registry import did_you_mean
+from ..trip import TRUTH_PREFIX, Trip
+from ..vehicle import ChannelSensorSpec, SensorSpec
 from .frames import CanFrames, write_can_log
 from .report import LogImportError
-from roadload.presets import get_preset
-from ..vehicle import ChannelSensorSpec, SensorSpec
 
 FIRST_ID = 0x100
 # physical ranges [SI] that size the DBC signals; channels not listed use +-DEFAULT_RANGE
@@ -241,7 +260,8 @@ def export_trip(trip: Trip, path: str | Path, fmt: str, *, sensors: Any | None =
     metadata (``sensors_from_meta``), else defaults. Returns the written paths.
     """
     if fmt not in _SUFFIX:
-        raise LogImportError(f"unknown CAN export format {fmt!r}; choose one of {sorted(_SUFFIX)}")
+        raise LogImportError(f"unknown CAN export format {fmt!r}{did_you_mean(fmt, _SUFFIX)}; choose one of "
+                             f"{sorted(_SUFFIX)}")
     path = Path(path)
     if path.suffix.lower() != _SUFFIX[fmt]:
         path = path.with_suffix(_SUFFIX[fmt])
@@ -276,3 +296,94 @@ def sensors_from_meta(meta: dict[str, Any]):
         return SensorSpec(**{**raw, "channels": channels})
     except TypeError as exc:
         raise LogImportError(f"trip metadata 'sensors' is not a sensor spec: {exc}") from None
+
+
+# ---------------------------------------------------------------------------------------------- file exports
+FILE_FORMATS = {"mf4": ".mf4", "csv": ".csv", "mat": ".mat"}
+
+
+def export_file(trip: Trip, path: str | Path, fmt: str, *, truth: bool = False) -> Path:
+    """Write ``trip`` as an MDF4, CSV or MATLAB file (see the module docstring); atomic, returns the path.
+    ``truth``: also the ground truth of a simulated trip (refused for a trip without truth)."""
+    if fmt not in FILE_FORMATS:
+        raise LogImportError(f"unknown export format {fmt!r}{did_you_mean(fmt, FILE_FORMATS)}; choose one of "
+                             f"{list(FILE_FORMATS)}")
+    path = Path(path)
+    if path.suffix.lower() != FILE_FORMATS[fmt]:
+        raise LogImportError(f"{path}: a {fmt} export ends in {FILE_FORMATS[fmt]}")
+    if not trip.channels:
+        raise LogImportError(f"trip {trip.meta.get('name', '?')!r} has no measured channel besides 't': nothing to "
+                             f"export")
+    if truth and trip.truth is None:
+        raise LogImportError(f"trip {trip.meta.get('name', '?')!r} has no ground truth (not simulated); export it "
+                             f"without --truth")
+    writer = {"mf4": _write_mf4, "csv": _write_csv, "mat": _write_mat}[fmt]
+    with atomic_path(path) as tmp:
+        writer(trip, tmp, truth)
+    return path
+
+
+def _description(name: str, truth: bool) -> str:
+    table = TRUTH if truth else MEASURED
+    return table[name].description if name in table else ""
+
+
+def _write_mf4(trip: Trip, path: Path, truth: bool) -> None:
+    from asammdf import MDF, Signal
+
+    mdf = MDF(version="4.10")
+    t = trip.t
+    mdf.append([Signal(trip.measured[c].to_numpy(), t, name=c, unit=trip.units[c], comment=_description(c, False))
+                for c in trip.channels], comment="measured channels (SI)")
+    if truth and trip.truth is not None:
+        tt = trip.truth["t"].to_numpy(dtype=float)
+        mdf.append([Signal(trip.truth[c].to_numpy(), tt, name=TRUTH_PREFIX + c, unit=trip.truth_units[c],
+                           comment=_description(c, True)) for c in trip.truth.columns if c != "t"],
+                   comment="ground truth of the simulation (not a measurement)")
+    mdf.attach(json.dumps(trip.meta).encode("utf-8"), file_name="roadload_meta.json", embedded=True,
+               mime="application/json")
+    mdf.save(path, overwrite=True)
+    mdf.close()
+
+
+def _export_frame(trip: Trip, truth: bool) -> tuple[pd.DataFrame, list[str]]:
+    """Measured (and truth) channels as one frame on the union of their time bases, with the unit of each column."""
+    frame = trip.measured
+    units = [trip.units[c] for c in frame.columns]
+    if truth and trip.truth is not None:
+        tr = trip.truth.rename(columns={c: TRUTH_PREFIX + c for c in trip.truth.columns if c != "t"})
+        frame = frame.merge(tr, on="t", how="outer", sort=True)
+        units += [trip.truth_units[c] for c in trip.truth.columns if c != "t"]
+    return frame, units
+
+
+def _write_csv(trip: Trip, path: Path, truth: bool) -> None:
+    frame, units = _export_frame(trip, truth)
+    with open(path, "w", encoding="utf-8", newline="") as fh:
+        fh.write(",".join(frame.columns) + "\n")
+        fh.write(",".join(units) + "\n")
+        frame.to_csv(fh, header=False, index=False, lineterminator="\n")
+
+
+_MATLAB_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,62}$")
+
+
+def _matlab_struct(frame: pd.DataFrame, what: str) -> dict[str, np.ndarray]:
+    bad = [c for c in frame.columns if not _MATLAB_NAME.match(c)]
+    if bad:
+        raise LogImportError(f"{what} channels {bad} are not MATLAB field names (a letter, then letters, digits or "
+                             f"'_', at most 63 characters); rename them before a .mat export")
+    return {c: frame[c].to_numpy() for c in frame.columns}
+
+
+def _write_mat(trip: Trip, path: Path, truth: bool) -> None:
+    from scipy.io import savemat
+
+    data: dict[str, object] = {"measured": _matlab_struct(trip.measured, "measured"),
+                               "units": {c: trip.units[c] for c in trip.measured.columns},
+                               "meta_json": json.dumps(trip.meta)}
+    if truth and trip.truth is not None:
+        data["truth"] = _matlab_struct(trip.truth, "truth")
+        data["truth_units"] = {c: trip.truth_units[c] for c in trip.truth.columns}
+    with open(path, "wb") as fh:
+        savemat(fh, data, long_field_names=True, do_compression=True, oned_as="column")

@@ -6,11 +6,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Sequence
 
+from ..registry import did_you_mean
 from ..trip import Trip
 from .bmw_i3 import load_bmw_i3
 from .derived import add_derived
 from .loaders import CAN_LOG_FORMATS, DEFAULT_MAPPINGS, Progress, load_can_log, load_csv_log, load_openxc
-from .mapping import Mapping, load_mapping
+from .mapping import FORMATS, Mapping, load_mapping
 from .report import ImportReport, LogImportError
 
 __all__ = ["import_log"]
@@ -21,7 +22,19 @@ def import_log(source: str | Path, fmt: str, mapping: str | Path | Mapping | Non
     """Import a log of the given format through a mapping (file, packaged name, or default for the format).
 
     Malformed lines of text logs (candump, ASC, CSV) are left out and reported with their line numbers in
-    ``meta["import_report"]``; ``strict=True`` makes any malformed line an error instead."""
+    ``meta["import_report"]``; ``strict=True`` makes any malformed line an error instead. Format 'mf4' (decoded
+    MDF4 signals, :mod:`roadload.io.mdf`) needs no mapping when its signals carry the catalogue's names."""
+    if fmt not in FORMATS:
+        raise LogImportError(f"unknown import format {fmt!r}{did_you_mean(fmt, FORMATS)}; choose one of "
+                             f"{list(FORMATS)}")
+    if fmt == "mf4":
+        from .mdf import load_mdf_log  # asammdf loads only for MDF4 files
+
+        trip = load_mdf_log(source, None if mapping is None else
+                            mapping if isinstance(mapping, Mapping) else load_mapping(mapping), progress=progress)
+        if progress:
+            progress("done", 1.0)
+        return trip
     if mapping is None:
         if fmt not in DEFAULT_MAPPINGS:
             raise LogImportError(f"format {fmt!r} needs a mapping file (--mapping)")
@@ -36,8 +49,7 @@ def import_log(source: str | Path, fmt: str, mapping: str | Path | Mapping | Non
     elif fmt == "openxc":
         trip = load_openxc(source, m, progress=progress)
     else:
-        raise LogImportError(f"unknown import format {fmt!r}; choose one of "
-                             f"{sorted(set(CAN_LOG_FORMATS) | {'csv', 'bmw-i3', 'openxc'})}")
+        raise LogImportError(f"import format {fmt!r} has no loader")
     if strict:
         bad = [d for d in trip.meta["import_report"].get("dropped", []) if str(d["what"]).endswith(" lines")]
         if bad:

@@ -37,7 +37,7 @@ from .signals import Signal, SignalSet
 Progress = Callable[[str, float], None]  # (stage, fraction 0..1)
 
 DEFAULT_MAPPINGS = {"bmw-i3": "bmw_i3", "openxc": "openxc", "dbc-mf4": "canedge_gnss_obd",
-                    "comma2k19": "comma2k19_rav4"}
+                    "comma2k19": "comma2k19_rav4", "csv": "plain_csv"}
 CAN_LOG_FORMATS = ("dbc-mf4", "candump", "blf", "asc", "comma2k19")
 
 

@@ -45,6 +45,7 @@ import pandas as pd
 from pydantic import Field, ValidationError, field_validator, model_validator
 
 from ..channels import MEASURED, unit_of
+from ..registry import did_you_mean
 from ..schema import StrictModel, format_errors
 from ..trip import Trip
 from ..units import si_unit_of, to_si
@@ -69,7 +70,7 @@ _CHANNEL_KEYS = {"source", "channel", "unit", "scale", "offset", "resample", "va
                  "values", "range", "note", "plus", "event", "accuracy", "extra"}
 _TOP_KEYS = {"name", "format", "description", "licence", "source_url", "sample_rate", "dbc", "clock", "csv",
              "vehicle", "derived", "channels", "note", "max_gap"}
-FORMATS = ("dbc-mf4", "candump", "blf", "asc", "comma2k19", "bmw-i3", "openxc", "csv")
+FORMATS = ("dbc-mf4", "candump", "blf", "asc", "comma2k19", "bmw-i3", "openxc", "csv", "mf4")
 
 
 # ------------------------------------------------------------------------------------------ schema (pydantic)
@@ -255,7 +256,9 @@ class Mapping:
             raise LogImportError(f"{where}: a mapping is a JSON object, got {type(raw).__name__}")
         unknown = set(raw) - _TOP_KEYS
         if unknown:
-            raise LogImportError(f"{where}: unknown mapping keys {sorted(unknown)}; allowed {sorted(_TOP_KEYS)}")
+            hints = "".join(did_you_mean(k, _TOP_KEYS) for k in sorted(unknown))
+            raise LogImportError(f"{where}: unknown mapping keys {sorted(unknown)}{hints}; allowed "
+                                 f"{sorted(_TOP_KEYS)}")
         for key in ("name", "format", "channels"):
             if key not in raw:
                 raise LogImportError(f"{where}: mapping lacks {key!r}")
@@ -266,7 +269,8 @@ class Mapping:
                 if isinstance(entry, dict):
                     unknown = set(entry) - _CHANNEL_KEYS
                     if unknown:
-                        raise LogImportError(f"{where}: channels[{i}]: unknown keys {sorted(unknown)}; "
+                        hints = "".join(did_you_mean(k, _CHANNEL_KEYS) for k in sorted(unknown))
+                        raise LogImportError(f"{where}: channels[{i}]: unknown keys {sorted(unknown)}{hints}; "
                                              f"allowed {sorted(_CHANNEL_KEYS)}")
                     rule = entry.get("resample", "linear")
                     if isinstance(rule, str) and rule not in RULES:
@@ -353,7 +357,8 @@ def load_mapping(path_or_name: str | Path) -> Mapping:
             p = packaged
         else:
             known = sorted(x.stem for x in MAPPINGS_DIR.glob("*.json"))
-            raise LogImportError(f"mapping {str(path_or_name)!r} is neither a file nor a packaged mapping {known}")
+            raise LogImportError(f"mapping {str(path_or_name)!r}{did_you_mean(p.name, known)} is neither a file "
+                                 f"nor a packaged mapping {known}")
     try:
         raw = json.loads(p.read_text(encoding="utf-8"))
     except json.JSONDecodeError as exc:

@@ -63,7 +63,9 @@ def resample(t: np.ndarray, values: np.ndarray, t_new: np.ndarray, rule: str, ci
     end = t[-1]
     if rule == "hold" and t.size > 1:  # the last value of a periodic signal is valid until the next one is due
         end = t[-1] + float(np.median(np.diff(t)))
-    out[(t_new < t[0]) | (t_new > end)] = np.nan
+    # a time-base instant within TIME_TOLERANCE of the span is inside it: t_start + k / rate may land a rounding
+    # error past the last sample it was computed to reach
+    out[(t_new < t[0] - TIME_TOLERANCE) | (t_new > end + TIME_TOLERANCE)] = np.nan
     if circular:
         out = np.mod(out, period)
     return out

@@ -3,8 +3,9 @@
 #   docs/tools/build_docs.sh [--quick] [--skip-examples] [SITE_DIR]      (SITE_DIR defaults to /tmp/site)
 # Steps: (1) the generated reference tables are current (docs/tools/gen_reference.py --check);
 # (2) mkdocs build --strict (a broken link, anchor, nav entry or API reference fails);
-# (3) pytest --markdown-docs on docs/index.md, docs/guides and docs/reference (tiny sizes, ~1-2 min on 2 cores),
-#     then their shell blocks (.ci/doc_commands.py);
+# (3) pytest --markdown-docs on docs/index.md and docs/reference, then the home page's shell blocks; the guides'
+#     Python and shell blocks in order with their stored outputs checked (.ci/doc_commands.py --python; tiny
+#     sizes, ~6 min on 2 cores);
 # (4) every examples/*.py with --quick (< ~1 min each), unless --skip-examples.
 # --quick is accepted like the scripts' --quick; the runs are always the small ones.
 # mkdocstrings (griffe) reads the package from a non-editable copy: setuptools package-dir maps roadload to core/,
@@ -29,9 +30,11 @@ python -m pip install -q --no-deps --target "$pkg" . 2>&1 | { grep -v -e "^$" -e
 test -d "$pkg/roadload" || { echo "build_docs.sh: pip could not install roadload into $pkg" >&2; exit 1; }
 ROADLOAD_DOCS_PATH="$pkg" python -m mkdocs build --strict -d "$site"
 echo "site written to $site"
-python -m pytest -q -p no:cacheprovider --markdown-docs docs/index.md docs/guides docs/reference
-# the shell blocks of the same pages, in the repo root after the Python blocks wrote the files they read
-python .ci/doc_commands.py docs/index.md docs/guides/*.md --workdir .
+python -m pytest -q -p no:cacheprovider --markdown-docs docs/index.md docs/reference
+# the shell blocks of the home page, in the repo root after its Python blocks wrote the files they read
+python .ci/doc_commands.py docs/index.md --workdir .
+# the guides: Python and shell blocks in page order, each block's stored output checked against what it prints
+python .ci/doc_commands.py docs/guides/*.md --python --workdir .
 if [ "$examples" = 1 ]; then
   for example in examples/*.py; do
     echo "== $example --quick"

@@ -45,14 +45,14 @@ def main(argv: list[str] | None = None) -> None:
     base = Path(os.environ.get("ROADLOAD_CACHE", Path.home() / ".cache" / "roadload"))
     folder = args.cache or base / f"fleet-{args.seed}-{args.trips}"
     hours = args.hours * args.trips / 84
-    if len(list(folder.glob("*.parquet"))) < args.trips:
-        t0 = time.perf_counter()
-        gen = generate_fleet(folder, args.trips, args.seed, hours, scheduler=args.scheduler, workers=args.workers)
-        print(f"fleet generation: {len(gen['trips'])} trips in {time.perf_counter() - t0:.1f} s "
-              f"({len(gen['failed'])} failed)")
+    t0 = time.perf_counter()  # stored trips are checked and kept; missing, corrupt or foreign ones simulated
+    gen = generate_fleet(folder, args.trips, args.seed, hours, scheduler=args.scheduler, workers=args.workers)
+    print(f"fleet generation: {len(gen['trips'])} trips in {time.perf_counter() - t0:.1f} s "
+          f"({len(gen['failed'])} failed, {len(gen['rebuilt'])} corrupt or foreign files simulated again)")
     paths = stored_trips(folder, args.trips)
     print(f"load average before the run: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
-    res = run_benchmark(paths, scheduler=args.scheduler, workers=args.workers, progress=False, **extra)
+    res = run_benchmark(paths, scheduler=args.scheduler, workers=args.workers, progress=False,
+                        checkpoint=args.out / "units", **extra)
     t = res.timing
     hours_done = res.trips["duration"].sum() / 3600 if not res.trips.empty else 0.0
     n_rows = len(res.medse)

@@ -2,8 +2,10 @@
 ``roadload simulate``) per simulated duration, each run in a child process (its own peak RSS from wait4), plus
 the same for the in-memory path (``simulate()`` + ``Trip.save``) at the shortest duration for reference.
 
-Figures: peak RSS [MB] per duration and its growth per simulated hour; file size [MB] per simulated hour for
-precision 'compact' and 'exact'; the import + road baseline RSS (a child that stops before simulating).
+Figures: peak RSS [MB] per duration and its growth per simulated hour; file size [MB] per simulated hour (100 Hz,
+every channel and the truth) of the open format ('compact': plain SI floats, Parquet's own encodings; the target is
+<= 15 MB per hour) next to the earlier private integer codec ('packed', format 3) and 'exact' (float64); the import
++ road baseline RSS (a child that stops before simulating).
 
     python scripts/bench_trip_storage.py                      # 1 h and 4 h
     python scripts/bench_trip_storage.py --hours 1 4 24       # + a day (~1 min CPU plus I/O)
@@ -56,7 +58,7 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hours", type=float, nargs="+", default=[1.0, 4.0], help="simulated durations [h]")
     ap.add_argument("--quick", action="store_true", help="tiny run for CI: 5 and 10 simulated minutes")
-    ap.add_argument("--no-exact", action="store_true", help="skip the precision='exact' file-size row")
+    ap.add_argument("--no-exact", action="store_true", help="skip the precision='exact' and 'packed' file-size rows")
     args = ap.parse_args(argv)
     hours = [5 / 60, 10 / 60] if args.quick else sorted(args.hours)
     if args.quick:
@@ -72,12 +74,15 @@ def main(argv: list[str] | None = None) -> None:
             rows.append(("stream, compact", h, rss, cpu, size))
             print(f"streamed {h:6.2f} h: peak RSS {rss:7.0f} MB (baseline + {rss - base:.0f} MB), {cpu:6.1f} s CPU, "
                   f"file {size:7.1f} MB "
-                  f"({size / h:5.1f} MB per simulated hour)", flush=True)
+                  f"({size / h:5.1f} MB per simulated hour, open format 'compact')", flush=True)
         h0 = hours[0]
         if not args.no_exact:
-            rss, cpu, size = run_child("stream", 3600.0 * h0, out, "exact")
-            rows.append(("stream, exact", h0, rss, cpu, size))
-            print(f"streamed {h0:6.2f} h, precision exact: file {size:7.1f} MB ({size / h0:5.1f} MB per hour)")
+            for precision, what in (("packed", "the earlier private integer codec (format 3)"),
+                                    ("exact", "float64, bit for bit")):
+                rss, cpu, size = run_child("stream", 3600.0 * h0, out, precision)
+                rows.append((f"stream, {precision}", h0, rss, cpu, size))
+                print(f"streamed {h0:6.2f} h, precision {precision}: file {size:7.1f} MB ({size / h0:5.1f} MB per "
+                      f"hour; {what})")
         rss, cpu, size = run_child("memory", 3600.0 * h0, out, "exact")
         rows.append(("in memory, exact", h0, rss, cpu, size))
         print(f"in-memory simulate() + save {h0:6.2f} h: peak RSS {rss:7.0f} MB (the path before streaming)")

@@ -1,27 +1,19 @@
 """``roadload drive`` (one closed-loop drive with a controller) and ``roadload benchmark controllers`` (the
-comparison: table + figures)."""
+comparison: table + figures), ``benchmark headline`` and ``benchmark sensitivity``.
+
+Light at import (see the package docstring): CasADi (the MPC), the simulator, dask and matplotlib load inside the
+commands, after the arguments are checked."""
 
 from __future__ import annotations
 
-import os
-import time
-
 import json
 import math
+import os
+import time
 from pathlib import Path
 
 import typer
-from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-from roadload.experiments.controller_comparison import road_by_name
-from roadload.controllers.cruise import CruiseSettings
-from roadload.controllers.drive import DriveSettings, drive
-from roadload.sweep import run_sweep
-from roadload.experiments.controller_comparison import CONDITIONS, ComparisonTask, run_comparison_task, write_outputs
-from roadload.experiments.controller_comparison import VEHICLE_CASES
-from roadload.tables import markdown_table
-from roadload.experiments.headline import (headline_figure, headline_markdown, headline_tasks, run_paired,
-                                           sensitivity_figure, sensitivity_table, sensitivity_tasks)
+
 from roadload.fileio import write_text
 
 from .errors import fail
@@ -52,15 +44,15 @@ DRIVE_METRICS = {"arrived": ("arrived", "", "{}"), "energy_kWh": ("energy", "kWh
                  "trip_time": ("trip time", "s", "{:.1f}"), "speed_violations": ("speed violations", "", "{:d}"),
                  "max_excess_kmh": ("max excess", "km/h", "{:.2f}"), "rms_jerk": ("RMS jerk", "m/s^3", "{:.3f}"),
                  "solve_time_median": ("solve time median", "ms", "{:.1f}"),
-                 "solve_time_p99": ("solve time p99", "ms", "{:.1f}"), "fallbacks": ("fallbacks", "", "{:d}"),
-                 "ctl_relaxed_plans": ("relaxed plans", "", "{:d}")}
+                 "solve_time_p99": ("solve time p99", "ms", "{:.1f}"), "fallbacks": ("fallbacks", "", "{:d}")}
 
 
 def metric_lines(m: dict) -> list[str]:
-    """The drive metrics rounded and with their units, e.g. ``   trip time: 362.4 [s]``."""
+    """The drive metrics rounded and with their units, e.g. ``   trip time: 362.4 [s]``; for the MPC, what its
+    plans could not meet and what the fallback did (:mod:`roadload.controllers.mpc_controller`)."""
     out = []
     for key, (label, unit, fmt) in DRIVE_METRICS.items():
-        if key not in m and key != "ctl_relaxed_plans":
+        if key not in m:
             continue
         value = m.get(key, 0)
         if unit == "ms":
@@ -71,7 +63,31 @@ def metric_lines(m: dict) -> list[str]:
         except (ValueError, TypeError):
             text = str(value)
         out.append(f"{label:>20}: {text}" + (f" [{unit}]" if unit and text != "-" else ""))
-    return out
+    return out + feasibility_lines(m)
+
+
+def feasibility_lines(m: dict) -> list[str]:
+    """MPC runs: relaxed / infeasible plans out of all solves, with what they mean, the fallback brake's steps and
+    the worst violation (nothing for the other controllers)."""
+    if "ctl_relaxed_plans" not in m and "ctl_solves" not in m:
+        return []
+    solves = int(m.get("ctl_solves", 0))
+    relaxed, infeasible = int(m.get("ctl_relaxed_plans", 0)), int(m.get("ctl_infeasible_plans", 0))
+    lines = [f"{'relaxed plans':>20}: {relaxed} of {solves} solves "
+             + ("(every plan met every stop and speed cap within the comfort limits)" if relaxed == 0 else
+                "(plans that could not meet a stop, a speed cap or its margin within the comfort limits; the "
+                "solver planned the hardest comfortable braking instead)"),
+             f"{'infeasible plans':>20}: {infeasible} of {solves} solves"
+             + ("" if infeasible == 0 else " (the solver found no plan; the named constraint could not be met)")]
+    brakes = int(m.get("ctl_fallback_brake", 0))
+    if brakes:
+        comfort, emergency = int(m.get("ctl_comfort_brake_steps", 0)), int(m.get("ctl_emergency_brake_steps", 0))
+        lines.append(f"{'fallback brake':>20}: {brakes} solves ({comfort} control steps at the maximum comfort "
+                     f"deceleration, {emergency} emergency-braking)")
+    worst = m.get("ctl_worst_violation") or ""
+    if worst:
+        lines.append(f"{'worst violation':>20}: {worst}")
+    return lines
 
 
 def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
@@ -96,9 +112,15 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
     ) -> None:
         """Drive a road once in closed loop on the simulator and print energy, time, violations, jerk, solver
         time and fallbacks."""
-
         if out is not None and out.suffix != ".parquet":
             _fail(f"--out: trip files end in .parquet, got {out.name!r}")
+        from rich.console import Console
+        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+        from roadload.controllers.cruise import CruiseSettings
+        from roadload.controllers.drive import DriveSettings, drive
+        from roadload.experiments.controller_comparison import road_by_name
+
         try:
             settings = DriveSettings(controller=controller, force_model=force_model, solver=solver,
                                      time_weight=time_weight, model=model, estimator=estimator,
@@ -109,7 +131,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                           console=Console(stderr=True), transient=True) as bar:
                 task = bar.add_task(f"{controller}/{force_model} on {profile.name}", total=1.0)
                 res, plant = drive(vehicle, profile, effects=",".join(effects) or None, seed=seed, settings=settings,
-                                   progress=lambda f: bar.update(task, completed=f))
+                                   progress=lambda f: bar.update(task, completed=f, refresh=True))
         except typer.Exit:
             raise
         except (ValueError, FileNotFoundError, KeyError) as exc:
@@ -147,7 +169,9 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
     ) -> None:
         """Closed-loop comparison of MPC (oracle / abc / online) against cruise control and the human-like
         driver over roads x conditions at equal trip time; writes a Markdown/CSV table and PNG figures."""
-
+        from roadload.experiments.controller_comparison import (CONDITIONS, ComparisonTask, run_comparison_task,
+                                                                write_outputs)
+        from roadload.sweep import run_sweep
 
         cond_list = list(CONDITIONS) if conditions == "all" else [c.strip() for c in conditions.split(",") if c]
         bad = [c for c in cond_list if c not in CONDITIONS]
@@ -176,6 +200,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
 
 
 def _car_truck_cases(vehicles: str) -> list[str]:
+    from roadload.experiments.controller_comparison import VEHICLE_CASES
+
     cases = [v.strip() for v in vehicles.split(",") if v.strip()]
     bad = [c for c in cases if c not in VEHICLE_CASES]
     if bad:
@@ -232,6 +258,9 @@ def register_headline(benchmark_app: typer.Typer) -> None:
     ) -> None:
         """MPC with the oracle / abc / online force model against cruise control at equal trip time, paired over
         seeds, with the 1-sigma resolution and 95 % CIs of every difference."""
+        from roadload.experiments.controller_comparison import CONDITIONS
+        from roadload.experiments.headline import headline_figure, headline_markdown, headline_tasks, run_paired
+
         if metric not in ("net", "raw"):
             _fail(f"--metric: net or raw, got {metric!r}")
         if not (schedule_gain >= 0):
@@ -310,6 +339,9 @@ def register_headline(benchmark_app: typer.Typer) -> None:
     ) -> None:
         """Energy penalty at equal time vs force-model error (mass, rolling resistance, drag area, grade bias,
         drive-train losses; one at a time and jointly) against the oracle MPC: table and figure per vehicle."""
+        from roadload.experiments.headline import run_paired, sensitivity_figure, sensitivity_table, sensitivity_tasks
+        from roadload.tables import markdown_table
+
         cases = ["car"] if quick else _car_truck_cases(vehicles)
         seeds = 2 if quick else seeds
         if seeds < 2:

@@ -3,28 +3,34 @@
 Every command callback is wrapped by :func:`guarded`: bad input (any roadload error class, a pydantic validation
 error, a missing/unwritable file, a bad option value) is printed as one plain line ``error: <what>`` on stderr,
 without Rich markup interpretation (so ``[km/h]`` in a message stays), and the command exits with code 2. Anything
-else is an internal error: one line, exit code 1. Tracebacks only with the global ``--debug`` (or
-``ROADLOAD_DEBUG=1``).
+else is an internal error: one line, exit code 1 (a write that ran out of room,
+:class:`roadload.fileio.OutputSpaceError`, too, without the word "internal"). Tracebacks only with the global
+``--debug`` (or ``ROADLOAD_DEBUG=1``).
 
 Before a command runs, its arguments get generic checks: seeds (``seed``, ``*_seed``) must be >= 0, float options
 must be finite, and ``out`` paths are checked with :func:`roadload.fileio.check_output_path` (a path with a suffix
-is a file, one without is a folder).
+is a file, one without is a folder). Commands check names and input files with :func:`choose` and
+:func:`require_file` (both say "did you mean" for a close match) before they import anything heavy.
+
+This module imports nothing heavy (no pydantic either: a pydantic error can only come from code that imported it).
 """
 
 from __future__ import annotations
 
+import difflib
 import functools
 import inspect
 import math
 import os
+import sys
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, Callable, NoReturn
 
-import click
-import pydantic
 import typer
 
-from roadload.fileio import check_output_path
+from roadload.fileio import OutputSpaceError, check_output_path
+from roadload.registry import did_you_mean
 
 #: typer >= 0.2x vendors its own click: its usage errors (typer.BadParameter) derive from this class
 _TYPER_CLICK_EXCEPTION: type[Exception] = next(c for c in typer.BadParameter.__mro__ if c.__name__ == "ClickException")
@@ -54,10 +60,15 @@ def option_name(param: str) -> str:
     return "--" + param.replace("_", "-")
 
 
+def _is_validation_error(exc: BaseException) -> bool:
+    pydantic = sys.modules.get("pydantic")
+    return pydantic is not None and isinstance(exc, pydantic.ValidationError)
+
+
 def is_bad_input(exc: BaseException) -> bool:
     """True for errors caused by what the user handed in (files, options, specs), False for internal bugs."""
     if isinstance(exc, (FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError,
-                        FileExistsError, pydantic.ValidationError, UnicodeDecodeError)):
+                        FileExistsError, UnicodeDecodeError)) or _is_validation_error(exc):
         return True
     return isinstance(exc, (ValueError, KeyError)) and type(exc).__module__.split(".")[0] == "roadload"
 
@@ -68,9 +79,10 @@ def describe(exc: BaseException) -> str:
         text = str(exc.args[0])
     elif isinstance(exc, OSError) and exc.filename is not None:
         text = f"{exc.filename}: {exc.strerror or exc}"
-    elif isinstance(exc, pydantic.ValidationError):
-        text = "; ".join(f"{'.'.join(str(p) for p in e['loc']) or exc.title}: {e['msg']} (got {e.get('input')!r})"
-                         for e in exc.errors())
+    elif _is_validation_error(exc):
+        error: Any = exc  # a pydantic ValidationError (pydantic is not imported here)
+        text = "; ".join(f"{'.'.join(str(p) for p in e['loc']) or error.title}: {e['msg']} (got {e.get('input')!r})"
+                         for e in error.errors())
     else:
         text = str(exc) or type(exc).__name__
     return one_line(text)
@@ -80,6 +92,33 @@ def fail(message: str, code: int = BAD_INPUT_EXIT) -> NoReturn:
     """Print ``error: message`` as one plain line on stderr and exit (2 = bad input)."""
     typer.echo(f"error: {one_line(message)}", err=True)
     raise typer.Exit(code=code)
+
+
+def choose(value: str, choices: Iterable[str], option: str, what: str, listing: str | None = None) -> str:
+    """``value`` if it is one of ``choices``; else :class:`CliInputError` naming the option, the close match and
+    the choices (or ``listing``, e.g. where to find a long list)."""
+    choices = list(choices)
+    if value in choices:
+        return value
+    listing = f"known: {', '.join(choices)}" if listing is None else listing
+    raise CliInputError(f"{option}: unknown {what} {value!r}{did_you_mean(value, choices)}; {listing}")
+
+
+def require_file(path: Path, option: str, suffixes: tuple[str, ...] = ()) -> Path:
+    """``path`` if it is an existing file (with one of ``suffixes`` when given); else :class:`CliInputError` naming
+    the option and, for a missing file, a similarly named file in the same folder."""
+    path = Path(path)
+    if suffixes and path.suffix.lower() not in suffixes:
+        raise CliInputError(f"{option}: expected a {' or '.join(suffixes)} file, got {str(path)!r}")
+    if path.is_dir():
+        raise CliInputError(f"{option}: {path} is a folder, expected a file")
+    if not path.is_file():
+        folder = path.parent
+        siblings = {p.name: p for p in folder.iterdir()} if folder.is_dir() else {}
+        close = difflib.get_close_matches(path.name, list(siblings), n=1, cutoff=0.6)
+        hint = f" (did you mean {str(siblings[close[0]])!r}?)" if close else ""
+        raise CliInputError(f"{option}: no file {path}{hint}")
+    return path
 
 
 def check_arguments(kwargs: dict[str, Any]) -> None:
@@ -105,14 +144,15 @@ def guarded(fn: Callable[..., Any]) -> Callable[..., Any]:
         try:
             check_arguments(kwargs)
             return fn(*args, **kwargs)
-        except (typer.Exit, typer.Abort, click.exceptions.ClickException, click.exceptions.Exit, KeyboardInterrupt,
-                _TYPER_CLICK_EXCEPTION):
+        except (typer.Exit, typer.Abort, KeyboardInterrupt, _TYPER_CLICK_EXCEPTION):
             raise
         except Exception as exc:  # the one place that turns errors into exit codes
             if debug():
                 raise
             if is_bad_input(exc):
                 fail(describe(exc))
+            if isinstance(exc, OutputSpaceError):  # the machine ran out of room: not a bug, say what and where
+                fail(describe(exc), code=INTERNAL_EXIT)
             fail(f"internal {type(exc).__name__}: {describe(exc)} (rerun with --debug for the traceback)",
                  code=INTERNAL_EXIT)
 

@@ -1,4 +1,7 @@
-"""CLI of the chapter-5 pipeline: ``roadload estimate TRIP`` and ``roadload benchmark fleet``."""
+"""CLI of the chapter-5 pipeline: ``roadload estimate TRIP`` and ``roadload benchmark fleet``.
+
+Light at import (see the package docstring): the pipeline, the estimators, dask and matplotlib load inside the
+commands, after the arguments and input files are checked."""
 
 from __future__ import annotations
 
@@ -10,20 +13,10 @@ from typing import Optional
 import typer
 
 from roadload.fileio import atomic_path
-from roadload.trip import Trip, TripError
-from roadload.estimators.evaluation import estimate
-from roadload.experiments.fleet import FleetError
-from roadload.estimators.knowledge import knowledge_for_trip
-from roadload.estimators.models import ModelError, get_model
-from roadload.estimators.pipeline import PipelineError, model_data, run_pipeline
-from roadload.experiments.fleet import (generate_fleet, run_benchmark, single_trip_figures, stored_trips,
-                                        write_report)
-from roadload.estimators.figures import plot_output_corrections, plot_parameter_traces, plot_stage, save
+from roadload.units import unit_label
 
+from .errors import fail, require_file
 
-def _fail(msg: str) -> None:
-    typer.secho(f"error: {msg}", fg=typer.colors.RED, err=True)
-    raise typer.Exit(code=2)
 
 
 def _write_parquet(df, path: Path) -> None:
@@ -40,10 +33,16 @@ def estimate_command(
     figures: Optional[Path] = typer.Option(None, "--figures", help="folder for stage/parameter figures (PNG)"),
 ) -> None:
     """Run the chapter-5 pipeline and one model-estimator combination over a trip."""
-
-
     if out.suffix != ".parquet":
-        _fail(f"--out must end in .parquet, got {out.name!r}")
+        fail(f"--out must end in .parquet, got {out.name!r}")
+    require_file(trip, "TRIP", (".parquet",))
+    from roadload.estimators.evaluation import estimate
+    from roadload.estimators.knowledge import knowledge_for_trip
+    from roadload.estimators.models import ModelError, get_model
+    from roadload.estimators.pipeline import PipelineError, model_data, run_pipeline
+    from roadload.experiments.fleet import FleetError
+    from roadload.trip import Trip, TripError
+
     try:
         t = Trip.load(trip)
         m = get_model(model)
@@ -51,21 +50,22 @@ def estimate_command(
         res = run_pipeline(t, knowledge)
         tt, A, B = model_data(res.states, m)
         if B.size == 0:
-            _fail(f"trip {res.name!r}: the trigger of section 5.3 is never true; nothing to estimate")
+            fail(f"trip {res.name!r}: the trigger of section 5.3 is never true; nothing to estimate")
         est = estimate(tt, A, B, m, None if m.white_box else estimator, m.nominal_parameters(knowledge.nominal))
     except (TripError, ModelError, PipelineError, FleetError, ValueError) as exc:
-        _fail(str(exc))
+        fail(str(exc))
         return
     frame = est.frame()
     _write_parquet(frame, out)
     last = frame.iloc[-1]
     typer.echo(f"{res.name}: {est.name}, {B.size} triggered samples of {len(res.states)} at 10 Hz")
     for p, u in zip(m.parameter_names, m.parameter_units):
-        typer.echo(f"  {p:>18s} = {last[p]:.6g} {u}")
+        typer.echo(f"  {p:>18s} = {last[p]:.6g} {unit_label(u)}")
     for n in res.notes:
         typer.echo(f"  note: {n}")
     typer.echo(f"wrote {out}")
     if figures is not None:
+        from roadload.estimators.figures import plot_output_corrections, plot_parameter_traces, plot_stage, save
 
         save(plot_stage(res, "states"), figures / "states.png")
         save(plot_parameter_traces({est.name: est}), figures / "parameters.png")
@@ -87,13 +87,15 @@ def benchmark_fleet_command(
     figures: bool = typer.Option(True, "--figures/--no-figures", help="write PNG figures"),
 ) -> None:
     """Chapter-5 benchmark over the simulated fleet (generated into the cache when absent)."""
-
     n = trips or 84
     if n < 1:
-        _fail(f"--trips must be >= 1, got {n}")
+        fail(f"--trips must be >= 1, got {n}")
     total = hours if hours is not None else 20.0 * n / 84
     if not total > 0:
-        _fail(f"--hours must be > 0, got {total}")
+        fail(f"--hours must be > 0, got {total}")
+    from roadload.experiments.fleet import (FleetError, generate_fleet, run_benchmark, single_trip_figures,
+                                            stored_trips, write_report)
+
     base = Path(os.environ.get("ROADLOAD_CACHE", Path.home() / ".cache" / "roadload"))
     folder = cache or base / f"fleet-{seed}-{n}"
     try:
@@ -109,7 +111,7 @@ def benchmark_fleet_command(
         paths = stored_trips(folder, n)
         res = run_benchmark(paths, scheduler=scheduler, workers=workers)
     except (FleetError, ValueError) as exc:
-        _fail(str(exc))
+        fail(str(exc))
         return
     report = write_report(res, out, figures=figures,
                           title=f"chapter-5 benchmark, fleet seed {seed}, {len(paths)} trips")

@@ -1,21 +1,23 @@
-"""``roadload profiles ...``: list the named profiles, show a profile's statistics, export one to JSON/CSV."""
+"""``roadload profiles ...``: list the named profiles, show a profile's statistics, export one to JSON/CSV.
+
+Light at import (see the package docstring): the road generators (numba, scipy) load inside the commands."""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import typer
-from rich.console import Console
-from rich.table import Table
 
-from roadload.road_profiles.files import save_profile
-from roadload.road_profiles.profile import DriveCycle, RoadProfile
-from roadload.road_profiles.registry import known_profiles, load_profile
+if TYPE_CHECKING:
+    from roadload.road_profiles.profile import DriveCycle, RoadProfile
 
 
 def profile_summary(profile: RoadProfile | DriveCycle) -> dict[str, float | int | str]:
     """Key statistics of a profile or cycle in edge units (km, %, km/h) for display."""
+    from roadload.road_profiles.profile import DriveCycle
+
     if isinstance(profile, DriveCycle):
         out: dict[str, float | int | str] = {
             "kind": "drive cycle", "duration_s": profile.duration, "distance_km": profile.distance / 1000,
@@ -46,6 +48,11 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         """List the registered profile names."""
         if kind not in (None, "road", "cycle"):
             raise typer.BadParameter(f"must be 'road' or 'cycle', got {kind!r}", param_hint="--kind")
+        from rich.console import Console
+        from rich.table import Table
+
+        from roadload.road_profiles.registry import known_profiles
+
         table = Table("name", "description")
         for name, description in known_profiles(kind).items():
             table.add_row(name, description)
@@ -55,6 +62,11 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
     def show(name: str = typer.Argument(..., help="profile name or .json/.csv/.gpx file"),
              seed: int = typer.Option(0, help="seed of generated profiles")) -> None:
         """Print a profile's statistics (length, grade, radii, limits, stops)."""
+        from rich.console import Console
+        from rich.table import Table
+
+        from roadload.road_profiles.registry import load_profile
+
         profile = load_profile(name, seed=seed)
         table = Table("quantity", "value", title=f"{profile.name} ({profile.meta.get('licence', 'no licence')})")
         for key, value in profile_summary(profile).items():
@@ -66,5 +78,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                out: Path = typer.Argument(..., help="output .json or .csv"),
                seed: int = typer.Option(0, help="seed of generated profiles")) -> None:
         """Write a named profile to a JSON or CSV file (SI units, meta with source and licence)."""
+        from roadload.road_profiles.files import save_profile
+        from roadload.road_profiles.registry import load_profile
+
         path = save_profile(load_profile(name, seed=seed), out)
         typer.echo(f"wrote {path}")

@@ -45,7 +45,9 @@ def _sweeps_of(backend: str, families: list[str]) -> list[str]:
 def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
     @benchmark_app.command("robustness")
     def robustness_cmd(
-        out: Path = typer.Option(..., "--out", "-o", help="output directory (tables, PNG curves, summary.md)"),
+        out: Path = typer.Option(..., "--out", "-o",
+                                 help="output directory (tables, PNG curves, summary.md; units/ holds every "
+                                      "finished scenario, so a stopped run resumes where it was)"),
         estimators: str = typer.Option(None, "--estimators", "-e",
                                        help="comma-separated catalog names (default: all but the PKS)"),
         sweep: list[str] = typer.Option([], "--sweep", "-s",
@@ -75,7 +77,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
             for name in _sweeps_of(backend, list(sweep)):
                 tasks += scenarios(backend, name, seeds, dur)
             t0 = time.perf_counter()
-            results, failed = run_sweep_results(tasks, names, scheduler=scheduler, workers=workers)
+            results, failed = run_sweep_results(tasks, names, scheduler=scheduler, workers=workers,
+                                                checkpoint=out / "units")
             elapsed = time.perf_counter() - t0
             if results.empty:
                 raise RobustnessError(f"every scenario failed; first error: {failed[0][1] if failed else '?'}")

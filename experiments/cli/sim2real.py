@@ -1,4 +1,7 @@
-"""``roadload diagnose``, ``roadload calibrate``, ``roadload sim2real selftest`` and ``roadload sim2real inject``."""
+"""``roadload diagnose``, ``roadload calibrate``, ``roadload sim2real selftest`` and ``roadload sim2real inject``.
+
+Light at import (see the package docstring): roadload.sim2real, the simulator and the test worlds load inside the
+commands, after the arguments are checked."""
 
 from __future__ import annotations
 
@@ -6,18 +9,6 @@ from pathlib import Path
 from typing import Optional
 
 import typer
-from roadload.trip import Trip
-from roadload.sim2real.errors import DiagnosisError
-from roadload.sim2real.catalog import DEFAULT_CANDIDATES
-from roadload.sim2real.calibrate import CalibrationSettings, calibrate
-from roadload.sim2real.diagnose import DiagnosisSettings, diagnose
-from roadload.sim2real.inject import INJECTIONS, inject
-from roadload.sim2real.report import calibration_paths, why_none, write_calibration, write_report
-from roadload.sim2real.simconfig import SimConfig
-from roadload.experiments.sim2real.selftest import WORLD_NAMES, print_run, run_world
-from roadload.fileio import write_json
-from roadload.io import import_log
-from roadload.io.report import LogImportError
 
 from .errors import describe, fail
 
@@ -43,6 +34,11 @@ def load_trips(paths: list[Path], fmt: str | None, mapping: str | None = None) -
     """Trips from Trip Parquet files, or raw logs through ``roadload.io.import_log`` when ``fmt`` is given (e.g.
     'csv' with ``mapping``, default the packaged plain_csv mapping; 'bmw-i3'). A folder yields its trip files
     only (:data:`TRIP_SUFFIXES` of the format; JSON documents such as mappings or vehicle files are skipped)."""
+    from roadload.io import import_log
+    from roadload.io.report import LogImportError
+    from roadload.sim2real.errors import DiagnosisError
+    from roadload.trip import Trip
+
     if mapping is not None and not fmt:
         raise DiagnosisError("--mapping needs --format (the import format of the raw logs, e.g. csv)")
     files: list[Path] = []
@@ -130,6 +126,13 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         Against a calibrated sim (roadload calibrate), the effects are what differs from the reference trips."""
         from rich.console import Console
 
+        from roadload.sim2real.catalog import DEFAULT_CANDIDATES
+        from roadload.sim2real.diagnose import DiagnosisSettings, diagnose
+        from roadload.sim2real.errors import DiagnosisError
+        from roadload.sim2real.report import write_report
+        from roadload.sim2real.simconfig import SimConfig
+        from roadload.sim2real.report import why_none
+
         console = Console(soft_wrap=True)
         try:
             cfg = SimConfig.load(sim)
@@ -183,6 +186,11 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         simulate --vehicle and the MPC's force models read, and reports how far the held-out gap shrinks."""
         from rich.console import Console
 
+        from roadload.sim2real.calibrate import CalibrationSettings, calibrate
+        from roadload.sim2real.errors import DiagnosisError
+        from roadload.sim2real.report import calibration_paths, write_calibration
+        from roadload.sim2real.simconfig import SimConfig
+
         console = Console(soft_wrap=True)
         try:
             paths = calibration_paths(out)
@@ -223,6 +231,9 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         must give no acceptance. Prints the confusion table per seed and the summary."""
         from rich.console import Console
 
+        from roadload.experiments.sim2real.selftest import WORLD_NAMES, print_run, run_world
+        from roadload.fileio import write_json
+
         console = Console(soft_wrap=True)
         if world not in WORLD_NAMES:
             fail(f"--world: unknown world {world!r}; choose one of {', '.join(WORLD_NAMES)}")
@@ -240,7 +251,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
     def inject_cmd(
         real: list[Path] = typer.Option(..., "--real", help="recorded trips (Trip .parquet, or raw logs with "
                                                             "--format); folders expand"),
-        effect: str = typer.Option(..., "--effect", help=f"one of {', '.join(sorted(INJECTIONS))}"),
+        effect: str = typer.Option(..., "--effect", help="one of accel_bias, aux_load, latency, "
+                                                         "speed_scale, torque_gain, torque_offset"),
         size: float = typer.Option(..., "--size", help="the effect's size in its unit: aux_load W, torque_gain 1, "
                                                        "torque_offset N*m, accel_bias m/s^2, latency s, "
                                                        "speed_scale 1"),
@@ -254,6 +266,9 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         load into the battery current, drive-torque gain or offset, accelerometer bias, a channel latency,
         speed-signal scale): diagnosed against a calibration of the trips as logged, it must be named."""
         from rich.console import Console
+
+        from roadload.sim2real.errors import DiagnosisError
+        from roadload.sim2real.inject import INJECTIONS, inject
 
         console = Console(soft_wrap=True)
         try:

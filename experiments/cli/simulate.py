@@ -1,55 +1,54 @@
-"""``roadload simulate``, ``roadload plot``, ``roadload effects`` and ``roadload benchmark simulator``."""
+"""``roadload simulate``, ``roadload plot``, ``roadload effects`` and ``roadload benchmark simulator``.
+
+Light at import (see the package docstring): the simulator, the road generators and matplotlib load inside the
+commands, after the arguments and input files are checked."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
-from typing import NoReturn
 
 import typer
-from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-from roadload.vehicle import load_vehicle
-from roadload.presets import PRESETS, get_preset
-from roadload.road_profiles import load_profile
-from roadload.road_profiles import DriveCycle
-from roadload.vehicle import SensorSpec, VehicleSpecError, parse_spec
-from roadload.envs.effects import EffectsConfig
-from roadload.envs.simulator import simulate
-from roadload.trip import Trip, TripError
-from roadload.envs.plotting import plot_trip
-from roadload.envs.effects import describe_effects
-from roadload.experiments.benchmarks.simulator import report
 
-from .errors import fail
+from roadload.presets import PRESETS
 
+from .errors import CliInputError, choose, fail, require_file
+from .io import PRECISIONS
 
 #: ambient temperatures the simulator's air-density and tire/oil models are meant for [degC]
 AMBIENT_RANGE_C = (-60.0, 60.0)
+PRECISION_HELP = ("trip file storage: 'compact' (SI floats, float32 on the sensor grid, truth to 15 significant "
+                  "bits; ~13 MB per simulated hour), 'exact' (every value bit for bit, ~5x larger) or 'packed' "
+                  "(roadload's private integer codec: 2 % smaller, but other tools read integer codes, not SI values)")
 
 
-def _fail(msg: str) -> NoReturn:
-    fail(msg)
-
-
-def _load_vehicle(text: str):
-
-
+def check_vehicle(text: str, option: str = "--vehicle") -> None:
+    """A preset name (did you mean) or an existing vehicle JSON file."""
     if text in PRESETS:
-        return get_preset(text)
-    if text.endswith(".json") or Path(text).exists():
-        return load_vehicle(text)
-    return get_preset(text)  # raises, listing the presets
+        return
+    if text.endswith(".json") or Path(text).exists() or "/" in text:
+        require_file(Path(text), option, (".json",))
+        return
+    choose(text, PRESETS, option, "vehicle preset", f"presets: {', '.join(PRESETS)}, or a vehicle .json file")
 
 
-def _load_road(text: str, seed: int):
+def check_road(text: str, option: str = "--road") -> None:
+    """A registered road profile / drive cycle name (did you mean) or an existing .json/.csv/.gpx file."""
+    if Path(text).suffix.lower() in (".json", ".csv", ".gpx") or Path(text).exists():
+        require_file(Path(text), option, (".json", ".csv", ".gpx"))
+        return
+    from roadload.road_profiles import known_profiles
 
-    return load_profile(text, seed=seed)
+    names = list(known_profiles())
+    if text.lower() not in names:
+        choose(text, names, option, "road", f"'roadload profiles list' shows all {len(names)} road profiles and "
+                                            f"drive cycles, or give a .json/.csv/.gpx file")
 
 
 def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
     @app.command("simulate")
     def simulate_cmd(
-        vehicle: str = typer.Option(..., help="vehicle preset (gt_rwd, gt_awd, bmw_i3) or vehicle JSON file"),
+        vehicle: str = typer.Option(..., help=f"vehicle preset ({', '.join(PRESETS)}) or vehicle JSON file"),
         road: str = typer.Option(..., help="road profile / drive cycle name (roadload profiles list) or a "
                                  ".json/.csv/.gpx file"),
         out: Path = typer.Option(..., help="output trip file (.parquet)"),
@@ -63,58 +62,71 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         ambient_temperature: float = typer.Option(20.0, help="ambient temperature [degC]"),
         sensors: Path = typer.Option(None, help="sensor spec JSON (default: the vehicle's sensors)"),
         plot: bool = typer.Option(False, help="also write a PNG next to the trip"),
-        precision: str = typer.Option("compact", help="'compact' (quantised channels as scaled integers, truth "
-                                      "float32; ~4x smaller) or 'exact' (float64)"),
+        precision: str = typer.Option("compact", help=PRECISION_HELP),
     ) -> None:
         """Simulate a trip (100 Hz CAN-like channels + ground truth) and write it as Parquet."""
-
-
         if out.suffix != ".parquet":
-            _fail(f"--out: trip files end in .parquet, got {out.name!r}")
+            fail(f"--out: trip files end in .parquet, got {out.name!r}")
         if not AMBIENT_RANGE_C[0] <= ambient_temperature <= AMBIENT_RANGE_C[1]:
-            _fail(f"--ambient-temperature: must lie in [{AMBIENT_RANGE_C[0]:g}, {AMBIENT_RANGE_C[1]:g}] [degC], "
-                  f"got {ambient_temperature:g}")
+            fail(f"--ambient-temperature: must lie in [{AMBIENT_RANGE_C[0]:g}, {AMBIENT_RANGE_C[1]:g}] [degC], "
+                 f"got {ambient_temperature:g}")
         for opt, value, unit in (("--duration", duration, "s"), ("--distance", distance, "km")):
             if value is not None and not value > 0:
-                _fail(f"{opt}: must be > 0 [{unit}], got {value:g}")
-        try:
-            spec = _load_vehicle(vehicle)
-            profile = _load_road(road, seed if road_seed is None else road_seed)
-            driver = None
-            if cycle is not None:
-                driver = _load_road(cycle, 0)
-                if not isinstance(driver, DriveCycle):
-                    _fail(f"--cycle: {cycle!r} is a road profile, not a drive cycle")
-            cfg = EffectsConfig.parse(",".join(effects) or None)
-            cfg = EffectsConfig.from_dict({**cfg.to_dict(), "ambient_temperature": ambient_temperature + 273.15})
-            sensor_spec = None
-            if sensors is not None:
-                import json
+                fail(f"{opt}: must be > 0 [{unit}], got {value:g}")
+        choose(precision, PRECISIONS, "--precision", "storage precision")
+        check_vehicle(vehicle)
+        sensor_data = None
+        if sensors is not None:
+            require_file(sensors, "--sensors", (".json",))
+            try:
+                sensor_data = json.loads(sensors.read_text())
+            except (OSError, json.JSONDecodeError) as exc:
+                raise CliInputError(f"--sensors {sensors}: cannot read a JSON sensor spec ({exc})") from None
+        check_road(road)
+        if cycle is not None:
+            check_road(cycle, "--cycle")
 
-                try:
-                    data = json.loads(Path(sensors).read_text())
-                except (OSError, json.JSONDecodeError) as exc:
-                    _fail(f"--sensors {sensors}: cannot read a JSON sensor spec ({exc})")
-                sensor_spec = parse_spec(SensorSpec, data, "sensors")
-            with Progress(TextColumn("[bold]simulating[/bold] {task.description}"), BarColumn(),
-                          TextColumn("{task.percentage:>5.1f}%"), TimeElapsedColumn(),
-                          console=Console(stderr=True), transient=True) as bar:
-                task = bar.add_task(f"{spec.name} on {profile.name}", total=1.0)
-                # streamed: one Parquet row group per 2 min of driving, memory bounded by one chunk
-                path = simulate(spec, profile, effects=cfg, sensors=sensor_spec, seed=seed,
-                                duration=duration, distance=None if distance is None else distance * 1000.0,
-                                driver=driver, progress=lambda f: bar.update(task, completed=f), out=out,
-                                precision=precision)
-            info = Trip.read_info(path)
-        except typer.Exit:
-            raise
-        except (ValueError, VehicleSpecError, FileNotFoundError) as exc:
-            _fail(str(exc))
+        from rich.console import Console
+        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+        from roadload.envs.effects import EffectsConfig
+        from roadload.envs.simulator import simulate
+        from roadload.presets import get_preset
+        from roadload.road_profiles import DriveCycle, load_profile
+        from roadload.trip import Trip
+        from roadload.vehicle import SensorSpec, load_vehicle, parse_spec
+
+        spec = get_preset(vehicle) if vehicle in PRESETS else load_vehicle(vehicle)
+        profile = load_profile(road, seed=seed if road_seed is None else road_seed)
+        driver = None
+        if cycle is not None:
+            driver = load_profile(cycle, seed=0)
+            if not isinstance(driver, DriveCycle):
+                fail(f"--cycle: {cycle!r} is a road profile, not a drive cycle")
+        cfg = EffectsConfig.parse(",".join(effects) or None)
+        cfg = EffectsConfig.from_dict({**cfg.to_dict(), "ambient_temperature": ambient_temperature + 273.15})
+        sensor_spec = None if sensor_data is None else parse_spec(SensorSpec, sensor_data, "sensors")
+        with Progress(TextColumn("[bold]simulating[/bold] {task.description}"), BarColumn(),
+                      TextColumn("{task.percentage:>5.1f}%"), TimeElapsedColumn(), console=Console(stderr=True),
+                      transient=True) as bar:
+            # until the first chunk is done the bar cannot move (a first run compiles the simulator, holding the GIL
+            # that rich's refresh thread needs): say so, then show the vehicle and road
+            task = bar.add_task(f"{spec.name} on {profile.name} (starting; a first run compiles the simulator: "
+                                f"20-60 s)", total=1.0)
+            # streamed: one Parquet row group per 5 min of driving, memory bounded by one chunk; each chunk
+            # redraws the bar (the compiled simulator holds the GIL, so rich's refresh thread cannot run meanwhile)
+            path = simulate(spec, profile, effects=cfg, sensors=sensor_spec, seed=seed,
+                            duration=duration, distance=None if distance is None else distance * 1000.0,
+                            driver=driver, out=out, progress=lambda f: bar.update(
+                                task, completed=f, description=f"{spec.name} on {profile.name}", refresh=True),
+                            precision=precision)
+        info = Trip.read_info(path)
         t_first = None
+        last = None
         for last in Trip.iter_chunks(path, channels=[], truth_channels=["position"]):  # bounded memory
             t_first = last.t[0] if t_first is None else t_first
-        if last.truth is None:
-            _fail(f"{path}: the streamed trip has no ground-truth position channel")
+        if last is None or last.truth is None or t_first is None:
+            fail(f"{path}: the streamed trip has no ground-truth position channel")
         km = float(last.truth["position"].iloc[-1]) / 1000.0
         duration_s = float(last.t[-1] - t_first)
         e = info["meta"]["energy"]["source"]
@@ -124,25 +136,26 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         for w in info["meta"]["warnings"]:
             typer.secho(f"warning: {w}", fg=typer.colors.YELLOW, err=True)
         if plot:
+            from roadload.envs.plotting import plot_trip
 
             typer.echo(f"wrote {plot_trip(Trip.load(path), out.with_suffix('.png'))}")
 
     @app.command("plot")
     def plot_cmd(trip: Path = typer.Argument(..., help="trip file (.parquet)"),
                  out: Path = typer.Option(None, help="PNG to write (default: next to the trip)")) -> None:
-        """Plot a trip over distance (speed, forces, grade/elevation, parameters) to a PNG."""
+        """Plot a trip over distance (speed, forces, grade and elevation, energy) to a PNG."""
+        require_file(trip, "TRIP", (".parquet",))
+        if out is not None and out.suffix.lower() != ".png":
+            fail(f"--out: the plot is a .png file, got {out.name!r}")
+        from roadload.envs.plotting import plot_trip
+        from roadload.trip import Trip
 
-
-        try:
-            t = Trip.load(trip)
-            path = plot_trip(t, out if out is not None else trip.with_suffix(".png"))
-        except (TripError, ValueError) as exc:
-            _fail(str(exc))
-        typer.echo(f"wrote {path}")
+        typer.echo(f"wrote {plot_trip(Trip.load(trip), out if out is not None else trip.with_suffix('.png'))}")
 
     @app.command("effects")
     def effects_cmd() -> None:
         """List the simulator's effects with their equations and parameters."""
+        from roadload.envs.effects import describe_effects
 
         typer.echo(describe_effects())
 
@@ -150,5 +163,6 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
     def bench_cmd(duration: float = typer.Option(3600.0, help="simulated seconds per run"),
                   repeats: int = typer.Option(3, help="runs (best is reported)")) -> None:
         """Simulator speed: real-time factor at 100 Hz with all sensors and effects, memory, step throughput."""
+        from roadload.experiments.benchmarks.simulator import report
 
         typer.echo(report(duration, repeats))

@@ -1,13 +1,13 @@
 """Reinforcement learning on ``roadload/EcoDrive-v0``: training (PPO / SAC from stable-baselines3 on vectorised
 envs), evaluation on held-out roads against cruise control and the MPC (the controllers' metrics), and the
-environment speed benchmark. CLI: ``roadload train`` and ``roadload benchmark gym``; scripts/train_rl.py and
-scripts/bench_gym.py call the same functions.
+environment speed benchmark. CLI: ``roadload train`` and ``roadload benchmark gym`` (roadload.experiments.cli.rl);
+scripts/train_rl.py and scripts/bench_gym.py call the same functions.
 
 Road seeds: training episodes draw roads from ``road_seed_range`` (default [0, 10000)); the learning-curve
 evaluation uses VALIDATION_SEEDS and the final table HELD_OUT_SEEDS, both outside the training range.
 
 Modules: ``common`` (ids, seeds, vectorised envs), ``rollouts``, ``training``, ``evaluation``, ``benchmark``
-(environment speed), ``command`` (``roadload train``).
+(environment speed), ``command`` (the workflow of ``roadload train``).
 """
 
 from .common import (  # noqa: F401
@@ -51,6 +51,5 @@ from .benchmark import (  # noqa: F401
 from .command import (  # noqa: F401
     load_trained,
     print_table,
-    register,
     train_and_evaluate,
 )

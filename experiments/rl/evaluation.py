@@ -43,6 +43,10 @@ def evaluation_table(policies: dict[str, Callable[[np.ndarray], np.ndarray]], en
                 notes.append(f"{name} on road {seed}: failed ({type(exc).__name__}: {exc})")
                 continue
             rows.append({"controller": name, "road_seed": seed, **m})
+            if m.get("relaxed_plans") or m.get("infeasible_plans"):
+                notes.append(f"{name} on road {seed}: {m['relaxed_plans']} relaxed and {m['infeasible_plans']} "
+                             f"infeasible plans (a stop or speed cap out of reach within the comfort limits), "
+                             f"{m['fallback_brakes']} fallback brakes; worst: {m['worst_violation']}")
             if progress:
                 progress(f"{name} road {seed}")
     table = pd.DataFrame(rows)

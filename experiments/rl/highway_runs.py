@@ -7,8 +7,8 @@ kinetic energy, against the one trained with the mechanical-energy credit.
     python scripts/train_rl_highway.py --timesteps 75000 --n-envs 4 --out out/rl_highway
     python scripts/train_rl_highway.py --quick          # tiny run for CI (512 steps, 2 held-out episodes)
     python scripts/eval_rl_highway.py \\
-        --policy "first reward=docs/results/scale_rl/highway/ppo_ecohighway.zip" \\
-        --policy "mechanical-energy credit=docs/results/scale_rl/highway_credit/ppo_ecohighway.zip" \\
+        --policy "first reward=out/rl_highway_first_reward/ppo_ecohighway.zip" \\
+        --policy "mechanical-energy credit=examples/policies/ppo_ecohighway_energy_credit.zip" \\
         --config '{"simulation_frequency": 4.0, "policy_frequency": 2.0, "vehicles_count": 10}'
     python scripts/eval_rl_highway.py --quick      # CI smoke run (the credit policy, 1 short episode)
 """
@@ -28,8 +28,9 @@ from roadload.gym.config import EcoHighwayConfig, make_config
 
 REPO = Path(__file__).resolve().parents[2]
 """The source tree of an editable install; the scripts pass their own repository instead."""
-SHIPPED_POLICY = "docs/results/scale_rl/highway_credit/ppo_ecohighway.zip"
-"""The shipped policy that :func:`main_evaluate` evaluates by default, relative to the repository."""
+SHIPPED_POLICY = "examples/policies/ppo_ecohighway_energy_credit.zip"
+"""The reference policy that :func:`main_evaluate` evaluates by default, relative to the repository (its
+provenance: ``examples/policies/README.md``)."""
 
 
 def _policy(model):

@@ -85,5 +85,10 @@ def run_controller(name: str, env_config: dict[str, Any], road_seed: int, seed: 
     if logs is not None:
         logs[name] = result.log
     m = dict(result.metrics)
-    return {k: m.get(k) for k in ("arrived", "energy_kWh", "trip_time", "speed_violations", "violation_time",
-                                  "max_excess_kmh", "rms_jerk", "max_abs_accel", "distance", "mean_speed_kmh")}
+    out = {k: m.get(k) for k in ("arrived", "energy_kWh", "trip_time", "speed_violations", "violation_time",
+                                 "max_excess_kmh", "rms_jerk", "max_abs_accel", "distance", "mean_speed_kmh")}
+    if controller == "mpc":  # plans that could not meet a stop or cap within the comfort limits, and the fallback
+        out.update(relaxed_plans=int(m.get("ctl_relaxed_plans", 0)), infeasible_plans=int(m.get(
+            "ctl_infeasible_plans", 0)), fallback_brakes=int(m.get("ctl_fallback_brake", 0)),
+            worst_violation=str(m.get("ctl_worst_violation", "")))
+    return out

@@ -2,8 +2,8 @@
 on and off -- cost (energy + lambda * time), trip time, speed-violation episodes and the share of steps where the
 shield capped the policy's command.
 
-    python scripts/shield_effect.py --policy docs/results/scale_rl/ppo_ecodrive.zip    # a saved SB3 policy
-    python scripts/shield_effect.py --quick                                             # CI: full throttle, 1 road
+    python scripts/shield_effect.py --policy out/rl/ppo_ecodrive.zip   # saved by scripts/train_rl.py --out out/rl
+    python scripts/shield_effect.py --quick                            # CI: full throttle, 1 road
 """
 
 import argparse

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import time
 from dataclasses import dataclass, field
@@ -29,7 +30,53 @@ class TrainResult:
     extra: dict[str, Any] = field(default_factory=dict)
 
 
-def _curve_callback(env_config: dict[str, Any], eval_every: int, progress: Callable[[int], None] | None):
+# --------------------------------------------------------------------------------------------- checkpoints
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def checkpoint_paths(out_dir: Path, algo: str) -> dict[str, Path]:
+    """The files of an unfinished training: the model (SB3 zip), SAC's replay buffer, and the JSON that holds the
+    run's identity, the steps done, the learning-curve rows so far and the SHA-256 of the other two."""
+    out_dir = Path(out_dir)
+    return {"model": out_dir / f"{algo}_checkpoint.zip", "replay": out_dir / f"{algo}_checkpoint_replay.pkl",
+            "state": out_dir / f"{algo}_checkpoint.json"}
+
+
+def load_checkpoint(out_dir: Path, algo: str, identity: dict[str, Any]) -> tuple[dict[str, Any] | None, str]:
+    """(state, '') of a valid checkpoint of this very run, else (None, why it is not used: missing, another run,
+    or corrupt -- a corrupt checkpoint is never trusted)."""
+    paths = checkpoint_paths(out_dir, algo)
+    if not paths["state"].exists():
+        return None, "no checkpoint"
+    try:
+        state = json.loads(paths["state"].read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        return None, f"checkpoint {paths['state']} is unreadable ({exc})"
+    if not isinstance(state, dict) or state.get("identity") != json.loads(json.dumps(identity, default=str)):
+        return None, f"checkpoint {paths['state']} belongs to another training run"
+    for key in ("model", "replay"):
+        expected = state.get(f"{key}_sha256")
+        if expected is not None and (not paths[key].exists() or _sha256(paths[key]) != expected):
+            return None, f"checkpoint {paths[key]} is missing or does not match its checksum"
+    return state, ""
+
+
+def _save_checkpoint(model, out_dir: Path, algo: str, identity: dict[str, Any], rows: list, next_eval: int) -> None:
+    """Model (and replay buffer) first, the state JSON with their checksums last: a kill in between leaves a state
+    whose checksums no longer match, which :func:`load_checkpoint` refuses."""
+    paths = checkpoint_paths(out_dir, algo)
+    _atomic_write_bytes(paths["model"], lambda tmp: model.save(str(tmp)))
+    state: dict[str, Any] = {"identity": identity, "timesteps": int(model.num_timesteps), "rows": rows,
+                             "next_eval": int(next_eval), "model_sha256": _sha256(paths["model"])}
+    if hasattr(model, "save_replay_buffer"):
+        _atomic_write_bytes(paths["replay"], lambda tmp: model.save_replay_buffer(str(tmp)))
+        state["replay_sha256"] = _sha256(paths["replay"])
+    _atomic_write_bytes(paths["state"], lambda tmp: tmp.write_text(json.dumps(state, default=str)))
+
+
+def _curve_callback(env_config: dict[str, Any], eval_every: int, progress: Callable[[int], None] | None,
+                    checkpoint: Callable[[Any, list, int], None] | None = None, checkpoint_every: int = 0):
     from stable_baselines3.common.callbacks import BaseCallback
 
     class CurveCallback(BaseCallback):
@@ -37,6 +84,7 @@ def _curve_callback(env_config: dict[str, Any], eval_every: int, progress: Calla
             super().__init__()
             self.rows: list[tuple[int, str, float]] = []
             self._next_eval = eval_every
+            self._next_checkpoint = checkpoint_every
 
         def _validate(self) -> None:
             rets = [run_policy(sb3_policy(self.model), env_config, s)[0]["episode_return"] for s in VALIDATION_SEEDS]
@@ -54,6 +102,9 @@ def _curve_callback(env_config: dict[str, Any], eval_every: int, progress: Calla
             if eval_every > 0 and self.num_timesteps >= self._next_eval:
                 self._next_eval += eval_every
                 self._validate()
+            if checkpoint is not None and checkpoint_every > 0 and self.num_timesteps >= self._next_checkpoint:
+                self._next_checkpoint = (self.num_timesteps // checkpoint_every + 1) * checkpoint_every
+                checkpoint(self.model, self.rows, self._next_eval)
             if progress is not None:
                 progress(self.num_timesteps)
             return True
@@ -64,10 +115,17 @@ def _curve_callback(env_config: dict[str, Any], eval_every: int, progress: Calla
 def train_policy(algo: str, timesteps: int, out_dir: Path, n_envs: int = 2, seed: int = 0,
                  env_config: dict[str, Any] | None = None, vec: str = "subproc", eval_every: int = 0,
                  hyperparams: dict[str, Any] | None = None, progress: Callable[[int], None] | None = None,
-                 torch_threads: int = 1, threads: int = 1) -> TrainResult:
+                 torch_threads: int = 1, threads: int = 1, checkpoint_every: int = 0) -> TrainResult:
     """Train PPO or SAC on EcoDrive-v0 with ``n_envs`` vectorised envs (``threads`` numba threads of the native
     vector env); saves ``<algo>_ecodrive.zip`` (atomic) and returns the learning curve (training episode returns
-    + validation returns every ``eval_every``)."""
+    + validation returns every ``eval_every``).
+
+    ``checkpoint_every`` [steps] > 0: the model (SAC: and its replay buffer), the steps done and the curve so far
+    are saved that often (:func:`checkpoint_paths`); a training of the same settings started again in the same
+    ``out_dir`` after a crash or SIGKILL continues from there instead of repeating those steps (its environments
+    restart their episodes, so the continuation is not bit-identical to an uninterrupted run). A checkpoint of
+    other settings, or one that fails its checksum, is not used (said in ``extra['resume']``). The checkpoint is
+    removed once the final policy is saved."""
     import torch
 
     if timesteps < 1:
@@ -87,11 +145,30 @@ def train_policy(algo: str, timesteps: int, out_dir: Path, n_envs: int = 2, seed
     if algo == "ppo":
         params["n_steps"] = max(16, min(params["n_steps"], max(timesteps // n_envs, 16)))
         params["batch_size"] = min(params["batch_size"], params["n_steps"] * n_envs)
-    model = cls("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **params)
-    callback = _curve_callback(env_config, eval_every, progress)
+    if checkpoint_every < 0:
+        raise RLError(f"checkpoint_every: must be >= 0 steps, got {checkpoint_every}")
+    identity = {"algo": algo, "timesteps": timesteps, "n_envs": n_envs, "seed": seed, "vec": vec,
+                "threads": threads, "eval_every": eval_every, "env_config": env_config, "hyperparams": params}
+    state, why = load_checkpoint(Path(out_dir), algo, identity) if checkpoint_every > 0 else (None, "off")
+    paths = checkpoint_paths(Path(out_dir), algo)
+    callback = _curve_callback(env_config, eval_every, progress,
+                               lambda m, rows, nxt: _save_checkpoint(m, Path(out_dir), algo, identity, rows, nxt),
+                               checkpoint_every)
+    if state is not None:
+        model = cls.load(str(paths["model"]), env=venv, device="cpu")
+        if "replay_sha256" in state:
+            model.load_replay_buffer(str(paths["replay"]))
+        callback.rows = [tuple(r) for r in state["rows"]]
+        callback._next_eval = int(state["next_eval"])
+        callback._next_checkpoint = (int(state["timesteps"]) // checkpoint_every + 1) * checkpoint_every
+        resume = f"resumed at {int(state['timesteps'])} of {timesteps} steps from {paths['state']}"
+    else:
+        model = cls("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **params)
+        resume = why
     t0 = time.perf_counter()
     try:
-        model.learn(total_timesteps=timesteps, callback=callback)
+        model.learn(total_timesteps=max(timesteps - int(model.num_timesteps), 0), callback=callback,
+                    reset_num_timesteps=state is None)
     finally:
         venv.close()
     seconds = time.perf_counter() - t0
@@ -103,7 +180,9 @@ def train_policy(algo: str, timesteps: int, out_dir: Path, n_envs: int = 2, seed
             "env_config": env_config, "hyperparams": params, "seconds": seconds}
     _atomic_write_bytes(Path(out_dir) / f"{algo}_ecodrive.json",
                         lambda tmp: tmp.write_text(json.dumps(meta, indent=1, default=str)))
-    return TrainResult(algo, path, curve, seconds, int(model.num_timesteps), {"model": model})
+    for leftover in paths.values():  # the final policy is written: the checkpoint has served
+        leftover.unlink(missing_ok=True)
+    return TrainResult(algo, path, curve, seconds, int(model.num_timesteps), {"model": model, "resume": resume})
 
 
 def load_policy(path: Path):
@@ -115,8 +194,11 @@ def load_policy(path: Path):
     return _algo_class(algo).load(str(path), device="cpu")
 
 
-def plot_learning_curves(results: list[TrainResult], path: Path) -> Path:
-    """PNG: training episode returns (rolling mean over 20 episodes) and validation returns vs timesteps."""
+def plot_learning_curves(results: list[TrainResult], path: Path) -> Path | None:
+    """PNG: training episode returns (rolling mean over 20 episodes) and validation returns vs timesteps; None (and
+    no file) when no run has a point to plot -- a short run without a finished episode or validation."""
+    if not any(len(res.curve) for res in results):
+        return None
     import matplotlib
 
     matplotlib.use("Agg")
@@ -127,8 +209,8 @@ def plot_learning_curves(results: list[TrainResult], path: Path) -> Path:
         c = res.curve
         tr = c[c.kind == "train"]
         if len(tr):
-            line, = ax.plot(tr.timesteps, tr.value.rolling(20, min_periods=1).mean(), lw=1.2, alpha=0.8,
-                            label=f"{res.algo.upper()} training episodes (rolling mean 20)")
+            line, = ax.plot(tr.timesteps, tr.value.rolling(20, min_periods=1).mean(), "-" if len(tr) > 1 else "o",
+                            lw=1.2, alpha=0.8, label=f"{res.algo.upper()} training episodes (rolling mean 20)")
             color = line.get_color()
         else:
             color = None

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 from typing import Any, Sequence
 
 import numpy as np
@@ -179,11 +181,14 @@ def run_scenario(scenario: Scenario, estimators: Sequence[str] | None = None) ->
 
 
 def run_sweep_results(tasks: Sequence[Scenario], estimators: Sequence[str] | None = None, *,
-                      scheduler: str | None = None, progress: bool = True, workers: int | None = None):
+                      scheduler: str | None = None, progress: bool = True, workers: int | None = None,
+                      checkpoint: str | os.PathLike | None = None):
     """Run scenarios on the shared sweep runner (local processes or a Dask cluster at ``scheduler``).
 
     Returns (results, failed): one long DataFrame of metric rows, and [(scenario, error text)] for the
-    scenarios whose construction or evaluation raised (they are reported, not dropped silently)."""
+    scenarios whose construction or evaluation raised (they are reported, not dropped silently). ``checkpoint``:
+    a folder where every finished scenario is stored at once; a run stopped or killed resumes from it without
+    computing those again (:func:`roadload.sweep.run_sweep`)."""
     import functools
 
     import pandas as pd
@@ -196,7 +201,8 @@ def run_sweep_results(tasks: Sequence[Scenario], estimators: Sequence[str] | Non
             raise RobustnessError(f"unknown estimators {unknown}; known: {known}")
     fn = functools.partial(run_scenario, estimators=list(estimators) if estimators is not None else None)
     outcomes = run_sweep(fn, list(tasks), scheduler=scheduler, progress=progress, workers=workers,
-                         description="robustness")
+                         description="robustness", checkpoint=checkpoint,
+                         name=lambda s: f"{s.backend}_{s.sweep}_{s.variant}_{s.level:g}_{s.seed}")
     rows = [row for o in outcomes if o.ok for row in o.value]
     failed = [(o.task, o.error) for o in outcomes if not o.ok]
     return pd.DataFrame(rows), failed

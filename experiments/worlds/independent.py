@@ -32,7 +32,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-import numba
+from roadload.jitcache import cached_njit
 import numpy as np
 from roadload.units import KELVIN, R_AIR, STANDARD_PRESSURE, G
 from roadload.vehicle import (
@@ -177,7 +177,7 @@ CURRENT = Column("I_HV [A]", "battery_current", "A", 1)
 TIME_HEADER = "t [s]"
 
 
-@numba.njit(cache=True)
+@cached_njit
 def _interp_uniform(x, ds, y):
     k = x / ds
     i = int(k)
@@ -189,7 +189,7 @@ def _interp_uniform(x, ds, y):
     return y[i] * (1 - f) + y[i + 1] * f
 
 
-@numba.njit(cache=True)
+@cached_njit
 def _stop_state(s, v, dt, stops, j, passing, wait, dwell):
     """Driver at stops: skip the stops behind, wait ``dwell`` [s] at standstill before the next, then pass it.
     Returns (next stop index, passing, time waited [s])."""
@@ -204,7 +204,7 @@ def _stop_state(s, v, dt, stops, j, passing, wait, dwell):
     return j, passing, wait
 
 
-@numba.njit(cache=True)
+@cached_njit
 def _motor_limits(omega, tmax, pmax, treg, preg):
     """Motor torque limits [N m] at motor speed ω [rad/s]: min(T_max, P_max/ω) motoring, min(T_reg, P_reg/ω)
     regenerating (power limits only above 1 rad/s)."""
@@ -217,7 +217,7 @@ def _motor_limits(omega, tmax, pmax, treg, preg):
     return lim_mot, lim_reg
 
 
-@numba.njit(cache=True)
+@cached_njit
 def _demand(f_d, v, v_t, tap, omega, p):
     """Driver's motor torque demand T_dem = F_d r_W / (i η) [N m] and brake pressure demand [Pa]: regeneration
     first up to its limit, the rest F_rest / brake gain on the friction brake; held at standstill; brake taps."""
@@ -238,7 +238,7 @@ def _demand(f_d, v, v_t, tap, omega, p):
     return t_dem, p_dem
 
 
-@numba.njit(cache=True)
+@cached_njit
 def _pedal(p_dem, p_held, t_since, dt):
     """Step-like brake pedal: hold the pressure [Pa], re-set in 5 bar steps at most every 0.6 s (release after
     0.3 s). Returns (held pressure [Pa], time since the last re-set [s])."""
@@ -249,7 +249,7 @@ def _pedal(p_dem, p_held, t_since, dt):
     return p_held, t_since
 
 
-@numba.njit(cache=True)
+@cached_njit
 def _wheel_torque(tm, v, t, p, eff):
     """Drive-train: wheel torque i η T_M - i T_0 in traction, i T_M / η - i T_0 in regeneration [N m], with cold
     oil raising the mesh loss and the drag torque by 1 + c e^(-t/τ); none backwards at standstill."""
@@ -266,7 +266,7 @@ def _wheel_torque(tm, v, t, p, eff):
     return t_w
 
 
-@numba.njit(cache=True)
+@cached_njit
 def _resistances(v, s, th, ka, psi, t_amb, m, kc, p, eff):
     """Driving resistances [N] (eq. 2.5-2.14): air ρ_a/2 c_x A v_a |v_a| with ρ_a = p_a/(R_a T_a) and the wind's
     approach speed, rolling m g cos θ f_r(v) (tire warm-up over distance), cornering k_c v⁴ κ², climbing
@@ -282,7 +282,7 @@ def _resistances(v, s, th, ka, psi, t_amb, m, kc, p, eff):
     return f_air + f_roll + f_corner + f_cl, rho
 
 
-@numba.njit(cache=True)
+@cached_njit
 def _acceleration(t_w, f_res, f_brake, v, rw, m_eff):
     """v̇ = (T_W / r_W - F_res - F_B) / m_eff [m/s²] (eq. 2.6 + 2.17); static friction holds the car when the
     brake force exceeds the net force; no rolling backwards."""
@@ -299,7 +299,7 @@ def _acceleration(t_w, f_res, f_brake, v, rw, m_eff):
     return a
 
 
-@numba.njit(cache=True)
+@cached_njit
 def _battery_current(tm, omega, soc, aux_add, p):
     """Battery current I [A] drawing P_el = T ω + k_cu T² + k_fe ω + P_0 + P_aux from U_oc(soc) = u0 + u1 soc
     through R: I = (U_oc - sqrt(U_oc² - 4 R P_el)) / (2 R). Returns (I, U_oc [V])."""
@@ -311,7 +311,7 @@ def _battery_current(tm, omega, soc, aux_add, p):
     return (u_oc - np.sqrt(disc)) / (2 * rbat), u_oc
 
 
-@numba.njit(cache=True)
+@cached_njit
 def _drive(n, dt, ds, grade, kappa, v_plan, v_free, stops, taps, p, eff, ambient, dwell):
     """The numba loop, one named stage per step: stops, driver's target and force demand, torque and brake
     demand, pedal, motor and brake lags, drive-train, resistances, acceleration, battery, log, integration.

@@ -118,7 +118,7 @@ def test_unsuccessful_solve_is_counted_and_plan_not_used():
 
     def failing(*args, **kw):
         plan = real_solve(*args, **kw)
-        plan.success = False
+        plan.success = plan.converged = False  # the solver did not converge
         plan.traction[:] = 1e5  # a garbage plan must never be applied
         return plan
 

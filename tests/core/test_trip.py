@@ -61,8 +61,9 @@ def test_load_rejects_foreign_parquet(tmp_path):
         Trip.load(tmp_path / "f.parquet")
 
 
-def test_compact_differenced_columns_roundtrip_across_chunks_gaps_and_wraps(tmp_path):
-    """'delta' columns (first differences of the integer code, continued over chunks): smooth float32 truth,
+def test_packed_differenced_columns_roundtrip_across_chunks_gaps_and_wraps(tmp_path):
+    """Precision 'packed' (format 3, the private codec, opt-in): 'delta' columns (first differences of the integer
+    code, continued over chunks): smooth float32 truth,
     a fixed-step truth channel and a quantised measured channel with NaN gaps, a float32 bit pattern that
     crosses zero (int32 differences wrap); load and chunked reads with rows not aligned to the chunks give the
     compact values exactly."""
@@ -81,7 +82,7 @@ def test_compact_differenced_columns_roundtrip_across_chunks_gaps_and_wraps(tmp_
                           "position": np.cumsum(np.full(n, 0.25)), "speed": 20.0 + np.cos(t / 3.0)})
     path = tmp_path / "d.parquet"
     with TripWriter(path, {"t": "s", "vehicle_speed": "m/s"}, {"t": "s", "acceleration": "m/s^2",
-                    "position": "m", "speed": "m/s"}, "compact", {"vehicle_speed": 0.01}) as w:
+                    "position": "m", "speed": "m/s"}, "packed", {"vehicle_speed": 0.01}) as w:
         for a in range(0, n, 1000):
             w.write(measured.iloc[a:a + 1000], truth.iloc[a:a + 1000])
         w.close({"name": "delta"})
@@ -96,3 +97,87 @@ def test_compact_differenced_columns_roundtrip_across_chunks_gaps_and_wraps(tmp_
     joined = np.concatenate([p.true("speed") for p in parts])
     np.testing.assert_array_equal(joined, back.true("speed"))
     np.testing.assert_array_equal(np.concatenate([p.channel("vehicle_speed") for p in parts]), speed)
+
+
+# ------------------------------------------------------------------------------------------ constructor contract
+@pytest.mark.parametrize("units, message", [
+    (["s", "m/s", "1"], r"units: expected a dict \{channel: SI unit string\}.*got list"),
+    ("m/s", r"units: expected a dict.*got str"),
+    ({"t": "s", "vehicle_speed": 3.6, "gear": "1"}, r"units\['vehicle_speed'\]: the unit must be a string such as "
+                                                    r"'m/s', got float 3.6"),
+    ({"t": "s", "vehicle_speed": None, "gear": "1"}, r"units\['vehicle_speed'\].*got NoneType"),
+])
+def test_units_of_the_wrong_type_give_a_clean_error(units, message):
+    base = _trip(truth=False)
+    with pytest.raises(TripError, match=message):
+        Trip(base.measured, units)
+    with pytest.raises(TripError, match=message.replace("units", "truth_units", 1)):
+        Trip(base.measured, base.units, {}, pd.DataFrame({"t": base.t, "mass": 1.0}), units)
+
+
+def test_channels_of_unequal_length_are_refused_not_padded():
+    t = np.arange(10) / 100.0
+    with pytest.raises(TripError, match=r"measured: channels of unequal length: 't' has 10 samples, "
+                                        r"'vehicle_speed' has 7"):
+        Trip({"t": t, "vehicle_speed": np.ones(7)}, {"t": "s", "vehicle_speed": "m/s"})
+    with pytest.raises(TripError, match=r"truth: channels of unequal length: 't' has 10 samples, 'mass' has 11"):
+        Trip({"t": t, "vehicle_speed": np.ones(10)}, {"t": "s", "vehicle_speed": "m/s"}, {},
+             {"t": t, "mass": np.ones(11)}, {"t": "s", "mass": "kg"})
+    with pytest.raises(TripError, match=r"channel 'vehicle_speed' must be a 1-D array, got shape \(10, 2\)"):
+        Trip({"t": t, "vehicle_speed": np.ones((10, 2))}, {"t": "s", "vehicle_speed": "m/s"})
+    # equal lengths from a mapping are accepted as a DataFrame
+    trip = Trip({"t": t, "vehicle_speed": np.ones(10)}, {"t": "s", "vehicle_speed": "m/s"})
+    assert len(trip) == 10 and trip.channel("vehicle_speed").sum() == 10.0
+
+
+@pytest.mark.parametrize("names, message", [
+    (["vehicle_speed", "vehicle_speed "], r"channel name 'vehicle_speed ' is empty or has surrounding whitespace"),
+    (["Vehicle_Speed", "vehicle_speed"], r"channel names 'Vehicle_Speed' and 'vehicle_speed' differ only in case"),
+    (["my signal", "MY SIGNAL"], r"'my signal' and 'MY SIGNAL' differ only in case or whitespace"),
+    (["truth/speed"], r"channel name 'truth/speed' is reserved"),
+    (["measured_row"], r"channel name 'measured_row' is reserved"),
+    ([""], r"channel name '' is empty"),
+])
+def test_near_duplicate_and_reserved_channel_names_are_refused(names, message):
+    t = np.arange(5) / 100.0
+    measured = pd.DataFrame({"t": t, **{n: np.zeros(5) for n in names}})
+    units = {"t": "s", **{n: ("m/s" if n.lower().strip() == "vehicle_speed" else "1") for n in names}}
+    with pytest.raises(TripError, match=message):
+        Trip(measured, units)
+
+
+def test_channel_names_must_be_strings():
+    measured = pd.DataFrame({"t": np.arange(3) / 100.0, 7: np.zeros(3)})
+    with pytest.raises(TripError, match=r"channel names must be strings, got 7 \(int\)"):
+        Trip(measured, {"t": "s", 7: "1"})
+
+
+@pytest.mark.parametrize("unit, message", [
+    ("km/h", r"channel 'my_speed': unit 'km/h' is not SI: convert to 'm/s' \(x \[m/s\] = x \[km/h\] \* 0.277778"),
+    ("degC", r"unit 'degC' is not SI: convert to 'K' \(x \[K\] = x \[degC\] \* 1 \+ 273.15"),
+    ("%", r"unit '%' is not SI: convert to '1' \(x \[1\] = x \[%\] \* 0.01"),
+    ("furlong/fortnight", r"unit 'furlong/fortnight' is not an SI unit expression"),
+    (" m/s", r"unit ' m/s' is not a unit \(empty or with surrounding whitespace\)"),
+])
+def test_non_si_unit_on_a_channel_outside_the_catalogue_is_refused_with_the_conversion(unit, message):
+    measured = pd.DataFrame({"t": np.arange(3) / 100.0, "my_speed": np.ones(3)})
+    with pytest.raises(TripError, match=message):
+        Trip(measured, {"t": "s", "my_speed": unit})
+
+
+@pytest.mark.parametrize("unit", ["m/s", "N*m", "kg/m^3", "s^4/m^4", "1/m", "1", "W"])
+def test_si_unit_expressions_pass_for_channels_outside_the_catalogue(unit):
+    measured = pd.DataFrame({"t": np.arange(3) / 100.0, "my_signal": np.ones(3)})
+    assert Trip(measured, {"t": "s", "my_signal": unit}).units["my_signal"] == unit
+
+
+def test_truth_units_are_checked_against_the_truth_catalogue():
+    base = _trip(truth=False)
+    with pytest.raises(TripError, match=r"truth channel 'mass' has unit 'g', the catalogue says 'kg'"):
+        Trip(base.measured, base.units, {}, pd.DataFrame({"t": base.t, "mass": 1.0}), {"t": "s", "mass": "g"})
+
+
+def test_meta_must_be_a_dict():
+    base = _trip(truth=False)
+    with pytest.raises(TripError, match=r"meta: expected a dict of JSON-serialisable metadata, got list"):
+        Trip(base.measured, base.units, ["name", "x"])

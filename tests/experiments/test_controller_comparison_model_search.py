@@ -79,7 +79,7 @@ def test_headline_cli_passes_the_gear_command_and_model_search_to_every_task(mon
     from roadload.experiments.cli import _load, app
 
     _load()
-    import roadload.experiments.cli.controllers as cli_controllers
+    import roadload.experiments.headline as headline  # the command imports run_paired from here when it runs
 
     seen = []
 
@@ -87,7 +87,7 @@ def test_headline_cli_passes_the_gear_command_and_model_search_to_every_task(mon
         seen.extend(tasks)
         return pd.DataFrame(), []
 
-    monkeypatch.setattr(cli_controllers, "run_paired", fake_run_paired)
+    monkeypatch.setattr(headline, "run_paired", fake_run_paired)
     runner = CliRunner()
     args = ["benchmark", "headline", "--vehicles", "truck_15t", "--seeds", "2", "--out", str(tmp_path)]
     res = runner.invoke(app, [*args, "--mpc-gear", "--model-search-runs", "2"])

@@ -1,10 +1,13 @@
 """The fleet benchmark on a tiny fleet: local vs. Dask LocalCluster identical, failed trips reported, report files."""
 
+import dataclasses
+from pathlib import Path
 import pandas as pd
 import pytest
 
 import roadload.envs  # noqa: F401
 
+from roadload.estimators.evaluation import ESTIMATORS
 from roadload.experiments.fleet import (check_findings, generate_fleet, run_benchmark, stored_trips,  # noqa: E402
                                        write_report)
 
@@ -33,6 +36,16 @@ def test_generation_is_cached_and_regenerable(tiny_fleet, tmp_path):
     fresh = generate_fleet(tmp_path / "fresh", n_trips=3, seed=7, total_hours=0.12, workers=1, progress=False)
     assert Trip.load(fresh["trips"][0]).equals(Trip.load(paths[0]))
     assert len(again["trips"]) == 1
+    # a truncated trip file and a file holding another planned trip are detected and simulated again
+    import shutil
+
+    broken, foreign = Path(fresh["trips"][1]), Path(fresh["trips"][2])
+    broken.write_bytes(broken.read_bytes()[:5000])
+    shutil.copy(fresh["trips"][0], foreign)
+    redo = generate_fleet(tmp_path / "fresh", n_trips=3, seed=7, total_hours=0.12, workers=1, progress=False)
+    assert [name for name, _ in redo["rebuilt"]] == [broken.stem, foreign.stem]
+    assert "unreadable" in redo["rebuilt"][0][1] and "holds another planned trip" in redo["rebuilt"][1][1]
+    assert Trip.load(broken).equals(Trip.load(paths[1])) and Trip.load(foreign).equals(Trip.load(paths[2]))
 
 
 def test_local_and_dask_give_identical_results_and_failures_are_reported(tiny_fleet, tmp_path):
@@ -41,7 +54,13 @@ def test_local_and_dask_give_identical_results_and_failures_are_reported(tiny_fl
     bad = tmp_path / "broken.parquet"
     bad.write_bytes(b"not a parquet file")
     paths.append(bad)
-    local = run_benchmark(paths, workers=1, progress=False, horizons=(300, 600), min_training=300)
+    local = run_benchmark(paths, workers=1, progress=False, horizons=(300, 600), min_training=300,
+                          checkpoint=tmp_path / "units")
+    # every trip's evaluation was stored as it finished: a second run resumes them and gives the same tables
+    resumed = run_benchmark(paths, workers=1, progress=False, horizons=(300, 600), min_training=300,
+                            checkpoint=tmp_path / "units")
+    pd.testing.assert_frame_equal(resumed.medse, local.medse)
+    assert len(list((tmp_path / "units").glob("*.json"))) == 3  # the broken trip failed: nothing stored
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=":0") as cluster:
         dask = run_benchmark(paths, scheduler=cluster, progress=False, horizons=(300, 600), min_training=300)
@@ -62,5 +81,19 @@ def test_local_and_dask_give_identical_results_and_failures_are_reported(tiny_fl
     text = report.read_text()
     assert "broken" in text and "## Findings of the text" in text
     assert (tmp_path / "out" / "medse_k300.csv").exists() and (tmp_path / "out" / "medse_boxplot_k300.png").exists()
-    findings = check_findings(local, horizon=300)
-    assert all(f["reproduced"] in (True, False, None) for f in findings)
+    findings = {f["finding"]: f for f in check_findings(local, horizon=300)}
+    # complete results at k = 300: every finding is decided (True/False, never the 'no results' None) with evidence
+    assert "all" not in findings and len(findings) >= 3
+    assert all(isinstance(f["reproduced"], bool) and f["evidence"] for f in findings.values()), findings
+    # each verdict agrees with the table it is drawn from (recomputed here from the notched MEDSE table)
+    tab = local.medse_table(300).set_index("combination")
+    pairs = [(tab.loc[f"M3-{e}", "median"], tab.loc[f"M4-{e}", "median"]) for e in ESTIMATORS
+             if f"M3-{e}" in tab.index and f"M4-{e}" in tab.index]
+    assert pairs and findings["M4 predicts better than M3"]["reproduced"] == all(m4 < m3 for m3, m4 in pairs)
+    gray = [c for c in tab.index if c != "M0"]
+    m0_worse = findings["M0 significantly worse than every gray-box combination (fig. 5.9)"]
+    assert not m0_worse["reproduced"] or all(tab.loc["M0", "median"] > tab.loc[c, "median"] for c in gray)
+    assert f"{tab.loc['M0', 'median']:.4g}" in m0_worse["evidence"]
+    # incomplete results are reported as undecided, not as reproduced
+    empty = dataclasses.replace(local, medse=local.medse.iloc[:0], mass=local.mass.iloc[:0])
+    assert [f["reproduced"] for f in check_findings(empty, horizon=300)] == [None]

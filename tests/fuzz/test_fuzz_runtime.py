@@ -106,12 +106,14 @@ def test_relaxed_plans_carry_a_flag(small_ocp, ledger):
     # 20 m/s into a cap of 0: the cap cannot be honoured at once
     capped = ocps["nominal"].solve(20.0, 0.0, _preview(energy, np.zeros(21)), params)
     assert capped.relaxed and capped.relaxed_nodes >= 5
+    assert not capped.success and {v.constraint for v in capped.violations} == {"speed_cap"}
     ledger.record("controllers", "repair")
     # an impossible stop: 100 m ahead at 25 m/s with decel_max = 0.01 m/s^2
     cap = np.full(21, 30.0)
     cap[10:12] = 1.0
     stop = ocps["weak_brakes"].solve(25.0, 0.0, _preview(energy, cap), params)
     assert stop.relaxed_nodes == 2
+    assert not stop.success and stop.status.startswith("relaxed: speed_cap at 100 m"), stop.status
     ledger.record("controllers", "repair")
 
 
@@ -177,8 +179,17 @@ def test_ecodrive_step_refuses(ecodrive, action, ledger):
 
 
 def test_ecodrive_step_accepts_scalar_and_array(ecodrive):
-    ecodrive.step(np.array([0.2], dtype=np.float32))
-    ecodrive.step(0.2)
+    """A (1,) float32 array and a plain float are the same action: from the same state they give the same step."""
+    results = []
+    for action in (np.array([0.2], dtype=np.float32), 0.2):
+        ecodrive.reset(seed=3)
+        obs, reward, terminated, truncated, info = ecodrive.step(action)
+        assert ecodrive.observation_space.contains(obs) and np.isfinite(reward) and not (terminated or truncated)
+        assert info["a"] > 0.0  # u = +0.2 is traction: the car moves off
+        results.append((obs, reward, info["s"], info["v"]))
+    (obs_a, r_a, s_a, v_a), (obs_b, r_b, s_b, v_b) = results
+    np.testing.assert_array_equal(obs_a, obs_b)
+    assert (r_a, s_a, v_a) == (r_b, s_b, v_b)
 
 
 @FUZZ

@@ -161,7 +161,7 @@ def _return_and_end(policy, road, reward=None):
 
 @pytest.mark.parametrize("road", [None, "motorway"])
 def test_braking_to_a_stop_to_recover_the_kinetic_energy_does_not_beat_cruising(road):
-    """The exploit PPO found (docs/results/scale.md): brake from the 25 m/s start, regenerate the kinetic energy
+    """The exploit PPO found (docs/results/rl.md): brake from the 25 m/s start, regenerate the kinetic energy
     and cover less road. With the mechanical-energy credit, braking to a stop returns far less than a 25 m/s
     cruise; with the credit off (the first reward) it returned more, so this test catches the flaw."""
     cruise = lambda v: float(np.clip(0.08 + 0.5 * (25.0 - v), -1.0, 1.0))  # noqa: E731

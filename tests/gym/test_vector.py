@@ -276,3 +276,28 @@ def test_openmp_runtime_loaded_by_torch_is_detected():
     from roadload.gym.vector import _openmp_runtime_loaded
 
     assert _openmp_runtime_loaded()
+
+
+def test_route_end_and_time_limit_in_the_same_step_is_terminated_not_truncated():
+    """A step that reaches the route end exactly at the time limit ends the episode as terminated (the MDP's end),
+    not truncated, in the single env and in every sub-env of the vector env."""
+    action = np.array([0.8], dtype=np.float32)
+    probe = EcoDriveEnv(config={"route_length": 150.0})
+    probe.reset(seed=7)
+    steps, terminated = 0, False
+    while not terminated:
+        _, _, terminated, truncated, info = probe.step(action)
+        steps += 1
+        assert not truncated
+    config = {"route_length": 150.0, "time_limit": info["t"]}  # the limit falls on the terminating step
+    single = EcoDriveEnv(config=config)
+    single.reset(seed=7)
+    venv = EcoDriveVectorEnv(2, config=config)
+    venv.reset(seed=[7, 7])
+    for k in range(steps):
+        _, _, te, tr, inf = single.step(action)
+        _, _, vte, vtr, vinfo = venv.step(np.tile(action, (2, 1)))
+        last = k == steps - 1
+        assert (te, tr) == (last, False), (k, te, tr)
+        assert vte.tolist() == [last, last] and vtr.tolist() == [False, False], (k, vte, vtr)
+    assert inf["t"] >= config["time_limit"] - 1e-9 and vinfo["t"][0] >= config["time_limit"] - 1e-9

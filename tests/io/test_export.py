@@ -107,13 +107,10 @@ def test_unknown_format():
 
 
 def test_cli_export_then_import(tmp_path):
-    import typer
     from typer.testing import CliRunner
 
-    from roadload.experiments.cli.io import register
+    from roadload.experiments.cli import app
 
-    app = typer.Typer()
-    register(app, typer.Typer())
     trip = _trip(duration=5.0)
     trip.save(tmp_path / "sim.parquet")
     runner = CliRunner()
@@ -173,3 +170,142 @@ def test_simulated_trip_round_trip_through_mf4(tmp_path, hilly_road):
         clipped += int(differs.sum())
     report = back.meta["import_report"]
     assert report["n_repaired"] == clipped and report["n_dropped"] == 0
+
+
+# ------------------------------------------------------------------------------------ file exports: MDF4, CSV, MAT
+@pytest.fixture(scope="module")
+def simulated(tmp_path_factory, hilly_road):
+    from roadload.envs.simulator import simulate
+
+    path = tmp_path_factory.mktemp("exports") / "sim.parquet"
+    return simulate("bmw_i3", hilly_road, seed=2, duration=60.0, out=path)
+
+
+def test_mdf4_export_opens_in_asammdf_with_units_and_reimports_within_resolution(tmp_path, simulated):
+    from asammdf import MDF
+
+    from roadload.channels import MEASURED
+    from roadload.io.export import export_file
+    from roadload.trip import resolutions_from_meta
+
+    trip = Trip.load(simulated)
+    path = export_file(trip, tmp_path / "sim.mf4", "mf4", truth=True)
+    mdf = MDF(path)
+    units = {}
+    for sig in mdf.iter_channels(skip_master=True):
+        units[sig.name] = sig.unit
+        if sig.name == "vehicle_speed":
+            np.testing.assert_array_equal(sig.timestamps, trip.t)
+            np.testing.assert_array_equal(sig.samples, trip.channel("vehicle_speed"))
+    mdf.close()
+    assert units["vehicle_speed"] == "m/s" and units["accel_x"] == "m/s^2" and units["drive_torque"] == "N*m"
+    assert units["brake_pressure_front"] == "Pa" and units["truth/tractive_force"] == "N"
+    assert all(units[c] == trip.units[c] for c in trip.channels)
+
+    back = import_log(path, "mf4")                       # the catalogue names map themselves, no mapping file
+    assert back.channels == trip.channels and back.units == {**trip.units}
+    assert len(back) == len(trip) and back.meta["origin"]["source"] == "sim"
+    np.testing.assert_allclose(back.t, trip.t - trip.t[0], atol=1e-9)          # t restarts at 0 on import
+    assert back.meta["t0_unix"] == pytest.approx(back.meta["t0_unix"])
+    res = resolutions_from_meta(trip.meta)
+    repaired = {r["what"]: r["count"] for r in back.meta["import_report"]["repairs"]}
+    for c in trip.channels:
+        step = res.get(c, 0.0)
+        assert MEASURED[c].unit == back.units[c]
+        x, y = back.channel(c), trip.channel(c)
+        # the importer's one documented repair: small negative speeds (sensor noise at standstill) clipped to 0
+        clipped = (y < 0) & (x == 0) if c in ("vehicle_speed", "wheel_speed_fl", "wheel_speed_fr",
+                                              "wheel_speed_rl", "wheel_speed_rr") else np.zeros(y.size, bool)
+        assert int(clipped.sum()) == repaired.get(c, 0), c
+        np.testing.assert_allclose(x[~clipped], y[~clipped], rtol=0, atol=max(step / 2, 1e-9), err_msg=c)
+    assert "truth/tractive_force" in back.meta["unmapped_signals"]          # truth listed, not imported
+    assert not back.measured.isna().any().any()                            # the last sample survives the time base
+
+
+def test_the_time_base_keeps_a_last_sample_that_rounding_puts_past_the_span():
+    from roadload.io.resample import resample, uniform_time_base
+
+    t = np.cumsum(np.full(6000, 0.01))                 # an accumulated clock, as the simulator's: ends at 59.9999...
+    grid = uniform_time_base(t[0], t[-1], 100.0)      # 0.01 + 5999 / 100 = 60.0 > 59.99999999999663
+    assert grid.size == t.size and grid[-1] > t[-1]
+    for rule in ("linear", "hold", "nearest"):
+        out = resample(t, t * 2.0, grid, rule)
+        assert not np.isnan(out).any() and out[-1] == pytest.approx(120.0), rule
+
+
+def test_csv_export_has_a_units_row_and_exact_numbers(tmp_path, simulated):
+    from roadload.io.export import export_file
+
+    trip = Trip.load(simulated)
+    path = export_file(trip, tmp_path / "sim.csv", "csv", truth=True)
+    with open(path, encoding="utf-8") as fh:
+        names, units = fh.readline().strip().split(","), fh.readline().strip().split(",")
+    assert names[:2] == ["t", "wheel_speed_fl"] and "truth/tractive_force" in names
+    assert dict(zip(names, units))["vehicle_speed"] == "m/s" and dict(zip(names, units))["truth/mass"] == "kg"
+    frame = pd.read_csv(path, skiprows=[1])
+    np.testing.assert_array_equal(frame["vehicle_speed"].to_numpy(), trip.channel("vehicle_speed"))
+    np.testing.assert_array_equal(frame["truth/mass"].to_numpy(), trip.true("mass"))
+
+
+def test_mat_export_loads_in_scipy_with_units_and_metadata(tmp_path, simulated):
+    import json
+
+    from scipy.io import loadmat
+
+    from roadload.io.export import export_file
+
+    trip = Trip.load(simulated)
+    path = export_file(trip, tmp_path / "sim.mat", "mat")
+    mat = loadmat(path, squeeze_me=True, struct_as_record=False)
+    np.testing.assert_array_equal(mat["measured"].vehicle_speed, trip.channel("vehicle_speed"))
+    np.testing.assert_array_equal(mat["measured"].t, trip.t)
+    assert mat["units"].vehicle_speed == "m/s" and mat["units"].t == "s"
+    assert json.loads(mat["meta_json"])["source"] == "sim" and "truth" not in mat
+
+
+def test_file_exports_refuse_what_they_cannot_write(tmp_path):
+    from roadload.io.export import export_file
+
+    trip = _trip(duration=1.0)
+    with pytest.raises(LogImportError, match="has no ground truth"):
+        export_file(trip, tmp_path / "x.mf4", "mf4", truth=True)
+    with pytest.raises(LogImportError, match=r"unknown export format 'mdf' \(did you mean 'mf4'\?\)"):
+        export_file(trip, tmp_path / "x.mdf", "mdf")
+    only_t = Trip(pd.DataFrame({"t": np.arange(5) / 100}), {"t": "s"})
+    with pytest.raises(LogImportError, match="no measured channel besides 't': nothing to export"):
+        export_file(only_t, tmp_path / "x.csv", "csv")
+    odd = Trip(pd.DataFrame({"t": np.arange(5) / 100, "my-signal": 1.0}), {"t": "s", "my-signal": "1"})
+    with pytest.raises(LogImportError, match=r"\['my-signal'\] are not MATLAB field names"):
+        export_file(odd, tmp_path / "x.mat", "mat")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_can_export_with_no_exportable_channel_refuses_and_writes_nothing(tmp_path):
+    only_t = Trip(pd.DataFrame({"t": np.arange(50) / 100}), {"t": "s"})
+    with pytest.raises(LogImportError, match="no channels to export"):
+        export_trip(only_t, tmp_path / "a.log", "candump")
+    disabled = SimpleNamespace(sample_rate=100.0, channels={k: SimpleNamespace(resolution=r, enabled=False,
+                                                                               rate=None) for k, r in RES.items()})
+    with pytest.raises(LogImportError, match="no channels to export"):
+        export_trip(_trip(duration=1.0), tmp_path / "b.log", "candump", sensors=disabled)
+    with pytest.raises(LogImportError, match="no channels to export"):
+        export_trip(_trip(duration=1.0), tmp_path / "c.log", "candump", channels=[])
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_cli_export_convert_and_can_refusals(tmp_path, simulated):
+    from typer.testing import CliRunner
+
+    from roadload.experiments.cli import app
+
+    runner = CliRunner()
+    res = runner.invoke(app, ["export", str(simulated), "--format", "csv", "--out", str(tmp_path / "s.csv")])
+    assert res.exit_code == 0 and "wrote" in res.output and (tmp_path / "s.csv").is_file()
+    res = runner.invoke(app, ["export-can", str(simulated), "--channels", " , ", "--out", str(tmp_path / "c")])
+    assert res.exit_code == 2 and "--channels: no channel named" in res.output
+    res = runner.invoke(app, ["export-can", str(simulated), "--channels", "vehicle_sped", "--out", str(tmp_path / "c")])
+    assert res.exit_code == 2 and "(did you mean 'vehicle_speed'?)" in res.output
+    packed = Trip.load(simulated).save(tmp_path / "old.parquet", precision="packed")
+    res = runner.invoke(app, ["convert", str(packed), "--out", str(tmp_path / "new.parquet")])
+    assert res.exit_code == 0 and "format 3 (packed" in res.output and "-> format 4 (compact" in res.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["new.parquet", "old.parquet", "s.csv"]

@@ -187,7 +187,8 @@ def test_malformed_track_files(tmp_path):
         load_profile(nocols)
     text = tmp_path / "text.csv"
     text.write_text("distance,elevation\n0,1\n5,abc\n10,3\n")
-    with pytest.raises(ProfileFileError, match="'elevation' has a non-numeric value at row 1"):
+    with pytest.raises(ProfileFileError,
+                       match=r"'elevation' has a non-numeric value 'abc' at row 1; expected the elevation \[m\]"):
         load_track_csv(text)
     with pytest.raises(ProfileFileError, match="no column 'height'"):
         load_track_csv(text, elevation="height")

@@ -221,3 +221,23 @@ def test_brake_drag_after_release_is_found_with_its_time_constant():
     assert ranked[0].parameters["residual brake drag F_d"] == pytest.approx(120.0, rel=0.1)
     assert steps[0].accepted
     assert np.isnan(time_since(np.array([False, True, False]), np.array([0.0, 1.0, 3.0]))[0])
+
+
+def test_latency_candidate_fits_the_delay_with_its_sign():
+    """A drive-force signal that arrives tau = 0.15 s late, F_meas(t) = F(t - tau), is explained by the latency
+    candidate with tau = +0.15 s (not -0.15 s), and switched on in the simulator as +0.15 s of torque latency."""
+    tau = 0.15
+    tab = synth(lambda t: np.zeros(len(t)), noise=10.0)
+    late = np.empty(len(tab))
+    for k in pd.unique(tab.trip):
+        rows = (tab.trip == k).to_numpy()
+        t, f = tab.t[rows].to_numpy(), tab.sim_drive_force[rows].to_numpy()
+        late[rows] = np.interp(t - tau, t, f)
+    rng = np.random.default_rng(3)
+    tab["tractive_force"] = late + rng.normal(0.0, 10.0, len(tab))
+    tab["residual"] = tab.tractive_force - tab.sim_force
+    _, ranked, steps = diagnose_table(tab, candidates=("latency", "mass_offset", "torque_scale"))
+    top = ranked[0]
+    assert top.name == "latency" and steps[0]["effect"] == "latency" and steps[0]["accepted"]
+    assert top.parameters["latency tau"] == pytest.approx(tau, rel=0.1)
+    assert top.sim_parameters == {"delta": pytest.approx(top.parameters["latency tau"])}

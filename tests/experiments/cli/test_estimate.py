@@ -59,4 +59,4 @@ def test_estimate_errors_are_clear(trip_file, tmp_path, args, message):
 
 def test_estimate_missing_trip_file(tmp_path):
     r = runner.invoke(app, ["estimate", str(tmp_path / "nope.parquet"), "--out", str(tmp_path / "p.parquet")])
-    assert r.exit_code == 2 and "no trip file" in r.output
+    assert r.exit_code == 2 and f"TRIP: no file {tmp_path / 'nope.parquet'}" in r.output

@@ -34,6 +34,14 @@ def test_cli_writes_tables_curves_and_summary(tmp_path):
     umask = os.umask(0)
     os.umask(umask)
     assert (out / "summary.md").stat().st_mode & 0o777 == 0o666 & ~umask   # not mkstemp's 0600
+    # every finished scenario is stored: the same command again resumes all 64 and writes the same tables
+    assert len(list((out / "units").glob("synthetic_outliers_*.json"))) == 64
+    before = {name: (out / name).read_bytes() for name in ("results.csv", "table_synthetic_outliers.csv")}
+    again = runner.invoke(app, ["benchmark", "robustness", "--backend", "synthetic", "--sweep", "outliers",
+                                "--seeds", "2", "--duration", "2000", "-e", "RLS,RLM", "--workers", "1",
+                                "--out", str(out)])
+    assert again.exit_code == 0 and "resumed 64 of 64 finished tasks" in again.output, again.output
+    assert {name: (out / name).read_bytes() for name in before} == before
 
 
 def test_cli_rejects_bad_input(tmp_path):

@@ -113,14 +113,13 @@ def test_threads_reach_the_native_env_of_the_training_path(tmp_path):
     with pytest.raises(ValueError, match="threads"):
         make_vec_env(2, 0, None, vec="native", threads=0)
     assert not list(tmp_path.iterdir())
-    import typer
     from typer.testing import CliRunner
 
-    app = typer.Typer(add_completion=False)
-    rl_command.register(app, typer.Typer())
-    res = CliRunner().invoke(app, ["--threads", "0", "--algo", "ppo", "--timesteps", "64", "--out", str(tmp_path),
-                                   "--eval-every", "0", "--skip-evaluation"])
-    assert res.exit_code != 0 and "threads" in res.output, res.output
+    from roadload.experiments.cli import app
+
+    res = CliRunner().invoke(app, ["train", "--threads", "0", "--algo", "ppo", "--timesteps", "64", "--out",
+                                   str(tmp_path), "--eval-every", "0", "--skip-evaluation"])
+    assert res.exit_code == 2 and "--threads: at least 1" in res.output, res.output
 
 
 def test_cli_sets_the_openmp_wait_policy_before_the_runtime_loads():

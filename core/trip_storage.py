@@ -1,0 +1,719 @@
+"""Trip files: one Parquet file per trip that pandas, polars, DuckDB, Arrow and MATLAB read without roadload.
+
+Layout (format 4)
+-----------------
+- ``t`` [s], float64: the time of the row.
+- one column per measured channel, named as the channel (``vehicle_speed``, ``accel_x``, ...);
+- one column ``truth/<name>`` per ground-truth channel (simulated trips only). :class:`roadload.Trip` keeps these
+  in ``trip.truth``, apart from ``trip.measured``, so an estimator handed the measured frame cannot read them; a
+  pandas user finds them by the prefix (``df.filter(like="truth/")``).
+- measured and truth share one row per time instant. When their time bases differ (sensor decimation, samples
+  removed by dropouts), the rows are the union of both, a measured channel is null on a truth-only row and vice
+  versa, and two bool columns say which rows belong to which: ``measured_row`` and ``truth_row``. When the time
+  bases are equal (the usual simulated trip) neither column exists.
+- every column carries Arrow field metadata: ``unit`` (SI, from :mod:`roadload.channels`) and, where known,
+  ``resolution`` (the sensor's quantisation step in that unit).
+- the trip metadata is one JSON key-value entry of the file, ``roadload``: ``{"version": 4, "meta": {...},
+  "precision": ..., "n_measured": ..., "n_truth": ..., "has_truth": ..., "time_base": "shared" | "union"}``.
+
+Storage precision
+-----------------
+- ``compact`` (streamed simulations): plain SI floats -- float64 for ``t`` and positions (:data:`FLOAT64_CHANNELS`),
+  float32 elsewhere. Measured channels are rounded to their sensor resolution (``Trip.load`` restores the exact grid
+  value k x step); truth channels are rounded to :data:`TRUTH_SIGNIFICANT_BITS` significant bits (relative step
+  2^-15 ~ 3e-5; float64 ones to 32 bits), which zeroes the low mantissa bits so that the file compresses. Parquet's
+  own encodings do the rest: dictionary for enums and constants (gear, clutch, the mass), PLAIN for quantised
+  channels (zstd finds their repeated 4-byte patterns), BYTE_STREAM_SPLIT for the rest, ZSTD on top. About 13 MB
+  per simulated hour at 100 Hz (scripts/bench_trip_storage.py).
+- ``exact``: every column in its own dtype, floats unrounded (bit for bit); ~5x larger.
+- ``packed`` (explicit opt-in): format 3, roadload's private integer codec. Its columns are integer codes and first
+  differences that only roadload decodes -- pandas, polars, DuckDB and MATLAB read meaningless integers -- for
+  about 2 % less space than ``compact``. ``roadload convert`` rewrites such files (and formats 1-3) as format 4.
+
+Writing is atomic (temporary file + rename) and streams: :class:`TripWriter` appends one row group per chunk, so a
+day-long simulation holds one chunk in memory; :func:`iter_trip_chunks` reads in bounded memory.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterator, Literal, NamedTuple
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from .fileio import atomic_path
+from .trip_schema import TripError, TripMetadataError, parse_trip_payload
+
+TRUTH_PREFIX = "truth/"
+META_KEY = b"roadload"
+FORMAT_VERSION = 4
+MEASURED_ROW, TRUTH_ROW = "measured_row", "truth_row"
+RESERVED_COLUMNS = frozenset({MEASURED_ROW, TRUTH_ROW})
+PRECISIONS = ("compact", "exact", "packed")
+#: channels kept in float64 by precision 'compact': time and positions, whose float32 step would grow with the trip
+FLOAT64_CHANNELS = frozenset({"t", "position", "source_energy", "distance", "latitude", "longitude"})
+#: significant bits kept of a float32 truth value by precision 'compact' (of 24); float64 truth values keep 32 (of 53)
+TRUTH_SIGNIFICANT_BITS = 15
+TRUTH_SIGNIFICANT_BITS_64 = 33
+#: a float32 column holds grid values k x step exactly recoverable while |k| < 2^22
+_F32_GRID_LIMIT = 2.0 ** 22
+#: columns with at most this many distinct values in the first chunk (enums such as gear and clutch, constants) are
+#: dictionary-encoded; for more, a dictionary saved no space and cost 4 MB of writer memory (1 h streamed, measured)
+_DICTIONARY_MAX = 16
+_ZSTD_LEVEL = 15
+
+
+class TripParts(NamedTuple):
+    """What a file holds, before it becomes a :class:`roadload.Trip`."""
+
+    measured: pd.DataFrame
+    units: dict[str, str]
+    meta: dict[str, Any]
+    truth: pd.DataFrame | None
+    truth_units: dict[str, str]
+
+
+# ---------------------------------------------------------------------------------------------- rounding
+def round_significant(values: np.ndarray, bits: int) -> np.ndarray:
+    """``values`` rounded to ``bits`` significant bits (round half to even on the mantissa; float32 or float64 kept),
+    the step of a binary grid relative to each value's magnitude: 2^-(bits-1) x 2^exponent. NaN and inf pass
+    unchanged. Zeroed low mantissa bits are what makes a smooth signal compress."""
+    x = np.ascontiguousarray(values)
+    if x.dtype not in (np.float32, np.float64):
+        raise TypeError(f"round_significant: float32 or float64 expected, got {x.dtype}")
+    uint = np.dtype(np.uint32 if x.dtype == np.float32 else np.uint64)
+    drop = (23 if x.dtype == np.float32 else 52) - (bits - 1)
+    if drop <= 0:
+        return x.copy()
+    b = x.view(uint)
+    one, shift = np.array(1, dtype=uint), np.array(drop, dtype=uint)
+    half = (one << (shift - one)) - one + ((b >> shift) & one)   # round half to even on the kept bits
+    out = ((b + half) & ~((one << shift) - one)).view(x.dtype)
+    finite = np.isfinite(x)
+    return np.where(finite & np.isfinite(out), out, x)
+
+
+def resolutions_from_meta(meta: dict[str, Any]) -> dict[str, float]:
+    """Quantisation step [SI] of each measured channel from a simulated trip's ``meta['sensors']`` (empty when the
+    trip does not declare its sensors)."""
+    chans = (meta.get("sensors") or {}).get("channels") if isinstance(meta.get("sensors"), dict) else None
+    if not isinstance(chans, dict):
+        return {}
+    out = {}
+    for name, spec in chans.items():
+        r = spec.get("resolution") if isinstance(spec, dict) else None
+        if isinstance(r, (int, float)) and r > 0:
+            out[name] = float(r)
+    return out
+
+
+# ---------------------------------------------------------------------------------------------- writing
+@dataclass
+class _Column:
+    """How one column is stored (decided on the first chunk)."""
+
+    key: str                      # column name in the file
+    unit: str
+    kind: Literal["time", "measured", "truth"]
+    dtype: np.dtype
+    step: float | None = None     # measured: round to this grid [unit]
+    bits: int | None = None       # truth: round to this many significant bits
+    encoding: str | None = None   # None: dictionary (or the writer's default for bool)
+
+    def values(self, raw: np.ndarray) -> np.ndarray:
+        x = np.asarray(raw)
+        if self.dtype.kind != "f":
+            return x.astype(self.dtype, copy=False)
+        x = x.astype(np.float64, copy=False)
+        if self.step is not None:
+            x = np.round(x / self.step) * self.step
+        x = x.astype(self.dtype, copy=False)
+        if self.bits is not None:
+            x = round_significant(x, self.bits)
+        return x
+
+    def field(self) -> pa.Field:
+        meta = {b"unit": self.unit.encode()}
+        if self.step is not None:
+            meta[b"resolution"] = repr(float(self.step)).encode()
+        return pa.field(self.key, pa.from_numpy_dtype(self.dtype), metadata=meta)
+
+
+def _plan_column(key: str, name: str, kind: Literal["time", "measured", "truth"], unit: str, sample: np.ndarray,
+                 precision: str, step: float | None) -> _Column:
+    dtype = np.dtype(sample.dtype)
+    if dtype.kind == "b" or dtype.kind in "iu":
+        col = _Column(key, unit, kind, dtype)
+        col.encoding = None if len(np.unique(sample)) <= _DICTIONARY_MAX else \
+            ("DELTA_BINARY_PACKED" if dtype.kind in "iu" else "PLAIN")
+        if dtype.kind == "b":
+            col.encoding = "PLAIN"
+        return col
+    if dtype.kind != "f":
+        raise TripError(f"channel {name!r}: cannot store dtype {dtype} (numeric channels only)")
+    if precision == "exact":
+        col = _Column(key, unit, kind, dtype)
+    elif kind == "time":
+        col = _Column(key, unit, kind, np.dtype(np.float64))
+    else:
+        wide = name in FLOAT64_CHANNELS
+        finite = sample[np.isfinite(sample)]
+        if step is not None and finite.size and float(np.abs(finite).max()) / step >= _F32_GRID_LIMIT:
+            wide = True  # float32 cannot hold this grid over the channel's values
+        col = _Column(key, unit, kind, np.dtype(np.float64 if wide else np.float32))
+        if kind == "measured":
+            col.step = step
+        else:
+            col.bits = TRUTH_SIGNIFICANT_BITS_64 if wide else TRUTH_SIGNIFICANT_BITS
+    stored = col.values(sample)
+    distinct = len(np.unique(stored[np.isfinite(stored)])) if stored.size else 0
+    if kind != "time" and distinct <= _DICTIONARY_MAX and stored.size > 4 * distinct:
+        col.encoding = None
+    elif col.step is not None and col.dtype == np.float32:
+        col.encoding = "PLAIN"  # zstd matches the repeated 4-byte patterns of a quantised channel
+    else:
+        col.encoding = "BYTE_STREAM_SPLIT"
+    return col
+
+
+class TripWriter:
+    """Write a Trip chunk by chunk (one Parquet row group per chunk) -- a day-long simulation never holds more than
+    one chunk. Atomic: the file appears at ``path`` only on :meth:`close`; an exception inside the ``with`` block
+    (or a writer never closed) leaves nothing behind.
+
+    ``units`` / ``truth_units``: the SI unit of every measured / truth channel (``truth_units=None``: no truth);
+    ``precision``: see the module docstring; ``resolutions``: quantisation step [SI] per measured channel;
+    ``shared_time``: True if every chunk's truth has the measured time base, False if not, None = decide from the
+    first chunk (a later mismatch raises)."""
+
+    def __init__(self, path: str | os.PathLike, units: dict[str, str], truth_units: dict[str, str] | None,
+                 precision: str = "compact", resolutions: dict[str, float] | None = None,
+                 shared_time: bool | None = None) -> None:
+        self.path = Path(path)
+        if self.path.suffix != ".parquet":
+            raise TripError(f"trip files end in .parquet, got {self.path.name!r}")
+        if precision not in PRECISIONS:
+            raise TripError(f"precision: expected one of {PRECISIONS}, got {precision!r}")
+        self.units, self.truth_units = dict(units), dict(truth_units or {})
+        self.has_truth = truth_units is not None
+        self.precision = precision
+        self.resolutions = dict(resolutions or {})
+        self._shared_time = shared_time
+        self._time_base: str | None = None
+        self._columns: list[_Column] | None = None
+        self._schema: pa.Schema | None = None
+        self._writer: pq.ParquetWriter | None = None
+        self._last_t = -np.inf
+        self.n_measured = self.n_truth = 0
+        self._ctx = atomic_path(self.path)
+        self._tmp: Path | None = None
+        self._closed = False
+        self._packed = _PackedWriter(self) if precision == "packed" else None
+
+    def __enter__(self) -> "TripWriter":
+        self._tmp = self._ctx.__enter__()
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> Literal[False]:
+        writer = self._packed.writer if self._packed is not None else self._writer
+        if writer is not None and not self._closed:
+            try:  # the file is discarded either way; closing after a failed write (a full disk) may fail as well,
+                writer.close()  # and must not keep the temporary file from being removed
+            except Exception:
+                pass
+        if exc_type is None and not self._closed:
+            exc_type, exc = TripError, TripError(f"{self.path}: TripWriter left without close(meta)")
+            self._ctx.__exit__(exc_type, exc, None)
+            raise exc
+        self._ctx.__exit__(exc_type, exc, tb)
+        return False
+
+    # -------------------------------------------------------------- layout
+    def _plan(self, measured: pd.DataFrame, truth: pd.DataFrame | None) -> None:
+        if truth is None:
+            self._time_base = "shared"
+        else:
+            same = len(measured) == len(truth) and np.array_equal(measured["t"].to_numpy(), truth["t"].to_numpy())
+            self._time_base = "shared" if (self._shared_time if self._shared_time is not None else same) else "union"
+        cols = [_Column("t", self.units.get("t", "s"), "time", np.dtype(np.float64), encoding="BYTE_STREAM_SPLIT")]
+        for c in measured.columns:
+            if c != "t":
+                cols.append(_plan_column(c, c, "measured", self.units[c], measured[c].to_numpy(), self.precision,
+                                         self.resolutions.get(c)))
+        if truth is not None:
+            for c in truth.columns:
+                if c != "t":
+                    cols.append(_plan_column(TRUTH_PREFIX + c, c, "truth", self.truth_units[c], truth[c].to_numpy(),
+                                             self.precision, None))
+        fields = [col.field() for col in cols]
+        if self._time_base == "union":
+            fields += [pa.field(MEASURED_ROW, pa.bool_()), pa.field(TRUTH_ROW, pa.bool_())]
+        self._columns, self._schema = cols, pa.schema(fields)
+        encoding = {col.key: col.encoding for col in cols if col.encoding is not None}
+        encoding.update({MEASURED_ROW: "PLAIN", TRUTH_ROW: "PLAIN"} if self._time_base == "union" else {})
+        # no column statistics: no reader filters on them, and pyarrow's writer keeps every row group's column
+        # metadata in memory until close (with statistics: +94 MB for 1440 row groups of 77 columns, measured)
+        self._writer = pq.ParquetWriter(self._tmp, self._schema, compression="zstd", compression_level=_ZSTD_LEVEL,
+                                        use_dictionary=[col.key for col in cols if col.encoding is None],
+                                        column_encoding=encoding, write_statistics=False)
+
+    def write(self, measured: pd.DataFrame, truth: pd.DataFrame | None = None) -> None:
+        """Append one chunk: measured rows (first column 't') and, for simulated trips, truth rows."""
+        if self._closed:
+            raise TripError(f"{self.path}: write after close")
+        if (truth is not None) != self.has_truth:
+            raise TripError("truth: give a truth frame with every chunk iff truth_units were given")
+        if self._packed is not None:
+            self._packed.write(measured, truth)
+            return
+        first = self._columns is None
+        if first:
+            if self._tmp is None:
+                raise TripError(f"{self.path}: TripWriter has no open Parquet writer (use it as a context manager)")
+            self._plan(measured, truth)
+        assert self._columns is not None and self._writer is not None and self._schema is not None
+        names = [c for c in measured.columns] + ([] if truth is None else [TRUTH_PREFIX + c for c in truth.columns
+                                                                           if c != "t"])
+        expected = [col.key for col in self._columns]
+        if names != expected:
+            raise TripError(f"{self.path}: chunk columns {names} differ from the first chunk's {expected}")
+        tm = measured["t"].to_numpy(dtype=np.float64)
+        if self._time_base == "shared":
+            if truth is not None and not (len(truth) == len(measured)
+                                          and np.array_equal(tm, truth["t"].to_numpy(dtype=np.float64))):
+                raise TripError("truth: its time base differed from the measured one only after the first chunk; "
+                                "give the same time base in every chunk or write one chunk")
+            t, rows_m, rows_t = tm, None, None
+        else:
+            tt = truth["t"].to_numpy(dtype=np.float64) if truth is not None else np.empty(0)
+            t = np.union1d(tm, tt)
+            rows_m, rows_t = np.searchsorted(t, tm), np.searchsorted(t, tt)
+        if t.size and not t[0] > self._last_t:
+            raise TripError(f"{self.path}: chunk starts at t = {t[0]:.6g} s, not after the previous chunk's end "
+                            f"{self._last_t:.6g} s (chunks must follow each other in time)")
+        arrays = []
+        for col in self._columns:
+            if col.kind == "time":
+                arrays.append(pa.array(t))
+                continue
+            frame, rows = (measured, rows_m) if col.kind == "measured" else (truth, rows_t)
+            assert frame is not None
+            name = col.key[len(TRUTH_PREFIX):] if col.kind == "truth" else col.key
+            values = col.values(frame[name].to_numpy())
+            if rows is None:
+                arrays.append(pa.array(values))
+            else:
+                full = np.zeros(t.size, dtype=values.dtype)
+                full[rows] = values
+                present = np.zeros(t.size, dtype=bool)
+                present[rows] = True
+                arrays.append(pa.array(full, mask=~present))
+        if self._time_base == "union":
+            for rows in (rows_m, rows_t):
+                flag = np.zeros(t.size, dtype=bool)
+                flag[rows] = True
+                arrays.append(pa.array(flag))
+        table = pa.Table.from_arrays(arrays, schema=self._schema)
+        self._writer.write_table(table)
+        del table, arrays
+        pa.default_memory_pool().release_unused()  # hand the chunk's buffers back: bounded RSS over a day
+        if t.size:
+            self._last_t = float(t[-1])
+        self.n_measured += len(measured)
+        self.n_truth += 0 if truth is None else len(truth)
+
+    def close(self, meta: dict[str, Any]) -> Path:
+        """Finish the file with the trip's metadata (known only at the end of a streamed simulation)."""
+        if self._packed is not None:
+            payload, writer = self._packed.payload(meta), self._packed.writer
+        else:
+            payload = {"version": FORMAT_VERSION, "meta": meta, "precision": self.precision,
+                       "n_measured": self.n_measured, "n_truth": self.n_truth, "has_truth": self.has_truth,
+                       "time_base": self._time_base}
+            writer = self._writer
+        text = json.dumps(payload)  # a TypeError here leaves nothing behind
+        if writer is None:
+            raise TripError(f"{self.path}: nothing written (a trip needs at least one chunk)")
+        writer.add_key_value_metadata({META_KEY: text.encode()})
+        writer.close()
+        self._closed = True
+        return self.path
+
+
+# ---------------------------------------------------------------------------------------------- reading
+def open_trip_file(path: str | os.PathLike) -> tuple[pq.ParquetFile, dict[str, Any]]:
+    """The Parquet file and its validated ``roadload`` payload (TripError when it is no trip file)."""
+    path = Path(path)
+    if not path.exists():
+        raise TripError(f"no trip file at {path}")
+    try:
+        pf = pq.ParquetFile(path)
+    except Exception as exc:  # pyarrow raises several types for corrupt files
+        raise TripError(f"{path}: not a readable Parquet file ({exc})") from None
+    raw = (pf.metadata.metadata or {}).get(META_KEY)  # file key-value metadata (formats >= 2 write it last)
+    if raw is None:
+        raw = (pf.schema_arrow.metadata or {}).get(META_KEY)
+    if raw is None:
+        raise TripError(f"{path}: Parquet file without roadload metadata (not a Trip)")
+    try:
+        payload = parse_trip_payload(raw, path, pf.metadata.num_rows)
+    except TripMetadataError as exc:
+        raise TripError(str(exc)) from None
+    if payload["version"] >= 4:
+        payload["units"], payload["truth_units"], payload["resolutions"] = _field_units(pf.schema_arrow, path)
+    return pf, payload
+
+
+def _field_units(schema: pa.Schema, path: Path) -> tuple[dict[str, str], dict[str, str], dict[str, float]]:
+    units, truth_units, res = {}, {}, {}
+    for f in schema:
+        if f.name in RESERVED_COLUMNS:
+            continue
+        md = f.metadata or {}
+        if b"unit" not in md:
+            raise TripError(f"{path}: column {f.name!r} has no 'unit' in its field metadata (not a roadload trip "
+                            f"file, or a corrupt one)")
+        unit = md[b"unit"].decode()
+        if f.name.startswith(TRUTH_PREFIX):
+            truth_units[f.name[len(TRUTH_PREFIX):]] = unit
+        else:
+            units[f.name] = unit
+            if b"resolution" in md:
+                res[f.name] = float(md[b"resolution"])
+    truth_units.setdefault("t", units.get("t", "s"))
+    return units, truth_units, res
+
+
+def trip_file_info(path: str | os.PathLike) -> dict[str, Any]:
+    """The file's bookkeeping without reading any data: meta, units, truth_units, n_measured, n_truth, channels,
+    truth_channels, precision, version."""
+    pf, payload = open_trip_file(path)
+    names = pf.schema_arrow.names
+    truth_units = payload["truth_units"] if payload.get("has_truth", payload["n_truth"] > 0 or
+                                                         any(c.startswith(TRUTH_PREFIX) for c in names)) else {}
+    return {"meta": payload["meta"], "units": payload["units"], "truth_units": truth_units,
+            "n_measured": payload["n_measured"], "n_truth": payload["n_truth"],
+            "channels": [c for c in names if not c.startswith(TRUTH_PREFIX) and c not in ("t", _ROWS)
+                         and c not in RESERVED_COLUMNS],
+            "truth_channels": [c[len(TRUTH_PREFIX):] for c in names if c.startswith(TRUTH_PREFIX)
+                               and c != TRUTH_PREFIX + "t"],
+            "precision": storage_precision(payload), "version": payload["version"]}
+
+
+def storage_precision(payload: dict[str, Any]) -> str:
+    """The precision a file was written with ('compact' files of formats 2-3 are the private codec, 'packed')."""
+    precision = str(payload.get("precision", "exact"))
+    return "packed" if payload["version"] < 4 and precision == "compact" else precision
+
+
+def _wanted_columns(names: list[str], channels: list[str] | None, truth_channels: list[str] | None
+                    ) -> list[str] | None:
+    if channels is None and truth_channels is None:
+        return None
+    want = ["t", _ROWS, MEASURED_ROW, TRUTH_ROW] + list(
+        channels if channels is not None else
+        [c for c in names if not c.startswith(TRUTH_PREFIX) and c != "t"])
+    if truth_channels is None or len(truth_channels) > 0:  # [] = no truth at all
+        want += [TRUTH_PREFIX + c for c in (["t"] + list(truth_channels) if truth_channels is not None
+                                            else [c[len(TRUTH_PREFIX):] for c in names
+                                                  if c.startswith(TRUTH_PREFIX)])]
+    wanted = set(want)
+    return [c for c in names if c in wanted]
+
+
+def read_trip_file(path: str | os.PathLike, channels: list[str] | None = None,
+                   truth_channels: list[str] | None = None) -> TripParts:
+    """The whole file (or only the named channels, plus 't'; names the file lacks are ignored)."""
+    path = Path(path)
+    pf, payload = open_trip_file(path)
+    columns = _wanted_columns(pf.schema_arrow.names, channels, truth_channels)
+    try:
+        table = pf.read(columns=columns)
+    except Exception as exc:  # pyarrow raises several types for corrupt files
+        raise TripError(f"{path}: not a readable Parquet file ({exc})") from None
+    if payload["version"] >= 4:
+        return _parts_v4(table, payload, truth_channels)
+    return _parts_legacy(table, payload, payload["n_measured"], payload["n_truth"])
+
+
+def iter_trip_chunks(path: str | os.PathLike, channels: list[str] | None = None,
+                     truth_channels: list[str] | None = None, rows: int = 360_000) -> Iterator[TripParts]:
+    """The file as consecutive parts of about ``rows`` file rows each, reading only the requested channels: memory
+    bounded by one part. Files written before format 2 are read whole and sliced."""
+    path = Path(path)
+    pf, payload = open_trip_file(path)
+    step = max(int(rows), 1)
+    if payload["version"] < 2:
+        whole = read_trip_file(path, channels, truth_channels)
+        t = whole.measured["t"].to_numpy()
+        for a in range(0, len(t), step):
+            lo, hi = t[a], t[min(a + step, len(t)) - 1]
+            m = whole.measured[(whole.measured["t"] >= lo) & (whole.measured["t"] <= hi)].reset_index(drop=True)
+            tr = None if whole.truth is None else \
+                whole.truth[(whole.truth["t"] >= lo) & (whole.truth["t"] <= hi)].reset_index(drop=True)
+            yield TripParts(m, whole.units, whole.meta, tr, whole.truth_units)
+        return
+    columns = _wanted_columns(pf.schema_arrow.names, channels, truth_channels)
+    carry: dict[str, Any] = {}  # format 3 'delta' columns continue from the previous batch
+    for batch in pf.iter_batches(batch_size=step, columns=columns):
+        table = pa.Table.from_batches([batch])
+        if payload["version"] >= 4:
+            yield _parts_v4(table, payload, truth_channels)
+        else:
+            yield _parts_legacy(table, payload, None, None, carry)
+
+
+def _as_float64(col: pa.ChunkedArray, step: float | None) -> np.ndarray:
+    """A stored float column as float64; values of a quantised channel back on the grid k x step (the very product
+    the sensor's quantiser formed) where float32 held k exactly."""
+    x = col.to_numpy(zero_copy_only=False).astype(np.float64, copy=False)
+    if step is not None and col.type == pa.float32():
+        k = np.round(x / step)
+        on_grid = np.abs(k) < _F32_GRID_LIMIT
+        x = np.where(on_grid, k * step, x)
+    return x
+
+
+def _parts_v4(table: pa.Table, payload: dict[str, Any], truth_channels: list[str] | None) -> TripParts:
+    res = payload.get("resolutions", {})
+    measured_table = truth_table = table
+    if payload.get("time_base") == "union":
+        measured_table = table.filter(table.column(MEASURED_ROW))
+        truth_table = table.filter(table.column(TRUTH_ROW))
+
+    def values(tab: pa.Table, name: str, step: float | None) -> np.ndarray:
+        col = tab.column(name)
+        return _as_float64(col, step) if pa.types.is_floating(col.type) else col.to_numpy(zero_copy_only=False)
+
+    measured = pd.DataFrame({c: values(measured_table, c, res.get(c)) for c in measured_table.column_names
+                             if c not in RESERVED_COLUMNS and not c.startswith(TRUTH_PREFIX)}, copy=False)
+    truth = None
+    if payload.get("has_truth", False) and (truth_channels is None or len(truth_channels) > 0):
+        truth = pd.DataFrame({"t": values(truth_table, "t", None),
+                              **{c[len(TRUTH_PREFIX):]: values(truth_table, c, None)
+                                 for c in truth_table.column_names if c.startswith(TRUTH_PREFIX)}}, copy=False)
+    units = {c: u for c, u in payload["units"].items() if c in measured.columns}
+    truth_units = {} if truth is None else {c: u for c, u in payload["truth_units"].items() if c in truth.columns}
+    return TripParts(measured, units, payload["meta"], truth, truth_units)
+
+
+# ---------------------------------------------------------------------------------------------- formats 1-3
+# Format 3 ('packed', roadload's private codec) and earlier: measured channels with a quantisation step stored as
+# int32 multiples of it, other floats as float32 / float64 bit patterns, integer codes optionally as first
+# differences continued across row groups ('delta'); truth 'position' / 'source_energy' as int64 multiples of a
+# fixed step; '_rows' flags which rows of the file belong to which frame (rows padded with nulls).
+_ROWS = "_rows"
+PACKED_VERSION = 3
+TRUTH_FIXED = {"position": 1e-4, "source_energy": 1e-3}
+
+
+def _undelta(col: pa.ChunkedArray, key: str, carry: dict[str, Any] | None) -> np.ndarray:
+    """The integers of a 'delta' column: running sum of the stored first differences (wrapping, as they were
+    formed), continued from ``carry[key]`` (the last value of the previous batch of a chunked read)."""
+    d = (col.fill_null(0) if col.null_count else col).to_numpy()
+    k = np.cumsum(d, dtype=d.dtype)
+    if carry is not None:
+        if key in carry:
+            k += carry[key]
+        if k.size:
+            carry[key] = k[-1]
+    return k
+
+
+def _decode(col: pa.ChunkedArray, enc: dict[str, Any] | None, key: str = "",
+            carry: dict[str, Any] | None = None) -> np.ndarray:
+    if enc is not None and enc.get("delta"):
+        k = _undelta(col, key, carry)
+        if "float32" in enc:
+            return k.view(np.float32).astype(np.float64)
+        out = k.astype(np.float64) * enc["scale"]  # the very product the sensor's quantiser formed
+        if col.null_count:
+            out[col.is_null().to_numpy(zero_copy_only=False)] = np.nan
+        return out
+    if enc is not None and ("float32" in enc or "float64bits" in enc):
+        bits = (col.fill_null(0) if col.null_count else col).to_numpy()  # padding rows: dropped by _rows
+        return bits.view(np.float32).astype(np.float64) if "float32" in enc else bits.view(np.float64)
+    if enc is not None and "scale" in enc:
+        k = col.to_numpy().astype(np.float64) if col.null_count == 0 else \
+            col.cast(pa.float64()).to_numpy(zero_copy_only=False)
+        return k * enc["scale"]  # the very product the sensor's quantiser formed: bit-identical
+    if pa.types.is_floating(col.type):
+        return col.to_numpy(zero_copy_only=False).astype(np.float64, copy=False)
+    return col.to_numpy(zero_copy_only=False)
+
+
+def _parts_legacy(table: pa.Table, payload: dict[str, Any], n_measured: int | None, n_truth: int | None,
+                  carry: dict[str, Any] | None = None) -> TripParts:
+    enc = payload.get("encoding", {})
+    cols: dict[str, np.ndarray] = {name: _decode(table.column(name), enc.get(name), name, carry)
+                                   for name in table.column_names}
+    flags = cols.pop(_ROWS, None)
+    m_rows = t_rows = None
+    if flags is not None:
+        m_rows, t_rows = (flags.astype(np.uint8) & 1) > 0, (flags.astype(np.uint8) & 2) > 0
+    truth_names = [c for c in cols if c.startswith(TRUTH_PREFIX)]
+    meas = {c: v for c, v in cols.items() if not c.startswith(TRUTH_PREFIX)}
+    if m_rows is not None:
+        meas = {c: v[m_rows] for c, v in meas.items()}
+    elif n_measured is not None:
+        meas = {c: v[:n_measured] for c, v in meas.items()}
+    measured = pd.DataFrame(meas, copy=False)
+    truth = None
+    if truth_names:
+        tr = {c[len(TRUTH_PREFIX):]: cols[c] for c in truth_names}
+        if t_rows is not None:
+            tr = {c: v[t_rows] for c, v in tr.items()}
+        elif n_truth is not None:
+            tr = {c: v[:n_truth] for c, v in tr.items()}
+        if "t" not in tr and payload.get("truth_time") == "measured":
+            tr = {"t": measured["t"].to_numpy(), **tr}  # one time base stored once
+        truth = pd.DataFrame(tr, copy=False)
+    # restore dtypes that NaN padding / storage encoding changed
+    measured = measured.astype({c: d for c, d in payload.get("dtypes", {}).items() if c in measured.columns
+                                and str(measured[c].dtype) != d})
+    if truth is not None:
+        truth = truth.astype({c: d for c, d in payload.get("truth_dtypes", {}).items() if c in truth.columns
+                              and str(truth[c].dtype) != d})
+    units = {c: u for c, u in payload["units"].items() if c in measured.columns}
+    truth_units = {c: u for c, u in payload["truth_units"].items() if truth is not None and c in truth.columns}
+    return TripParts(measured.reset_index(drop=True), units, payload["meta"],
+                     None if truth is None else truth.reset_index(drop=True), truth_units)
+
+
+class _PackedWriter:
+    """The writer of format 3 ('packed'): see the section comment above. Kept as an explicit opt-in only."""
+
+    def __init__(self, owner: TripWriter) -> None:
+        self.owner = owner
+        self.writer: pq.ParquetWriter | None = None
+        self._schema: pa.Schema | None = None
+        self._encoding: dict[str, dict[str, Any]] = {}
+        self._carry: dict[str, Any] = {}  # last integer of every 'delta' column (its differences continue)
+        self._dtypes: dict[str, str] = {}
+        self._truth_dtypes: dict[str, str] = {}
+        self._truth_time = "own" if owner._shared_time is False else "measured"
+
+    def _column(self, name: str, values: np.ndarray, truth: bool) -> pa.Array:
+        key = (TRUTH_PREFIX + name) if truth else name
+        if self._schema is None:  # first chunk: decide the column's storage
+            enc = None
+            if values.dtype.kind == "f":
+                step = TRUTH_FIXED.get(name) if truth else self.owner.resolutions.get(name)
+                if step is not None:
+                    enc = {"scale": step, **({"fixed": True} if truth else {})}
+                elif name != "t":
+                    enc = {"float32": True}
+                else:  # lossless: increments of a clock are small in the bit pattern too
+                    enc = {"float64bits": True}
+            if enc is not None:
+                self._encoding[key] = enc
+        enc = self._encoding.get(key)
+        if enc is None:
+            return pa.array(values)
+        if "float32" in enc:  # the float32 bit pattern as int32: delta encoding of smooth signals packs it
+            return self._integers(key, np.ascontiguousarray(values, dtype=np.float32).view(np.int32), None)
+        if "float64bits" in enc:
+            return pa.array(np.ascontiguousarray(values, dtype=np.float64).view(np.int64))
+        step = enc["scale"]
+        k = np.round(values / step)
+        nan = np.isnan(values)
+        if enc.get("fixed"):  # lossy by design (half a step)
+            k[nan] = 0.0
+            return self._integers(key, k.astype(np.int64), nan if nan.any() else None)
+        ok = ~nan
+        if not (np.array_equal(k[ok] * step, values[ok]) and np.all(np.abs(k[ok]) < 2 ** 31)):
+            bad = int(np.flatnonzero(ok & ((k * step != values) | (np.abs(k) >= 2 ** 31)))[0])
+            raise TripError(f"measured channel {name!r}: value {values[bad]!r} at row {bad} is not a multiple of "
+                            f"its resolution {step!r} (write it with precision='compact' or 'exact')")
+        k[nan] = 0.0
+        return self._integers(key, k.astype(np.int32), nan if nan.any() else None)
+
+    def _integers(self, key: str, k: np.ndarray, mask: np.ndarray | None) -> pa.Array:
+        """An integer-coded column as stored: k itself, or (encoding 'delta', chosen on the first chunk where the
+        second differences of k take fewer bits than the first) its first differences, continued across chunks
+        (wrapping integer arithmetic, undone exactly by :func:`_undelta`); masked rows (NaN) hold the last value."""
+        enc = self._encoding[key]
+        carry = self._carry.get(key, k.dtype.type(0))
+        if mask is not None:  # hold the last valid value under the mask, so the differences skip the gaps
+            idx = np.where(mask, -1, np.arange(k.size))
+            np.maximum.accumulate(idx, out=idx)
+            k = np.where(idx >= 0, k[np.maximum(idx, 0)], carry).astype(k.dtype)
+        if self._schema is None and k.size > 2:
+            k64 = k.astype(np.int64)
+            bits = [np.log2(1.0 + np.abs(np.diff(k64, n))).mean() for n in (1, 2)]  # ~ packed bit widths
+            enc["delta"] = bool(bits[1] < bits[0])
+        if not enc.get("delta"):
+            return pa.array(k, mask=mask)
+        d = np.diff(k, prepend=carry)  # wraps in k's dtype, as the decoder's running sum does
+        if k.size:
+            self._carry[key] = k[-1]
+        return pa.array(d, mask=mask)
+
+    def write(self, measured: pd.DataFrame, truth: pd.DataFrame | None) -> None:
+        owner = self.owner
+        nm, nt = len(measured), 0 if truth is None else len(truth)
+        n = max(nm, nt)
+        first = self._schema is None
+        if first:
+            self._dtypes = {c: str(t) for c, t in measured.dtypes.items()}
+            if truth is not None:
+                self._truth_dtypes = {c: str(t) for c, t in truth.dtypes.items()}
+        if truth is not None and self._truth_time == "measured":
+            same = nm == nt and np.array_equal(measured["t"].to_numpy(), truth["t"].to_numpy())
+            if not same:
+                if not first or owner._shared_time:
+                    raise TripError("truth: its time base differed from the measured one only after the first "
+                                    "chunk; give the same time base in every chunk or write one chunk")
+                self._truth_time = "own"
+        arrays, names = [], []
+
+        def pad(arr: pa.Array, k: int) -> pa.Array:
+            return arr if k == n else pa.concat_arrays([arr, pa.nulls(n - k, arr.type)])
+
+        for c in measured.columns:
+            arrays.append(pad(self._column(c, measured[c].to_numpy(), False), nm))
+            names.append(c)
+        if truth is not None:
+            for c in truth.columns:
+                if c == "t" and self._truth_time == "measured":
+                    continue
+                arrays.append(pad(self._column(c, truth[c].to_numpy(), True), nt))
+                names.append(TRUTH_PREFIX + c)
+        flags = np.zeros(n, dtype=np.uint8)
+        flags[:nm] |= 1
+        flags[:nt] |= 2
+        arrays.append(pa.array(flags))
+        names.append(_ROWS)
+        table = pa.Table.from_arrays(arrays, names=names)
+        if first:
+            self._schema = table.schema
+            encoding = {f.name: "BYTE_STREAM_SPLIT" for f in table.schema if pa.types.is_floating(f.type)}
+            encoding.update({f.name: "DELTA_BINARY_PACKED" for f in table.schema if pa.types.is_integer(f.type)})
+            if owner._tmp is None:
+                raise TripError(f"{owner.path}: TripWriter has no open Parquet writer (use it as a context manager)")
+            self.writer = pq.ParquetWriter(owner._tmp, table.schema, compression="zstd", compression_level=15,
+                                           use_dictionary=False, column_encoding=encoding, write_statistics=False)
+        elif table.schema != self._schema:
+            raise TripError(f"{owner.path}: chunk columns {names} differ from the first chunk's "
+                            f"{self._schema.names if self._schema is not None else []}")
+        assert self.writer is not None
+        self.writer.write_table(table)
+        del table, arrays
+        pa.default_memory_pool().release_unused()
+        owner.n_measured += nm
+        owner.n_truth += nt
+
+    def payload(self, meta: dict[str, Any]) -> dict[str, Any]:
+        owner = self.owner
+        return {
+            "version": PACKED_VERSION, "units": owner.units, "truth_units": owner.truth_units, "meta": meta,
+            "n_measured": owner.n_measured, "n_truth": owner.n_truth, "dtypes": self._dtypes,
+            "truth_dtypes": self._truth_dtypes, "precision": "packed", "encoding": self._encoding,
+            "truth_time": self._truth_time if owner.has_truth else None,
+        }

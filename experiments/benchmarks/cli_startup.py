@@ -1,0 +1,117 @@
+"""How fast the ``roadload`` command answers, against ``python -c "import numpy, pandas"`` measured in the same run.
+
+Every case runs in a fresh process, interleaved with the reference (reference, case 1, case 2, ..., reference, ...)
+so that machine load hits them alike; each figure is the median over the repeats of wall time and CPU time (user +
+system, from wait4), and its ratio to the reference's median. Peak RSS comes from the same wait4. Cases:
+
+- ``roadload --help``;
+- refused bad input (exit code 2): a mapping file with a typo in a key, an unknown vehicle preset, an unknown import
+  format, a missing trip file;
+- (without --quick) a 1-hour ``roadload simulate`` on a 150 km motorway: peak RSS and wall time.
+
+Targets (issue: a command line that starts at once): --help within 1.5x and a refused bad input within 2x of the
+reference; peak RSS of --help <= 150 MB and of a 1-hour simulate <= 250 MB. The 1-min load average is printed.
+
+    python scripts/bench_cli_startup.py                 # 7 repeats + the 1-hour simulate
+    python scripts/bench_cli_startup.py --quick         # CI smoke run: 1 round, no simulate
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+
+def roadload_command() -> list[str]:
+    exe = shutil.which("roadload")
+    return [exe] if exe else [sys.executable, "-c", "from roadload.experiments.cli import main; main()"]
+
+
+def run(argv: list[str], cwd: Path) -> tuple[float, float, float, int]:
+    """(wall [s], CPU [s], peak RSS [MB], exit code) of one child process."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(argv, cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    return wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024.0, os.waitstatus_to_exitcode(status)
+
+
+def cases(work: Path) -> dict[str, tuple[list[str], int]]:
+    """name -> (argv, expected exit code)."""
+    cli = roadload_command()
+    mapping = {"name": "typo", "format": "csv", "csv": {"time": "time_s"},
+               "chanels": [{"source": "speed_kmh", "channel": "vehicle_speed", "unit": "km/h"}]}
+    (work / "typo.json").write_text(json.dumps(mapping))
+    (work / "log.csv").write_text("time_s,speed_kmh\n0,0\n0.01,0.1\n")
+    return {
+        "python -c 'import numpy, pandas'": ([sys.executable, "-c", "import numpy, pandas"], 0),
+        "roadload --help": (cli + ["--help"], 0),
+        "refused: mapping file with a typo": (cli + ["import", "log.csv", "--format", "csv", "--mapping",
+                                                     "typo.json", "--out", "x.parquet"], 2),
+        "refused: unknown vehicle preset": (cli + ["simulate", "--vehicle", "gt_rdw", "--road", "hilly", "--out",
+                                                   "x.parquet"], 2),
+        "refused: unknown import format": (cli + ["import", "log.csv", "--format", "cvs", "--out", "x.parquet"], 2),
+        "refused: missing trip file": (cli + ["export", "missing.parquet", "--format", "mf4"], 2),
+    }
+
+
+def simulate_hour(work: Path) -> tuple[float, float, float, int]:
+    """A 1-hour ``roadload simulate`` of the bmw_i3 on a 150 km motorway (written as a profile file first)."""
+    from roadload.road_profiles import load_profile, save_profile
+
+    road = save_profile(load_profile("motorway", seed=0, length=150_000.0), work / "motorway150.json")
+    return run(roadload_command() + ["simulate", "--vehicle", "bmw_i3", "--road", str(road), "--duration", "3600",
+                                     "--out", "hour.parquet"], work)
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=7, help="interleaved rounds (median reported)")
+    ap.add_argument("--quick", action="store_true", help="CI smoke run: 1 round, no 1-hour simulate")
+    ap.add_argument("--no-simulate", action="store_true", help="skip the 1-hour simulate")
+    args = ap.parse_args(argv)
+    repeats = 1 if args.quick else max(1, args.repeats)
+    with tempfile.TemporaryDirectory(prefix="roadload-startup-") as tmp:
+        work = Path(tmp)
+        table = cases(work)
+        samples: dict[str, list[tuple[float, float, float, int]]] = {name: [] for name in table}
+        load0 = os.getloadavg()[0]
+        for _ in range(repeats):
+            for name, (argv, _) in table.items():
+                samples[name].append(run(argv, work))
+        ref = "python -c 'import numpy, pandas'"
+        ref_wall = statistics.median(s[0] for s in samples[ref])
+        ref_cpu = statistics.median(s[1] for s in samples[ref])
+        print(f"{repeats} interleaved rounds; 1-min load average {load0:.2f} at start, {os.getloadavg()[0]:.2f} "
+              f"at end ({os.cpu_count()} CPUs)")
+        print(f"{'case':40s} {'wall [s]':>9s} {'x ref':>6s} {'CPU [s]':>8s} {'x ref':>6s} {'peak RSS [MB]':>14s}  "
+              f"exit")
+        failed = []
+        for name, (_, expected) in table.items():
+            wall = statistics.median(s[0] for s in samples[name])
+            cpu = statistics.median(s[1] for s in samples[name])
+            rss = max(s[2] for s in samples[name])
+            codes = sorted({s[3] for s in samples[name]})
+            print(f"{name:40s} {wall:9.2f} {wall / ref_wall:6.2f} {cpu:8.2f} {cpu / ref_cpu:6.2f} {rss:14.0f}  "
+                  f"{','.join(map(str, codes))}")
+            if codes != [expected]:
+                failed.append(f"{name}: exit {codes}, expected {expected}")
+        if not (args.quick or args.no_simulate):
+            wall, cpu, rss, code = simulate_hour(work)
+            print(f"{'roadload simulate, 1 h on 150 km':40s} {wall:9.1f} {'':6s} {cpu:8.1f} {'':6s} {rss:14.0f}  "
+                  f"{code}")
+            if code != 0:
+                failed.append(f"1-hour simulate: exit {code}")
+        print("targets: --help <= 1.5x and refused input <= 2x the reference (wall); --help <= 150 MB, 1-hour "
+              "simulate <= 250 MB peak RSS")
+    if failed:
+        sys.exit("unexpected exit codes: " + "; ".join(failed))
+

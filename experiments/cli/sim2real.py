@@ -123,6 +123,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         more: Optional[list[Path]] = typer.Argument(None, help="further trips (so '--real A B C' works)"),
     ) -> None:
         """Diagnose where a sim departs from recorded trips, which effect explains it, how far the gap shrinks.
+
         Against a calibrated sim (roadload calibrate), the effects are what differs from the reference trips."""
         from rich.console import Console
 
@@ -181,9 +182,11 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                                                     help="comma-separated channels withheld from the trips"),
         more: Optional[list[Path]] = typer.Argument(None, help="further trips (so '--real A B C' works)"),
     ) -> None:
-        """Calibrate the sim's base vehicle (mass, road load, drive-train efficiency, inertia, brakes, motor
-        losses, torque signal, auxiliary power) to reference trips; writes a vehicle spec that diagnose --sim,
-        simulate --vehicle and the MPC's force models read, and reports how far the held-out gap shrinks."""
+        """Calibrate the sim's base vehicle to reference trips and write it as a vehicle spec.
+
+        Fits mass, road load, drive-train efficiency, inertia, brakes, motor losses, torque signal and auxiliary
+        power; diagnose --sim, simulate --vehicle and the MPC's force models read the spec; reports how far the
+        held-out gap shrinks."""
         from rich.console import Console
 
         from roadload.sim2real.calibrate import CalibrationSettings, calibrate

@@ -86,16 +86,15 @@ def main() -> None:
     settings = (DiagnosisSettings(floor_roads=(("hilly", 9101),), floor_duration=300.0, n_boot=100,
                                   resimulate=False, replay=False) if args.quick else DiagnosisSettings())
     diagnosis = diagnose(trips, SimConfig.load(args.sim), settings)
-    before, after = diagnosis.gap_before["force_residual"], diagnosis.gap_after["force_residual"]
-    print(f"held-out force residual: median {before['median']:+.0f} N, RMSE {before['rmse']:.0f} N -> "
-          f"{after['rmse']:.0f} N; identified {diagnosis.identified or 'nothing'}")
-    ranking = pd.DataFrame([{"candidate": r["name"], "held-out gain": r["heldout_improvement"],
-                             "significant": r["significant"],
-                             "fit": ", ".join(f"{k} = {v:.4g}" for k, v in r["parameters"].items())}
+    before, after = diagnosis.gap_before.force_residual, diagnosis.gap_after.force_residual
+    print(f"held-out force residual: median {before.median:+.0f} N, RMSE {before.rmse:.0f} N -> "
+          f"{after.rmse:.0f} N; identified {diagnosis.identified or 'nothing'}")
+    ranking = pd.DataFrame([{"candidate": r.name, "held-out gain": r.improvement, "significant": r.significant,
+                             "fit": ", ".join(f"{k} = {v:.4g}" for k, v in r.parameters.items())}
                             for r in diagnosis.ranking[:6]])
     print(markdown_table(ranking, floatfmt=".3f"))
     for step in diagnosis.selection:
-        print(f"forward selection step {step['step']}: {step['effect']} -> {step['reason']}")
+        print(f"forward selection step {step.step}: {step.effect} -> {step.reason}")
     written = write_report(diagnosis, args.out)
     print("report:", ", ".join(str(p) for p in written.values()))
 

@@ -7,7 +7,7 @@ each; ``scripts/`` holds their thin entry points (argument parsing lives here, i
 - estimators: ``ch3_reproduction`` (chapter 3), ``fleet`` (chapter-5 fleet campaign), ``real_i3_ch5`` (chapter 5
   on the real BMW i3 trips), ``measurement_bias``, ``robustness/`` (sweeps to breakdown);
 - RL: ``rl/`` (training, evaluation, highway, speed-shield effect);
-- sim-to-real: ``sim2real_selftest`` and its test worlds ``worlds/``;
+- sim-to-real: ``sim2real/`` (the selftest, the real i3 trips, the JSON identity check) and its test worlds ``worlds/``;
 - data: ``real_profiles`` (road profiles from the real logs);
 - ``benchmarks/``: speed of every layer and the bitwise identity check, with old/new comparisons, and the
   parameter count of the compiled kernels (``kernel_signatures``);

@@ -5,7 +5,7 @@ much of the gap disappears once the effect is switched on in the simulator.
   :func:`write_report` writes ``report.md``, ``diagnosis.json`` and PNG figures;
 - the candidate catalog: :class:`CandidateEffect`, :func:`register_candidate`, :func:`candidate_names`;
 - regimes: :class:`Regime`, :func:`register_regime`;
-- the selftest on withheld effects: :func:`roadload.experiments.sim2real_selftest.run_selftest`.
+- the selftest on withheld effects: :func:`roadload.experiments.sim2real.selftest.run_world`.
 
 Recorded trips from a logger (``roadload diagnose --real FOLDER --format csv [--mapping FILE]``): the logs go
 through :func:`roadload.io.import_log` exactly as with ``roadload import``; a folder yields the trip files of the
@@ -33,8 +33,9 @@ maps to a physically plausible simulator setting (an implausible fit is reported
 Modules: ``forcemodel`` (the sim's force balance on the model registry), ``floor`` (the sim against its own trips),
 ``table`` (trips -> diagnosis table), ``energy`` (battery-power side), ``stats`` (block bootstrap, notches,
 cluster covariance), ``regimes`` (localisation, eq. 3.4), ``reference`` (regime-only model), ``selection``
-(split, CV, ΔAIC/ΔBIC, forward selection), ``gap`` and ``replay`` (gap measures), ``diagnose``, ``report``,
-``robust`` (robust target, null calibration), ``base`` (base calibration), ``selftest`` (scoring helpers).
+(split, CV, ΔAIC/ΔBIC, forward selection), ``gap`` and ``replay`` (gap measures), ``diagnose`` (the pipeline of
+named stages), ``results`` and ``records`` (its typed results), ``report``, ``robust`` (robust target, null
+calibration), ``base`` (base calibration).
 """
 
 from .catalog import CandidateEffect, candidate_names, get_candidate, register_candidate

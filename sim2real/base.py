@@ -32,6 +32,8 @@ block, not as an effect — the base block says which catalog effect each signif
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 import pandas as pd
 
@@ -42,6 +44,7 @@ from roadload.units import G
 from .catalog import DRIVE_FORCE, get_candidate
 from .energy import MOTOR_SPEED
 from .forcemodel import SimForceModel, columns_of
+from .records import Record, optional
 from .robust import RobustTarget, weighted_fit
 from .selection import Split, design
 from .stats import cluster_covariance
@@ -52,6 +55,57 @@ BASE_PARAMETERS: tuple[tuple[str, str], ...] = (
     ("cornering", "cornering resistance m_V^2/c_yW"), ("friction_brake", "brake gain X_B"))
 EFFICIENCY_PARAMETER = "drive-train loss error epsilon (|F_drive|)"
 INERTIA_PARAMETER = "delta I_red/r_W^2 (all gears)"
+
+
+@dataclass
+class PhysicalValue(Record):
+    """A base parameter in the sim's own terms: the sim's value, the calibrated one and their unit; for the
+    drive-train efficiency the calibrated value is the efficiency in traction and ``calibrated_regen`` the one in
+    regeneration; ``flag`` says why a value is not physically plausible (an efficiency above 1 or below 0.7)."""
+
+    sim: float
+    calibrated: float
+    unit: str
+    calibrated_regen: float | None = optional()
+    flag: str | None = optional()
+
+
+@dataclass
+class BaseParameter(Record):
+    """One fitted base parameter: ``name`` (what it is), the catalog ``candidate`` it stands for, the fitted
+    ``parameter`` with its ``unit``, value and standard error, the RMS of its contribution (N, or W on the energy
+    side) and whether it is significant; ``physical``: the value in the sim's terms (force side); ``in_fit``
+    False and ``method`` for a parameter reported with the block but fitted apart (accelerometer bias)."""
+
+    name: str
+    candidate: str
+    parameter: str
+    unit: str
+    value: float
+    std_error: float
+    size_rms: float
+    significant: bool
+    in_fit: bool | None = optional()
+    physical: PhysicalValue | None = optional()
+    method: str | None = optional()
+
+
+@dataclass
+class BaseBlock(Record):
+    """A base block (force or energy side): its parameters, how they were fitted, the significance level z and
+    size gate (N or W), whether the effects were selected over it; ``note`` when nothing could be fitted."""
+
+    parameters: list[BaseParameter] = field(default_factory=list)
+    note: str | None = optional()
+    method: str | None = optional()
+    z: float | None = optional()
+    min_size: float | None = optional()
+    unit_of_size: str | None = optional()
+    used_for_effects: bool | None = optional()
+
+    def parameter(self, candidate: str) -> BaseParameter | None:
+        """The parameter standing for ``candidate`` (None when the block has none)."""
+        return next((p for p in self.parameters if p.candidate == candidate), None)
 
 
 def _efficiency_column(cols: dict) -> np.ndarray:
@@ -94,31 +148,46 @@ def base_columns(table: pd.DataFrame, model: SimForceModel, braking: np.ndarray,
     return (np.hstack(blocks) if blocks else np.zeros((len(table), 0))), info
 
 
-def _physical(model: SimForceModel, row: dict) -> dict:
+EFFICIENCY_PLAUSIBLE = (0.7, 1.0)
+
+
+def efficiency_value(eta_sim: float, epsilon: float) -> PhysicalValue:
+    """The drive-train efficiency the base block's loss error ε stands for. The pipeline turns the logged torque
+    into force with the sim's η (T i η / r_W in traction, T i / (η r_W) in regeneration), so a measured force
+    (1 + ε) times the true one in traction means η_t = η_sim / (1 + ε), and (1 - ε) times in regeneration
+    η_r = η_sim (1 - ε). Flagged when either leaves [0.7, 1]."""
+    eta_t, eta_r = eta_sim / (1.0 + epsilon), eta_sim * (1.0 - epsilon)
+    lo, hi = EFFICIENCY_PLAUSIBLE
+    bad = [f"{what} {eta:.3f}" for what, eta in (("traction", eta_t), ("regeneration", eta_r))
+           if not lo <= eta <= hi]
+    flag = (f"implausible efficiency: {', '.join(bad)} outside [{lo:g}, {hi:g}] (a base mismatch the efficiency "
+            "absorbs: mass, road load or the torque signal)") if bad else None
+    return PhysicalValue(eta_sim, eta_t, "eta in traction (eta in regeneration: calibrated_regen)", eta_r, flag)
+
+
+def _physical(model: SimForceModel, candidate: str, v: float) -> PhysicalValue:
     """The calibrated base value in the sim's own terms (mass [kg], drag area [m²], factors)."""
-    v = row["value"]
-    if row["candidate"] == "mass_offset":
-        return {"sim": model.mass, "calibrated": model.mass + v, "unit": "kg"}
-    if row["candidate"] == "drag_area":
-        return {"sim": model.drag_area, "calibrated": model.drag_area + v, "unit": "m^2"}
-    if row["candidate"] == "rolling_scale":
-        return {"sim": 1.0, "calibrated": 1.0 + v, "unit": "x f_r(v)"}
-    if row["candidate"] == "cornering":
-        return {"sim": 0.0, "calibrated": v, "unit": "kg^2 rad/N (added to m_V^2/c_yW, eq. 2.15)"}
-    if row["candidate"] == "rotational_inertia":
-        return {"sim": 0.0, "calibrated": v, "unit": "kg (added to the sim's reduced mass)"}
-    if row["candidate"] == "drive_efficiency":
-        return {"sim": model.drivetrain_efficiency, "calibrated": model.drivetrain_efficiency * (1.0 + v),
-                "unit": "eta (tractive force per drive force in traction; 1 / that ratio in regeneration)"}
-    return {"sim": 1.0, "calibrated": 1.0 + v, "unit": "x X_B"}
+    if candidate == "mass_offset":
+        return PhysicalValue(model.mass, model.mass + v, "kg")
+    if candidate == "drag_area":
+        return PhysicalValue(model.drag_area, model.drag_area + v, "m^2")
+    if candidate == "rolling_scale":
+        return PhysicalValue(1.0, 1.0 + v, "x f_r(v)")
+    if candidate == "cornering":
+        return PhysicalValue(0.0, v, "kg^2 rad/N (added to m_V^2/c_yW, eq. 2.15)")
+    if candidate == "rotational_inertia":
+        return PhysicalValue(0.0, v, "kg (added to the sim's reduced mass)")
+    if candidate == "drive_efficiency":
+        return efficiency_value(model.drivetrain_efficiency, v)
+    return PhysicalValue(1.0, 1.0 + v, "x X_B")
 
 
 def base_calibration(table: pd.DataFrame, target: RobustTarget, split: Split, model: SimForceModel,
-                     min_size: float = 15.0) -> tuple[dict, np.ndarray]:
+                     min_size: float = 15.0) -> tuple[BaseBlock, np.ndarray]:
     """The base block (see module doc) and the base design (n x k) for the effects beyond it."""
     A, info = base_columns(table, model, target.braking, split.valid)
     if A.shape[1] == 0:
-        return {"parameters": [], "note": "no base parameter can be fitted on these trips"}, A
+        return BaseBlock(note="no base parameter can be fitted on these trips"), A
     rows = split.train
     w = target.weight
     X = weighted_fit(A, target.r_w, w, rows)
@@ -129,16 +198,14 @@ def base_calibration(table: pd.DataFrame, target: RobustTarget, split: Split, mo
     for j, meta in enumerate(info):
         contrib = A[rows, j] * X[j]
         size = float(np.sqrt(np.mean(contrib ** 2)))
-        row = {**meta, "value": float(X[j]), "std_error": float(se[j]), "size_rms": size,
-               "significant": bool(abs(X[j]) >= Z_SIGNIFICANT * se[j] and size >= min_size)}
-        row["physical"] = _physical(model, row)
-        out.append(row)
+        out.append(BaseParameter(meta["name"], meta["candidate"], meta["parameter"], meta["unit"], float(X[j]),
+                                 float(se[j]), size, bool(abs(X[j]) >= Z_SIGNIFICANT * se[j] and size >= min_size),
+                                 physical=_physical(model, meta["candidate"], float(X[j]))))
     bias = accelerometer_bias_from_elevation(table, split, model.mass, min_size)
     if bias is not None:    # reported with the block, not part of its force fit (see the function)
         out.append(bias)
-    return {"parameters": out, "method": "weighted least squares on the robust residual (training rows), "
-                                         "cluster-robust standard errors over 10 s blocks",
-            "z": Z_SIGNIFICANT, "min_size": min_size}, A
+    return BaseBlock(out, method="weighted least squares on the robust residual (training rows), cluster-robust "
+                                 "standard errors over 10 s blocks", z=Z_SIGNIFICANT, min_size=min_size), A
 
 
 ENERGY_PARAMETERS: tuple[tuple[str, str, str, str], ...] = (
@@ -158,7 +225,7 @@ def energy_base_columns(table: pd.DataFrame) -> np.ndarray:
 
 
 def energy_base_calibration(table: pd.DataFrame, power_residual: np.ndarray, split: Split,
-                            min_power_size: float = 100.0) -> dict:
+                            min_power_size: float = 100.0) -> BaseBlock:
     """The energy side's base block (battery-electric trips): the battery-power residual P_el,measured -
     P_el,sim [W] fitted on a constant (the auxiliary power a preset gets wrong, ``auxiliary_power``),
     |T_E ω_E| (a motor / inverter loss proportional to the converted power, ``motor_efficiency``) and the signed
@@ -174,19 +241,18 @@ def energy_base_calibration(table: pd.DataFrame, power_residual: np.ndarray, spl
     y = np.asarray(power_residual, dtype=float)
     rows = split.train & np.isfinite(y) & np.isfinite(p_motor)
     if rows.sum() < 100:
-        return {"parameters": [], "note": "too few rows with battery power"}
+        return BaseBlock(note="too few rows with battery power")
     X, *_ = np.linalg.lstsq(A[rows], y[rows], rcond=None)
     cov = cluster_covariance(A[rows], y[rows] - A[rows] @ X, split.blocks[rows])
     se = np.sqrt(np.clip(np.diag(cov), 0, None))
     out = []
     for j, (cand, label, param, unit) in enumerate(ENERGY_PARAMETERS):
         size = float(np.sqrt(np.mean((A[rows, j] * X[j]) ** 2)))
-        out.append({"name": label, "candidate": cand, "parameter": param, "unit": unit, "value": float(X[j]),
-                    "std_error": float(se[j]), "size_rms": size,
-                    "significant": bool(abs(X[j]) >= Z_SIGNIFICANT * se[j] and size >= min_power_size)})
-    return {"parameters": out, "method": "least squares on the battery-power residual (training rows), "
-                                         "cluster-robust standard errors over 10 s blocks",
-            "z": Z_SIGNIFICANT, "min_size": min_power_size, "unit_of_size": "W"}
+        out.append(BaseParameter(label, cand, param, unit, float(X[j]), float(se[j]), size,
+                                 bool(abs(X[j]) >= Z_SIGNIFICANT * se[j] and size >= min_power_size)))
+    return BaseBlock(out, method="least squares on the battery-power residual (training rows), cluster-robust "
+                                 "standard errors over 10 s blocks", z=Z_SIGNIFICANT, min_size=min_power_size,
+                     unit_of_size="W")
 
 
 ELEVATION = "elevation"
@@ -194,7 +260,7 @@ MIN_BIAS_SEGMENTS = 10
 
 
 def accelerometer_bias_from_elevation(table: pd.DataFrame, split: Split, mass: float,
-                                      min_size: float = 15.0) -> dict | None:
+                                      min_size: float = 15.0) -> BaseParameter | None:
     """The accelerometer bias b [m/s²] as a base parameter, from the logged elevation h (GNSS, map) instead of
     the force balance: eq. 5.2 turns a bias into a grade error, sin θ̂ = sin θ + b/g, so the elevation climbed
     along the grade, ∫ sin θ̂ ds, drifts from the logged one by (b/g) s. Per split segment (60 s) the drift
@@ -243,8 +309,8 @@ def accelerometer_bias_from_elevation(table: pd.DataFrame, split: Split, mass: f
     se_slope = float(np.sqrt(np.sum((wts * s * resid) ** 2)) / np.sum(wts * s ** 2))
     b, se = G * slope, G * se_slope
     size = float(mass * abs(b))
-    return {"name": "accelerometer bias (from the logged elevation)", "candidate": "accel_bias",
-            "parameter": "accelerometer bias b", "unit": "m/s^2", "value": b, "std_error": se, "size_rms": size,
-            "significant": bool(abs(b) >= Z_SIGNIFICANT * se and size >= min_size), "in_fit": False,
-            "physical": {"sim": 0.0, "calibrated": b, "unit": "m/s^2 (eq. 5.2 grade offset b/g)"},
-            "method": f"drift of the eq. 5.2 climb against the logged elevation over {e.size} training segments"}
+    return BaseParameter("accelerometer bias (from the logged elevation)", "accel_bias", "accelerometer bias b",
+                         "m/s^2", b, se, size, bool(abs(b) >= Z_SIGNIFICANT * se and size >= min_size), in_fit=False,
+                         physical=PhysicalValue(0.0, b, "m/s^2 (eq. 5.2 grade offset b/g)"),
+                         method=f"drift of the eq. 5.2 climb against the logged elevation over {e.size} training "
+                                "segments")

@@ -69,6 +69,14 @@ class CandidateEffect:
     regime_hint: str = ""
     sim_aliases: tuple[str, ...] = ()
     side: str = "force"
+    signal_gain: Callable[[dict, float | None, bool], float] | None = None
+
+    def torque_signal_gain(self, params: dict, shape: float | None, speed_derived: bool) -> float:
+        """The drive-torque signal gain g the fitted effect implies on the battery power (P_el,sim is computed from
+        the logged torque and the motor speed: a signal reading (1 + g) T over-predicts it by g T ω): 0 for a
+        physical effect (a heavier car needs a truly larger torque); ``speed_derived``: the motor speed comes
+        from the vehicle speed (no motor-speed channel), so a speed-signal scale acts like a torque gain."""
+        return self.signal_gain(params, shape, speed_derived) if self.signal_gain is not None else 0.0
 
     @property
     def is_brake(self) -> bool:
@@ -235,6 +243,20 @@ def _latency(model, shape):
                  lambda n: 0.0),)
 
 
+def _speed_scale(model, shape):
+    # the speed signal reads (1 + s) v: the balance is evaluated at (1 + s) v and (1 + s) dv/dt, and eq. 5.2 turns
+    # the scaled dv/dt into a grade g sin(theta) - s dv/dt, so the inertial terms cancel and, to first order, the
+    # sim's force is too high by s (m_V g cos(theta) (f_r1 v + 4 f_r4 v^4) + 2 rho_a/2 c_x A_V v^2 + 4 F_corner)
+    def build(s):
+        v = _c(s, SPEED)
+        corner = v ** 4 * np.nan_to_num(_c(s, PATH_CURVATURE)) ** 2 / 4.0 * model.mass ** 2 / model.cornering_stiffness
+        return -(model.mass * G * np.cos(_c(s, GRADIENT_ANGLE)) * (model.rolling_resistance_f1 * v
+                                                                  + 4.0 * model.rolling_resistance_f4 * v ** 4)
+                 + _c(s, AIR_DENSITY) * model.drag_area * v ** 2 + 4.0 * corner)
+    return (Term("-v dF_road/dv", "speed scale error s", "1", build, (SPEED, GRADIENT_ANGLE, AIR_DENSITY,
+                                                                      PATH_CURVATURE), lambda n: 0.0),)
+
+
 def _aux_constant(model, shape):
     return (Term("1", "delta P_aux", "W", lambda s: np.ones_like(_c(s, SPEED)), (SPEED,), lambda n: 0.0),)
 
@@ -347,13 +369,18 @@ for _cand in (
     CandidateEffect("torque_scale", "drive-torque scale error (efficiency, torque model)", _torque_scale,
                     (DRIVE_FORCE,), "spec:sensors.drive_torque_gain_error",
                     lambda p, sh, m: {"delta": _p(p, "torque scale error epsilon")},
-                    regime_hint="mode", sim_aliases=("torque_model_error",)),
+                    regime_hint="mode", sim_aliases=("torque_model_error",),
+                    signal_gain=lambda p, sh, fs: _p(p, "torque scale error epsilon")),
     CandidateEffect("drive_efficiency", "drive-train / motor efficiency off, separately in traction and in regen",
                     _drive_efficiency, (DRIVE_FORCE,), None, None, regime_hint="mode",
                     sim_aliases=("spec:sensors.drive_torque_gain_error", "torque_model_error")),
     CandidateEffect("latency", "drive-torque signal latency", _latency, (DRIVE_FORCE_RATE,),
                     "spec:sensors.channels.drive_torque.latency",
                     lambda p, sh, m: {"delta": max(_p(p, "latency tau"), 0.0)}, regime_hint="acceleration"),
+    CandidateEffect("speed_scale", "speed-signal scale error (wheel circumference, speed sensor)", _speed_scale,
+                    (SPEED, GRADIENT_ANGLE, AIR_DENSITY), "spec:sensors.speed_scale_error",
+                    lambda p, sh, m: {"delta": _p(p, "speed scale error s")}, regime_hint="speed",
+                    signal_gain=lambda p, sh, fs: _p(p, "speed scale error s") if fs else 0.0),
     CandidateEffect("auxiliary_power", "auxiliary power on the energy side (heater, air conditioning), constant",
                     _aux_constant, (SPEED, POWER_RESIDUAL), "auxiliary_load",
                     lambda p, sh, m: {"power": float(np.clip(_p(p, "delta P_aux"), 0.0, 20000.0))}, side="power",

@@ -1,53 +1,71 @@
 """The diagnosis: where the sim departs from recorded trips, which candidate effect explains it, how far the gap
 shrinks once the effect is switched on, and what stays unexplained.
 
-Steps of :func:`diagnose` (settings in :class:`DiagnosisSettings`):
+:func:`diagnose` is a pipeline of named stages, each a function with a typed result (settings in
+:class:`DiagnosisSettings`, the result a :class:`.results.Diagnosis`):
 
-1. the sim's floor (:mod:`.floor`) from trips the sim itself drives, reduced to the recorded trips' channels;
-2. the diagnosis table of the recorded trips (:mod:`.table`): residual r = F_xV,measured - (F_xV,sim + floor);
-3. the split (:func:`.selection.make_split`): held-out test segments, training segments in CV folds;
-4. gap measures before (:mod:`.gap`) on the held-out part; localisation of r over the regimes
-   (:mod:`.regimes`) and the residual analysis of eq. 3.4a/3.4b;
-5. candidates ranked alone by out-of-fold MSE with ΔAIC/ΔBIC; greedy forward selection (:mod:`.selection`);
-6. the accepted effects fitted on the whole training part (parameters with block-robust standard errors),
-   mapped to simulator switches; gap measures after / remaining per regime on the held-out part;
-7. the unexplained residual: regime bins of the held-out residual after the accepted effects that still depart
-   from 0 by at least ``min_effect`` N, and the flexible reference's strongest regime variable when the
-   reference still removes a significant part of it.
+1. **table** (:func:`stage_table`): the recorded trips through the chapter-5 pipeline with the sim's knowledge
+   (:mod:`.table`): measured force F_xV,measured and the sim's balance F_xV,sim per 10 Hz sample;
+2. **split** (:func:`stage_split`): held-out test segments, training segments in CV folds (:mod:`.selection`);
+3. **floor** (:func:`stage_floor`): the sim's floor from trips the sim itself drives, reduced to the recorded
+   trips' channels (:mod:`.floor`), added to the sim side: r = F_xV,measured - (F_xV,sim + floor);
+4. **gap** (:func:`stage_gap`): gap measures before on the held-out part (:mod:`.gap`), localisation of r over
+   the regimes and the residual analysis of eq. 3.4a/3.4b (:mod:`.regimes`);
+5. **base** (:func:`stage_base`): the force and energy base blocks (:mod:`.base`); with ``base_first`` the effects
+   are judged over them;
+6. **rank** (:func:`stage_rank`): every candidate alone by its robust out-of-fold gain with ΔAIC/ΔBIC, per side
+   (force, battery power);
+7. **select** (:func:`stage_select`): greedy forward selection; the accepted effects fitted on the whole training
+   part (parameters with block-robust standard errors) and mapped to simulator switches;
+8. **re-simulate** (:func:`stage_resimulate`): the accepted effects switched on in the simulator, the floor trips
+   re-driven and the gap recomputed ("after, simulator");
+9. **report** (:func:`stage_report`): gap after and per regime on the held-out part; the unexplained residual
+   (regime bins still departing by at least ``min_effect`` N, the flexible reference's strongest regime variable
+   when it still removes a significant part); the :class:`.results.Diagnosis`.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 import numpy as np
 import pandas as pd
 
-from roadload.trip import Trip
-
-from .catalog import DEFAULT_CANDIDATES, get_candidate
-from .errors import DiagnosisError
-from .floor import SimFloor, reduce_channels
-from .gap import gap_measures
-from .reference import AdditiveRegimeModel
-from .regimes import DEFAULT_REGIMES, get_regime, localise, residual_analysis, strongest_departures
-from .selection import Selector, make_split
-from .base import base_calibration, energy_base_calibration, energy_base_columns
-from .robust import braking_rows, robust_target, weighted_fit
-from .simconfig import SimConfig
-from .stats import block_bootstrap_mean_difference
-from .table import DiagnosisTable, build_table
 from roadload.envs.simulator import simulate
 from roadload.road_profiles import load_profile
-from .energy import POWER_RESIDUAL, SIM_ELECTRIC_POWER, ELECTRIC_POWER, electric_energy_per_distance
-from .selection import Split
-from .stats import robust_summary
+from roadload.trip import Trip
 
-SCHEMA_VERSION = 1
+from .base import Z_SIGNIFICANT, BaseBlock, base_calibration, energy_base_calibration, energy_base_columns
+from .catalog import DEFAULT_CANDIDATES, DRIVE_FORCE, get_candidate
+from .energy import (ELECTRIC_POWER, POWER_RESIDUAL, SIM_ELECTRIC_POWER, SPEED_DERIVED,
+                     electric_energy_per_distance)
+from .errors import DiagnosisError
+from .floor import SimFloor, reduce_channels
+from .gap import GapMeasures, gap_measures
+from .pertrip import per_trip_sizes
+from .records import RobustSummary
+from .reference import AdditiveRegimeModel
+from .regimes import (DEFAULT_REGIMES, RegimeTable, ResidualCorrelation, get_regime, localise, residual_analysis,
+                      strongest_departures)
+from .results import (Diagnosis, Effect, ElectricEnergy, EnergySide, Implausible, Notes, ReferenceGain,
+                      Unexplained, per_regime_gap)
+from .robust import braking_rows, robust_target, weighted_fit
+from .selection import CandidateResult, SelectionStep, Selector, Split, fitted_parameters, make_split
+from .simconfig import SimConfig
+from .stats import block_bootstrap_mean_difference
+from .table import DiagnosisTable, build_table, finish_table
+
+__all__ = ["Diagnosis", "DiagnosisSettings", "diagnose", "fit_floor", "plausibility_check", "sim_trips",
+           "switched_on"]
+
 FLOOR_ROADS: tuple[tuple[str, int], ...] = (("hilly", 9101), ("city", 9102), ("motorway", 9103))
 RESIDUAL_SIGNALS = ("speed", "acceleration", "gradient_angle", "sim_drive_force", "sim_drive_force_rate",
                     "time_since_start", "lateral_acceleration")
+#: the stages of :func:`diagnose` and the progress fraction at which each starts (monotone)
+STAGES: tuple[tuple[str, float], ...] = (
+    ("table", 0.0), ("split", 0.2), ("floor", 0.22), ("gap", 0.4), ("base", 0.5), ("rank", 0.55),
+    ("select", 0.7), ("re-simulate", 0.85), ("report", 0.95))
 
 
 @dataclass
@@ -70,7 +88,8 @@ class DiagnosisSettings:
     floor trips and recompute the gap ("after, simulator"); replay: feed the recorded forces and road into the
     simulator (before, and after with the effects on) and compare the speed traces (:mod:`.replay`);
     strict_candidates: a candidate the trips lack channels for is an error (the user asked for it by name)
-    instead of being skipped with the reason."""
+    instead of being skipped with the reason; energy_consistency: a force-side effect must agree with the
+    drive-torque signal gain the battery power shows (:func:`energy_consistency`; not with base_first)."""
 
     candidates: tuple[str, ...] = DEFAULT_CANDIDATES
     regimes: tuple[str, ...] = DEFAULT_REGIMES
@@ -97,79 +116,7 @@ class DiagnosisSettings:
     resimulate: bool = True
     replay: bool = True
     strict_candidates: bool = False
-
-
-@dataclass
-class Diagnosis:
-    """Result of :func:`diagnose`; :meth:`to_dict` is the documented diagnosis.json schema."""
-
-    sim: dict
-    trips: list[str]
-    settings: dict
-    split: dict
-    floor: dict
-    gap_before: dict
-    gap_after: dict
-    gap_after_sim: dict | None
-    regimes_before: dict
-    per_regime: list[dict]
-    residual_analysis: dict
-    ranking: list[dict]
-    skipped: dict
-    selection: list[dict]
-    effects: list[dict]
-    unexplained: dict
-    energy: dict | None
-    notes: dict
-    table: DiagnosisTable | None = field(default=None, repr=False)
-    residual_after: np.ndarray | None = field(default=None, repr=False)
-    test_rows: np.ndarray | None = field(default=None, repr=False)
-
-    @property
-    def identified(self) -> list[str]:
-        """Accepted effects: force side first, then the energy side."""
-        return [e["name"] for e in self.effects] + [e["name"] for e in (self.energy or {}).get("effects", [])]
-
-    def shrinkage(self, measure: str = "rmse", simulator: bool = False) -> float:
-        """1 - gap_after / gap_before of the held-out force residual's ``measure`` (rmse, medse or |median|);
-        ``simulator``: the after of the re-simulated sim with the effects switched on (NaN when not run)."""
-        after = self.gap_after_sim if simulator else self.gap_after
-        if after is None:
-            return float("nan")
-        b = self.gap_before["force_residual"][measure]
-        a = after["force_residual"][measure]
-        if measure == "median":
-            b, a = abs(b), abs(a)
-        return float(1.0 - a / b) if b > 0 else float("nan")
-
-    def to_dict(self) -> dict:
-        return _jsonable({
-            "schema_version": SCHEMA_VERSION, "sim": self.sim, "trips": self.trips, "settings": self.settings,
-            "split": self.split, "floor": self.floor,
-            "gap": {"before": self.gap_before, "after": self.gap_after, "after_simulator": self.gap_after_sim,
-                    "shrinkage": {m: self.shrinkage(m) for m in ("rmse", "medse", "median")},
-                    "shrinkage_simulator": {m: self.shrinkage(m, simulator=True) for m in ("rmse", "medse", "median")},
-                    "per_regime": self.per_regime},
-            "regimes": self.regimes_before, "residual_analysis": self.residual_analysis,
-            "ranking": self.ranking, "skipped_candidates": self.skipped, "forward_selection": self.selection,
-            "effects": self.effects, "unexplained": self.unexplained, "energy_side": self.energy,
-            "notes": self.notes})
-
-
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, (np.floating, float)):
-        return None if not np.isfinite(x) else float(x)
-    if isinstance(x, (np.integer,)):
-        return int(x)
-    if isinstance(x, np.bool_):
-        return bool(x)
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    return x
+    energy_consistency: bool = True
 
 
 def sim_trips(sim: SimConfig, roads: Sequence[tuple[str, int]], duration: float,
@@ -186,26 +133,26 @@ def sim_trips(sim: SimConfig, roads: Sequence[tuple[str, int]], duration: float,
 
 
 def fit_floor(sim: SimConfig, channels: set[str], settings: DiagnosisSettings,
-              trips: Sequence[Trip] | None = None, extra: tuple = ()) -> SimFloor:
-    """The sim's floor from its own trips reduced to ``channels`` (see :mod:`.floor`); ``extra``: (candidate,
-    shape) pairs whose regressors join the floor basis."""
+              trips: Sequence[Trip] | None = None, extra: tuple = (), rate: float | None = None) -> SimFloor:
+    """The sim's floor from its own trips reduced to ``channels`` and to the recorded trips' sample ``rate`` [Hz]
+    (see :mod:`.floor`); ``extra``: (candidate, shape) pairs whose regressors join the floor basis."""
     if not settings.floor_roads and trips is None:
         return SimFloor.none()
     own = list(trips) if trips is not None else sim_trips(sim, settings.floor_roads, settings.floor_duration)
-    own = [reduce_channels(t, channels) for t in own]
+    own = [reduce_channels(t, channels, rate) for t in own]
     tab = build_table(own, sim)
     f = tab.frame
     return SimFloor.fit(f, f["sim_balance"].to_numpy(), f["residual"].to_numpy(), f["valid"].to_numpy(bool),
                         extra=extra, model=tab.model)
 
 
-def switched_on(sim: SimConfig, effects: Sequence[dict]) -> SimConfig | None:
+def switched_on(sim: SimConfig, effects: Sequence[Effect]) -> SimConfig | None:
     """The sim with every identified effect's simulator switch on (None when one has no switch)."""
     out = sim
     for e in effects:
-        if not e.get("sim_switch") or e.get("sim_parameters") is None:
+        if not e.sim_switch or e.sim_parameters is None:
             return None
-        out = out.with_effect(e["sim_switch"], e["sim_parameters"])
+        out = out.with_effect(e.sim_switch, e.sim_parameters)
     return out
 
 
@@ -235,28 +182,380 @@ def plausibility_check(sim: SimConfig, model) -> Callable:
     return check
 
 
-def _per_regime(table: pd.DataFrame, before: np.ndarray, after: np.ndarray, rows: np.ndarray,
-                regimes: Sequence[str]) -> list[dict]:
-    out = []
-    for name in regimes:
-        reg = get_regime(name)
-        if reg.column not in table.columns:
-            continue
-        idx = reg.assign(table)
-        for i, label in enumerate(reg.bin_labels()):
-            sel = rows & (idx == i)
-            if sel.sum() < 20:
-                continue
-            b = float(np.sqrt(np.mean(before[sel] ** 2)))
-            a = float(np.sqrt(np.mean(after[sel] ** 2)))
-            out.append({"regime": reg.name, "bin": label, "n": int(sel.sum()), "rmse_before": b, "rmse_after": a,
-                        "median_before": float(np.median(before[sel])), "median_after": float(np.median(after[sel])),
-                        "remaining": a / b if b > 0 else float("nan")})
+# ============================================================================================ the stages
+@dataclass
+class Run:
+    """What every stage reads: the recorded trips, the sim, the settings, the seeded generator of the
+    localisation bootstraps (the gap stage draws first, the report stage after it) and the progress callback."""
+
+    real: Sequence[Trip]
+    sim: SimConfig
+    settings: DiagnosisSettings
+    rng: np.random.Generator
+    progress: Callable[[str, float], None]
+
+    def stage(self, name: str) -> None:
+        """Report the start of stage ``name`` (fractions of :data:`STAGES`, never backwards)."""
+        self.progress(name, dict(STAGES)[name])
+
+    @property
+    def channels(self) -> set[str]:
+        return set.intersection(*[set(t.channels) for t in self.real])
+
+    @property
+    def rate(self) -> float:
+        """The recorded trips' sample rate [Hz] (the lowest: the sim's floor trips are taken down to it)."""
+        return float(min(t.sample_rate for t in self.real))
+
+
+def stage_table(run: Run) -> DiagnosisTable:
+    """Stage 1: the diagnosis table of the recorded trips against the sim's balance, without the floor."""
+    run.stage("table")
+    return build_table(run.real, run.sim)
+
+
+def stage_split(run: Run, table: DiagnosisTable) -> Split:
+    """Stage 2: training / held-out segments and CV folds (:func:`.selection.make_split`)."""
+    run.stage("split")
+    s = run.settings
+    return make_split(table.frame, segment_length=s.segment_length, test_fraction=s.test_fraction,
+                      n_folds=s.n_folds, block_length=s.block_length, seed=s.seed)
+
+
+@dataclass
+class FloorStage:
+    """The sim's floor, the table with it added to the sim side, and the residual r [N] (NaN off valid rows)."""
+
+    floor: SimFloor
+    table: DiagnosisTable
+    residual: np.ndarray
+
+
+def stage_floor(run: Run, table: DiagnosisTable, split: Split, floor: SimFloor | None,
+                floor_trips: Sequence[Trip] | None) -> FloorStage:
+    """Stage 3: the sim's floor (fitted on its own trips unless given) added to the table's sim side."""
+    run.stage("floor")
+    if floor is None:
+        floor = fit_floor(run.sim, run.channels, run.settings, floor_trips, rate=run.rate)
+    with_floor = finish_table(table.frame, table.model, table.notes, floor, table.trips)
+    r = np.where(split.valid, with_floor.frame["residual"].to_numpy(dtype=float), np.nan)
+    return FloorStage(floor, with_floor, r)
+
+
+@dataclass
+class GapStage:
+    """The gap before on the held-out rows, the residual per regime bin and the residual analysis."""
+
+    gap_before: GapMeasures
+    regimes: dict[str, RegimeTable]
+    residual_analysis: dict[str, ResidualCorrelation]
+
+
+def stage_gap(run: Run, fl: FloorStage, split: Split) -> GapStage:
+    """Stage 4: where the gap lies (held-out gap measures, regimes, eq. 3.4a/3.4b)."""
+    run.stage("gap")
+    s = run.settings
+    table, r = fl.table.frame, fl.residual
+    gap_before = gap_measures(table, np.nan_to_num(r), fl.table.model.mass, split.test,
+                              replay_sim=run.sim if s.replay else None)
+    regs = localise(r, table, split.blocks, s.regimes, run.rng, n_boot=s.n_boot, min_effect=s.min_effect)
+    valid = split.valid
+    signals = {c: table[c].to_numpy(dtype=float)[valid] for c in RESIDUAL_SIGNALS if c in table.columns}
+    ra = residual_analysis(r[valid], signals, table["trip"].to_numpy()[valid], max_lag=20)
+    return GapStage(gap_before, regs, ra)
+
+
+@dataclass
+class SideInput:
+    """What one side's selection judges: its split, the residual y (N or W; with ``base_first`` net of the base
+    block) and the base design refitted jointly with every candidate (None: not joint)."""
+
+    split: Split
+    residual: np.ndarray
+    base_design: np.ndarray | None
+
+
+@dataclass
+class BaseStage:
+    """The force base block and the force side's input; the energy base block and the energy side's input (None
+    without battery power or energy-side candidates)."""
+
+    force_block: BaseBlock
+    force: SideInput
+    energy_block: BaseBlock | None
+    energy: SideInput | None
+    energy_residual: np.ndarray | None
+
+
+def stage_base(run: Run, fl: FloorStage, split: Split) -> BaseStage:
+    """Stage 5: the base blocks (:mod:`.base`); with ``base_first`` the residual the effects are judged on is net
+    of them, and with ``joint_base`` (force side) their columns are refitted with every candidate."""
+    run.stage("base")
+    s = run.settings
+    table = fl.table.frame
+    y = np.nan_to_num(fl.residual)
+    target0 = robust_target(table, y, split.train, split.segments, split.fold, split.n_folds, clip=s.clip)
+    block, base_A = base_calibration(table, target0, split, fl.table.model, min_size=s.min_size)
+    block.used_for_effects = s.base_first
+    if s.base_first and base_A.shape[1]:
+        x_base = np.array([p.value for p in block.parameters if p.in_fit is not False])
+        y = y - base_A @ x_base
+    force = SideInput(split, y, base_A if (s.base_first and s.joint_base) else None)
+    energy_block, energy, pr = _energy_base(table, split, s)
+    return BaseStage(block, force, energy_block, energy, pr)
+
+
+def _energy_base(table: pd.DataFrame, split: Split, s: DiagnosisSettings
+                 ) -> tuple[BaseBlock | None, SideInput | None, np.ndarray | None]:
+    """The energy base block and the energy side's input: rows with a battery-power residual; with
+    ``base_first`` the energy base (auxiliary power, motor efficiency, torque-signal gain) is fitted, subtracted
+    and refitted jointly with every power-side candidate (nested comparison)."""
+    pr = table[POWER_RESIDUAL].to_numpy(dtype=float)
+    ok = np.isfinite(pr)
+    names = [n for n in s.candidates if get_candidate(n).side == "power"]
+    if not names or (ok & split.valid).sum() < 100:
+        return None, None, None
+    sp = Split(split.valid & ok, split.test & ok, np.where(ok, split.fold, -1), split.n_folds, split.blocks,
+               split.segments)
+    y = np.where(ok, pr, 0.0)
+    base_A = None
+    if s.base_first:
+        braking = braking_rows(table)
+        base_A = np.where(braking[:, None], 0.0, np.nan_to_num(energy_base_columns(table)))
+        x_b = weighted_fit(base_A, y, np.ones(len(y)), sp.train)
+        y = y - base_A @ x_b
+    block = energy_base_calibration(table, np.where(ok, pr, np.nan), sp, s.min_power_size)
+    return block, SideInput(sp, y, base_A), pr
+
+
+@dataclass
+class RankStage:
+    """Per side the selector (its statistics and null), the candidates ranked alone and the skipped ones."""
+
+    force: Selector
+    force_ranked: list[CandidateResult]
+    force_skipped: dict[str, str]
+    energy: Selector | None = None
+    energy_ranked: list[CandidateResult] = field(default_factory=list)
+    energy_skipped: dict[str, str] = field(default_factory=dict)
+
+
+def _selector(run: Run, table: DiagnosisTable, side: SideInput, name: str, min_size: float,
+              consistent: Callable | None = None) -> Selector:
+    s = run.settings
+    return Selector(table.frame, side.residual, side.split, table.model, robust=s.robust, n_boot=s.n_boot,
+                    seed=s.seed, min_gain=s.min_gain, min_explained=s.min_explained, side=name, n_null=s.n_null,
+                    alpha=s.alpha, clip=s.clip, plausible=plausibility_check(run.sim, table.model),
+                    min_size=min_size, base_design=side.base_design, consistent=consistent)
+
+
+def energy_consistency(block: BaseBlock | None, table: pd.DataFrame, split: Split, settings: DiagnosisSettings
+                       ) -> Callable | None:
+    """The force side's check against the battery power (None without it, or with the base calibrated first):
+    P_el,sim is computed from the logged torque and motor speed, so the energy base block's signed T_E ω_E term
+    measures the drive-torque signal gain ĝ (a speed-signal scale too where the motor speed comes from the
+    vehicle speed). A force-side candidate is inconsistent when the gain its fit implies
+    (:meth:`.catalog.CandidateEffect.torque_signal_gain`: 0 for a physical effect such as a mass or drag change)
+    differs from ĝ by >= 2.58 standard errors and that difference, as a force ĝ F_drive, is at least the size
+    gate and half the candidate's own fitted effect: a payload then cannot stand in for a torque signal reading
+    high, which scales the measured force the same way."""
+    p = block.parameter("torque_scale") if block is not None else None
+    if p is None or not np.isfinite(p.std_error) or not settings.energy_consistency or settings.base_first:
+        return None
+    g_hat, se = -p.value, p.std_error          # the block's coefficient of +T ω is -g
+    speed_derived = bool(table[SPEED_DERIVED].any()) if SPEED_DERIVED in table else False
+    f = np.nan_to_num(table[DRIVE_FORCE].to_numpy(dtype=float))[split.train]
+    rms_f = float(np.sqrt(np.mean(f ** 2))) if f.size else 0.0
+
+    def check(cand, params: dict, shape, size: float) -> str | None:
+        implied = cand.torque_signal_gain(params, shape, speed_derived)
+        diff = g_hat - implied
+        force = abs(diff) * rms_f
+        if abs(diff) >= Z_SIGNIFICANT * se and force >= max(settings.min_size, 0.5 * size):
+            return (f"inconsistent with the battery power: it shows a drive-torque signal gain of {g_hat:+.3f} ± "
+                    f"{se:.3f} where {cand.name} implies {implied:+.3f} (a {force:.0f} N force effect unexplained)")
+        return None
+
+    return check
+
+
+def _side_candidates(settings: DiagnosisSettings, side: str) -> list[str]:
+    return [n for n in settings.candidates if get_candidate(n).side == side]
+
+
+def stage_rank(run: Run, fl: FloorStage, base: BaseStage) -> RankStage:
+    """Stage 6: every candidate alone, per side (DiagnosisError with ``strict_candidates`` when a requested one
+    cannot be fitted on these trips)."""
+    run.stage("rank")
+    s = run.settings
+    sel = _selector(run, fl.table, base.force, "force", s.min_size,
+                    energy_consistency(base.energy_block, fl.table.frame, base.force.split, s))
+    ranked, skipped = sel.rank(_side_candidates(s, "force"))
+    out = RankStage(sel, ranked, skipped)
+    if s.strict_candidates:
+        bad = {k: v for k, v in skipped.items() if "needs" in v}
+        if bad:
+            raise DiagnosisError("requested candidates cannot be fitted on these trips: "
+                                 + "; ".join(f"{k} {v}" for k, v in bad.items()))
+    power_asked = _side_candidates(s, "power")
+    if base.energy is None:
+        if s.strict_candidates and power_asked:
+            raise DiagnosisError(f"requested energy-side candidates {power_asked} need battery_voltage and "
+                                 f"battery_current on the trips and a battery-electric sim vehicle")
+        return out
+    out.energy = _selector(run, fl.table, base.energy, "power", s.min_power_size)
+    out.energy_ranked, out.energy_skipped = out.energy.rank(power_asked)
     return out
 
 
-def _unexplained(table: pd.DataFrame, residual_after: np.ndarray, split, settings: DiagnosisSettings,
-                 rng: np.random.Generator, mse_before: float) -> dict:
+def accepted_effects(sel: Selector, steps: list[SelectionStep], alpha: float = 0.01
+                     ) -> tuple[list[Effect], np.ndarray]:
+    """The effects the selector accepted, fitted jointly on the training rows (with the base when it is refitted
+    jointly: predicted with the design as fitted, so the base says nothing on braking rows and an effect's
+    coefficients, conditional on it, are not extrapolated there), and the residual after them (one builder for
+    the force and the energy side); each with its sizes per trip (:mod:`.pertrip`)."""
+    y = sel.residual
+    if not sel.chosen:
+        return [], y.copy()
+    d, fit = sel.final_fit(sel.chosen)
+    after = y - (sel.fitted_columns(d) if sel.base_design is not None else d.A) @ fit.X
+    effects = []
+    for cand, shape in sel.chosen:
+        params, errors, units = fitted_parameters(d, fit, cand.name)
+        step = next(st for st in steps if st.effect == cand.name)
+        effects.append(Effect(cand.name, cand.description, shape, cand.shape_name, cand.shape_unit, params, errors,
+                              units, step.gain_of_original, step.null_p, step.explained_fraction, cand.sim_effect,
+                              cand.sim_parameters(params, shape, sel.model),
+                              per_trip_sizes(sel, sel.chosen, cand.name, alpha)))
+    return effects, after
+
+
+@dataclass
+class SelectStage:
+    """Force side: the forward-selection steps, the accepted effects and the residual after them [N]; the energy
+    side as reported (None without battery power)."""
+
+    steps: list[SelectionStep]
+    effects: list[Effect]
+    residual_after: np.ndarray
+    energy: EnergySide | None
+
+
+def stage_select(run: Run, fl: FloorStage, base: BaseStage, rank: RankStage) -> SelectStage:
+    """Stage 7: greedy forward selection per side; the accepted effects with their parameters."""
+    run.stage("select")
+    max_effects = run.settings.max_effects
+    alpha = run.settings.alpha
+    steps = rank.force.forward(rank.force_ranked, max_effects=max_effects)
+    effects, r_after = accepted_effects(rank.force, steps, alpha)
+    energy = None
+    if rank.energy is not None and base.energy is not None and base.energy_block is not None:
+        e_steps = rank.energy.forward(rank.energy_ranked, max_effects=max_effects)
+        e_effects, e_after = accepted_effects(rank.energy, e_steps, alpha)
+        energy = _energy_report(fl.table.frame, base, e_after, rank, e_steps, e_effects)
+    return SelectStage(steps, effects, r_after, energy)
+
+
+def _energy_report(table: pd.DataFrame, base: BaseStage, after: np.ndarray, rank: RankStage,
+                   steps: list[SelectionStep], effects: list[Effect]) -> EnergySide:
+    assert base.energy is not None and base.energy_block is not None and base.energy_residual is not None
+    test = base.energy.split.test
+    measured = table[ELECTRIC_POWER].to_numpy(dtype=float)
+    sim_p = table[SIM_ELECTRIC_POWER].to_numpy(dtype=float)
+    energy = ElectricEnergy(electric_energy_per_distance(table, measured, test),
+                            electric_energy_per_distance(table, sim_p, test),
+                            electric_energy_per_distance(table, measured - after, test))
+    return EnergySide(RobustSummary.of(base.energy_residual[test]), RobustSummary.of(after[test]),
+                      base.energy_block, energy, rank.energy_ranked, rank.energy_skipped, steps, effects)
+
+
+@dataclass
+class Resimulation:
+    """The gap with the accepted effects switched on in the simulator (None when not run) and what happened."""
+
+    gap: GapMeasures | None
+    note: str
+
+
+def stage_resimulate(run: Run, fl: FloorStage, split: Split, rank: RankStage, sel: SelectStage) -> Resimulation:
+    """Stage 8: the accepted effects switched on in the sim, its floor re-fitted with them and the held-out gap
+    recomputed. Never aborts: the diagnosis is complete before it, a failing re-simulation is a note."""
+    run.stage("re-simulate")
+    s = run.settings
+    if not s.resimulate:
+        return Resimulation(None, "not asked (--no-resimulate)")
+    if not sel.effects or fl.floor.is_none:
+        return Resimulation(None, "")
+    try:
+        sim_after = switched_on(run.sim, sel.effects)
+        if sim_after is None:
+            return Resimulation(None, "an accepted effect has no simulator switch")
+        extra = tuple((c.name, sh) for c, sh in rank.force.chosen)
+        floor_after = fit_floor(sim_after, run.channels, s, extra=extra, rate=run.rate)
+        t_after = build_table(run.real, sim_after, floor=floor_after).frame
+        if len(t_after) != len(fl.table.frame):
+            return Resimulation(None, "the re-simulated table differs in length; skipped")
+        r_sim = np.where(split.valid, t_after["residual"].to_numpy(dtype=float), 0.0)
+        gap = gap_measures(t_after, np.nan_to_num(r_sim), fl.table.model.mass, split.test,
+                           replay_sim=sim_after if s.replay else None)
+        gap.sim = sim_after
+        return Resimulation(gap, "done")
+    except (DiagnosisError, ValueError) as exc:
+        return Resimulation(None, f"failed, diagnosis kept: {exc}")
+
+
+def stage_report(run: Run, fl: FloorStage, split: Split, gap: GapStage, base: BaseStage, rank: RankStage,
+                 sel: SelectStage, resim: Resimulation) -> Diagnosis:
+    """Stage 9: the gap after and per regime, the unexplained residual, the :class:`.results.Diagnosis`."""
+    run.stage("report")
+    s = run.settings
+    table = fl.table.frame
+    test = split.test
+    r_after = sel.residual_after
+    gap_after = gap_measures(table, r_after, fl.table.model.mass, test)
+    per_regime = per_regime_gap(table, np.nan_to_num(fl.residual), r_after, test,
+                                [get_regime(n) for n in s.regimes])
+    unexplained = _unexplained(table, np.where(split.valid, r_after, np.nan), split, s, run.rng,
+                               float(gap.gap_before.force_residual.rmse) ** 2)
+    notes = Notes(fl.table.notes, rank.force.baseline_info, resim.note, base.force_block,
+                  [Implausible(st.effect, st.implausible) for st in sel.steps if st.implausible],
+                  strongest_departures(gap.regimes, top=8))
+    diag = Diagnosis(run.sim, list(pd.unique(table["trip"])), s, split.describe(), fl.floor, gap.gap_before,
+                     gap_after, resim.gap, {k: v.rows for k, v in gap.regimes.items()}, per_regime,
+                     gap.residual_analysis, rank.force_ranked, rank.force_skipped, sel.steps, sel.effects,
+                     unexplained, sel.energy, notes, fl.table.trips, table=fl.table, residual_after=r_after,
+                     test_rows=test)
+    run.progress("done", 1.0)
+    return diag
+
+
+def diagnose(real: Sequence[Trip], sim: SimConfig, settings: DiagnosisSettings | None = None,
+             floor_trips: Sequence[Trip] | None = None, floor: SimFloor | None = None,
+             progress: Callable[[str, float], None] | None = None) -> Diagnosis:
+    """Diagnose ``sim`` against the recorded trips ``real``: the stages of the module doc in order.
+    ``floor``: a floor fitted before (else fitted on ``floor_trips`` or on the sim's own trips);
+    ``progress(stage, fraction)``: called at the start of every stage, fractions never decrease."""
+    settings = settings or DiagnosisSettings()
+    for name in settings.candidates:
+        get_candidate(name)
+    for name in settings.regimes:
+        get_regime(name)
+    if not real:
+        raise DiagnosisError("no recorded trips given")
+    run = Run(real, sim, settings, np.random.default_rng(settings.seed), progress or (lambda what, frac: None))
+    table = stage_table(run)
+    split = stage_split(run, table)
+    fl = stage_floor(run, table, split, floor, floor_trips)
+    gap = stage_gap(run, fl, split)
+    base = stage_base(run, fl, split)
+    rank = stage_rank(run, fl, base)
+    sel = stage_select(run, fl, base, rank)
+    resim = stage_resimulate(run, fl, split, rank, sel)
+    return stage_report(run, fl, split, gap, base, rank, sel, resim)
+
+
+def _unexplained(table: pd.DataFrame, residual_after: np.ndarray, split: Split, settings: DiagnosisSettings,
+                 rng: np.random.Generator, mse_before: float) -> Unexplained:
     """Held-out bins still departing after the accepted effects, and whether the flexible reference still
     removes a significant part (at least min_gain of the held-out MSE before) — with its strongest regimes."""
     test = split.test
@@ -273,189 +572,5 @@ def _unexplained(table: pd.DataFrame, residual_after: np.ndarray, split, setting
     rel = gain[0] / mse_before if mse_before > 0 else 0.0
     structured = bool(gain[1] > 0 and rel >= settings.min_gain)
     importance = ref.importance(table[test]) if structured else []
-    return {"present": bool(departures) or structured, "departing_bins": departures,
-            "reference_gain": {"relative": rel, "interval": list(gain), "significant": structured},
-            "reference_importance": importance[:5],
-            "rms_after": float(np.sqrt(np.nanmean(loss0)))}
-
-
-def _energy_side(table: pd.DataFrame, split, settings: DiagnosisSettings, model, plausible=None) -> dict | None:
-    """The battery-power residual (:mod:`.energy`): gap before/after, ranking and forward selection of the
-    power-side candidates on the same split; None without battery power."""
-
-    pr = table[POWER_RESIDUAL].to_numpy(dtype=float)
-    ok = np.isfinite(pr)
-    names = [n for n in settings.candidates if get_candidate(n).side == "power"]
-    if not names or (ok & split.valid).sum() < 100:
-        return None
-    sp = Split(split.valid & ok, split.test & ok, np.where(ok, split.fold, -1), split.n_folds, split.blocks,
-               split.segments)
-    y = np.where(ok, pr, 0.0)
-    base_A = None
-    if settings.base_first:
-        # base mismatch first: the energy base block (auxiliary power, motor efficiency, torque-signal gain) is
-        # fitted and subtracted, and refitted jointly with every power-side candidate (nested comparison)
-        braking = braking_rows(table)
-        base_A = np.where(braking[:, None], 0.0, np.nan_to_num(energy_base_columns(table)))
-        x_b = weighted_fit(base_A, y, np.ones(len(y)), sp.train)
-        y = y - base_A @ x_b
-    sel = Selector(table, y, sp, model, robust=settings.robust, n_boot=settings.n_boot,
-                   seed=settings.seed, min_gain=settings.min_gain, min_explained=settings.min_explained, side="power",
-                   n_null=settings.n_null, alpha=settings.alpha, clip=settings.clip, plausible=plausible,
-                   min_size=settings.min_power_size, base_design=base_A)
-    ranked, skipped = sel.rank(names)
-    steps = sel.forward(ranked, max_effects=settings.max_effects)
-    after = y.copy()
-    effects = []
-    if sel.chosen:
-        d, fit = sel.final_fit(sel.chosen)
-        after = after - (sel.fitted_columns(d) if sel.base_design is not None else d.A) @ fit.X
-        se = np.sqrt(np.clip(np.diag(fit.cov), 0, None)) if fit.cov is not None else np.full(fit.X.size, np.nan)
-        for cand, shape in sel.chosen:
-            own = [i for i, o in enumerate(d.owner) if o == cand.name]
-            params = {d.names[i]: float(fit.X[i]) for i in own}
-            effects.append({"name": cand.name, "parameters": params,
-                            "std_errors": {d.names[i]: float(se[i]) for i in own},
-                            "units": {d.names[i]: d.units[i] for i in own}, "sim_switch": cand.sim_effect,
-                            "sim_parameters": cand.sim_parameters(params, shape, model)})
-    test = sp.test
-    measured = table[ELECTRIC_POWER].to_numpy(dtype=float)
-    sim_p = table[SIM_ELECTRIC_POWER].to_numpy(dtype=float)
-    e_meas = electric_energy_per_distance(table, measured, test)
-    e_before = electric_energy_per_distance(table, sim_p, test)
-    e_after = electric_energy_per_distance(table, measured - after, test)
-    return {"power_residual_before": robust_summary(pr[test]), "power_residual_after": robust_summary(after[test]),
-            "base_calibration": energy_base_calibration(table, np.where(ok, pr, np.nan), sp,
-                                                        settings.min_power_size),
-            "electric_energy_per_distance": {"measured": e_meas, "sim_before": e_before, "sim_after": e_after,
-                                             "unit": "kWh/100 km (while moving)"},
-            "ranking": [r.to_dict() for r in ranked], "skipped_candidates": skipped, "forward_selection": steps,
-            "effects": effects}
-
-
-def diagnose(real: Sequence[Trip], sim: SimConfig, settings: DiagnosisSettings | None = None,
-             floor_trips: Sequence[Trip] | None = None, floor: SimFloor | None = None,
-             progress: Callable[[str, float], None] | None = None) -> Diagnosis:
-    """Diagnose ``sim`` against the recorded trips ``real`` (see module doc)."""
-    settings = settings or DiagnosisSettings()
-    step = progress or (lambda what, frac: None)
-    for name in settings.candidates:
-        get_candidate(name)
-    for name in settings.regimes:
-        get_regime(name)
-    if not real:
-        raise DiagnosisError("no recorded trips given")
-    channels = set.intersection(*[set(t.channels) for t in real])
-    step("sim floor", 0.05)
-    if floor is None:
-        floor = fit_floor(sim, channels, settings, floor_trips)
-    step("diagnosis table", 0.25)
-    dt = build_table(real, sim, floor=floor)
-    table = dt.frame
-    model = dt.model
-    split = make_split(table, segment_length=settings.segment_length, test_fraction=settings.test_fraction,
-                       n_folds=settings.n_folds, block_length=settings.block_length, seed=settings.seed)
-    rng = np.random.default_rng(settings.seed)
-    r = np.where(split.valid, table["residual"].to_numpy(dtype=float), np.nan)
-    test = split.test
-    step("gap and regimes", 0.35)
-    gap_before = gap_measures(table, np.nan_to_num(r), model.mass, test, replay_sim=sim if settings.replay else None)
-    regs = localise(r, table, split.blocks, settings.regimes, rng, n_boot=settings.n_boot,
-                    min_effect=settings.min_effect)
-    valid = split.valid
-    signals = {c: table[c].to_numpy(dtype=float)[valid] for c in RESIDUAL_SIGNALS if c in table.columns}
-    ra = residual_analysis(r[valid], signals, table["trip"].to_numpy()[valid], max_lag=20)
-    step("ranking candidates", 0.45)
-    plausible = plausibility_check(sim, model)
-    step("base calibration", 0.42)
-    y_sel = np.nan_to_num(r)
-    target0 = robust_target(table, y_sel, split.train, split.segments, split.fold, split.n_folds,
-                            clip=settings.clip)
-    base, base_A = base_calibration(table, target0, split, model, min_size=settings.min_size)
-    base["used_for_effects"] = settings.base_first
-    if settings.base_first and base_A.shape[1]:
-        x_base = np.array([p_["value"] for p_ in base["parameters"] if p_.get("in_fit", True)])
-        y_sel = y_sel - base_A @ x_base
-    sel = Selector(table, y_sel, split, model, robust=settings.robust, n_boot=settings.n_boot,
-                   seed=settings.seed, min_gain=settings.min_gain, min_explained=settings.min_explained,
-                   n_null=settings.n_null, alpha=settings.alpha, clip=settings.clip, plausible=plausible,
-                   min_size=settings.min_size,
-                   base_design=base_A if (settings.base_first and settings.joint_base) else None)
-    explicit = settings.strict_candidates
-    ranked, skipped = sel.rank([n for n in settings.candidates if get_candidate(n).side == "force"])
-    if explicit:
-        bad = {k: v for k, v in skipped.items() if "needs" in v}
-        if bad:
-            raise DiagnosisError("requested candidates cannot be fitted on these trips: "
-                                 + "; ".join(f"{k} {v}" for k, v in bad.items()))
-    step("forward selection", 0.7)
-    steps = sel.forward(ranked, max_effects=settings.max_effects)
-    chosen = sel.chosen
-    effects: list[dict] = []
-    r_after = y_sel.copy()
-    if chosen:
-        d, fit = sel.final_fit(chosen)
-        # jointly with the base: predict with the design as fitted (the base says nothing on braking rows, so an
-        # effect's coefficients, conditional on it, are not extrapolated there)
-        r_after = y_sel - (sel.fitted_columns(d) if sel.base_design is not None else d.A) @ fit.X
-        se = np.sqrt(np.clip(np.diag(fit.cov), 0, None)) if fit.cov is not None else np.full(fit.X.size, np.nan)
-        for cand, shape in chosen:
-            own = [i for i, o in enumerate(d.owner) if o == cand.name]
-            params = {d.names[i]: float(fit.X[i]) for i in own}
-            step_info = next(s for s in steps if s["effect"] == cand.name)
-            effects.append({"name": cand.name, "description": cand.description, "shape": shape,
-                            "shape_name": cand.shape_name, "shape_unit": cand.shape_unit, "parameters": params,
-                            "std_errors": {d.names[i]: float(se[i]) for i in own},
-                            "units": {d.names[i]: d.units[i] for i in own},
-                            "heldout_gain": step_info["gain_of_original"], "null_p": step_info["null_p"],
-                            "explained_fraction": step_info["explained_fraction"],
-                            "sim_switch": cand.sim_effect,
-                            "sim_parameters": cand.sim_parameters(params, shape, model)})
-    energy = _energy_side(table, split, settings, model, plausible)
-    power_asked = [n for n in settings.candidates if get_candidate(n).side == "power"]
-    if explicit and power_asked and energy is None:
-        raise DiagnosisError(f"requested energy-side candidates {power_asked} need battery_voltage and "
-                             f"battery_current on the trips and a battery-electric sim vehicle")
-    step("gap after", 0.85)
-    gap_after = gap_measures(table, r_after, model.mass, test)
-    gap_after_sim = None
-    resim_note = "not asked (--no-resimulate)" if not settings.resimulate else ""
-    if settings.resimulate and effects and not floor.is_none:
-        # never abort here: the diagnosis above is complete; a failing re-simulation is a note in the report
-        try:
-            sim_after = switched_on(sim, effects)
-            if sim_after is None:
-                resim_note = "an accepted effect has no simulator switch"
-            else:
-                step("re-simulating with the effects on", 0.88)
-                extra = tuple((c.name, sh) for c, sh in chosen)
-                floor_after = fit_floor(sim_after, channels, settings, extra=extra)
-                t_after = build_table(real, sim_after, floor=floor_after).frame
-                if len(t_after) == len(table):
-                    r_sim = np.where(split.valid, t_after["residual"].to_numpy(dtype=float), 0.0)
-                    gap_after_sim = gap_measures(t_after, np.nan_to_num(r_sim), model.mass, test,
-                                                 replay_sim=sim_after if settings.replay else None)
-                    gap_after_sim["sim"] = sim_after.to_dict()
-                    resim_note = "done"
-                else:
-                    resim_note = "the re-simulated table differs in length; skipped"
-        except (DiagnosisError, ValueError) as exc:
-            resim_note = f"failed, diagnosis kept: {exc}"
-    per_regime = _per_regime(table, np.nan_to_num(r), r_after, test, settings.regimes)
-    unexplained = _unexplained(table, np.where(valid, r_after, np.nan), split, settings, rng,
-                               float(gap_before["force_residual"]["rmse"]) ** 2)
-    regimes_before = {k: v.rows for k, v in regs.items()}
-    diag = Diagnosis(
-        sim=sim.to_dict(), trips=list(pd.unique(table["trip"])), settings=asdict(settings), split=split.describe(),
-        floor=floor.to_dict(), gap_before=gap_before, gap_after=gap_after, gap_after_sim=gap_after_sim,
-        regimes_before=regimes_before,
-        per_regime=per_regime, residual_analysis=ra, ranking=[c.to_dict() for c in ranked], skipped=skipped,
-        selection=steps, effects=effects, unexplained=unexplained, energy=energy,
-        notes={"pipeline": dt.notes, "baseline": sel.baseline_info, "resimulation": resim_note,
-               "base_calibration": base,
-               "implausible": [{"effect": s_["effect"], "reason": s_["implausible"]} for s_ in steps
-                               if s_.get("implausible")],
-               "strongest_departures_before": strongest_departures(regs, top=8)},
-        table=dt, residual_after=r_after, test_rows=test)
-    step("done", 1.0)
-    return diag
+    return Unexplained(bool(departures) or structured, departures, ReferenceGain(rel, list(gain), structured),
+                       importance[:5], float(np.sqrt(np.nanmean(loss0))))

@@ -22,6 +22,7 @@ SIM_ELECTRIC_POWER = "sim_electric_power"
 POWER_RESIDUAL = "power_residual"
 AUX_LOGGED = "aux_power_logged"
 MOTOR_SPEED = "motor_speed"
+SPEED_DERIVED = "motor_speed_from_vehicle_speed"
 
 
 def _sample(trip: Trip, name: str, t: np.ndarray) -> np.ndarray:
@@ -36,13 +37,15 @@ def _sample(trip: Trip, name: str, t: np.ndarray) -> np.ndarray:
 
 def power_columns(trip: Trip, frame: pd.DataFrame, sim: SimConfig) -> dict[str, np.ndarray]:
     """electric_power, sim_electric_power, power_residual, aux_power_logged [W] on the frame's times (NaN where the
-    trip or the sim's vehicle has no traction battery)."""
+    trip or the sim's vehicle has no traction battery), the motor speed ω_E [rad/s] and whether it was derived
+    from the vehicle speed (no motor-speed channel)."""
     t = frame["t"].to_numpy(dtype=float)
     nan = np.full(t.shape, np.nan)
     d = sim.vehicle.drivetrain
     if d.kind != "bev" or d.motor is None or d.battery is None or not (trip.has("battery_voltage")
                                                                        and trip.has("battery_current")):
-        return {ELECTRIC_POWER: nan, SIM_ELECTRIC_POWER: nan, POWER_RESIDUAL: nan, AUX_LOGGED: nan, MOTOR_SPEED: nan}
+        return {ELECTRIC_POWER: nan, SIM_ELECTRIC_POWER: nan, POWER_RESIDUAL: nan, AUX_LOGGED: nan, MOTOR_SPEED: nan,
+                SPEED_DERIVED: np.zeros(t.shape, dtype=bool)}
     p_meas = _sample(trip, "battery_voltage", t) * _sample(trip, "battery_current", t)
     torque = frame["drive_torque"].to_numpy(dtype=float)
     if trip.has("engine_speed"):
@@ -60,7 +63,8 @@ def power_columns(trip: Trip, frame: pd.DataFrame, sim: SimConfig) -> dict[str, 
             logged = logged + np.nan_to_num(_sample(trip, c, t))
             have = True
     return {ELECTRIC_POWER: p_meas, SIM_ELECTRIC_POWER: p_sim, POWER_RESIDUAL: p_meas - p_sim,
-            AUX_LOGGED: logged if have else nan, MOTOR_SPEED: omega}
+            AUX_LOGGED: logged if have else nan, MOTOR_SPEED: omega,
+            SPEED_DERIVED: np.full(t.shape, not trip.has("engine_speed"))}
 
 
 POWER_BASIS: tuple[str, ...] = ("1", "omega", "T omega", "|T omega|", "T^2")

@@ -131,8 +131,17 @@ def _fit_power_floor(frame: pd.DataFrame, valid: np.ndarray) -> np.ndarray | Non
     return x / scale
 
 
-def reduce_channels(trip: Trip, channels: set[str]) -> Trip:
-    """A copy of a (sim) trip with only the measured channels in ``channels`` (plus t)."""
+def reduce_channels(trip: Trip, channels: set[str], rate: float | None = None) -> Trip:
+    """A copy of a (sim) trip with only the measured channels in ``channels`` (plus t), taken every k-th sample
+    when ``rate`` [Hz] is lower than the trip's (k = the nearest whole ratio): a logger sampling at 10 Hz makes the
+    pipeline smooth and differentiate at 10 Hz, and the sim's floor must see the same."""
     keep = ["t"] + [c for c in trip.channels if c in channels]
     units = {c: trip.units[c] for c in keep}
-    return Trip(trip.measured[keep].copy(), units, dict(trip.meta), trip.truth, dict(trip.truth_units))
+    k = int(round(trip.sample_rate / rate)) if rate is not None and np.isfinite(rate) and rate > 0 else 1
+    measured = trip.measured[keep].iloc[::max(k, 1)].reset_index(drop=True)
+    truth = trip.truth
+    if k > 1 and truth is not None and len(truth) == len(trip.measured):
+        truth = truth.iloc[::k].reset_index(drop=True)
+    elif k > 1:
+        truth = None
+    return Trip(measured, units, dict(trip.meta), truth, dict(trip.truth_units) if truth is not None else {})

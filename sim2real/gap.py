@@ -12,17 +12,42 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import pandas as pd
 
-from .stats import robust_summary
-from .replay import simulator_replay
+from .records import Record, RobustSummary, optional
+from .replay import ReplayError, simulator_replay, windows
+from .simconfig import SimConfig
 
 J_PER_M_TO_KWH_PER_100KM = 100e3 / 3.6e6
 
 
+@dataclass
+class EnergyPerDistance(Record):
+    """Traction energy per distance of the measured and the sim's force, and the sim's relative error."""
+
+    measured: float
+    sim: float
+    relative_error: float
+    unit: str = "kWh/100 km"
+
+
+@dataclass
+class GapMeasures(Record):
+    """The gap measures of a residual on a set of rows (see module doc); ``sim``: the sim config the measures
+    were taken with when it is not the diagnosed one (the re-simulation)."""
+
+    force_residual: RobustSummary
+    replay_speed_error: ReplayError
+    replay_simulator: ReplayError | None
+    energy_per_distance: EnergyPerDistance
+    sim: SimConfig | None = optional()
+
+
 def replay_speed_error(frame: pd.DataFrame, residual: np.ndarray, mass: float, rows: np.ndarray,
-                       window: float = 20.0) -> dict[str, float]:
+                       window: float = 20.0) -> ReplayError:
     """RMS and final-value median of the windowed replay speed error e(t) = ∫ r / m dt on ``rows`` [m/s]."""
     r = np.asarray(residual, dtype=float)
     t = frame["t"].to_numpy(dtype=float)
@@ -33,10 +58,7 @@ def replay_speed_error(frame: pd.DataFrame, residual: np.ndarray, mass: float, r
         if sel.size < 2:
             continue
         tk, rk = t[sel], r[sel]
-        win = np.floor((tk - tk[0]) / window).astype(int)
-        # a window restarts at every gap in the selected rows too (the replay starts at the recorded speed)
-        gaps = np.concatenate([[0], np.cumsum(np.diff(tk) > 0.5)])
-        key = win * 100000 + gaps
+        key = windows(tk, window)
         dt = np.concatenate([[0.0], np.diff(tk)])
         for w in np.unique(key):
             idx = key == w
@@ -45,9 +67,7 @@ def replay_speed_error(frame: pd.DataFrame, residual: np.ndarray, mass: float, r
             sq += float(np.sum(e ** 2))
             n += e.size
             ends.append(abs(e[-1]))
-    if n == 0:
-        return {"rms": float("nan"), "median_end": float("nan"), "windows": 0}
-    return {"rms": float(np.sqrt(sq / n)), "median_end": float(np.median(ends)), "windows": len(ends)}
+    return ReplayError.from_windows(sq, n, ends)
 
 
 def energy_per_distance(frame: pd.DataFrame, force: np.ndarray, rows: np.ndarray) -> float:
@@ -60,19 +80,14 @@ def energy_per_distance(frame: pd.DataFrame, force: np.ndarray, rows: np.ndarray
     return float(np.sum(np.clip(f, 0, None) * v) / dist * J_PER_M_TO_KWH_PER_100KM)
 
 
-def gap_measures(frame: pd.DataFrame, residual: np.ndarray, mass: float, rows: np.ndarray, replay_sim=None) -> dict:
+def gap_measures(frame: pd.DataFrame, residual: np.ndarray, mass: float, rows: np.ndarray,
+                 replay_sim: SimConfig | None = None) -> GapMeasures:
     """All gap measures of ``residual`` on ``rows`` (see module doc); with ``replay_sim`` (a SimConfig) also the
     replay through the simulator itself (:func:`roadload.sim2real.replay.simulator_replay`)."""
     r = np.asarray(residual, dtype=float)
     measured = frame["tractive_force"].to_numpy(dtype=float)
     e_meas = energy_per_distance(frame, measured, rows)
     e_sim = energy_per_distance(frame, measured - r, rows)
-    out_replay = None
-    if replay_sim is not None:
-        out_replay = simulator_replay(frame, rows, replay_sim)
-    return {"force_residual": robust_summary(r[rows]),
-            "replay_speed_error": replay_speed_error(frame, r, mass, rows),
-            "replay_simulator": out_replay,
-            "energy_per_distance": {"measured": e_meas, "sim": e_sim,
-                                    "relative_error": (e_sim - e_meas) / e_meas if e_meas else float("nan"),
-                                    "unit": "kWh/100 km"}}
+    out_replay = simulator_replay(frame, rows, replay_sim) if replay_sim is not None else None
+    return GapMeasures(RobustSummary.of(r[rows]), replay_speed_error(frame, r, mass, rows), out_replay,
+                       EnergyPerDistance(e_meas, e_sim, (e_sim - e_meas) / e_meas if e_meas else float("nan")))

@@ -10,12 +10,12 @@ variables) or categories; each f_j is a bin mean shrunk towards 0 with n/(n + sh
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from .errors import DiagnosisError
+from .records import Record
 
 # (column, kind): the regime variables the reference may use when the table has them
 REFERENCE_VARIABLES: tuple[tuple[str, str], ...] = (
@@ -23,6 +23,17 @@ REFERENCE_VARIABLES: tuple[tuple[str, str], ...] = (
     ("lateral_acceleration", "absolute"), ("time_since_start", "numeric"), ("mode", "category"),
     ("gear", "category"), ("ambient_temperature", "numeric"), ("payload", "numeric"),
 )
+
+
+@dataclass
+class RegimeImportance(Record):
+    """How much of the reference's fit one regime variable carries: the std of its partial effect [N] and its
+    strongest bin with that bin's effect [N]."""
+
+    column: str
+    std: float
+    strongest_bin: str
+    strongest_effect: float
 
 
 @dataclass
@@ -62,30 +73,37 @@ class AdditiveRegimeModel:
         if ok.sum() < 10:
             raise DiagnosisError("reference model: fewer than 10 finite residual samples")
         t, r = table[ok], r[ok]
-        used = []
-        for name, kind in self.variables:
-            if name not in t.columns:
-                continue
-            if kind == "category":
-                vals = t[name].to_numpy()
-                cats = np.array(sorted({v for v in vals if v == v and v is not None}, key=str), dtype=object)
-                if cats.size < 2:
-                    continue
-                self.categories[name] = cats
-            else:
-                x = t[name].to_numpy(dtype=float)
-                if kind == "absolute":
-                    x = np.abs(x)
-                x = x[np.isfinite(x)]
-                if x.size < 10 or np.ptp(x) == 0:
-                    continue
-                e = np.unique(np.quantile(x, np.linspace(0, 1, self.n_bins + 1)))
-                if e.size < 3:
-                    continue
-                e[0], e[-1] = -np.inf, np.inf
-                self.edges[name] = e
-            used.append((name, kind))
-        self.variables = tuple(used)
+        self.variables = tuple(v for v in self.variables if v[0] in t.columns and self._learn_bins(t, *v))
+        self._backfit(t, r)
+        return self
+
+    def _learn_bins(self, t: pd.DataFrame, name: str, kind: str) -> bool:
+        """Categories or quantile edges of one variable from the training rows; False when it has too few
+        distinct values to use."""
+        if kind == "category":
+            vals = t[name].to_numpy()
+            cats = np.array(sorted({v for v in vals if v == v and v is not None}, key=str), dtype=object)
+            if cats.size < 2:
+                return False
+            self.categories[name] = cats
+            return True
+        x = t[name].to_numpy(dtype=float)
+        if kind == "absolute":
+            x = np.abs(x)
+        x = x[np.isfinite(x)]
+        if x.size < 10 or np.ptp(x) == 0:
+            return False
+        e = np.unique(np.quantile(x, np.linspace(0, 1, self.n_bins + 1)))
+        if e.size < 3:
+            return False
+        e[0], e[-1] = -np.inf, np.inf
+        self.edges[name] = e
+        return True
+
+    def _backfit(self, t: pd.DataFrame, r: np.ndarray) -> None:
+        """The partial effects f_j by backfitting: each bin mean of the partial residual shrunk towards 0 with
+        n/(n + shrinkage) and centred (the intercept carries the mean)."""
+        used = self.variables
         idx = {name: self._index(t, name, kind) for name, kind in used}
         nb = {name: (self.categories[name].size if kind == "category" else self.edges[name].size - 1)
               for name, kind in used}
@@ -107,7 +125,6 @@ class AdditiveRegimeModel:
                 total += c - contrib[name]
                 contrib[name] = c
         self.effects = f
-        return self
 
     def predict(self, table: pd.DataFrame) -> np.ndarray:
         out = np.full(len(table), self.intercept)
@@ -116,9 +133,9 @@ class AdditiveRegimeModel:
             out += np.where(i >= 0, self.effects[name][np.clip(i, 0, None)], 0.0)
         return out
 
-    def importance(self, table: pd.DataFrame) -> list[dict]:
+    def importance(self, table: pd.DataFrame) -> list[RegimeImportance]:
         """Per variable: the std of its partial effect over ``table`` [N] and its strongest bin, largest first."""
-        rows: list[dict[str, Any]] = []
+        rows: list[RegimeImportance] = []
         for name, kind in self.variables:
             i = self._index(table, name, kind)
             c = np.where(i >= 0, self.effects[name][np.clip(i, 0, None)], 0.0)
@@ -128,7 +145,6 @@ class AdditiveRegimeModel:
             else:
                 e = self.edges[name]
                 where = f"[{e[j]:.4g}, {e[j + 1]:.4g})"
-            rows.append({"column": name, "std": float(np.std(c)), "strongest_bin": where,
-                         "strongest_effect": float(self.effects[name][j])})
-        rows.sort(key=lambda d: -d["std"])
+            rows.append(RegimeImportance(name, float(np.std(c)), where, float(self.effects[name][j])))
+        rows.sort(key=lambda d: -d.std)
         return rows

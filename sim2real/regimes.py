@@ -21,7 +21,8 @@ from roadload.registry import Registry
 from roadload.units import KELVIN
 
 from .errors import DiagnosisError
-from .stats import block_bootstrap_median, notch_interval, robust_summary
+from .records import Record, RobustSummary
+from .stats import block_bootstrap_median, notch_interval
 
 
 @dataclass(frozen=True)
@@ -126,18 +127,42 @@ DEFAULT_REGIMES: tuple[str, ...] = tuple(_REGIMES)
 
 
 @dataclass
+class RegimeBin(Record):
+    """One bin of a regime: n samples in n_blocks blocks, their share of all, median / MAD / mean / MEDSE of the
+    residual [N], the block-bootstrap 95 % interval of the median (ci_low, ci_high) with its p-value, McGill's
+    notch (notch_low, notch_high) and whether the bin departs from 0."""
+
+    regime: str
+    bin: str
+    bin_index: int
+    n: int
+    n_blocks: int
+    share: float
+    median: float
+    mad: float
+    mean: float
+    medse: float
+    ci_low: float
+    ci_high: float
+    p_value: float
+    notch_low: float
+    notch_high: float
+    departs: bool
+
+
+@dataclass
 class RegimeTable:
     """Statistics of a residual per bin of one regime (rows: bins with samples)."""
 
     regime: str
     description: str
-    rows: list[dict] = field(default_factory=list)
+    rows: list[RegimeBin] = field(default_factory=list)
 
     def frame(self) -> pd.DataFrame:
-        return pd.DataFrame(self.rows)
+        return pd.DataFrame([r.to_dict() for r in self.rows])
 
-    def departing(self) -> list[dict]:
-        return [r for r in self.rows if r["departs"]]
+    def departing(self) -> list[RegimeBin]:
+        return [r for r in self.rows if r.departs]
 
 
 def bin_statistics(residual: np.ndarray, table: pd.DataFrame, regime: str | Regime, blocks: np.ndarray,
@@ -161,15 +186,13 @@ def bin_statistics(residual: np.ndarray, table: pd.DataFrame, regime: str | Regi
             continue
         x, b = r[sel], blocks[sel]
         nb = int(np.unique(b).size)
-        summ = robust_summary(x)
+        summ = RobustSummary.of(x)
         med, lo, hi, p = block_bootstrap_median(x, b, rng, n_boot=n_boot)
         _, n_lo, n_hi = notch_interval(x, n_effective=nb)
         departs = bool(nb >= min_blocks and (lo > 0 or hi < 0) and (n_lo > 0 or n_hi < 0)
                        and abs(med) >= min_effect)
-        out.rows.append({"regime": reg.name, "bin": label, "bin_index": i, "n": summ["n"], "n_blocks": nb,
-                         "share": summ["n"] / max(total, 1), "median": med, "mad": summ["mad"],
-                         "mean": summ["mean"], "medse": summ["medse"], "ci_low": lo, "ci_high": hi, "p_value": p,
-                         "notch_low": n_lo, "notch_high": n_hi, "departs": departs})
+        out.rows.append(RegimeBin(reg.name, label, i, summ.n, nb, summ.n / max(total, 1), med, summ.mad, summ.mean,
+                                  summ.medse, lo, hi, p, n_lo, n_hi, departs))
     return out
 
 
@@ -187,16 +210,27 @@ def localise(residual: np.ndarray, table: pd.DataFrame, blocks: np.ndarray, regi
     return out
 
 
-def strongest_departures(tables: dict[str, RegimeTable], top: int = 5) -> list[dict]:
+def strongest_departures(tables: dict[str, RegimeTable], top: int = 5) -> list[RegimeBin]:
     """Departing bins of all regimes, largest |median| × √share first (effect size weighted by coverage).
     Regimes with one populated bin are left out: they only repeat the overall median."""
     rows = [r for tab in tables.values() if len(tab.rows) > 1 for r in tab.departing()]
-    rows.sort(key=lambda r: -abs(r["median"]) * np.sqrt(r["share"]))
+    rows.sort(key=lambda r: -abs(r.median) * np.sqrt(r.share))
     return rows[:top]
 
 
+@dataclass
+class ResidualCorrelation(Record):
+    """Correlation coefficients of the residual with one signal (eq. 3.4a; with itself: eq. 3.4b) at each lag
+    0..max_lag [samples], the largest |correlation| with its lag, and the ±2/√m white-noise bound."""
+
+    correlation: list[float]
+    max_abs: float
+    lag: int
+    bound: float
+
+
 def residual_analysis(residual: np.ndarray, signals: dict[str, np.ndarray], trip_index: np.ndarray,
-                      max_lag: int = 20) -> dict[str, dict]:
+                      max_lag: int = 20) -> dict[str, ResidualCorrelation]:
     """Residual analysis of eq. 3.4a/3.4b, normalised to correlation coefficients and pooled over trips.
 
     Returns per signal (and 'residual' for the auto-correlation 3.4b): the correlation at each lag τ = 0..max_lag
@@ -229,6 +263,5 @@ def residual_analysis(residual: np.ndarray, signals: dict[str, np.ndarray], trip
         denom = sr * sy if sr > 0 and sy > 0 else np.inf
         corr = acc[n] / m_total / denom
         j = int(np.argmax(np.abs(corr[1:]) if n == "residual" else np.abs(corr))) + (1 if n == "residual" else 0)
-        out[n] = {"correlation": corr.tolist(), "max_abs": float(abs(corr[j])), "lag": j,
-                  "bound": float(2.0 / np.sqrt(m_total))}
+        out[n] = ResidualCorrelation(corr.tolist(), float(abs(corr[j])), j, float(2.0 / np.sqrt(m_total)))
     return out

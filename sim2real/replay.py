@@ -12,10 +12,12 @@ window ends, and the number of windows.
 from __future__ import annotations
 
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
+from .records import Record
 from .simconfig import SimConfig
 from roadload.envs.simulator import DT, Action, LateralValidityWarning, Simulator
 from roadload.road_profiles import RoadProfile
@@ -24,14 +26,32 @@ from roadload.road_profiles import RoadProfile
 MAX_GRADE = float(np.arctan(0.29))   # rad, the simulator's road profiles stop at 30 %
 
 
-def _windows(t: np.ndarray, window: float) -> np.ndarray:
+@dataclass
+class ReplayError(Record):
+    """Speed error of a replay [m/s]: RMS over all windows, median |error| at the window ends, number of windows."""
+
+    rms: float
+    median_end: float
+    windows: int
+
+    @classmethod
+    def from_windows(cls, sum_of_squares: float, n: int, ends: list[float]) -> "ReplayError":
+        """From the summed squared error over ``n`` samples and the |error| at each window end."""
+        if n == 0:
+            return cls(float("nan"), float("nan"), 0)
+        return cls(float(np.sqrt(sum_of_squares / n)), float(np.median(ends)), len(ends))
+
+
+def windows(t: np.ndarray, window: float) -> np.ndarray:
+    """Window key of every sample: a window is ``window`` seconds long and also ends at every gap (> 0.5 s) in
+    the times ``t`` [s] of the selected rows (a replay restarts at the recorded speed there)."""
     win = np.floor((t - t[0]) / window).astype(int)
     gaps = np.concatenate([[0], np.cumsum(np.diff(t) > 0.5)])
     return win * 100000 + gaps
 
 
 def simulator_replay(frame: pd.DataFrame, rows: np.ndarray, sim: SimConfig, window: float = 20.0,
-                     seed: int = 0) -> dict[str, float]:
+                     seed: int = 0) -> ReplayError:
     """Replay speed error of the simulator configured as ``sim`` on the table rows ``rows`` (see module doc)."""
 
     t_all = frame["t"].to_numpy(dtype=float)
@@ -68,7 +88,7 @@ def _replay(frame, rows, sim, window, seed, t_all, trip, DT, Action, LateralVali
         pos = distance_in_trip[np.isin(np.flatnonzero(in_trip), sel)] - d[0]
         drive = frame["drive_force"].to_numpy(dtype=float)[sel]
         brake = np.nan_to_num(frame["brake_force"].to_numpy(dtype=float)[sel])
-        key = _windows(t, window)
+        key = windows(t, window)
         for w in np.unique(key):
             idx = np.flatnonzero(key == w)
             if idx.size < 2:
@@ -88,6 +108,4 @@ def _replay(frame, rows, sim, window, seed, t_all, trip, DT, Action, LateralVali
             sq += float(np.sum(err ** 2))
             n += err.size
             ends.append(abs(err[-1]))
-    if n == 0:
-        return {"rms": float("nan"), "median_end": float("nan"), "windows": 0}
-    return {"rms": float(np.sqrt(sq / n)), "median_end": float(np.median(ends)), "windows": len(ends)}
+    return ReplayError.from_windows(sq, n, ends)

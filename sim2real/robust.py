@@ -44,9 +44,29 @@ import pandas as pd
 from roadload.estimators.batch import mad_scale
 
 from .errors import DiagnosisError
+from .records import Record
 
 ACCEL_EDGES = np.array([-np.inf, -1.5, -0.5, -0.1, 0.1, 0.5, 1.5, np.inf])
 MODES = ("traction", "coast", "regen", "braking")
+
+
+@dataclass
+class RegimeCell(Record):
+    """One cell of the robust target: its label, training rows, median and MAD scale of the residual [N]."""
+
+    cell: str
+    n_train: int
+    median: float
+    scale: float
+
+
+@dataclass
+class TargetSummary(Record):
+    """The robust target in the report: its cells, the braking rows and the training segments."""
+
+    cells: list[RegimeCell]
+    n_braking_rows: int
+    n_training_segments: int
 
 
 @dataclass
@@ -63,15 +83,14 @@ class RobustTarget:
     segment: np.ndarray
     fold_of_segment: np.ndarray
     n_folds: int
-    cells: list[dict]
+    cells: list[RegimeCell]
 
     @property
     def n_segments(self) -> int:
         return int(self.fold_of_segment.size)
 
-    def describe(self) -> dict:
-        return {"cells": self.cells, "n_braking_rows": int(self.braking.sum()),
-                "n_training_segments": self.n_segments}
+    def describe(self) -> TargetSummary:
+        return TargetSummary(self.cells, int(self.braking.sum()), self.n_segments)
 
 
 def regime_cells(table: pd.DataFrame) -> np.ndarray:
@@ -140,7 +159,7 @@ def robust_target(table: pd.DataFrame, residual: np.ndarray, train: np.ndarray, 
             label = f"{mode}, dv/dt in [{lo:g}, {hi:g})"
         else:
             label = f"rest (cells with < {min_cell} training rows)"
-        cells.append({"cell": label, "n_train": int(tr.sum()), "median": m_c, "scale": s_c})
+        cells.append(RegimeCell(label, int(tr.sum()), m_c, s_c))
     r_w = med + np.clip(r - med, -clip * scale, clip * scale)
     weight = 1.0 / scale ** 2
     seg = np.full(r.shape, -1, dtype=np.int64)

@@ -27,12 +27,25 @@ from roadload.estimators.batch import BatchInputError, least_squares, m_estimate
 from .catalog import CandidateEffect, get_candidate
 from .errors import DiagnosisError
 from .forcemodel import SimForceModel, columns_of
+from .records import Record
 from .reference import AdditiveRegimeModel
-from .robust import rademacher, robust_target, step_statistics
+from .robust import StepStatistics, TargetSummary, rademacher, robust_target, step_statistics
 from .stats import block_ids, cluster_covariance
 
 
 # ============================================================================================ split
+@dataclass
+class SplitSummary(Record):
+    """Sizes of a split: valid, training and held-out (test) rows, CV folds, segments and held-out segments."""
+
+    n_valid: int
+    n_train: int
+    n_test: int
+    n_folds: int
+    n_segments: int
+    n_test_segments: int
+
+
 @dataclass
 class Split:
     """valid: rows used at all; test: held-out rows; fold: CV fold of training rows (-1 elsewhere);
@@ -49,10 +62,10 @@ class Split:
     def train(self) -> np.ndarray:
         return self.valid & ~self.test
 
-    def describe(self) -> dict:
-        return {"n_valid": int(self.valid.sum()), "n_train": int(self.train.sum()), "n_test": int(self.test.sum()),
-                "n_folds": self.n_folds, "n_segments": int(np.unique(self.segments[self.valid]).size),
-                "n_test_segments": int(np.unique(self.segments[self.test]).size)}
+    def describe(self) -> SplitSummary:
+        return SplitSummary(int(self.valid.sum()), int(self.train.sum()), int(self.test.sum()), self.n_folds,
+                            int(np.unique(self.segments[self.valid]).size),
+                            int(np.unique(self.segments[self.test]).size))
 
 
 def make_split(table: pd.DataFrame, *, segment_length: float = 60.0, test_fraction: float = 1 / 3,
@@ -238,6 +251,7 @@ class Selector:
     plausible: Callable[[CandidateEffect, dict, float | None], str | None] | None = None
     min_size: float = 0.0
     base_design: np.ndarray | None = None
+    consistent: Callable[[CandidateEffect, dict, float | None, float], str | None] | None = None
     cols: dict[str, np.ndarray] = field(init=False)
     baseline_loss: np.ndarray = field(init=False)
 
@@ -404,51 +418,49 @@ class Selector:
         ref_loss = self._reference_loss([])
         results = []
         for j, cand in enumerate(ok):
-            shape = cand.shapes()[int(stats.variant[j])]
             try:
-                d, fit = self.final_fit([(cand, shape)])
+                results.append(self._judge_alone(j, cand, stats, ref_loss))
             except DiagnosisError as exc:
                 skipped[cand.name] = str(exc)
-                continue
-            gain = float(stats.observed[j])
-            p = stats.marginal_p(j)
-            sse = float(np.sum((self.residual[tr] - d.A[tr] @ fit.X) ** 2))
-            o = d.A.shape[1] + (1 if cand.shape_grid else 0)
-            aic, bic = information_criteria(sse, m, o)
-            se = np.sqrt(np.clip(np.diag(fit.cov), 0, None)) if fit.cov is not None else np.full(fit.X.size, np.nan)
-            own = [i for i, o in enumerate(d.owner) if o == cand.name]
-            params = {d.names[i]: float(fit.X[i]) for i in own}
-            explainable = 1.0 - min(ref_loss, 1.0 - gain)
-            frac = float(np.clip(gain / explainable, -np.inf, 1.0)) if explainable > 0 else 0.0
-            res = CandidateResult(
-                cand.name, cand.description, shape, cand.shape_name, params,
-                {d.names[i]: float(se[i]) for i in own}, {d.names[i]: d.units[i] for i in own}, 1.0 - gain, 1.0,
-                gain, (gain, float(np.quantile(stats.null[:, j], 1 - self.alpha)) if stats.null.size else gain,
-                       float(stats.null[:, j].max()) if stats.null.size else gain),
-                bool(p <= self.alpha and gain >= self.min_gain
-                     and self.effect_size(d, fit, cand.name) >= self.min_size), aic, bic,
-                explained_fraction=frac, sim_effect=cand.sim_effect,
-                sim_parameters=_safe_sim_parameters(cand, params, shape, self.model), regime_hint=cand.regime_hint)
-            res.null_p = p
-            res.size = self.effect_size(d, fit, cand.name)
-            results.append(res)
         results.sort(key=lambda r: -r.improvement)
-        if results:
-            amin = min([aic0] + [r.aic for r in results])
-            bmin = min([bic0] + [r.bic for r in results])
-            for r in results:
-                r.delta_aic, r.delta_bic = r.aic - amin, r.bic - bmin
-        self.baseline_info = {"robust_loss": 1.0, "reference_robust_loss": ref_loss, "aic": aic0, "bic": bic0,
-                              "delta_aic": aic0 - min([aic0] + [r.aic for r in results]),
-                              "delta_bic": bic0 - min([bic0] + [r.bic for r in results]),
-                              "null": {"draws": int(self.signs.shape[0] - 1), "alpha": self.alpha,
-                                       "method": "wild bootstrap over training segments (Rademacher), "
-                                                 "max-statistic over the step's candidates"},
-                              "robust_target": self.target.describe()}
+        amin = min([aic0] + [r.aic for r in results])
+        bmin = min([bic0] + [r.bic for r in results])
+        for r in results:
+            r.delta_aic, r.delta_bic = r.aic - amin, r.bic - bmin
+        self.baseline_info = BaselineInfo(1.0, ref_loss, aic0, bic0, aic0 - amin, bic0 - bmin,
+                                          NullSettings(int(self.signs.shape[0] - 1), self.alpha),
+                                          self.target.describe())
         return results, skipped
 
+    def _judge_alone(self, j: int, cand: CandidateEffect, stats: StepStatistics, ref_loss: float
+                     ) -> CandidateResult:
+        """The :class:`CandidateResult` of candidate ``j`` of a ranking step (DiagnosisError when its fit fails)."""
+        shape = cand.shapes()[int(stats.variant[j])]
+        d, fit = self.final_fit([(cand, shape)])
+        tr = self.split.train
+        m = int(tr.sum())
+        gain = float(stats.observed[j])
+        sse = float(np.sum((self.residual[tr] - d.A[tr] @ fit.X) ** 2))
+        aic, bic = information_criteria(sse, m, d.A.shape[1] + (1 if cand.shape_grid else 0))
+        params, errors, units = fitted_parameters(d, fit, cand.name)
+        explainable = 1.0 - min(ref_loss, 1.0 - gain)
+        frac = float(np.clip(gain / explainable, -np.inf, 1.0)) if explainable > 0 else 0.0
+        p = stats.marginal_p(j)
+        size = self.effect_size(d, fit, cand.name)
+        null_j = stats.null[:, j]
+        interval = (gain, float(np.quantile(null_j, 1 - self.alpha)) if null_j.size else gain,
+                    float(null_j.max()) if null_j.size else gain)
+        res = CandidateResult(
+            cand.name, cand.description, shape, cand.shape_name, params, errors, units, 1.0 - gain, 1.0, gain,
+            interval, bool(p <= self.alpha and gain >= self.min_gain and size >= self.min_size), aic, bic,
+            explained_fraction=frac, sim_effect=cand.sim_effect,
+            sim_parameters=_safe_sim_parameters(cand, params, shape, self.model), regime_hint=cand.regime_hint)
+        res.null_p = p
+        res.size = size
+        return res
+
     # ---------------------------------------------------------------- greedy forward selection
-    def forward(self, ranked: list[CandidateResult], max_effects: int = 4) -> list[dict]:
+    def forward(self, ranked: list[CandidateResult], max_effects: int = 4) -> list[SelectionStep]:
         """Greedy forward selection over the significant ranked candidates (top 6).
 
         Each step takes the candidate with the largest robust out-of-fold gain given the ones already chosen
@@ -460,61 +472,135 @@ class Selector:
         selection stops at the first step failing (a) or (b)."""
         pool = [(get_candidate(r.name), r.shape) for r in ranked if r.significant][:6]
         chosen: list[tuple[CandidateEffect, float | None]] = []
-        steps: list[dict] = []
+        steps: list[SelectionStep] = []
         cur = 1.0
         while pool and len(chosen) < max_effects:
-            stats = step_statistics(self._base(chosen), [self._variants(c) for c, _ in pool], self.target,
-                                    self.signs)
-            j = int(np.argmax(stats.observed))
-            cand = pool[j][0]
-            shape = cand.shapes()[int(stats.variant[j])]
-            gain = float(stats.observed[j])
-            p = stats.p_value(j)
-            ref_loss = self._reference_loss(chosen)
-            after = stats.loss_before - gain
-            explainable = stats.loss_before - min(ref_loss, after)
-            frac = float(min(gain / explainable, 1.0)) if explainable > 0 else 0.0
-            accepted = bool(p <= self.alpha and gain >= self.min_gain and frac >= self.min_explained)
-            reason = ("accepted" if accepted else
-                      f"held-out gain not beyond the null (p = {p:.3f} > {self.alpha})" if p > self.alpha else
-                      f"gain {gain:.3f} of the original gap, below {self.min_gain}" if gain < self.min_gain else
-                      f"partial fit: explains {frac:.2f} of the removable remainder (< {self.min_explained})")
-            implausible = None
-            size = float("nan")
-            try:
-                d, fit = self.final_fit(chosen + [(cand, shape)])
-                size = self.effect_size(d, fit, cand.name)
-                params = {d.names[i]: float(fit.X[i]) for i, o in enumerate(d.owner) if o == cand.name}
-                if accepted and self.plausible is not None:
-                    implausible = self.plausible(cand, params, shape)
-            except DiagnosisError as exc:
-                implausible = str(exc)
-            if accepted and not size >= self.min_size:
-                accepted = False
-                reason = f"too small: the fitted effect's RMS {size:.3g} is below {self.min_size:g}"
-            if accepted and implausible:
-                accepted = False
-                reason = f"implausible: {implausible}"
-            else:
-                implausible = None
-            null_q = float(np.quantile(stats.null.max(axis=1), 1 - self.alpha)) if stats.null.size else float("nan")
-            steps.append({"step": len(steps) + 1, "effect": cand.name, "shape": shape,
-                          "robust_loss_before": stats.loss_before, "robust_loss_after": after,
-                          "relative_gain": float(gain / stats.loss_before) if stats.loss_before > 0 else 0.0,
-                          "gain_of_original": gain, "null_p": p, "null_quantile": null_q,
-                          "gain": [gain, null_q, float("nan")],
-                          "reference_robust_loss": ref_loss, "explained_fraction": frac, "accepted": accepted,
-                          "size_rms": size, "implausible": implausible, "reason": reason})
-            pool = [(c, s) for c, s in pool if c.name != cand.name]
-            if implausible or (not accepted and reason.startswith(("too small", "partial fit"))):
+            step, choice = self._judge_step(chosen, pool, len(steps) + 1)
+            steps.append(step)
+            pool = [(c, s) for c, s in pool if c.name != choice[0].name]
+            if step.implausible or (not step.accepted and step.reason.startswith(("too small", "partial fit"))):
                 continue      # the next candidate may still be a real one
-            if not accepted:
+            if not step.accepted:
                 break
-            chosen.append((cand, shape))
-            cur = after
+            chosen.append(choice)
+            cur = step.robust_loss_after
         self.chosen = chosen
         self.robust_loss_after = cur
         return steps
+
+    def _judge_step(self, chosen: list[tuple[CandidateEffect, float | None]],
+                    pool: list[tuple[CandidateEffect, float | None]], number: int
+                    ) -> tuple[SelectionStep, tuple[CandidateEffect, float | None]]:
+        """The best candidate of the pool given the chosen ones, judged by the acceptance rules of
+        :meth:`forward`."""
+        stats = step_statistics(self._base(chosen), [self._variants(c) for c, _ in pool], self.target, self.signs)
+        j = int(np.argmax(stats.observed))
+        cand = pool[j][0]
+        shape = cand.shapes()[int(stats.variant[j])]
+        gain = float(stats.observed[j])
+        p = stats.p_value(j)
+        ref_loss = self._reference_loss(chosen)
+        after = stats.loss_before - gain
+        explainable = stats.loss_before - min(ref_loss, after)
+        frac = float(min(gain / explainable, 1.0)) if explainable > 0 else 0.0
+        accepted = bool(p <= self.alpha and gain >= self.min_gain and frac >= self.min_explained)
+        reason = ("accepted" if accepted else
+                  f"held-out gain not beyond the null (p = {p:.3f} > {self.alpha})" if p > self.alpha else
+                  f"gain {gain:.3f} of the original gap, below {self.min_gain}" if gain < self.min_gain else
+                  f"partial fit: explains {frac:.2f} of the removable remainder (< {self.min_explained})")
+        size, implausible = self._size_and_plausibility(chosen, cand, shape, accepted)
+        if accepted and not size >= self.min_size:
+            accepted = False
+            reason = f"too small: the fitted effect's RMS {size:.3g} is below {self.min_size:g}"
+        if accepted and implausible:
+            accepted = False
+            reason = f"implausible: {implausible}"
+        else:
+            implausible = None
+        null_q = float(np.quantile(stats.null.max(axis=1), 1 - self.alpha)) if stats.null.size else float("nan")
+        step = SelectionStep(number, cand.name, shape, stats.loss_before, after,
+                             float(gain / stats.loss_before) if stats.loss_before > 0 else 0.0, gain, p, null_q,
+                             [gain, null_q, float("nan")], ref_loss, frac, accepted, size, implausible, reason)
+        return step, (cand, shape)
+
+    def _size_and_plausibility(self, chosen: list[tuple[CandidateEffect, float | None]], cand: CandidateEffect,
+                               shape: float | None, accepted: bool) -> tuple[float, str | None]:
+        """The RMS of the candidate's fitted contribution next to the chosen ones, and why its fitted value is no
+        plausible simulator setting or is inconsistent with the other side's evidence (``consistent``; None when it
+        is plausible, or when the step is not accepted anyway)."""
+        try:
+            d, fit = self.final_fit(chosen + [(cand, shape)])
+        except DiagnosisError as exc:
+            return float("nan"), str(exc)
+        size = self.effect_size(d, fit, cand.name)
+        if not (accepted and (self.plausible is not None or self.consistent is not None)):
+            return size, None
+        try:
+            params = fitted_parameters(d, fit, cand.name)[0]
+            reason = self.plausible(cand, params, shape) if self.plausible is not None else None
+            if reason is None and self.consistent is not None:
+                reason = self.consistent(cand, params, shape, size)
+            return size, reason
+        except DiagnosisError as exc:
+            return size, str(exc)
+
+
+@dataclass
+class NullSettings(Record):
+    """The null of the selection: bootstrap draws, family-wise level and method."""
+
+    draws: int
+    alpha: float
+    method: str = ("wild bootstrap over training segments (Rademacher), max-statistic over the step's "
+                   "candidates")
+
+
+@dataclass
+class BaselineInfo(Record):
+    """The sim as is before any effect: robust loss (1 by definition), the flexible reference's robust loss, AIC
+    and BIC with their distance to the best candidate, the null's settings and the robust target's cells."""
+
+    robust_loss: float
+    reference_robust_loss: float
+    aic: float
+    bic: float
+    delta_aic: float
+    delta_bic: float
+    null: NullSettings
+    robust_target: TargetSummary
+
+
+@dataclass
+class SelectionStep(Record):
+    """One step of the forward selection: the candidate judged, its shape, robust losses before and after (shares
+    of the sim's original robust loss), the gain with its null p and quantile, the flexible reference's loss, the
+    explained share of the removable remainder, the RMS of the fitted contribution (N or W), whether it was
+    accepted and why (``implausible``: the reason a fitted value is no plausible simulator setting)."""
+
+    step: int
+    effect: str
+    shape: float | None
+    robust_loss_before: float
+    robust_loss_after: float
+    relative_gain: float
+    gain_of_original: float
+    null_p: float
+    null_quantile: float
+    gain: list[float]
+    reference_robust_loss: float
+    explained_fraction: float
+    accepted: bool
+    size_rms: float
+    implausible: str | None
+    reason: str
+
+
+def fitted_parameters(d: Design, fit: Fit, name: str) -> tuple[dict[str, float], dict[str, float], dict[str, str]]:
+    """Fitted values, block-robust standard errors and units of the parameters of effect ``name`` in design ``d``."""
+    se = np.sqrt(np.clip(np.diag(fit.cov), 0, None)) if fit.cov is not None else np.full(fit.X.size, np.nan)
+    own = [i for i, o in enumerate(d.owner) if o == name]
+    return ({d.names[i]: float(fit.X[i]) for i in own}, {d.names[i]: float(se[i]) for i in own},
+            {d.names[i]: d.units[i] for i in own})
 
 
 def _safe_sim_parameters(cand: CandidateEffect, params: dict, shape, model) -> dict | None:

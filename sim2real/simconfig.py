@@ -1,6 +1,6 @@
 """The "sim" of a diagnosis: a vehicle (preset name or spec file) plus the simulator effects it models.
 
-A sim config file is JSON::
+A sim config file is JSON (a vehicle spec JSON is taken as that vehicle with no effects)::
 
     {"vehicle": "bmw_i3",                      # preset name, or a path to a vehicle spec JSON
      "effects": {"effects": {"wind": {"mean_speed": 2.0}}, "ambient_temperature": 293.15},   # EffectsConfig
@@ -27,6 +27,7 @@ from .errors import DiagnosisError
 from roadload.presets import PRESETS, get_preset
 
 _KEYS = {"vehicle", "effects", "name"}
+VEHICLE_SPEC_KEYS = {"name", "body", "aero", "tires", "drivetrain"}     # an object with these is a vehicle spec
 
 
 class SimConfigFile(StrictModel):
@@ -51,8 +52,12 @@ class SimConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], base: Path | None = None) -> "SimConfig":
+        """From a sim config object, or a vehicle spec object (the sim is that vehicle with no effects: what
+        ``roadload calibrate`` writes)."""
         if not isinstance(data, dict):
             raise DiagnosisError(f"sim config: expected a JSON object, got {type(data).__name__}")
+        if VEHICLE_SPEC_KEYS <= set(data):
+            return cls(load_sim_vehicle(data, base))
         unknown = set(data) - _KEYS
         if unknown:
             raise DiagnosisError(f"sim config: unknown keys {sorted(unknown)}; allowed: {sorted(_KEYS)}")

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from roadload.estimators.batch import mad_scale
 from roadload.estimators.evaluation import NOTCH_FACTOR
 
 from .errors import DiagnosisError
@@ -32,17 +31,6 @@ def block_ids(trip_index: np.ndarray, t: np.ndarray, block_length: float) -> np.
     key = trip_code.astype(np.int64) * (int(within.max(initial=0)) + 1) + within
     _, ids = np.unique(key, return_inverse=True)
     return ids.astype(np.int64)
-
-
-def robust_summary(residual: np.ndarray) -> dict[str, float]:
-    """n, mean, median, MAD scale (1.483 med|r - med r|, eq. 3.14), MEDSE (med r²), RMSE of a residual [N]."""
-    r = np.asarray(residual, dtype=float)
-    r = r[np.isfinite(r)]
-    if r.size == 0:
-        return {"n": 0, "mean": float("nan"), "median": float("nan"), "mad": float("nan"),
-                "medse": float("nan"), "rmse": float("nan")}
-    return {"n": int(r.size), "mean": float(np.mean(r)), "median": float(np.median(r)),
-            "mad": float(mad_scale(r)), "medse": float(np.median(r ** 2)), "rmse": float(np.sqrt(np.mean(r ** 2)))}
 
 
 def notch_interval(values: np.ndarray, n_effective: int | None = None) -> tuple[float, float, float]:

@@ -46,6 +46,7 @@ from roadload.units import KELVIN, air_density
 from .energy import power_columns
 from .errors import DiagnosisError
 from .forcemodel import SimForceModel
+from .records import Record
 from .simconfig import SimConfig
 
 MIN_SPEED = 1.0               # m/s, slower samples are not diagnosed (standstill, creeping)
@@ -148,12 +149,39 @@ def brake_force_from_pressure(vehicle, p_front: np.ndarray, p_rear: np.ndarray) 
 
 
 @dataclass
+class TripInfo(Record):
+    """What a trip's metadata says about it: date, season, median ambient temperature [°C], extra payload [kg],
+    the logger's note, and the samples it has in the table."""
+
+    trip: str
+    date: str
+    season: str
+    ambient_c: float
+    payload_kg: float | None
+    note: str
+    samples: int
+
+    @classmethod
+    def of(cls, trip: Trip, name: str, frame: pd.DataFrame) -> "TripInfo":
+        ov = trip.meta.get("overview") or {}
+        amb = frame["ambient_temperature"].to_numpy(dtype=float)
+        amb = amb[np.isfinite(amb)]
+        payload = trip.meta.get("extra_payload_kg")
+        return cls(name, str(ov.get("Date") or trip.meta.get("date") or ""), str(frame["season"].iloc[0]),
+                   float(np.median(amb)) - KELVIN if amb.size else float("nan"),
+                   float(payload) if payload is not None else None,
+                   str(ov.get("Note") or trip.meta.get("note") or "").strip(), len(frame))
+
+
+@dataclass
 class DiagnosisTable:
-    """The table (see module doc), the sim's force model and notes (pipeline fallbacks, per trip)."""
+    """The table (see module doc), the sim's force model, notes (pipeline fallbacks, per trip) and each trip's
+    metadata."""
 
     frame: pd.DataFrame
     model: SimForceModel
     notes: dict[str, list[str]] = field(default_factory=dict)
+    trips: list[TripInfo] = field(default_factory=list)
 
     @property
     def residual(self) -> np.ndarray:
@@ -180,7 +208,7 @@ def build_table(trips: Sequence[Trip], sim: SimConfig, settings: PipelineSetting
         raise DiagnosisError("no trips given")
     knowledge = knowledge_from_spec(sim.vehicle)
     model = model or sim_force_model(sim)
-    frames, notes = [], {}
+    frames, notes, infos = [], {}, []
     names = set()
     for i, trip in enumerate(trips):
         check_trip(trip, sim, i)
@@ -188,86 +216,112 @@ def build_table(trips: Sequence[Trip], sim: SimConfig, settings: PipelineSetting
         if name in names:
             name = f"{name}#{i}"
         names.add(name)
-        st = settings or PipelineSettings()
         try:
             res = run_pipeline(trip, knowledge, settings)
         except PipelineError as exc:
             raise DiagnosisError(f"trip {name!r}: {exc}") from None
-        s = res.states
-        dec = res.stages["decimated"]
         notes[name] = list(res.notes)
-        t = s["t"].to_numpy(dtype=float)
-        v = s["speed"].to_numpy(dtype=float)
-        f = pd.DataFrame({"trip": name, "t": t})
-        for c in ("speed", "acceleration", "gradient_angle", "path_curvature", "gear", "drive_torque"):
-            f[c] = s[c].to_numpy(dtype=float)
-        f["time_since_start"] = t - float(trip.t[0])
-        f["distance"] = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
-        amb = _sample(trip, "ambient_temperature", t)
-        amb_fill = np.where(np.isfinite(amb), amb, sim.effects.ambient_temperature)
-        pres = _sample(trip, "ambient_pressure", t)
-        pres = np.where(np.isfinite(pres), pres, sim.effects.ambient_pressure)
-        f["ambient_temperature"] = amb
-        f["elevation"] = _sample(trip, "elevation", t)
-        f["air_density"] = air_density(amb_fill, pres)
-        has_brakes = any(c in dec for c in ("brake_pressure_front", "brake_pressure_rear"))
-        if has_brakes:
-            pf = dec["brake_pressure_front"].to_numpy(dtype=float) if "brake_pressure_front" in dec else 0.0 * v
-            pr = dec["brake_pressure_rear"].to_numpy(dtype=float) if "brake_pressure_rear" in dec else 0.0 * v
-            braking = np.maximum(np.nan_to_num(pf), np.nan_to_num(pr)) > BRAKE_PRESSURE_ON
-            pf_s = smoothed_pressure(trip, "brake_pressure_front", t, st) if trip.has("brake_pressure_front") \
-                else 0.0 * v
-            pr_s = smoothed_pressure(trip, "brake_pressure_rear", t, st) if trip.has("brake_pressure_rear") \
-                else 0.0 * v
-            f["brake_force"] = brake_force_from_pressure(sim.vehicle, pf_s, pr_s)
-            braking |= np.maximum(np.nan_to_num(pf_s), np.nan_to_num(pr_s)) > BRAKE_PRESSURE_ON
-        else:
-            f["brake_force"] = 0.0
-            braking = ~s["trigger_no_brake"].to_numpy(dtype=bool)
-        f["drive_force"] = s["tractive_force"].to_numpy(dtype=float)
-        f["tractive_force"] = f["drive_force"] - f["brake_force"]
-        f["time_since_brake"] = time_since(braking, t)
-        f["lateral_acceleration"] = v ** 2 * f["path_curvature"].to_numpy(dtype=float)
-        if not np.isfinite(f["path_curvature"].to_numpy(dtype=float)).any():
-            # no steering signal: the balance goes without cornering resistance (lateral regime stays NaN)
-            f["path_curvature"] = 0.0
-            notes[name].append("no path curvature: cornering resistance left out of the sim's balance")
-        if trip.has("yaw_rate"):
-            yr = np.nan_to_num(trip.channel("yaw_rate"))
-            tt = trip.t
-            head = np.concatenate([[0.0], np.cumsum(0.5 * (yr[1:] + yr[:-1]) * np.diff(tt))])
-            f["heading"] = np.interp(t, tt, head)
-        else:
-            f["heading"] = np.nan
-        torque = f["drive_torque"].to_numpy(dtype=float)
-        min_tq = st.min_drive_torque
-        f["mode"] = np.where(braking, "braking", np.where(torque > min_tq, "traction",
-                                                          np.where(torque < -min_tq, "regen", "coast")))
-        f["heating_power"] = _sample(trip, "heating_power", t)
-        payload = trip.meta.get("extra_payload_kg")
-        f["payload"] = float(payload) if payload is not None else (0.0 if trip.meta.get("overview") else np.nan)
-        f["season"] = _season(trip, amb)
-        no_slip = s["trigger_no_slip"].to_numpy(dtype=bool)
-        moving = v > MIN_SPEED
-        if moving.sum() > 100 and no_slip[moving].mean() < 0.1:
-            # "slip" on (nearly) every moving sample: the logged motor speed does not fit the sim vehicle's drive
-            # ratio (a preset that is not the car) — the slip check says nothing then and is left out
-            no_slip = np.ones_like(no_slip)
-            notes[name].append("wheel-slip check left out: the logged engine/motor speed does not fit the sim "
-                               "vehicle's drive ratio on >= 90 % of the moving samples (check the vehicle's gear "
-                               "ratios and wheel radius)")
-        valid = moving & (t >= t[0] + st.warmup) & no_slip
-        valid &= s["trigger_rim_torque_available"].to_numpy(dtype=bool)
-        if not has_brakes:
-            torque_floor = max(st.drive_torque_floor, knowledge.drive_torque_floor)
-            valid &= ~braking & (torque > torque_floor)
-        for key, col in power_columns(trip, f, sim).items():
-            f[key] = col
-        f["has_brake_pressure"] = has_brakes
-        f["valid_base"] = valid
-        frames.append(f)
+        frames.append(_trip_frame(trip, name, res, sim, knowledge, settings or PipelineSettings(), notes[name]))
+        infos.append(TripInfo.of(trip, name, frames[-1]))
     frame = pd.concat(frames, ignore_index=True)
-    return finish_table(frame, model, notes, floor)
+    out = finish_table(frame, model, notes, floor)
+    out.trips = infos
+    return out
+
+
+def _trip_frame(trip: Trip, name: str, res, sim: SimConfig, knowledge, st: PipelineSettings,
+                notes: list[str]) -> pd.DataFrame:
+    """One trip's rows of the table (module doc) from its pipeline result ``res``; notes appended to ``notes``."""
+    s = res.states
+    t = s["t"].to_numpy(dtype=float)
+    v = s["speed"].to_numpy(dtype=float)
+    f = pd.DataFrame({"trip": name, "t": t})
+    for c in ("speed", "acceleration", "gradient_angle", "path_curvature", "gear", "drive_torque"):
+        f[c] = s[c].to_numpy(dtype=float)
+    f["time_since_start"] = t - float(trip.t[0])
+    f["distance"] = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
+    amb = _sample(trip, "ambient_temperature", t)
+    amb_fill = np.where(np.isfinite(amb), amb, sim.effects.ambient_temperature)
+    pres = _sample(trip, "ambient_pressure", t)
+    pres = np.where(np.isfinite(pres), pres, sim.effects.ambient_pressure)
+    f["ambient_temperature"] = amb
+    f["elevation"] = _sample(trip, "elevation", t)
+    f["air_density"] = air_density(amb_fill, pres)
+    has_brakes, braking = _brake_columns(f, trip, res, sim, st)
+    f["drive_force"] = s["tractive_force"].to_numpy(dtype=float)
+    f["tractive_force"] = f["drive_force"] - f["brake_force"]
+    f["time_since_brake"] = time_since(braking, t)
+    _path_columns(f, trip, notes)
+    torque = f["drive_torque"].to_numpy(dtype=float)
+    min_tq = st.min_drive_torque
+    f["mode"] = np.where(braking, "braking", np.where(torque > min_tq, "traction",
+                                                      np.where(torque < -min_tq, "regen", "coast")))
+    f["heating_power"] = _sample(trip, "heating_power", t)
+    payload = trip.meta.get("extra_payload_kg")
+    f["payload"] = float(payload) if payload is not None else (0.0 if trip.meta.get("overview") else np.nan)
+    f["season"] = _season(trip, amb)
+    valid = _valid_rows(s, v, t, st, notes)
+    if not has_brakes:
+        torque_floor = max(st.drive_torque_floor, knowledge.drive_torque_floor)
+        valid &= ~braking & (torque > torque_floor)
+    for key, col in power_columns(trip, f, sim).items():
+        f[key] = col
+    f["has_brake_pressure"] = has_brakes
+    f["valid_base"] = valid
+    return f
+
+
+def _brake_columns(f: pd.DataFrame, trip: Trip, res, sim: SimConfig, st: PipelineSettings
+                   ) -> tuple[bool, np.ndarray]:
+    """brake_force [N] into ``f``; (whether the trip logs brake pressure, the braking rows). Without brake
+    pressure the braking rows are the pipeline's (its no-brake trigger off)."""
+    dec = res.stages["decimated"]
+    t = f["t"].to_numpy(dtype=float)
+    zero = 0.0 * f["speed"].to_numpy(dtype=float)
+    if not any(c in dec for c in ("brake_pressure_front", "brake_pressure_rear")):
+        f["brake_force"] = 0.0
+        return False, ~res.states["trigger_no_brake"].to_numpy(dtype=bool)
+    pf = dec["brake_pressure_front"].to_numpy(dtype=float) if "brake_pressure_front" in dec else zero
+    pr = dec["brake_pressure_rear"].to_numpy(dtype=float) if "brake_pressure_rear" in dec else zero
+    braking = np.maximum(np.nan_to_num(pf), np.nan_to_num(pr)) > BRAKE_PRESSURE_ON
+    pf_s = smoothed_pressure(trip, "brake_pressure_front", t, st) if trip.has("brake_pressure_front") else zero
+    pr_s = smoothed_pressure(trip, "brake_pressure_rear", t, st) if trip.has("brake_pressure_rear") else zero
+    f["brake_force"] = brake_force_from_pressure(sim.vehicle, pf_s, pr_s)
+    braking |= np.maximum(np.nan_to_num(pf_s), np.nan_to_num(pr_s)) > BRAKE_PRESSURE_ON
+    return True, braking
+
+
+def _path_columns(f: pd.DataFrame, trip: Trip, notes: list[str]) -> None:
+    """lateral_acceleration [m/s²], path_curvature (0 without a steering signal) and heading [rad] into ``f``."""
+    v = f["speed"].to_numpy(dtype=float)
+    f["lateral_acceleration"] = v ** 2 * f["path_curvature"].to_numpy(dtype=float)
+    if not np.isfinite(f["path_curvature"].to_numpy(dtype=float)).any():
+        # no steering signal: the balance goes without cornering resistance (lateral regime stays NaN)
+        f["path_curvature"] = 0.0
+        notes.append("no path curvature: cornering resistance left out of the sim's balance")
+    if trip.has("yaw_rate"):
+        yr = np.nan_to_num(trip.channel("yaw_rate"))
+        tt = trip.t
+        head = np.concatenate([[0.0], np.cumsum(0.5 * (yr[1:] + yr[:-1]) * np.diff(tt))])
+        f["heading"] = np.interp(f["t"].to_numpy(dtype=float), tt, head)
+    else:
+        f["heading"] = np.nan
+
+
+def _valid_rows(s: pd.DataFrame, v: np.ndarray, t: np.ndarray, st: PipelineSettings, notes: list[str]
+                ) -> np.ndarray:
+    """Moving, smoothers settled, no wheel slip, rim torque available (before the braking rules)."""
+    no_slip = s["trigger_no_slip"].to_numpy(dtype=bool)
+    moving = v > MIN_SPEED
+    if moving.sum() > 100 and no_slip[moving].mean() < 0.1:
+        # "slip" on (nearly) every moving sample: the logged motor speed does not fit the sim vehicle's drive
+        # ratio (a preset that is not the car) — the slip check says nothing then and is left out
+        no_slip = np.ones_like(no_slip)
+        notes.append("wheel-slip check left out: the logged engine/motor speed does not fit the sim "
+                     "vehicle's drive ratio on >= 90 % of the moving samples (check the vehicle's gear "
+                     "ratios and wheel radius)")
+    valid = moving & (t >= t[0] + st.warmup) & no_slip
+    return valid & s["trigger_rim_torque_available"].to_numpy(dtype=bool)
 
 
 def _drive_columns(frame: pd.DataFrame, force: np.ndarray) -> None:
@@ -283,8 +337,8 @@ def _drive_columns(frame: pd.DataFrame, force: np.ndarray) -> None:
     frame["sim_drive_force_rate"] = rate
 
 
-def finish_table(frame: pd.DataFrame, model: SimForceModel, notes: dict | None = None, floor=None
-                 ) -> DiagnosisTable:
+def finish_table(frame: pd.DataFrame, model: SimForceModel, notes: dict | None = None, floor=None,
+                 trips: list[TripInfo] | None = None) -> DiagnosisTable:
     """Add sim_balance (the analytic balance), sim_force (balance + the sim's floor, :mod:`.floor`), residual,
     sim_drive_force(_rate) and valid (finite everywhere it matters)."""
     frame = frame.copy()
@@ -304,4 +358,4 @@ def finish_table(frame: pd.DataFrame, model: SimForceModel, notes: dict | None =
     frame["valid"] = valid
     if not valid.any():
         raise DiagnosisError("no valid samples in the trips (moving, drive-train engaged, finite states)")
-    return DiagnosisTable(frame, model, notes or {})
+    return DiagnosisTable(frame, model, notes or {}, list(trips or []))

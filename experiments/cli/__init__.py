@@ -60,6 +60,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "estimate": (f"{_PKG}.estimate", "Run the chapter-5 pipeline and one model-estimator combination over a trip."),
     "diagnose": (f"{_PKG}.sim2real", "Diagnose where a sim departs from recorded trips, which effect explains it, "
                                      "how far the gap shrinks."),
+    "calibrate": (f"{_PKG}.sim2real", "Calibrate the sim's base vehicle to reference trips and write it as a "
+                                      "vehicle spec."),
     "train": (f"{_PKG}.rl", "Train PPO / SAC on EcoDrive-v0, save the policies, and compare them on held-out roads "
                             "with cruise control and the MPC (energy, time, violations)."),
     "drive": (f"{_PKG}.controllers", "Drive a road once in closed loop on the simulator and print energy, time, "

@@ -190,131 +190,174 @@ def _interp_uniform(x, ds, y):
 
 
 @cached_njit
+def _stop_state(s, v, dt, stops, j, passing, wait, dwell):
+    """Driver at stops: skip the stops behind, wait ``dwell`` [s] at standstill before the next, then pass it.
+    Returns (next stop index, passing, time waited [s])."""
+    while j < stops.size and stops[j] < s - 10.0:
+        j += 1
+        passing = False
+    if j < stops.size and not passing and s > stops[j] - 8.0 and v < 0.3:
+        wait += dt
+        if wait > dwell:
+            passing = True
+            wait = 0.0
+    return j, passing, wait
+
+
+@cached_njit
+def _motor_limits(omega, tmax, pmax, treg, preg):
+    """Motor torque limits [N m] at motor speed ω [rad/s]: min(T_max, P_max/ω) motoring, min(T_reg, P_reg/ω)
+    regenerating (power limits only above 1 rad/s)."""
+    lim_reg = treg
+    if omega > 1.0 and preg / omega < lim_reg:
+        lim_reg = preg / omega
+    lim_mot = tmax
+    if omega > 1.0 and pmax / omega < lim_mot:
+        lim_mot = pmax / omega
+    return lim_mot, lim_reg
+
+
+@cached_njit
+def _demand(f_d, v, v_t, tap, omega, p):
+    """Driver's motor torque demand T_dem = F_d r_W / (i η) [N m] and brake pressure demand [Pa]: regeneration
+    first up to its limit, the rest F_rest / brake gain on the friction brake; held at standstill; brake taps."""
+    rw, ratio, eta = p[5], p[7], p[8]
+    lim_mot, lim_reg = _motor_limits(omega, p[11], p[12], p[13], p[14])
+    t_dem = f_d * rw / (ratio * eta)
+    p_dem = 0.0
+    if t_dem < -lim_reg:
+        f_rest = -(t_dem + lim_reg) * ratio * eta / rw
+        p_dem = f_rest / p[23]
+        t_dem = -lim_reg
+    t_dem = min(t_dem, lim_mot)
+    if v < 0.3 and v_t < 0.5:
+        t_dem = 0.0
+        p_dem = 1.5e6     # holding at standstill
+    if tap > 0 and v > 12.0:
+        p_dem = p_dem + tap
+    return t_dem, p_dem
+
+
+@cached_njit
+def _pedal(p_dem, p_held, t_since, dt):
+    """Step-like brake pedal: hold the pressure [Pa], re-set in 5 bar steps at most every 0.6 s (release after
+    0.3 s). Returns (held pressure [Pa], time since the last re-set [s])."""
+    t_since += dt
+    if (abs(p_dem - p_held) > 5e5 and t_since > 0.6) or (p_dem == 0.0 and p_held > 0.0 and t_since > 0.3):
+        p_held = np.round(p_dem / 5e5) * 5e5
+        t_since = 0.0
+    return p_held, t_since
+
+
+@cached_njit
+def _wheel_torque(tm, v, t, p, eff):
+    """Drive-train: wheel torque i η T_M - i T_0 in traction, i T_M / η - i T_0 in regeneration [N m], with cold
+    oil raising the mesh loss and the drag torque by 1 + c e^(-t/τ); none backwards at standstill."""
+    ratio, eta, tdrag = p[7], p[8], p[9]
+    cold = 1.0 + eff[3] * np.exp(-t / eff[4])
+    eta_t = 1.0 - (1.0 - eta) * cold
+    t0 = tdrag * cold
+    if tm >= 0:
+        t_w = ratio * eta_t * tm - ratio * t0
+    else:
+        t_w = ratio * tm / eta_t - ratio * t0
+    if v < 0.05 and t_w < 0:
+        t_w = 0.0
+    return t_w
+
+
+@cached_njit
+def _resistances(v, s, th, ka, psi, t_amb, m, kc, p, eff):
+    """Driving resistances [N] (eq. 2.5-2.14): air ρ_a/2 c_x A v_a |v_a| with ρ_a = p_a/(R_a T_a) and the wind's
+    approach speed, rolling m g cos θ f_r(v) (tire warm-up over distance), cornering k_c v⁴ κ², climbing
+    m g sin θ. Returns (F_res, ρ_a [kg/m³])."""
+    fr0, fr1, fr4, cxa = p[1], p[2], p[3], p[4]
+    rho = AIR_PRESSURE / (R_AIR * t_amb)
+    v_a = v + eff[8] * np.cos(psi - eff[9])
+    f_air = 0.5 * rho * cxa * eff[7] * v_a * abs(v_a)
+    fr = (fr0 + fr1 * v + fr4 * v ** 4) * (1.0 + eff[1] * np.exp(-s / eff[2]))
+    f_roll = m * G * np.cos(th) * fr
+    f_corner = kc * v ** 4 * ka * ka
+    f_cl = m * G * np.sin(th)
+    return f_air + f_roll + f_corner + f_cl, rho
+
+
+@cached_njit
+def _acceleration(t_w, f_res, f_brake, v, rw, m_eff):
+    """v̇ = (T_W / r_W - F_res - F_B) / m_eff [m/s²] (eq. 2.6 + 2.17); static friction holds the car when the
+    brake force exceeds the net force; no rolling backwards."""
+    f_net = t_w / rw - f_res
+    if v > 0.01:
+        f_net -= f_brake
+    elif abs(f_net) <= f_brake:     # static friction holds
+        f_net = 0.0
+    else:
+        f_net -= np.sign(f_net) * f_brake
+    a = f_net / m_eff
+    if v <= 0.0 and a < 0:
+        a = 0.0
+    return a
+
+
+@cached_njit
+def _battery_current(tm, omega, soc, aux_add, p):
+    """Battery current I [A] drawing P_el = T ω + k_cu T² + k_fe ω + P_0 + P_aux from U_oc(soc) = u0 + u1 soc
+    through R: I = (U_oc - sqrt(U_oc² - 4 R P_el)) / (2 R). Returns (I, U_oc [V])."""
+    kcu, kfe, p0, u0, u1, rbat, aux = p[15], p[16], p[17], p[18], p[19], p[20], p[22]
+    p_el = tm * omega + kcu * tm * tm + kfe * omega + p0 + aux + aux_add
+    u_oc = u0 + u1 * soc
+    disc = u_oc * u_oc - 4 * rbat * p_el
+    disc = max(disc, 1.0)
+    return (u_oc - np.sqrt(disc)) / (2 * rbat), u_oc
+
+
+@cached_njit
 def _drive(n, dt, ds, road, v_plan, v_free, stops, taps, p, eff, ambient, dwell):
-    """The numba loop. road: grade [rad] and curvature [1/m] over distance (rows, grid step ds [m]); p: vehicle
-    parameters (see :func:`_params`); eff: (mass add, f_r cold factor - 1, d_tire,
-    loss cold factor - 1, tau_oil, aux add, cornering factor scale, drag factor, wind speed, wind from);
-    ambient: T_a(t) [K]; v_plan / v_free: target speeds over distance with / without the stops; stops [m];
-    dwell [s] at each stop. Returns an array of states per step."""
-    (m0, fr0, fr1, fr4, cxa, rw, iw, ratio, eta, tdrag, im, tmax, pmax, treg, preg, kcu, kfe, p0, u0, u1, rbat,
-     cap, aux, brake_gain, _front_share, l, l34, l12, x12, x34) = p
+    """The numba loop, one named stage per step: stops, driver's target and force demand, torque and brake
+    demand, pedal, motor and brake lags, drive-train, resistances, acceleration, battery, log, integration.
+    road: grade [rad] and curvature [1/m] over distance (rows, grid step ds [m]);
+    p: vehicle parameters (see :func:`_params`); eff: (mass add, f_r cold factor - 1, d_tire, loss cold factor - 1,
+    tau_oil, aux add, cornering factor scale, drag factor, wind speed, wind from); ambient: T_a(t) [K];
+    v_plan / v_free: target speeds over distance with / without the stops; stops [m]; dwell [s] at each stop.
+    Returns an array of states per step."""
+    m0, fr0, cxa, rw, iw, ratio, im, cap, brake_gain = p[0], p[1], p[4], p[5], p[6], p[7], p[10], p[21], p[23]
+    l, l34, l12, x12, x34 = p[25], p[26], p[27], p[28], p[29]
     m = m0 + eff[0]
     x12e = x12 * eff[6]
     x34e = x34 * eff[6]
     kc = m * m * (l34 * l34 / x12e + l12 * l12 / x34e) / (l * l)
     m_eff = m + (4 * iw + ratio * ratio * im) / (rw * rw)
     out = np.zeros((n, 16))
-    v = 0.0
-    s = 0.0
-    psi = 0.0
-    tm = 0.0
-    pb = 0.0
-    p_held = 0.0
+    v = s = psi = tm = pb = p_held = wait = 0.0
     t_since = 10.0
     soc = 0.8
     j = 0
-    wait = 0.0
     passing = False
     for k in range(n):
         t = k * dt
         th = _interp_uniform(s, ds, road[0])
         ka = _interp_uniform(s, ds, road[1])
-        # driver: stops (dwell, then drive off), look-ahead target, own force estimate, regeneration first
-        while j < stops.size and stops[j] < s - 10.0:
-            j += 1
-            passing = False
-        if j < stops.size and not passing and s > stops[j] - 8.0 and v < 0.3:
-            wait += dt
-            if wait > dwell:
-                passing = True
-                wait = 0.0
-        look = s + 1.5 * v + 2.0
-        v_t = _interp_uniform(look, ds, v_free if passing else v_plan)
-        a_d = 0.8 * (v_t - v)
-        a_d = min(a_d, 2.0)
-        a_d = max(a_d, -3.0)
+        j, passing, wait = _stop_state(s, v, dt, stops, j, passing, wait, dwell)
+        # driver: look-ahead target, own force estimate, regeneration first
+        v_t = _interp_uniform(s + 1.5 * v + 2.0, ds, v_free if passing else v_plan)
+        a_d = max(min(0.8 * (v_t - v), 2.0), -3.0)
         f_est = m0 * G * np.sin(th) + m0 * G * fr0 + 0.5 * DRIVER_AIR_DENSITY * cxa * v * v
-        f_d = m0 * a_d + f_est
-        tap = _interp_uniform(t, 1.0, taps)
         omega = v / rw * ratio
-        t_dem = f_d * rw / (ratio * eta)
-        lim_reg = treg
-        if omega > 1.0 and preg / omega < lim_reg:
-            lim_reg = preg / omega
-        lim_mot = tmax
-        if omega > 1.0 and pmax / omega < lim_mot:
-            lim_mot = pmax / omega
-        p_dem = 0.0
-        if t_dem < -lim_reg:
-            f_rest = -(t_dem + lim_reg) * ratio * eta / rw
-            p_dem = f_rest / brake_gain
-            t_dem = -lim_reg
-        t_dem = min(t_dem, lim_mot)
-        if v < 0.3 and v_t < 0.5:
-            t_dem = 0.0
-            p_dem = 1.5e6     # holding at standstill
-        if tap > 0 and v > 12.0:
-            p_dem = p_dem + tap
-        # step-like pedal: hold the pressure, re-set in 5 bar steps at most every 0.6 s
-        t_since += dt
-        if (abs(p_dem - p_held) > 5e5 and t_since > 0.6) or (p_dem == 0.0 and p_held > 0.0 and t_since > 0.3):
-            p_held = np.round(p_dem / 5e5) * 5e5
-            t_since = 0.0
+        t_dem, p_dem = _demand(m0 * a_d + f_est, v, v_t, _interp_uniform(t, 1.0, taps), omega, p)
+        p_held, t_since = _pedal(p_dem, p_held, t_since, dt)
         pb += (p_held - pb) * dt / 0.04
         tm += (t_dem - tm) * dt / 0.05
-        # drive-train (cold oil raises the mesh loss and the drag)
-        cold = 1.0 + eff[3] * np.exp(-t / eff[4])
-        eta_t = 1.0 - (1.0 - eta) * cold
-        t0 = tdrag * cold
-        if tm >= 0:
-            t_w = ratio * eta_t * tm - ratio * t0
-        else:
-            t_w = ratio * tm / eta_t - ratio * t0
-        if v < 0.05 and t_w < 0:
-            t_w = 0.0
-        # resistances
-        rho = AIR_PRESSURE / (R_AIR * ambient[k])
-        v_a = v + eff[8] * np.cos(psi - eff[9])
-        f_air = 0.5 * rho * cxa * eff[7] * v_a * abs(v_a)
-        fr = (fr0 + fr1 * v + fr4 * v ** 4) * (1.0 + eff[1] * np.exp(-s / eff[2]))
-        f_roll = m * G * np.cos(th) * fr
-        f_corner = kc * v ** 4 * ka * ka
-        f_cl = m * G * np.sin(th)
+        t_w = _wheel_torque(tm, v, t, p, eff)
+        f_res, rho = _resistances(v, s, th, ka, psi, ambient[k], m, kc, p, eff)
         f_brake = pb * brake_gain
-        f_res = f_air + f_roll + f_corner + f_cl
-        f_net = t_w / rw - f_res
-        if v > 0.01:
-            f_net -= f_brake
-        elif abs(f_net) <= f_brake:     # static friction holds
-            f_net = 0.0
-        else:
-            f_net -= np.sign(f_net) * f_brake
-        a = f_net / m_eff
-        if v <= 0.0 and a < 0:
-            a = 0.0
-        # battery
-        p_el = tm * omega + kcu * tm * tm + kfe * omega + p0 + aux + eff[5]
-        u_oc = u0 + u1 * soc
-        disc = u_oc * u_oc - 4 * rbat * p_el
-        disc = max(disc, 1.0)
-        cur = (u_oc - np.sqrt(disc)) / (2 * rbat)
+        a = _acceleration(t_w, f_res, f_brake, v, rw, m_eff)
+        cur, u_oc = _battery_current(tm, omega, soc, eff[5], p)
         soc -= u_oc * cur * dt / cap
-        out[k, 0] = t
-        out[k, 1] = s
-        out[k, 2] = v
-        out[k, 3] = a
-        out[k, 4] = th
-        out[k, 5] = ka
-        out[k, 6] = tm
-        out[k, 7] = omega
-        out[k, 8] = pb
-        out[k, 9] = u_oc - rbat * cur
-        out[k, 10] = cur
-        out[k, 11] = f_res
-        out[k, 12] = t_w / rw - (4 * iw + ratio * ratio * im) / (rw * rw) * a   # tractive force F_xV
-        out[k, 13] = f_brake
-        out[k, 14] = psi
-        out[k, 15] = rho
+        row = out[k]
+        row[0], row[1], row[2], row[3], row[4], row[5], row[6], row[7] = t, s, v, a, th, ka, tm, omega
+        row[8], row[9], row[10], row[11] = pb, u_oc - p[20] * cur, cur, f_res
+        row[12] = t_w / rw - (4 * iw + ratio * ratio * im) / (rw * rw) * a   # tractive force F_xV
+        row[13], row[14], row[15] = f_brake, psi, rho
         v += a * dt
         if v < 0:
             v = 0.0
@@ -400,7 +443,7 @@ def simulate_trip(road_name: str, road_seed: int, rng: np.random.Generator, dura
     ambient = t_amb0 + drift * tt / max(duration, 1.0) + _ou(rng, n // 100 + 2, 1.0, 60.0, 0.3)[tt.astype(int)]
     v_free = planned_speed(replace_stops(prof), np.random.default_rng(plan_seed), accel=1.8, power_to_mass=45.0,
                            decel=2.3, brake_power_to_mass=80.0)
-    out = _drive(n, DT, ds, np.vstack([prof.grade, kappa]), v_plan, v_free, np.asarray(prof.stops, float), taps,
+    out = _drive(n, DT, ds, np.vstack((prof.grade, kappa)), v_plan, v_free, np.asarray(prof.stops, float), taps,
                  _params(vehicle), effect_vector(withheld), ambient, float(rng.uniform(5.0, 12.0)))
     return log_channels(out, prof, ambient, rng, withheld, vehicle)
 

@@ -1,11 +1,10 @@
 """The independent test worlds (roadload.experiments.worlds): physics against closed-form results, the loggers'
 quirks in the CSV, the import through the written mapping, and withheld effects moving the force balance by the
-expected amount. The confusion runs themselves are scripts (scripts/sim2real_worlds.py)."""
+expected amount. The selftest over them is tests/experiments/sim2real/."""
 
 from __future__ import annotations
 
 import importlib.util
-from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -18,15 +17,7 @@ from roadload.experiments.worlds import (
 )
 from roadload.experiments.worlds import independent as iw
 from roadload.experiments.worlds.base_gap import base_gap
-from roadload.experiments.sim2real_selftest import WorldCaseResult, WorldRun, found_against_reference
 from roadload.experiments.worlds.common import NONE, OUTSIDE, WorldCase
-from roadload.experiments.worlds.selftest import (
-    UNEXPLAINED,
-    WorldResult,
-    WorldSelftest,
-    markdown_table,
-    score,
-)
 from roadload.sim2real import SimConfig
 from roadload.units import R_AIR, G
 from roadload.vehicle import load_vehicle
@@ -279,35 +270,6 @@ def test_supported_effects_and_clear_errors(tmp_path):
         generate_case("independent", None, 0, duration_s=10.0, out_dir=tmp_path)
 
 
-def _diag(identified, bins=(), present=False):
-    return SimpleNamespace(identified=list(identified),
-                           unexplained={"departing_bins": list(bins), "present": present,
-                                        "reference_importance": []})
-
-
-def test_scoring_and_confusion():
-    case = SimpleNamespace(withheld="torque_scale", truth={"accepted": ["torque_scale", "drive_efficiency"]})
-    assert score(case, _diag(["drive_efficiency"]))[1]
-    assert not score(case, _diag(["mass_offset", "torque_scale"]))[1]
-    none = SimpleNamespace(withheld=NONE, truth={"accepted": []})
-    assert score(none, _diag([])) == (UNEXPLAINED, True, "")
-    out = SimpleNamespace(withheld=OUTSIDE, truth={"accepted": [], "parameters": {"low_kmh": 50.0, "high_kmh": 70.0}})
-    band = [{"regime": "speed", "bin": "50-70 km/h"}]
-    assert score(out, _diag([], band, True))[1] and not score(out, _diag(["latency"], band, True))[1]
-    res = WorldSelftest([WorldResult("w", 0, "payload", "mass_offset", ["mass_offset"], True, 1, 1, 0, "", 0),
-                         WorldResult("w", 1, "payload", "drag_area", ["drag_area"], False, 1, 1, 0, "", 0),
-                         WorldResult("w", 0, NONE, UNEXPLAINED, [], True, 1, 1, 0, "", 0)])
-    m = res.confusion("w")
-    assert m.loc["payload", "mass_offset"] == 1 and m.loc["payload", "drag_area"] == 1
-    assert res.top1("w") == 0.5 and res.summary("w")["none_clean"] == "1/1"
-    both = WorldSelftest([WorldResult("independent", 0, "auxiliary_load", "mass_offset",
-                                      ["mass_offset", "auxiliary_power"], False, 1, 1, 0, "", 0)])
-    assert both.summary("independent")["found_anywhere"] == 1 and both.top1("independent") == 0.0
-    md = markdown_table(m).splitlines()
-    assert md[0] == "| withheld \\ identified | drag_area | mass_offset | unexplained |"
-    assert md[2] == "| payload | 1 | 1 |  |"
-
-
 # ------------------------------------------------------------- the matched vehicle reproduces the world's base
 def test_matched_sim_config_carries_the_world_ambient(independent_case):
     sim = SimConfig.load(independent_case.sim_path)
@@ -328,71 +290,3 @@ def test_matched_independent_vehicle_reproduces_the_world_base_forces():
     assert len(fast) >= 2 and len(after) >= 5
     assert fast["residual median [N]"].abs().max() <= 6.0, fast
     assert after["residual median [N]"].abs().max() <= 10.0, after
-
-
-# ------------------------------------------------------- scoring rule: found beyond the nothing-withheld reference
-def _case(withheld, fits, seed=0, stands_for=()):
-    r = WorldCaseResult("w", seed, withheld, "-", [], False, False, 1.0, 1.0, 0.0, [], "", 1.0)
-    r.fits, r.stands_for = fits, tuple(stands_for)
-    return r
-
-
-def _base(value, se, size=100.0, significant=True, name="delta m_V", min_size=15.0):
-    return {"source": "base", "significant": significant, "size_rms": size, "min_size": min_size,
-            "parameters": {name: (value, se)}}
-
-
-def _effect(**params):
-    return {"source": "effect", "significant": True, "parameters": params}
-
-
-def test_found_against_reference_separates_the_withheld_effect_from_the_preset_mismatch():
-    aux0 = _base(-1670.0, 130.0, size=1670.0, name="delta P_aux", min_size=100.0)
-    ref = _case(NONE, {"base:mass_offset": _base(457.0, 2.0, size=500.0), "base:auxiliary_power": aux0,
-                       "auxiliary_power": _effect(**{"delta P_aux": (-1670.0, 130.0)})})
-    payload = _case("payload", {"base:mass_offset": _base(665.0, 2.0, size=700.0)}, stands_for=["mass_offset"])
-    assert found_against_reference(payload, ref)                     # +208 kg beyond the preset's own +457 kg
-    same = _case("payload", {"base:mass_offset": _base(459.0, 2.0, size=500.0)}, stands_for=["mass_offset"])
-    assert not found_against_reference(same, ref)                    # only the preset's mismatch (0.7 sigma)
-    small = _case("payload", {"base:mass_offset": _base(470.0, 2.0, size=500.0)}, stands_for=["mass_offset"])
-    assert not found_against_reference(small, ref)                   # 4.6 sigma, but 14 N < 15 N of contribution
-    assert found_against_reference(small, None)                      # no reference: a significant departure counts
-    aux = _case("auxiliary_load", {"auxiliary_power": _effect(**{"delta P_aux": (-1700.0, 140.0)})},
-                stands_for=["auxiliary_power"])
-    assert not found_against_reference(aux, ref)                     # accepted in the reference too, not moved
-    aux.fits["auxiliary_power"]["parameters"]["delta P_aux"] = (-170.0, 140.0)
-    assert found_against_reference(aux, ref)                         # moved by 1500 W
-    # the load cancels the preset's own mismatch: nothing accepted, but the energy base moved by 1500 W
-    cancel = _case("auxiliary_load", {"base:auxiliary_power": _base(-170.0, 130.0, size=170.0, name="delta P_aux",
-                                                                    significant=False, min_size=100.0)},
-                   stands_for=["auxiliary_power"])
-    assert found_against_reference(cancel, ref)
-    # matched sim: the reference accepts nothing, an accepted candidate standing for the effect is found
-    wind = _case("wind", {"wind_world": _effect(w=(6.0, 0.5))}, stands_for=["wind", "wind_world"])
-    assert found_against_reference(wind, _case(NONE, {}))
-    assert not found_against_reference(_case("wind", {}, stands_for=["wind_world"]), _case(NONE, {}))
-    run = WorldRun("w", "preset", [ref, payload, same, _case(OUTSIDE, {})])
-    s = run.summary()
-    assert (s["found"], s["catalog_cases"], s["found_cases"]) == (1, 2, 2)
-
-
-@pytest.mark.slow
-def test_preset_on_the_independent_world_names_nothing_and_finds_bias_and_torque_gain_in_the_base(tmp_path):
-    """The shipped bmw_i3 against the independent world (3 x 300 s, seed 0), base first and refitted jointly with
-    every candidate: nothing withheld accepts nothing on either side (before: the preset's battery mismatch was
-    accepted as ``auxiliary_power`` ≈ -1.7 kW on every drive); an accelerometer bias of 0.1 m/s² comes out of the
-    logged elevation (0.10 ± 0.002 over 3 x 900 s); the inverter's +5 % torque gain moves the energy base's
-    signed T ω term by ≈ -0.05 (-0.047 ± 0.005 over 3 x 900 s)."""
-    from roadload.experiments.sim2real_selftest import run_world
-    run = run_world("independent", seeds=(0,), effects=("none", "accel_bias", "torque_scale"), duration=300.0,
-                    vehicle="bmw_i3", work=str(tmp_path))
-    res = {r.withheld: r for r in run.results}
-    assert not res["none"].accepted and not res["none"].error
-    bias = res["accel_bias"].fits["base:accel_bias"]["parameters"]["accelerometer bias b"]
-    bias0 = res["none"].fits["base:accel_bias"]["parameters"]["accelerometer bias b"]
-    assert bias[0] == pytest.approx(0.1, abs=0.015) and abs(bias0[0]) < 0.015
-    gain = res["torque_scale"].fits["base:torque_scale"]["parameters"]["gain error of the signed T_E omega_E"]
-    gain0 = res["none"].fits["base:torque_scale"]["parameters"]["gain error of the signed T_E omega_E"]
-    assert gain[0] - gain0[0] == pytest.approx(-0.05, abs=0.02)
-    run.score()
-    assert res["accel_bias"].found and res["torque_scale"].found

@@ -70,8 +70,8 @@ def test_injected_mass_offset_is_ranked_first_and_accepted_with_its_value():
     assert ranked[0].name == "mass_offset"
     assert ranked[0].parameters["delta m_V"] == pytest.approx(120.0, abs=6.0)
     assert ranked[0].delta_aic == 0.0 and ranked[0].significant
-    assert steps[0]["effect"] == "mass_offset" and steps[0]["accepted"]
-    assert [s["effect"] for s in steps if s["accepted"]] == ["mass_offset"]
+    assert steps[0].effect == "mass_offset" and steps[0].accepted
+    assert [s.effect for s in steps if s.accepted] == ["mass_offset"]
     # the block standard error is honest: the estimate lies within 4 of them of the truth
     assert abs(ranked[0].parameters["delta m_V"] - 120.0) < 4 * ranked[0].std_errors["delta m_V"] + 1.0
     # the candidate's model structure went through the chapter-5 registry
@@ -84,7 +84,7 @@ def test_injected_headwind_identified_in_world_frame():
         return 1.2 * 0.6 * tab.speed.to_numpy() * (4.0 * np.cos(h) + 1.0 * np.sin(h))
     tab = synth(wind)
     _, ranked, steps = diagnose_table(tab)
-    accepted = [s["effect"] for s in steps if s["accepted"]]
+    accepted = [s.effect for s in steps if s.accepted]
     assert accepted and accepted[0] in ("wind_world", "wind")
     top = next(r for r in ranked if r.name == "wind_world")
     assert top.parameters["wind w_x"] == pytest.approx(4.0, abs=0.3)
@@ -94,8 +94,8 @@ def test_injected_headwind_identified_in_world_frame():
 def test_effect_outside_the_catalog_is_not_forced_onto_a_candidate():
     tab = synth(lambda t: np.where((t.speed > 18) & (t.speed < 22), 150.0, 0.0))
     sel, ranked, steps = diagnose_table(tab)
-    assert not any(s["accepted"] for s in steps)
-    assert steps and "partial fit" in steps[0]["reason"]
+    assert not any(s.accepted for s in steps)
+    assert steps and "partial fit" in steps[0].reason
 
 
 def test_all_catalog_candidates_fit_on_a_full_table():
@@ -110,7 +110,7 @@ def test_all_catalog_candidates_fit_on_a_full_table():
 def test_no_gap_means_nothing_accepted():
     tab = synth(lambda t: np.zeros(len(t)))
     _, ranked, steps = diagnose_table(tab)
-    assert not any(s["accepted"] for s in steps)
+    assert not any(s.accepted for s in steps)
 
 
 def test_split_keeps_test_and_folds_apart():
@@ -169,9 +169,9 @@ def test_regime_bins_localise_a_band_effect():
     tab = synth(lambda t: np.where((t.speed > 50 / 3.6) & (t.speed < 70 / 3.6), 200.0, 0.0), noise=20.0)
     blocks = block_ids(tab.trip.to_numpy(), tab.t.to_numpy(), 10.0)
     rt = bin_statistics(tab.residual.to_numpy(), tab, "speed", blocks, np.random.default_rng(0), min_effect=20)
-    rows = {r["bin"]: r for r in rt.rows}
-    assert rows["50-70 km/h"]["departs"] and rows["50-70 km/h"]["median"] == pytest.approx(200, abs=15)
-    assert not rows["30-50 km/h"]["departs"]
+    rows = {r.bin: r for r in rt.rows}
+    assert rows["50-70 km/h"].departs and rows["50-70 km/h"].median == pytest.approx(200, abs=15)
+    assert not rows["30-50 km/h"].departs
 
 
 def test_residual_analysis_finds_a_lagged_input():
@@ -179,7 +179,7 @@ def test_residual_analysis_finds_a_lagged_input():
     x = rng.normal(0, 1, 4000)
     r = np.roll(x, 5) + 0.1 * rng.normal(0, 1, 4000)
     out = residual_analysis(r, {"x": x}, np.zeros(4000), max_lag=10)
-    assert out["x"]["lag"] == 5 and out["x"]["max_abs"] > 0.9 > out["x"]["bound"]
+    assert out["x"].lag == 5 and out["x"].max_abs > 0.9 > out["x"].bound
 
 
 def test_candidate_missing_channels_are_named():
@@ -188,27 +188,6 @@ def test_candidate_missing_channels_are_named():
     assert get_candidate("cornering").missing({"speed": np.ones(3)}) == ["path_curvature"]
     with pytest.raises(DiagnosisError, match="unknown candidate"):
         get_candidate("nope")
-
-
-def test_selftest_scoring():
-    from roadload.experiments.sim2real_selftest import SelftestCase, SelftestResult, WithheldEffect, is_correct
-
-    assert is_correct(WithheldEffect("p", "payload"), "mass_offset")
-    assert is_correct(WithheldEffect("w", "wet_road"), "rolling_scale")          # alias
-    assert not is_correct(WithheldEffect("p", "payload"), "drag_area")
-    assert not is_correct(WithheldEffect("p", "payload"), "unexplained")
-
-    def case(label, ident, ok, before, after):
-        return SelftestCase(label, label, ident, ok, 1 - after / before, float("nan"), before, after, {}, None, "")
-    res = SelftestResult([case("a", "mass_offset", True, 50.0, 10.0), case("b", "unexplained", False, 30.0, 30.0)],
-                         case("out", "unexplained", True, 40.0, 40.0), True, "toy",
-                         case("none", "unexplained", True, 10.0, 6.0))
-    assert res.top1 == 0.5
-    assert res.median_shrinkage == pytest.approx(np.median([0.8, 0.0]))
-    assert res.noise_rmse == 6.0
-    assert res.excess_shrinkage(res.cases[0]) == pytest.approx(1 - np.sqrt(100 - 36) / np.sqrt(2500 - 36))
-    conf = res.confusion()
-    assert conf.loc["a", "mass_offset"] == 1 and conf.loc["b", "unexplained"] == 1 and conf.values.sum() == 4
 
 
 def test_friction_brake_gain_sign_and_simulator_mapping():
@@ -240,7 +219,7 @@ def test_brake_drag_after_release_is_found_with_its_time_constant():
     _, ranked, steps = diagnose_table(tab, candidates=("brake_drag", "friction_brake", "mass_offset"))
     assert ranked[0].name == "brake_drag" and ranked[0].shape == 15.0
     assert ranked[0].parameters["residual brake drag F_d"] == pytest.approx(120.0, rel=0.1)
-    assert steps[0]["accepted"]
+    assert steps[0].accepted
     assert np.isnan(time_since(np.array([False, True, False]), np.array([0.0, 1.0, 3.0]))[0])
 
 

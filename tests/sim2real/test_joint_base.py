@@ -43,7 +43,7 @@ def _selector(tab: pd.DataFrame, joint: bool, seed: int = 1) -> Selector:
     split = make_split(tab, seed=seed, n_folds=4)
     tg = robust_target(tab, tab.residual.to_numpy(), split.train, split.segments, split.fold, split.n_folds)
     block, A = base_calibration(tab, tg, split, MODEL)
-    x = np.array([p["value"] for p in block["parameters"] if p.get("in_fit", True)])
+    x = np.array([p.value for p in block.parameters if p.in_fit is not False])
     y = tab.residual.to_numpy() - A @ x
     return Selector(tab, y, split, MODEL, robust=True, n_boot=100, seed=seed, min_size=15.0,
                     base_design=A if joint else None)
@@ -53,7 +53,7 @@ def _cold_fraction(sel: Selector) -> tuple[float, dict]:
     ranked, _ = sel.rank(("drivetrain_oil", "torque_scale", "mass_offset"))
     steps = sel.forward(ranked)
     oil = next(r for r in ranked if r.name == "drivetrain_oil")
-    return oil.parameters["cold loss fraction"], {s["effect"]: s for s in steps}
+    return oil.parameters["cold loss fraction"], {s.effect: s for s in steps}
 
 
 def test_joint_base_keeps_the_cold_drivetrain_that_subtracting_the_base_absorbs():
@@ -64,7 +64,7 @@ def test_joint_base_keeps_the_cold_drivetrain_that_subtracting_the_base_absorbs(
     # the trip-mean of it) only the decay's departure from that mean is left
     assert joint == pytest.approx(COLD, rel=0.15)
     assert sub < 0.9 * COLD and joint - sub > 0.1 * COLD     # measured: joint 0.1, subtracted 0.082
-    assert steps_joint["drivetrain_oil"]["accepted"] and steps_joint["drivetrain_oil"]["null_p"] <= 0.01
+    assert steps_joint["drivetrain_oil"].accepted and steps_joint["drivetrain_oil"].null_p <= 0.01
 
 
 def test_candidate_inside_the_base_span_gains_nothing_jointly():
@@ -74,7 +74,7 @@ def test_candidate_inside_the_base_span_gains_nothing_jointly():
     sel = _selector(tab, joint=True, seed=2)
     ranked, _ = sel.rank(("torque_scale", "mass_offset", "drag_area", "drivetrain_oil"))
     steps = sel.forward(ranked)
-    assert not any(s["accepted"] for s in steps), steps
+    assert not any(s.accepted for s in steps), steps
     gains = {r.name: r.improvement for r in ranked}
     assert gains["torque_scale"] < 0.005 and gains["mass_offset"] < 0.005
 
@@ -102,17 +102,17 @@ def test_accelerometer_bias_from_the_logged_elevation(bias):
     tab = _with_elevation(synth(lambda t: np.zeros(len(t)), n_trips=3, duration=900.0, seed=3), bias, seed=3)
     split = make_split(tab, seed=3, n_folds=4)
     row = accelerometer_bias_from_elevation(tab, split, MODEL.mass)
-    assert row is not None and row["candidate"] == "accel_bias" and not row["in_fit"]
-    assert row["value"] == pytest.approx(bias, abs=0.005) and row["significant"]
-    assert row["size_rms"] == pytest.approx(MODEL.mass * abs(bias), rel=0.05)
+    assert row is not None and row.candidate == "accel_bias" and not row.in_fit
+    assert row.value == pytest.approx(bias, abs=0.005) and row.significant
+    assert row.size_rms == pytest.approx(MODEL.mass * abs(bias), rel=0.05)
 
 
 def test_no_accelerometer_bias_without_one_or_without_elevation():
     tab = _with_elevation(synth(lambda t: np.zeros(len(t)), n_trips=3, duration=900.0, seed=4), 0.0, seed=4)
     split = make_split(tab, seed=4, n_folds=4)
     row = accelerometer_bias_from_elevation(tab, split, MODEL.mass)
-    assert row is not None and not row["significant"] and abs(row["value"]) < 0.005
-    assert 0 < row["std_error"] < 0.005
+    assert row is not None and not row.significant and abs(row.value) < 0.005
+    assert 0 < row.std_error < 0.005
     assert accelerometer_bias_from_elevation(tab.drop(columns="elevation"), split, MODEL.mass) is None
 
 
@@ -126,10 +126,10 @@ def test_energy_base_tells_a_torque_signal_gain_from_a_motor_efficiency_error():
     # sim from a torque signal 5 % high: P_sim over by 0.05 T ω; motor losses 2 % of |T ω| higher; aux -1.2 kW
     resid = -0.05 * p + 0.02 * np.abs(p) - 1200.0 + rng.normal(0, 300.0, len(tab))
     split = make_split(tab, seed=5, n_folds=4)
-    rows = {r["candidate"]: r for r in energy_base_calibration(tab, resid, split)["parameters"]}
-    assert rows["torque_scale"]["value"] == pytest.approx(-0.05, abs=0.005) and rows["torque_scale"]["significant"]
-    assert rows["motor_efficiency"]["value"] == pytest.approx(0.02, abs=0.005)
-    assert rows["auxiliary_power"]["value"] == pytest.approx(-1200.0, abs=60.0)
+    rows = {r.candidate: r for r in energy_base_calibration(tab, resid, split).parameters}
+    assert rows["torque_scale"].value == pytest.approx(-0.05, abs=0.005) and rows["torque_scale"].significant
+    assert rows["motor_efficiency"].value == pytest.approx(0.02, abs=0.005)
+    assert rows["auxiliary_power"].value == pytest.approx(-1200.0, abs=60.0)
 
 
 def test_extended_segment_sums_equal_the_sums_of_the_whole_design():
@@ -157,4 +157,4 @@ def test_accelerometer_bias_survives_an_elevation_glitch():
     tab["elevation"] = h
     split = make_split(tab, seed=7, n_folds=4)
     row = accelerometer_bias_from_elevation(tab, split, MODEL.mass)
-    assert row is not None and row["value"] == pytest.approx(0.1, abs=0.005) and row["std_error"] < 0.005
+    assert row is not None and row.value == pytest.approx(0.1, abs=0.005) and row.std_error < 0.005

@@ -75,7 +75,7 @@ def test_heavy_tailed_braking_residual_gives_no_acceptance_on_null_data():
         # the data are what the user met: kN residuals on a few % of the samples, a few N elsewhere
         assert brk.mean() < 0.12 and np.sqrt(np.mean(r[brk] ** 2)) > 200.0 and np.median(np.abs(r[~brk])) < 10.0
         sel, ranked, steps = run(tab, seed=seed)
-        assert not any(s["accepted"] for s in steps), steps
+        assert not any(s.accepted for s in steps), steps
         assert sel.chosen == []
 
 
@@ -86,7 +86,7 @@ def test_heavy_tailed_noise_null_false_positive_rate_is_zero_over_seeds():
         tab = synth(lambda t: np.zeros(len(t)), noise=0.0, seed=seed, duration=500.0)
         tab["residual"] = 8.0 * rng.standard_t(2, len(tab))       # infinite variance
         _, _, steps = run(tab, seed=seed, candidates=BRAKING[2:])
-        accepted += sum(s["accepted"] for s in steps)
+        accepted += sum(s.accepted for s in steps)
     assert accepted == 0
 
 
@@ -95,8 +95,8 @@ def test_real_effect_is_still_accepted_over_heavy_tails_and_braking_transients()
     rng = np.random.default_rng(3)
     tab["residual"] = tab["residual"] + 5.0 * rng.standard_t(2, len(tab))
     sel, ranked, steps = run(tab, seed=3)
-    assert steps[0]["effect"] == "mass_offset" and steps[0]["accepted"], steps[:2]
-    assert steps[0]["null_p"] <= 0.01
+    assert steps[0].effect == "mass_offset" and steps[0].accepted, steps[:2]
+    assert steps[0].null_p <= 0.01
     d, fit = sel.final_fit(sel.chosen)
     assert fit.X[0] == pytest.approx(120.0, rel=0.1)
 
@@ -139,9 +139,9 @@ def test_out_of_range_fit_is_reported_not_an_abort():
     msg = check(get_candidate("friction_brake"), {"pad friction error k": 34.6}, None)
     assert msg and "pad_friction" in msg and "[0.05, 1.5]" in msg
     sel, ranked, steps = run(tab, candidates=("friction_brake", "mass_offset"), plausible=check)
-    brake = [s for s in steps if s["effect"] == "friction_brake"]
-    assert brake and not brake[0]["accepted"] and brake[0]["reason"].startswith("implausible")
-    assert "[0.05, 1.5]" in brake[0]["implausible"]
+    brake = [s for s in steps if s.effect == "friction_brake"]
+    assert brake and not brake[0].accepted and brake[0].reason.startswith("implausible")
+    assert "[0.05, 1.5]" in brake[0].implausible
     assert all(c.name != "friction_brake" for c, _ in sel.chosen)
 
 
@@ -150,12 +150,12 @@ def test_base_calibration_reports_a_mass_offset_with_its_uncertainty():
     split = make_split(tab, seed=4, n_folds=4)
     tg = robust_target(tab, tab.residual.to_numpy(), split.train, split.segments, split.fold, split.n_folds)
     block, A = base_calibration(tab, tg, split, MODEL)
-    rows = {p["candidate"]: p for p in block["parameters"]}
+    rows = {p.candidate: p for p in block.parameters}
     m = rows["mass_offset"]
-    assert m["value"] == pytest.approx(120.0, abs=4 * m["std_error"] + 5.0) and m["significant"]
-    assert 0 < m["std_error"] < 30.0
-    assert m["physical"]["calibrated"] == pytest.approx(MODEL.mass + m["value"])
-    assert not rows["drag_area"]["significant"]
+    assert m.value == pytest.approx(120.0, abs=4 * m.std_error + 5.0) and m.significant
+    assert 0 < m.std_error < 30.0
+    assert m.physical.calibrated == pytest.approx(MODEL.mass + m.value)
+    assert not rows["drag_area"].significant
 
 
 def _base_rows(extra, seed=4):
@@ -163,18 +163,19 @@ def _base_rows(extra, seed=4):
     split = make_split(tab, seed=seed, n_folds=4)
     tg = robust_target(tab, tab.residual.to_numpy(), split.train, split.segments, split.fold, split.n_folds)
     block, _ = base_calibration(tab, tg, split, MODEL)
-    return {p["candidate"]: p for p in block["parameters"]}
+    return {p.candidate: p for p in block.parameters}
 
 
 def test_base_block_separates_a_payload_from_the_drivetrain_efficiency():
     """The base's drive-train efficiency is a loss ∝ |F_drive| (traction x (1 + e), regen x (1 - e)); a symmetric
     scale of F_drive would be collinear with mass + rolling + drag area and split a payload between them."""
     rows = _base_rows(mass_extra)
-    assert rows["mass_offset"]["value"] == pytest.approx(120.0, abs=15.0)
-    assert not rows["drive_efficiency"]["significant"]
-    assert abs(rows["drive_efficiency"]["value"]) < 0.01
+    assert rows["mass_offset"].value == pytest.approx(120.0, abs=15.0)
+    assert not rows["drive_efficiency"].significant
+    assert abs(rows["drive_efficiency"].value) < 0.01
     eff = _base_rows(lambda tab: 0.04 * np.abs(MODEL.predict(tab)))
     e = eff["drive_efficiency"]
-    assert e["significant"] and e["value"] == pytest.approx(0.04, abs=4 * e["std_error"] + 0.005)
-    assert abs(eff["mass_offset"]["value"]) < 15.0
-    assert e["physical"]["calibrated"] == pytest.approx(MODEL.drivetrain_efficiency * (1 + e["value"]))
+    assert e.significant and e.value == pytest.approx(0.04, abs=4 * e.std_error + 0.005)
+    assert abs(eff["mass_offset"].value) < 15.0
+    assert e.physical.calibrated == pytest.approx(MODEL.drivetrain_efficiency / (1 + e.value))
+    assert e.physical.calibrated_regen == pytest.approx(MODEL.drivetrain_efficiency * (1 - e.value))

@@ -35,15 +35,15 @@ def test_withheld_payload_is_identified_and_the_gap_shrinks(payload_diagnosis):
     _, d = payload_diagnosis
     assert d.identified[:1] == ["mass_offset"]
     eff = d.effects[0]
-    assert eff["parameters"]["delta m_V"] == pytest.approx(250.0, rel=0.15)
-    assert eff["sim_switch"] == "payload"
-    assert eff["sim_parameters"]["initial_payload"] == pytest.approx(eff["parameters"]["delta m_V"])
+    assert eff.parameters["delta m_V"] == pytest.approx(250.0, rel=0.15)
+    assert eff.sim_switch == "payload"
+    assert eff.sim_parameters["initial_payload"] == pytest.approx(eff.parameters["delta m_V"])
     assert d.shrinkage("rmse") > 0.5
     # switched on in the simulator with the fitted mass, the re-simulated sim closes most of the gap too
     assert d.gap_after_sim is not None and d.shrinkage("rmse", simulator=True) > 0.5
     # before: the gap is localised where a mass error shows, in acceleration
-    dep = d.notes["strongest_departures_before"]
-    assert dep and dep[0]["regime"] in ("acceleration", "mode")
+    dep = d.notes.strongest_departures_before
+    assert dep and dep[0].regime in ("acceleration", "mode")
 
 
 def test_report_files_and_schema(payload_diagnosis, tmp_path):
@@ -125,8 +125,8 @@ def test_withheld_auxiliary_load_is_found_on_the_energy_side(sim):
                                  floor_duration=360.0, resimulate=False, n_boot=100, segment_length=30.0)
     d = diagnose(real, sim, settings)
     assert d.energy is not None
-    assert [e["name"] for e in d.energy["effects"]] == ["auxiliary_power"]
-    p = d.energy["effects"][0]["parameters"]["delta P_aux"]
+    assert [e.name for e in d.energy.effects] == ["auxiliary_power"]
+    p = d.energy.effects[0].parameters["delta P_aux"]
     assert p == pytest.approx(1500.0, rel=0.05)
-    assert d.energy["effects"][0]["sim_parameters"] == {"power": pytest.approx(p)}
-    assert abs(d.energy["power_residual_after"]["median"]) < 0.05 * abs(d.energy["power_residual_before"]["median"])
+    assert d.energy.effects[0].sim_parameters == {"power": pytest.approx(p)}
+    assert abs(d.energy.power_residual_after.median) < 0.05 * abs(d.energy.power_residual_before.median)

@@ -25,9 +25,10 @@ import numpy as np
 import pandas as pd
 
 from roadload.fileio import save_figure
-from roadload.gym.config import EcoHighwayConfig, make_config
+from roadload.gym.config import EcoHighwayConfig, EcoTrafficConfig, make_config
 from roadload.gym.ecodrive import DriveScales
 from roadload.gym.highway import EcoHighwayEnv, highway_observation_layout
+from roadload.gym.traffic import traffic_observation_layout
 from roadload.presets import get_preset
 from roadload.tables import write_csv
 
@@ -45,11 +46,15 @@ HIGHWAY_COLUMNS = ["controller", "seed", "crashed", "distance_m", "energy_kWh", 
 
 
 # --------------------------------------------------------------------------------------------- baselines
-def _indices(cfg: EcoHighwayConfig) -> dict[str, tuple[int, float]]:
-    return {name: (k, scale) for k, (name, _unit, scale) in enumerate(highway_observation_layout(cfg))}
+def _indices(cfg: EcoHighwayConfig | EcoTrafficConfig) -> dict[str, tuple[int, float]]:
+    """name -> (index, scale) of the observation of EcoHighway-v0 or EcoTraffic-v0 (both carry v, front_gap and
+    front_closing_speed)."""
+    layout = (traffic_observation_layout(cfg) if isinstance(cfg, EcoTrafficConfig)
+              else highway_observation_layout(cfg))
+    return {name: (k, scale) for k, (name, _unit, scale) in enumerate(layout)}
 
 
-def cruise_policy(cfg: EcoHighwayConfig, target_speed: float | None = None,
+def cruise_policy(cfg: EcoHighwayConfig | EcoTrafficConfig, target_speed: float | None = None,
                   gain: float = 0.5, feed_forward: float = 0.08) -> Callable[[np.ndarray], np.ndarray]:
     """Speed hold at target_speed [m/s] (default: the config's initial speed): u = feed_forward + gain * (v* - v)
     with gain in 1/(m/s), clipped to [-1, 1]; ignores the traffic."""
@@ -63,7 +68,7 @@ def cruise_policy(cfg: EcoHighwayConfig, target_speed: float | None = None,
     return policy
 
 
-def idm_policy(cfg: EcoHighwayConfig, target_speed: float | None = None, max_accel: float = 1.5,
+def idm_policy(cfg: EcoHighwayConfig | EcoTrafficConfig, target_speed: float | None = None, max_accel: float = 1.5,
                comfort_decel: float = 2.0, time_gap: float = 1.5, min_gap: float = 5.0,
                feed_forward: float = 0.08) -> Callable[[np.ndarray], np.ndarray]:
     """IDM: a = a_max (1 - (v / v0)^4 - (s*(v, dv) / gap)^2), s* = s0 + v T + v dv / (2 sqrt(a_max b)) [m/s^2],

@@ -1,0 +1,211 @@
+"""Fidelity of ``roadload/EcoTraffic-v0`` (native backend) against ``roadload/EcoHighway-v0`` (highway-env, the
+reference) on the same scenario, both egos driven by the same IDM follower (roadload.experiments.rl.highway).
+
+Scenario: EcoTraffic-v0's configuration with a straight road (``curvature=False``, as highway-env's) and its
+equivalent EcoHighway-v0 configuration (roadload.gym.traffic_reference.highway_config: lanes, density, vehicle
+count, IDM/MOBIL parameters, frequencies, duration). Episode k is reset with seed ``seed0 + k`` on both backends
+(each draws its traffic from its own generator: the same distribution, different draws) and with the same road
+seed (the same grade under both egos).
+
+Measured from the vehicle states after every env step, with one function for both backends
+(:func:`traffic_samples`):
+
+- speed of every traffic vehicle [m/s];
+- time headway of every traffic vehicle with a leader on its lane: bumper gap / speed [s] (leader = the nearest
+  vehicle ahead within 3 m of the lane's centre line, the ego included, as highway-env's neighbour search);
+- lane changes of the traffic: changes of a vehicle's lane between steps, per vehicle and minute;
+- per episode: the ego crashed; its source energy, distance and mean speed (energy per km = total energy / total
+  distance over the episodes).
+
+The table gives each backend's figure, the relative difference native / reference - 1 with a 95 % bootstrap
+interval over episodes, the two-sample Kolmogorov-Smirnov distance of the speed and headway distributions, and the
+target of each row.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+import pandas as pd
+
+from roadload.gym.config import EcoTrafficConfig, make_config
+from roadload.gym.highway import EcoHighwayEnv
+from roadload.gym.traffic import EcoTrafficEnv
+from roadload.gym.traffic_model import LANE_MARGIN, LANE_WIDTH, LENGTH, V_LANE, V_SPEED, V_X, V_Y
+from roadload.gym.traffic_reference import highway_config
+
+from .highway import idm_policy
+
+FIDELITY_TARGETS = {"headway_median_s": 0.10, "speed_median_mps": 0.10, "lane_changes_per_vehicle_min": 0.25,
+                    "ego_energy_Wh_per_km": 0.03}
+"""Relative tolerance of each compared figure (|native / reference - 1|)."""
+BACKENDS = ("native", "highway-env")
+
+
+@dataclass
+class EpisodeSamples:
+    """What one episode gave (module docstring)."""
+
+    speeds: list[np.ndarray] = field(default_factory=list)
+    headways: list[np.ndarray] = field(default_factory=list)
+    lane_changes: int = 0
+    vehicle_minutes: float = 0.0
+    crashed: bool = False
+    energy_J: float = 0.0
+    distance_m: float = 0.0
+    duration_s: float = 0.0
+
+
+def vehicle_arrays(env: Any) -> np.ndarray:
+    """(vehicles, 4) x [m], y [m], speed [m/s], lane of every vehicle (row 0 the ego) of either backend."""
+    if isinstance(env, EcoTrafficEnv):
+        v = env.vehicles
+        return v[:, [V_X, V_Y, V_SPEED, V_LANE]]
+    return np.array([[veh.position[0], veh.position[1], veh.speed, veh.lane_index[2]] for veh in env.road.vehicles])
+
+
+def time_headways(state: np.ndarray, lanes: int) -> np.ndarray:
+    """Bumper gap / speed [s] of every traffic vehicle (rows 1..) with a leader on its lane and speed > 0.1 m/s."""
+    x, y, v, lane = state[:, 0], state[:, 1], state[:, 2], state[:, 3].astype(int)
+    on = np.abs(y[None, :] - np.arange(lanes)[:, None] * LANE_WIDTH) <= LANE_WIDTH / 2 + LANE_MARGIN  # (lanes, n)
+    out = []
+    for j in range(1, len(x)):
+        ahead = on[lane[j]] & (x >= x[j])
+        ahead[j] = False
+        if not ahead.any() or v[j] <= 0.1:
+            continue
+        gap = x[ahead].min() - x[j] - LENGTH
+        out.append(gap / v[j])
+    return np.asarray(out)
+
+
+def run_episode(env: Any, policy: Callable[[np.ndarray], np.ndarray], seed: int, road_seed: int,
+                lanes: int, step_time: float) -> EpisodeSamples:
+    """One episode of either backend under ``policy`` with the episode seed and road seed given."""
+    obs, info = env.reset(seed=int(seed), options={"road_seed": int(road_seed)})
+    out = EpisodeSamples()
+    state = vehicle_arrays(env)
+    e0 = info["source_energy_total"]
+    done = False
+    while not done:
+        obs, _, terminated, truncated, info = env.step(policy(obs))
+        done = terminated or truncated
+        new = vehicle_arrays(env)
+        out.speeds.append(new[1:, 2].copy())
+        out.headways.append(time_headways(new, lanes))
+        out.lane_changes += int(np.count_nonzero(new[1:, 3] != state[1:, 3]))
+        out.vehicle_minutes += (len(new) - 1) * step_time / 60.0
+        state = new
+    out.crashed = bool(info["crashed"])
+    out.energy_J = float(info["source_energy_total"] - e0)
+    out.distance_m = float(info["s"])
+    out.duration_s = float(info["t"])
+    return out
+
+
+def make_backend(backend: str, cfg: EcoTrafficConfig) -> Any:
+    if backend == "native":
+        return EcoTrafficEnv(cfg)
+    if backend == "highway-env":
+        return EcoHighwayEnv(highway_config(cfg))
+    raise ValueError(f"backend: expected one of {BACKENDS}, got {backend!r}")
+
+
+def run_backend(backend: str, cfg: EcoTrafficConfig, episodes: int, seed0: int = 0,
+                progress: Callable[[str], None] | None = None) -> tuple[list[EpisodeSamples], float]:
+    """``episodes`` IDM-driven episodes of one backend; (samples, wall seconds)."""
+    env = make_backend(backend, cfg)
+    # the same follower on each backend's observation layout (it reads speed, front gap and closing speed)
+    policy = idm_policy(cfg if backend == "native" else highway_config(cfg))
+    rng = np.random.default_rng(12345)
+    road_seeds = rng.integers(*cfg.road_seed_range, size=episodes)
+    t0 = time.perf_counter()
+    out = []
+    for k in range(episodes):
+        out.append(run_episode(env, policy, seed0 + k, int(road_seeds[k]), cfg.lanes_count,
+                               1.0 / cfg.policy_frequency))
+        if progress:
+            progress(f"{backend} episode {k + 1}/{episodes}")
+    env.close()
+    return out, time.perf_counter() - t0
+
+
+# --------------------------------------------------------------------------------------------- statistics
+def episode_metrics(samples: list[EpisodeSamples]) -> dict[str, np.ndarray]:
+    """Per-episode sums the figures are ratios of (for the bootstrap over episodes)."""
+    return {"lane_changes": np.array([s.lane_changes for s in samples], float),
+            "vehicle_minutes": np.array([s.vehicle_minutes for s in samples]),
+            "energy": np.array([s.energy_J for s in samples]),
+            "distance": np.array([s.distance_m for s in samples]),
+            "duration": np.array([s.duration_s for s in samples]),
+            "crashed": np.array([s.crashed for s in samples], float)}
+
+
+def _pooled(samples: list[EpisodeSamples], name: str, idx: np.ndarray) -> np.ndarray:
+    parts = [a for k in idx for a in getattr(samples[k], name)]
+    return np.concatenate(parts) if parts else np.zeros(0)
+
+
+def figures(samples: list[EpisodeSamples], idx: np.ndarray | None = None) -> dict[str, float]:
+    """The compared figures over the episodes ``idx`` (all by default)."""
+    idx = np.arange(len(samples)) if idx is None else idx
+    m = {k: v[idx] for k, v in episode_metrics(samples).items()}
+    speeds = _pooled(samples, "speeds", idx)
+    heads = _pooled(samples, "headways", idx)
+    return {"headway_median_s": float(np.median(heads)) if heads.size else float("nan"),
+            "speed_median_mps": float(np.median(speeds)) if speeds.size else float("nan"),
+            "lane_changes_per_vehicle_min": float(m["lane_changes"].sum() / max(m["vehicle_minutes"].sum(), 1e-9)),
+            "ego_energy_Wh_per_km": float(m["energy"].sum() / 3.6 / max(m["distance"].sum(), 1e-9)),
+            "ego_collision_rate": float(m["crashed"].mean()),
+            "ego_mean_speed_kmh": float(m["distance"].sum() / max(m["duration"].sum(), 1e-9) * 3.6)}
+
+
+def ks_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """Two-sample Kolmogorov-Smirnov statistic sup |F_a - F_b|."""
+    a, b = np.sort(a), np.sort(b)
+    grid = np.concatenate([a, b])
+    return float(np.max(np.abs(np.searchsorted(a, grid, side="right") / a.size
+                               - np.searchsorted(b, grid, side="right") / b.size)))
+
+
+def fidelity_table(native: list[EpisodeSamples], reference: list[EpisodeSamples], n_boot: int = 400,
+                   seed: int = 0) -> pd.DataFrame:
+    """One row per figure: native, reference, native / reference - 1, its 95 % bootstrap interval (episodes
+    resampled independently on each backend), the target, and whether the point estimate meets it."""
+    fn, fr = figures(native), figures(reference)
+    rng = np.random.default_rng(seed)
+    boots: dict[str, list[float]] = {k: [] for k in fn}
+    for _ in range(n_boot):
+        bn = figures(native, rng.integers(0, len(native), len(native)))
+        br = figures(reference, rng.integers(0, len(reference), len(reference)))
+        for k in fn:
+            boots[k].append(bn[k] / br[k] - 1.0 if br[k] not in (0.0,) and np.isfinite(br[k]) else np.nan)
+    rows = []
+    for k in fn:
+        rel = fn[k] / fr[k] - 1.0 if fr[k] != 0 else float("nan")
+        lo, hi = np.nanpercentile(boots[k], [2.5, 97.5]) if np.isfinite(boots[k]).any() else (np.nan, np.nan)
+        tol = FIDELITY_TARGETS.get(k)
+        rows.append({"figure": k, "native": fn[k], "highway-env": fr[k], "rel_diff": rel, "ci_low": lo, "ci_high": hi,
+                     "target": f"within {tol:.0%}" if tol is not None else "reported",
+                     "met": (abs(rel) <= tol) if tol is not None else None})
+    all_n = {k: np.concatenate([a for s in native for a in getattr(s, k)]) for k in ("speeds", "headways")}
+    all_r = {k: np.concatenate([a for s in reference for a in getattr(s, k)]) for k in ("speeds", "headways")}
+    rows.append({"figure": "speed KS distance", "native": ks_distance(all_n["speeds"], all_r["speeds"]),
+                 "target": "reported"})
+    rows.append({"figure": "headway KS distance", "native": ks_distance(all_n["headways"], all_r["headways"]),
+                 "target": "reported"})
+    return pd.DataFrame(rows)
+
+
+def run_fidelity(episodes: int = 60, native_episodes: int | None = None, env_config: dict[str, Any] | None = None,
+                 seed0: int = 0, progress: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """Both backends on the scenario (module docstring): the table, per-backend wall times and the samples."""
+    cfg = make_config(EcoTrafficConfig, {"curvature": False, **(env_config or {})})
+    native, t_native = run_backend("native", cfg, native_episodes or episodes, seed0, progress)
+    reference, t_ref = run_backend("highway-env", cfg, episodes, seed0, progress)
+    return {"table": fidelity_table(native, reference), "seconds": {"native": t_native, "highway-env": t_ref},
+            "episodes": {"native": len(native), "highway-env": len(reference)}, "config": cfg,
+            "native": native, "reference": reference}

@@ -46,7 +46,7 @@ each sub-env's episodes are drawn from its own generator, so sub-env i equals a 
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import gymnasium as gym
 import numpy as np
@@ -60,9 +60,9 @@ from roadload.gym import traffic_model as _tm
 from roadload.gym.actions import BOUND_TOLERANCE, validate_action, validate_actions
 from roadload.gym import batched
 from roadload.gym.config import SPACE_FIELDS_TRAFFIC, EcoTrafficConfig, GymConfigError, make_config, updated_config
-from roadload.gym.ecodrive import PREVIEW_GRID, SHIELD_GAIN, _look_ahead
-from roadload.gym.traffic_ego import (PREVIEW, EgoBatch, ego_advance, ego_road, ego_road_end, ego_state, road_key,
-                                      wheel_force)
+from roadload.gym.ecodrive import SHIELD_GAIN
+from roadload.gym.traffic_ego import (PREVIEW, EgoBatch, ego_advance, ego_at_road_end, ego_look_ahead, ego_road,
+                                      ego_state, road_key)
 from roadload.gym.traffic_model import (LANE_WIDTH, V_CRASHED, V_DELTA, V_HEADING, V_LANE, V_SPEED, V_TARGET_LANE,
                                         V_TARGET_SPEED, V_TIMER, V_X, V_Y, N_V, behaviour_array, ego_collisions,
                                         front_gap, kinematics_block, move, neighbours, traffic_act, traffic_move)
@@ -121,6 +121,50 @@ def traffic_observation_layout(config: EcoTrafficConfig) -> list[tuple[str, str,
 
 
 # --------------------------------------------------------------------------------------------- compiled stages
+class TrafficArrays(NamedTuple):
+    """Per-sub-env arrays of the compiled step (first axis: sub-env)."""
+
+    vehicles: np.ndarray
+    """(N, m, N_V) vehicle rows (roadload.gym.traffic_model.V_*), row 0 the ego."""
+    episode: np.ndarray
+    """(N, N_EP) episode values (EP_*)."""
+    terms: np.ndarray
+    """(N, 7) raw reward terms of the last step (TERM_NAMES)."""
+    obs: np.ndarray
+    """(N, n_obs) float32 observations."""
+    look_ahead: np.ndarray
+    """(N, 4, len(PREVIEW)) route table at the preview distances (rows: roadload.gym.ecodrive.RouteTable)."""
+    order: np.ndarray
+    """(N, m) int work array of the Kinematics block's sort."""
+    key: np.ndarray
+    """(N, m) work array of the Kinematics block's sort."""
+    buf: np.ndarray
+    """(N, n_obs) observation before scaling."""
+
+
+class TrafficConstants(NamedTuple):
+    """What the whole batch shares: the driver models (B_*), the road (G_*), the step (K_*), the reward weights,
+    the observation scales and preview, and the spawn constants (limit, delta low / high, decision delay)."""
+
+    behaviour: np.ndarray
+    road: np.ndarray
+    step: np.ndarray
+    weights: np.ndarray
+    scale: np.ndarray
+    preview: np.ndarray
+    spawn: np.ndarray
+
+
+class StepOutput(NamedTuple):
+    """What one step returns per sub-env (fresh arrays every step: an info a user keeps is never overwritten)."""
+
+    reward: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+    info: np.ndarray
+    """(N_INFO, N): INFO_KEYS rows, then the terms."""
+
+
 @kernel()
 def envelope_command(gap, v, v_lead, reaction_time, deceleration, leader_deceleration, margin):
     """The shield's cap on the command: SHIELD_GAIN (v_safe - v) [1], v_safe [m/s] the speed that solves
@@ -135,9 +179,10 @@ def envelope_command(gap, v, v_lead, reaction_time, deceleration, leader_deceler
 
 
 @kernel()
-def shield_cap(veh, m, K):
+def shield_cap(veh, K):
     """Stage 'shield': the lowest :func:`envelope_command` behind the ego's leader on its lane and, while
     changing, on its target lane (1 without a leader)."""
+    m = veh.shape[0]
     cap = 1.0
     for lane_k in range(2):
         lane = int(veh[0, V_LANE]) if lane_k == 0 else int(veh[0, V_TARGET_LANE])
@@ -154,19 +199,26 @@ def shield_cap(veh, m, K):
 
 
 @kernel()
-def _observe(i, veh, m, lanes, X, la, ep, K, scale, kin_order, kin_key, buf, out):
-    """Stage 'observation' of sub-env i -> out (float32): the Kinematics block, then the powertrain block
-    (value / scale, clipped to [-5, 5]); ``la`` holds the route table's grade and curvature at the preview
-    distances."""
+def _observe(i, ego, tr, c):
+    """Stage 'observation' of sub-env i -> tr.obs[i] (float32): the Kinematics block, then the powertrain block
+    (value / scale, clipped to [-5, 5]), the route table read at the ego's position first."""
+    veh = tr.vehicles[i]
+    m = veh.shape[0]
+    lanes = int(c.road[_tm.G_LANES])
+    K = c.step
+    t, s, v, a, energy, mass, climb, gear, omega = ego_state(ego, i)
+    la = tr.look_ahead[i]
+    ego_look_ahead(ego, i, c.preview, s, la)
+    buf = tr.buf[i]
     rows = int(K[K_ROWS])
-    kinematics_block(veh, m, lanes, rows, K[K_SEE_BEHIND] > 0.5, kin_order, kin_key, buf)
+    kinematics_block(veh, m, lanes, rows, K[K_SEE_BEHIND] > 0.5, tr.order[i], tr.key[i], buf)
     k = rows * 5
-    t, s, v, a, energy, mass, climb, gear, omega = ego_state(X, i)
     gap, closing = front_gap(veh, m)
+    e = tr.episode[i]
     buf[k] = v
     buf[k + 1] = a
-    buf[k + 2] = ep[EP_U]
-    buf[k + 3] = ep[EP_POWER]
+    buf[k + 2] = e[EP_U]
+    buf[k + 3] = e[EP_POWER]
     buf[k + 4] = gear
     buf[k + 5] = omega
     k += 6
@@ -178,134 +230,133 @@ def _observe(i, veh, m, lanes, X, la, ep, K, scale, kin_order, kin_key, buf, out
     buf[k] = veh[0, V_LANE] / max(lanes - 1, 1)
     buf[k + 1] = min(gap, GAP_CAP)
     buf[k + 2] = closing
+    e[EP_GAP] = gap
+    out = tr.obs[i]
+    scale = c.scale
     for j in range(buf.size):
         o = buf[j] / scale[j]
         out[j] = np.float32(-5.0 if o < -5.0 else (5.0 if o > 5.0 else o))
 
 
 @kernel()
-def _gather_info(i, veh, m, X, ep, terms, with_terms, info):
+def _gather_info(i, ego, tr, with_terms, info):
     """Stage 'info' of sub-env i -> column i of the info block (INFO_KEYS, then the terms, zero without)."""
-    t, s, v, a, energy, mass, climb, gear, omega = ego_state(X, i)
+    t, s, v, a, energy, mass, climb, gear, omega = ego_state(ego, i)
+    veh = tr.vehicles[i]
+    e = tr.episode[i]
     info[0, i] = v
     info[1, i] = veh[0, V_CRASHED]
     info[2, i] = veh[0, V_LANE]
     info[3, i] = s
     info[4, i] = t
     info[5, i] = energy
-    info[6, i] = ep[EP_GAP]
-    info[7, i] = ep[EP_ROAD_SEED]
-    info[8, i] = ep[EP_SHIELD]
+    info[6, i] = e[EP_GAP]
+    info[7, i] = e[EP_ROAD_SEED]
+    info[8, i] = e[EP_SHIELD]
+    terms = tr.terms[i]
     for k in range(7):
         info[I_TERMS + k, i] = terms[k] if with_terms else 0.0
 
 
 @kernel()
-def _step_range(lo, hi, active, u, lane_request, veh, m, beh, geo, K, W, ep, scale,
-                X, slot, rng, cmd, log, cycle, F, P, start, tabs, ti, road, road_n, stops, stops_n, table, table_n,
-                preview, obs, reward, term, trunc, info, terms, la, kin_order, kin_key, buf, work):
-    """One env step of sub-envs lo..hi-1 as named stages: action (clip, lane request, shield), frames (traffic
-    decisions, ego powertrain, ego and traffic kinematics, headway, collisions), done flags, reward, observation,
-    info. A sub-env that is not active (reset in this step: next-step autoreset) gets reward 0, no done flags and
-    its info only. W = (progress, energy, mechanical, collision, headway, jerk, lane_change, scale)."""
-    lanes = int(geo[_tm.G_LANES])
-    frames = int(K[K_FRAMES])
-    n_sub = int(K[K_N_SUB])
+def _frame(i, ui, ego, tr, c, work):
+    """One traffic frame of sub-env i under the command ui: the traffic decides (MOBIL, IDM, steering; the ego
+    steers to its target lane); the ego's powertrain runs n_sub substeps under the wheel force of ui at the
+    frame's starting speed and the ego moves the distance driven along its heading; the terms accumulate
+    (distance, source energy, mechanical energy 0.5 m v^2 + m g h, jerk^2 dt, the headway deficit
+    (h_min - gap / max(v, 1))+ dt behind the leader before the traffic moves); the traffic moves; the ego is tested
+    for collisions. Returns whether the ego crashed."""
+    veh = tr.vehicles[i]
+    m = veh.shape[0]
+    K = c.step
     dt = K[K_DT]
+    tm = tr.terms[i]
+    traffic_act(veh, m, c.behaviour, c.road)
+    t0, s0, v0, a0, en0, mass0, climb0, g0, w0 = ego_state(ego, i)
+    ego_advance(ego, i, ui, int(K[K_N_SUB]))
+    t1, s1, v1, a1, en1, mass1, climb1, g1, w1 = ego_state(ego, i)
+    move(veh, 0, int(c.road[_tm.G_LANES]), dt, s1 - s0)
+    veh[0, V_SPEED] = v1
+    tm[0] += s1 - s0
+    tm[1] += en1 - en0
+    tm[2] += 0.5 * mass1 * (v1 * v1 - v0 * v0) + climb1 - climb0
+    jerk = (a1 - a0) / dt
+    tm[5] += jerk * jerk * dt
     h_min = K[K_MIN_HEADWAY]
+    if h_min > 0.0:
+        gap, closing = front_gap(veh, m)
+        headway = gap / max(v1, 1.0)
+        if headway < h_min:
+            tm[4] += (h_min - headway) * dt
+    traffic_move(veh, m, c.road, dt)
+    return ego_collisions(veh, m, dt, work)
+
+
+@kernel()
+def _step_range(lo, hi, active, u, lane_request, ego, tr, c, out, work):
+    """One env step of sub-envs lo..hi-1 as named stages: action (clip, lane request, shield), frames
+    (:func:`_frame`), done flags, reward, observation, info. A sub-env that is not active (reset in this step:
+    next-step autoreset) gets reward 0, no done flags and its info only. Weights W = (progress, energy,
+    mechanical, collision, headway, jerk, lane_change, scale)."""
+    K = c.step
+    W = c.weights
+    lanes = int(c.road[_tm.G_LANES])
     for i in range(lo, hi):
-        vi = veh[i]
-        e = ep[i]
-        tm = terms[i]
+        veh = tr.vehicles[i]
+        e = tr.episode[i]
+        tm = tr.terms[i]
         for k in range(7):
             tm[k] = 0.0
         if not active[i]:
-            reward[i] = 0.0
-            term[i] = False
-            trunc[i] = False
-            _gather_info(i, vi, m, X, e, tm, False, info)
+            out.reward[i] = 0.0
+            out.terminated[i] = False
+            out.truncated[i] = False
+            _gather_info(i, ego, tr, False, out.info)
             continue
         # stage 'action': u clipped to [-1, 1]; a lane request moves the target lane by one (if it exists)
         ui = u[i]
         ui = -1.0 if ui < -1.0 else (1.0 if ui > 1.0 else ui)
         if K[K_LANE_CHANGES] > 0.5 and lane_request[i] != 0:
-            target = int(vi[0, V_TARGET_LANE]) + lane_request[i]
+            target = int(veh[0, V_TARGET_LANE]) + lane_request[i]
             target = 0 if target < 0 else (lanes - 1 if target > lanes - 1 else target)
-            if target != int(vi[0, V_TARGET_LANE]) and abs(vi[0, V_Y] - target * LANE_WIDTH) <= 2 * LANE_WIDTH:
-                vi[0, V_TARGET_LANE] = target
+            if target != int(veh[0, V_TARGET_LANE]) and abs(veh[0, V_Y] - target * LANE_WIDTH) <= 2 * LANE_WIDTH:
+                veh[0, V_TARGET_LANE] = target
                 tm[6] = 1.0
         # stage 'shield': u <= SHIELD_GAIN (v_safe - v), at least full braking
         e[EP_SHIELD] = 0.0
         if K[K_SHIELD] > 0.5:
-            cap = shield_cap(vi, m, K)
+            cap = shield_cap(veh, K)
             if cap < ui:
                 ui = max(cap, -1.0)
                 e[EP_SHIELD] = 1.0
+        # stage 'frames'
         crashed = False
-        step_energy = 0.0
-        for _ in range(frames):
-            # stage 'traffic decisions' (MOBIL, IDM, steering; the ego steers to its target lane)
-            traffic_act(vi, m, beh, geo)
-            # stage 'ego powertrain': the wheel force of u at the frame's starting speed, n_sub substeps
-            t0, s0, v0, a0, en0, mass0, climb0, g0, w0 = ego_state(X, i)
-            ego_advance(i, wheel_force(ui, v0, F), n_sub, X, slot, rng, cmd, log, cycle, P, tabs, ti, road, road_n,
-                        stops, stops_n)
-            t1, s1, v1, a1, en1, mass1, climb1, g1, w1 = ego_state(X, i)
-            # stage 'ego kinematics': moved by the distance driven along its heading; speed from the powertrain
-            move(vi, 0, lanes, dt, s1 - s0)
-            vi[0, V_SPEED] = v1
-            # stage 'terms': distance, source energy, mechanical energy 0.5 m v^2 + m g h, jerk^2 dt, and the
-            # headway deficit (h_min - gap / max(v, 1))+ dt behind the leader (the traffic not yet moved)
-            tm[0] += s1 - s0
-            tm[1] += en1 - en0
-            tm[2] += 0.5 * mass1 * (v1 * v1 - v0 * v0) + climb1 - climb0
-            jerk = (a1 - a0) / dt
-            tm[5] += jerk * jerk * dt
-            if h_min > 0.0:
-                gap, closing = front_gap(vi, m)
-                headway = gap / max(v1, 1.0)
-                if headway < h_min:
-                    tm[4] += (h_min - headway) * dt
-            step_energy += en1 - en0
-            # stage 'traffic kinematics' and stage 'collisions' (the ego against every vehicle)
-            traffic_move(vi, m, geo, dt)
-            if ego_collisions(vi, m, dt, work):
+        energy0 = ego_state(ego, i)[4]
+        for _ in range(int(K[K_FRAMES])):
+            if _frame(i, ui, ego, tr, c, work):
                 crashed = True
                 break
         tm[3] = 1.0 if crashed else 0.0
         # stage 'done flags': a crash terminates; the duration or the road's end truncates
         e[EP_TIME] += K[K_STEP_TIME]
-        t1, s1, v1, a1, en1, mass1, climb1, g1, w1 = ego_state(X, i)
-        terminated = crashed
-        truncated = (not terminated) and (e[EP_TIME] >= e[EP_DURATION] or s1 >= ego_road_end(P, slot, i) - 1e-6)
-        term[i] = terminated
-        trunc[i] = truncated
+        out.terminated[i] = crashed
+        out.truncated[i] = (not crashed) and (e[EP_TIME] >= e[EP_DURATION] or ego_at_road_end(ego, i))
         # stage 'reward'
-        reward[i] = W[7] * (W[0] * tm[0] - W[1] * tm[1] + W[2] * tm[2] - W[3] * tm[3] - W[4] * tm[4]
-                            - W[5] * tm[5] - W[6] * tm[6])
+        out.reward[i] = W[7] * (W[0] * tm[0] - W[1] * tm[1] + W[2] * tm[2] - W[3] * tm[3] - W[4] * tm[4]
+                                - W[5] * tm[5] - W[6] * tm[6])
         e[EP_U] = ui
-        e[EP_POWER] = step_energy / K[K_STEP_TIME]
+        e[EP_POWER] = (ego_state(ego, i)[4] - energy0) / K[K_STEP_TIME]
         # stage 'observation' and stage 'info'
-        gap, closing = front_gap(vi, m)
-        e[EP_GAP] = gap
-        lai = la[i]
-        k = slot[i]
-        _look_ahead(table[k, :, :table_n[k]], PREVIEW_GRID, preview, s1, lai)
-        _observe(i, vi, m, lanes, X, lai, e, K, scale, kin_order[i], kin_key[i], buf[i], obs[i])
-        _gather_info(i, vi, m, X, e, tm, True, info)
+        _observe(i, ego, tr, c)
+        _gather_info(i, ego, tr, True, out.info)
 
 
 @kernel(parallel=True)
-def _step_threads(n_chunks, active, u, lane_request, veh, m, beh, geo, K, W, ep, scale,
-                  X, slot, rng, cmd, log, cycle, F, P, start, tabs, ti, road, road_n, stops, stops_n, table, table_n,
-                  preview, obs, reward, term, trunc, info, terms, la, kin_order, kin_key, buf, work):
+def _step_threads(n_chunks, active, u, lane_request, ego, tr, c, out, work):
     """_step_range over n_chunks contiguous blocks of sub-envs, one numba thread each."""
-    n = veh.shape[0]
-    for c in prange(n_chunks):
-        _step_range(c * n // n_chunks, (c + 1) * n // n_chunks, active, u, lane_request, veh, m, beh, geo, K, W,
-                    ep, scale, X, slot, rng, cmd, log, cycle, F, P, start, tabs, ti, road, road_n, stops, stops_n,
-                    table, table_n, preview, obs, reward, term, trunc, info, terms, la, kin_order, kin_key, buf,
-                    work[c])
+    n = active.shape[0]
+    for k in prange(n_chunks):
+        _step_range(k * n // n_chunks, (k + 1) * n // n_chunks, active, u, lane_request, ego, tr, c, out, work[k])
 
 
 @kernel()
@@ -320,8 +371,8 @@ def spawn_traffic(vi, uniforms, lanes, initial_speed, limit, density, delta_low,
     m = vi.shape[0]
     crowding = math.exp(-5.0 / 40.0 * lanes)
     for j in range(m):
-        for c in range(N_V):
-            vi[j, c] = 0.0
+        for col in range(N_V):
+            vi[j, col] = 0.0
         lane = min(int(uniforms[j] * lanes), lanes - 1)
         vi[j, V_Y] = lane * LANE_WIDTH
         vi[j, V_LANE] = lane
@@ -345,35 +396,25 @@ def spawn_traffic(vi, uniforms, lanes, initial_speed, limit, density, delta_low,
 
 
 @kernel()
-def _reset_envs(index, uniforms, rng_states, params, veh, m, lanes, beh_spawn, ep, X, slot, rng, cmd, start,
-                table, table_n, preview, K, scale, la, kin_order, kin_key, buf, obs, info, terms):
-    """The start of an episode for sub-envs ``index``: traffic spawned from their uniforms, the ego at its road's
-    start state with its random stream, episode values zeroed (params = initial speed, density, duration, road
-    seed), the first observation and info. beh_spawn = (limit, delta low, delta high, decision delay)."""
+def _start_episodes(index, uniforms, params, ego, tr, c, info):
+    """The start of an episode for sub-envs ``index`` (the egos already at their roads' start): traffic spawned
+    from their uniforms, episode values zeroed (params = initial speed, density, duration, road seed), the first
+    observation and info."""
+    lanes = int(c.road[_tm.G_LANES])
+    sp = c.spawn
     for r in range(index.size):
         i = index[r]
         p = params[r]
-        spawn_traffic(veh[i], uniforms[r], lanes, p[0], beh_spawn[0], p[1], beh_spawn[1], beh_spawn[2],
-                      beh_spawn[3])
-        X[i] = start[slot[i]]
-        rng[i, 0] = rng_states[r]
-        for c in range(cmd.shape[1]):
-            cmd[i, c] = 0.0
-        e = ep[i]
-        for c in range(e.size):
-            e[c] = 0.0
+        spawn_traffic(tr.vehicles[i], uniforms[r], lanes, p[0], sp[0], p[1], sp[1], sp[2], sp[3])
+        e = tr.episode[i]
+        for col in range(e.size):
+            e[col] = 0.0
         e[EP_DURATION] = p[2]
         e[EP_ROAD_SEED] = p[3]
-        vi = veh[i]
-        gap, closing = front_gap(vi, m)
-        e[EP_GAP] = gap
-        t, s, v, a, energy, mass, climb, gear, omega = ego_state(X, i)
-        k = slot[i]
-        _look_ahead(table[k, :, :table_n[k]], PREVIEW_GRID, preview, s, la[i])
-        _observe(i, vi, m, lanes, X, la[i], e, K, scale, kin_order[i], kin_key[i], buf[i], obs[i])
-        for c in range(terms.shape[1]):
-            terms[i, c] = 0.0
-        _gather_info(i, vi, m, X, e, terms[i], False, info)
+        for col in range(tr.terms.shape[1]):
+            tr.terms[i, col] = 0.0
+        _observe(i, ego, tr, c)
+        _gather_info(i, ego, tr, False, info)
 
 
 @kernel()
@@ -403,35 +444,42 @@ class TrafficBatch:
         self.m = config.vehicles_count + 1
         self.layout = traffic_observation_layout(config)
         self.n_obs = len(self.layout)
-        self.veh = np.zeros((n, self.m, N_V))
-        self.ep = np.zeros((n, N_EP))
+        m = self.m
+        self.arrays = TrafficArrays(vehicles=np.zeros((n, m, N_V)), episode=np.zeros((n, N_EP)),
+                                    terms=np.zeros((n, 7)), obs=np.zeros((n, self.n_obs), dtype=np.float32),
+                                    look_ahead=np.zeros((n, 4, PREVIEW.size)), order=np.zeros((n, m), np.int64),
+                                    key=np.zeros((n, m)), buf=np.zeros((n, self.n_obs)))
         self.ego = EgoBatch(n, config.vehicle)
-        self.obs = np.zeros((n, self.n_obs), dtype=np.float32)
-        self.terms = np.zeros((n, 7))
-        self.la = np.zeros((n, 4, PREVIEW.size))
-        self.kin_order = np.zeros((n, self.m), dtype=np.int64)
-        self.kin_key = np.zeros((n, self.m))
-        self.buf = np.zeros((n, self.n_obs))
         self.work = np.zeros((max(threads, 1), 2, 5, 2))
-        self.scale = np.array([row[2] for row in self.layout])
-        self.preview = PREVIEW.copy()
         self._reset_info = np.zeros((N_INFO, n))
         self._set_shared(config)
 
+    @property
+    def veh(self) -> np.ndarray:
+        return self.arrays.vehicles
+
+    @property
+    def obs(self) -> np.ndarray:
+        return self.arrays.obs
+
     def _set_shared(self, cfg: EcoTrafficConfig) -> None:
         self.config = cfg
-        self.beh = behaviour_array(cfg.traffic)
-        self.spawn_constants = np.array([cfg.speed_limit, cfg.traffic.delta_range[0], cfg.traffic.delta_range[1],
-                                         cfg.traffic.lane_change_delay])
-        self.geo = np.array([cfg.lanes_count, cfg.speed_limit], dtype=np.float64)
         sh = cfg.shield
-        self.K = np.array([cfg.frames_per_action, cfg.n_substeps, 1.0 / cfg.simulation_frequency,
-                           1.0 / cfg.policy_frequency, cfg.min_time_headway, cfg.lane_changes == "box",
-                           cfg.kinematics_rows, cfg.see_behind, sh.enabled, sh.reaction_time, sh.deceleration,
-                           sh.leader_deceleration, sh.margin], dtype=np.float64)
         w = cfg.reward
-        self.W = np.array([w.progress, w.energy, w.mechanical_energy, w.collision, w.headway, w.jerk, w.lane_change,
-                           w.scale])
+        step = np.array([cfg.frames_per_action, cfg.n_substeps, 1.0 / cfg.simulation_frequency,
+                         1.0 / cfg.policy_frequency, cfg.min_time_headway, cfg.lane_changes == "box",
+                         cfg.kinematics_rows, cfg.see_behind, sh.enabled, sh.reaction_time, sh.deceleration,
+                         sh.leader_deceleration, sh.margin], dtype=np.float64)
+        self.constants = TrafficConstants(
+            behaviour=behaviour_array(cfg.traffic),
+            road=np.array([cfg.lanes_count, cfg.speed_limit], dtype=np.float64),
+            step=step,
+            weights=np.array([w.progress, w.energy, w.mechanical_energy, w.collision, w.headway, w.jerk,
+                              w.lane_change, w.scale]),
+            scale=np.array([row[2] for row in self.layout]),
+            preview=PREVIEW.copy(),
+            spawn=np.array([cfg.speed_limit, cfg.traffic.delta_range[0], cfg.traffic.delta_range[1],
+                            cfg.traffic.lane_change_delay]))
 
     def shared_changes(self, cfg: EcoTrafficConfig) -> list[str]:
         """Fields that differ from the shared configuration outside PER_ENV_FIELDS."""
@@ -461,34 +509,24 @@ class TrafficBatch:
             u[:] = g.random(n_u + 2)  # the traffic's uniforms, then the road seed's and the effect noise seed's
             road_seed = fixed_seed if fixed_seed is not None else low + min(int(u[n_u] * (high - low)),
                                                                             high - low - 1)
-            self.ego.assign(i, ego_road(cfg, road_seed, base))
+            self.ego.start(i, ego_road(cfg, road_seed, base), int(u[n_u + 1] * 2.0 ** 63))
             self.configs[i] = cfg
             params[r] = (v0, density, duration, road_seed)
-        states = (uniforms[:, n_u + 1] * 2.0 ** 63).astype(np.uint64)
-        X, slot, rng, cmd, log, cycle, F, P, start, tabs, ti, road, road_n, stops, stops_n, table, table_n = \
-            self.ego.args
         self._reset_info = np.zeros((N_INFO, self.n))
-        _reset_envs(np.asarray(index, dtype=np.int64), uniforms, states, params, self.veh, self.m,
-                    self.config.lanes_count, self.spawn_constants, self.ep, X, slot, rng, cmd, start, table, table_n,
-                    self.preview, self.K, self.scale, self.la, self.kin_order, self.kin_key, self.buf, self.obs,
-                    self._reset_info, self.terms)
+        _start_episodes(np.asarray(index, dtype=np.int64), uniforms, params, self.ego.records, self.arrays,
+                        self.constants, self._reset_info)
 
-    def step(self, active: np.ndarray, u: np.ndarray, lane_request: np.ndarray
-             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The compiled step of every sub-env (active ones move): (reward, terminated, truncated, info block)."""
+    def step(self, active: np.ndarray, u: np.ndarray, lane_request: np.ndarray) -> StepOutput:
+        """The compiled step of every sub-env (active ones move)."""
         n = self.n
-        reward = np.empty(n)
-        term = np.empty(n, dtype=bool)
-        trunc = np.empty(n, dtype=bool)
-        info = np.empty((N_INFO, n))
-        args = (active, u, lane_request, self.veh, self.m, self.beh, self.geo, self.K, self.W, self.ep, self.scale,
-                *self.ego.args, self.preview, self.obs, reward, term, trunc, info, self.terms, self.la,
-                self.kin_order, self.kin_key, self.buf)
+        out = StepOutput(np.empty(n), np.empty(n, dtype=bool), np.empty(n, dtype=bool), np.empty((N_INFO, n)))
         if self.threads > 1:
-            _step_threads(self.threads, *args, self.work)
+            _step_threads(self.threads, active, u, lane_request, self.ego.records, self.arrays, self.constants, out,
+                          self.work)
         else:
-            _step_range(0, n, *args, self.work[0])
-        return reward, term, trunc, info
+            _step_range(0, n, active, u, lane_request, self.ego.records, self.arrays, self.constants, out,
+                        self.work[0])
+        return out
 
     @staticmethod
     def info_values(block: np.ndarray, i: int, with_terms: bool) -> dict[str, Any]:

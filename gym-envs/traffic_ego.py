@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -32,9 +32,11 @@ from roadload.presets import get_preset
 from roadload.road_profiles import RoadProfile, load_profile_start
 
 from roadload.gym.config import EcoTrafficConfig, GymConfigError
-from roadload.gym.ecodrive import DriveScales, RouteTable, cut_profile
+from roadload.gym import ecodrive as _ecodrive
+from roadload.gym.ecodrive import PREVIEW_GRID, DriveScales, RouteTable, cut_profile
+from roadload.gym.ecodrive import _look_ahead as look_ahead
 
-kernel = dependent_jit(__file__)
+kernel = dependent_jit(__file__, _ecodrive.__file__)
 
 PREVIEW = np.array([0.0, 100.0, 200.0])
 """Distances ahead of the ego [m] at which the observation reports grade and curvature."""
@@ -132,14 +134,13 @@ def ego_road(cfg: EcoTrafficConfig, road_seed: int, base_key: tuple | None = Non
 # --------------------------------------------------------------------------------------------- the batch
 class RoadPool:
     """The built roads one batch uses, packed side by side (a slot each) so that a reset points a sub-env at a
-    slot instead of copying ~150 kB: the simulator parameters P, the start state, the road and stop arrays and the
-    preview table of each road (the core only reads them). Slots nobody uses are reused, least recently released
+    slot instead of copying ~150 kB: the simulator parameters P, the road and stop arrays and the preview table of
+    each road (the core only reads them). Slots nobody uses are reused, least recently released
     first, once ``max_slots`` are filled."""
 
     def __init__(self, max_slots: int) -> None:
         self.max_slots = max_slots
         self.P = np.zeros((0, 1))
-        self.start = np.zeros((0, N_STATE))
         self.road = np.zeros((0, N_ROAD, 2))
         self.road_n = np.zeros(0, dtype=np.int64)
         self.stops = np.zeros((0, 1))
@@ -201,12 +202,11 @@ class RoadPool:
             self.tabs, self.ti = sim.tabs, sim.ti
         rows = slot + 1
         nr, ns, nt = sim._road.shape[1], sim._stops.size, road.route.table.shape[1]
-        for name, width in (("P", sim.P.size), ("start", None), ("road", nr), ("road_n", None),
+        for name, width in (("P", sim.P.size), ("road", nr), ("road_n", None),
                             ("stops", max(ns, 1)), ("stops_n", None), ("table", nt), ("table_n", None)):
             self._grow(name, rows, width)
         self.P[slot] = 0.0
         self.P[slot, :sim.P.size] = sim.P
-        self.start[slot] = road.start_state
         self.road[slot, :, :nr] = sim._road
         self.road_n[slot] = nr
         self.stops[slot, :ns] = sim._stops
@@ -217,9 +217,33 @@ class RoadPool:
         return slot
 
 
+class EgoRecords(NamedTuple):
+    """The egos' arrays as the compiled kernels take them: per-ego state, pool slot, effect-noise stream, command
+    and (empty) truth log; the drive scales; the road pool (simulator parameters, drive-train tables,
+    roads, stops, preview tables)."""
+
+    X: np.ndarray
+    slot: np.ndarray
+    rng: np.ndarray
+    cmd: np.ndarray
+    log: np.ndarray
+    cycle: np.ndarray
+    drive: np.ndarray
+    """(peak traction force [N], peak power [W], full brake force [N]) of the vehicle (DriveScales)."""
+    P: np.ndarray
+    tabs: np.ndarray
+    ti: np.ndarray
+    road: np.ndarray
+    road_n: np.ndarray
+    stops: np.ndarray
+    stops_n: np.ndarray
+    table: np.ndarray
+    table_n: np.ndarray
+
+
 class EgoBatch:
     """n egos (rows of the state, command and random-stream arrays), each on a road of the batch's
-    :class:`RoadPool` (``slot``); one vehicle preset for all. ``args`` are the compiled kernels' arguments."""
+    :class:`RoadPool` (``slot``); one vehicle preset for all. ``records`` are the compiled kernels' argument."""
 
     def __init__(self, n: int, vehicle: str) -> None:
         self.n = n
@@ -235,17 +259,20 @@ class EgoBatch:
         self.log = np.zeros((n, N_LOG, 0))
         self.cycle = np.zeros((2, 2))
         self.cycle[0, 1] = 1.0
-        self._args: tuple | None = None
+        self._records: EgoRecords | None = None
         self._version = -1
 
-    def assign(self, i: int, road: EgoRoad) -> int:
-        """Point row i at ``road`` (its pool slot); the start state is loaded by the compiled reset."""
+    def start(self, i: int, road: EgoRoad, noise_seed: int) -> None:
+        """Row i at the start of ``road`` (its pool slot and the start state), the effects' random stream seeded
+        with ``noise_seed``."""
         old = int(self.slot[i])
         new = self.pool.acquire(road)
         if old >= 0:
             self.pool.release(old)
         self.slot[i] = new
-        return new
+        self.X[i] = road.start_state
+        self.rng[i, 0] = np.uint64(noise_seed)
+        self.cmd[i] = 0.0
 
     def loaded(self, i: int) -> EgoRoad:
         slot = int(self.slot[i])
@@ -254,17 +281,16 @@ class EgoBatch:
         return self.pool.roads[slot]
 
     @property
-    def args(self) -> tuple:
-        """(X, slot, rng, cmd, log, cycle, F, P, start, tabs, ti, road, road_n, stops, stops_n, table, table_n)."""
+    def records(self) -> EgoRecords:
         pool = self.pool
-        if self._args is None or self._version != pool.version:
-            if pool.tabs is None:
+        if self._records is None or self._version != pool.version:
+            if pool.tabs is None or pool.ti is None:
                 raise GymConfigError("no ego loaded yet (call reset first)")
-            self._args = (self.X, self.slot, self.rng, self.cmd, self.log, self.cycle, self.drive_scales, pool.P,
-                          pool.start, pool.tabs, pool.ti, pool.road, pool.road_n, pool.stops, pool.stops_n,
-                          pool.table, pool.table_n)
+            self._records = EgoRecords(self.X, self.slot, self.rng, self.cmd, self.log, self.cycle, self.drive_scales,
+                                       pool.P, pool.tabs, pool.ti, pool.road, pool.road_n, pool.stops, pool.stops_n,
+                                       pool.table, pool.table_n)
             self._version = pool.version
-        return self._args
+        return self._records
 
 
 # --------------------------------------------------------------------------------------------- compiled access
@@ -276,36 +302,45 @@ def wheel_force(u, v, F):
 
 
 @kernel()
-def ego_advance(i, force, n_sub, X, slot, rng, cmd, log, cycle, P, tabs, ti, road, road_n, stops, stops_n):
-    """n_sub substeps (10 ms each) of ego i under the signed wheel force ``force`` [N] (regen first, friction
-    brakes for the rest), the built-in steering law keeping it on its road's curvature."""
-    c = cmd[i]
+def ego_advance(ego, i, u, n_sub):
+    """n_sub substeps (10 ms each) of ego i under the wheel force of the normalised command u at its current
+    speed (regen first, friction brakes for the rest), the built-in steering law keeping it on its road's
+    curvature."""
+    x = ego.X[i]
+    c = ego.cmd[i]
     c[C_USE_DRIVER] = 2.0
-    c[C_TRACTION] = force
+    c[C_TRACTION] = wheel_force(u, x[S_V], ego.drive)
     c[C_STEER] = np.nan
     c[C_GEAR_REQ] = -1.0
-    X[i, S_NLOG] = 0.0
-    k = slot[i]
-    physics.advance(X[i], P[k], tabs, ti, road[k, :, :road_n[k]], stops[k, :stops_n[k]], cycle, rng[i], c, log[i],
-                    n_sub)
+    x[S_NLOG] = 0.0
+    k = ego.slot[i]
+    physics.advance(x, ego.P[k], ego.tabs, ego.ti, ego.road[k, :, :ego.road_n[k]], ego.stops[k, :ego.stops_n[k]],
+                    ego.cycle, ego.rng[i], c, ego.log[i], n_sub)
 
 
 @kernel(forceinline=True)
-def ego_state(X, i):
+def ego_state(ego, i):
     """(t [s], s [m], v [m/s], a [m/s^2], source energy [J], mass [kg], climbing work m g h [J], gear,
     engine / motor speed [rad/s]) of ego i."""
-    x = X[i]
+    x = ego.X[i]
     return x[S_T], x[S_POS], x[S_V], x[S_A], x[S_E_SOURCE], x[S_MASS], x[S_W_CLIMB], x[S_GEAR], x[S_OMEGA_E]
 
 
 @kernel(forceinline=True)
-def ego_road_end(P, slot, i):
-    """Length of ego i's road [m] (its episode is truncated there)."""
-    return P[slot[i], P_ROAD_LEN]
+def ego_at_road_end(ego, i):
+    """Whether ego i has reached the end of its road (its episode is truncated there)."""
+    return ego.X[i, S_POS] >= ego.P[ego.slot[i], P_ROAD_LEN] - 1e-6
+
+
+@kernel(forceinline=True)
+def ego_look_ahead(ego, i, preview, s, out):
+    """The preview table of ego i's road (grade, curvature, ...: RouteTable rows) at s + preview -> out."""
+    k = ego.slot[i]
+    look_ahead(ego.table[k, :, :ego.table_n[k]], PREVIEW_GRID, preview, s, out)
 
 
 def describe(batch: EgoBatch, i: int) -> dict[str, Any]:
     """The ego's state as named SI values (for info and tests)."""
-    t, s, v, a, e, m, w, gear, omega = (float(x) for x in ego_state(batch.X, i))
+    t, s, v, a, e, m, w, gear, omega = (float(x) for x in ego_state(batch.records, i))
     return {"t": t, "s": s, "v": v, "a": a, "source_energy_total": e, "mass": m, "climbing_work": w,
             "gear": int(gear), "engine_speed": omega}

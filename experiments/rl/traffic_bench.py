@@ -13,12 +13,20 @@ same machine load):
 Every row steps random actions in [-1, 1] and includes its autoresets; rates are env steps per wall second and per
 CPU second of this process (the machine is shared: the CPU rate is what the code costs, the wall rate what the
 scheduler gave), with the 1-minute load average as the row started. The ratio native / reference is per round
-(same load) and its median is reported.
+(same load) and its median is reported. Command line: :func:`main` (``scripts/bench_traffic.py``).
+
+    python scripts/bench_traffic.py                       # N = 256, threads 1 and 2, 2 rounds of 5 s per row
+    python scripts/bench_traffic.py --vehicles 10 --threads 2 --rounds 3
+    python scripts/bench_traffic.py --quick               # CI smoke run (N = 16, 0.5 s per row, one round)
 """
 
 from __future__ import annotations
 
+import argparse
+import json
+import os
 import statistics
+from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
@@ -146,4 +154,42 @@ def summary_line(ratios: pd.DataFrame, n_envs: int, vehicles: int) -> str:
             f"(goal >= {TARGET_RATIO:,.0f}x: {goal}); load average {statistics.median(ratios.load_1min):.1f}")
 
 
-__all__ = ["run_traffic_benchmark", "traffic_ratios", "summary_line", "TARGET_STEPS_PER_S", "TARGET_RATIO"]
+__all__ = ["run_traffic_benchmark", "traffic_ratios", "summary_line", "main", "TARGET_STEPS_PER_S", "TARGET_RATIO"]
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Run the benchmark and print its tables (``scripts/bench_traffic.py``; module docstring)."""
+    from rich.console import Console
+
+    from .command import print_table
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--seconds", type=float, default=5.0, help="measurement time per row [s]")
+    ap.add_argument("--n-envs", type=int, default=256, help="sub-envs of the native vector env")
+    ap.add_argument("--threads", default="1,2", help="numba thread counts, comma-separated")
+    ap.add_argument("--rounds", type=int, default=2, help="interleaved rounds")
+    ap.add_argument("--vehicles", type=int, default=20, help="traffic vehicles per env")
+    ap.add_argument("--no-highway-fast", action="store_true", help="skip highway-env's highway-fast-v0 rows")
+    ap.add_argument("--json", metavar="PATH", help="also write the rows and ratios as JSON")
+    ap.add_argument("--quick", action="store_true", help="tiny run for CI")
+    a = ap.parse_args(argv)
+    try:
+        threads = tuple(int(t) for t in a.threads.split(",") if t.strip())
+    except ValueError:
+        ap.error(f"--threads: expected comma-separated integers >= 1, got {a.threads!r}")
+    if not threads or min(threads) < 1 or a.n_envs < 1 or a.rounds < 1 or a.seconds <= 0:
+        ap.error("--threads, --n-envs and --rounds must be >= 1 and --seconds > 0")
+    if a.quick:
+        a.seconds, a.n_envs, a.rounds = 0.5, 16, 1
+    console = Console(width=160)
+    console.print(f"load average (1 min) at start: {load_average():.2f} on {os.cpu_count()} cores")
+    table = run_traffic_benchmark(a.seconds, a.n_envs, threads, a.rounds, {"vehicles_count": a.vehicles},
+                                  highway_fast=not a.no_highway_fast, progress=lambda m: console.print(m))
+    print_table(console, table, "env steps per second (interleaved rounds)", "{:,.1f}")
+    ratios = traffic_ratios(table)
+    print_table(console, ratios, "EcoTraffic-v0 native against EcoHighway-v0 (highway-env), same run", "{:,.1f}")
+    console.print(summary_line(ratios, a.n_envs, a.vehicles))
+    if a.json:
+        Path(a.json).write_text(json.dumps({"rows": table.to_dict("records"), "ratios": ratios.to_dict("records")},
+                                           indent=1))

@@ -19,14 +19,24 @@ Measured from the vehicle states after every env step, with one function for bot
 
 The table gives each backend's figure, the relative difference native / reference - 1 with a 95 % bootstrap
 interval over episodes, the two-sample Kolmogorov-Smirnov distance of the speed and headway distributions, and the
-target of each row.
+target of each row. ``--paired`` starts highway-env from each native episode's start state instead of its own
+draw: the same traffic and road in both, so what differs is the models. Command line: :func:`main`
+(``scripts/traffic_fidelity.py``).
+
+    python scripts/traffic_fidelity.py --episodes 100 --out docs/results/traffic     # ~25 min (highway-env side)
+    python scripts/traffic_fidelity.py --quick                                       # CI smoke run (2 episodes)
 """
 
 from __future__ import annotations
 
+import argparse
+import json
+import tempfile
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
+
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -34,8 +44,10 @@ import pandas as pd
 from roadload.gym.config import EcoTrafficConfig, make_config
 from roadload.gym.highway import EcoHighwayEnv
 from roadload.gym.traffic import EcoTrafficEnv
-from roadload.gym.traffic_model import LANE_MARGIN, LANE_WIDTH, LENGTH, V_LANE, V_SPEED, V_X, V_Y
+from roadload.gym.traffic_model import (LANE_MARGIN, LANE_WIDTH, LENGTH, V_DELTA, V_LANE, V_SPEED, V_TIMER, V_X,
+                                        V_Y)
 from roadload.gym.traffic_reference import highway_config
+from roadload.tables import markdown_table, write_csv
 
 from .highway import idm_policy
 
@@ -82,10 +94,33 @@ def time_headways(state: np.ndarray, lanes: int) -> np.ndarray:
     return np.asarray(out)
 
 
+def place_vehicles(env: EcoHighwayEnv, start: np.ndarray) -> np.ndarray:
+    """Put EcoHighway-v0's freshly reset vehicles into the native episode's start state ``start`` (rows of
+    roadload.gym.traffic_model.V_*: position, lane, speed, desired speed, IDM exponent, decision timer; the ego's
+    speed is already its initial speed); returns the observation of that state."""
+    vehicles = env.road.vehicles
+    if len(vehicles) != start.shape[0]:
+        raise ValueError(f"start: {start.shape[0]} vehicles, EcoHighway-v0 has {len(vehicles)}")
+    for v, row in zip(vehicles, start):
+        lane = ("0", "1", int(row[V_LANE]))
+        v.position = np.array([row[V_X], row[V_Y]])
+        v.heading = 0.0
+        v.target_lane_index = lane
+        if v is not env.vehicle:
+            v.speed = v.target_speed = float(row[V_SPEED])
+            v.DELTA = float(row[V_DELTA])
+            v.timer = float(row[V_TIMER])
+        v.on_state_update()
+    return env.observation_type.observe()
+
+
 def run_episode(env: Any, policy: Callable[[np.ndarray], np.ndarray], seed: int, road_seed: int,
-                lanes: int, step_time: float) -> EpisodeSamples:
-    """One episode of either backend under ``policy`` with the episode seed and road seed given."""
+                lanes: int, step_time: float, start: np.ndarray | None = None) -> EpisodeSamples:
+    """One episode of either backend under ``policy`` with the episode seed and road seed given (``start``: the
+    vehicles' start state to place on highway-env instead of its own draw)."""
     obs, info = env.reset(seed=int(seed), options={"road_seed": int(road_seed)})
+    if start is not None:
+        obs = place_vehicles(env, start)
     out = EpisodeSamples()
     state = vehicle_arrays(env)
     e0 = info["source_energy_total"]
@@ -114,19 +149,35 @@ def make_backend(backend: str, cfg: EcoTrafficConfig) -> Any:
     raise ValueError(f"backend: expected one of {BACKENDS}, got {backend!r}")
 
 
+def native_starts(cfg: EcoTrafficConfig, episodes: int, seed0: int = 0) -> list[np.ndarray]:
+    """The vehicles' start states of the native episodes seed0 .. seed0 + episodes - 1 (road seeds as
+    :func:`run_backend` draws them)."""
+    env = EcoTrafficEnv(cfg)
+    out = []
+    for k, road_seed in enumerate(_road_seeds(cfg, episodes)):
+        env.reset(seed=seed0 + k, options={"road_seed": int(road_seed)})
+        out.append(env.vehicles)
+    return out
+
+
+def _road_seeds(cfg: EcoTrafficConfig, episodes: int) -> np.ndarray:
+    return np.random.default_rng(12345).integers(*cfg.road_seed_range, size=episodes)
+
+
 def run_backend(backend: str, cfg: EcoTrafficConfig, episodes: int, seed0: int = 0,
-                progress: Callable[[str], None] | None = None) -> tuple[list[EpisodeSamples], float]:
-    """``episodes`` IDM-driven episodes of one backend; (samples, wall seconds)."""
+                progress: Callable[[str], None] | None = None,
+                starts: list[np.ndarray] | None = None) -> tuple[list[EpisodeSamples], float]:
+    """``episodes`` IDM-driven episodes of one backend (``starts``: highway-env placed in these start states);
+    (samples, wall seconds)."""
     env = make_backend(backend, cfg)
     # the same follower on each backend's observation layout (it reads speed, front gap and closing speed)
     policy = idm_policy(cfg if backend == "native" else highway_config(cfg))
-    rng = np.random.default_rng(12345)
-    road_seeds = rng.integers(*cfg.road_seed_range, size=episodes)
+    road_seeds = _road_seeds(cfg, episodes)
     t0 = time.perf_counter()
     out = []
     for k in range(episodes):
         out.append(run_episode(env, policy, seed0 + k, int(road_seeds[k]), cfg.lanes_count,
-                               1.0 / cfg.policy_frequency))
+                               1.0 / cfg.policy_frequency, None if starts is None else starts[k]))
         if progress:
             progress(f"{backend} episode {k + 1}/{episodes}")
     env.close()
@@ -172,15 +223,18 @@ def ks_distance(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def fidelity_table(native: list[EpisodeSamples], reference: list[EpisodeSamples], n_boot: int = 400,
-                   seed: int = 0) -> pd.DataFrame:
+                   seed: int = 0, paired: bool = False) -> pd.DataFrame:
     """One row per figure: native, reference, native / reference - 1, its 95 % bootstrap interval (episodes
-    resampled independently on each backend), the target, and whether the point estimate meets it."""
+    resampled independently on each backend, or together when ``paired``), the target, and whether the point
+    estimate meets it."""
     fn, fr = figures(native), figures(reference)
     rng = np.random.default_rng(seed)
     boots: dict[str, list[float]] = {k: [] for k in fn}
     for _ in range(n_boot):
-        bn = figures(native, rng.integers(0, len(native), len(native)))
-        br = figures(reference, rng.integers(0, len(reference), len(reference)))
+        idx_n = rng.integers(0, len(native), len(native))
+        idx_r = idx_n if paired else rng.integers(0, len(reference), len(reference))
+        bn = figures(native, idx_n)
+        br = figures(reference, idx_r)
         for k in fn:
             boots[k].append(bn[k] / br[k] - 1.0 if br[k] not in (0.0,) and np.isfinite(br[k]) else np.nan)
     rows = []
@@ -200,12 +254,71 @@ def fidelity_table(native: list[EpisodeSamples], reference: list[EpisodeSamples]
     return pd.DataFrame(rows)
 
 
+def paired_episodes(native: list[EpisodeSamples], reference: list[EpisodeSamples]) -> pd.DataFrame:
+    """Per episode of a paired run: each backend's ego energy per km [Wh/km], distance [m], crash, lane changes of
+    the traffic, and the relative energy difference."""
+    rows = []
+    for k, (n, r) in enumerate(zip(native, reference)):
+        en, er = n.energy_J / 3.6 / max(n.distance_m, 1e-9), r.energy_J / 3.6 / max(r.distance_m, 1e-9)
+        rows.append({"episode": k, "native_Wh_per_km": en, "highway_env_Wh_per_km": er,
+                     "native_distance_m": n.distance_m, "highway_env_distance_m": r.distance_m,
+                     "native_crashed": n.crashed, "highway_env_crashed": r.crashed,
+                     "native_lane_changes": n.lane_changes, "highway_env_lane_changes": r.lane_changes})
+    return pd.DataFrame(rows)
+
+
 def run_fidelity(episodes: int = 60, native_episodes: int | None = None, env_config: dict[str, Any] | None = None,
-                 seed0: int = 0, progress: Callable[[str], None] | None = None) -> dict[str, Any]:
-    """Both backends on the scenario (module docstring): the table, per-backend wall times and the samples."""
+                 seed0: int = 0, progress: Callable[[str], None] | None = None,
+                 paired: bool = False) -> dict[str, Any]:
+    """Both backends on the scenario (module docstring): the table, per-backend wall times and the samples.
+    ``paired``: highway-env starts every episode from the native episode's start state (same traffic, same road),
+    so the differences are the models' and not the draws'."""
     cfg = make_config(EcoTrafficConfig, {"curvature": False, **(env_config or {})})
+    if paired and native_episodes not in (None, episodes):
+        raise ValueError("paired: both backends run the same episodes (leave native_episodes unset)")
     native, t_native = run_backend("native", cfg, native_episodes or episodes, seed0, progress)
-    reference, t_ref = run_backend("highway-env", cfg, episodes, seed0, progress)
-    return {"table": fidelity_table(native, reference), "seconds": {"native": t_native, "highway-env": t_ref},
+    starts = native_starts(cfg, episodes, seed0) if paired else None
+    reference, t_ref = run_backend("highway-env", cfg, episodes, seed0, progress, starts)
+    return {"table": fidelity_table(native, reference, paired=paired),
+            "seconds": {"native": t_native, "highway-env": t_ref},
             "episodes": {"native": len(native), "highway-env": len(reference)}, "config": cfg,
             "native": native, "reference": reference}
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Run both backends, print the table, write it (``scripts/traffic_fidelity.py``; module docstring)."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--episodes", type=int, default=100, help="IDM episodes on highway-env")
+    ap.add_argument("--native-episodes", type=int, default=None, help="IDM episodes on the native backend "
+                                                                       "(default: as many)")
+    ap.add_argument("--config", default=None, help="EcoTraffic-v0 config as JSON text (curvature is set False)")
+    ap.add_argument("--out", type=Path, default=None, help="folder for fidelity.csv / fidelity.md / fidelity.json")
+    ap.add_argument("--paired", action="store_true", help="highway-env starts from the native episodes' start "
+                                                          "states (same traffic and road per episode)")
+    ap.add_argument("--quick", action="store_true", help="2 short episodes per backend")
+    a = ap.parse_args(argv)
+    config = json.loads(a.config) if a.config else {}
+    if a.quick:
+        a.episodes, a.native_episodes = 2, 2
+        config = {"duration": 5.0, "vehicles_count": 10, **config}
+        a.out = a.out or Path(tempfile.mkdtemp(prefix="roadload-fidelity-"))
+    if a.episodes < 1:
+        ap.error("--episodes must be >= 1")
+    res = run_fidelity(a.episodes, None if a.paired else a.native_episodes, config,
+                       progress=lambda m: print(m, flush=True) if m.endswith("0/" + str(a.episodes)) else None,
+                       paired=a.paired)
+    table = res["table"]
+    print(markdown_table(table, floatfmt=".4g"))
+    print(f"episodes: {res['episodes']}; wall seconds: {({k: round(v, 1) for k, v in res['seconds'].items()})}")
+    if a.out:
+        a.out.mkdir(parents=True, exist_ok=True)
+        stem = "fidelity_paired" if a.paired else "fidelity"
+        write_csv(a.out / f"{stem}.csv", table)
+        (a.out / f"{stem}.md").write_text(markdown_table(table, floatfmt=".4g") + "\n")
+        (a.out / f"{stem}.json").write_text(json.dumps(
+            {"episodes": res["episodes"], "seconds": res["seconds"], "paired": a.paired,
+             "config": res["config"].model_dump()}, indent=1, default=str))
+        if a.paired:
+            write_csv(a.out / "fidelity_paired_episodes.csv", paired_episodes(res["native"], res["reference"]))
+        print(f"written to {a.out}")

@@ -1,6 +1,10 @@
 """PPO (stable-baselines3) on ``roadload/EcoTraffic-v0``'s native vector env, its evaluation on held-out episodes
 against the IDM follower, and the transfer of the same policy to the highway-env backend (EcoHighway-v0 in
-EcoTraffic-v0's layout, roadload.gym.traffic_reference).
+EcoTraffic-v0's layout, roadload.gym.traffic_reference). Command line: :func:`main` (``scripts/train_traffic.py``).
+
+    OMP_WAIT_POLICY=PASSIVE python scripts/train_traffic.py --seeds 0,1,2 --timesteps 2000000 --out out/rl_traffic
+    python scripts/train_traffic.py --evaluate-only --seeds 0,1,2 --out out/rl_traffic     # re-evaluate
+    python scripts/train_traffic.py --quick             # CI smoke run (4k steps, 2 + 1 held-out episodes)
 
 Training: ``n_envs`` sub-envs of the native vector env behind the SB3 adapter (same-step autoreset), episodes and
 roads drawn by the env (road seeds in the config's ``road_seed_range``, default [0, 100)). The default training
@@ -18,8 +22,10 @@ configuration there has ``curvature=False`` (the native policy was trained with 
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
+import tempfile
 import time
 from pathlib import Path
 from typing import Any, Callable
@@ -30,7 +36,7 @@ import pandas as pd
 from roadload.gym.config import EcoTrafficConfig, make_config
 from roadload.gym.sb3 import SB3VecEnv
 from roadload.gym.traffic import EcoTrafficEnv, EcoTrafficVectorEnv
-from roadload.tables import write_csv
+from roadload.tables import markdown_table, write_csv
 
 from .common import RLError, _atomic_write_bytes
 from .highway import idm_policy
@@ -236,3 +242,38 @@ def run_traffic_experiment(seeds: tuple[int, ...], timesteps: int, out_dir: Path
     (out_dir / "training_times.json").write_text(json.dumps(
         {str(s): {"wall_seconds": w, "cpu_seconds": c, "timesteps": n} for s, (w, c, n) in times.items()}, indent=1))
     return {"table": table, "summary": summary, "intervals": intervals, "times": times, "out_dir": out_dir}
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Train, evaluate and print the tables (``scripts/train_traffic.py``; module docstring)."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--seeds", default="0,1,2", help="training seeds, comma-separated")
+    ap.add_argument("--timesteps", type=int, default=2_000_000, help="env steps per seed (0.1 s of driving each)")
+    ap.add_argument("--n-envs", type=int, default=32, help="sub-envs of the native vector env")
+    ap.add_argument("--threads", type=int, default=1, help="numba threads of the vector env")
+    ap.add_argument("--episodes", type=int, default=50, help="held-out episodes on the native backend")
+    ap.add_argument("--transfer-episodes", type=int, default=20, help="held-out episodes on highway-env (0: none)")
+    ap.add_argument("--config", default=None, help="EcoTraffic-v0 config as JSON text (default: shield on)")
+    ap.add_argument("--out", type=Path, default=Path("out/rl_traffic"))
+    ap.add_argument("--evaluate-only", action="store_true", help="load the policies saved in --out")
+    ap.add_argument("--quick", action="store_true", help="tiny run for CI")
+    a = ap.parse_args(argv)
+    try:
+        seeds = tuple(int(s) for s in a.seeds.split(",") if s.strip())
+    except ValueError:
+        ap.error(f"--seeds: expected comma-separated integers, got {a.seeds!r}")
+    config = json.loads(a.config) if a.config else {}
+    if a.quick:
+        seeds, a.timesteps, a.n_envs, a.episodes, a.transfer_episodes = (0,), 4096, 8, 2, 1
+        config = {"duration": 5.0, "vehicles_count": 10, **config}
+        if a.out == Path("out/rl_traffic"):
+            a.out = Path(tempfile.mkdtemp(prefix="roadload-rl-traffic-"))
+    if not seeds or a.timesteps < 1 or a.episodes < 1:
+        ap.error("--seeds, --timesteps and --episodes must be given and >= 1")
+    res = run_traffic_experiment(seeds, a.timesteps, a.out, a.episodes, a.transfer_episodes, a.n_envs, config,
+                                 a.threads, a.evaluate_only, progress=lambda m: print(m, flush=True))
+    print(markdown_table(res["summary"], floatfmt=".4g"))
+    if len(res["intervals"]):
+        print(markdown_table(res["intervals"], floatfmt=".4g"))
+    print(f"tables and policies in {res['out_dir']}")

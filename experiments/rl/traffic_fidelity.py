@@ -195,23 +195,45 @@ def episode_metrics(samples: list[EpisodeSamples]) -> dict[str, np.ndarray]:
             "crashed": np.array([s.crashed for s in samples], float)}
 
 
-def _pooled(samples: list[EpisodeSamples], name: str, idx: np.ndarray) -> np.ndarray:
-    parts = [a for k in idx for a in getattr(samples[k], name)]
-    return np.concatenate(parts) if parts else np.zeros(0)
+class _Pooled:
+    """One pooled sample (all episodes' speeds or headways), sorted once with each value's episode, so that the
+    median of a bootstrap resample (episode k drawn c_k times) is a weighted median: O(n), no concatenation."""
+
+    def __init__(self, samples: list[EpisodeSamples], name: str) -> None:
+        parts = [np.concatenate(getattr(s, name)) if getattr(s, name) else np.zeros(0) for s in samples]
+        values = np.concatenate(parts) if parts else np.zeros(0)
+        episode = np.repeat(np.arange(len(parts)), [p.size for p in parts])
+        order = np.argsort(values, kind="stable")
+        self.values, self.episode = values[order], episode[order]
+
+    def median(self, counts: np.ndarray) -> float:
+        """The median of the pool with episode k counted counts[k] times (np.median's when all counts are 1)."""
+        if self.values.size == 0:
+            return float("nan")
+        if np.all(counts == 1):
+            return float(np.median(self.values))
+        weight = np.cumsum(counts[self.episode])
+        total = weight[-1]
+        if total == 0:
+            return float("nan")
+        lo = int(np.searchsorted(weight, (total + 1) // 2))  # the lower and upper middle of the weighted sample
+        hi = int(np.searchsorted(weight, total // 2 + 1))
+        return float(0.5 * (self.values[lo] + self.values[hi]))
 
 
-def figures(samples: list[EpisodeSamples], idx: np.ndarray | None = None) -> dict[str, float]:
-    """The compared figures over the episodes ``idx`` (all by default)."""
-    idx = np.arange(len(samples)) if idx is None else idx
-    m = {k: v[idx] for k, v in episode_metrics(samples).items()}
-    speeds = _pooled(samples, "speeds", idx)
-    heads = _pooled(samples, "headways", idx)
-    return {"headway_median_s": float(np.median(heads)) if heads.size else float("nan"),
-            "speed_median_mps": float(np.median(speeds)) if speeds.size else float("nan"),
-            "lane_changes_per_vehicle_min": float(m["lane_changes"].sum() / max(m["vehicle_minutes"].sum(), 1e-9)),
-            "ego_energy_Wh_per_km": float(m["energy"].sum() / 3.6 / max(m["distance"].sum(), 1e-9)),
-            "ego_collision_rate": float(m["crashed"].mean()),
-            "ego_mean_speed_kmh": float(m["distance"].sum() / max(m["duration"].sum(), 1e-9) * 3.6)}
+def figures(samples: list[EpisodeSamples], idx: np.ndarray | None = None,
+            pools: dict[str, _Pooled] | None = None) -> dict[str, float]:
+    """The compared figures over the episodes ``idx`` (all by default; repeated indices count repeatedly)."""
+    counts = np.ones(len(samples), dtype=np.int64) if idx is None else np.bincount(idx, minlength=len(samples))
+    pools = pools or {k: _Pooled(samples, k) for k in ("speeds", "headways")}
+    m = {k: (v * counts).sum() for k, v in episode_metrics(samples).items()}
+    n = max(counts.sum(), 1)
+    return {"headway_median_s": pools["headways"].median(counts),
+            "speed_median_mps": pools["speeds"].median(counts),
+            "lane_changes_per_vehicle_min": float(m["lane_changes"] / max(m["vehicle_minutes"], 1e-9)),
+            "ego_energy_Wh_per_km": float(m["energy"] / 3.6 / max(m["distance"], 1e-9)),
+            "ego_collision_rate": float(m["crashed"] / n),
+            "ego_mean_speed_kmh": float(m["distance"] / max(m["duration"], 1e-9) * 3.6)}
 
 
 def ks_distance(a: np.ndarray, b: np.ndarray) -> float:
@@ -227,14 +249,16 @@ def fidelity_table(native: list[EpisodeSamples], reference: list[EpisodeSamples]
     """One row per figure: native, reference, native / reference - 1, its 95 % bootstrap interval (episodes
     resampled independently on each backend, or together when ``paired``), the target, and whether the point
     estimate meets it."""
-    fn, fr = figures(native), figures(reference)
+    pn = {k: _Pooled(native, k) for k in ("speeds", "headways")}
+    pr = {k: _Pooled(reference, k) for k in ("speeds", "headways")}
+    fn, fr = figures(native, pools=pn), figures(reference, pools=pr)
     rng = np.random.default_rng(seed)
     boots: dict[str, list[float]] = {k: [] for k in fn}
     for _ in range(n_boot):
         idx_n = rng.integers(0, len(native), len(native))
         idx_r = idx_n if paired else rng.integers(0, len(reference), len(reference))
-        bn = figures(native, idx_n)
-        br = figures(reference, idx_r)
+        bn = figures(native, idx_n, pn)
+        br = figures(reference, idx_r, pr)
         for k in fn:
             boots[k].append(bn[k] / br[k] - 1.0 if br[k] not in (0.0,) and np.isfinite(br[k]) else np.nan)
     rows = []
@@ -245,13 +269,25 @@ def fidelity_table(native: list[EpisodeSamples], reference: list[EpisodeSamples]
         rows.append({"figure": k, "native": fn[k], "highway-env": fr[k], "rel_diff": rel, "ci_low": lo, "ci_high": hi,
                      "target": f"within {tol:.0%}" if tol is not None else "reported",
                      "met": (abs(rel) <= tol) if tol is not None else None})
-    all_n = {k: np.concatenate([a for s in native for a in getattr(s, k)]) for k in ("speeds", "headways")}
-    all_r = {k: np.concatenate([a for s in reference for a in getattr(s, k)]) for k in ("speeds", "headways")}
-    rows.append({"figure": "speed KS distance", "native": ks_distance(all_n["speeds"], all_r["speeds"]),
+    rows.append({"figure": "speed KS distance", "native": ks_distance(pn["speeds"].values, pr["speeds"].values),
                  "target": "reported"})
-    rows.append({"figure": "headway KS distance", "native": ks_distance(all_n["headways"], all_r["headways"]),
-                 "target": "reported"})
+    rows.append({"figure": "headway KS distance",
+                 "native": ks_distance(pn["headways"].values, pr["headways"].values), "target": "reported"})
     return pd.DataFrame(rows)
+
+
+def save_samples(path: Path, native: list[EpisodeSamples], reference: list[EpisodeSamples]) -> None:
+    """Both backends' samples in one .npz (numpy's open format): per backend the pooled speeds and headways with
+    their episode index and the per-episode sums (episode_metrics), so the table can be recomputed."""
+    arrays: dict[str, np.ndarray] = {}
+    for name, samples in (("native", native), ("highway_env", reference)):
+        for k in ("speeds", "headways"):
+            pool = _Pooled(samples, k)
+            arrays[f"{name}_{k}"] = pool.values
+            arrays[f"{name}_{k}_episode"] = pool.episode
+        for k, v in episode_metrics(samples).items():
+            arrays[f"{name}_{k}"] = v
+    np.savez_compressed(path, **arrays)
 
 
 def paired_episodes(native: list[EpisodeSamples], reference: list[EpisodeSamples]) -> pd.DataFrame:
@@ -321,4 +357,5 @@ def main(argv: list[str] | None = None) -> None:
              "config": res["config"].model_dump()}, indent=1, default=str))
         if a.paired:
             write_csv(a.out / "fidelity_paired_episodes.csv", paired_episodes(res["native"], res["reference"]))
+        save_samples(a.out / f"{stem}_samples.npz", res["native"], res["reference"])
         print(f"written to {a.out}")

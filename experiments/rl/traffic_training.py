@@ -148,7 +148,7 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
     if timesteps < 1 or n_envs < 1:
         raise RLError(f"timesteps and n_envs must be >= 1, got {timesteps}, {n_envs}")
     torch.set_num_threads(torch_threads)
-    env_config = {**TRAFFIC_TRAIN_CONFIG, **(env_config or {})}
+    env_config = dict(env_config if env_config is not None else TRAFFIC_TRAIN_CONFIG)
     make_config(EcoTrafficConfig, env_config)  # a bad key fails before any training
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -201,14 +201,20 @@ def load_traffic_policy(path: Path):
 def run_traffic_experiment(seeds: tuple[int, ...], timesteps: int, out_dir: Path, episodes: int = 50,
                            transfer_episodes: int = 20, n_envs: int = 32, env_config: dict[str, Any] | None = None,
                            threads: int = 1, evaluate_only: bool = False,
-                           progress: Callable[[str], None] | None = None) -> dict[str, Any]:
+                           progress: Callable[[str], None] | None = None,
+                           train_config: dict[str, Any] | None = None,
+                           hyperparams: dict[str, Any] | None = None) -> dict[str, Any]:
     """Train one PPO per seed (or load them with ``evaluate_only``), evaluate each with the IDM follower on
     ``episodes`` held-out native episodes and ``transfer_episodes`` on highway-env; write episodes.csv,
-    summary.csv, intervals.csv and the learning curves to ``out_dir``."""
+    summary.csv, intervals.csv and the learning curves to ``out_dir``. ``env_config`` is the evaluation's (and
+    training's) configuration; ``train_config`` overrides fields for training only (e.g. the shield off in
+    training, on when deployed)."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     env_config = {**TRAFFIC_TRAIN_CONFIG, **(env_config or {})}
     cfg = make_config(EcoTrafficConfig, env_config)
+    trained_on = {**env_config, **(train_config or {})}
+    make_config(EcoTrafficConfig, trained_on)
     models, times = {}, {}
     for s in seeds:
         if evaluate_only:
@@ -216,7 +222,8 @@ def run_traffic_experiment(seeds: tuple[int, ...], timesteps: int, out_dir: Path
             meta = json.loads((out_dir / f"ppo_traffic_seed{s}.json").read_text())
             times[s] = (meta["wall_seconds"], meta["cpu_seconds"], meta["timesteps"])
         else:
-            res = train_traffic(timesteps, out_dir, s, n_envs, env_config, threads, progress=progress)
+            res = train_traffic(timesteps, out_dir, s, n_envs, trained_on, threads, hyperparams=hyperparams,
+                                progress=progress)
             models[s] = res["model"]
             times[s] = (res["wall_seconds"], res["cpu_seconds"], res["timesteps"])
         if progress:
@@ -255,6 +262,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--episodes", type=int, default=50, help="held-out episodes on the native backend")
     ap.add_argument("--transfer-episodes", type=int, default=20, help="held-out episodes on highway-env (0: none)")
     ap.add_argument("--config", default=None, help="EcoTraffic-v0 config as JSON text (default: shield on)")
+    ap.add_argument("--train-config", default=None, help="fields overriding --config in training only, JSON text "
+                                                         "(e.g. '{\"shield\": {\"enabled\": false}}')")
+    ap.add_argument("--hyperparams", default=None, help="PPO settings overriding TRAFFIC_PPO, JSON text")
     ap.add_argument("--out", type=Path, default=Path("out/rl_traffic"))
     ap.add_argument("--evaluate-only", action="store_true", help="load the policies saved in --out")
     ap.add_argument("--quick", action="store_true", help="tiny run for CI")
@@ -272,7 +282,9 @@ def main(argv: list[str] | None = None) -> None:
     if not seeds or a.timesteps < 1 or a.episodes < 1:
         ap.error("--seeds, --timesteps and --episodes must be given and >= 1")
     res = run_traffic_experiment(seeds, a.timesteps, a.out, a.episodes, a.transfer_episodes, a.n_envs, config,
-                                 a.threads, a.evaluate_only, progress=lambda m: print(m, flush=True))
+                                 a.threads, a.evaluate_only, progress=lambda m: print(m, flush=True),
+                                 train_config=json.loads(a.train_config) if a.train_config else None,
+                                 hyperparams=json.loads(a.hyperparams) if a.hyperparams else None)
     print(markdown_table(res["summary"], floatfmt=".4g"))
     if len(res["intervals"]):
         print(markdown_table(res["intervals"], floatfmt=".4g"))

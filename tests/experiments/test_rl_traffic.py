@@ -71,3 +71,16 @@ def test_short_ppo_run_trains_saves_and_is_evaluated(tmp_path):
         train_traffic(0, tmp_path)
     with pytest.raises(RLError, match="backend"):
         evaluate_traffic({}, {}, backend="carla")
+
+
+def test_the_bootstraps_weighted_median_equals_the_median_of_the_resampled_pool():
+    from roadload.experiments.rl.traffic_fidelity import _Pooled
+
+    rng = np.random.default_rng(1)
+    episodes = [EpisodeSamples(speeds=[rng.normal(20, 3, rng.integers(1, 30)) for _ in range(rng.integers(1, 4))])
+                for _ in range(7)]
+    pool = _Pooled(episodes, "speeds")
+    for _ in range(100):
+        idx = rng.integers(0, 7, 7)
+        resampled = np.concatenate([a for k in idx for a in episodes[k].speeds])
+        assert pool.median(np.bincount(idx, minlength=7)) == pytest.approx(np.median(resampled), abs=1e-12)

@@ -73,22 +73,26 @@ def idm_policy(cfg: EcoHighwayConfig | EcoTrafficConfig, target_speed: float | N
                feed_forward: float = 0.08) -> Callable[[np.ndarray], np.ndarray]:
     """IDM: a = a_max (1 - (v / v0)^4 - (s*(v, dv) / gap)^2), s* = s0 + v T + v dv / (2 sqrt(a_max b)) [m/s^2],
     turned into the command u = feed_forward + a m / F(v) with F the traction force available at v (a >= 0) or
-    the full brake force (a < 0), clipped to [-1, 1]."""
+    the full brake force (a < 0), clipped to [-1, 1]. The returned policy takes one observation or a batch
+    (n, observation size) and returns shape (1,) or (n, 1)."""
     idx = _indices(cfg)
     (kv, sv), (kg, sg), (kc, sc) = idx["v"], idx["front_gap"], idx["front_closing_speed"]
-    v0 = cfg.initial_speed if target_speed is None else target_speed
+    v0 = max(cfg.initial_speed if target_speed is None else target_speed, 0.1)
     spec = get_preset(cfg.vehicle)
     drive = DriveScales.from_spec(spec)
     mass = spec.body.mass
+    sqrt_ab = 2.0 * math.sqrt(max_accel * comfort_decel)
 
     def policy(obs: np.ndarray) -> np.ndarray:
-        v = float(obs[kv]) * sv
-        gap = max(float(obs[kg]) * sg, 0.1)
-        dv = float(obs[kc]) * sc
-        s_star = min_gap + max(0.0, v * time_gap + v * dv / (2.0 * math.sqrt(max_accel * comfort_decel)))
-        a = max_accel * (1.0 - (v / max(v0, 0.1)) ** 4 - (s_star / gap) ** 2)
-        force = min(drive.peak_traction_force, drive.peak_power / max(v, 1.0)) if a >= 0 else drive.full_brake_force
-        return np.array([np.clip(feed_forward + a * mass / force, -1.0, 1.0)], dtype=np.float32)
+        obs = np.asarray(obs, dtype=np.float64)
+        v = obs[..., kv] * sv
+        gap = np.maximum(obs[..., kg] * sg, 0.1)
+        dv = obs[..., kc] * sc
+        s_star = min_gap + np.maximum(0.0, v * time_gap + v * dv / sqrt_ab)
+        a = max_accel * (1.0 - (v / v0) ** 4 - (s_star / gap) ** 2)
+        force = np.where(a >= 0, np.minimum(drive.peak_traction_force, drive.peak_power / np.maximum(v, 1.0)),
+                         drive.full_brake_force)
+        return np.clip(feed_forward + a * mass / force, -1.0, 1.0)[..., None].astype(np.float32)
     return policy
 
 

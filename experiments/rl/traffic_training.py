@@ -30,6 +30,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+import gymnasium as gym
 import numpy as np
 import pandas as pd
 
@@ -136,12 +137,47 @@ def sb3_predict(model) -> Callable[[np.ndarray], np.ndarray]:
     return lambda obs: model.predict(obs, deterministic=True)[0]
 
 
+class ResidualActions(gym.vector.VectorWrapper):
+    """Residual policy learning on a vector env: the agent's action a in [-1, 1] corrects a base policy,
+    u = clip(base(obs) + scale a, -1, 1) (the base sees the observation the agent sees). With the IDM follower as
+    the base, PPO starts from the follower's driving instead of from random forces."""
+
+    def __init__(self, env: gym.vector.VectorEnv, base: Callable[[np.ndarray], np.ndarray], scale: float) -> None:
+        if not 0 < scale <= 2:
+            raise RLError(f"residual scale: expected 0 < scale <= 2 (command units), got {scale}")
+        super().__init__(env)
+        self.base = base
+        self.scale = scale
+        self._obs: np.ndarray | None = None
+
+    def reset(self, **kwargs):
+        obs, info = self.env.reset(**kwargs)
+        self._obs = obs
+        return obs, info
+
+    def step(self, actions):
+        if self._obs is None:
+            raise RLError("ResidualActions: step before reset")
+        u = np.clip(self.base(self._obs) + self.scale * np.asarray(actions, dtype=np.float32), -1.0, 1.0)
+        obs, reward, terminated, truncated, info = self.env.step(u.astype(np.float32))
+        self._obs = obs  # same-step autoreset: already the next episode's first observation where one ended
+        return obs, reward, terminated, truncated, info
+
+
+def residual_policy(model, base: Callable[[np.ndarray], np.ndarray], scale: float
+                    ) -> Callable[[np.ndarray], np.ndarray]:
+    """The deployed residual policy: clip(base(obs) + scale x the agent's deterministic action, -1, 1)."""
+    return lambda obs: np.clip(base(obs) + scale * model.predict(obs, deterministic=True)[0], -1.0,
+                               1.0).astype(np.float32)
+
+
 def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32,
                   env_config: dict[str, Any] | None = None, threads: int = 1, torch_threads: int = 1,
                   hyperparams: dict[str, Any] | None = None, progress: Callable[[str], None] | None = None,
-                  report_every: int = 100_000) -> dict[str, Any]:
-    """PPO on the native vector env; saves ``ppo_traffic_seed<seed>.zip`` / ``.json`` and the learning curve
-    (training episode returns) to ``out_dir``; returns the model, its path, wall and CPU seconds."""
+                  report_every: int = 100_000, residual: float = 0.0) -> dict[str, Any]:
+    """PPO on the native vector env (``residual`` > 0: a correction of that scale on the IDM follower,
+    :class:`ResidualActions`); saves ``ppo_traffic_seed<seed>.zip`` / ``.json`` and the learning curve (training
+    episode returns) to ``out_dir``; returns the model, its path, wall and CPU seconds."""
     import torch
     from stable_baselines3 import PPO
 
@@ -152,7 +188,11 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
     make_config(EcoTrafficConfig, env_config)  # a bad key fails before any training
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    venv = SB3VecEnv(EcoTrafficVectorEnv(n_envs, config=env_config, autoreset_mode="same_step", threads=threads))
+    native: gym.vector.VectorEnv = EcoTrafficVectorEnv(n_envs, config=env_config, autoreset_mode="same_step",
+                                                       threads=threads)
+    if residual > 0:
+        native = ResidualActions(native, idm_policy(make_config(EcoTrafficConfig, env_config)), residual)
+    venv = SB3VecEnv(native)
     venv.seed(seed)
     params: dict[str, Any] = {**TRAFFIC_PPO, **(hyperparams or {})}
     params["n_steps"] = max(8, min(params["n_steps"], max(timesteps // n_envs, 8)))
@@ -180,7 +220,7 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
     _atomic_write_bytes(out_dir / f"{stem}.zip", lambda tmp: model.save(str(tmp)))
     meta = {"algo": "ppo", "env": "EcoTraffic-v0", "timesteps": int(model.num_timesteps), "n_envs": n_envs,
             "seed": seed, "env_config": env_config, "hyperparams": params, "wall_seconds": wall,
-            "cpu_seconds": cpu, "threads": threads}
+            "cpu_seconds": cpu, "threads": threads, "residual_scale": residual}
     _atomic_write_bytes(out_dir / f"{stem}.json", lambda tmp: tmp.write_text(json.dumps(meta, indent=1, default=str)))
     curve = pd.DataFrame([(t, v) for t, kind, v in callback.rows if kind == "train"],
                          columns=["timesteps", "episode_return"])
@@ -203,7 +243,7 @@ def run_traffic_experiment(seeds: tuple[int, ...], timesteps: int, out_dir: Path
                            threads: int = 1, evaluate_only: bool = False,
                            progress: Callable[[str], None] | None = None,
                            train_config: dict[str, Any] | None = None,
-                           hyperparams: dict[str, Any] | None = None) -> dict[str, Any]:
+                           hyperparams: dict[str, Any] | None = None, residual: float = 0.0) -> dict[str, Any]:
     """Train one PPO per seed (or load them with ``evaluate_only``), evaluate each with the IDM follower on
     ``episodes`` held-out native episodes and ``transfer_episodes`` on highway-env; write episodes.csv,
     summary.csv, intervals.csv and the learning curves to ``out_dir``. ``env_config`` is the evaluation's (and
@@ -215,17 +255,19 @@ def run_traffic_experiment(seeds: tuple[int, ...], timesteps: int, out_dir: Path
     cfg = make_config(EcoTrafficConfig, env_config)
     trained_on = {**env_config, **(train_config or {})}
     make_config(EcoTrafficConfig, trained_on)
-    models, times = {}, {}
+    models, times, scales = {}, {}, {}
     for s in seeds:
         if evaluate_only:
             models[s] = load_traffic_policy(out_dir / f"ppo_traffic_seed{s}.zip")
             meta = json.loads((out_dir / f"ppo_traffic_seed{s}.json").read_text())
             times[s] = (meta["wall_seconds"], meta["cpu_seconds"], meta["timesteps"])
+            scales[s] = float(meta.get("residual_scale", 0.0))
         else:
             res = train_traffic(timesteps, out_dir, s, n_envs, trained_on, threads, hyperparams=hyperparams,
-                                progress=progress)
+                                progress=progress, residual=residual)
             models[s] = res["model"]
             times[s] = (res["wall_seconds"], res["cpu_seconds"], res["timesteps"])
+            scales[s] = residual
         if progress:
             progress(f"seed {s}: {times[s][2]} steps, {times[s][0]:.0f} s wall, {times[s][1]:.0f} s CPU")
     # the IDM follower on the same configuration (its shield too) and without the shield
@@ -234,7 +276,8 @@ def run_traffic_experiment(seeds: tuple[int, ...], timesteps: int, out_dir: Path
     for backend, n_ep in (("native", episodes), ("highway-env", transfer_episodes)):
         if n_ep < 1:
             continue
-        pols = {f"PPO seed {s}": sb3_predict(m) for s, m in models.items()}
+        pols = {f"PPO seed {s}": residual_policy(m, idm_policy(cfg), scales[s]) if scales[s] > 0 else sb3_predict(m)
+                for s, m in models.items()}
         pols["IDM follower"] = idm_policy(cfg)
         tables.append(evaluate_traffic(pols, env_config, n_ep, backend, progress))
         tables.append(evaluate_traffic({"IDM follower (no shield)": idm_policy(cfg)}, unshielded, n_ep, backend,
@@ -265,6 +308,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--train-config", default=None, help="fields overriding --config in training only, JSON text "
                                                          "(e.g. '{\"shield\": {\"enabled\": false}}')")
     ap.add_argument("--hyperparams", default=None, help="PPO settings overriding TRAFFIC_PPO, JSON text")
+    ap.add_argument("--residual", type=float, default=0.0, help="> 0: PPO learns a correction of this scale [command "
+                                                                "units] on the IDM follower (0: the command itself)")
     ap.add_argument("--out", type=Path, default=Path("out/rl_traffic"))
     ap.add_argument("--evaluate-only", action="store_true", help="load the policies saved in --out")
     ap.add_argument("--quick", action="store_true", help="tiny run for CI")
@@ -284,7 +329,8 @@ def main(argv: list[str] | None = None) -> None:
     res = run_traffic_experiment(seeds, a.timesteps, a.out, a.episodes, a.transfer_episodes, a.n_envs, config,
                                  a.threads, a.evaluate_only, progress=lambda m: print(m, flush=True),
                                  train_config=json.loads(a.train_config) if a.train_config else None,
-                                 hyperparams=json.loads(a.hyperparams) if a.hyperparams else None)
+                                 hyperparams=json.loads(a.hyperparams) if a.hyperparams else None,
+                                 residual=a.residual)
     print(markdown_table(res["summary"], floatfmt=".4g"))
     if len(res["intervals"]):
         print(markdown_table(res["intervals"], floatfmt=".4g"))

@@ -84,3 +84,27 @@ def test_the_bootstraps_weighted_median_equals_the_median_of_the_resampled_pool(
         idx = rng.integers(0, 7, 7)
         resampled = np.concatenate([a for k in idx for a in episodes[k].speeds])
         assert pool.median(np.bincount(idx, minlength=7)) == pytest.approx(np.median(resampled), abs=1e-12)
+
+
+def test_residual_actions_add_the_agents_correction_to_the_idm_follower():
+    from roadload.experiments.rl.highway import idm_policy
+    from roadload.experiments.rl.traffic_training import ResidualActions
+    from roadload.gym.config import EcoTrafficConfig
+    from roadload.gym.traffic import EcoTrafficVectorEnv
+
+    config = {"vehicles_count": 8, "duration": 3.0}
+    follow = idm_policy(EcoTrafficConfig(**config))
+    plain = EcoTrafficVectorEnv(3, config=config, autoreset_mode="same_step")
+    wrapped = ResidualActions(EcoTrafficVectorEnv(3, config=config, autoreset_mode="same_step"), follow, 0.3)
+    with pytest.raises(RLError, match="before reset"):
+        wrapped.step(np.zeros((3, 1), np.float32))
+    obs_p, _ = plain.reset(seed=4)
+    obs_w, _ = wrapped.reset(seed=4)
+    correction = np.array([[0.0], [1.0], [-1.0]], np.float32)
+    for _ in range(40):  # past the 3 s episode end: the base follows the autoreset's first observation
+        expected = np.clip(follow(obs_p) + 0.3 * correction, -1.0, 1.0).astype(np.float32)
+        obs_p, r_p, *_ = plain.step(expected)
+        obs_w, r_w, *_ = wrapped.step(correction)
+        assert np.array_equal(obs_p, obs_w) and np.array_equal(r_p, r_w)
+    with pytest.raises(RLError, match="scale"):
+        ResidualActions(plain, follow, 0.0)

@@ -35,24 +35,12 @@ import pandas as pd
 from roadload.gym.config import EcoTrafficConfig, make_config
 from roadload.gym.traffic import EcoTrafficVectorEnv
 
-from .benchmark import _rates, load_average
+from roadload.experiments.rl.benchmark import call_rates, load_average, random_action_stepper
 
 TARGET_STEPS_PER_S = 100_000
 """Native env steps per wall second at N = 256 with 2 threads (10+ traffic vehicles per env)."""
 TARGET_RATIO = 1000.0
 """Goal of the native / highway-env ratio."""
-
-
-def _single_stepper(env) -> Callable[[], None]:
-    """One step of a single env under random actions, resetting at the end of an episode."""
-    env.reset(seed=0)
-    env.action_space.seed(0)
-
-    def step() -> None:
-        _, _, te, tr, _ = env.step(env.action_space.sample())
-        if te or tr:
-            env.reset()
-    return step
 
 
 def _reference_env(cfg: EcoTrafficConfig):
@@ -92,14 +80,14 @@ def run_traffic_benchmark(seconds: float = 5.0, n_envs: int = 256, threads: tupl
     seconds per wall second, load average."""
     cfg = make_config(EcoTrafficConfig, {"curvature": False, **(env_config or {})})
     step_time = 1.0 / cfg.policy_frequency
-    ref = _single_stepper(_reference_env(cfg))
+    ref = random_action_stepper(_reference_env(cfg))
     natives = {t: _native_stepper(cfg, n_envs, t, 0) for t in threads}
-    fast = _single_stepper(_highway_fast_env()) if highway_fast else None
+    fast = random_action_stepper(_highway_fast_env()) if highway_fast else None
     rows = []
 
     def add(env: str, mode: str, rnd: int, t: int, per_call: int, sim_step: float, fn: Callable[[], None]) -> None:
         load = load_average()
-        wall, cpu, n = _rates(fn, seconds)
+        wall, cpu, n = call_rates(fn, seconds)
         rows.append({"env": env, "mode": mode, "round": rnd, "threads": t, "steps_per_s": wall * per_call,
                      "steps_per_cpu_s": cpu * per_call, "simulated_s_per_wall_s": wall * per_call * sim_step,
                      "steps": n * per_call, "load_1min": load})
@@ -161,7 +149,7 @@ def main(argv: list[str] | None = None) -> None:
     """Run the benchmark and print its tables (``scripts/bench_traffic.py``; module docstring)."""
     from rich.console import Console
 
-    from .command import print_table
+    from roadload.experiments.rl.command import print_table
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -23,7 +23,9 @@ def check_counts(num_envs: Any, threads: Any) -> tuple[int, int]:
 
 def autoreset_mode(value: str | gym.vector.AutoresetMode) -> gym.vector.AutoresetMode:
     """'next_step' / 'same_step' (or the AutoresetMode itself), else GymConfigError."""
-    mode = _MODES.get(str(value).lower(), value if value in _MODES.values() else None)
+    mode = _MODES.get(str(value).lower())
+    if mode is None and isinstance(value, gym.vector.AutoresetMode) and value in _MODES.values():
+        mode = value
     if mode is None:
         raise GymConfigError(f"autoreset_mode: expected 'next_step' or 'same_step' (or the AutoresetMode), got "
                              f"{value!r}")

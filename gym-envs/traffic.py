@@ -46,7 +46,7 @@ each sub-env's episodes are drawn from its own generator, so sub-env i equals a 
 from __future__ import annotations
 
 import math
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, cast
 
 import gymnasium as gym
 import numpy as np
@@ -54,7 +54,7 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from numba import prange
 
-from roadload.envs._jit import dependent_jit
+from roadload.envs.batch import dependent_jit
 from roadload.gym import traffic_ego as _ego
 from roadload.gym import traffic_model as _tm
 from roadload.gym.actions import BOUND_TOLERANCE, validate_action, validate_actions
@@ -678,12 +678,13 @@ class EcoTrafficVectorEnv(gym.vector.VectorEnv):
         """(command (n,), lane request (n,)) from the batched actions (a compiled bounds check on the fast path,
         validate_actions otherwise and for every bad action)."""
         n = self.num_envs
-        d = self.single_action_space.shape[0]
+        space = cast(spaces.Box, self.single_action_space)
+        d = space.shape[0]
         if type(actions) is np.ndarray and actions.shape == (n, d) and actions.dtype in (np.float32, np.float64) \
                 and _actions_in_bounds(actions.reshape(-1), BOUND_TOLERANCE):
             a = actions.astype(np.float32).astype(np.float64)
         else:
-            a = validate_actions(actions, self.single_action_space, n).astype(np.float64)
+            a = validate_actions(actions, space, n).astype(np.float64)
         lane = _lane_requests(a[:, 1]) if d > 1 else np.zeros(n, dtype=np.int64)
         return np.ascontiguousarray(a[:, 0]), lane
 

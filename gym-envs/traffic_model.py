@@ -32,7 +32,7 @@ import math
 
 import numpy as np
 
-from roadload.envs._jit import dependent_jit
+from roadload.envs.batch import dependent_jit
 
 kernel = dependent_jit(__file__)
 """njit(cache=True) keyed by this module's source (and the simulator core's)."""

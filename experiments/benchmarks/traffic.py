@@ -27,8 +27,9 @@ import json
 import os
 import statistics
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, cast
 
+import gymnasium as gym
 import numpy as np
 import pandas as pd
 
@@ -61,7 +62,7 @@ def _highway_fast_env():
 def _native_stepper(cfg: EcoTrafficConfig, n_envs: int, threads: int, seed: int) -> Callable[[], None]:
     venv = EcoTrafficVectorEnv(n_envs, config=cfg, threads=threads)
     venv.reset(seed=seed)
-    d = venv.single_action_space.shape[0]
+    d = cast(gym.spaces.Box, venv.single_action_space).shape[0]
     acts = np.random.default_rng(seed).uniform(-1, 1, (256, n_envs, d)).astype(np.float32)
     k = [0]
 

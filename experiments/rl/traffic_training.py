@@ -2,8 +2,7 @@
 against the IDM follower, and the transfer of the same policy to the highway-env backend (EcoHighway-v0 in
 EcoTraffic-v0's layout, roadload.gym.traffic_reference). Command line: :func:`main` (``scripts/train_traffic.py``).
 
-    OMP_WAIT_POLICY=PASSIVE python scripts/train_traffic.py --seeds 0,1,2 --timesteps 1000000 --residual 0.3 \
-        --out out/rl_traffic
+    OMP_WAIT_POLICY=PASSIVE python scripts/train_traffic.py --seeds 0,1,2 --timesteps 1000000 --out out/rl_traffic
     python scripts/train_traffic.py --evaluate-only --seeds 0,1,2 --out out/rl_traffic     # re-evaluate
     python scripts/train_traffic.py --quick             # CI smoke run (4k steps, 2 + 1 held-out episodes)
 

@@ -32,15 +32,16 @@ def __dir__() -> list[str]:
 # Gymnasium 1.x scans no plugin entry points, so the ids are registered when ``roadload`` is imported, with string
 # entry points (the env modules load only on ``gymnasium.make``). ``gymnasium.make("roadload:roadload/EcoDrive-v0")``
 # imports ``roadload`` first, which is what makes the ids resolve in SubprocVecEnv workers started with spawn or
-# forkserver. EcoDrive-v0 also has a native vector env
-# (``gymnasium.make_vec(..., vectorization_mode="vector_entry_point")``, roadload.gym.vector). The envs truncate at
-# their own configured time limit, hence no max_episode_steps.
+# forkserver. EcoDrive-v0 and EcoTraffic-v0 also have a native vector env
+# (``gymnasium.make_vec(..., vectorization_mode="vector_entry_point")``, roadload.gym.vector / .traffic). The envs
+# truncate at their own configured time limit, hence no max_episode_steps.
 def _register_gym_envs() -> None:
     import gymnasium
 
     for env_id, entry_point, vector_entry_point in (
             ("roadload/EcoDrive-v0", "roadload.gym.ecodrive:EcoDriveEnv", "roadload.gym.vector:make_vector_env"),
-            ("roadload/EcoHighway-v0", "roadload.gym.highway:EcoHighwayEnv", None)):
+            ("roadload/EcoHighway-v0", "roadload.gym.highway:EcoHighwayEnv", None),
+            ("roadload/EcoTraffic-v0", "roadload.gym.traffic:EcoTrafficEnv", "roadload.gym.traffic:make_vector_env")):
         if env_id not in gymnasium.registry:
             gymnasium.register(id=env_id, entry_point=entry_point, vector_entry_point=vector_entry_point,
                                disable_env_checker=False)

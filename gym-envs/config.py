@@ -1,4 +1,4 @@
-"""Typed, validated configuration of the gymnasium environments (EcoDrive-v0, EcoHighway-v0).
+"""Typed, validated configuration of the gymnasium environments (EcoDrive-v0, EcoHighway-v0, EcoTraffic-v0).
 
 Unlike highway-env's untyped dicts, an unknown key or an out-of-range value raises :class:`GymConfigError`
 (a ``ValueError``) naming the field, at construction and not mid-episode. Units are SI; the field
@@ -48,6 +48,12 @@ def _check_road(name: str | None) -> str | None:
     if Path(name).is_file():
         return name
     raise ValueError(f"unknown road profile {name!r}; road profiles: {', '.join(known_profiles('road'))}")
+
+
+def _check_seed_range(v: tuple[int, int]) -> tuple[int, int]:
+    if v[0] < 0 or v[1] <= v[0]:
+        raise ValueError(f"needs 0 <= low < high, got {v}")
+    return v
 
 
 def _check_effects(effects: Any) -> Any:
@@ -129,12 +135,7 @@ class EcoDriveConfig(_Strict):
             raise ValueError("distances must be strictly increasing")
         return v
 
-    @field_validator("road_seed_range")
-    @classmethod
-    def _seed_range(cls, v: tuple[int, int]) -> tuple[int, int]:
-        if v[0] < 0 or v[1] <= v[0]:
-            raise ValueError(f"needs 0 <= low < high, got {v}")
-        return v
+    _seed_range = field_validator("road_seed_range")(classmethod(lambda cls, v: _check_seed_range(v)))
 
     @field_validator("control_period")
     @classmethod
@@ -175,31 +176,26 @@ class EcoHighwayReward(_Strict):
     scale: float = Field(1e-4, gt=0, description="reward units per joule-equivalent [1/J]")
 
 
-class EcoHighwayConfig(_Strict):
-    """Configuration of ``roadload/EcoHighway-v0``: highway-env traffic (IDM/MOBIL) around an ego vehicle whose
-    longitudinal dynamics and energy come from roadload's simulator."""
+class _TrafficScenario(_Strict):
+    """The multi-lane traffic scenario EcoHighway-v0 and EcoTraffic-v0 share: an ego vehicle preset on a road
+    profile among IDM/MOBIL traffic, with highway-env's lanes, spawn density, rates and EcoHighway-v0's reward."""
 
     vehicle: str = Field("bmw_i3", description="ego vehicle preset name")
-    road: str | None = Field("motorway", description="road profile giving the grade along the highway; "
-                                                     "None = flat")
+    road: str | None = Field("motorway", description="road profile under the ego (its grade; EcoTraffic-v0 also "
+                                                     "its curvature); None = flat")
     road_seed: int | None = Field(None, ge=0, description="road generator seed; None draws one per episode")
     effects: dict[str, dict[str, Any]] | list[str] = Field(default_factory=dict, description="simulator effects "
                                                                                             "of the ego vehicle")
     lanes_count: int = Field(3, ge=1, le=6)
     vehicles_count: int = Field(20, ge=0, le=100, description="number of IDM/MOBIL traffic vehicles")
-    vehicles_density: float = Field(1.0, gt=0, le=5.0)
+    vehicles_density: float = Field(1.0, gt=0, le=5.0, description="spawn density (spacing = 1 / density x "
+                                                                   "highway-env's default spacing)")
     duration: float = Field(40.0, gt=0, le=3600, description="episode time limit [s]")
     policy_frequency: float = Field(2.0, gt=0, le=10.0, description="decisions per second [Hz]")
     simulation_frequency: float = Field(10.0, gt=0, le=100.0, description="traffic simulation rate [Hz]")
     initial_speed: float = Field(25.0, ge=0, le=40.0, description="ego speed at reset [m/s]")
     speed_limit: float = Field(30.0, gt=0, le=60.0, description="lane speed limit [m/s]")
-    lane_changes: Literal["off", "dict", "box"] = Field(
-        "off", description="'off': 1-D force; 'dict': Dict(force Box, lane_change Discrete(3)); 'box': 2-D Box, "
-                           "second entry < -1/3 = left, > 1/3 = right")
-    observed_vehicles: int = Field(5, ge=1, le=20, description="nearest traffic vehicles in the observation")
     min_time_headway: float = Field(1.0, ge=0, le=5.0, description="time headway below which a penalty applies [s]")
-    screen_width: int = Field(600, ge=64, le=4096)
-    screen_height: int = Field(150, ge=64, le=4096)
     reward: EcoHighwayReward = Field(default_factory=EcoHighwayReward)
 
     _vehicle = field_validator("vehicle")(classmethod(lambda cls, v: _check_vehicle(v)))
@@ -207,7 +203,7 @@ class EcoHighwayConfig(_Strict):
     _effects = field_validator("effects")(classmethod(lambda cls, v: _check_effects(v)))
 
     @model_validator(mode="after")
-    def _rates(self) -> EcoHighwayConfig:
+    def _rates(self) -> "_TrafficScenario":
         ratio = self.simulation_frequency / self.policy_frequency
         if not ratio <= 1e6 or abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:  # not <=: inf (a tiny rate)
             raise ValueError(f"simulation_frequency ({self.simulation_frequency} Hz) must be a whole multiple of "
@@ -220,12 +216,25 @@ class EcoHighwayConfig(_Strict):
 
     @property
     def frames_per_action(self) -> int:
+        """Traffic frames per env step."""
         return int(round(self.simulation_frequency / self.policy_frequency))
 
     @property
     def n_substeps(self) -> int:
         """Physics steps per traffic-simulation frame."""
         return int(round(PHYSICS_RATE / self.simulation_frequency))
+
+
+class EcoHighwayConfig(_TrafficScenario):
+    """Configuration of ``roadload/EcoHighway-v0``: highway-env traffic (IDM/MOBIL) around an ego vehicle whose
+    longitudinal dynamics and energy come from roadload's simulator."""
+
+    lane_changes: Literal["off", "dict", "box"] = Field(
+        "off", description="'off': 1-D force; 'dict': Dict(force Box, lane_change Discrete(3)); 'box': 2-D Box, "
+                           "second entry < -1/3 = left, > 1/3 = right")
+    observed_vehicles: int = Field(5, ge=1, le=20, description="nearest traffic vehicles in the observation")
+    screen_width: int = Field(600, ge=64, le=4096)
+    screen_height: int = Field(150, ge=64, le=4096)
 
 
 SPACE_FIELDS_HIGHWAY = ("lane_changes", "observed_vehicles")
@@ -304,3 +313,81 @@ def updated_config(config: _Strict, options: dict[str, Any] | None, space_fields
         raise GymConfigError(f"reset options {frozen} would change the observation/action space; "
                              f"make a new env instead")
     return make_config(type(config), config, **options)
+
+
+class TrafficBehaviour(_Strict):
+    """The traffic vehicles' driver models, with highway-env 1.x's ``IDMVehicle`` constants as defaults.
+
+    Longitudinal, IDM (Treiber, Hennecke & Helbing 2000): a = a_c (1 - (v / v_0)^delta - (d* / d)^2) with
+    d* = d_0 + v T + v dv / (2 sqrt(a_c b)), d the centre-to-centre distance to the leader (as highway-env, whose
+    d_0 = 5 m + one vehicle length), clipped to [-a_max, a_max]. Lateral, MOBIL (Kesting, Treiber & Helbing 2007):
+    change when the own acceleration gain plus politeness x the followers' gains exceeds the threshold and the new
+    follower brakes less than the safe limit; decided at most once per ``lane_change_delay``."""
+
+    max_acceleration: float = Field(6.0, gt=0, le=20.0, description="a_max: clip of the IDM acceleration [m/s^2]")
+    comfort_acceleration: float = Field(3.0, gt=0, le=10.0, description="a_c: IDM maximum acceleration [m/s^2]")
+    comfort_deceleration: float = Field(5.0, gt=0, le=10.0, description="b: IDM comfortable deceleration [m/s^2]")
+    jam_distance: float = Field(10.0, gt=0, le=50.0, description="d_0: desired centre-to-centre distance at "
+                                                                   "standstill [m] (5 m gap + 5 m vehicle length)")
+    time_gap: float = Field(1.5, gt=0, le=5.0, description="T: desired time gap [s]")
+    delta_range: tuple[float, float] = Field((3.5, 4.5), description="[low, high] of each vehicle's IDM speed "
+                                                                     "exponent delta, drawn at spawn [1]")
+    politeness: float = Field(0.0, ge=0, le=1.0, description="MOBIL politeness factor p [1]")
+    lane_change_min_gain: float = Field(0.2, ge=0, le=5.0, description="MOBIL threshold of the acceleration gain "
+                                                                        "[m/s^2]")
+    lane_change_max_braking: float = Field(2.0, gt=0, le=10.0, description="MOBIL safe limit of the braking "
+                                                                            "imposed on the new follower [m/s^2]")
+    lane_change_delay: float = Field(1.0, gt=0, le=10.0, description="time between two lane-change decisions [s]")
+
+    @field_validator("delta_range")
+    @classmethod
+    def _delta(cls, v: tuple[float, float]) -> tuple[float, float]:
+        if not 0 < v[0] <= v[1] <= 20:
+            raise ValueError(f"needs 0 < low <= high <= 20, got {v}")
+        return v
+
+
+class TrafficShield(_Strict):
+    """The safety layer of ``roadload/EcoTraffic-v0`` (``shield=...``): the command u is capped at
+    SHIELD_GAIN (v_safe - v), v_safe the highest speed from which the ego, reacting after ``reaction_time`` and
+    braking at ``deceleration``, stops behind its leader braking at ``leader_deceleration`` with ``margin`` to
+    spare: v T + v^2 / (2 b) <= gap - margin + v_l^2 / (2 b_l)."""
+
+    enabled: bool = Field(False, description="cap the command by the braking envelope behind the leader")
+    reaction_time: float = Field(0.3, ge=0, le=3.0, description="T: delay before the ego brakes [s]")
+    deceleration: float = Field(3.5, gt=0, le=9.0, description="b: the ego's braking deceleration [m/s^2] (u = -1 "
+                                                                "asks for 0.5 g)")
+    leader_deceleration: float = Field(6.0, gt=0, le=15.0, description="b_l: the leader's worst braking [m/s^2] "
+                                                                        "(highway-env's IDM clips at 6)")
+    margin: float = Field(2.0, ge=0, le=50.0, description="bumper-to-bumper distance left at the stop [m]")
+
+
+class EcoTrafficConfig(_TrafficScenario):
+    """Configuration of ``roadload/EcoTraffic-v0``: EcoHighway-v0's scenario (highway-env's defaults) on the native
+    backend: compiled IDM/MOBIL traffic around an ego that drives roadload's powertrain on a road with grade and
+    curvature, batched (roadload.gym.traffic)."""
+
+    road_seed_range: tuple[int, int] = Field((0, 100), description="[low, high) of drawn road seeds (each road is "
+                                             "built once per process, ~5 ms, and cached); evaluate outside it")
+    curvature: bool = Field(True, description="the ego drives the road's curvature (cornering resistance); False "
+                                              "= straight, as EcoHighway-v0")
+    policy_frequency: float = Field(10.0, gt=0, le=100.0, description="decisions per second [Hz] (10 = "
+                                                                      "EcoDrive-v0's 0.1 s control period)")
+    lane_changes: Literal["off", "box"] = Field(
+        "off", description="'off': 1-D force; 'box': 2-D Box, second entry < -1/3 = left, > 1/3 = right")
+    kinematics_rows: int = Field(5, ge=2, le=20, description="rows of the Kinematics block, the ego's first "
+                                                             "(highway-env's vehicles_count)")
+    see_behind: bool = Field(False, description="the Kinematics block also lists vehicles more than 10 m behind")
+    traffic: TrafficBehaviour = Field(default_factory=TrafficBehaviour)
+    shield: TrafficShield = Field(default_factory=TrafficShield)
+
+    _seed_range = field_validator("road_seed_range")(classmethod(lambda cls, v: _check_seed_range(v)))
+
+    @property
+    def road_length(self) -> float:
+        """Length of the ego's road [m]: EcoHighway-v0's, duration x 60 m/s + 500 m, at least 2 km, at most 10 km."""
+        return min(10_000.0, max(2000.0, self.duration * 60.0 + 500.0))
+
+
+SPACE_FIELDS_TRAFFIC = ("lane_changes", "kinematics_rows", "lanes_count", "vehicles_count")
+"""Fields of EcoTrafficConfig that shape the spaces or the batch arrays; reset options may not change them."""

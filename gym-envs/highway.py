@@ -42,11 +42,10 @@ from highway_env.utils import class_from_path, near_split
 from highway_env.vehicle.controller import ControlledVehicle
 from highway_env.vehicle.kinematics import Vehicle
 
-from roadload.road_profiles import RoadProfile, load_profile_start
-
 from roadload.gym.actions import validate_action
 from roadload.gym.config import SPACE_FIELDS_HIGHWAY, EcoHighwayConfig, GymConfigError, make_config, updated_config
-from roadload.gym.ecodrive import DriveScales, cut_profile
+from roadload.gym.ecodrive import DriveScales
+from roadload.gym.traffic_ego import ego_road_profile
 from roadload.presets import get_preset
 from roadload.envs.simulator import LateralValidityWarning, Simulator
 
@@ -280,21 +279,8 @@ class EcoHighwayEnv(AbstractEnv):
         if key != self._plant_key:
             try:
                 spec = get_preset(cfg.vehicle)
-                if cfg.road is None:
-                    s = np.array([0.0, length])
-                    grade = np.zeros(2)
-                else:
-                    prof = load_profile_start(cfg.road, length, seed=road_seed)
-                    if not isinstance(prof, RoadProfile):
-                        raise GymConfigError(f"road: {cfg.road!r} is not a road profile")
-                    prof = cut_profile(prof, min(length, prof.length))
-                    s, grade = prof.distance, prof.grade
-                    if s[-1] < length:  # extend flat
-                        s, grade = np.append(s, length), np.append(grade, 0.0)
                 # highway-env's road is straight and flat across: keep the grade, no curvature / bank
-                road = RoadProfile(name=f"highway:{cfg.road or 'flat'}", distance=s, grade=grade,
-                                   curvature=np.zeros_like(s), bank=np.zeros_like(s),
-                                   speed_limit=np.full_like(s, cfg.speed_limit))
+                road = ego_road_profile(cfg.road, length, road_seed, cfg.speed_limit, curvature=False)
                 self._plant = Simulator(spec, road, cfg.effects, None, sim_seed, initial_speed=cfg.initial_speed)
             except GymConfigError:
                 raise
@@ -315,7 +301,7 @@ class EcoHighwayEnv(AbstractEnv):
 
     def _reset(self) -> None:
         cfg = self.typed_config
-        road_seed = cfg.road_seed if cfg.road_seed is not None else int(self.np_random.integers(0, 10_000))
+        road_seed = cfg.road_seed if cfg.road_seed is not None else self._draw_road_seed()
         self._build_plant(cfg, road_seed, int(self.np_random.integers(0, 2 ** 31 - 1)))
         self.road = Road(network=RoadNetwork.straight_road_network(cfg.lanes_count, speed_limit=cfg.speed_limit,
                                                                    length=ROAD_LENGTH),
@@ -338,6 +324,10 @@ class EcoHighwayEnv(AbstractEnv):
             other.randomize_behavior()
             other.check_collisions = False  # as highway-fast-v0: only the ego's collisions are checked
             self.road.vehicles.append(other)
+
+    def _draw_road_seed(self) -> int:
+        """The road seed of an episode without a fixed one: uniform in [0, 10000) from the env's RNG."""
+        return int(self.np_random.integers(0, 10_000))
 
     def step(self, action):
         action = validate_action(action, self.action_space)

@@ -132,11 +132,14 @@ def _config_rows(cls) -> list[list]:
 
 
 def gym_config() -> str:
-    from roadload.gym.config import EcoDriveConfig, EcoDriveReward, EcoHighwayConfig, EcoHighwayReward
+    from roadload.gym.config import (EcoDriveConfig, EcoDriveReward, EcoHighwayConfig, EcoHighwayReward,
+                                     EcoTrafficConfig, TrafficBehaviour, TrafficShield)
 
     out = []
     for title, cls in (("EcoDriveConfig", EcoDriveConfig), ("EcoDriveReward (`reward=`)", EcoDriveReward),
-                       ("EcoHighwayConfig", EcoHighwayConfig), ("EcoHighwayReward (`reward=`)", EcoHighwayReward)):
+                       ("EcoHighwayConfig", EcoHighwayConfig), ("EcoHighwayReward (`reward=`)", EcoHighwayReward),
+                       ("EcoTrafficConfig", EcoTrafficConfig), ("TrafficBehaviour (`traffic=`)", TrafficBehaviour),
+                       ("TrafficShield (`shield=`)", TrafficShield)):
         out.append(f"**{title}**\n\n" + table(["field", "type", "default", "meaning"], _config_rows(cls)))
     return "\n\n".join(out)
 

@@ -73,7 +73,7 @@ def bench_vectorised(n_envs: int = 2, seconds: float = 5.0, vec: str = "subproc"
             "steps": n * n_envs, "episodes": None}
 
 
-def _rates(step: Callable[[], None], seconds: float) -> tuple[float, float, int]:
+def call_rates(step: Callable[[], None], seconds: float) -> tuple[float, float, int]:
     """(calls per wall second, calls per CPU second of this process, calls): CPU seconds make runs on a machine
     shared with other jobs comparable (wall rates there measure the share the scheduler gave us)."""
     n = 0
@@ -84,6 +84,19 @@ def _rates(step: Callable[[], None], seconds: float) -> tuple[float, float, int]
         if n % 8 == 0 and time.perf_counter() - t0 >= seconds:
             break
     return n / (time.perf_counter() - t0), n / max(time.process_time() - c0, 1e-9), n
+
+
+def random_action_stepper(env: Any) -> Callable[[], None]:
+    """One step of a single env under random actions (reset with seed 0 first, actions seeded 0), resetting at
+    the end of an episode."""
+    env.reset(seed=0)
+    env.action_space.seed(0)
+
+    def step() -> None:
+        _, _, te, tr, _ = env.step(env.action_space.sample())
+        if te or tr:
+            env.reset()
+    return step
 
 
 def bench_native(n_envs: int = 256, seconds: float = 5.0, threads: int = 1, bare: bool = False,
@@ -104,7 +117,7 @@ def bench_native(n_envs: int = 256, seconds: float = 5.0, threads: int = 1, bare
 
     for _ in range(3):
         step()
-    wall, cpu, n = _rates(step, seconds)
+    wall, cpu, n = call_rates(step, seconds)
     mode = f"{'bare batched physics' if bare else 'native vector env'} x{n_envs}, {threads} thread(s)"
     return {"env": "roadload/EcoDrive-v0", "mode": mode, "steps_per_s": wall * n_envs,
             "steps_per_cpu_s": cpu * n_envs, "steps": n * n_envs}
@@ -135,16 +148,8 @@ def run_native_benchmark(seconds: float = 5.0, n_envs: int = 256, n_dummy: int =
     import gymnasium as gym
 
     env = gym.make("roadload/EcoDrive-v0")
-    env.reset(seed=0)
-    env.action_space.seed(0)
-
-    def single() -> None:
-        _, _, te, tr, _ = env.step(env.action_space.sample())
-        if te or tr:
-            env.reset()
-
     load = load_average()
-    wall, cpu, n = _rates(single, seconds)
+    wall, cpu, n = call_rates(random_action_stepper(env), seconds)
     add({"env": "roadload/EcoDrive-v0", "mode": "single process", "threads": 1, "steps_per_s": wall,
          "steps_per_cpu_s": cpu, "steps": n}, load)
     venv = make_vec_env(n_dummy, 0, None, vec="dummy")
@@ -158,7 +163,7 @@ def run_native_benchmark(seconds: float = 5.0, n_envs: int = 256, n_dummy: int =
             k[0] += 1
 
         load = load_average()
-        wall, cpu, n = _rates(dummy, seconds)
+        wall, cpu, n = call_rates(dummy, seconds)
     finally:
         venv.close()
     add({"env": "roadload/EcoDrive-v0", "mode": f"dummy x{n_dummy}", "threads": 1, "steps_per_s": wall * n_dummy,

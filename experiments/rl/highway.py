@@ -25,9 +25,10 @@ import numpy as np
 import pandas as pd
 
 from roadload.fileio import save_figure
-from roadload.gym.config import EcoHighwayConfig, make_config
+from roadload.gym.config import EcoHighwayConfig, EcoTrafficConfig, make_config
 from roadload.gym.ecodrive import DriveScales
 from roadload.gym.highway import EcoHighwayEnv, highway_observation_layout
+from roadload.gym.traffic import traffic_observation_layout
 from roadload.presets import get_preset
 from roadload.tables import write_csv
 
@@ -45,11 +46,15 @@ HIGHWAY_COLUMNS = ["controller", "seed", "crashed", "distance_m", "energy_kWh", 
 
 
 # --------------------------------------------------------------------------------------------- baselines
-def _indices(cfg: EcoHighwayConfig) -> dict[str, tuple[int, float]]:
-    return {name: (k, scale) for k, (name, _unit, scale) in enumerate(highway_observation_layout(cfg))}
+def _indices(cfg: EcoHighwayConfig | EcoTrafficConfig) -> dict[str, tuple[int, float]]:
+    """name -> (index, scale) of the observation of EcoHighway-v0 or EcoTraffic-v0 (both carry v, front_gap and
+    front_closing_speed)."""
+    layout = (traffic_observation_layout(cfg) if isinstance(cfg, EcoTrafficConfig)
+              else highway_observation_layout(cfg))
+    return {name: (k, scale) for k, (name, _unit, scale) in enumerate(layout)}
 
 
-def cruise_policy(cfg: EcoHighwayConfig, target_speed: float | None = None,
+def cruise_policy(cfg: EcoHighwayConfig | EcoTrafficConfig, target_speed: float | None = None,
                   gain: float = 0.5, feed_forward: float = 0.08) -> Callable[[np.ndarray], np.ndarray]:
     """Speed hold at target_speed [m/s] (default: the config's initial speed): u = feed_forward + gain * (v* - v)
     with gain in 1/(m/s), clipped to [-1, 1]; ignores the traffic."""
@@ -63,27 +68,31 @@ def cruise_policy(cfg: EcoHighwayConfig, target_speed: float | None = None,
     return policy
 
 
-def idm_policy(cfg: EcoHighwayConfig, target_speed: float | None = None, max_accel: float = 1.5,
+def idm_policy(cfg: EcoHighwayConfig | EcoTrafficConfig, target_speed: float | None = None, max_accel: float = 1.5,
                comfort_decel: float = 2.0, time_gap: float = 1.5, min_gap: float = 5.0,
                feed_forward: float = 0.08) -> Callable[[np.ndarray], np.ndarray]:
     """IDM: a = a_max (1 - (v / v0)^4 - (s*(v, dv) / gap)^2), s* = s0 + v T + v dv / (2 sqrt(a_max b)) [m/s^2],
     turned into the command u = feed_forward + a m / F(v) with F the traction force available at v (a >= 0) or
-    the full brake force (a < 0), clipped to [-1, 1]."""
+    the full brake force (a < 0), clipped to [-1, 1]. The returned policy takes one observation or a batch
+    (n, observation size) and returns shape (1,) or (n, 1)."""
     idx = _indices(cfg)
     (kv, sv), (kg, sg), (kc, sc) = idx["v"], idx["front_gap"], idx["front_closing_speed"]
-    v0 = cfg.initial_speed if target_speed is None else target_speed
+    v0 = max(cfg.initial_speed if target_speed is None else target_speed, 0.1)
     spec = get_preset(cfg.vehicle)
     drive = DriveScales.from_spec(spec)
     mass = spec.body.mass
+    sqrt_ab = 2.0 * math.sqrt(max_accel * comfort_decel)
 
     def policy(obs: np.ndarray) -> np.ndarray:
-        v = float(obs[kv]) * sv
-        gap = max(float(obs[kg]) * sg, 0.1)
-        dv = float(obs[kc]) * sc
-        s_star = min_gap + max(0.0, v * time_gap + v * dv / (2.0 * math.sqrt(max_accel * comfort_decel)))
-        a = max_accel * (1.0 - (v / max(v0, 0.1)) ** 4 - (s_star / gap) ** 2)
-        force = min(drive.peak_traction_force, drive.peak_power / max(v, 1.0)) if a >= 0 else drive.full_brake_force
-        return np.array([np.clip(feed_forward + a * mass / force, -1.0, 1.0)], dtype=np.float32)
+        obs = np.asarray(obs, dtype=np.float64)
+        v = obs[..., kv] * sv
+        gap = np.maximum(obs[..., kg] * sg, 0.1)
+        dv = obs[..., kc] * sc
+        s_star = min_gap + np.maximum(0.0, v * time_gap + v * dv / sqrt_ab)
+        a = max_accel * (1.0 - (v / v0) ** 4 - (s_star / gap) ** 2)
+        force = np.where(a >= 0, np.minimum(drive.peak_traction_force, drive.peak_power / np.maximum(v, 1.0)),
+                         drive.full_brake_force)
+        return np.clip(feed_forward + a * mass / force, -1.0, 1.0)[..., None].astype(np.float32)
     return policy
 
 

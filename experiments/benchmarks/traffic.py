@@ -1,0 +1,184 @@
+"""Speed of ``roadload/EcoTraffic-v0`` against highway-env in the same run.
+
+Rows, interleaved over ``rounds`` (reference, native with each thread count, reference, ...: every pair sees the
+same machine load):
+
+- reference: ``roadload/EcoHighway-v0`` on highway-env with EcoTraffic-v0's scenario and step (the same lanes,
+  traffic, frequencies and ego powertrain: roadload.gym.traffic_reference.highway_config), one process, one env;
+- highway-env's own ``highway-fast-v0`` (its fast configuration: 5 Hz traffic, 1 s steps), for scale, compared by
+  simulated seconds per wall second;
+- native: ``gymnasium.make_vec("roadload/EcoTraffic-v0", num_envs=N, vectorization_mode="vector_entry_point",
+  threads=k)``.
+
+Every row steps random actions in [-1, 1] and includes its autoresets; rates are env steps per wall second and per
+CPU second of this process (the machine is shared: the CPU rate is what the code costs, the wall rate what the
+scheduler gave), with the 1-minute load average as the row started. The ratio native / reference is per round
+(same load) and its median is reported. Command line: :func:`main` (``scripts/bench_traffic.py``).
+
+    python scripts/bench_traffic.py                       # N = 256, threads 1 and 2, 2 rounds of 5 s per row
+    python scripts/bench_traffic.py --vehicles 10 --threads 2 --rounds 3
+    python scripts/bench_traffic.py --quick               # CI smoke run (N = 16, 0.5 s per row, one round)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+from pathlib import Path
+from typing import Any, Callable, cast
+
+import gymnasium as gym
+import numpy as np
+import pandas as pd
+
+from roadload.gym.config import EcoTrafficConfig, make_config
+from roadload.gym.traffic import EcoTrafficVectorEnv
+
+from roadload.experiments.rl.benchmark import call_rates, load_average, random_action_stepper
+
+TARGET_STEPS_PER_S = 100_000
+"""Native env steps per wall second at N = 256 with 2 threads (10+ traffic vehicles per env)."""
+TARGET_RATIO = 1000.0
+"""Goal of the native / highway-env ratio."""
+
+
+def _reference_env(cfg: EcoTrafficConfig):
+    from roadload.gym.highway import EcoHighwayEnv
+    from roadload.gym.traffic_reference import highway_config
+
+    return EcoHighwayEnv(highway_config(cfg))
+
+
+def _highway_fast_env():
+    import gymnasium as gym
+    import highway_env
+
+    gym.register_envs(highway_env)
+    return gym.make("highway-fast-v0")
+
+
+def _native_stepper(cfg: EcoTrafficConfig, n_envs: int, threads: int, seed: int) -> Callable[[], None]:
+    venv = EcoTrafficVectorEnv(n_envs, config=cfg, threads=threads)
+    venv.reset(seed=seed)
+    d = cast(gym.spaces.Box, venv.single_action_space).shape[0]
+    acts = np.random.default_rng(seed).uniform(-1, 1, (256, n_envs, d)).astype(np.float32)
+    k = [0]
+
+    def step() -> None:
+        venv.step(acts[k[0] % 256])
+        k[0] += 1
+    for _ in range(3):  # warm-up: kernels loaded, first allocations
+        step()
+    return step
+
+
+def run_traffic_benchmark(seconds: float = 5.0, n_envs: int = 256, threads: tuple[int, ...] = (1, 2),
+                          rounds: int = 2, env_config: dict[str, Any] | None = None, highway_fast: bool = True,
+                          progress: Callable[[str], None] | None = None) -> pd.DataFrame:
+    """The interleaved rows (module docstring): env, mode, round, threads, steps/s (wall, CPU), simulated
+    seconds per wall second, load average."""
+    cfg = make_config(EcoTrafficConfig, {"curvature": False, **(env_config or {})})
+    step_time = 1.0 / cfg.policy_frequency
+    ref = random_action_stepper(_reference_env(cfg))
+    natives = {t: _native_stepper(cfg, n_envs, t, 0) for t in threads}
+    fast = random_action_stepper(_highway_fast_env()) if highway_fast else None
+    rows = []
+
+    def add(env: str, mode: str, rnd: int, t: int, per_call: int, sim_step: float, fn: Callable[[], None]) -> None:
+        load = load_average()
+        wall, cpu, n = call_rates(fn, seconds)
+        rows.append({"env": env, "mode": mode, "round": rnd, "threads": t, "steps_per_s": wall * per_call,
+                     "steps_per_cpu_s": cpu * per_call, "simulated_s_per_wall_s": wall * per_call * sim_step,
+                     "steps": n * per_call, "load_1min": load})
+        if progress:
+            progress(f"round {rnd}: {env} {mode}")
+
+    for rnd in range(rounds):
+        add("EcoHighway-v0 (highway-env)", "single process", rnd, 1, 1, step_time, ref)
+        for t, fn in natives.items():
+            add("EcoTraffic-v0 (native)", f"vector x{n_envs}", rnd, t, n_envs, step_time, fn)
+        if fast is not None:
+            add("highway-fast-v0 (highway-env)", "single process", rnd, 1, 1, 1.0, fast)
+    return pd.DataFrame(rows)
+
+
+def traffic_ratios(table: pd.DataFrame) -> pd.DataFrame:
+    """Per thread count: the native rate (median over rounds, wall and CPU), the per-round ratio native /
+    EcoHighway-v0 (median, min, max; wall and CPU), the ratio to highway-fast-v0 in simulated seconds per wall
+    second, and the load."""
+    out = []
+    ref = table[table.env.str.startswith("EcoHighway")].set_index("round")
+    fast = table[table.env.str.startswith("highway-fast")].set_index("round")
+    native = table[table.env.str.startswith("EcoTraffic")]
+    for t, grp in native.groupby("threads"):
+        g = grp.set_index("round")
+        wall = g.steps_per_s / ref.steps_per_s.reindex(g.index)
+        cpu = g.steps_per_cpu_s / ref.steps_per_cpu_s.reindex(g.index)
+        row = {"threads": int(t), "native_steps_per_s": float(g.steps_per_s.median()),
+               "native_steps_per_cpu_s": float(g.steps_per_cpu_s.median()),
+               "reference_steps_per_s": float(ref.steps_per_s.median()),
+               "ratio_wall": float(wall.median()), "ratio_wall_min": float(wall.min()),
+               "ratio_wall_max": float(wall.max()), "ratio_cpu": float(cpu.median()),
+               "load_1min": float(g.load_1min.median())}
+        if len(fast):
+            sim = g.simulated_s_per_wall_s / fast.simulated_s_per_wall_s.reindex(g.index)
+            row["ratio_highway_fast_simulated_s"] = float(sim.median())
+        out.append(row)
+    return pd.DataFrame(out)
+
+
+def summary_line(ratios: pd.DataFrame, n_envs: int, vehicles: int) -> str:
+    best = ratios.loc[ratios.native_steps_per_s.idxmax()]
+    met = "met" if best.native_steps_per_s >= TARGET_STEPS_PER_S else "missed"
+    goal = "met" if best.ratio_wall >= TARGET_RATIO else "missed"
+    two = ratios[ratios.threads == 2]
+    two_text = (f"; 2 threads: {float(two.native_steps_per_s.iloc[0]):,.0f} steps/s wall, "
+                f"{float(two.native_steps_per_cpu_s.iloc[0]):,.0f} per CPU second" if len(two) else "")
+    return (f"best native rate {best.native_steps_per_s:,.0f} env steps/s with {int(best.threads)} thread(s) at "
+            f"N = {n_envs}, {vehicles} traffic vehicles per env (target >= {TARGET_STEPS_PER_S:,}: {met}){two_text}; "
+            f"native / EcoHighway-v0 (same scenario and step) {best.ratio_wall:,.0f}x wall (per-round range "
+            f"{best.ratio_wall_min:,.0f}-{best.ratio_wall_max:,.0f}), {best.ratio_cpu:,.0f}x per CPU second "
+            f"(goal >= {TARGET_RATIO:,.0f}x: {goal}); load average {statistics.median(ratios.load_1min):.1f}")
+
+
+__all__ = ["run_traffic_benchmark", "traffic_ratios", "summary_line", "main", "TARGET_STEPS_PER_S", "TARGET_RATIO"]
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Run the benchmark and print its tables (``scripts/bench_traffic.py``; module docstring)."""
+    from rich.console import Console
+
+    from roadload.experiments.rl.command import print_table
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--seconds", type=float, default=5.0, help="measurement time per row [s]")
+    ap.add_argument("--n-envs", type=int, default=256, help="sub-envs of the native vector env")
+    ap.add_argument("--threads", default="1,2", help="numba thread counts, comma-separated")
+    ap.add_argument("--rounds", type=int, default=2, help="interleaved rounds")
+    ap.add_argument("--vehicles", type=int, default=20, help="traffic vehicles per env")
+    ap.add_argument("--no-highway-fast", action="store_true", help="skip highway-env's highway-fast-v0 rows")
+    ap.add_argument("--json", metavar="PATH", help="also write the rows and ratios as JSON")
+    ap.add_argument("--quick", action="store_true", help="tiny run for CI")
+    a = ap.parse_args(argv)
+    try:
+        threads = tuple(int(t) for t in a.threads.split(",") if t.strip())
+    except ValueError:
+        ap.error(f"--threads: expected comma-separated integers >= 1, got {a.threads!r}")
+    if not threads or min(threads) < 1 or a.n_envs < 1 or a.rounds < 1 or a.seconds <= 0:
+        ap.error("--threads, --n-envs and --rounds must be >= 1 and --seconds > 0")
+    if a.quick:
+        a.seconds, a.n_envs, a.rounds = 0.5, 16, 1
+    console = Console(width=160)
+    console.print(f"load average (1 min) at start: {load_average():.2f} on {os.cpu_count()} cores")
+    table = run_traffic_benchmark(a.seconds, a.n_envs, threads, a.rounds, {"vehicles_count": a.vehicles},
+                                  highway_fast=not a.no_highway_fast, progress=lambda m: console.print(m))
+    print_table(console, table, "env steps per second (interleaved rounds)", "{:,.1f}")
+    ratios = traffic_ratios(table)
+    print_table(console, ratios, "EcoTraffic-v0 native against EcoHighway-v0 (highway-env), same run", "{:,.1f}")
+    console.print(summary_line(ratios, a.n_envs, a.vehicles))
+    if a.json:
+        Path(a.json).write_text(json.dumps({"rows": table.to_dict("records"), "ratios": ratios.to_dict("records")},
+                                           indent=1))

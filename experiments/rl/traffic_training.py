@@ -1,0 +1,337 @@
+"""PPO (stable-baselines3) on ``roadload/EcoTraffic-v0``'s native vector env, its evaluation on held-out episodes
+against the IDM follower, and the transfer of the same policy to the highway-env backend (EcoHighway-v0 in
+EcoTraffic-v0's layout, roadload.gym.traffic_reference). Command line: :func:`main` (``scripts/train_traffic.py``).
+
+    OMP_WAIT_POLICY=PASSIVE python scripts/train_traffic.py --seeds 0,1,2 --timesteps 1000000 --out out/rl_traffic
+    python scripts/train_traffic.py --evaluate-only --seeds 0,1,2 --out out/rl_traffic     # re-evaluate
+    python scripts/train_traffic.py --quick             # CI smoke run (4k steps, 2 + 1 held-out episodes)
+
+Training: ``n_envs`` sub-envs of the native vector env behind the SB3 adapter (same-step autoreset), episodes and
+roads drawn by the env (road seeds in the config's ``road_seed_range``, default [0, 100)). The default training
+config turns the safety layer on (``shield.enabled``).
+
+Held-out evaluation: episode k (k < episodes) is reset with seed 50000 + k and road seed 50000 + k, outside the
+training range, on the same config; every policy drives the same episodes. Per episode: crashed, distance [m],
+source energy [kWh], time [s], return; the summary gives energy per km = total energy / total distance [Wh/km],
+mean speed = total distance / total time [km/h], crashes, mean return. Over training seeds: the mean and a 95 %
+t-interval of each seed's summary.
+
+Transfer: the same episode seeds and road seeds on the highway-env backend; highway-env's road is straight, so the
+configuration there has ``curvature=False`` (the native policy was trained with curvature).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+import gymnasium as gym
+import numpy as np
+import pandas as pd
+
+from roadload.gym.config import EcoTrafficConfig, make_config
+from roadload.gym.sb3 import SB3VecEnv
+from roadload.gym.traffic import EcoTrafficEnv, EcoTrafficVectorEnv
+from roadload.tables import markdown_table, write_csv
+
+from .common import RLError, _atomic_write_bytes
+from .highway import idm_policy
+from .training import _curve_callback
+
+TRAFFIC_HELD_OUT = 50_000
+"""First episode seed and road seed of the held-out evaluation (training roads are in [0, 100))."""
+TRAFFIC_TRAIN_CONFIG: dict[str, Any] = {"shield": {"enabled": True}}
+"""The training configuration: EcoTraffic-v0's defaults with the safety layer on."""
+TRAFFIC_PPO: dict[str, Any] = dict(n_steps=256, batch_size=512, n_epochs=10, learning_rate=3e-4, gamma=0.99,
+                                   gae_lambda=0.95, clip_range=0.2, ent_coef=0.0,
+                                   policy_kwargs={"log_std_init": -1.0})
+"""PPO settings: 32 sub-envs x 256 steps = 8192 samples per update; gamma 0.99 (a 10 s horizon at 10 Hz)."""
+EPISODE_COLUMNS = ["policy", "backend", "seed", "crashed", "distance_m", "energy_kWh", "time_s", "episode_return",
+                   "steps", "shield_steps"]
+
+
+# --------------------------------------------------------------------------------------------- evaluation
+def traffic_episode(env: Any, policy: Callable[[np.ndarray], np.ndarray], seed: int) -> dict[str, Any]:
+    """One held-out episode (episode and road seed ``seed``) of either backend under ``policy``."""
+    obs, info = env.reset(seed=int(seed), options={"road_seed": int(seed)})
+    e0 = info["source_energy_total"]
+    ret, shielded, steps, done = 0.0, 0, 0, False
+    while not done:
+        obs, r, terminated, truncated, info = env.step(policy(obs))
+        steps += 1
+        ret += float(r)
+        shielded += int(info.get("shield_active", False))
+        done = terminated or truncated
+    return {"crashed": bool(info["crashed"]), "distance_m": float(info["s"]),
+            "energy_kWh": float(info["source_energy_total"] - e0) / 3.6e6, "time_s": float(info["t"]),
+            "episode_return": ret, "steps": steps, "shield_steps": shielded}
+
+
+def make_backend_env(backend: str, cfg: EcoTrafficConfig) -> Any:
+    """The native env or its highway-env reference (straight road) for the configuration."""
+    if backend == "native":
+        return EcoTrafficEnv(cfg)
+    if backend == "highway-env":
+        from roadload.gym.traffic_reference import HighwayTrafficEnv
+
+        return HighwayTrafficEnv(cfg.model_copy(update={"curvature": False}))
+    raise RLError(f"backend: expected 'native' or 'highway-env', got {backend!r}")
+
+
+def evaluate_traffic(policies: dict[str, Callable[[np.ndarray], np.ndarray]], env_config: dict[str, Any],
+                     episodes: int = 50, backend: str = "native",
+                     progress: Callable[[str], None] | None = None) -> pd.DataFrame:
+    """Per-episode rows of every policy on the held-out episodes of one backend."""
+    cfg = make_config(EcoTrafficConfig, env_config)
+    env = make_backend_env(backend, cfg)
+    rows = []
+    for name, policy in policies.items():
+        for k in range(episodes):
+            rows.append({"policy": name, "backend": backend, "seed": TRAFFIC_HELD_OUT + k,
+                         **traffic_episode(env, policy, TRAFFIC_HELD_OUT + k)})
+        if progress:
+            progress(f"{backend}: {name} done")
+    env.close()
+    return pd.DataFrame(rows, columns=EPISODE_COLUMNS)
+
+
+def summarise_traffic(table: pd.DataFrame) -> pd.DataFrame:
+    """Per policy and backend: episodes, crashes, energy per km, mean speed, mean return, share of shielded
+    steps."""
+    out = []
+    for (name, backend), g in table.groupby(["policy", "backend"], sort=False):
+        dist = g.distance_m.sum()
+        out.append({"policy": name, "backend": backend, "episodes": len(g), "crashes": int(g.crashed.sum()),
+                    "energy_Wh_per_km": g.energy_kWh.sum() * 1e6 / max(dist, 1e-9),
+                    "mean_speed_kmh": dist / max(g.time_s.sum(), 1e-9) * 3.6,
+                    "mean_return": float(g.episode_return.mean()),
+                    "shielded_steps": float(g.shield_steps.sum() / max(g.steps.sum(), 1))})
+    return pd.DataFrame(out)
+
+
+def seed_intervals(summaries: pd.DataFrame, columns=("energy_Wh_per_km", "mean_speed_kmh", "mean_return",
+                                                      "crashes")) -> pd.DataFrame:
+    """Mean and 95 % t-interval (Student t, n - 1 degrees of freedom) over training seeds, per backend."""
+    from scipy import stats
+
+    rows = []
+    for backend, g in summaries.groupby("backend", sort=False):
+        n = len(g)
+        row: dict[str, Any] = {"backend": backend, "seeds": n}
+        for c in columns:
+            x = g[c].astype(float).to_numpy()
+            half = stats.t.ppf(0.975, n - 1) * x.std(ddof=1) / math.sqrt(n) if n > 1 else float("nan")
+            row[c] = float(x.mean())
+            row[f"{c}_ci95"] = float(half)
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+# --------------------------------------------------------------------------------------------- training
+def sb3_predict(model) -> Callable[[np.ndarray], np.ndarray]:
+    return lambda obs: model.predict(obs, deterministic=True)[0]
+
+
+class ResidualActions(gym.vector.VectorWrapper):
+    """Residual policy learning on a vector env: the agent's action a in [-1, 1] corrects a base policy,
+    u = clip(base(obs) + scale a, -1, 1) (the base sees the observation the agent sees). With the IDM follower as
+    the base, PPO starts from the follower's driving instead of from random forces."""
+
+    def __init__(self, env: gym.vector.VectorEnv, base: Callable[[np.ndarray], np.ndarray], scale: float) -> None:
+        if not 0 < scale <= 2:
+            raise RLError(f"residual scale: expected 0 < scale <= 2 (command units), got {scale}")
+        super().__init__(env)
+        self.base = base
+        self.scale = scale
+        self._obs: np.ndarray | None = None
+
+    def reset(self, **kwargs):
+        obs, info = self.env.reset(**kwargs)
+        self._obs = obs
+        return obs, info
+
+    def step(self, actions):
+        if self._obs is None:
+            raise RLError("ResidualActions: step before reset")
+        u = np.clip(self.base(self._obs) + self.scale * np.asarray(actions, dtype=np.float32), -1.0, 1.0)
+        obs, reward, terminated, truncated, info = self.env.step(u.astype(np.float32))
+        self._obs = obs  # same-step autoreset: already the next episode's first observation where one ended
+        return obs, reward, terminated, truncated, info
+
+
+def residual_policy(model, base: Callable[[np.ndarray], np.ndarray], scale: float
+                    ) -> Callable[[np.ndarray], np.ndarray]:
+    """The deployed residual policy: clip(base(obs) + scale x the agent's deterministic action, -1, 1)."""
+    return lambda obs: np.clip(base(obs) + scale * model.predict(obs, deterministic=True)[0], -1.0,
+                               1.0).astype(np.float32)
+
+
+def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32,
+                  env_config: dict[str, Any] | None = None, threads: int = 1, torch_threads: int = 1,
+                  hyperparams: dict[str, Any] | None = None, progress: Callable[[str], None] | None = None,
+                  report_every: int = 100_000, residual: float = 0.0) -> dict[str, Any]:
+    """PPO on the native vector env (``residual`` > 0: a correction of that scale on the IDM follower,
+    :class:`ResidualActions`); saves ``ppo_traffic_seed<seed>.zip`` / ``.json`` and the learning curve (training
+    episode returns) to ``out_dir``; returns the model, its path, wall and CPU seconds."""
+    import torch
+    from stable_baselines3 import PPO
+
+    if timesteps < 1 or n_envs < 1:
+        raise RLError(f"timesteps and n_envs must be >= 1, got {timesteps}, {n_envs}")
+    torch.set_num_threads(torch_threads)
+    env_config = dict(env_config if env_config is not None else TRAFFIC_TRAIN_CONFIG)
+    make_config(EcoTrafficConfig, env_config)  # a bad key fails before any training
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    native: gym.vector.VectorEnv = EcoTrafficVectorEnv(n_envs, config=env_config, autoreset_mode="same_step",
+                                                       threads=threads)
+    if residual > 0:
+        native = ResidualActions(native, idm_policy(make_config(EcoTrafficConfig, env_config)), residual)
+    venv = SB3VecEnv(native)
+    venv.seed(seed)
+    params: dict[str, Any] = {**TRAFFIC_PPO, **(hyperparams or {})}
+    params["n_steps"] = max(8, min(params["n_steps"], max(timesteps // n_envs, 8)))
+    params["batch_size"] = min(params["batch_size"], params["n_steps"] * n_envs)
+    model = PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **params)
+    t0, c0 = time.perf_counter(), time.process_time()
+    reported = [0]
+
+    def report(steps: int) -> None:
+        if progress is None or steps - reported[0] < report_every:
+            return
+        reported[0] = steps
+        recent = [v for _, kind, v in callback.rows[-200:] if kind == "train"]
+        progress(f"seed {seed}: {steps} steps, {time.perf_counter() - t0:.0f} s wall, "
+                 f"{time.process_time() - c0:.0f} s CPU, mean return of the last {len(recent)} episodes "
+                 f"{np.mean(recent) if recent else float('nan'):.2f}")
+
+    callback = _curve_callback(env_config, eval_every=0, progress=report)
+    try:
+        model.learn(total_timesteps=timesteps, callback=callback)
+    finally:
+        venv.close()
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    stem = f"ppo_traffic_seed{seed}"
+    _atomic_write_bytes(out_dir / f"{stem}.zip", lambda tmp: model.save(str(tmp)))
+    meta = {"algo": "ppo", "env": "EcoTraffic-v0", "timesteps": int(model.num_timesteps), "n_envs": n_envs,
+            "seed": seed, "env_config": env_config, "hyperparams": params, "wall_seconds": wall,
+            "cpu_seconds": cpu, "threads": threads, "residual_scale": residual}
+    _atomic_write_bytes(out_dir / f"{stem}.json", lambda tmp: tmp.write_text(json.dumps(meta, indent=1, default=str)))
+    curve = pd.DataFrame([(t, v) for t, kind, v in callback.rows if kind == "train"],
+                         columns=["timesteps", "episode_return"])
+    write_csv(out_dir / f"{stem}_curve.csv", curve)
+    return {"model": model, "path": out_dir / f"{stem}.zip", "wall_seconds": wall, "cpu_seconds": cpu,
+            "timesteps": int(model.num_timesteps), "meta": meta, "curve": curve}
+
+
+def load_traffic_policy(path: Path):
+    from stable_baselines3 import PPO
+
+    path = Path(path)
+    if not path.is_file():
+        raise RLError(f"policy file not found: {path}")
+    return PPO.load(str(path), device="cpu")
+
+
+def run_traffic_experiment(seeds: tuple[int, ...], timesteps: int, out_dir: Path, episodes: int = 50,
+                           transfer_episodes: int = 20, n_envs: int = 32, env_config: dict[str, Any] | None = None,
+                           threads: int = 1, evaluate_only: bool = False,
+                           progress: Callable[[str], None] | None = None,
+                           train_config: dict[str, Any] | None = None,
+                           hyperparams: dict[str, Any] | None = None, residual: float = 0.0) -> dict[str, Any]:
+    """Train one PPO per seed (or load them with ``evaluate_only``), evaluate each with the IDM follower on
+    ``episodes`` held-out native episodes and ``transfer_episodes`` on highway-env; write episodes.csv,
+    summary.csv, intervals.csv and the learning curves to ``out_dir``. ``env_config`` is the evaluation's (and
+    training's) configuration; ``train_config`` overrides fields for training only (e.g. the shield off in
+    training, on when deployed)."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    env_config = {**TRAFFIC_TRAIN_CONFIG, **(env_config or {})}
+    cfg = make_config(EcoTrafficConfig, env_config)
+    trained_on = {**env_config, **(train_config or {})}
+    make_config(EcoTrafficConfig, trained_on)
+    models, times, scales = {}, {}, {}
+    for s in seeds:
+        if evaluate_only:
+            models[s] = load_traffic_policy(out_dir / f"ppo_traffic_seed{s}.zip")
+            meta = json.loads((out_dir / f"ppo_traffic_seed{s}.json").read_text())
+            times[s] = (meta["wall_seconds"], meta["cpu_seconds"], meta["timesteps"])
+            scales[s] = float(meta.get("residual_scale", 0.0))
+        else:
+            res = train_traffic(timesteps, out_dir, s, n_envs, trained_on, threads, hyperparams=hyperparams,
+                                progress=progress, residual=residual)
+            models[s] = res["model"]
+            times[s] = (res["wall_seconds"], res["cpu_seconds"], res["timesteps"])
+            scales[s] = residual
+        if progress:
+            progress(f"seed {s}: {times[s][2]} steps, {times[s][0]:.0f} s wall, {times[s][1]:.0f} s CPU")
+    # the IDM follower on the same configuration (its shield too) and without the shield
+    unshielded = {**env_config, "shield": {"enabled": False}}
+    tables = []
+    for backend, n_ep in (("native", episodes), ("highway-env", transfer_episodes)):
+        if n_ep < 1:
+            continue
+        pols = {f"PPO seed {s}": residual_policy(m, idm_policy(cfg), scales[s]) if scales[s] > 0 else sb3_predict(m)
+                for s, m in models.items()}
+        pols["IDM follower"] = idm_policy(cfg)
+        tables.append(evaluate_traffic(pols, env_config, n_ep, backend, progress))
+        tables.append(evaluate_traffic({"IDM follower (no shield)": idm_policy(cfg)}, unshielded, n_ep, backend,
+                                       progress))
+    table = pd.concat(tables, ignore_index=True)
+    summary = summarise_traffic(table)
+    ppo = summary[summary.policy.str.startswith("PPO")]
+    intervals = seed_intervals(ppo) if len(ppo) else pd.DataFrame()
+    write_csv(out_dir / "episodes.csv", table)
+    write_csv(out_dir / "summary.csv", summary)
+    write_csv(out_dir / "intervals.csv", intervals)
+    (out_dir / "training_times.json").write_text(json.dumps(
+        {str(s): {"wall_seconds": w, "cpu_seconds": c, "timesteps": n} for s, (w, c, n) in times.items()}, indent=1))
+    return {"table": table, "summary": summary, "intervals": intervals, "times": times, "out_dir": out_dir}
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Train, evaluate and print the tables (``scripts/train_traffic.py``; module docstring)."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--seeds", default="0,1,2", help="training seeds, comma-separated")
+    ap.add_argument("--timesteps", type=int, default=2_000_000, help="env steps per seed (0.1 s of driving each)")
+    ap.add_argument("--n-envs", type=int, default=32, help="sub-envs of the native vector env")
+    ap.add_argument("--threads", type=int, default=1, help="numba threads of the vector env")
+    ap.add_argument("--episodes", type=int, default=50, help="held-out episodes on the native backend")
+    ap.add_argument("--transfer-episodes", type=int, default=20, help="held-out episodes on highway-env (0: none)")
+    ap.add_argument("--config", default=None, help="EcoTraffic-v0 config as JSON text (default: shield on)")
+    ap.add_argument("--train-config", default=None, help="fields overriding --config in training only, JSON text "
+                                                         "(e.g. '{\"shield\": {\"enabled\": false}}')")
+    ap.add_argument("--hyperparams", default=None, help="PPO settings overriding TRAFFIC_PPO, JSON text")
+    ap.add_argument("--residual", type=float, default=0.0, help="> 0: PPO learns a correction of this scale [command "
+                                                                "units] on the IDM follower (0: the command itself)")
+    ap.add_argument("--out", type=Path, default=Path("out/rl_traffic"))
+    ap.add_argument("--evaluate-only", action="store_true", help="load the policies saved in --out")
+    ap.add_argument("--quick", action="store_true", help="tiny run for CI")
+    a = ap.parse_args(argv)
+    try:
+        seeds = tuple(int(s) for s in a.seeds.split(",") if s.strip())
+    except ValueError:
+        ap.error(f"--seeds: expected comma-separated integers, got {a.seeds!r}")
+    config = json.loads(a.config) if a.config else {}
+    if a.quick:
+        seeds, a.timesteps, a.n_envs, a.episodes, a.transfer_episodes = (0,), 4096, 8, 2, 1
+        config = {"duration": 5.0, "vehicles_count": 10, **config}
+        if a.out == Path("out/rl_traffic"):
+            a.out = Path(tempfile.mkdtemp(prefix="roadload-rl-traffic-"))
+    if not seeds or a.timesteps < 1 or a.episodes < 1:
+        ap.error("--seeds, --timesteps and --episodes must be given and >= 1")
+    res = run_traffic_experiment(seeds, a.timesteps, a.out, a.episodes, a.transfer_episodes, a.n_envs, config,
+                                 a.threads, a.evaluate_only, progress=lambda m: print(m, flush=True),
+                                 train_config=json.loads(a.train_config) if a.train_config else None,
+                                 hyperparams=json.loads(a.hyperparams) if a.hyperparams else None,
+                                 residual=a.residual)
+    print(markdown_table(res["summary"], floatfmt=".4g"))
+    if len(res["intervals"]):
+        print(markdown_table(res["intervals"], floatfmt=".4g"))
+    print(f"tables and policies in {res['out_dir']}")

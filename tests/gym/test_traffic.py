@@ -1,0 +1,209 @@
+"""roadload/EcoTraffic-v0: the compiled, batched traffic env with roadload's powertrain (roadload.gym.traffic),
+its gymnasium contracts, the single and vector forms, the ego's physics, the reward, the safety layer and the
+reference backend on highway-env (roadload.gym.traffic_reference)."""
+
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import roadload  # noqa: F401
+from roadload.gym import traffic_model as tm
+from roadload.gym.config import GymConfigError
+from roadload.gym.ecodrive import DriveScales
+from roadload.gym.traffic import TERM_NAMES, EcoTrafficEnv, EcoTrafficVectorEnv, traffic_observation_layout
+from roadload.envs.simulator import Simulator
+
+FAST = dict(vehicles_count=10, duration=8.0)
+
+
+@pytest.mark.parametrize("mode", ["off", "box"])
+def test_checkers_pass(mode):
+    from gymnasium.utils.env_checker import check_env
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    env = gym.make("roadload/EcoTraffic-v0", lane_changes=mode, **FAST)
+    check_env(env.unwrapped)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        sb3_check_env(env.unwrapped)
+    assert not caught, [str(w.message) for w in caught]
+    assert env.observation_space.shape == (len(traffic_observation_layout(env.unwrapped.config)),)
+
+
+def test_make_vec_gives_the_native_vector_env_and_checks_its_arguments():
+    envs = gym.make_vec("roadload/EcoTraffic-v0", num_envs=3, vectorization_mode="vector_entry_point", **FAST)
+    assert isinstance(envs, EcoTrafficVectorEnv)
+    obs, info = envs.reset(seed=0)
+    assert obs.shape == (3, envs.single_observation_space.shape[0]) and envs.observation_space.contains(obs)
+    assert info["_speed"].all() and np.allclose(info["speed"], 25.0)
+    with pytest.raises(GymConfigError, match="num_envs"):
+        EcoTrafficVectorEnv(0)
+    with pytest.raises(GymConfigError, match="autoreset_mode"):
+        EcoTrafficVectorEnv(2, autoreset_mode="sometimes")
+    with pytest.raises(GymConfigError, match="threads"):
+        EcoTrafficVectorEnv(2, threads=0)
+    with pytest.raises(GymConfigError, match="kinematics_rows"):
+        EcoTrafficVectorEnv(2, kinematics_rows=1)
+    with pytest.raises(GymConfigError, match="reset options .*lanes_count"):
+        envs.reset(options={"lanes_count": 4})
+    with pytest.raises(GymConfigError, match="reset options .*min_time_headway"):
+        envs.reset(options={"min_time_headway": 2.0})  # a batch-wide field
+    envs.reset(seed=1, options={"road_seed": 77, "initial_speed": 20.0})  # per sub-env fields are taken
+    assert np.allclose(envs.vehicles[:, 0, tm.V_SPEED], 20.0)
+    with pytest.raises(ValueError, match="non-finite"):
+        envs.step(np.array([[np.nan], [0.0], [0.0]], dtype=np.float32))
+    with pytest.raises(ValueError, match="shape"):
+        envs.step(np.zeros((2, 1), dtype=np.float32))
+
+
+def test_bad_config_and_actions_are_refused_with_the_field():
+    with pytest.raises(GymConfigError, match="vehicles_count"):
+        EcoTrafficEnv(vehicles_count=-1)
+    with pytest.raises(GymConfigError, match="unknown key"):
+        EcoTrafficEnv(lanes=3)
+    with pytest.raises(GymConfigError, match="whole multiple"):
+        EcoTrafficEnv(policy_frequency=3.0)
+    with pytest.raises(GymConfigError, match="delta_range"):
+        EcoTrafficEnv(traffic={"delta_range": (5.0, 4.0)})
+    with pytest.raises(GymConfigError, match="unknown vehicle"):
+        EcoTrafficEnv(vehicle="bicycle")
+    env = EcoTrafficEnv(**FAST)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="non-finite"):
+        env.step(np.array([np.inf], dtype=np.float32))
+    with pytest.raises(ValueError, match="outside the bounds"):
+        env.step(np.array([1.5], dtype=np.float32))
+
+
+def test_same_seed_same_episode_and_single_equals_vector_to_1e9():
+    """Sub-env i of the vector env seeded s equals the single env seeded s + i, through autoresets (next-step
+    rule) and with the work split over 2 threads."""
+    n, steps = 4, 70
+    config = dict(lane_changes="box", vehicles_count=12, duration=3.0)
+    actions = np.random.default_rng(0).uniform(-1, 1, (steps, n, 2)).astype(np.float32)
+    runs = []
+    for threads in (1, 2):
+        venv = EcoTrafficVectorEnv(n, config, threads=threads)
+        obs, _ = venv.reset(seed=11)
+        out = [(obs, np.zeros(n))]
+        for k in range(steps):
+            obs, r, te, tr, _ = venv.step(actions[k])
+            out.append((obs, r))
+        runs.append(out)
+    for (o1, r1), (o2, r2) in zip(*runs):
+        assert np.array_equal(o1, o2) and np.array_equal(r1, r2)
+    resets = 0
+    for i in range(n):
+        env = EcoTrafficEnv(config)
+        obs, _ = env.reset(seed=11 + i)
+        assert np.abs(obs - runs[0][0][0][i]).max() <= 1e-9
+        done = False
+        for k in range(steps):
+            if done:
+                obs, _ = env.reset()
+                r, done = 0.0, False
+                resets += 1
+            else:
+                obs, r, te, tr, _ = env.step(actions[k, i])
+                done = te or tr
+            assert np.abs(obs - runs[0][k + 1][0][i]).max() <= 1e-9
+            assert abs(r - runs[0][k + 1][1][i]) <= 1e-9
+    assert resets >= n  # the comparison went through autoresets
+    other = EcoTrafficEnv(config)
+    assert not np.array_equal(other.reset(seed=12)[0], EcoTrafficEnv(config).reset(seed=11)[0])
+
+
+def test_same_step_autoreset_reports_the_final_observation():
+    venv = EcoTrafficVectorEnv(2, dict(vehicles_count=5, duration=0.3), autoreset_mode="same_step")
+    venv.reset(seed=0)
+    for _ in range(2):
+        obs, r, te, tr, info = venv.step(np.zeros((2, 1), dtype=np.float32))
+        assert not (te | tr).any()
+    obs, r, te, tr, info = venv.step(np.zeros((2, 1), dtype=np.float32))
+    assert tr.all() and info["_final_obs"].all() and not np.array_equal(info["final_obs"], obs)
+    assert np.allclose(info["t"], 0.0)  # the fresh episodes' info; the finished ones' is in final_info
+    assert np.allclose(info["final_info"]["t"], 0.3)
+
+
+def test_ego_is_roadloads_simulator_without_traffic():
+    """No traffic: the ego's speed, distance and energy equal a standalone Simulator run on the same road with the
+    same wheel forces (the EcoDrive command mapping) to 1e-9, grade and curvature included."""
+    env = EcoTrafficEnv(vehicles_count=0, duration=20.0, road="motorway", road_seed=4, initial_speed=20.0)
+    env.reset(seed=1)
+    x0 = env.vehicles[0, tm.V_X]
+    road = env.road_profile
+    assert np.abs(road.curvature).max() > 1e-4 and np.abs(road.grade).max() > 0.005  # a real road
+    ref = Simulator("bmw_i3", road, None, None, 0, initial_speed=20.0)
+    scales = DriveScales.from_spec(ref.vehicle)
+    energy = 0.0
+    for u in [1.0, 1.0, 0.4, 0.0, -0.3, -0.05, 0.2, 0.6] * 5:
+        _, _, te, tr, info = env.step(np.array([u], dtype=np.float32))
+        st = ref.step(scales.wheel_force(float(np.float32(u)), ref.state.v), 10)
+        energy += info["terms"]["energy"]
+        assert info["speed"] == pytest.approx(st.v, abs=1e-9)
+        assert info["s"] == pytest.approx(st.s, abs=1e-9)
+        assert info["terms"]["progress"] > 0
+    assert energy == pytest.approx(st.source_energy_total, rel=1e-9)
+    # the ego kept its lane: its position along the lane is the distance its powertrain drove
+    assert env.vehicles[0, tm.V_X] - x0 == pytest.approx(st.s, abs=1e-9)
+
+
+def test_reward_is_the_sum_of_its_weighted_terms_and_a_collision_terminates():
+    env = EcoTrafficEnv(vehicles_count=20, vehicles_density=2.0, duration=40.0)
+    w = env.config.reward
+    obs, info = env.reset(seed=2)
+    crashed = False
+    for _ in range(400):
+        obs, r, te, tr, info = env.step(np.array([1.0], dtype=np.float32))  # full throttle into the traffic
+        t = info["terms"]
+        expected = w.scale * (w.progress * t["progress"] - w.energy * t["energy"]
+                              + w.mechanical_energy * t["mechanical"] - w.collision * t["collision"]
+                              - w.headway * t["headway"] - w.jerk * t["jerk"] - w.lane_change * t["lane_change"])
+        assert r == pytest.approx(expected, rel=1e-12, abs=1e-12)
+        assert set(t) == set(TERM_NAMES)
+        if te:
+            crashed = True
+            break
+    assert crashed and info["crashed"] and t["collision"] == 1.0 and r < -50
+    assert t["headway"] > 0  # it closed in below 1 s of headway first
+
+
+def test_safety_layer_prevents_rear_end_collisions_at_full_throttle():
+    """Full throttle into the default traffic (and 1.5 x denser) crashes every episode; with the shield none."""
+    crashes = {}
+    for shield in (False, True):
+        n = 0
+        for seed in range(8):
+            env = EcoTrafficEnv(vehicles_density=1.0 + 0.5 * (seed % 2), duration=15.0, shield={"enabled": shield})
+            env.reset(seed=seed)
+            for _ in range(150):
+                _, _, te, tr, info = env.step(np.array([1.0], dtype=np.float32))
+                if te or tr:
+                    break
+            n += int(info["crashed"])
+        crashes[shield] = n
+    assert crashes[False] == 8 and crashes[True] == 0
+
+
+def test_reference_backend_runs_the_same_layout_on_highway_env():
+    from gymnasium.utils.env_checker import check_env
+
+    from roadload.gym.traffic_reference import HighwayTrafficEnv
+
+    with pytest.raises(GymConfigError, match="curvature"):
+        HighwayTrafficEnv(**FAST)
+    env = HighwayTrafficEnv(curvature=False, **FAST)
+    check_env(env)
+    native = EcoTrafficEnv(curvature=False, **FAST)
+    assert env.observation_space == native.observation_space and env.layout == native.layout
+    obs, info = env.reset(seed=0)
+    idx = {name: k for k, (name, _, _) in enumerate(env.layout)}
+    assert obs[idx["ego_presence"]] == 1.0 and obs[idx["v"]] == pytest.approx(25.0 / 30.0)
+    assert obs[idx["curvature@0m"]] == 0.0
+    for _ in range(5):
+        obs, r, te, tr, info = env.step(np.array([0.3], dtype=np.float32))
+    assert obs[idx["command"]] == pytest.approx(0.3, abs=1e-6)
+    assert obs[idx["source_power"]] * 50e3 == pytest.approx(info["terms"]["energy"] * 10.0, rel=1e-9)
+    assert set(info) >= {"speed", "crashed", "lane", "s", "t", "source_energy_total", "front_gap", "shield_active"}

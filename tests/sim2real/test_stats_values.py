@@ -6,7 +6,8 @@ import pytest
 
 from roadload.sim2real.errors import DiagnosisError
 from roadload.sim2real.stats import (block_bootstrap_mean_difference, block_bootstrap_median, block_ids,
-                                     cluster_covariance, notch_interval, robust_summary)
+                                     cluster_covariance, notch_interval)
+from roadload.sim2real.records import RobustSummary
 
 
 def test_blocks_start_at_each_trips_own_first_time():
@@ -30,13 +31,13 @@ def test_block_id_errors_name_the_problem():
 
 def test_robust_summary_by_hand():
     r = np.array([1.0, -2.0, 3.0, np.nan, 10.0, np.inf])
-    s = robust_summary(r)
+    s = RobustSummary.of(r)
     x = np.array([1.0, -2.0, 3.0, 10.0])
-    assert s["n"] == 4 and s["mean"] == pytest.approx(3.0) and s["median"] == pytest.approx(2.0)
-    assert s["mad"] == pytest.approx(1.482602218505602 * 2.5, rel=1e-3)  # |x - 2| = 1, 4, 1, 8 -> median 2.5
-    assert s["medse"] == pytest.approx(np.median(x ** 2)) and s["rmse"] == pytest.approx(np.sqrt(np.mean(x ** 2)))
-    empty = robust_summary(np.array([np.nan]))
-    assert empty["n"] == 0 and all(np.isnan(empty[k]) for k in ("mean", "median", "mad", "medse", "rmse"))
+    assert s.n == 4 and s.mean == pytest.approx(3.0) and s.median == pytest.approx(2.0)
+    assert s.mad == pytest.approx(1.482602218505602 * 2.5, rel=1e-3)  # |x - 2| = 1, 4, 1, 8 -> median 2.5
+    assert s.medse == pytest.approx(np.median(x ** 2)) and s.rmse == pytest.approx(np.sqrt(np.mean(x ** 2)))
+    empty = RobustSummary.of(np.array([np.nan]))
+    assert empty.n == 0 and all(np.isnan(getattr(empty, k)) for k in ("mean", "median", "mad", "medse", "rmse"))
 
 
 def test_notch_is_median_plus_minus_1_57_iqr_over_root_m():

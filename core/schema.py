@@ -226,14 +226,15 @@ _T = typing.TypeVar("_T")
 
 
 @typing.dataclass_transform(field_specifiers=(dataclasses.field, pydantic.Field))
-def spec_dataclass(config: ConfigDict, error: Callable[[pydantic.ValidationError, Any], Exception]
-                   ) -> Callable[[type[_T]], type[_T]]:
+def spec_dataclass(config: ConfigDict, error: Callable[[pydantic.ValidationError, Any], Exception],
+                   frozen: bool = False) -> Callable[[type[_T]], type[_T]]:
     """Decorator: a pydantic dataclass (validated on construction; attribute access, positional arguments and
-    ``dataclasses.replace`` as with a stdlib dataclass) whose ValidationError is re-raised as the one-line
-    domain error ``error(exc, cls)`` (e.g. VehicleSpecError naming the field, the bound and the unit)."""
+    ``dataclasses.replace`` as with a stdlib dataclass; immutable and hashable with ``frozen``) whose
+    ValidationError is re-raised as the one-line domain error ``error(exc, cls)`` (e.g. VehicleSpecError naming
+    the field, the bound and the unit)."""
 
     def wrap(cls: type[_T]) -> type[_T]:
-        pcls: Any = pydantic.dataclasses.dataclass(cls, config=config)
+        pcls: Any = pydantic.dataclasses.dataclass(cls, config=config, frozen=frozen)
         init = pcls.__init__
 
         def __init__(self: Any, *args: Any, **kwargs: Any) -> None:

@@ -14,7 +14,7 @@ from math import comb
 
 import numpy as np
 
-from .influence import PSI_KINDS, _resolve, _weight_vec
+from .influence import MAD_CONSISTENCY, PSI_KINDS, _resolve, _weight_vec
 
 
 class BatchInputError(ValueError):
@@ -73,9 +73,9 @@ def weighted_least_squares(A, B, W=None) -> BatchResult:
 
 
 def mad_scale(residual) -> float:
-    """σ̂_MAD = 1.483 med |ΔB - med ΔB| (eq. 3.14)."""
+    """σ̂_MAD = 1.483 med |ΔB - med ΔB| (eq. 3.14, :data:`~.influence.MAD_CONSISTENCY`)."""
     r = np.asarray(residual, dtype=float)
-    return 1.483 * float(np.median(np.abs(r - np.median(r))))
+    return MAD_CONSISTENCY * float(np.median(np.abs(r - np.median(r))))
 
 
 def m_estimate(A, B, psi: str = "huber", psi_params=None, max_iter: int = 100, tol: float = 1e-10,

@@ -14,7 +14,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from .config import EstimatorConfig, EstimatorConfigError, check_setting_names
+from .config import (INSTRUMENT_DELAY, EstimatorConfig, EstimatorConfigError, check_setting_names,
+                     estimator_defaults)
 from .recursive import RecursiveEstimator
 from .rgtls import RecursiveGTLS
 from .pks import PolynomialKalmanSmoother
@@ -32,7 +33,7 @@ class CatalogEntry:
 
 _M = dict(psi="huber", robust_scale=True)          # M-estimator weights with the robust scale (Alg. 3.3/3.11)
 _LM = dict(regularisation="levenberg_marquardt", kappa=1e-5)
-_IV = dict(instruments="delayed", instrument_delay=4)
+_IV = dict(instruments="delayed", instrument_delay=INSTRUMENT_DELAY)
 _KF = dict(covariance="kalman")
 _SG = dict(covariance="stenlund_gustafsson")
 
@@ -102,14 +103,15 @@ def chapter5_settings(model: str = "M3") -> dict[str, dict[str, Any]]:
         raise EstimatorConfigError(f"chapter 5 defines settings for models 'M3' and 'M4', not {model!r}")
     n = 3 if model == "M3" else 4
     pd = [5e-5, 1e-6, 1e-8] + ([1e-6] if n == 4 else [])
-    robust = dict(psi="huber", robust_scale=True, scale0=25.0, quantile0=350.0, scale_forgetting=0.995,
-                  learn_rate=0.01)
+    d = estimator_defaults()   # section 5.5's values are the library's defaults; listed here to be seen
+    p0 = dict(p0=d["p0"])
+    robust = dict(psi="huber", robust_scale=True, **{k: d[k] for k in ("scale0", "quantile0", "scale_forgetting",
+                                                                       "learn_rate")})
     return {
-        "RLS": dict(n_params=n, forgetting=0.999, p0=100.0),
-        "RRLM": dict(n_params=n, forgetting=0.999, regularisation="levenberg_marquardt", kappa=1e-5,
-                     p0=100.0, **robust),
-        "SGMKF": dict(n_params=n, output_noise=0.8, desired_covariance=pd, p0=100.0, **robust),
-        "RGTLS": dict(n_params=n, forgetting=0.999, noise_covariance=1.0, p0=100.0),
-        "SGIVMKF": dict(n_params=n, output_noise=0.8, desired_covariance=pd, instrument_delay=4, p0=100.0,
-                        **robust),
+        "RLS": dict(n_params=n, forgetting=d["forgetting"], **p0),
+        "RRLM": dict(n_params=n, forgetting=d["forgetting"], **_LM, **p0, **robust),
+        "SGMKF": dict(n_params=n, output_noise=d["output_noise"], desired_covariance=pd, **p0, **robust),
+        "RGTLS": dict(n_params=n, forgetting=d["forgetting"], noise_covariance=1.0, **p0),
+        "SGIVMKF": dict(n_params=n, output_noise=d["output_noise"], desired_covariance=pd,
+                        instrument_delay=d["instrument_delay"], **p0, **robust),
     }

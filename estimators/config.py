@@ -16,11 +16,11 @@ from typing import Annotated, Any, Literal, overload
 import annotated_types as at
 import numpy as np
 from pydantic import ConfigDict, Field, Strict, ValidationError, field_validator, model_validator
-from roadload.schema import spec_dataclass
 from pydantic.fields import FieldInfo
+from roadload.schema import spec_dataclass
 
 from . import kernel as K
-from .influence import InfluenceError, check_psi_params, psi_code, psi_defaults
+from .influence import MAD_CONSISTENCY, InfluenceError, check_psi_params, psi_code, psi_defaults
 
 
 class EstimatorConfigError(ValueError):
@@ -48,43 +48,83 @@ def _setting(doc: str, unit: str = "1", *, gt: float | None = None, ge: float | 
 Real = Annotated[float, Strict()]
 Count = Annotated[int, Strict()]
 
+# ---- the defaults of the estimators: each written here once (section 5.5 where the text gives them)
+#: λ of the forgetting family and of RGTLS (section 5.5)
+FORGETTING = 0.999
+#: R¹, the output noise of the Kalman family (section 5.5)
+OUTPUT_NOISE = 0.8
+#: k of the delayed instruments 𝔄_t = A_{t-k} (section 5.5)
+INSTRUMENT_DELAY = 4
+#: P_0 = 100 I (section 5.5)
+INITIAL_COVARIANCE = 100.0
+#: a max diag P above this × max diag P_0 is reported as blow-up
+BLOWUP_RATIO = 1e6
 
-def _error_text(exc: ValidationError) -> str:
-    """The first error of a ValidationError of EstimatorConfig as one line naming the setting, its range and unit:
-    ``forgetting must lie in (0.0, 1.0] [1], got 0.0``."""
+# ---- settings several estimators share: declared (bounds, meaning, unit) once, checked by pydantic
+ParameterCount = Annotated[Count, Field(ge=1, description="number of parameters n [1]")]
+Forgetting = Annotated[Real, _setting("forgetting factor lambda", gt=0.0, le=1.0)]
+BlowupRatio = Annotated[Real, _setting("blow-up report level, x max diag P0", gt=1.0)]
+
+
+def _field_name(cls: type, loc: tuple) -> str:
+    """The setting an error location points at (a positional argument's index becomes its name)."""
+    names = [f.name for f in dataclasses.fields(cls) if f.init]
+    if loc and isinstance(loc[0], int) and loc[0] < len(names):
+        return names[loc[0]]
+    return str(loc[0]) if loc else ""
+
+
+def _range_text(name: str, value: Any, kind: str, integer: bool, info: FieldInfo) -> str:
+    """``<name> must lie in (lo, hi] [unit], got <value>`` (or the integer / number form) of a declared setting."""
+    bounds = {type(m): m for m in info.metadata}
+    unit = info.json_schema_extra.get("unit", "1") if isinstance(info.json_schema_extra, dict) else "1"
+    lo, lo_open = (bounds[at.Gt].gt, True) if at.Gt in bounds else (getattr(bounds.get(at.Ge), "ge", -np.inf), False)
+    hi, hi_open = (bounds[at.Lt].lt, True) if at.Lt in bounds else (getattr(bounds.get(at.Le), "le", np.inf), False)
+    if integer:
+        where = f">= {lo}" if hi == np.inf else f"in [{lo}, {hi}]"
+        return f"{name} must be an integer {where}{'' if unit == '1' else f' [{unit}]'}, got {value!r}"
+    if kind in ("float_type", "float_parsing"):
+        return f"{name} must be a number [{unit}], got {value!r}"
+    hi_open = hi_open or hi == np.inf
+    return (f"{name} must lie in {'(' if lo_open else '['}{float(lo)}, {float(hi)}{')' if hi_open else ']'} "
+            f"[{unit}], got {value!r}")
+
+
+_TYPE_ERRORS = {"bool_type": "{name} must be true or false, got {value!r}",
+                "string_type": "{name} must be a string, got {value!r}",
+                "unexpected_keyword_argument": "unknown setting(s) [{name!r}]; valid settings are {valid}",
+                "unexpected_positional_argument": "unknown setting(s) [{name!r}]; valid settings are {valid}"}
+
+
+def _error_text(exc: ValidationError, cls: type) -> str:
+    """The first error of a ValidationError of an estimator's settings class as one line naming the setting, its
+    range and unit: ``forgetting must lie in (0.0, 1.0] [1], got 0.0``."""
     err = exc.errors(include_url=False)[0]
     ctx = err.get("ctx") or {}
     if err["type"] == "value_error" and isinstance(ctx.get("error"), ValueError):
         return str(ctx["error"])
-    loc = tuple(err["loc"])
-    names = [f.name for f in dataclasses.fields(EstimatorConfig) if f.init]
-    name = names[loc[0]] if loc and isinstance(loc[0], int) and loc[0] < len(names) else (str(loc[0]) if loc else "")
-    value = err.get("input")
-    declared = _declared_hints()
-    if name == "n_params":
-        return f"n_params must be a positive integer, got {value!r}"
+    name, value = _field_name(cls, tuple(err["loc"])), err.get("input")
+    declared = _declared_hints(cls)
     if name in declared:
-        integer, info = declared[name]
-        bounds = {type(m): m for m in info.metadata}
-        if integer:
-            return f"{name} must be an integer >= {getattr(bounds.get(at.Ge), 'ge', 1)}, got {value!r}"
-        unit = info.json_schema_extra.get("unit", "1") if isinstance(info.json_schema_extra, dict) else "1"
-        if err["type"] in ("float_type", "float_parsing"):
-            return f"{name} must be a number [{unit}], got {value!r}"
-        lo, lo_open = (bounds[at.Gt].gt, True) if at.Gt in bounds else (getattr(bounds.get(at.Ge), "ge", -np.inf),
-                                                                         False)
-        hi, hi_open = (bounds[at.Lt].lt, True) if at.Lt in bounds else (getattr(bounds.get(at.Le), "le", np.inf),
-                                                                         False)
-        hi_open = hi_open or hi == np.inf
-        return (f"{name} must lie in {'(' if lo_open else '['}{float(lo)}, {float(hi)}{')' if hi_open else ']'} "
-                f"[{unit}], got {value!r}")
-    if err["type"] in ("unexpected_keyword_argument", "unexpected_positional_argument"):
-        return f"unknown setting(s) [{name!r}]; valid settings are {sorted(setting_names())}"
-    if err["type"] == "bool_type":
-        return f"{name} must be true or false, got {value!r}"
-    if err["type"] == "string_type":
-        return f"{name} must be a string, got {value!r}"
+        return _range_text(name, value, err["type"], *declared[name])
+    if err["type"] in _TYPE_ERRORS:
+        return _TYPE_ERRORS[err["type"]].format(name=name, value=value, valid=sorted(setting_names(cls)))
     return f"{name}: {err['msg']}, got {value!r}"
+
+
+def python_scalar(cls: type, value: Any) -> Any:
+    """Before-validator of integer and boolean settings: numpy integers and booleans count as Python ones (the strict
+    int and bool types refuse them)."""
+    if isinstance(value, np.bool_):
+        return bool(value)
+    return int(value) if isinstance(value, np.integer) else value
+
+
+#: the decorator of the estimators' settings classes: a pydantic dataclass whose errors are EstimatorConfigError
+#: lines naming the setting, the value and the expected range with its unit
+def settings_dataclass(frozen: bool = False) -> Any:
+    return spec_dataclass(ConfigDict(extra="forbid", allow_inf_nan=False, arbitrary_types_allowed=True),
+                          lambda exc, cls: EstimatorConfigError(_error_text(exc, cls)), frozen=frozen)
 
 
 @overload
@@ -122,8 +162,7 @@ def _matrix(value: Any, n: int, what: str, *, allow_none: bool = False, psd: boo
     return np.ascontiguousarray(arr)
 
 
-@spec_dataclass(ConfigDict(extra="forbid", allow_inf_nan=False, arbitrary_types_allowed=True),
-                lambda exc, cls: EstimatorConfigError(_error_text(exc)))
+@settings_dataclass()
 class EstimatorConfig:
     """One recursive estimator as a composition of parts (chapter 3). Units: X in units of B per unit of A.
 
@@ -154,7 +193,7 @@ class EstimatorConfig:
       positive definite (that update is also rolled back).
     """
 
-    n_params: Annotated[Count, Field(ge=1, description="number of parameters n [1]")]
+    n_params: ParameterCount
     name: str = "custom"
     psi: str = "l2"
     psi_params: tuple[Real, ...] | None = None
@@ -166,12 +205,12 @@ class EstimatorConfig:
     quantile_p: Annotated[Real, _setting("quantile p of the recursive quantile", gt=0.0, lt=1.0)] = 0.5
     scale_forgetting: Annotated[Real, _setting("forgetting lambda of sigma^2 (Algorithm 3.3)", ge=0.0,
                                                le=1.0)] = 0.995
-    scale_factor: Annotated[Real, _setting("consistency factor of the robust scale", gt=0.0)] = 1.483
+    scale_factor: Annotated[Real, _setting("consistency factor of the robust scale", gt=0.0)] = MAD_CONSISTENCY
     scale_iterations: Annotated[Count, _setting("iterations of one time step (optimal variant)", ge=1)] = 1
     iteration_tol: Annotated[Real, _setting("relative convergence tolerance of the iterations", ge=0.0)] = 1e-10
     min_scale: Annotated[Real, _setting("floor of the scale sigma", "unit of B", gt=0.0)] = 1e-12
     covariance: str = "forgetting"
-    forgetting: Annotated[Real, _setting("forgetting factor lambda (RLS family)", gt=0.0, le=1.0)] | None = None
+    forgetting: Forgetting | None = None
     process_noise: Any = None
     output_noise: Annotated[Real, _setting("output noise R (Kalman family)", "unit of B^2", gt=0.0)] | None = None
     desired_covariance: Any = None
@@ -183,23 +222,17 @@ class EstimatorConfig:
     x_min: Any = None
     x_max: Any = None
     x0: Any = None
-    p0: Any = 100.0
+    p0: Any = INITIAL_COVARIANCE
     transition: Any = None
     symmetrize: Annotated[bool, Strict()] = True
-    blowup_ratio: Annotated[Real, _setting("blow-up report level, x max diag P0", gt=1.0)] = 1e6
+    blowup_ratio: BlowupRatio = BLOWUP_RATIO
     covariance_bound_ratio: Annotated[Real, _setting("covariance reset level, x max diag P0", gt=1.0)] = 1e8
     _arrays: dict = field(default_factory=dict, init=False, repr=False, compare=False)  # set by _kernel_arrays
 
     # ------------------------------------------------------------------ validation (pydantic, in this order:
     # the declared fields, the choices, then the model validators top to bottom)
-    @field_validator("n_params", "scale_iterations", "instrument_delay", "robust_scale", "joseph", "symmetrize",
-                     mode="before")
-    @classmethod
-    def _numpy_scalars(cls, value: Any) -> Any:
-        """numpy integers and booleans count as Python ones (the strict int and bool types refuse them)."""
-        if isinstance(value, np.bool_):
-            return bool(value)
-        return int(value) if isinstance(value, np.integer) else value
+    _numpy_scalars = field_validator("n_params", "scale_iterations", "instrument_delay", "robust_scale", "joseph",
+                                     "symmetrize", mode="before")(python_scalar)
 
     @field_validator("psi_params", mode="before")
     @classmethod
@@ -269,20 +302,20 @@ class EstimatorConfig:
                 unused.append(("output_noise", ("R¹ only enters the Kalman family ('kalman', "
                                                "'stenlund_gustafsson')")))
             if self.forgetting is None:
-                self.forgetting = 0.999
+                self.forgetting = FORGETTING
         else:
             if self.forgetting is not None:
                 unused.append(("forgetting", ("λ only enters covariance 'forgetting'; the Kalman family forgets "
                                              "through process_noise Q or desired_covariance P_d")))
             if self.output_noise is None:
-                self.output_noise = 0.8
+                self.output_noise = OUTPUT_NOISE
         if self.covariance != "kalman" and self.process_noise is not None:
             unused.append(("process_noise", "Q only enters covariance 'kalman'"))
         if self.covariance != "stenlund_gustafsson" and self.desired_covariance is not None:
             unused.append(("desired_covariance", "P_d only enters covariance 'stenlund_gustafsson'"))
         if self.instruments == "delayed":
             if self.instrument_delay is None:
-                self.instrument_delay = 4
+                self.instrument_delay = INSTRUMENT_DELAY
         elif self.instrument_delay is not None:
             unused.append(("instrument_delay", "the delay only enters instruments 'delayed'"))
         if unused:
@@ -308,36 +341,63 @@ class EstimatorConfig:
     def _kernel_arrays(self) -> "EstimatorConfig":
         """Matrix-valued settings (Q, P_d, P_0 symmetric PSD; x0, bounds, F by shape) and the kernel's codes."""
         n = self.n_params
+        arrays = self._covariances()
+        arrays["xmin"], arrays["xmax"], arrays["x0"] = self._bounds_and_start()
+        arrays["F"] = self._transition_matrix()
+        constrain = bool(np.any(np.isfinite(arrays["xmin"])) or np.any(np.isfinite(arrays["xmax"])))
+        codes, values = self._codes(constrain), self._values(float(np.max(np.diag(arrays["P0"]))))
+        self._arrays = {"ip": codes, "fp": values,
+                        "Q": arrays["Q"] if arrays["Q"] is not None else np.zeros((n, n)),
+                        "Pd": arrays["Pd"] if arrays["Pd"] is not None else np.zeros((n, n)),
+                        **{k: arrays[k] for k in ("F", "xmin", "xmax", "x0", "P0")}}
+        matrices = tuple(self._arrays[k] for k in ("Q", "Pd", "F", "xmin", "xmax", "P0"))
+        for store in (K.STORE_FINAL, K.STORE_X, K.STORE_FULL):   # the parts record with each store code
+            store_codes = codes.copy()
+            store_codes[K.IP_STORE] = store
+            self._arrays[("parts", store)] = (store_codes, values) + matrices
+        return self
+
+    def _covariances(self) -> dict[str, np.ndarray | None]:
+        """Q (required by 'kalman'), P_d (required by 'stenlund_gustafsson') and P_0 (positive diagonal)."""
+        n = self.n_params
+        shapes = f"a scalar, {n} diagonal entries or an {n}x{n} matrix"
         Q = _matrix(self.process_noise, n, "process_noise (Q)", allow_none=True, psd=True)
         if self.covariance == "kalman" and Q is None:
-            raise EstimatorConfigError("covariance 'kalman' needs process_noise (Q): a scalar, "
-                                       f"{n} diagonal entries or an {n}x{n} matrix")
+            raise EstimatorConfigError(f"covariance 'kalman' needs process_noise (Q): {shapes}")
         Pd = _matrix(self.desired_covariance, n, "desired_covariance (P_d)", allow_none=True, psd=True)
         if self.covariance == "stenlund_gustafsson" and Pd is None:
-            raise EstimatorConfigError("covariance 'stenlund_gustafsson' needs desired_covariance (P_d): a "
-                                       f"scalar, {n} diagonal entries or an {n}x{n} matrix")
+            raise EstimatorConfigError(f"covariance 'stenlund_gustafsson' needs desired_covariance (P_d): {shapes}")
         P0 = _matrix(self.p0, n, "p0", psd=True)
         if np.max(np.diag(P0)) <= 0:
             raise EstimatorConfigError("p0 must have a positive diagonal")
+        return {"Q": Q, "Pd": Pd, "P0": P0}
+
+    def _transition_matrix(self) -> np.ndarray:
+        """F (n×n, finite; identity when not set)."""
+        n = self.n_params
+        if self.transition is None:
+            return np.eye(n)
+        F = np.asarray(self.transition, dtype=float)
+        if F.shape != (n, n) or not np.all(np.isfinite(F)):
+            raise EstimatorConfigError(f"transition must be a finite {n}x{n} matrix")
+        return np.ascontiguousarray(F)
+
+    def _bounds_and_start(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """x_min, x_max (±inf where not set, x_min <= x_max) and X̂_0 (n finite numbers, saturated)."""
+        n = self.n_params
         x0 = np.zeros(n) if self.x0 is None else np.asarray(self.x0, dtype=float).reshape(-1)
         if x0.shape != (n,) or not np.all(np.isfinite(x0)):
             raise EstimatorConfigError(f"x0 must be {n} finite numbers, got {self.x0!r}")
-        xmin = np.full(n, -np.inf) if self.x_min is None else np.broadcast_to(
-            np.asarray(self.x_min, dtype=float), (n,)).copy()
-        xmax = np.full(n, np.inf) if self.x_max is None else np.broadcast_to(
-            np.asarray(self.x_max, dtype=float), (n,)).copy()
+        xmin, xmax = (np.full(n, fill) if given is None else np.broadcast_to(np.asarray(given, dtype=float),
+                                                                              (n,)).copy()
+                      for given, fill in ((self.x_min, -np.inf), (self.x_max, np.inf)))
         if np.any(np.isnan(xmin)) or np.any(np.isnan(xmax)) or np.any(xmin > xmax):
             raise EstimatorConfigError(f"need x_min <= x_max element-wise, got x_min={xmin}, x_max={xmax}")
-        if self.transition is not None:
-            F = np.asarray(self.transition, dtype=float)
-            if F.shape != (n, n) or not np.all(np.isfinite(F)):
-                raise EstimatorConfigError(f"transition must be a finite {n}x{n} matrix")
-        else:
-            F = np.eye(n)
-        constrain = bool(np.any(np.isfinite(xmin)) or np.any(np.isfinite(xmax)))
-        x0 = np.clip(x0, xmin, xmax)
+        return xmin, xmax, np.clip(x0, xmin, xmax)
 
-        codes = np.zeros(K.N_IP, dtype=np.int64)  # integer codes of the parts
+    def _codes(self, constrain: bool) -> np.ndarray:
+        """The integer codes of the parts (``kernel.IP_*``)."""
+        codes = np.zeros(K.N_IP, dtype=np.int64)
         codes[K.IP_PSI] = psi_code(self.psi)
         codes[K.IP_COV] = COVARIANCE_KINDS[self.covariance]
         codes[K.IP_REG] = REGULARISATION_KINDS[self.regularisation]
@@ -349,7 +409,11 @@ class EstimatorConfig:
         codes[K.IP_SYMMETRIC] = int(bool(self.symmetrize) and self.instruments == "none")
         codes[K.IP_CONSTRAIN] = int(constrain)
         codes[K.IP_TRANSITION] = int(self.transition is not None)
-        values = np.zeros(K.N_FP)  # float settings
+        return codes
+
+    def _values(self, p0_max: float) -> np.ndarray:
+        """The float settings (``kernel.FP_*``); ``p0_max`` = max diag P_0 scales the blow-up and reset levels."""
+        values = np.zeros(K.N_FP)
         values[K.FP_C1], values[K.FP_C2], values[K.FP_C3] = self.psi_params or psi_defaults(self.psi)  # filled above
         values[K.FP_LAMBDA] = self.forgetting if self.forgetting is not None else 1.0  # 1.0: not used
         values[K.FP_R] = self.output_noise if self.output_noise is not None else 1.0
@@ -360,21 +424,20 @@ class EstimatorConfig:
         values[K.FP_SCALE_FACTOR] = self.scale_factor
         values[K.FP_TOL] = self.iteration_tol
         values[K.FP_MIN_SCALE] = self.min_scale
-        values[K.FP_BLOWUP_LEVEL] = self.blowup_ratio * float(np.max(np.diag(P0)))
-        values[K.FP_P_BOUND] = self.covariance_bound_ratio * float(np.max(np.diag(P0)))
-        self._arrays = {
-            "ip": codes, "fp": values,
-            "Q": Q if Q is not None else np.zeros((n, n)),
-            "Pd": Pd if Pd is not None else np.zeros((n, n)),
-            "F": np.ascontiguousarray(F), "xmin": xmin, "xmax": xmax, "x0": x0, "P0": P0,
-        }
-        return self
+        values[K.FP_BLOWUP_LEVEL] = self.blowup_ratio * p0_max
+        values[K.FP_P_BOUND] = self.covariance_bound_ratio * p0_max
+        return values
 
     # ------------------------------------------------------------------ helpers
     @property
     def kernel_arrays(self) -> dict:
         """The code/setting arrays handed to the kernel (read-only by convention)."""
         return self._arrays
+
+    def kernel_parts(self, store: int) -> tuple:
+        """The ``parts`` record of :func:`~roadload.estimators.kernel.run_record` (``kernel.PARTS_FIELDS``) with
+        the store code ``store`` (``kernel.STORE_*``)."""
+        return self._arrays[("parts", store)]
 
     def replace(self, **changes: Any) -> EstimatorConfig:
         """A validated copy with some settings changed (unknown names raise EstimatorConfigError)."""
@@ -386,11 +449,13 @@ class EstimatorConfig:
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.init}
 
 
-def _declared_hints() -> dict[str, tuple[bool, FieldInfo]]:
-    """name -> (integer, Field info) of the settings declared with bounds (cached)."""
-    if not _DECLARED:
-        hints = typing.get_type_hints(EstimatorConfig, include_extras=True)
-        for name, hint in hints.items():
+def _declared_hints(cls: type | None = None) -> dict[str, tuple[bool, FieldInfo]]:
+    """name -> (integer, Field info) of the settings of ``cls`` (default EstimatorConfig) declared with bounds
+    (cached per class)."""
+    cls = EstimatorConfig if cls is None else cls
+    if cls not in _DECLARED:
+        declared = _DECLARED[cls] = {}
+        for name, hint in typing.get_type_hints(cls, include_extras=True).items():
             if typing.get_origin(hint) in (typing.Union, types.UnionType):  # X | None: a setting used by some parts
                 hint = next(a for a in typing.get_args(hint) if a is not type(None))
             if typing.get_origin(hint) is not Annotated:
@@ -399,17 +464,16 @@ def _declared_hints() -> dict[str, tuple[bool, FieldInfo]]:
             if info is None:
                 continue
             base = typing.get_args(hint)[0]
-            integer = base is int or int in typing.get_args(base)
-            _DECLARED[name] = (integer, info)
-    return _DECLARED
+            declared[name] = (base is int or int in typing.get_args(base), info)
+    return _DECLARED[cls]
 
 
-_DECLARED: dict[str, tuple[bool, FieldInfo]] = {}
+_DECLARED: dict[type, dict[str, tuple[bool, FieldInfo]]] = {}
 
 
-def setting_names() -> list[str]:
-    """Names accepted as settings/overrides."""
-    return [f.name for f in dataclasses.fields(EstimatorConfig) if f.init]
+def setting_names(cls: type | None = None) -> list[str]:
+    """Names accepted as settings/overrides of ``cls`` (default EstimatorConfig)."""
+    return [f.name for f in dataclasses.fields(EstimatorConfig if cls is None else cls) if f.init]
 
 
 def check_setting_names(settings: dict[str, Any]) -> None:
@@ -418,3 +482,12 @@ def check_setting_names(settings: dict[str, Any]) -> None:
     unknown = sorted(set(settings) - valid)
     if unknown:
         raise EstimatorConfigError(f"unknown setting(s) {unknown}; valid settings are {sorted(valid)}")
+
+
+def estimator_defaults() -> dict[str, Any]:
+    """The default of every EstimatorConfig setting, with the part-dependent ones (λ of the forgetting family, R¹
+    of the Kalman family, the instrument delay) at the values the parts that use them get."""
+    out = {f.name: f.default for f in dataclasses.fields(EstimatorConfig)
+           if f.init and f.default is not dataclasses.MISSING}
+    out.update(forgetting=FORGETTING, output_noise=OUTPUT_NOISE, instrument_delay=INSTRUMENT_DELAY)
+    return out

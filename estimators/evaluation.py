@@ -25,6 +25,7 @@ from .models import ModelStructure, get_model
 from .pipeline import PipelineResult, PipelineSettings, VehicleKnowledge, model_data, run_pipeline
 from . import chapter5_settings
 from . import run
+from .batch import mad_scale
 from .metrics import medse
 from .metrics import nmse
 
@@ -105,6 +106,18 @@ class Estimate:
             for j, p in enumerate(self.parameter_names):
                 out[f"P[{p}]"] = self.P_diag[:, j]
         return pd.DataFrame(out)
+
+
+def _outlier_info(ref: "Estimate | None") -> dict[str, float]:
+    """Outliers as the estimators see them: the share of |ΔB| above 5 robust standard deviations (MAD scale,
+    eq. 3.14) and the largest |ΔB| of the robust reference run (figures 5.5/5.6 show 2000 N corrections in the
+    text's data); empty without the reference run or with 10 finite corrections or fewer."""
+    if ref is None or np.isfinite(ref.residual).sum() <= 10:
+        return {}
+    r = ref.residual[np.isfinite(ref.residual)]
+    sigma = mad_scale(r)
+    return {"outlier_share": float(np.mean(np.abs(r) > 5 * sigma)) if sigma > 0 else float("nan"),
+            "max_output_correction": float(np.max(np.abs(r)))}
 
 
 def estimate(t: np.ndarray, A: np.ndarray, B: np.ndarray, model: str | ModelStructure, estimator: str | None,
@@ -226,14 +239,7 @@ def evaluate_states(name: str, states: pd.DataFrame, knowledge: VehicleKnowledge
                 row.update(nmse=mass_nmse(est.X[start:, j], true_mass), final_mass=float(est.X[-1, j]),
                            median_mass=float(np.median(est.X[start:, j])))
             ev.mass.append(row)
-    # outliers as the estimators see them: share of |ΔB| above 5 robust standard deviations (1.483 MAD) and the
-    # largest |ΔB| of the robust reference run (figures 5.5/5.6 show 2000 N corrections in the text's data)
-    ref = estimates.get("M3-RRLM")
-    if ref is not None and np.isfinite(ref.residual).sum() > 10:
-        r = ref.residual[np.isfinite(ref.residual)]
-        sigma = 1.483 * np.median(np.abs(r - np.median(r)))
-        ev.info["outlier_share"] = float(np.mean(np.abs(r) > 5 * sigma)) if sigma > 0 else float("nan")
-        ev.info["max_output_correction"] = float(np.max(np.abs(r)))
+    ev.info.update(_outlier_info(estimates.get("M3-RRLM")))
     t_eval += time.perf_counter() - t1
     ev.timing.update(estimation=t_est, evaluation=t_eval)
     ev.info["n_triggered"] = int(np.sum(states["trigger"].to_numpy(dtype=bool)))
@@ -275,13 +281,18 @@ def notch_table(values: pd.DataFrame, value: str = "medse", by: Sequence[str] = 
         if x.size == 0:
             row.update(m=0, median=np.nan, q25=np.nan, q75=np.nan, iqr=np.nan, notch_low=np.nan, notch_high=np.nan)
         else:
-            q25, med, q75 = np.percentile(x, [25, 50, 75])
-            half = NOTCH_FACTOR * (q75 - q25) / np.sqrt(x.size)
+            q25, med, q75, half = mcgill_notch(x)
             row.update(m=int(x.size), median=med, q25=q25, q75=q75, iqr=q75 - q25, notch_low=med - half,
                        notch_high=med + half)
         rows.append(row)
     cols = list(by) + ["m", "median", "q25", "q75", "iqr", "notch_low", "notch_high"]
     return pd.DataFrame(rows, columns=cols)
+
+
+def mcgill_notch(x: np.ndarray) -> tuple[float, float, float, float]:
+    """(q25, median, q75, half width 1.57 IQR/√m) of m > 0 finite values: the McGill notch is median ± half."""
+    q25, med, q75 = np.percentile(x, [25, 50, 75])
+    return q25, med, q75, NOTCH_FACTOR * (q75 - q25) / np.sqrt(x.size)
 
 
 def significantly_different(a: pd.Series | dict, b: pd.Series | dict) -> bool:

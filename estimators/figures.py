@@ -18,7 +18,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from .evaluation import Estimate  # noqa: E402
+from .evaluation import Estimate, mcgill_notch  # noqa: E402
 from .pipeline import PipelineError, PipelineResult  # noqa: E402
 from roadload.fileio import save_figure
 
@@ -155,38 +155,21 @@ def plot_notched_boxplot(values: pd.DataFrame, value: str, order: Sequence[str] 
         data.append(x[np.isfinite(x)])
     # notches median ± 1.57 IQR/√m computed linearly (as in the text); on a log axis a notch below zero is cut
     # at the smallest positive value shown
-    conf: list[tuple[float, float] | None] = []  # notch (low, high) per combination
     floor = min((x[x > 0].min() for x in data if np.any(x > 0)), default=1.0) * 0.5
+    conf: list[tuple[float, float] | None] = []  # notch (low, high) per combination
     for x in data:
         if x.size == 0:
             conf.append(None)
             continue
-        q25, med, q75 = np.percentile(x, [25, 50, 75])
-        half = 1.57 * (q75 - q25) / np.sqrt(x.size)
-        lo = med - half
-        conf.append((max(lo, floor) if log else lo, med + half))
-    off_scale = 0
-    if log:   # diverged estimators (MEDSE up to 1e278) would break a log axis: draw them at a ceiling
-        tops = [np.percentile(x, 75) for x in data if x.size]
-        ceiling = 1e3 * max(tops) if tops else np.inf
-        off_scale = int(sum(np.sum(x > ceiling) for x in data))
-        data = [np.minimum(x, ceiling) for x in data]
-        conf = [None if c is None else (min(c[0], ceiling), min(c[1], ceiling)) for c in conf]
-    elif any(x.size for x in data):   # linear axis: a diverged estimate (NMSE -1e296) is drawn at a floor / ceiling
-        q = np.array([np.percentile(x, [25, 75]) for x in data if x.size])
-        span = 3.0 * max(float(np.max(q[:, 1] - q[:, 0])), 1e-12)
-        lo, hi = float(q[:, 0].min()) - span, float(q[:, 1].max()) + span
-        off_scale = int(sum(np.sum((x < lo) | (x > hi)) for x in data))
-        ceiling = f"[{lo:.4g}, {hi:.4g}]"
-        data = [np.clip(x, lo, hi) for x in data]
-        conf = [None if c is None else (float(np.clip(c[0], lo, hi)), float(np.clip(c[1], lo, hi))) for c in conf]
+        _, med, _, half = mcgill_notch(x)
+        conf.append((max(med - half, floor) if log else med - half, med + half))
+    data, conf, off_scale, where = (_to_log_scale if log else _to_linear_scale)(data, conf)
+    if off_scale:
+        title = f"{title} ({off_scale} values {where})"
     fig, ax = plt.subplots(figsize=(max(6, 0.8 * len(order) + 2), 4.5))
     ax.boxplot([x if x.size else [np.nan] for x in data], notch=True, whis=1.5, tick_labels=order,
                # matplotlib's stub says ArrayLike; its documented None rows (default notch) do not fit it
                conf_intervals=conf, flierprops={"markersize": 2})  # type: ignore[arg-type]
-    if off_scale:
-        where = f"beyond {ceiling:.3g} drawn at that ceiling" if log else f"outside {ceiling} drawn at its edge"
-        title = f"{title} ({off_scale} values {where})"
     if log:
         ax.set_yscale("log")
     ax.set_ylabel(ylabel)
@@ -194,3 +177,29 @@ def plot_notched_boxplot(values: pd.DataFrame, value: str, order: Sequence[str] 
     ax.set_title(title, fontsize=10)
     ax.grid(alpha=0.3, axis="y")
     return fig
+
+
+Notches = list[tuple[float, float] | None]
+
+
+def _to_log_scale(data: list[np.ndarray], conf: Notches) -> tuple[list[np.ndarray], Notches, int, str]:
+    """Diverged estimators (MEDSE up to 1e278) would break a log axis: values and notches above 1000 × the largest
+    upper quartile are drawn at that ceiling. Returns (values, notches, values moved, where they were moved)."""
+    tops = [np.percentile(x, 75) for x in data if x.size]
+    ceiling = 1e3 * max(tops) if tops else np.inf
+    off_scale = int(sum(np.sum(x > ceiling) for x in data))
+    conf = [None if c is None else (min(c[0], ceiling), min(c[1], ceiling)) for c in conf]
+    return [np.minimum(x, ceiling) for x in data], conf, off_scale, f"beyond {ceiling:.3g} drawn at that ceiling"
+
+
+def _to_linear_scale(data: list[np.ndarray], conf: Notches) -> tuple[list[np.ndarray], Notches, int, str]:
+    """On a linear axis a diverged estimate (NMSE -1e296) is drawn at a floor / ceiling 3 × the widest IQR beyond
+    the quartiles. Returns (values, notches, values moved, where they were moved)."""
+    if not any(x.size for x in data):
+        return data, conf, 0, ""
+    q = np.array([np.percentile(x, [25, 75]) for x in data if x.size])
+    span = 3.0 * max(float(np.max(q[:, 1] - q[:, 0])), 1e-12)
+    lo, hi = float(q[:, 0].min()) - span, float(q[:, 1].max()) + span
+    off_scale = int(sum(np.sum((x < lo) | (x > hi)) for x in data))
+    conf = [None if c is None else (float(np.clip(c[0], lo, hi)), float(np.clip(c[1], lo, hi))) for c in conf]
+    return [np.clip(x, lo, hi) for x in data], conf, off_scale, f"outside [{lo:.4g}, {hi:.4g}] drawn at its edge"

@@ -39,6 +39,8 @@ PSI_KINDS: dict[str, tuple[int, tuple[float, float, float]]] = {
     "l1": (PSI_L1, (0.0, 0.0, 0.0)),
 }
 _L1_FLOOR = 1e-6
+#: consistency factor of the median absolute deviation as a scale of Gaussian residuals, 1/Φ⁻¹(3/4) (eq. 3.14)
+MAD_CONSISTENCY = 1.483
 
 
 class InfluenceError(ValueError):

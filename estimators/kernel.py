@@ -33,13 +33,27 @@ record, so online and batch results are the same numbers by construction. ``recu
 independent records (trips) in parallel threads with the very same function (it releases the GIL).
 The stages are ``inline="always"`` numba functions: after inlining, ``run_record`` is the same single loop
 as one hand-written body (no array-passing calls per sample).
+
+:func:`run_record` takes five packed records (plain tuples, in the field order named below; numba types a
+plain tuple of arrays in its fast dispatch path, a named tuple costs ~13 µs more per call, which the online
+``update()`` would pay on every sample):
+
+- ``record`` (:data:`RECORD_FIELDS`): regressors A (T×n), outputs B (T,), instruments 𝔄 (T×n, or 0×n);
+- ``parts`` (:data:`PARTS_FIELDS`): the composition, ``EstimatorConfig.kernel_parts``;
+- ``state`` (:data:`STATE_FIELDS`): X̂, P, the scalar state, the instrument ring and the counters, updated in place;
+- ``out`` (:data:`OUTPUT_FIELDS`): per-sample outputs (:func:`outputs`);
+- ``work`` (:func:`scratch`): work buffers.
+
+Inside the kernel the composition's settings travel as an :class:`Options` and the named work buffers as a
+:class:`Buffers` (named tuples built in compiled code, never crossing the Python boundary).
 """
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit
-from roadload.jitcache import cached_njit
 
 from .influence import PSI_L2, weight_scalar
 
@@ -61,9 +75,25 @@ STORE_FINAL, STORE_X, STORE_FULL = 0, 1, 2
 P_HEALTHY, P_ABOVE_BOUND, P_CORRUPT = 0, 1, 2
 
 
+#: the packed records of :func:`run_record`, field by field
+RECORD_FIELDS = ("regressors", "outputs", "instruments")
+PARTS_FIELDS = ("codes", "settings", "process_noise", "desired_cov", "transition", "xmin", "xmax", "P0")
+STATE_FIELDS = ("X", "P", "scalars", "instrument_ring", "counters")
+OUTPUT_FIELDS = ("X", "P_diag", "residual_prior", "residual_post", "weights", "scale")
+
+
 def scratch(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """The ``vectors`` and ``matrices`` work buffers of :func:`run_record` for n parameters."""
+    """The ``work`` record of :func:`run_record` for n parameters: (vectors, matrices) work buffers."""
     return np.empty((N_SCRATCH_VECTORS, n)), np.empty((N_SCRATCH_MATRICES, n, n))
+
+
+def outputs(T: int, n: int, store: int, trips: tuple[int, ...] = ()) -> tuple[np.ndarray, ...]:
+    """The ``out`` record of :func:`run_record` (:data:`OUTPUT_FIELDS`) for T samples: X̂_t when ``store`` is
+    STORE_X or STORE_FULL, the others with STORE_FULL only (arrays of length 0 where not stored). With
+    ``trips`` = (K,) every array has a leading trip axis (the record of trip r is ``tuple(o[r] for o in out)``)."""
+    rows = T if store == STORE_FULL else 0
+    return (np.empty(trips + (T if store >= STORE_X else 0, n)), np.empty(trips + (rows, n)),
+            *(np.empty(trips + (rows,)) for _ in range(4)))
 
 
 def size_tag(n: int) -> tuple:
@@ -87,14 +117,24 @@ _inline = njit(inline="always")
 
 # ============================================================================ stage 1: sample and prediction
 @_inline
-def read_sample(regressors, outputs, instruments, t, a, z, instrument_ring, counters, iv, delay, n):
-    """Copy a_t (and the instrument 𝔄_t) into ``a`` (``z``); returns (b_t, all entries finite)."""
+def read_regressors(record, t, a, n):
+    """Copy a_t of ``record`` (:data:`RECORD_FIELDS`) into ``a``; returns (b_t, probe): probe is 0 when a_t and b_t
+    are finite, NaN otherwise (one test for all entries: x * 0 is 0 for finite x and NaN for inf/NaN)."""
+    regressors, outputs, _ = record
     b = outputs[t]
-    # one test for all entries: x * 0 is 0 for finite x and NaN for inf/NaN
     probe = b * 0.0
     for i in range(n):
         a[i] = regressors[t, i]
         probe += a[i] * 0.0
+    return b, probe
+
+
+@_inline
+def read_sample(record, t, a, z, instrument_ring, counters, iv, delay, n):
+    """Copy a_t (and the instrument 𝔄_t) of ``record`` (:data:`RECORD_FIELDS`) into ``a`` (``z``); returns (b_t,
+    all entries finite)."""
+    b, probe = read_regressors(record, t, a, n)
+    instruments = record[2]
     if iv == IV_USER:
         for i in range(n):
             z[i] = instruments[t, i]
@@ -120,13 +160,19 @@ def symmetrise(P, n):
 
 
 @_inline
-def predict(transition, X, P, x_tmp, work, n, sym):
-    """Prediction X' = F X, P' = F P Fᵀ (random-walk / PKS shift model); also for skipped samples."""
+def matrix_vector(M, v, out, n):
+    """out = M v (n×n times n)."""
     for i in range(n):
         acc = 0.0
         for j in range(n):
-            acc += transition[i, j] * X[j]
-        x_tmp[i] = acc
+            acc += M[i, j] * v[j]
+        out[i] = acc
+
+
+@_inline
+def predict(transition, X, P, x_tmp, work, n, sym):
+    """Prediction X' = F X, P' = F P Fᵀ (random-walk / PKS shift model); also for skipped samples."""
+    matrix_vector(transition, X, x_tmp, n)
     for i in range(n):
         for j in range(n):
             acc = 0.0
@@ -158,11 +204,24 @@ def backup_state(X, P, X_prev, P_prev, n, sym, with_P):
 
 
 @_inline
+def output_correction(a, X, b, n):
+    """ΔB = b - a X̂ [unit of B] (a priori with X̂_{t-1}, a posteriori with X̂_t)."""
+    r = b
+    for i in range(n):
+        r -= a[i] * X[i]
+    return r
+
+
+@_inline
 def prior_products(P, X, a, z, b, P_z, a_P, n, sym, cov):
     """ΔB_t = b_t - a_t X̂_{t-1} [unit of B], P𝔄ᵀ → P_z, a P → a_P (when needed); returns (ΔB_t, s = a P 𝔄ᵀ)."""
-    r_prior = b
-    for i in range(n):
-        r_prior -= a[i] * X[i]
+    return output_correction(a, X, b, n), covariance_products(P, a, z, P_z, a_P, n, sym, cov)
+
+
+@_inline
+def covariance_products(P, a, z, P_z, a_P, n, sym, cov):
+    """P𝔄ᵀ → P_z, a P → a_P (when needed: without symmetry, or a symmetric P outside the forgetting family, where
+    a P = (P aᵀ)ᵀ is copied); returns s = a P 𝔄ᵀ."""
     s = 0.0
     for i in range(n):
         acc = 0.0
@@ -180,7 +239,7 @@ def prior_products(P, X, a, z, b, P_z, a_P, n, sym, cov):
             for i in range(n):
                 acc += a[i] * P[i, j]
             a_P[j] = acc
-    return r_prior, s
+    return s
 
 
 @_inline
@@ -240,11 +299,13 @@ def covariance_forgetting(P, P_prev, L, P_z, a_P, inv_lam, n, sym):
 
 
 @_inline
-def covariance_kalman(P, P_prev, L, P_z, a_P, s, r_joseph, process_noise, g_sg, Pd_z, a_Pd, n, sym, joseph,
-                      kalman):
+def covariance_kalman(P, P_prev, gain_terms, s, r_joseph, process_noise, desired_terms, n, sym, joseph, kalman):
     """Kalman family: P - L a P + Q (Algorithm 3.13) or + Q_t = W P_d 𝔄ᵀ a P_d / (R + W a P_d 𝔄ᵀ)
     (Stenlund-Gustafsson, Algorithm 3.16); Joseph form (I - L a) P (I - L a)ᵀ + L (R/W) Lᵀ on request.
+    ``gain_terms`` = (L, P 𝔄ᵀ, a P); ``desired_terms`` = (W / (R + W a P_d 𝔄ᵀ), P_d 𝔄ᵀ, a P_d).
     ``P_prev`` may be ``P`` itself (in place, as in :func:`covariance_forgetting`)."""
+    L, P_z, a_P = gain_terms
+    g_sg, Pd_z, a_Pd = desired_terms
     for i in range(n):
         j0 = i if sym else 0
         for j in range(j0, n):
@@ -424,9 +485,10 @@ def push_instrument(a, instrument_ring, counters, delay, n):
 
 
 @_inline
-def store_sample(t, X, P, r_prior, r_post, w, sigma2, out_X, out_Pdiag, out_rprior, out_rpost, out_w, out_scale,
-                 store, n):
-    """Write X̂_t (STORE_X) and diag P_t, ΔB prior/post, W, σ̂ (STORE_FULL) of sample t."""
+def store_sample(t, X, P, r_prior, r_post, w, sigma2, out, store, n):
+    """Write X̂_t (STORE_X) and diag P_t, ΔB prior/post, W, σ̂ (STORE_FULL) of sample t into ``out``
+    (:data:`OUTPUT_FIELDS`)."""
+    out_X, out_Pdiag, out_rprior, out_rpost, out_w, out_scale = out
     if store >= STORE_X:
         for i in range(n):
             out_X[t, i] = X[i]
@@ -440,151 +502,187 @@ def store_sample(t, X, P, r_prior, r_post, w, sigma2, out_X, out_Pdiag, out_rpri
 
 
 # ============================================================================ the record loop
-# _nrt=False: numba's private switch for reference counting, not listed in its njit overloads
-@cached_njit(nogil=True, _nrt=False)
-def run_record(regressors, outputs, instruments, codes, settings, process_noise, desired_cov, transition, xmin,
-               xmax, P0, X, P, scalars, instrument_ring, counters, out_X, out_Pdiag, out_rprior, out_rpost, out_w,
-               out_scale, vectors, matrices, size_tag):
-    """Process one record (T samples) in place on the state (X, P, scalars, instrument_ring, counters).
+#: the composition's settings inside the kernel (built by :func:`options` from ``codes`` and ``settings``)
+Options = namedtuple("Options", [
+    "store", "psi", "c1", "c2", "c3", "min_scale",               # weights (stage 3)
+    "cov", "c_gain", "inv_lam", "R", "joseph", "sym",            # gain and covariance (stages 4-5)
+    "iv", "delay", "has_transition",                            # gain direction, prediction
+    "max_iter", "tol", "regularised", "tikhonov", "kappa", "constrain",  # iterations, stages 6-7
+    "robust", "step_up", "step_down", "lam_scale", "scale_factor",      # robust scale (stage 9)
+    "blowup_level", "p_bound"])                                  # safety net (stage 8)
+#: the work buffers inside the kernel, named (built by :func:`buffers` from the ``work`` record)
+Buffers = namedtuple("Buffers", ["a", "z", "X_prev", "X_iter", "P_z", "a_P", "L", "Pd_z", "a_Pd", "col", "row",
+                                 "P_source", "pivots"])
 
-    regressors A (T×n), outputs B (T,), instruments 𝔄 (T×n, only read when codes[IP_IV] == IV_USER);
-    codes/settings: the IP_*/FP_* arrays of :class:`~roadload.estimators.config.EstimatorConfig`; P0: the
-    initial covariance (target of a covariance reset); vectors/matrices: work buffers (:func:`scratch`) — the
-    function is compiled without numba's reference counting (``_nrt=False``: it allocates nothing), so the
-    inline stages pass arrays at no cost. Outputs are written per sample when codes[IP_STORE] asks
-    for them (STORE_X: out_X; STORE_FULL: all). ``size_tag`` is a tuple of n zeros (:func:`size_tag`): its
-    length is part of the argument type, so the function is compiled once per number of parameters with n a
-    compile-time constant (small loops unrolled; about 1.5x faster than a run-time n).
-    """
-    T = outputs.shape[0]
-    n = len(size_tag)
-    store = codes[IP_STORE]
-    psi = codes[IP_PSI]
+
+@_inline
+def options(codes, settings):
+    """The :class:`Options` of a composition from its integer codes (IP_*) and float settings (FP_*)."""
     cov = codes[IP_COV]
-    iv = codes[IP_IV]
-    delay = codes[IP_DELAY]
-    max_iter = codes[IP_MAX_ITER]
-    robust = codes[IP_ROBUST_SCALE] != 0
-    joseph = codes[IP_JOSEPH] != 0
-    sym = codes[IP_SYMMETRIC] != 0
-    constrain = codes[IP_CONSTRAIN] != 0
-    has_transition = codes[IP_TRANSITION] != 0
-    c1 = settings[FP_C1]
-    c2 = settings[FP_C2]
-    c3 = settings[FP_C3]
-    inv_lam = 1.0 / settings[FP_LAMBDA]
-    R = settings[FP_R]
     kappa = settings[FP_KAPPA]
-    regularised = codes[IP_REG] != REG_NONE and kappa > 0.0
-    tikhonov = codes[IP_REG] == REG_TIKHONOV and kappa > 0.0
-    c_gain = settings[FP_LAMBDA] if cov == COV_FORGETTING else R
-    tol = settings[FP_TOL]
-    min_scale = settings[FP_MIN_SCALE]
-    blowup_level = settings[FP_BLOWUP_LEVEL]
-    p_bound = settings[FP_P_BOUND]
-    step_up = settings[FP_ETA] * 2.0 * settings[FP_P]
-    step_down = -settings[FP_ETA] * 2.0 * (1.0 - settings[FP_P])
-    lam_scale = settings[FP_LAMBDA_SCALE]
-    scale_factor = settings[FP_SCALE_FACTOR]
+    return Options(
+        codes[IP_STORE], codes[IP_PSI], settings[FP_C1], settings[FP_C2], settings[FP_C3], settings[FP_MIN_SCALE],
+        cov, settings[FP_LAMBDA] if cov == COV_FORGETTING else settings[FP_R], 1.0 / settings[FP_LAMBDA],
+        settings[FP_R], codes[IP_JOSEPH] != 0, codes[IP_SYMMETRIC] != 0,
+        codes[IP_IV], codes[IP_DELAY], codes[IP_TRANSITION] != 0,
+        codes[IP_MAX_ITER], settings[FP_TOL], codes[IP_REG] != REG_NONE and kappa > 0.0,
+        codes[IP_REG] == REG_TIKHONOV and kappa > 0.0, kappa, codes[IP_CONSTRAIN] != 0,
+        codes[IP_ROBUST_SCALE] != 0, settings[FP_ETA] * 2.0 * settings[FP_P],
+        -settings[FP_ETA] * 2.0 * (1.0 - settings[FP_P]), settings[FP_LAMBDA_SCALE], settings[FP_SCALE_FACTOR],
+        settings[FP_BLOWUP_LEVEL], settings[FP_P_BOUND])
 
+
+@_inline
+def buffers(work, P, opt):
+    """The named :class:`Buffers` in the ``work`` record. Without instruments the gain direction is the regressor
+    itself (shared buffer, no per-sample copy); with a symmetric P_d and 𝔄 = a, a P_d equals P_d aᵀ (one buffer);
+    P_{t-1} for the covariance update is a copy only when the update is iterated (each iteration restarts from
+    it), else the update runs in place."""
+    vectors, matrices = work
     a = vectors[0]
-    # without instruments the gain direction is the regressor itself: share the buffer (no per-sample copy)
-    z = a if iv == IV_NONE else vectors[1]
-    X_prev = vectors[2]
-    X_iter = vectors[3]
-    P_z = vectors[4]
-    a_P = vectors[5]
-    L = vectors[6]
-    Pd_z = vectors[7]
-    # symmetric P_d with 𝔄 = a: a P_d equals P_d aᵀ (desired_products fills one buffer)
-    a_Pd = Pd_z if sym else vectors[8]
-    col = vectors[9]
-    row = vectors[10]
-    # P_{t-1} for the covariance update: a copy only when the update is iterated (each iteration restarts from it)
-    iterated = max_iter > 1
-    P_source = matrices[0] if iterated else P
-    work = matrices[1]
+    return Buffers(a, a if opt.iv == IV_NONE else vectors[1], vectors[2], vectors[3], vectors[4], vectors[5],
+                   vectors[6], vectors[7], vectors[7] if opt.sym else vectors[8], vectors[9], vectors[10],
+                   matrices[0] if opt.max_iter > 1 else P, matrices[1])
+
+
+@_inline
+def a_priori(P, X, desired_cov, b, buf, opt, n):
+    """Stage 2 of a finite sample: back up X̂_{t-1} (and P_{t-1} when iterated), ΔB_t, s = a P 𝔄ᵀ and s_d = a P_d 𝔄ᵀ;
+    returns (ΔB_t, s, s_d, usable). A sample whose products overflow (a P aᵀ, a P 𝔄ᵀ or ΔB beyond the float
+    range) is not usable: it is skipped like a non-finite one."""
+    a = buf.a
+    backup_state(X, P, buf.X_prev, buf.P_source, n, opt.sym, opt.max_iter > 1)
+    r_prior, s = prior_products(P, X, a, buf.z, b, buf.P_z, buf.a_P, n, opt.sym, opt.cov)
+    s_d = 0.0
+    if opt.cov == COV_SG:
+        s_d = desired_products(desired_cov, a, buf.z, buf.Pd_z, buf.a_Pd, n, opt.sym)
+    probe = r_prior * 0.0 + s * 0.0 + s_d * 0.0
+    if opt.iv != IV_NONE:
+        # with instruments s = a P 𝔄ᵀ need not overflow for a huge a_t: test Σ a_i² P_ii ≥ a P aᵀ / n
+        for i in range(n):
+            probe += a[i] * a[i] * P[i, i] * 0.0
+    return r_prior, s, s_d, probe == 0.0
+
+
+@_inline
+def covariance_update(P, process_noise, buf, w, s, s_d, den, opt, n):
+    """Stage 5: P_t by forgetting (Algorithm 3.1) or in the Kalman family (Algorithms 3.13, 3.16), from
+    ``buf.P_source`` (P_{t-1})."""
+    if opt.cov == COV_FORGETTING:
+        covariance_forgetting(P, buf.P_source, buf.L, buf.P_z, buf.a_P, opt.inv_lam, n, opt.sym)
+    else:
+        g_sg = w / (opt.R + w * s_d) if opt.cov == COV_SG else 0.0
+        covariance_kalman(P, buf.P_source, (buf.L, buf.P_z, buf.a_P), s, opt.R * w / (den * den), process_noise,
+                          (g_sg, buf.Pd_z, buf.a_Pd), n, opt.sym, opt.joseph, opt.cov == COV_KALMAN)
+
+
+@_inline
+def update_step(parts, X, P, sigma2, b, r_prior, s, s_d, buf, opt, n):
+    """Stages 3-7 of one time step (iterated up to ``max_iter`` times until X̂_t converges, the "optimal"
+    variant): weight, gain, covariance, regularisation, parameter update, saturation. Returns (W, ok); ok is
+    False when the regularisation's normaliser was not a finite positive number."""
+    _, _, process_noise, _, _, xmin, xmax, _ = parts
+    sigma = 1.0
+    if opt.psi != PSI_L2:
+        sigma = np.sqrt(sigma2)
+        sigma = max(sigma, opt.min_scale)
+    w = weight(opt.psi, r_prior, sigma, opt.c1, opt.c2, opt.c3)
+    ok = True
+    for it in range(opt.max_iter):
+        if it > 0:
+            # iterate the weight with the current estimate until X̂_t converges
+            for i in range(n):
+                buf.X_iter[i] = X[i]
+            w = weight(opt.psi, output_correction(buf.a, X, b, n), sigma, opt.c1, opt.c2, opt.c3)
+        den = gain(buf.P_z, w, s, opt.c_gain, buf.L, n)
+        covariance_update(P, process_noise, buf, w, s, s_d, den, opt, n)
+        if opt.regularised:
+            ok = regularise(P, opt.kappa, buf.col, buf.row, n, opt.sym)
+            if not ok:
+                break
+        update_parameters(X, buf.X_prev, buf.L, r_prior, P, opt.kappa, opt.tikhonov, n)
+        if opt.constrain:
+            saturate(X, xmin, xmax, n)
+        if it > 0 and converged(X, buf.X_iter, opt.tol, n):
+            break
+    return w, ok
+
+
+@_inline
+def safety_net(state, P0, sample, ok, buf, opt, n):
+    """Stage 8 after an update: classify P_t (the LDLᵀ factorisation every PD_CHECK_INTERVAL samples), keep the
+    largest healthy max diag P, roll back a corrupt update and reset P to P_0 when it is corrupt or above the
+    bound (counted; the first such sample, or the first above the blow-up level, is the blow-up sample)."""
+    X, P, scalars, _, counters = state
+    health, pmax = covariance_health(X, P, buf.pivots, opt.p_bound, n, opt.sym,
+                                     (sample & (PD_CHECK_INTERVAL - 1)) == 0)
+    if not ok:
+        health = P_CORRUPT
+    if health != P_CORRUPT and pmax > scalars[SC_PMAX]:
+        scalars[SC_PMAX] = pmax  # the largest diag P an update produced (before a reset)
+    if health != P_HEALTHY:
+        if health == P_CORRUPT:
+            # a non-finite or indefinite result (overflow, singular normalisation) is undone
+            counters[CT_ROLLED_BACK] += 1
+            restore_state(X, buf.X_prev, n)
+        counters[CT_P_RESETS] += 1
+        pmax = reset_covariance(P, P0, n)
+        if counters[CT_BLOWUP_AT] < 0:
+            counters[CT_BLOWUP_AT] = sample
+    if pmax > opt.blowup_level and counters[CT_BLOWUP_AT] < 0:
+        counters[CT_BLOWUP_AT] = sample
+
+
+@_inline
+def finish_sample(t, b, r_prior, w, state, out, buf, opt, n):
+    """Stage 9 and the outputs: a posteriori ΔB (when the scale or the outputs need it), the robust scale, the
+    delayed-instrument ring, the stored sample."""
+    X, P, scalars, instrument_ring, counters = state
+    r_post = b
+    if opt.robust or opt.store == STORE_FULL:
+        r_post = output_correction(buf.a, X, b, n)
+    if opt.robust:
+        scale(scalars, r_post, opt.step_up, opt.step_down, opt.lam_scale, opt.scale_factor)
+    if opt.iv == IV_DELAY:
+        push_instrument(buf.a, instrument_ring, counters, opt.delay, n)
+    store_sample(t, X, P, r_prior, r_post, w, scalars[SC_SIGMA2], out, opt.store, n)
+
+
+# _nrt=False: numba's private switch for reference counting, not listed in its njit overloads
+@njit(cache=True, nogil=True, _nrt=False)  # type: ignore[call-overload]
+def run_record(record, parts, state, out, work, size_tag):
+    """Process one record (T samples) in place on the state.
+
+    ``record``, ``parts``, ``state``, ``out``, ``work``: the packed records of the module docstring (``parts`` =
+    the IP_*/FP_* arrays and matrices of :class:`~roadload.estimators.config.EstimatorConfig`; its P_0 is the
+    target of a covariance reset). The function is compiled without numba's reference counting (``_nrt=False``:
+    it allocates nothing), so the inline stages pass arrays at no cost. Outputs are written per sample when the
+    store code asks for them (STORE_X: X̂_t; STORE_FULL: all). ``size_tag`` is a tuple of n zeros
+    (:func:`size_tag`): its length is part of the argument type, so the function is compiled once per number of
+    parameters with n a compile-time constant (small loops unrolled; about 1.5x faster than a run-time n).
+    """
+    codes, settings, _, desired_cov, transition, _, _, P0 = parts
+    X, P, scalars, instrument_ring, counters = state
+    T = record[1].shape[0]
+    n = len(size_tag)
+    opt = options(codes, settings)
+    buf = buffers(work, P, opt)
     t0 = counters[CT_T]  # samples before this record (sample indices are global: online == batch)
 
     for t in range(T):
-        b, valid = read_sample(regressors, outputs, instruments, t, a, z, instrument_ring, counters, iv, delay, n)
-        if has_transition:
-            predict(transition, X, P, X_prev, work, n, sym)
+        b, valid = read_sample(record, t, buf.a, buf.z, instrument_ring, counters, opt.iv, opt.delay, n)
+        if opt.has_transition:
+            predict(transition, X, P, buf.X_prev, buf.pivots, n, opt.sym)
         r_prior = np.nan
         s = 0.0
         s_d = 0.0
         if valid:
-            backup_state(X, P, X_prev, P_source, n, sym, iterated)
-            r_prior, s = prior_products(P, X, a, z, b, P_z, a_P, n, sym, cov)
-            if cov == COV_SG:
-                s_d = desired_products(desired_cov, a, z, Pd_z, a_Pd, n, sym)
-            # overflow-scale samples (a P aᵀ, a P 𝔄ᵀ or ΔB beyond the float range) are skipped like non-finite ones
-            probe = r_prior * 0.0 + s * 0.0 + s_d * 0.0
-            if iv != IV_NONE:
-                # with instruments s = a P 𝔄ᵀ need not overflow for a huge a_t: test Σ a_i² P_ii ≥ a P aᵀ / n
-                for i in range(n):
-                    probe += a[i] * a[i] * P[i, i] * 0.0
-            valid = probe == 0.0
+            r_prior, s, s_d, valid = a_priori(P, X, desired_cov, b, buf, opt, n)
         if not valid:
             counters[CT_SKIPPED] += 1
-            store_sample(t, X, P, np.nan, np.nan, np.nan, scalars[SC_SIGMA2], out_X, out_Pdiag, out_rprior,
-                         out_rpost, out_w, out_scale, store, n)
+            store_sample(t, X, P, np.nan, np.nan, np.nan, scalars[SC_SIGMA2], out, opt.store, n)
             continue
-        sigma = 1.0
-        if psi != PSI_L2:
-            sigma = np.sqrt(scalars[SC_SIGMA2])
-            sigma = max(sigma, min_scale)
-        w = weight(psi, r_prior, sigma, c1, c2, c3)
-        ok = True
-        for it in range(max_iter):
-            if it > 0:
-                # iterate the weight with the current estimate until X̂_t converges ("optimal" variant)
-                r = b
-                for i in range(n):
-                    X_iter[i] = X[i]
-                    r -= a[i] * X[i]
-                w = weight(psi, r, sigma, c1, c2, c3)
-            den = gain(P_z, w, s, c_gain, L, n)
-            if cov == COV_FORGETTING:
-                covariance_forgetting(P, P_source, L, P_z, a_P, inv_lam, n, sym)
-            else:
-                g_sg = w / (R + w * s_d) if cov == COV_SG else 0.0
-                covariance_kalman(P, P_source, L, P_z, a_P, s, R * w / (den * den), process_noise, g_sg, Pd_z, a_Pd,
-                                  n, sym, joseph, cov == COV_KALMAN)
-            if regularised:
-                ok = regularise(P, kappa, col, row, n, sym)
-                if not ok:
-                    break
-            update_parameters(X, X_prev, L, r_prior, P, kappa, tikhonov, n)
-            if constrain:
-                saturate(X, xmin, xmax, n)
-            if it > 0 and converged(X, X_iter, tol, n):
-                break
-        # diagonal, finiteness and bound every sample; the LDLᵀ factorisation every PD_CHECK_INTERVAL samples
-        health, pmax = covariance_health(X, P, work, p_bound, n, sym, ((t0 + t) & (PD_CHECK_INTERVAL - 1)) == 0)
-        if not ok:
-            health = P_CORRUPT
-        if health != P_CORRUPT and pmax > scalars[SC_PMAX]:
-            scalars[SC_PMAX] = pmax  # the largest diag P an update produced (before a reset)
-        if health != P_HEALTHY:
-            if health == P_CORRUPT:
-                # a non-finite or indefinite result (overflow, singular normalisation) is undone
-                counters[CT_ROLLED_BACK] += 1
-                restore_state(X, X_prev, n)
-            counters[CT_P_RESETS] += 1
-            pmax = reset_covariance(P, P0, n)
-            if counters[CT_BLOWUP_AT] < 0:
-                counters[CT_BLOWUP_AT] = t0 + t
-        if pmax > blowup_level and counters[CT_BLOWUP_AT] < 0:
-            counters[CT_BLOWUP_AT] = t0 + t
-        r_post = b
-        if robust or store == STORE_FULL:
-            for i in range(n):
-                r_post -= a[i] * X[i]
-        if robust:
-            scale(scalars, r_post, step_up, step_down, lam_scale, scale_factor)
-        if iv == IV_DELAY:
-            push_instrument(a, instrument_ring, counters, delay, n)
-        store_sample(t, X, P, r_prior, r_post, w, scalars[SC_SIGMA2], out_X, out_Pdiag, out_rprior, out_rpost,
-                     out_w, out_scale, store, n)
+        w, ok = update_step(parts, X, P, scalars[SC_SIGMA2], b, r_prior, s, s_d, buf, opt, n)
+        safety_net(state, P0, t0 + t, ok, buf, opt, n)
+        finish_sample(t, b, r_prior, w, state, out, buf, opt, n)
     counters[CT_T] += T

@@ -22,6 +22,7 @@ drive-train model with its own loss tables, the steering-ratio table); it never 
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import warnings
 from dataclasses import dataclass, field
@@ -37,7 +38,7 @@ from .models import (ACCELERATION, GRADIENT_ANGLE, PATH_CURVATURE, SPEED, TRACTI
                      NominalParameters, get_model)
 from roadload.road_load import RoadLoadParameters
 from roadload.units import STANDARD_AIR_DENSITY
-from .pks import pks_bank
+from .pks import PKSDesign, pks_bank
 
 STAGES = ("measured", "smoothed", "decimated", "states")
 
@@ -305,18 +306,26 @@ class PipelineResult:
 
 
 # ================================================================================ stages
-def _smoother_bank(values: dict[str, np.ndarray], rate: float, settings: PipelineSettings):
-    """Smoothed values, first derivatives [unit/s] and the common delay [samples] of the library's PKS bank.
+def smoother_design(settings: PipelineSettings, rate: float) -> PKSDesign:
+    """The PKS design of the pipeline's smoother bank for an input sampled at ``rate`` [Hz].
 
-    The smoother settings are given for settings.smoother_rate (100 Hz); at another input rate the window is
+    The smoother settings are given for settings.smoother_rate (100 Hz); at another input rate the windows are
     scaled with the rate and the forgetting factor λ to the same memory in seconds (λ^(smoother_rate/rate))."""
-
-    cfg = dict(settings.smoother)
+    design = PKSDesign.from_options(**settings.smoother)
     scale = rate / settings.smoother_rate
     if abs(scale - 1.0) > 1e-6:
-        cfg["window"] = max(1, int(round(cfg.get("window", 20) * scale)))
-        cfg["forgetting"] = float(cfg.get("forgetting", 0.9)) ** (1.0 / scale)
-    return pks_bank(values, dt=1.0 / rate, derivatives=1, **cfg)
+        def scaled(window: int) -> int:   # a window of >= 1 sample stays >= 1
+            return max(min(window, 1), round(window * scale))
+        design = dataclasses.replace(design, window_left=scaled(design.window_left),
+                                     window_right=scaled(design.window_right),
+                                     forgetting=design.forgetting ** (1.0 / scale))
+    return design
+
+
+def _smoother_bank(values: dict[str, np.ndarray], rate: float, settings: PipelineSettings):
+    """Smoothed values, first derivatives [unit/s] and the common delay [samples] of the library's PKS bank
+    (:func:`smoother_design`)."""
+    return pks_bank(values, dt=1.0 / rate, derivatives=1, design=smoother_design(settings, rate))
 
 
 def _stage_smoothed(trip: Trip, settings: PipelineSettings, notes: list[str]) -> tuple[pd.DataFrame, float]:
@@ -401,8 +410,32 @@ def _stage_states(dec: pd.DataFrame, knowledge: VehicleKnowledge, settings: Pipe
     v = dec["vehicle_speed"].to_numpy(dtype=float)
     dv = dec["vehicle_speed_derivative"].to_numpy(dtype=float)
     out: dict[str, np.ndarray] = {"t": t, SPEED: v, ACCELERATION: dv}
+    out[GRADIENT_ANGLE] = _gradient_angle(dec, knowledge, settings, notes)
+    out[PATH_CURVATURE] = _path_curvature(dec, knowledge, notes)
+    gear = _gear(dec, knowledge)
+    out["gear"] = gear
+    # wheel angular acceleration θ̈_W: from the wheel-speed smoothers, else from dv/dt
+    if "wheel_acceleration" in dec:
+        wheel_acc = dec["wheel_acceleration"].to_numpy(dtype=float)
+    else:
+        wheel_acc = dv / dt_model.wheel_radius
+    out["drive_torque"], out["rim_torque"] = _drive_and_rim_torque(dec, dt_model, gear, wheel_acc, notes)
+    out[TRACTIVE_FORCE] = dt_model.tractive_force(out["rim_torque"], wheel_acc)
+    cond = _trigger_conditions(dec, knowledge, settings, out, notes)
+    trigger = np.ones_like(v, dtype=bool)
+    for name in TRIGGER_CONDITIONS:
+        out[f"trigger_{name}"] = cond[name]
+        trigger &= cond[name]
+    finite = np.isfinite(out[SPEED]) & np.isfinite(out[ACCELERATION]) & np.isfinite(out[GRADIENT_ANGLE])
+    trigger &= finite & (t >= t[0] + settings.warmup if t.size else True)
+    out["trigger"] = trigger
+    return pd.DataFrame(out)
 
-    # gradient angle, eq. 5.2 (or a grade channel)
+
+def _gradient_angle(dec: pd.DataFrame, knowledge: VehicleKnowledge, settings: PipelineSettings,
+                    notes: list[str]) -> np.ndarray:
+    """θ [rad] by eq. 5.2 (optionally pitch-corrected) or from a grade channel (``settings.gradient``)."""
+    dv = dec["vehicle_speed_derivative"].to_numpy(dtype=float)
     gradient = settings.gradient
     if gradient == "auto":
         gradient = "accelerometer"
@@ -415,56 +448,55 @@ def _stage_states(dec: pd.DataFrame, knowledge: VehicleKnowledge, settings: Pipe
     if gradient == "grade_channel":
         if "grade" not in dec:
             raise PipelineError("gradient='grade_channel' but the trip has no 'grade' channel")
-        out[GRADIENT_ANGLE] = dec["grade"].to_numpy(dtype=float)
         notes.append("gradient angle from the trip's grade channel, not eq. 5.2")
-    elif "accel_x" in dec:
-        ratio = (dec["accel_x"].to_numpy(dtype=float) - dv) / G
-        out[GRADIENT_ANGLE] = np.arcsin(np.clip(ratio, -1.0, 1.0))
-        if settings.pitch_correction:
-            out[GRADIENT_ANGLE] = out[GRADIENT_ANGLE] - knowledge.pitch_gradient * dv
-            notes.append(f"eq. 5.2 pitch-corrected (k = {knowledge.pitch_gradient:g} rad/(m/s^2))")
-    else:
-        out[GRADIENT_ANGLE] = np.full_like(v, np.nan)
+        return dec["grade"].to_numpy(dtype=float)
+    if "accel_x" not in dec:
         notes.append("no accel_x: gradient angle unavailable")
+        return np.full_like(dv, np.nan)
+    ratio = (dec["accel_x"].to_numpy(dtype=float) - dv) / G
+    angle = np.arcsin(np.clip(ratio, -1.0, 1.0))
+    if settings.pitch_correction:
+        angle = angle - knowledge.pitch_gradient * dv
+        notes.append(f"eq. 5.2 pitch-corrected (k = {knowledge.pitch_gradient:g} rad/(m/s^2))")
+    return angle
 
-    # path curvature, eq. 5.3
+
+def _path_curvature(dec: pd.DataFrame, knowledge: VehicleKnowledge, notes: list[str]) -> np.ndarray:
+    """1/r [1/m] by eq. 5.3 through the steering table (NaN without steering angle or table)."""
     if knowledge.steering is not None and "steering_wheel_angle" in dec:
-        out[PATH_CURVATURE] = knowledge.steering.path_curvature(dec["steering_wheel_angle"].to_numpy(dtype=float))
-    else:
-        out[PATH_CURVATURE] = np.full_like(v, np.nan)
-        notes.append("no steering_wheel_angle or steering table: path curvature unavailable (M4 not possible)")
+        return knowledge.steering.path_curvature(dec["steering_wheel_angle"].to_numpy(dtype=float))
+    notes.append("no steering_wheel_angle or steering table: path curvature unavailable (M4 not possible)")
+    return np.full(len(dec), np.nan)
 
-    # gear: logged, or the single gear of a one-speed drive-train
+
+def _gear(dec: pd.DataFrame, knowledge: VehicleKnowledge) -> np.ndarray:
+    """The logged gear, or the single gear of a one-speed drive-train."""
     if "gear" in dec:
-        gear = dec["gear"].to_numpy(dtype=float)
-    elif dt_model.n_gears == 1:
-        gear = np.ones_like(v)
-    else:
-        raise PipelineError(f"the drive-train model of {knowledge.name!r} has {dt_model.n_gears} gears but the "
-                            f"trip logs no gear channel")
-    out["gear"] = gear
+        return dec["gear"].to_numpy(dtype=float)
+    if knowledge.drivetrain.n_gears == 1:
+        return np.ones(len(dec))
+    raise PipelineError(f"the drive-train model of {knowledge.name!r} has {knowledge.drivetrain.n_gears} gears but "
+                        f"the trip logs no gear channel")
 
-    # wheel angular acceleration θ̈_W: from the wheel-speed smoothers, else from dv/dt
-    if "wheel_acceleration" in dec:
-        wheel_acc = dec["wheel_acceleration"].to_numpy(dtype=float)
-    else:
-        wheel_acc = dv / dt_model.wheel_radius
 
-    # rim torque, eq. 2.17 (own drive-train model); a logged rim torque is used only without a drive torque
+def _drive_and_rim_torque(dec: pd.DataFrame, dt_model: DrivetrainModel, gear: np.ndarray, wheel_acc: np.ndarray,
+                          notes: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """(T_E, T_R) [N m]: T_R by eq. 2.17 through the own drive-train model; a logged rim torque is used only without
+    a drive torque."""
     if "drive_torque" in dec:
         drive_torque = dec["drive_torque"].to_numpy(dtype=float)
-        rim = dt_model.rim_torque(drive_torque, gear, wheel_acc)
-    elif "rim_torque" in dec:
-        drive_torque = dec["rim_torque"].to_numpy(dtype=float) / dt_model.overall_ratio(gear)
+        return drive_torque, dt_model.rim_torque(drive_torque, gear, wheel_acc)
+    if "rim_torque" in dec:
         rim = dec["rim_torque"].to_numpy(dtype=float)
         notes.append("no drive_torque: the logged rim_torque is used as T_R")
-    else:
-        raise PipelineError("the trip has neither drive_torque nor rim_torque; no tractive force possible")
-    out["drive_torque"] = drive_torque
-    out["rim_torque"] = rim
-    out[TRACTIVE_FORCE] = dt_model.tractive_force(rim, wheel_acc)
+        return rim / dt_model.overall_ratio(gear), rim
+    raise PipelineError("the trip has neither drive_torque nor rim_torque; no tractive force possible")
 
-    # trigger, section 5.3
+
+def _trigger_conditions(dec: pd.DataFrame, knowledge: VehicleKnowledge, settings: PipelineSettings,
+                        out: dict[str, np.ndarray], notes: list[str]) -> dict[str, np.ndarray]:
+    """The five conditions of section 5.3 on the states ``out`` computed so far."""
+    t, v, dv, drive_torque = out["t"], out[SPEED], out[ACCELERATION], out["drive_torque"]
     if "brake_pressure_front" in dec or "brake_pressure_rear" in dec:
         p = np.zeros_like(v)
         for c in ("brake_pressure_front", "brake_pressure_rear"):
@@ -474,13 +506,20 @@ def _stage_states(dec: pd.DataFrame, knowledge: VehicleKnowledge, settings: Pipe
     else:
         braking = dv < settings.brake_deceleration
         notes.append(f"no brake pressure logged: braking assumed where dv/dt < {settings.brake_deceleration} m/s^2")
-    cond = {
+    return {
         "no_brake": ~_hold(braking, t, settings.brake_hold),
         "moving": v > settings.min_speed,
         "torque": ((np.abs(drive_torque) > settings.min_drive_torque)
                    & (drive_torque > max(settings.drive_torque_floor, knowledge.drive_torque_floor))),
-        "rim_torque_available": np.isfinite(rim) & np.isfinite(out[TRACTIVE_FORCE]),
+        "rim_torque_available": np.isfinite(out["rim_torque"]) & np.isfinite(out[TRACTIVE_FORCE]),
+        "no_slip": _no_slip(dec, knowledge.drivetrain, out["gear"], v, notes),
     }
+
+
+def _no_slip(dec: pd.DataFrame, dt_model: DrivetrainModel, gear: np.ndarray, v: np.ndarray,
+             notes: list[str]) -> np.ndarray:
+    """Condition 3: a gear engaged, the drive-train steady over the smoother's window, the clutch closed and the
+    engine speed matching the gear shaft speed within the slip tolerance."""
     slip_ok = np.isfinite(dt_model.overall_ratio(gear))
     if "drivetrain_steady" in dec:
         slip_ok &= dec["drivetrain_steady"].to_numpy(dtype=bool)
@@ -495,16 +534,7 @@ def _stage_states(dec: pd.DataFrame, knowledge: VehicleKnowledge, settings: Pipe
             slip_ok &= np.abs(eng - shaft) <= dt_model.slip_tolerance * np.maximum(np.abs(eng), 1.0)
     elif "clutch" not in dec:
         notes.append("no engine_speed or clutch: drive-train slip (condition 3) not checked")
-    cond["no_slip"] = slip_ok
-    trigger = np.ones_like(v, dtype=bool)
-    for name in TRIGGER_CONDITIONS:
-        out[f"trigger_{name}"] = cond[name]
-        trigger &= cond[name]
-    finite = np.isfinite(out[SPEED]) & np.isfinite(out[ACCELERATION]) & np.isfinite(out[GRADIENT_ANGLE])
-    trigger &= finite & (t >= t[0] + settings.warmup if t.size else True)
-    out["trigger"] = trigger
-    return pd.DataFrame(out)
-
+    return slip_ok
 
 
 def load_for_pipeline(path: str | os.PathLike) -> Trip:

@@ -15,10 +15,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from math import comb, factorial
+from typing import Annotated, Any
 
 import numpy as np
+from pydantic import field_validator
 
-from .config import EstimatorConfig, EstimatorConfigError
+from .config import (Count, EstimatorConfig, EstimatorConfigError, Forgetting, Real, _setting, python_scalar,
+                     settings_dataclass)
 from .recursive import EstimatorInputError, RecursiveEstimator
 
 
@@ -31,28 +34,34 @@ def shift_matrix(n_params: int) -> np.ndarray:
     return F
 
 
-@dataclass(frozen=True)
+@settings_dataclass(frozen=True)
 class PKSDesign:
-    """Settings of a PKS: n_params = order + 1, forgetting λ, windows w_l, w_r [samples], prior P_0 = p0 I."""
+    """Settings of a PKS: n_params = order + 1, forgetting λ, windows w_l, w_r [samples], prior P_0 = p0 I.
+    The defaults are the text's experiment-3.7 setting (order 4, λ = 0.9, w_l = w_r = 20)."""
 
-    n_params: int = 5
-    forgetting: float = 0.9
-    window_left: int = 20
-    window_right: int = 20
-    p0: float = 1e4
+    n_params: Annotated[Count, _setting("polynomial order + 1", ge=1, le=8)] = 5
+    forgetting: Forgetting = 0.9
+    window_left: Annotated[Count, _setting("window w_l before the smoothed sample", "samples", ge=0)] = 20
+    window_right: Annotated[Count, _setting("window w_r after the smoothed sample (the delay)", "samples",
+                                            ge=0)] = 20
+    p0: Annotated[Real, _setting("prior covariance P_0 = p0 I", gt=0.0)] = 1e4
 
-    def __post_init__(self):
-        if not (isinstance(self.n_params, (int, np.integer)) and 1 <= self.n_params <= 8):
-            raise EstimatorConfigError(f"PKS n_params (polynomial order + 1) must be an integer in 1..8, "
-                                       f"got {self.n_params!r}")
-        for name in ("window_left", "window_right"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, np.integer)) and v >= 0):
-                raise EstimatorConfigError(f"PKS {name} must be an integer >= 0 [samples], got {v!r}")
-        if not (0.0 < float(self.forgetting) <= 1.0):
-            raise EstimatorConfigError(f"PKS forgetting must lie in (0, 1], got {self.forgetting}")
-        if not (np.isfinite(self.p0) and self.p0 > 0):
-            raise EstimatorConfigError(f"PKS p0 must be finite and > 0, got {self.p0}")
+    _numpy_scalars = field_validator("n_params", "window_left", "window_right", mode="before")(python_scalar)
+
+    @classmethod
+    def from_options(cls, window: int | None = None, window_left: int | None = None, window_right: int | None = None,
+                     order: int | None = None, n_params: int | None = None, forgetting: float | None = None,
+                     p0: float | None = None) -> "PKSDesign":
+        """A design from the options of :func:`pks_bank`: ``window`` sets w_l = w_r, ``order`` = n_params - 1; an
+        option left at None takes its default (windows and counts are taken as integers, λ and p0 as floats)."""
+        if n_params is None and order is not None:
+            n_params = int(order) + 1
+        elif order is not None and int(order) + 1 != n_params:
+            raise EstimatorConfigError(f"order {order} and n_params {n_params} disagree (n_params = order + 1)")
+        given = dict(n_params=n_params, window_left=window if window_left is None else window_left,
+                     window_right=window if window_right is None else window_right, forgetting=forgetting, p0=p0)
+        kinds = dict(n_params=int, window_left=int, window_right=int, forgetting=float, p0=float)
+        return cls(**{k: kinds[k](v) for k, v in given.items() if v is not None})
 
     @property
     def delay(self) -> int:
@@ -83,9 +92,12 @@ class PolynomialKalmanSmoother:
     """One PKS (Algorithm 3.21). ``update(b_t)`` returns the smoothed value of sample t - w_r;
     ``smooth(B, dt, derivatives)`` processes a record and returns aligned values and derivatives."""
 
-    def __init__(self, n_params: int = 5, forgetting: float = 0.9, window_left: int = 20,
-                 window_right: int = 20, p0: float = 1e4):
-        self.design = PKSDesign(n_params, forgetting, window_left, window_right, p0)
+    def __init__(self, design: PKSDesign | None = None, **settings: Any):
+        """``design``, or the settings of a :class:`PKSDesign` (n_params, forgetting, window_left, window_right,
+        p0) by name."""
+        if design is not None and settings:
+            raise EstimatorConfigError("give a PKS design or its settings, not both")
+        self.design = design if design is not None else PKSDesign(**settings)
         self._est = RecursiveEstimator(self.design.config())
         self._c = self.design.regressor
         self._rows = self.design.evaluation_rows(0)
@@ -143,22 +155,36 @@ class PKSBankResult:
 
 def pks_bank(values, dt: float = 1.0, derivatives: int = 1, *, window: int | None = None,
              window_left: int | None = None, window_right: int | None = None, order: int | None = None,
-             n_params: int | None = None, forgetting: float = 0.9, p0: float = 1e4,
+             n_params: int | None = None, forgetting: float | None = None, p0: float | None = None,
              design: PKSDesign | None = None) -> PKSBankResult:
     """Smooth several channels with one PKS configuration (section 5.3), in parallel.
 
     values: dict name -> (T,) array (all the same length) or a (T × channels) array (names '0', '1', …).
-    dt [s]: sample period (derivatives are divided by dt^j). window sets w_l = w_r; order = n_params - 1
-    (default order 4, the text's experiment 3.7 setting). NaN samples are skipped (the polynomial shifts on).
+    dt [s]: sample period (derivatives are divided by dt^j). ``design``, or the options of
+    :meth:`PKSDesign.from_options` (window sets w_l = w_r; order = n_params - 1; the rest :class:`PKSDesign`'s
+    defaults). NaN samples are skipped (the polynomial shifts on).
     """
     if design is None:
-        if n_params is None:
-            n_params = 5 if order is None else int(order) + 1
-        elif order is not None and int(order) + 1 != n_params:
-            raise EstimatorConfigError(f"order {order} and n_params {n_params} disagree (n_params = order + 1)")
-        wl = window_left if window_left is not None else (window if window is not None else 20)
-        wr = window_right if window_right is not None else (window if window is not None else 20)
-        design = PKSDesign(int(n_params), float(forgetting), int(wl), int(wr), float(p0))
+        design = PKSDesign.from_options(window, window_left, window_right, order, n_params, forgetting, p0)
+    names, arrays = _channels(values)
+    if not (np.isfinite(dt) and dt > 0):
+        raise EstimatorInputError(f"dt must be a positive sample period [s], got {dt}")
+    if not (isinstance(derivatives, (int, np.integer)) and 0 <= derivatives < design.n_params):
+        raise EstimatorInputError(f"derivatives must be an integer in 0..{design.n_params - 1}, got {derivatives!r}")
+    T = arrays[0].shape[0]
+    A = np.tile(design.regressor, (T, 1))
+    rows = design.evaluation_rows(derivatives)
+    cfg = design.config()
+    # channels one after the other through the kernel (cheap; the parallel path is for long estimator runs)
+    est = np.stack([RecursiveEstimator(cfg).run(A, a, store="x").X @ rows.T for a in arrays])
+    value = {k: est[i, :, 0].copy() for i, k in enumerate(names)}
+    ders = {k: est[i, :, 1:] / dt ** np.arange(1, derivatives + 1) for i, k in enumerate(names)}
+    first = {k: ders[k][:, 0].copy() for k in names} if derivatives >= 1 else None
+    return PKSBankResult(value, first, ders, design.delay, design.delay * dt, design)
+
+
+def _channels(values) -> tuple[list[str], list[np.ndarray]]:
+    """(names, 1-D float arrays of one length) of a dict of channels or a (T × channels) array."""
     if isinstance(values, dict):
         names = list(values)
         arrays = [np.asarray(values[k], dtype=float) for k in names]
@@ -177,16 +203,4 @@ def pks_bank(values, dt: float = 1.0, derivatives: int = 1, *, window: int | Non
     for name, a in zip(names, arrays):
         if a.ndim != 1 or a.shape[0] != T:
             raise EstimatorInputError(f"channel {name!r}: expected shape ({T},), got {a.shape}")
-    if not (np.isfinite(dt) and dt > 0):
-        raise EstimatorInputError(f"dt must be a positive sample period [s], got {dt}")
-    if not (isinstance(derivatives, (int, np.integer)) and 0 <= derivatives < design.n_params):
-        raise EstimatorInputError(f"derivatives must be an integer in 0..{design.n_params - 1}, got {derivatives!r}")
-    A = np.tile(design.regressor, (T, 1))
-    rows = design.evaluation_rows(derivatives)
-    cfg = design.config()
-    # channels one after the other through the kernel (cheap; the parallel path is for long estimator runs)
-    est = np.stack([RecursiveEstimator(cfg).run(A, a, store="x").X @ rows.T for a in arrays])
-    value = {k: est[i, :, 0].copy() for i, k in enumerate(names)}
-    ders = {k: est[i, :, 1:] / dt ** np.arange(1, derivatives + 1) for i, k in enumerate(names)}
-    first = {k: ders[k][:, 0].copy() for k in names} if derivatives >= 1 else None
-    return PKSBankResult(value, first, ders, design.delay, design.delay * dt, design)
+    return names, arrays

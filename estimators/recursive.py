@@ -129,12 +129,16 @@ class RecursiveEstimator:
     def _init_online(self) -> None:
         """Per-estimator constants of the one-sample path (kept to make update() cheap)."""
         n = self.config.n_params
-        self._codes_final = self.config.kernel_arrays["ip"].copy()
-        self._codes_final[K.IP_STORE] = K.STORE_FINAL
-        self._empty_out = (np.empty((0, n)), np.empty(0))
+        self._parts_final = self.config.kernel_parts(K.STORE_FINAL)
+        self._no_output = K.outputs(1, n, K.STORE_FINAL)
         self._no_instruments = np.empty((0, n))
         self._tag = K.size_tag(n)
         self._scratch = K.scratch(n)
+
+    @property
+    def _kernel_state(self) -> tuple:
+        """The ``state`` record of the kernel (``kernel.STATE_FIELDS``): the estimator's own arrays."""
+        return self._x, self._p, self._scalars, self._instrument_ring, self._counters
 
     @property
     def n_params(self) -> int:
@@ -240,27 +244,15 @@ class RecursiveEstimator:
             Z = kernel_array(_as_float(instrument, "instrument").reshape(1, -1))
             if Z.shape != (1, n):
                 raise EstimatorInputError(f"instrument must have {n} entries, got {Z.shape[1]}")
-        arr = self.config.kernel_arrays
-        e2, e1 = self._empty_out
-        K.run_record(kernel_array(a), kernel_array(b), Z, self._codes_final, arr["fp"], arr["Q"], arr["Pd"],
-                     arr["F"], arr["xmin"], arr["xmax"], arr["P0"], self._x, self._p, self._scalars,
-                     self._instrument_ring, self._counters,
-                     e2, e2, e1, e1, e1, e1, *self._scratch, self._tag)
+        K.run_record((kernel_array(a), kernel_array(b), Z), self._parts_final, self._kernel_state, self._no_output,
+                     self._scratch, self._tag)
         return self._x.copy()
 
     def _process(self, A, B, Z, store):
-        arr = self.config.kernel_arrays
         T, n = A.shape
-        codes = arr["ip"].copy()
-        codes[K.IP_STORE] = store
-        full = store == K.STORE_FULL
-        out_X = np.empty((T, n)) if store >= K.STORE_X else np.empty((0, n))
-        out_Pd = np.empty((T, n)) if full else np.empty((0, n))
-        vecs = [np.empty(T) if full else np.empty(0) for _ in range(4)]
-        K.run_record(A, B, Z, codes, arr["fp"], arr["Q"], arr["Pd"], arr["F"], arr["xmin"], arr["xmax"], arr["P0"],
-                     self._x, self._p, self._scalars, self._instrument_ring, self._counters, out_X, out_Pd, *vecs,
-                     *K.scratch(n), self._tag)
-        return out_X, out_Pd, vecs
+        out = K.outputs(T, n, store)
+        K.run_record((A, B, Z), self.config.kernel_parts(store), self._kernel_state, out, K.scratch(n), self._tag)
+        return out[0], out[1], list(out[2:])
 
     def run(self, A, B, instruments=None, store: str = "full") -> EstimationResult:
         """Process a whole record A (T×n), B (T,) from the current state; returns an EstimationResult.
@@ -297,6 +289,37 @@ def run_many(config: EstimatorConfig, A, B, instruments=None, store: str = "full
         raise EstimatorInputError(f"store must be one of {sorted(_STORE)}, got {store!r}")
     if not isinstance(config, EstimatorConfig):
         raise EstimatorInputError(f"config must be an EstimatorConfig, got {type(config).__name__}")
+    A, B, Z = _many_records(config, A, B, instruments)
+    Kt, T, n = A.shape
+    workers = (os.cpu_count() or 1) if n_threads is None else int(n_threads)
+    if workers < 1:
+        raise EstimatorInputError(f"n_threads must be >= 1, got {n_threads}")
+    proto = RecursiveEstimator(config)
+    states = [np.repeat(s[None], Kt, axis=0) for s in proto._kernel_state]   # X, P, scalars, rings, counters
+    code = _STORE[store]
+    parts = config.kernel_parts(code)
+    out = K.outputs(T, n, code, trips=(Kt,))
+    tag = K.size_tag(n)
+
+    def one(r: int) -> None:
+        # per-trip state in its own allocations: rows of X, P, ... share cache lines, and threads writing
+        # neighbouring rows every sample (false sharing) ran no faster on two cores than on one
+        state = tuple(s[r].copy() for s in states)
+        K.run_record((A[r], B[r], Z[r]), parts, state, tuple(o[r] for o in out), K.scratch(n), tag)
+        for s, own in zip(states, state):
+            s[r] = own
+    if workers == 1 or Kt == 1:
+        for r in range(Kt):
+            one(r)
+    else:
+        with ThreadPoolExecutor(max_workers=min(workers, Kt)) as pool:
+            list(pool.map(one, range(Kt)))
+    return _many_result(proto, states, out, code)
+
+
+def _many_records(config: EstimatorConfig, A, B, instruments) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A (K×T×n), B (K×T) and the instruments (K×T×n, or K×0×n unless 'user') of :func:`run_many`, checked and
+    as kernel arrays."""
     n = config.n_params
     B = _as_float(B, "B (measured output)")
     if B.ndim != 2:
@@ -317,51 +340,24 @@ def run_many(config: EstimatorConfig, A, B, instruments=None, store: str = "full
         if instruments is not None:
             raise EstimatorInputError("instruments given but the estimator does not use user instruments")
         Z = np.empty((Kt, 0, n))
-    proto = RecursiveEstimator(config)
-    X = np.repeat(proto._x[None], Kt, axis=0)
-    P = np.repeat(proto._p[None], Kt, axis=0)
-    scalars = np.repeat(proto._scalars[None], Kt, axis=0)
-    rings = np.repeat(proto._instrument_ring[None], Kt, axis=0)
-    counters = np.repeat(proto._counters[None], Kt, axis=0)
-    code = _STORE[store]
-    full = code == K.STORE_FULL
-    arr = config.kernel_arrays
-    codes = arr["ip"].copy()
-    codes[K.IP_STORE] = code
-    out_X = np.empty((Kt, T, n)) if code >= K.STORE_X else np.empty((Kt, 0, n))
-    out_Pd = np.empty((Kt, T, n)) if full else np.empty((Kt, 0, n))
-    vecs = [np.empty((Kt, T)) if full else np.empty((Kt, 0)) for _ in range(4)]
-    A, B, Z = kernel_array(A), kernel_array(B), kernel_array(Z)
-    tag = K.size_tag(n)
+    return kernel_array(A), kernel_array(B), kernel_array(Z)
 
-    def one(r: int) -> None:
-        # per-trip state in its own allocations: rows of X, P, ... share cache lines, and threads writing
-        # neighbouring rows every sample (false sharing) ran no faster on two cores than on one
-        state = [X[r].copy(), P[r].copy(), scalars[r].copy(), rings[r].copy(), counters[r].copy()]
-        K.run_record(A[r], B[r], Z[r], codes, arr["fp"], arr["Q"], arr["Pd"], arr["F"], arr["xmin"], arr["xmax"],
-                     arr["P0"], *state, out_X[r], out_Pd[r], vecs[0][r], vecs[1][r], vecs[2][r], vecs[3][r],
-                     *K.scratch(n), tag)
-        X[r], P[r], scalars[r], rings[r], counters[r] = state
-    workers = (os.cpu_count() or 1) if n_threads is None else int(n_threads)
-    if workers < 1:
-        raise EstimatorInputError(f"n_threads must be >= 1, got {n_threads}")
-    if workers == 1 or Kt == 1:
-        for r in range(Kt):
-            one(r)
-    else:
-        with ThreadPoolExecutor(max_workers=min(workers, Kt)) as pool:
-            list(pool.map(one, range(Kt)))
-    states = []
-    for r in range(Kt):
+
+def _many_result(proto: RecursiveEstimator, states: list[np.ndarray], out: tuple, code: int) -> EstimationResult:
+    """The EstimationResult of :func:`run_many` from the per-trip states and outputs (trip axis first)."""
+    X, P, scalars, rings, counters = states
+    per_trip = []
+    for r in range(X.shape[0]):
         e = proto.copy()
         e._x, e._p, e._scalars, e._instrument_ring, e._counters = X[r], P[r], scalars[r], rings[r], counters[r]
-        states.append(e.state)
+        per_trip.append(e.state)
+    full = code == K.STORE_FULL
     blow = counters[:, K.CT_BLOWUP_AT]
     return EstimationResult(
-        X=out_X if code >= K.STORE_X else None, P_diag=out_Pd if full else None,
-        residual_prior=vecs[0] if full else None, residual_post=vecs[1] if full else None,
-        weights=vecs[2] if full else None, scale=vecs[3] if full else None,
-        skipped=np.isnan(vecs[0]) if full else None,
+        X=out[0] if code >= K.STORE_X else None, P_diag=out[1] if full else None,
+        residual_prior=out[2] if full else None, residual_post=out[3] if full else None,
+        weights=out[4] if full else None, scale=out[5] if full else None,
+        skipped=np.isnan(out[2]) if full else None,
         n_skipped=counters[:, K.CT_SKIPPED].copy(), n_rolled_back=counters[:, K.CT_ROLLED_BACK].copy(),
-        p_blowup=blow >= 0, p_blowup_at=blow.copy(), p_diag_max=scalars[:, K.SC_PMAX].copy(), state=states,
+        p_blowup=blow >= 0, p_blowup_at=blow.copy(), p_diag_max=scalars[:, K.SC_PMAX].copy(), state=per_trip,
         n_p_resets=counters[:, K.CT_P_RESETS].copy())

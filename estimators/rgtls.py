@@ -8,169 +8,198 @@ P̌_t is fixed (``noise_covariance``; I gives RTLS, diag(0 … 0 1) the RLS dire
 Ž = Z - Ẑ from q PKS with one configuration (delay w_r), P̌_t = λ_N P̌_{t-1} + (1 - λ_N) Žᵀ Ž. RGTLS itself uses
 the raw Z_t, so its estimates carry no smoother delay. Online ``update`` and batch ``run`` give the same numbers
 (both call :func:`rgtls_record`).
+
+Composition. "Apart from using Z_t instead of A_t, the update in Algorithm 3.8 Line 3 conforms with Algorithm 3.1
+Line 4" (section 3.6.3): lines 3-4 are the catalogue kernel's own stages (:func:`~.kernel.covariance_products`,
+:func:`~.kernel.gain` with W = 1, :func:`~.kernel.covariance_forgetting`) applied to Z_t; the sample reading,
+output corrections and stored outputs are the kernel's stages too, the NCE's smoothers are the catalogue's PKS.
+Two stages are RGTLS's own: :func:`generalised_inverse_iteration` (lines 5-7) and
+:func:`noise_covariance_update` (eq. 3.43b). The record loop cannot be the catalogue's ``run_record``: there the
+parameter vector and P share one dimension n and X̂_t = X̂_{t-1} + L ΔB_t, while here P is (n+1)×(n+1) over Z_t,
+X̂_t comes from the inverse iteration with P̌_t (not from the gain), and P̌_t evolves per sample; a failed update
+restores P_{t-1} (the catalogue's safety net resets to P_0 and skips overflowing samples instead).
 """
 
 from __future__ import annotations
 
 from collections import deque
+from typing import Annotated, Any
 
 import numpy as np
-from roadload.jitcache import cached_njit
+from numba import njit
+from pydantic import Strict, field_validator, model_validator
 
-from .config import EstimatorConfigError, _matrix
-from .pks import PolynomialKalmanSmoother
+from .config import (BLOWUP_RATIO, FORGETTING, INITIAL_COVARIANCE, BlowupRatio, EstimatorConfigError, Forgetting,
+                     ParameterCount, Real, _matrix, _setting, python_scalar, settings_dataclass)
+from .kernel import (COV_FORGETTING, STORE_FULL, _inline, covariance_forgetting, covariance_products, gain,
+                     matrix_vector, output_correction, outputs, read_regressors, store_sample)
+from .pks import PKSDesign, PolynomialKalmanSmoother
 from .recursive import EstimationResult, EstimatorInputError, EstimatorState, kernel_array
 
 # counters
 _SKIP, _ROLLED, _BLOW, _T = 0, 1, 2, 3
+#: rows of the work vectors of :func:`rgtls_record` (each of length q = n + 1)
+_Z, _PZ, _L, _V, _W = range(5)
 
 
-@cached_njit
-def rgtls_record(A, B, Nz, use_nce, lam, lam_nce, blowup, X, P, Pc, ct, sc,
-                 out_X, out_Pdiag, out_rprior, out_rpost, out_scale):
-    """Algorithm 3.8 over a record; Nz (T×q) are NCE noise rows (NaN rows: no NCE update)."""
-    T = B.shape[0]
+@_inline
+def noise_covariance_update(noise_cov, noise_row, lam_nce, q):
+    """NCE, eq. 3.43b: P̌_t = λ_N P̌_{t-1} + (1 - λ_N) Žᵀ Ž with Ž_t = [Ǎ_t B̌_t] (a row with a non-finite entry,
+    i.e. before the smoothers have an estimate, leaves P̌ as it is)."""
+    for i in range(q):
+        if not np.isfinite(noise_row[i]):
+            return
+    for i in range(q):
+        for j in range(q):
+            noise_cov[i, j] = lam_nce * noise_cov[i, j] + (1.0 - lam_nce) * noise_row[i] * noise_row[j]
+
+
+@_inline
+def generalised_inverse_iteration(X, P, noise_cov, V, W, n):
+    """Algorithm 3.8 lines 5-7, one constrained generalised inverse iteration: V = [X̂_{t-1}; -1],
+    V' = P_t (P̌_t V), X̂_t = -V'_{1:n} / V'_q. Returns False (X̂ kept) when V'_q is 0 or a result is not finite."""
+    q = n + 1
+    for i in range(n):
+        V[i] = X[i]
+    V[n] = -1.0
+    matrix_vector(noise_cov, V, W, q)
+    matrix_vector(P, W, V, q)
+    ok = V[n] != 0.0 and np.isfinite(V[n])
+    if ok:
+        for i in range(n):
+            xi = -V[i] / V[n]
+            if not np.isfinite(xi):
+                ok = False
+            W[i] = xi
+    for i in range(q):
+        if not np.isfinite(P[i, i]):
+            ok = False
+    if ok:
+        for i in range(n):
+            X[i] = W[i]
+    return ok
+
+
+@_inline
+def copy_square(target, source, q):
+    """target ← source (q×q)."""
+    for i in range(q):
+        for j in range(q):
+            target[i, j] = source[i, j]
+
+
+@_inline
+def track_blowup(P, scalars, counters, blowup, sample, q):
+    """Largest max diag P so far (``scalars[0]``) and the first sample above the blow-up level (``counters``)."""
+    pmax = P[0, 0]
+    for i in range(1, q):
+        if P[i, i] > pmax:
+            pmax = P[i, i]
+    if pmax > scalars[0]:
+        scalars[0] = pmax
+    if pmax > blowup and counters[_BLOW] < 0:
+        counters[_BLOW] = sample
+
+
+@njit(cache=True)
+def rgtls_record(record, noise_rows, settings, state, out, work):
+    """Algorithm 3.8 over a record, with the NCE (eq. 3.43b) fed by ``noise_rows`` Ž (T×q; NaN rows: no update).
+
+    ``record`` = (A, B, unused), ``settings`` = (use_nce, λ, λ_N, blow-up level), ``state`` = (X̂ (n), P (q×q),
+    P̌ (q×q), counters, scalars), ``out`` = the recursive kernel's output record (``kernel.OUTPUT_FIELDS``; the
+    scale is sqrt P̌_qq, the weight 1), ``work`` = (5×q vectors, q×q matrix). Lines 3-4 are the catalogue's
+    stages on Z_t = [A_t B_t] (products, gain, forgetting update of Algorithm 3.1); lines 5-7 are
+    :func:`generalised_inverse_iteration`; an update that leaves X̂ or P non-finite is undone (P_{t-1} restored)."""
+    use_nce, lam, lam_nce, blowup = settings
+    X, P, noise_cov, counters, scalars = state
+    vectors, P_prev = work
+    z, P_z, L = vectors[_Z], vectors[_PZ], vectors[_L]
+    T = record[1].shape[0]
     n = X.shape[0]
     q = n + 1
-    z = np.empty(q)
-    Pz = np.empty(q)
-    V = np.empty(q)
-    W = np.empty(q)
-    Pp = np.empty((q, q))
     inv_lam = 1.0 / lam
     for t in range(T):
         if use_nce:
-            okn = True
-            for i in range(q):
-                if not np.isfinite(Nz[t, i]):
-                    okn = False
-            if okn:
-                for i in range(q):
-                    for j in range(q):
-                        Pc[i, j] = lam_nce * Pc[i, j] + (1.0 - lam_nce) * Nz[t, i] * Nz[t, j]
-        valid = np.isfinite(B[t])
-        for i in range(n):
-            z[i] = A[t, i]
-            if not np.isfinite(z[i]):
-                valid = False
-        z[n] = B[t]
-        r0 = B[t]
-        for i in range(n):
-            r0 -= z[i] * X[i]
-        if not valid:
-            ct[_SKIP] += 1
-            for i in range(n):
-                out_X[t, i] = X[i]
-                out_Pdiag[t, i] = P[i, i]
-            out_rprior[t] = np.nan
-            out_rpost[t] = np.nan
-            out_scale[t] = np.sqrt(max(Pc[n, n], 0.0))
+            noise_covariance_update(noise_cov, noise_rows[t], lam_nce, q)
+        b, probe = read_regressors(record, t, z, n)
+        z[n] = b
+        if not probe == 0.0:
+            counters[_SKIP] += 1
+            store_sample(t, X, P, np.nan, np.nan, np.nan, max(noise_cov[n, n], 0.0), out, STORE_FULL, n)
             continue
-        for i in range(q):
-            for j in range(q):
-                Pp[i, j] = P[i, j]
-        s = 0.0
-        for i in range(q):
-            acc = 0.0
-            for j in range(q):
-                acc += P[i, j] * z[j]
-            Pz[i] = acc
-            s += z[i] * acc
-        g = 1.0 / (lam + s)
-        for i in range(q):
-            for j in range(i, q):
-                val = (P[i, j] - g * Pz[i] * Pz[j]) * inv_lam
-                P[i, j] = val
-                P[j, i] = val
-        for i in range(n):
-            V[i] = X[i]
-        V[n] = -1.0
-        for i in range(q):
-            acc = 0.0
-            for j in range(q):
-                acc += Pc[i, j] * V[j]
-            W[i] = acc
-        for i in range(q):
-            acc = 0.0
-            for j in range(q):
-                acc += P[i, j] * W[j]
-            V[i] = acc
-        ok = V[n] != 0.0 and np.isfinite(V[n])
-        if ok:
-            for i in range(n):
-                xi = -V[i] / V[n]
-                if not np.isfinite(xi):
-                    ok = False
-                W[i] = xi
-        for i in range(q):
-            if not np.isfinite(P[i, i]):
-                ok = False
-        if ok:
-            for i in range(n):
-                X[i] = W[i]
-        else:
-            ct[_ROLLED] += 1
-            for i in range(q):
-                for j in range(q):
-                    P[i, j] = Pp[i, j]
-        pmax = P[0, 0]
-        for i in range(1, q):
-            if P[i, i] > pmax:
-                pmax = P[i, i]
-        if pmax > sc[0]:
-            sc[0] = pmax
-        if pmax > blowup and ct[_BLOW] < 0:
-            ct[_BLOW] = ct[_T] + t
-        rp = B[t]
-        for i in range(n):
-            rp -= z[i] * X[i]
-            out_X[t, i] = X[i]
-            out_Pdiag[t, i] = P[i, i]
-        out_rprior[t] = r0
-        out_rpost[t] = rp
-        out_scale[t] = np.sqrt(max(Pc[n, n], 0.0))
-    ct[_T] += T
+        r_prior = output_correction(z, X, b, n)
+        copy_square(P_prev, P, q)
+        s = covariance_products(P, z, z, P_z, P_z, q, True, COV_FORGETTING)
+        gain(P_z, 1.0, s, lam, L, q)
+        covariance_forgetting(P, P, L, P_z, P_z, inv_lam, q, True)
+        if not generalised_inverse_iteration(X, P, noise_cov, vectors[_V], vectors[_W], n):
+            counters[_ROLLED] += 1
+            copy_square(P, P_prev, q)
+        track_blowup(P, scalars, counters, blowup, counters[_T] + t, q)
+        store_sample(t, X, P, r_prior, output_correction(z, X, b, n), 1.0, max(noise_cov[n, n], 0.0), out,
+                     STORE_FULL, n)
+    counters[_T] += T
+
+
+@settings_dataclass()
+class RGTLSConfig:
+    """Settings of RGTLS (Algorithm 3.8) and of its noise covariance estimator (NCE, eq. 3.43), validated on
+    construction (errors name the setting, the value and the expected range).
+
+    n_params: n; forgetting: λ; noise_covariance: P̌ (scalar·I, q diagonal entries or q×q; the NCE's initial
+    value when ``nce=True``); p0: initial P (q×q, scalar·I); x0: X̂_0 (default 0); nce: estimate P̌ online;
+    nce_forgetting: λ_N (default λ); pks: the NCE's PKS design (a :class:`~.pks.PKSDesign` or its settings by
+    name); blowup_ratio: a max diag P above this × max diag P_0 is reported as blow-up."""
+
+    n_params: ParameterCount
+    forgetting: Forgetting = FORGETTING
+    noise_covariance: Any = 1.0
+    p0: Any = INITIAL_COVARIANCE
+    x0: Any = None
+    nce: Annotated[bool, Strict()] = False
+    nce_forgetting: Annotated[Real, _setting("forgetting factor lambda_N of the noise covariance estimator", ge=0.0,
+                                             le=1.0)] | None = None
+    pks: Any = None
+    blowup_ratio: BlowupRatio = BLOWUP_RATIO
+    name: str = "RGTLS"
+
+    _numpy_scalars = field_validator("n_params", "nce", mode="before")(python_scalar)
+
+    @model_validator(mode="after")
+    def _matrices_and_defaults(self) -> "RGTLSConfig":
+        """P̌ and P_0 as q×q symmetric PSD matrices, X̂_0 as n finite numbers, λ_N = λ unless given, the PKS design."""
+        n = self.n_params
+        q = n + 1
+        self.noise_covariance = _matrix(self.noise_covariance, q, "noise_covariance (P̌)", psd=True)
+        self.p0 = _matrix(self.p0, q, "p0", psd=True)
+        x0 = np.zeros(n) if self.x0 is None else np.asarray(self.x0, dtype=float).reshape(-1)
+        if x0.shape != (n,) or not np.all(np.isfinite(x0)):
+            raise EstimatorConfigError(f"x0 must be {n} finite numbers, got {self.x0!r}")
+        self.x0 = x0
+        if self.nce_forgetting is None:
+            self.nce_forgetting = self.forgetting
+        if not isinstance(self.pks, PKSDesign):
+            if not isinstance(self.pks, (dict, type(None))):
+                raise EstimatorConfigError(f"pks must be a PKSDesign or a dict of its settings, got {self.pks!r}")
+            try:
+                self.pks = PKSDesign(**(self.pks or {}))
+            except EstimatorConfigError as exc:
+                raise EstimatorConfigError(f"pks: {exc}") from None
+        return self
 
 
 class RecursiveGTLS:
     """RGTLS (Algorithm 3.8), with a fixed noise covariance P̌ or the PKS-based NCE (eq. 3.43).
 
-    n_params: n; forgetting: λ; noise_covariance: P̌ (scalar·I, q diagonal entries or q×q; the NCE's initial
-    value when ``nce=True``); p0: initial P (q×q, scalar·I default 100); x0: X̂_0; nce: estimate P̌ online;
-    nce_forgetting: λ_N (default λ); pks: settings of the NCE's PKS bank (n_params, forgetting, window_left,
-    window_right, p0). The P reported in results is the top-left n×n block of the q×q data-information
-    inverse (not a parameter covariance)."""
+    Settings: those of :class:`RGTLSConfig`, by name. The P reported in results is the top-left n×n block of the
+    q×q data-information inverse (not a parameter covariance)."""
 
-    def __init__(self, n_params: int, forgetting: float = 0.999, noise_covariance=1.0, p0=100.0, x0=None,
-                 nce: bool = False, nce_forgetting: float | None = None, pks: dict | None = None,
-                 blowup_ratio: float = 1e6, name: str = "RGTLS"):
-        if isinstance(n_params, bool) or not isinstance(n_params, (int, np.integer)) or n_params < 1:
-            raise EstimatorConfigError(f"n_params must be a positive integer, got {n_params!r}")
-        self.n_params = n = int(n_params)
-        q = n + 1
-        if not (0.0 < float(forgetting) <= 1.0):
-            raise EstimatorConfigError(f"forgetting must lie in (0, 1], got {forgetting}")
-        lam_n = forgetting if nce_forgetting is None else nce_forgetting
-        if not (0.0 <= float(lam_n) <= 1.0):
-            raise EstimatorConfigError(f"nce_forgetting must lie in [0, 1], got {lam_n}")
-        if not (np.isfinite(blowup_ratio) and blowup_ratio > 1):
-            raise EstimatorConfigError(f"blowup_ratio must be > 1, got {blowup_ratio}")
-        self.forgetting = float(forgetting)
-        self.nce_forgetting = float(lam_n)
-        self.noise_covariance = _matrix(noise_covariance, q, "noise_covariance (P̌)", psd=True)
-        self.p0 = _matrix(p0, q, "p0", psd=True)
-        x0 = np.zeros(n) if x0 is None else np.asarray(x0, dtype=float).reshape(-1)
-        if x0.shape != (n,) or not np.all(np.isfinite(x0)):
-            raise EstimatorConfigError(f"x0 must be {n} finite numbers")
-        self.x0 = x0
-        self.nce = bool(nce)
-        pks = dict(pks or {})
-        try:
-            self._pks_proto = PolynomialKalmanSmoother(**pks)
-        except TypeError as exc:
-            raise EstimatorConfigError(f"pks settings: {exc}") from None
-        self.blowup = float(blowup_ratio) * float(np.max(np.diag(self.p0)))
-        self.name = name
+    def __init__(self, n_params: int, **settings: Any):
+        self.settings = cfg = RGTLSConfig(n_params, **settings)
+        self.n_params, self.name, self.nce = cfg.n_params, cfg.name, cfg.nce
+        self.forgetting, self.nce_forgetting = cfg.forgetting, float(cfg.nce_forgetting)
+        self.noise_covariance, self.p0, self.x0 = cfg.noise_covariance, cfg.p0, cfg.x0
+        self.blowup = cfg.blowup_ratio * float(np.max(np.diag(self.p0)))
         self.reset()
 
     def reset(self) -> None:
@@ -180,13 +209,8 @@ class RecursiveGTLS:
         self._pc = self.noise_covariance.copy()
         self._ct = np.array([0, 0, -1, 0], dtype=np.int64)
         self._sc = np.array([float(np.max(np.diag(self.p0)))])
-        self._smoothers = [PolynomialKalmanSmoother(**self._pks_kwargs()) for _ in range(q)]
-        self._raw: deque[np.ndarray] = deque(maxlen=self._pks_proto.delay + 1)
-
-    def _pks_kwargs(self) -> dict:
-        d = self._pks_proto.design
-        return dict(n_params=d.n_params, forgetting=d.forgetting, window_left=d.window_left,
-                    window_right=d.window_right, p0=d.p0)
+        self._smoothers = [PolynomialKalmanSmoother(self.settings.pks) for _ in range(q)]
+        self._raw: deque[np.ndarray] = deque(maxlen=self.settings.pks.delay + 1)
 
     @property
     def x(self) -> np.ndarray:
@@ -208,7 +232,7 @@ class RecursiveGTLS:
         Zr = np.column_stack([A, B])
         if not self.nce:
             return np.empty((0, q))
-        d = self._pks_proto.delay
+        d = self.settings.pks.delay
         smoothed = np.column_stack([s.run(Zr[:, i]).X @ s._rows[0] for i, s in enumerate(self._smoothers)])
         hist = np.array(self._raw) if len(self._raw) else np.empty((0, q))
         allz = np.vstack([hist, Zr])
@@ -232,17 +256,18 @@ class RecursiveGTLS:
         if A.ndim != 2 or A.shape[1] != n or B.shape != (A.shape[0],):
             raise EstimatorInputError(f"need A (T, {n}) and B (T,), got {A.shape} and {B.shape}")
         T = A.shape[0]
-        Nz = kernel_array(self._noise_rows(A, B))
-        out = [np.empty((T, n)), np.empty((T, n)), np.empty(T), np.empty(T), np.empty(T)]
+        noise_rows = kernel_array(self._noise_rows(A, B))
+        out = outputs(T, n, STORE_FULL)
         before = self._ct.copy()
-        rgtls_record(A, B, Nz, self.nce, self.forgetting, self.nce_forgetting, self.blowup, self._x, self._p,
-                     self._pc, self._ct, self._sc, *out)
+        q = n + 1
+        rgtls_record((A, B, A[:0]), noise_rows, (self.nce, self.forgetting, self.nce_forgetting, self.blowup),
+                     (self._x, self._p, self._pc, self._ct, self._sc), out, (np.empty((5, q)), np.empty((q, q))))
         skipped = np.isnan(out[2])
         full = store == "full"
         return EstimationResult(
             X=out[0] if store != "final" else None, P_diag=out[1] if full else None,
             residual_prior=out[2] if full else None, residual_post=out[3] if full else None,
-            weights=np.where(skipped, np.nan, 1.0) if full else None, scale=out[4] if full else None,
+            weights=out[4] if full else None, scale=out[5] if full else None,
             skipped=skipped if full else None, n_skipped=int(self._ct[_SKIP] - before[_SKIP]),
             n_rolled_back=int(self._ct[_ROLLED] - before[_ROLLED]), p_blowup=bool(self._ct[_BLOW] >= 0),
             p_blowup_at=int(self._ct[_BLOW]), p_diag_max=float(self._sc[0]), state=self.state)

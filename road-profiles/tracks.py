@@ -245,6 +245,75 @@ def _fill_missing(name: str, distance: np.ndarray, values: np.ndarray, repairs: 
     return out
 
 
+def _track_distance(distance, heading, xy) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """(s [m], x, y) of a track: the given cumulative distance, or the path length of the planar positions xy."""
+    x = y = None
+    if xy is not None:
+        x, y = (np.asarray(a, dtype=float) for a in xy)
+        if x.shape != y.shape or x.ndim != 1:
+            raise RoadProfileError(f"xy: expected two 1-D arrays of equal length, got {x.shape} and {y.shape}")
+        for nm, arr in (("x", x), ("y", y)):
+            bad = np.flatnonzero(~np.isfinite(arr))
+            if bad.size:
+                raise RoadProfileError(f"{nm}: {bad.size} NaN/inf values, first at index {int(bad[0])}")
+        if heading is not None:
+            raise RoadProfileError("give either heading or xy, not both")
+    if distance is None:
+        if x is None or y is None:
+            raise RoadProfileError("distance: required when no xy positions are given")
+        distance = path_length(x, y)
+    distance = np.asarray(distance, dtype=float)
+    if distance.ndim != 1 or distance.size < 2:
+        raise RoadProfileError(f"distance: expected a 1-D array of >= 2 samples, got shape {distance.shape}")
+    bad = np.flatnonzero(~np.isfinite(distance))
+    if bad.size:
+        raise RoadProfileError(f"distance: {bad.size} NaN/inf values, first at index {int(bad[0])}")
+    back = np.flatnonzero(np.diff(distance) < -1e-6)
+    if back.size:
+        raise RoadProfileError(f"distance: decreases at index {int(back[0]) + 1} (distance must be cumulative)")
+    return distance, x, y
+
+
+def _grade_on_grid(s: np.ndarray, grid: np.ndarray, z: np.ndarray | None, spike_threshold: float | None,
+                   window: float, repairs: dict[str, int]) -> np.ndarray:
+    """θ [rad] on the grid from the elevation z [m] at s (missing samples interpolated, spikes replaced; 0 without
+    elevation)."""
+    if z is None:
+        return np.zeros_like(grid)
+    z = _fill_missing("elevation", s, z, repairs)
+    if spike_threshold is not None:
+        z, n_spikes = remove_spikes(s, z, threshold=spike_threshold)
+        if n_spikes:
+            repairs["elevation_spikes_replaced"] = n_spikes
+    return grade_from_elevation(grid, np.interp(grid, s, z), window=window)
+
+
+def _curvature_from_track_heading(s: np.ndarray, grid: np.ndarray, psi: np.ndarray, window: float,
+                                  repairs: dict[str, int]) -> np.ndarray:
+    """κ [1/m] on the grid from the heading ψ [rad] at s (unwrapped before gaps are bridged, so that a gap across
+    ±π is not a turn)."""
+    psi = psi.copy()
+    finite = np.isfinite(psi)
+    psi[finite] = np.unwrap(psi[finite])
+    psi = _fill_missing("heading", s, psi, repairs)
+    return curvature_from_heading(grid, np.interp(grid, s, psi), window=window)
+
+
+def _clip_grade_and_curvature(grade: np.ndarray, curvature: np.ndarray, max_grade: float, max_curvature: float,
+                              repairs: dict[str, int]) -> tuple[np.ndarray, np.ndarray]:
+    """|tan θ| ≤ max_grade and |κ| ≤ max_curvature (each clipped sample counted)."""
+    limit_tan = np.tan(grade)
+    too_steep = np.abs(limit_tan) > max_grade
+    if too_steep.any():
+        repairs["grade_clipped"] = int(too_steep.sum())
+        grade = np.arctan(np.clip(limit_tan, -max_grade, max_grade))
+    too_tight = np.abs(curvature) > max_curvature
+    if too_tight.any():
+        repairs["curvature_clipped"] = int(too_tight.sum())
+        curvature = np.clip(curvature, -max_curvature, max_curvature)
+    return grade, curvature
+
+
 def profile_from_track(distance=None, elevation=None, heading=None, xy=None, *,
                        name: str = "track",
                        speed_limit=None,
@@ -276,30 +345,7 @@ def profile_from_track(distance=None, elevation=None, heading=None, xy=None, *,
     ``meta["repairs"]`` and logged as a warning (dropped close samples are ordinary thinning: counted only).
     """
     repairs: dict[str, int] = {}
-    x = y = None
-    if xy is not None:
-        x, y = (np.asarray(a, dtype=float) for a in xy)
-        if x.shape != y.shape or x.ndim != 1:
-            raise RoadProfileError(f"xy: expected two 1-D arrays of equal length, got {x.shape} and {y.shape}")
-        for nm, arr in (("x", x), ("y", y)):
-            bad = np.flatnonzero(~np.isfinite(arr))
-            if bad.size:
-                raise RoadProfileError(f"{nm}: {bad.size} NaN/inf values, first at index {int(bad[0])}")
-        if heading is not None:
-            raise RoadProfileError("give either heading or xy, not both")
-    if distance is None:
-        if x is None:
-            raise RoadProfileError("distance: required when no xy positions are given")
-        distance = path_length(x, y)
-    distance = np.asarray(distance, dtype=float)
-    if distance.ndim != 1 or distance.size < 2:
-        raise RoadProfileError(f"distance: expected a 1-D array of >= 2 samples, got shape {distance.shape}")
-    bad = np.flatnonzero(~np.isfinite(distance))
-    if bad.size:
-        raise RoadProfileError(f"distance: {bad.size} NaN/inf values, first at index {int(bad[0])}")
-    back = np.flatnonzero(np.diff(distance) < -1e-6)
-    if back.size:
-        raise RoadProfileError(f"distance: decreases at index {int(back[0]) + 1} (distance must be cumulative)")
+    distance, x, y = _track_distance(distance, heading, xy)
     n = distance.size
     z = _optional("elevation", elevation, n)
     psi = _optional("heading", heading, n)
@@ -316,41 +362,19 @@ def profile_from_track(distance=None, elevation=None, heading=None, xy=None, *,
     s = distance[keep] - distance[keep[0]]
 
     grid = _uniform_grid(s, step)
-    if z is not None:
-        z = _fill_missing("elevation", s, z[keep], repairs)
-        if elevation_spike_threshold is not None:
-            z, n_spikes = remove_spikes(s, z, threshold=elevation_spike_threshold)
-            if n_spikes:
-                repairs["elevation_spikes_replaced"] = n_spikes
-        z_grid = np.interp(grid, s, z)
-        grade = grade_from_elevation(grid, z_grid, window=elevation_window)
-    else:
-        grade = np.zeros_like(grid)
+    grade = _grade_on_grid(s, grid, None if z is None else z[keep], elevation_spike_threshold, elevation_window,
+                           repairs)
     if psi is not None:
-        psi = psi[keep].copy()
-        finite = np.isfinite(psi)
-        psi[finite] = np.unwrap(psi[finite])  # unwrap before bridging gaps, so a gap across +-pi is not a turn
-        psi = _fill_missing("heading", s, psi, repairs)
-        curvature = curvature_from_heading(grid, np.interp(grid, s, psi), window=heading_window)
+        curvature = _curvature_from_track_heading(s, grid, psi[keep], heading_window, repairs)
     elif x is not None and y is not None:
         curvature = curvature_from_xy(grid, np.interp(grid, s, x[keep]), np.interp(grid, s, y[keep]),
                                       window=heading_window)
     else:
         curvature = np.zeros_like(grid)
-
-    limit_tan = np.tan(grade)
-    too_steep = np.abs(limit_tan) > max_grade
-    if too_steep.any():
-        repairs["grade_clipped"] = int(too_steep.sum())
-        grade = np.arctan(np.clip(limit_tan, -max_grade, max_grade))
-    too_tight = np.abs(curvature) > max_curvature
-    if too_tight.any():
-        repairs["curvature_clipped"] = int(too_tight.sum())
-        curvature = np.clip(curvature, -max_curvature, max_curvature)
+    grade, curvature = _clip_grade_and_curvature(grade, curvature, max_grade, max_curvature, repairs)
 
     if v_lim is not None:
-        v_lim = _fill_missing("speed_limit", s, v_lim[keep], repairs)
-        limit = np.interp(grid, s, v_lim)
+        limit = np.interp(grid, s, _fill_missing("speed_limit", s, v_lim[keep], repairs))
     else:
         limit = np.full_like(grid, float(default_speed_limit))
     if curve_lateral_acceleration is not None:

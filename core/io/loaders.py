@@ -72,12 +72,10 @@ def check_mapping_against_dbc(mapping: Mapping, db: Database, report: ImportRepo
                 report.note(f"optional {text}")
             continue
         needed |= {h.partition(".")[0] for h in hits}
-    for extra in [cm.valid for cm in mapping.channels if cm.valid] + [p for cm in mapping.channels for p in cm.plus] + \
-            [cm.accuracy["source"] for cm in mapping.channels if cm.accuracy] + \
-            ([mapping.clock["source"], mapping.clock.get("valid")] if mapping.clock else []):
-        if extra and extra in known:
+    for extra in mapping.auxiliary_sources:
+        if extra in known:
             needed.add(extra.partition(".")[0])
-        elif extra:
+        else:
             problems.append(f"signal {extra!r} (validity flag / clock / plus) not defined in any DBC")
     if problems:
         raise LogImportError(f"mapping {mapping.name!r} does not fit the DBC files {db.files}: " + "; ".join(problems))
@@ -189,6 +187,28 @@ def read_csv_signals(path: str | Path, mapping: Mapping, report: ImportReport) -
     time_col = opts.get("time")
     if not time_col:
         raise LogImportError(f"mapping {mapping.name!r}: csv.time (the time column) is not set")
+    df, bad_lines = _read_csv_frame(path, opts, report)
+    tkey = next((c for c in [time_col] + list(opts.get("time_alternatives", [])) if c in df.columns), None)
+    if tkey is None:
+        raise LogImportError(f"{path}: time column {time_col!r} missing; columns are {list(df.columns)[:12]}...")
+    t_unit = opts.get("time_unit", "s")
+    t = to_si(pd.to_numeric(df[tkey], errors="coerce").to_numpy(dtype=float), t_unit)[0]
+    bad_t = ~np.isfinite(t)
+    if bad_t.all():
+        raise LogImportError(f"{path}: time column {tkey!r} holds no numbers")
+    if bad_t.any():  # rows without a time stamp cannot be placed on the time base
+        rows = _file_lines(np.flatnonzero(bad_t), bad_lines)
+        report.drop(f"{path.name} lines", f"time column {tkey!r} not numeric", int(bad_t.sum()), describe_lines(rows))
+        df = df.loc[~bad_t].reset_index(drop=True)
+        t = t[~bad_t]
+    check_time_base(t, t_unit, f"{path}: time column {tkey!r}")
+    return {col: Signal(t, _numeric_column(df, col, bad_lines, report), split_header(col.split("#")[0])[1])
+            for col in df.columns if col != tkey}
+
+
+def _read_csv_frame(path: Path, opts: dict[str, Any], report: ImportReport) -> tuple[pd.DataFrame, list[int]]:
+    """The CSV as a DataFrame with stripped, unique column names (a repeated name's later copies become name#2,
+    ...; counted) and the file lines of the malformed rows pandas skipped (reported)."""
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", pd.errors.ParserWarning)
@@ -211,45 +231,27 @@ def read_csv_signals(path: str | Path, mapping: Mapping, report: ImportReport) -
         h = h.strip()
         seen[h] = seen.get(h, 0) + 1
         names.append(h if seen[h] == 1 else f"{h}#{seen[h]}")
-    dupes = {h: c for h, c in seen.items() if c > 1}
-    for h, c in dupes.items():
-        report.repair(h, "duplicate column name; later copies renamed name#2, ...", c - 1)
+    for h, c in seen.items():
+        if c > 1:
+            report.repair(h, "duplicate column name; later copies renamed name#2, ...", c - 1)
     df.columns = names
-    tkey = None
-    for cand in [time_col] + list(opts.get("time_alternatives", [])):
-        if cand in df.columns:
-            tkey = cand
-            break
-    if tkey is None:
-        raise LogImportError(f"{path}: time column {time_col!r} missing; columns are {names[:12]}...")
-    t_unit = opts.get("time_unit", "s")
-    t = to_si(pd.to_numeric(df[tkey], errors="coerce").to_numpy(dtype=float), t_unit)[0]
-    bad_t = ~np.isfinite(t)
-    if bad_t.all():
-        raise LogImportError(f"{path}: time column {tkey!r} holds no numbers")
-    if bad_t.any():  # rows without a time stamp cannot be placed on the time base
-        rows = _file_lines(np.flatnonzero(bad_t), bad_lines)
-        report.drop(f"{path.name} lines", f"time column {tkey!r} not numeric", int(bad_t.sum()), describe_lines(rows))
-        df = df.loc[~bad_t].reset_index(drop=True)
-        t = t[~bad_t]
-    check_time_base(t, t_unit, f"{path}: time column {tkey!r}")
-    out: SignalSet = {}
-    for col in df.columns:
-        if col == tkey:
-            continue
-        base = col.split("#")[0]
-        unit = split_header(base)[1]
-        values = df[col].to_numpy()
-        if values.dtype == object:
-            numeric = pd.to_numeric(df[col], errors="coerce").to_numpy(dtype=float)
-            bad = np.isnan(numeric) & df[col].notna().to_numpy()
-            if bad.any() and not bad.all():
-                report.drop(col, "non-numeric cell", int(bad.sum()),
-                            describe_lines(_file_lines(np.flatnonzero(bad), bad_lines)))
-            if not bad.all():
-                values = numeric
-        out[col] = Signal(t, values, unit)
-    return out
+    return df, bad_lines
+
+
+def _numeric_column(df: pd.DataFrame, col: str, bad_lines: list[int], report: ImportReport) -> np.ndarray:
+    """A column's values: numbers where the column is numeric; a text column with some numbers becomes numeric with
+    the non-numeric cells NaN (counted with their file lines); an all-text column stays as it is."""
+    values = df[col].to_numpy()
+    if values.dtype != object:
+        return values
+    numeric = pd.to_numeric(df[col], errors="coerce").to_numpy(dtype=float)
+    bad = np.isnan(numeric) & df[col].notna().to_numpy()
+    if bad.all():
+        return values
+    if bad.any():
+        report.drop(col, "non-numeric cell", int(bad.sum()),
+                    describe_lines(_file_lines(np.flatnonzero(bad), bad_lines)))
+    return numeric
 
 
 def load_csv_log(source: str | Path, mapping: Mapping, *, progress: Progress | None = None,

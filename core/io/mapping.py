@@ -38,7 +38,7 @@ import json
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, TypedDict
+from typing import Any, Callable, Literal, TypedDict
 
 import numpy as np
 import pandas as pd
@@ -252,30 +252,7 @@ class Mapping:
 
     @classmethod
     def from_dict(cls, raw: dict[str, Any], where: str = "mapping") -> "Mapping":
-        if not isinstance(raw, dict):
-            raise LogImportError(f"{where}: a mapping is a JSON object, got {type(raw).__name__}")
-        unknown = set(raw) - _TOP_KEYS
-        if unknown:
-            hints = "".join(did_you_mean(k, _TOP_KEYS) for k in sorted(unknown))
-            raise LogImportError(f"{where}: unknown mapping keys {sorted(unknown)}{hints}; allowed "
-                                 f"{sorted(_TOP_KEYS)}")
-        for key in ("name", "format", "channels"):
-            if key not in raw:
-                raise LogImportError(f"{where}: mapping lacks {key!r}")
-        if raw["format"] not in FORMATS:
-            raise LogImportError(f"{where}: unknown format {raw['format']!r}; choose one of {list(FORMATS)}")
-        if isinstance(raw["channels"], list):
-            for i, entry in enumerate(raw["channels"]):
-                if isinstance(entry, dict):
-                    unknown = set(entry) - _CHANNEL_KEYS
-                    if unknown:
-                        hints = "".join(did_you_mean(k, _CHANNEL_KEYS) for k in sorted(unknown))
-                        raise LogImportError(f"{where}: channels[{i}]: unknown keys {sorted(unknown)}{hints}; "
-                                             f"allowed {sorted(_CHANNEL_KEYS)}")
-                    rule = entry.get("resample", "linear")
-                    if isinstance(rule, str) and rule not in RULES:
-                        raise LogImportError(f"{where}: channels[{i}] ({entry.get('channel')}): unknown resample "
-                                             f"rule {rule!r}; choose {list(RULES)}")
+        _check_mapping_keys(raw, where)
         try:
             MappingFile.model_validate(raw)
         except ValidationError as exc:
@@ -297,22 +274,58 @@ class Mapping:
                    description=raw.get("description", ""), max_gap=float(raw.get("max_gap", 2.0)))
 
     @property
-    def source_names(self) -> set[str]:
-        names = {s for c in self.channels for s in c.sources}
-        names |= {c.valid for c in self.channels if c.valid}
-        names |= {p for c in self.channels for p in c.plus}
-        names |= {c.accuracy["source"] for c in self.channels if c.accuracy}
+    def auxiliary_sources(self) -> list[str]:
+        """Source signals a mapping reads besides the channels' own: validity flags, added ('plus') signals,
+        accuracy signals, the clock reference and its validity flag."""
+        out = [c.valid for c in self.channels if c.valid] + [p for c in self.channels for p in c.plus]
+        out += [c.accuracy["source"] for c in self.channels if c.accuracy]
         if self.clock:
-            names |= {self.clock["source"]} | ({self.clock["valid"]} if self.clock.get("valid") else set())
-        return names
+            out += [self.clock["source"]] + ([self.clock["valid"]] if self.clock.get("valid") else [])
+        return out
+
+    @property
+    def source_names(self) -> set[str]:
+        return {s for c in self.channels for s in c.sources} | set(self.auxiliary_sources)
+
+
+def _check_mapping_keys(raw: Any, where: str) -> None:
+    """The top level of a mapping file: an object with the known keys, name, format and channels, a known format;
+    each channel entry with known keys and a known resample rule (checked before the schema, whose messages for
+    these cases would be less direct)."""
+    if not isinstance(raw, dict):
+        raise LogImportError(f"{where}: a mapping is a JSON object, got {type(raw).__name__}")
+    unknown = set(raw) - _TOP_KEYS
+    if unknown:
+        hints = "".join(did_you_mean(k, _TOP_KEYS) for k in sorted(unknown))
+        raise LogImportError(f"{where}: unknown mapping keys {sorted(unknown)}{hints}; allowed "
+                             f"{sorted(_TOP_KEYS)}")
+    for key in ("name", "format", "channels"):
+        if key not in raw:
+            raise LogImportError(f"{where}: mapping lacks {key!r}")
+    if raw["format"] not in FORMATS:
+        raise LogImportError(f"{where}: unknown format {raw['format']!r}; choose one of {list(FORMATS)}")
+    if not isinstance(raw["channels"], list):
+        return
+    for i, entry in enumerate(raw["channels"]):
+        if isinstance(entry, dict):
+            _check_channel_keys(entry, f"{where}: channels[{i}]")
+
+
+def _check_channel_keys(entry: dict[str, Any], where: str) -> None:
+    """A channel entry's keys are known and its resample rule is one of RULES."""
+    unknown = set(entry) - _CHANNEL_KEYS
+    if unknown:
+        hints = "".join(did_you_mean(k, _CHANNEL_KEYS) for k in sorted(unknown))
+        raise LogImportError(f"{where}: unknown keys {sorted(unknown)}{hints}; allowed {sorted(_CHANNEL_KEYS)}")
+    rule = entry.get("resample", "linear")
+    if isinstance(rule, str) and rule not in RULES:
+        raise LogImportError(f"{where} ({entry.get('channel')}): unknown resample rule {rule!r}; choose {list(RULES)}")
 
 
 def _parse_channel(entry: Any, where: str) -> ChannelMap:
     if not isinstance(entry, dict):
         raise LogImportError(f"{where}: expected an object, got {entry!r}")
-    unknown = set(entry) - _CHANNEL_KEYS
-    if unknown:
-        raise LogImportError(f"{where}: unknown keys {sorted(unknown)}; allowed {sorted(_CHANNEL_KEYS)}")
+    _check_channel_keys(entry, where)
     for key in ("source", "channel", "unit"):
         if key not in entry:
             raise LogImportError(f"{where}: lacks {key!r}")
@@ -330,6 +343,13 @@ def _parse_channel(entry: Any, where: str) -> ChannelMap:
                     range=tuple(entry["range"]) if entry.get("range") is not None else None,
                     plus=[str(p) for p in entry.get("plus", [])], event=bool(entry.get("event", False)),
                     accuracy=entry.get("accuracy"))
+    _check_channel_map(cm, entry, where)
+    return cm
+
+
+def _check_channel_map(cm: ChannelMap, entry: dict[str, Any], where: str) -> None:
+    """A channel map is consistent: accuracy as {source, max}, event channels held, circular channels angles, the
+    channel in the catalogue (or marked extra) and its unit convertible to the catalogue's."""
     if cm.accuracy is not None and (not isinstance(cm.accuracy, dict) or set(cm.accuracy) != {"source", "max"}):
         raise LogImportError(f"{where} ({cm.channel}): accuracy must be {{\"source\": signal, \"max\": number}}")
     if cm.event and cm.resample != "hold":
@@ -345,7 +365,6 @@ def _parse_channel(entry: Any, where: str) -> ChannelMap:
     if expected is not None and cm.unit != expected and si_unit_of(cm.unit) != expected:
         raise LogImportError(f"{where}: unit mismatch for channel {cm.channel!r}: the mapping gives {entry['unit']!r} "
                              f"(SI {si_unit_of(cm.unit)!r}) but the channel is in {expected!r}")
-    return cm
 
 
 def load_mapping(path_or_name: str | Path) -> Mapping:
@@ -480,109 +499,23 @@ def apply_mapping(signals: SignalSet, mapping: Mapping, report: ImportReport, *,
     """
     meta = dict(meta or {})
     # 1. match sources, check declared units, collect per-channel source samples in SI
-    per_channel: dict[str, tuple[np.ndarray, np.ndarray, ChannelMap, str]] = {}
-    missing: list[tuple[str, list[str]]] = []
-    for cm in mapping.channels:
-        key = find_source(signals, cm.sources)
-        if key is None:
-            if cm.required:
-                missing.append((cm.channel, cm.sources))
-            else:
-                report.note(f"optional channel {cm.channel} absent (source {cm.sources[0]!r})")
-            continue
-        sig = monotonic(key, signals[key], report)
-        _check_declared_unit(cm, key, sig.unit, report)
-        raw = _to_numeric(key, sig.values, cm.values)
-        t = sig.t
-        for extra in cm.plus:  # e.g. a fine steering-angle fraction sent next to the coarse angle
-            pkey = find_source(signals, [extra])
-            if pkey is None:
-                raise LogImportError(f"channel {cm.channel}: signal {extra!r} to add ('plus') not in the source")
-            psig = monotonic(pkey, signals[pkey], report)
-            _check_declared_unit(cm, pkey, psig.unit, report)
-            raw = raw + resample(psig.t, _to_numeric(pkey, psig.values, None), t, "nearest")
-        if cm.valid:
-            vkey = find_source(signals, [cm.valid])
-            if vkey is None:
-                raise LogImportError(f"validity flag {cm.valid!r} of channel {cm.channel} not in the source")
-            vsig = monotonic(vkey, signals[vkey], report)
-            flag = resample(vsig.t, vsig.values.astype(float), t, "nearest")
-            bad = ~(flag > 0.5)
-            report.drop(cm.channel, f"validity flag {vkey} = 0", int(bad.sum()))
-            t, raw = t[~bad], raw[~bad]
-        if cm.accuracy:
-            akey = find_source(signals, [cm.accuracy["source"]])
-            if akey is None:
-                raise LogImportError(f"accuracy signal {cm.accuracy['source']!r} of channel {cm.channel} "
-                                     f"not in the source")
-            asig = monotonic(akey, signals[akey], report)
-            acc = resample(asig.t, asig.values.astype(float), t, "nearest")
-            bad = ~(acc <= float(cm.accuracy["max"]))
-            report.drop(cm.channel, f"accuracy {akey} worse than {cm.accuracy['max']:g}", int(bad.sum()),
-                        f"worst {np.nanmax(acc[bad]):.3g}" if bad.any() else "")
-            t, raw = t[~bad], raw[~bad]
-        values = cm.convert(raw)
-        if cm.circular:
-            values = np.mod(values, 2 * np.pi)
-        t, values = plausible(cm.channel, t, values, report, cm.range)
-        if t.size == 0:
-            if cm.required:
-                raise LogImportError(f"channel {cm.channel} (source {key!r}): no valid samples left")
-            report.note(f"optional channel {cm.channel}: no valid samples left, omitted")
-            continue
-        per_channel[cm.channel] = (t, values, cm, key)
-    if missing:
-        raise _missing_error(mapping, missing, signals)
-    if not per_channel:
-        raise LogImportError(f"mapping {mapping.name!r}: no mapped channel found in the source")
-
+    per_channel = _mapped_samples(signals, mapping, report)
     # 2. clock alignment: source time -> reference time (e.g. GNSS epoch)
-    clock_info = None
-    if mapping.clock:
-        clock_info = clock_offset(signals, mapping.clock, start_time, report)
+    clock_info = clock_offset(signals, mapping.clock, start_time, report) if mapping.clock else None
 
-        def align(t_src: np.ndarray) -> np.ndarray:
-            return t_src + clock_info["fit_a"] + clock_info["fit_b"] * (t_src - clock_info["fit_t0"])
-    else:
-        def align(t_src: np.ndarray) -> np.ndarray:
+    def align(t_src: np.ndarray) -> np.ndarray:
+        if clock_info is None:
             return t_src
+        return t_src + clock_info["fit_a"] + clock_info["fit_b"] * (t_src - clock_info["fit_t0"])
 
     # 3. the uniform time base over the span all required channels cover
-    spans = {ch: (align(v[0][:1])[0], align(v[0][-1:])[0]) for ch, v in per_channel.items()}
-    req = [ch for ch, v in per_channel.items() if v[2].required] or list(per_channel)
-    t0 = max(spans[c][0] for c in req)
-    t1 = min(spans[c][1] for c in req)
-    if not t1 > t0:
-        raise LogImportError(f"required channels {req} do not overlap in time")
-    rate = mapping.sample_rate
-    if rate is None:
-        dts = np.concatenate([np.diff(per_channel[c][0]) for c in req])
-        rate = float(np.round(1.0 / np.median(dts[dts > 0]), 6))
-    grid = uniform_time_base(t0, t1, rate)
-
+    grid, rate = _time_base(per_channel, mapping, align)
     # 4. resample every channel by its rule, report bridged gaps and samples outside a channel's span
     cols = {"t": np.arange(grid.size) / rate}
     units = {"t": "s"}
     rules = {}
     for ch, (t, values, cm, key) in per_channel.items():
-        ta = align(t)
-        x = resample(ta, values, grid, cm.resample, circular=cm.circular)
-        if cm.event:  # sent on change: the last value stays valid until the end of the log
-            x[grid > ta[-1]] = values[-1]
-        dt = np.diff(ta)
-        if dt.size and not cm.event:
-            limit = max(mapping.max_gap, 5.0 * float(np.median(dt)))
-            gaps = np.flatnonzero(dt > limit)
-            if gaps.size:
-                inside = np.zeros(grid.size, dtype=bool)
-                for g in gaps:
-                    inside |= (grid > ta[g]) & (grid < ta[g + 1])
-                report.repair(ch, f"{gaps.size} source gaps > {limit:.3g} s bridged by '{cm.resample}'",
-                              int(inside.sum()), f"longest {dt[gaps].max():.3g} s")
-        n_nan = int(np.isnan(x).sum())
-        if n_nan:
-            report.note(f"{ch}: {n_nan} samples of the time base lie outside the channel's span (NaN)")
-        cols[ch] = x
+        cols[ch] = _resampled(ch, align(t), values, cm, grid, mapping.max_gap, report)
         units[ch] = cm.si_unit
         rules[ch] = {"source": key, "resample": cm.resample}
     unmapped = sorted(set(signals) - {v[3] for v in per_channel.values()} - mapping.source_names)
@@ -604,3 +537,118 @@ def apply_mapping(signals: SignalSet, mapping: Mapping, report: ImportReport, *,
                          "n": clock_info["n"]}
     meta["import_report"] = report.to_dict()
     return Trip(pd.DataFrame(cols), units, meta)
+
+
+ChannelSamples = tuple[np.ndarray, np.ndarray, ChannelMap, str]
+"""(source time [s], values in SI, the channel's map, the source key) of one mapped channel."""
+
+
+def _mapped_samples(signals: SignalSet, mapping: Mapping, report: ImportReport) -> dict[str, ChannelSamples]:
+    """Every mapped channel found in the source as SI samples on its own time; a missing required channel or no
+    channel at all is an error (naming the sources and close matches)."""
+    per_channel: dict[str, ChannelSamples] = {}
+    missing: list[tuple[str, list[str]]] = []
+    for cm in mapping.channels:
+        key = find_source(signals, cm.sources)
+        if key is None:
+            if cm.required:
+                missing.append((cm.channel, cm.sources))
+            else:
+                report.note(f"optional channel {cm.channel} absent (source {cm.sources[0]!r})")
+            continue
+        t, values = _channel_samples(signals, cm, key, report)
+        if t.size == 0:
+            if cm.required:
+                raise LogImportError(f"channel {cm.channel} (source {key!r}): no valid samples left")
+            report.note(f"optional channel {cm.channel}: no valid samples left, omitted")
+            continue
+        per_channel[cm.channel] = (t, values, cm, key)
+    if missing:
+        raise _missing_error(mapping, missing, signals)
+    if not per_channel:
+        raise LogImportError(f"mapping {mapping.name!r}: no mapped channel found in the source")
+    return per_channel
+
+
+def _channel_samples(signals: SignalSet, cm: ChannelMap, key: str,
+                     report: ImportReport) -> tuple[np.ndarray, np.ndarray]:
+    """(t, values in SI) of one channel from source ``key``: plus signals added, samples whose validity flag is 0 or
+    whose accuracy is worse than the mapping's limit dropped, implausible values removed (all counted)."""
+    sig = monotonic(key, signals[key], report)
+    _check_declared_unit(cm, key, sig.unit, report)
+    raw = _to_numeric(key, sig.values, cm.values)
+    t = sig.t
+    for extra in cm.plus:  # e.g. a fine steering-angle fraction sent next to the coarse angle
+        pkey = find_source(signals, [extra])
+        if pkey is None:
+            raise LogImportError(f"channel {cm.channel}: signal {extra!r} to add ('plus') not in the source")
+        psig = monotonic(pkey, signals[pkey], report)
+        _check_declared_unit(cm, pkey, psig.unit, report)
+        raw = raw + resample(psig.t, _to_numeric(pkey, psig.values, None), t, "nearest")
+    if cm.valid:
+        flag, vkey = _companion(signals, cm.valid, t, report, f"validity flag {cm.valid!r} of channel {cm.channel}")
+        bad = ~(flag > 0.5)
+        report.drop(cm.channel, f"validity flag {vkey} = 0", int(bad.sum()))
+        t, raw = t[~bad], raw[~bad]
+    if cm.accuracy:
+        acc, akey = _companion(signals, cm.accuracy["source"], t, report,
+                               f"accuracy signal {cm.accuracy['source']!r} of channel {cm.channel}")
+        bad = ~(acc <= float(cm.accuracy["max"]))
+        report.drop(cm.channel, f"accuracy {akey} worse than {cm.accuracy['max']:g}", int(bad.sum()),
+                    f"worst {np.nanmax(acc[bad]):.3g}" if bad.any() else "")
+        t, raw = t[~bad], raw[~bad]
+    values = cm.convert(raw)
+    if cm.circular:
+        values = np.mod(values, 2 * np.pi)
+    return plausible(cm.channel, t, values, report, cm.range)
+
+
+def _companion(signals: SignalSet, source: str, t: np.ndarray, report: ImportReport,
+               what: str) -> tuple[np.ndarray, str]:
+    """A channel's companion signal (validity flag, accuracy) at the channel's sample times ``t`` (nearest sample)
+    and its source key; an absent one is an error naming ``what``."""
+    key = find_source(signals, [source])
+    if key is None:
+        raise LogImportError(f"{what} not in the source")
+    sig = monotonic(key, signals[key], report)
+    return resample(sig.t, sig.values.astype(float), t, "nearest"), key
+
+
+def _time_base(per_channel: dict[str, ChannelSamples], mapping: Mapping,
+               align: Callable[[np.ndarray], np.ndarray]) -> tuple[np.ndarray, float]:
+    """(uniform time base [s] over the span all required channels cover, its rate [Hz]: the mapping's, else the
+    median rate of the required channels)."""
+    spans = {ch: (align(v[0][:1])[0], align(v[0][-1:])[0]) for ch, v in per_channel.items()}
+    req = [ch for ch, v in per_channel.items() if v[2].required] or list(per_channel)
+    t0 = max(spans[c][0] for c in req)
+    t1 = min(spans[c][1] for c in req)
+    if not t1 > t0:
+        raise LogImportError(f"required channels {req} do not overlap in time")
+    rate = mapping.sample_rate
+    if rate is None:
+        dts = np.concatenate([np.diff(per_channel[c][0]) for c in req])
+        rate = float(np.round(1.0 / np.median(dts[dts > 0]), 6))
+    return uniform_time_base(t0, t1, rate), rate
+
+
+def _resampled(ch: str, ta: np.ndarray, values: np.ndarray, cm: ChannelMap, grid: np.ndarray, max_gap: float,
+               report: ImportReport) -> np.ndarray:
+    """One channel (aligned source times ``ta``) on the time base by its rule; source gaps longer than max(max_gap,
+    5 median steps) bridged by the rule are reported, and so are time-base samples outside the channel's span."""
+    x = resample(ta, values, grid, cm.resample, circular=cm.circular)
+    if cm.event:  # sent on change: the last value stays valid until the end of the log
+        x[grid > ta[-1]] = values[-1]
+    dt = np.diff(ta)
+    if dt.size and not cm.event:
+        limit = max(max_gap, 5.0 * float(np.median(dt)))
+        gaps = np.flatnonzero(dt > limit)
+        if gaps.size:
+            inside = np.zeros(grid.size, dtype=bool)
+            for g in gaps:
+                inside |= (grid > ta[g]) & (grid < ta[g + 1])
+            report.repair(ch, f"{gaps.size} source gaps > {limit:.3g} s bridged by '{cm.resample}'",
+                          int(inside.sum()), f"longest {dt[gaps].max():.3g} s")
+    n_nan = int(np.isnan(x).sum())
+    if n_nan:
+        report.note(f"{ch}: {n_nan} samples of the time base lie outside the channel's span (NaN)")
+    return x

@@ -132,6 +132,7 @@ class RecursiveEstimator:
         self._parts_final = self.config.kernel_parts(K.STORE_FINAL)
         self._no_output = K.outputs(1, n, K.STORE_FINAL)
         self._no_instruments = np.empty((0, n))
+        self._sample = (np.empty((1, n)), np.empty(1), np.empty((1, n)))   # a_t, b_t, 𝔄_t of update()
         self._tag = K.size_tag(n)
         self._scratch = K.scratch(n)
 
@@ -227,12 +228,15 @@ class RecursiveEstimator:
 
         Returns X̂_t. A non-finite sample is skipped and counted (X̂ stays)."""
         n = self.config.n_params
-        a = _as_float(a_t, "a_t").reshape(1, -1)
-        if a.shape[1] != n:
-            raise EstimatorInputError(f"a_t must have {n} entries, got {a.shape[1]}")
-        b = _as_float(b_t, "b_t").reshape(-1)
-        if b.shape != (1,):
+        a = _as_float(a_t, "a_t")
+        if a.size != n:
+            raise EstimatorInputError(f"a_t must have {n} entries, got {a.size}")
+        b = _as_float(b_t, "b_t")
+        if b.size != 1:
             raise EstimatorInputError(f"b_t must be a scalar, got shape {np.shape(b_t)}")
+        regressors, outputs, user = self._sample   # the one-sample record's own buffers
+        regressors[0] = a.reshape(n)
+        outputs[0] = b.reshape(())
         if instrument is None:
             if self.config.instruments == "user":
                 raise EstimatorInputError("this estimator uses user-supplied instruments: pass instrument")
@@ -241,11 +245,13 @@ class RecursiveEstimator:
             if self.config.instruments != "user":
                 raise EstimatorInputError(f"instrument given but the estimator uses instruments="
                                           f"{self.config.instruments!r}; set instruments='user' to pass them")
-            Z = kernel_array(_as_float(instrument, "instrument").reshape(1, -1))
-            if Z.shape != (1, n):
-                raise EstimatorInputError(f"instrument must have {n} entries, got {Z.shape[1]}")
-        K.run_record((kernel_array(a), kernel_array(b), Z), self._parts_final, self._kernel_state, self._no_output,
-                     self._scratch, self._tag)
+            z = _as_float(instrument, "instrument")
+            if z.size != n:
+                raise EstimatorInputError(f"instrument must have {n} entries, got {z.size}")
+            user[0] = z.reshape(n)
+            Z = user
+        K.run_record((regressors, outputs, Z), self._parts_final, self._kernel_state, self._no_output, self._scratch,
+                     self._tag)
         return self._x.copy()
 
     def _process(self, A, B, Z, store):

@@ -120,9 +120,13 @@ def python_scalar(cls: type, value: Any) -> Any:
     return int(value) if isinstance(value, np.integer) else value
 
 
-#: the decorator of the estimators' settings classes: a pydantic dataclass whose errors are EstimatorConfigError
-#: lines naming the setting, the value and the expected range with its unit
-def settings_dataclass(frozen: bool = False) -> Any:
+_T = typing.TypeVar("_T")
+
+
+@typing.dataclass_transform(field_specifiers=(dataclasses.field, Field))
+def settings_dataclass(frozen: bool = False) -> typing.Callable[[type[_T]], type[_T]]:
+    """The decorator of the estimators' settings classes: a pydantic dataclass whose errors are EstimatorConfigError
+    lines naming the setting, the value and the expected range with its unit."""
     return spec_dataclass(ConfigDict(extra="forbid", allow_inf_nan=False, arbitrary_types_allowed=True),
                           lambda exc, cls: EstimatorConfigError(_error_text(exc, cls)), frozen=frozen)
 
@@ -341,15 +345,14 @@ class EstimatorConfig:
     def _kernel_arrays(self) -> "EstimatorConfig":
         """Matrix-valued settings (Q, P_d, P_0 symmetric PSD; x0, bounds, F by shape) and the kernel's codes."""
         n = self.n_params
-        arrays = self._covariances()
-        arrays["xmin"], arrays["xmax"], arrays["x0"] = self._bounds_and_start()
-        arrays["F"] = self._transition_matrix()
-        constrain = bool(np.any(np.isfinite(arrays["xmin"])) or np.any(np.isfinite(arrays["xmax"])))
-        codes, values = self._codes(constrain), self._values(float(np.max(np.diag(arrays["P0"]))))
-        self._arrays = {"ip": codes, "fp": values,
-                        "Q": arrays["Q"] if arrays["Q"] is not None else np.zeros((n, n)),
-                        "Pd": arrays["Pd"] if arrays["Pd"] is not None else np.zeros((n, n)),
-                        **{k: arrays[k] for k in ("F", "xmin", "xmax", "x0", "P0")}}
+        Q, Pd, P0 = self._covariances()
+        xmin, xmax, x0 = self._bounds_and_start()
+        F = self._transition_matrix()
+        constrain = bool(np.any(np.isfinite(xmin)) or np.any(np.isfinite(xmax)))
+        codes, values = self._codes(constrain), self._values(float(np.max(np.diag(P0))))
+        self._arrays = {"ip": codes, "fp": values, "Q": Q if Q is not None else np.zeros((n, n)),
+                        "Pd": Pd if Pd is not None else np.zeros((n, n)), "F": F, "xmin": xmin, "xmax": xmax,
+                        "x0": x0, "P0": P0}
         matrices = tuple(self._arrays[k] for k in ("Q", "Pd", "F", "xmin", "xmax", "P0"))
         for store in (K.STORE_FINAL, K.STORE_X, K.STORE_FULL):   # the parts record with each store code
             store_codes = codes.copy()
@@ -357,7 +360,7 @@ class EstimatorConfig:
             self._arrays[("parts", store)] = (store_codes, values) + matrices
         return self
 
-    def _covariances(self) -> dict[str, np.ndarray | None]:
+    def _covariances(self) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray]:
         """Q (required by 'kalman'), P_d (required by 'stenlund_gustafsson') and P_0 (positive diagonal)."""
         n = self.n_params
         shapes = f"a scalar, {n} diagonal entries or an {n}x{n} matrix"
@@ -370,7 +373,7 @@ class EstimatorConfig:
         P0 = _matrix(self.p0, n, "p0", psd=True)
         if np.max(np.diag(P0)) <= 0:
             raise EstimatorConfigError("p0 must have a positive diagonal")
-        return {"Q": Q, "Pd": Pd, "P0": P0}
+        return Q, Pd, P0
 
     def _transition_matrix(self) -> np.ndarray:
         """F (n×n, finite; identity when not set)."""

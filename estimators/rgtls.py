@@ -197,7 +197,8 @@ class RecursiveGTLS:
     def __init__(self, n_params: int, **settings: Any):
         self.settings = cfg = RGTLSConfig(n_params, **settings)
         self.n_params, self.name, self.nce = cfg.n_params, cfg.name, cfg.nce
-        self.forgetting, self.nce_forgetting = cfg.forgetting, float(cfg.nce_forgetting)
+        self.forgetting = cfg.forgetting
+        self.nce_forgetting = cfg.forgetting if cfg.nce_forgetting is None else cfg.nce_forgetting
         self.noise_covariance, self.p0, self.x0 = cfg.noise_covariance, cfg.p0, cfg.x0
         self.blowup = cfg.blowup_ratio * float(np.max(np.diag(self.p0)))
         self.reset()

@@ -28,6 +28,8 @@ import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from functools import partial
+from typing import Any, cast
 
 import numpy as np
 
@@ -84,7 +86,7 @@ CATALOGUE_RUNS: dict[str, tuple[str, dict]] = {
 }
 
 
-def _recursive(arrays: dict, key: str, make: Callable[[], object], A: np.ndarray, B: np.ndarray,
+def _recursive(arrays: dict, key: str, make: Callable[[], Any], A: np.ndarray, B: np.ndarray,
                Z: np.ndarray | None, online: int) -> None:
     """Record run (every store mode), then the sample-by-sample path with the full P_t after every sample."""
     est = make()
@@ -132,7 +134,7 @@ def catalogue_runs(arrays: dict, size: dict) -> None:
         s = dict(settings, n_params=3)
         user = s.get("instruments") == "user"
         for rec, (A, B) in records.items():
-            _recursive(arrays, f"{label}/{rec}", lambda name=name, s=s: make_estimator(name, **s), A, B,
+            _recursive(arrays, f"{label}/{rec}", partial(make_estimator, name, **s), A, B,
                        Z if user else None, size["online"])
         if user:
             continue
@@ -151,7 +153,7 @@ def rgtls_and_pks_runs(arrays: dict, size: dict) -> None:
 
     T = size["samples"]
     d = linear_miso(seed=4, m=T, input_noise_var=(0.0, 0.005, 0.01), output_noise_var=0.02, outlier_fraction=0.0)
-    settings = {
+    settings: dict[str, dict[str, Any]] = {
         "RGTLS/fixed": dict(n_params=3, forgetting=0.999, noise_covariance=[1e-4, 0.005, 0.01, 0.02]),
         "RGTLS/rtls": dict(n_params=3),
         "RGTLS/nce-pks": dict(n_params=3, forgetting=0.999, nce=True, nce_forgetting=0.99,
@@ -161,7 +163,7 @@ def rgtls_and_pks_runs(arrays: dict, size: dict) -> None:
         settings["RGTLS/nce"] = dict(n_params=3, forgetting=0.995, nce=True)   # the default PKS: order 4
     for key, s in settings.items():
         for rec, (A, B) in {"clean": (d.A, d.B), "faulty": _faulty(d.A, d.B)}.items():
-            _recursive(arrays, f"{key}/{rec}", lambda s=s: RecursiveGTLS(**s), A, B, None, size["online"])
+            _recursive(arrays, f"{key}/{rec}", partial(RecursiveGTLS, **s), A, B, None, size["online"])
             est = RecursiveGTLS(**s)
             est.run(A, B)
             arrays[f"{key}/{rec}/noise_covariance"] = est.noise_covariance_estimate
@@ -169,7 +171,8 @@ def rgtls_and_pks_runs(arrays: dict, size: dict) -> None:
     t = np.arange(T) * 0.01
     signal = np.sin(2.0 * t) + 0.1 * t ** 2 + rng.normal(0.0, 0.05, T)
     signal[T // 3:T // 3 + 4] = np.nan
-    designs = {"PKS/order2": dict(n_params=3, window_left=10, window_right=30, forgetting=0.98, p0=1e3)}
+    designs: dict[str, dict[str, Any]] = {
+        "PKS/order2": dict(n_params=3, window_left=10, window_right=30, forgetting=0.98, p0=1e3)}
     if size["all_sizes"]:
         designs["PKS/default"] = {}
     for key, kw in designs.items():
@@ -182,6 +185,7 @@ def rgtls_and_pks_runs(arrays: dict, size: dict) -> None:
         arrays[f"{key}/smooth/value"] = smooth.value["signal"]
         arrays[f"{key}/smooth/derivatives"] = smooth.derivatives["signal"]
     bank = pks_bank({"a": signal, "b": np.cos(t)}, dt=0.01, derivatives=1, window=15, order=2, forgetting=0.95)
+    assert bank.derivative is not None
     for name in ("a", "b"):
         arrays[f"PKS/bank/{name}/value"] = bank.value[name]
         arrays[f"PKS/bank/{name}/derivative"] = bank.derivative[name]
@@ -238,7 +242,7 @@ def pipeline_runs(arrays: dict, size: dict) -> None:
         arrays[f"pipeline/{model}/B"] = B
         x0 = get_model(model).nominal_parameters(knowledge.nominal)
         for name, s in chapter5_settings(model).items():
-            _recursive(arrays, f"pipeline/{model}/{name}", lambda name=name, s=s: make_estimator(name, x0=x0, **s),
+            _recursive(arrays, f"pipeline/{model}/{name}", partial(make_estimator, name, x0=x0, **s),
                        A, B, None, min(size["online"], B.shape[0]))
 
 
@@ -250,7 +254,7 @@ def dump(out: Path, quick: bool) -> None:
     rgtls_and_pks_runs(arrays, size)
     batch_runs(arrays, size)
     pipeline_runs(arrays, size)
-    np.savez(out, **arrays)
+    np.savez(out, **cast(dict[str, Any], arrays))
 
 
 @dataclass

@@ -215,13 +215,13 @@ def output_correction(a, X, b, n):
 @_inline
 def prior_products(P, X, a, z, b, P_z, a_P, n, sym, cov):
     """ΔB_t = b_t - a_t X̂_{t-1} [unit of B], P𝔄ᵀ → P_z, a P → a_P (when needed); returns (ΔB_t, s = a P 𝔄ᵀ)."""
-    return output_correction(a, X, b, n), covariance_products(P, a, z, P_z, a_P, n, sym, cov)
+    return output_correction(a, X, b, n), covariance_products(P, a, z, P_z, a_P, n, sym, cov != COV_FORGETTING)
 
 
 @_inline
-def covariance_products(P, a, z, P_z, a_P, n, sym, cov):
-    """P𝔄ᵀ → P_z, a P → a_P (when needed: without symmetry, or a symmetric P outside the forgetting family, where
-    a P = (P aᵀ)ᵀ is copied); returns s = a P 𝔄ᵀ."""
+def covariance_products(P, a, z, P_z, a_P, n, sym, copy_row):
+    """P𝔄ᵀ → P_z and a P → a_P; returns s = a P 𝔄ᵀ. A symmetric P (with 𝔄 = a) has a P = (P aᵀ)ᵀ: then a P is only
+    copied into a_P with ``copy_row`` (the Kalman family reads it; forgetting reads P_z)."""
     s = 0.0
     for i in range(n):
         acc = 0.0
@@ -230,7 +230,7 @@ def covariance_products(P, a, z, P_z, a_P, n, sym, cov):
         P_z[i] = acc
         s += a[i] * acc
     if sym:
-        if cov != COV_FORGETTING:
+        if copy_row:
             for j in range(n):
                 a_P[j] = P_z[j]
     else:
@@ -246,20 +246,7 @@ def covariance_products(P, a, z, P_z, a_P, n, sym, cov):
 def desired_products(desired_cov, a, z, Pd_z, a_Pd, n, sym):
     """Stenlund-Gustafsson products P_d 𝔄ᵀ → Pd_z, a P_d → a_Pd; returns s_d = a P_d 𝔄ᵀ. With ``sym`` (no
     instruments: 𝔄 = a; P_d is symmetric, checked by the config) a P_d = (P_d aᵀ)ᵀ: one product, shared buffer."""
-    s_d = 0.0
-    for i in range(n):
-        acc = 0.0
-        for j in range(n):
-            acc += desired_cov[i, j] * z[j]
-        Pd_z[i] = acc
-        s_d += a[i] * acc
-    if not sym:
-        for i in range(n):
-            acc = 0.0
-            for j in range(n):
-                acc += a[j] * desired_cov[j, i]
-            a_Pd[i] = acc
-    return s_d
+    return covariance_products(desired_cov, a, z, Pd_z, a_Pd, n, sym, False)
 
 
 # ============================================================================ stages 3-4: weight and gain

@@ -97,7 +97,24 @@ def kernel_array(arr: np.ndarray) -> np.ndarray:
     return np.require(arr, dtype=np.float64, requirements=["C", "W", "A"])
 
 
-class RecursiveEstimator:
+class EstimateViews:
+    """X̂_t and P_t of a recursive estimator (kept in ``_x``, ``_p``) as copies."""
+
+    _x: np.ndarray
+    _p: np.ndarray
+
+    @property
+    def x(self) -> np.ndarray:
+        """X̂_t (copy)."""
+        return self._x.copy()
+
+    @property
+    def p(self) -> np.ndarray:
+        """P_t (copy)."""
+        return self._p.copy()
+
+
+class RecursiveEstimator(EstimateViews):
     """A recursive estimator of chapter 3 built from an :class:`EstimatorConfig` composition.
 
     ``update(a_t, b_t[, instrument])`` processes one sample and returns X̂_t; ``run(A, B[, instruments])``
@@ -144,16 +161,6 @@ class RecursiveEstimator:
     @property
     def n_params(self) -> int:
         return self.config.n_params
-
-    @property
-    def x(self) -> np.ndarray:
-        """X̂_t (copy)."""
-        return self._x.copy()
-
-    @property
-    def p(self) -> np.ndarray:
-        """P_t (copy)."""
-        return self._p.copy()
 
     @property
     def scale(self) -> float:

@@ -31,10 +31,10 @@ from pydantic import Strict, field_validator, model_validator
 
 from .config import (BLOWUP_RATIO, FORGETTING, INITIAL_COVARIANCE, BlowupRatio, EstimatorConfigError, Forgetting,
                      ParameterCount, Real, _matrix, _setting, python_scalar, settings_dataclass)
-from .kernel import (COV_FORGETTING, STORE_FULL, _inline, covariance_forgetting, covariance_products, gain,
+from .kernel import (STORE_FULL, _inline, covariance_forgetting, covariance_products, gain,
                      matrix_vector, output_correction, outputs, read_regressors, store_sample)
 from .pks import PKSDesign, PolynomialKalmanSmoother
-from .recursive import EstimationResult, EstimatorInputError, EstimatorState, kernel_array
+from .recursive import EstimateViews, EstimationResult, EstimatorInputError, EstimatorState, kernel_array
 
 # counters
 _SKIP, _ROLLED, _BLOW, _T = 0, 1, 2, 3
@@ -129,7 +129,7 @@ def rgtls_record(record, noise_rows, settings, state, out, work):
             continue
         r_prior = output_correction(z, X, b, n)
         copy_square(P_prev, P, q)
-        s = covariance_products(P, z, z, P_z, P_z, q, True, COV_FORGETTING)
+        s = covariance_products(P, z, z, P_z, P_z, q, True, False)
         gain(P_z, 1.0, s, lam, L, q)
         covariance_forgetting(P, P, L, P_z, P_z, inv_lam, q, True)
         if not generalised_inverse_iteration(X, P, noise_cov, vectors[_V], vectors[_W], n):
@@ -188,7 +188,7 @@ class RGTLSConfig:
         return self
 
 
-class RecursiveGTLS:
+class RecursiveGTLS(EstimateViews):
     """RGTLS (Algorithm 3.8), with a fixed noise covariance P̌ or the PKS-based NCE (eq. 3.43).
 
     Settings: those of :class:`RGTLSConfig`, by name. The P reported in results is the top-left n×n block of the
@@ -212,14 +212,6 @@ class RecursiveGTLS:
         self._sc = np.array([float(np.max(np.diag(self.p0)))])
         self._smoothers = [PolynomialKalmanSmoother(self.settings.pks) for _ in range(q)]
         self._raw: deque[np.ndarray] = deque(maxlen=self.settings.pks.delay + 1)
-
-    @property
-    def x(self) -> np.ndarray:
-        return self._x.copy()
-
-    @property
-    def p(self) -> np.ndarray:
-        return self._p.copy()
 
     @property
     def noise_covariance_estimate(self) -> np.ndarray:

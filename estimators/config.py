@@ -124,11 +124,20 @@ _T = typing.TypeVar("_T")
 
 
 @typing.dataclass_transform(field_specifiers=(dataclasses.field, Field))
-def settings_dataclass(frozen: bool = False) -> typing.Callable[[type[_T]], type[_T]]:
-    """The decorator of the estimators' settings classes: a pydantic dataclass whose errors are EstimatorConfigError
-    lines naming the setting, the value and the expected range with its unit."""
+def settings_dataclass(frozen: bool = False, error: type[ValueError] = EstimatorConfigError
+                       ) -> typing.Callable[[type[_T]], type[_T]]:
+    """The decorator of the estimators' settings classes: a pydantic dataclass whose errors are ``error`` lines
+    naming the setting, the value and the expected range with its unit."""
     return spec_dataclass(ConfigDict(extra="forbid", allow_inf_nan=False, arbitrary_types_allowed=True),
-                          lambda exc, cls: EstimatorConfigError(_error_text(exc, cls)), frozen=frozen)
+                          lambda exc, cls: error(_error_text(exc, cls)), frozen=frozen)
+
+
+def start_vector(x0: Any, n: int) -> np.ndarray:
+    """X̂_0: n finite numbers (default 0)."""
+    out = np.zeros(n) if x0 is None else np.asarray(x0, dtype=float).reshape(-1)
+    if out.shape != (n,) or not np.all(np.isfinite(out)):
+        raise EstimatorConfigError(f"x0 must be {n} finite numbers, got {x0!r}")
+    return out
 
 
 @overload
@@ -388,9 +397,7 @@ class EstimatorConfig:
     def _bounds_and_start(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """x_min, x_max (±inf where not set, x_min <= x_max) and X̂_0 (n finite numbers, saturated)."""
         n = self.n_params
-        x0 = np.zeros(n) if self.x0 is None else np.asarray(self.x0, dtype=float).reshape(-1)
-        if x0.shape != (n,) or not np.all(np.isfinite(x0)):
-            raise EstimatorConfigError(f"x0 must be {n} finite numbers, got {self.x0!r}")
+        x0 = start_vector(self.x0, n)
         xmin, xmax = (np.full(n, fill) if given is None else np.broadcast_to(np.asarray(given, dtype=float),
                                                                               (n,)).copy()
                       for given, fill in ((self.x_min, -np.inf), (self.x_max, np.inf)))

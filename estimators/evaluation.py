@@ -30,7 +30,7 @@ from .metrics import medse
 from .metrics import nmse
 
 HORIZONS: tuple[int, ...] = (300, 900, 1200, 1500, 1800)   # k, triggered samples at 10 Hz (section 5.8)
-ESTIMATORS: tuple[str, ...] = ("RLS", "RRLM", "SGMKF", "RGTLS", "SGIVMKF")  # section 5.5
+ESTIMATORS: tuple[str, ...] = tuple(chapter5_settings("M3"))  # section 5.5: RLS, RRLM, SGMKF, RGTLS, SGIVMKF
 GRAY_BOX_MODELS: tuple[str, ...] = ("M3", "M4")
 MIN_TRAINING = 600          # triggered samples (60 s at 10 Hz) before a validation block may start
 P_MAX = 0.1                 # convergence test P_t < P_max on every diagonal entry of SGMKF's P (P_0 = 100 I);

@@ -26,7 +26,7 @@ import dataclasses
 import os
 import warnings
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Annotated, Literal, Sequence
 
 import numpy as np
 import pandas as pd
@@ -38,6 +38,9 @@ from .models import (ACCELERATION, GRADIENT_ANGLE, PATH_CURVATURE, SPEED, TRACTI
                      NominalParameters, get_model)
 from roadload.road_load import RoadLoadParameters
 from roadload.units import STANDARD_AIR_DENSITY
+from pydantic import Field, Strict, model_validator
+
+from .config import EstimatorConfigError, Real, _setting, settings_dataclass
 from .pks import PKSDesign, pks_bank
 
 STAGES = ("measured", "smoothed", "decimated", "states")
@@ -232,7 +235,7 @@ def knowledge_from_spec(spec, coast_down: tuple[float, float, float] | None = No
 
 
 # ================================================================================ settings and result
-@dataclass(frozen=True)
+@settings_dataclass(frozen=True, error=PipelineError)
 class PipelineSettings:
     """Settings of the preprocessing (section 5.3). Units SI.
 
@@ -258,29 +261,32 @@ class PipelineSettings:
     (~5 % for the i3). True: θ = arcsin((a_x - dv/dt)/g) - k dv/dt. Default False (the text's eq. 5.2).
     """
 
-    estimation_rate: float = 10.0
+    estimation_rate: Annotated[Real, _setting("rate of the estimators", "Hz", gt=0.0)] = 10.0
     smoother: dict = field(default_factory=lambda: {"window": 50, "order": 2, "forgetting": 0.98})
-    min_speed: float = 5.5
-    min_drive_torque: float = 10.0
-    brake_pressure_threshold: float = 1.0e5
-    brake_hold: float = 0.5
-    brake_deceleration: float = -1.5
-    warmup: float = 2.0
-    smoother_rate: float = 100.0
-    drive_torque_floor: float = -np.inf
-    gradient: str = "accelerometer"
-    pitch_correction: bool = False
+    min_speed: Annotated[Real, _setting("condition 2: least speed", "m/s", ge=0.0)] = 5.5
+    min_drive_torque: Annotated[Real, _setting("condition 4: least drive torque", "N m", ge=0.0)] = 10.0
+    brake_pressure_threshold: Annotated[Real, _setting("condition 1: brake pressure of braking", "Pa", ge=0.0)] = 1.0e5
+    brake_hold: Annotated[Real, _setting("condition 1: time after braking", "s", ge=0.0)] = 0.5
+    brake_deceleration: Annotated[Real, _setting("braking without brake pressure: dv/dt below", "m/s^2")] = -1.5
+    warmup: Annotated[Real, _setting("samples excluded at the start", "s", ge=0.0)] = 2.0
+    smoother_rate: Annotated[Real, _setting("input rate the smoother settings are given for", "Hz", gt=0.0)] = 100.0
+    drive_torque_floor: Annotated[Real, _setting("drive torque at or below which samples are excluded", "N m"),
+                                  Field(allow_inf_nan=True)] = -np.inf
+    gradient: Literal["accelerometer", "grade_channel", "auto"] = "accelerometer"
+    pitch_correction: Annotated[bool, Strict()] = False
 
-    def __post_init__(self) -> None:
-        if self.gradient not in ("accelerometer", "grade_channel", "auto"):
-            raise PipelineError(f"gradient must be 'accelerometer', 'grade_channel' or 'auto', got {self.gradient!r}")
-        if not self.smoother_rate > 0:
-            raise PipelineError(f"smoother_rate must be > 0 Hz, got {self.smoother_rate}")
-        if not self.estimation_rate > 0:
-            raise PipelineError(f"estimation_rate must be > 0 Hz, got {self.estimation_rate}")
-        for name in ("min_speed", "min_drive_torque", "brake_pressure_threshold", "brake_hold", "warmup"):
-            if not getattr(self, name) >= 0:
-                raise PipelineError(f"{name} must be >= 0, got {getattr(self, name)}")
+    @model_validator(mode="after")
+    def _smoother_design(self) -> "PipelineSettings":
+        """The smoother settings are those of :meth:`PKSDesign.from_options` (checked here, not at the first trip)."""
+        known = ("window", "window_left", "window_right", "order", "n_params", "forgetting", "p0")
+        unknown = sorted(set(self.smoother) - set(known))
+        if unknown:
+            raise PipelineError(f"smoother: unknown setting(s) {unknown}; the smoother takes {list(known)}")
+        try:
+            PKSDesign.from_options(**self.smoother)
+        except EstimatorConfigError as exc:
+            raise PipelineError(f"smoother: {exc}") from None
+        return self
 
 
 @dataclass

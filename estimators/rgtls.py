@@ -30,7 +30,7 @@ from numba import njit
 from pydantic import Strict, field_validator, model_validator
 
 from .config import (BLOWUP_RATIO, FORGETTING, INITIAL_COVARIANCE, BlowupRatio, EstimatorConfigError, Forgetting,
-                     ParameterCount, Real, _matrix, _setting, python_scalar, settings_dataclass)
+                     ParameterCount, Real, _matrix, _setting, python_scalar, settings_dataclass, start_vector)
 from .kernel import (STORE_FULL, _inline, covariance_forgetting, covariance_products, gain,
                      matrix_vector, output_correction, outputs, read_regressors, store_sample)
 from .pks import PKSDesign, PolynomialKalmanSmoother
@@ -172,10 +172,7 @@ class RGTLSConfig:
         q = n + 1
         self.noise_covariance = _matrix(self.noise_covariance, q, "noise_covariance (P̌)", psd=True)
         self.p0 = _matrix(self.p0, q, "p0", psd=True)
-        x0 = np.zeros(n) if self.x0 is None else np.asarray(self.x0, dtype=float).reshape(-1)
-        if x0.shape != (n,) or not np.all(np.isfinite(x0)):
-            raise EstimatorConfigError(f"x0 must be {n} finite numbers, got {self.x0!r}")
-        self.x0 = x0
+        self.x0 = start_vector(self.x0, n)
         if self.nce_forgetting is None:
             self.nce_forgetting = self.forgetting
         if not isinstance(self.pks, PKSDesign):

@@ -10,7 +10,7 @@ import pytest
 
 from roadload import estimators as E
 from roadload.estimators import config as C
-from roadload.estimators.pipeline import PipelineSettings, smoother_design
+from roadload.estimators.pipeline import PipelineError, PipelineSettings, smoother_design
 
 ESTIMATORS_DIR = Path(E.__file__).parent
 
@@ -109,3 +109,17 @@ def test_no_compiled_kernel_takes_more_than_twelve_parameters():
     assert sizes["kernel.py:run_record"] == 6 and sizes["rgtls.py:rgtls_record"] == 6
     too_long = {k: v for k, v in sizes.items() if v > 12}
     assert not too_long, too_long
+
+
+@pytest.mark.parametrize("settings, message", [
+    (dict(min_speed=-1.0), r"min_speed must lie in \[0.0, inf\) \[m/s\], got -1.0"),
+    (dict(estimation_rate=0), r"estimation_rate must lie in \(0.0, inf\) \[Hz\], got 0"),
+    (dict(warmup="2"), r"warmup must be a number \[s\], got '2'"),
+    (dict(gradient="gps"), r"gradient: .*'accelerometer', 'grade_channel' or 'auto', got 'gps'"),
+    (dict(smoother={"window": 50, "orders": 2}), r"smoother: unknown setting\(s\) \['orders'\]"),
+    (dict(smoother={"window": 50, "forgetting": 1.2}), r"smoother: forgetting must lie in \(0.0, 1.0\] \[1\], got 1.2"),
+])
+def test_pipeline_settings_errors_name_the_setting_value_and_range(settings, message):
+    with pytest.raises(PipelineError, match=message):
+        PipelineSettings(**settings)
+    assert PipelineSettings().drive_torque_floor == -np.inf   # -inf (off) stays allowed

@@ -32,7 +32,7 @@ from pydantic import Strict, field_validator, model_validator
 from .config import (BLOWUP_RATIO, FORGETTING, INITIAL_COVARIANCE, BlowupRatio, EstimatorConfigError, Forgetting,
                      ParameterCount, Real, _matrix, _setting, python_scalar, settings_dataclass, start_vector)
 from .kernel import (STORE_FULL, _inline, covariance_forgetting, covariance_products, gain,
-                     matrix_vector, output_correction, outputs, read_regressors, store_sample)
+                     matrix_vector, output_correction, outputs, read_regressors, size_tag, store_sample)
 from .pks import PKSDesign, PolynomialKalmanSmoother
 from .recursive import EstimateViews, EstimationResult, EstimatorInputError, EstimatorState, kernel_array
 
@@ -102,18 +102,19 @@ def track_blowup(P, scalars, counters, blowup, sample, q):
 # _nrt=False: numba's private switch for reference counting (see kernel.run_record): without it every array handed
 # to an inline stage is counted per sample, which made this loop 2x slower than one hand-written body
 @njit(cache=True, _nrt=False)  # type: ignore[call-overload]
-def rgtls_record(record, noise_rows, settings, state, out, work):
+def rgtls_record(record, noise_rows, settings, state, out, work, size_tag):
     """Algorithm 3.8 over a record, with the NCE (eq. 3.43b) fed by ``noise_rows`` Ž (T×q; NaN rows: no update).
 
     ``record`` = (A, B, unused), ``settings`` = (use_nce, λ, λ_N, blow-up level), ``state`` = (X̂ (n), P (q×q),
     P̌ (q×q), counters, scalars), ``out`` = the recursive kernel's output record (``kernel.OUTPUT_FIELDS``; the
-    scale is sqrt P̌_qq, the weight 1), ``work`` = (5×q vectors, q×q matrix). Lines 3-4 are the catalogue's
+    scale is sqrt P̌_qq, the weight 1), ``work`` = (5×q vectors, q×q matrix), ``size_tag`` = ``kernel.size_tag(n)``
+    (n a compile-time constant, as in ``kernel.run_record``). Lines 3-4 are the catalogue's
     stages on Z_t = [A_t B_t] (products, gain, forgetting update of Algorithm 3.1); lines 5-7 are
     :func:`generalised_inverse_iteration`; an update that leaves X̂ or P non-finite is undone (P_{t-1} restored)."""
     use_nce, lam, lam_nce, blowup = settings
     X, P, noise_cov, counters, scalars = state
     T = record[1].shape[0]
-    n = X.shape[0]
+    n = len(size_tag)
     q = n + 1
     vectors, P_prev = work
     z, P_z, L, V, W = vectors[0], vectors[1], vectors[2], vectors[3], vectors[4]
@@ -251,7 +252,7 @@ class RecursiveGTLS(EstimateViews):
         before = self._ct.copy()
         work = (np.empty((5, n + 1)), np.empty((n + 1, n + 1)))
         rgtls_record((A, B, A[:0]), noise_rows, (self.nce, self.forgetting, self.nce_forgetting, self.blowup),
-                     (self._x, self._p, self._pc, self._ct, self._sc), out, work)
+                     (self._x, self._p, self._pc, self._ct, self._sc), out, work, size_tag(n))
         skipped = np.isnan(out[2])
         full = store == "full"
         return EstimationResult(

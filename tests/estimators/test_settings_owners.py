@@ -106,7 +106,7 @@ def _compiled_signatures() -> dict[str, int]:
 def test_no_compiled_kernel_takes_more_than_twelve_parameters():
     sizes = _compiled_signatures()
     assert {"kernel.py:run_record", "rgtls.py:rgtls_record", "kernel.py:store_sample"} <= set(sizes)
-    assert sizes["kernel.py:run_record"] == 6 and sizes["rgtls.py:rgtls_record"] == 6
+    assert sizes["kernel.py:run_record"] == 6 and sizes["rgtls.py:rgtls_record"] == 7
     too_long = {k: v for k, v in sizes.items() if v > 12}
     assert not too_long, too_long
 

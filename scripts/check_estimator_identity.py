@@ -3,7 +3,7 @@ the batch references on fixed seeded data, and the section-5.5 estimators on the
 simulated trip: whole parameter and covariance histories (roadload.experiments.estimator_identity).
 
     python scripts/check_estimator_identity.py --ref main      # the working tree against commit main
-    python scripts/check_estimator_identity.py --quick         # CI smoke run: HEAD, short records
+    python scripts/check_estimator_identity.py --quick         # CI smoke run: HEAD, short records, no trip
 
 Prints how many arrays and values were compared and how many differ; exit status 1 when any differs.
 """
@@ -22,6 +22,6 @@ from roadload.experiments.estimator_identity import check  # noqa: E402
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--ref", default="HEAD", help="git commit to compare the working tree with (default HEAD)")
-    ap.add_argument("--quick", action="store_true", help="short records and trip (CI smoke run)")
+    ap.add_argument("--quick", action="store_true", help="short records, no simulated trip (CI smoke run)")
     args = ap.parse_args()
     sys.exit(check(args.ref, args.quick, export_commit))

@@ -54,6 +54,8 @@ WHEEL_SPEEDS = ("wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_spe
 TRIGGER_CONDITIONS = ("no_brake", "moving", "no_slip", "torque", "rim_torque_available")
 PIPELINE_CHANNELS = tuple(dict.fromkeys(SMOOTHED_CHANNELS + DISCRETE_CHANNELS))
 """Every measured channel the pipeline reads (when present)."""
+GradientSource = Literal["accelerometer", "grade_channel", "auto"]
+"""Where the gradient angle comes from (:class:`PipelineSettings`.gradient)."""
 
 
 class PipelineError(ValueError):
@@ -272,7 +274,7 @@ class PipelineSettings:
     smoother_rate: Annotated[Real, _setting("input rate the smoother settings are given for", "Hz", gt=0.0)] = 100.0
     drive_torque_floor: Annotated[Real, _setting("drive torque at or below which samples are excluded", "N m"),
                                   Field(allow_inf_nan=True)] = -np.inf
-    gradient: Literal["accelerometer", "grade_channel", "auto"] = "accelerometer"
+    gradient: GradientSource = "accelerometer"
     pitch_correction: Annotated[bool, Strict()] = False
 
     @model_validator(mode="after")

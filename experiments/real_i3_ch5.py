@@ -30,12 +30,12 @@ from roadload.estimators.evaluation import (ESTIMATORS, HORIZONS, MIN_TRAINING, 
 from roadload.estimators.knowledge import knowledge_for_trip
 from roadload.fileio import write_text
 from roadload.tables import markdown_table, write_csv
-from roadload.estimators.pipeline import PipelineSettings, accelerometer_gravity_slope, run_pipeline
+from roadload.estimators.pipeline import GradientSource, PipelineSettings, accelerometer_gravity_slope, run_pipeline
 from roadload.io import import_log
 from roadload.estimators.figures import plot_notched_boxplot, save
 from roadload.sweep import run_sweep
 
-GRADIENT_SOURCES = ("accelerometer", "grade_channel")
+GRADIENT_SOURCES: tuple[GradientSource, ...] = ("accelerometer", "grade_channel")
 COMBINATIONS = [("M0", None)] + [("M3", e) for e in ESTIMATORS]
 NOMINAL_MASS = 1400.0   # kg, the bmw_i3 preset: curb mass + driver
 

@@ -13,7 +13,6 @@ file runs against an old package tree too: it imports from roadload only what ev
 
 from __future__ import annotations
 
-import argparse
 import tempfile
 from pathlib import Path
 
@@ -67,15 +66,11 @@ def compare(ref: str, quick: bool, repo: Path | None = None) -> int:
     """Dump the arrays of commit ``ref`` (of the git repository ``repo``, default: the source tree of this file)
     and of the working tree, each in its own process, and count the arrays that differ; returns the exit status."""
     # imported here, not at the top: this file also runs against old package trees that lack the module
-    from roadload.experiments.benchmarks.refcompare import REPO, export_commit, run_file
+    from roadload.experiments.benchmarks.refcompare import REPO, dump_pair
 
     repo = repo or REPO
     with tempfile.TemporaryDirectory(prefix="roadload-identity-") as tmp:
-        pkg = export_commit(ref, Path(tmp), repo)
-        old, new = Path(tmp) / "old.npz", Path(tmp) / "new.npz"
-        for pythonpath, out in ((str(pkg), old), (None, new)):
-            run_file(Path(__file__).resolve(), ["--dump", str(out)] + (["--quick"] if quick else []), pythonpath,
-                     quiet=False)
+        old, new = dump_pair(Path(__file__).resolve(), ref, quick, Path(tmp), repo)
         a, b = np.load(old), np.load(new)
         differ = []
         for key in a.files:
@@ -92,15 +87,10 @@ def compare(ref: str, quick: bool, repo: Path | None = None) -> int:
 
 def main(argv: list[str] | None = None, repo: Path | None = None) -> int:
     """The check's command line (``scripts/check_core_identity.py``); returns the exit status."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--ref", default="HEAD", help="git commit to compare the working tree with (default HEAD)")
-    ap.add_argument("--quick", action="store_true", help="one short configuration (CI smoke run)")
-    ap.add_argument("--dump", type=Path, help=argparse.SUPPRESS)
-    args = ap.parse_args(argv)
-    if args.dump:
-        dump(args.dump, args.quick)
-        return 0
-    return compare(args.ref, args.quick, repo)
+    # imported here, not at the top: this file also runs against old package trees that lack the module
+    from roadload.experiments.benchmarks.refcompare import identity_command
+
+    return identity_command(__doc__ or "", "one short configuration (CI smoke run)", compare, argv, repo)
 
 
 if __name__ == "__main__":

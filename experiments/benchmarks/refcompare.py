@@ -9,6 +9,7 @@ so an old commit needs none of it); each child writes its figures as JSON and th
 
 from __future__ import annotations
 
+import argparse
 import io
 import json
 import os
@@ -18,6 +19,7 @@ import sys
 import tarfile
 import tempfile
 import tomllib
+from collections.abc import Callable
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
@@ -27,6 +29,9 @@ their own repository instead, which also works from an installed copy."""
 # a child runs a module file as __main__ through runpy: unlike ``python FILE`` this does not put the file's folder
 # (experiments/benchmarks/, whose simulator.py, gym.py, ... would shadow top-level modules) first on sys.path
 _RUN_FILE = "import runpy, sys; sys.argv = sys.argv[1:]; runpy.run_path(sys.argv[0], run_name='__main__')"
+# a child of an identity check loads the module file (not as __main__) and calls its dump(out, quick)
+_DUMP_FILE = ("import runpy, sys; from pathlib import Path; "
+              "runpy.run_path(sys.argv[1])['dump'](Path(sys.argv[2]), sys.argv[3] == 'quick')")
 
 
 class RefError(SystemExit):
@@ -56,15 +61,16 @@ def export_commit(ref: str, dest: Path, repo: Path = REPO) -> Path:
     return pkg
 
 
-def run_file(path: Path, args: list[str], pythonpath: str | None, quiet: bool = True) -> None:
+def run_file(path: Path, args: list[str], pythonpath: str | None, quiet: bool = True, code: str = _RUN_FILE) -> None:
     """Run the module file ``path`` as ``__main__`` with ``args`` in a child process whose roadload is the one
-    under ``pythonpath`` (an exported commit) or, without it, the installed one; raises on a non-zero exit."""
+    under ``pythonpath`` (an exported commit) or, without it, the installed one; raises on a non-zero exit.
+    ``code``: what the child runs (``-c``) with ``path`` and ``args`` as its arguments."""
     env = dict(os.environ)
     if pythonpath:
         env["PYTHONPATH"] = pythonpath
     else:
         env.pop("PYTHONPATH", None)
-    subprocess.run([sys.executable, "-c", _RUN_FILE, str(path), *args], check=True, env=env,
+    subprocess.run([sys.executable, "-c", code, str(path), *args], check=True, env=env,
                    cwd=tempfile.gettempdir(), stdout=subprocess.DEVNULL if quiet else None)
 
 
@@ -91,3 +97,25 @@ def compare(path: Path, args: list[str], ref: str, rounds: int = 3,
             old.append(run_json(path, args, str(pkg)))
             new.append(run_json(path, args, None))
     return old, new
+
+
+def dump_pair(path: Path, ref: str, quick: bool, dest: Path, repo: Path = REPO) -> tuple[Path, Path]:
+    """The arrays of commit ``ref`` and of the working tree, each written by ``dump(file, quick)`` of the
+    identity-check module file ``path`` in its own process (see :func:`run_file`); returns the (old, new) ``.npz``
+    files, written under ``dest``."""
+    pkg = export_commit(ref, dest, repo)
+    old, new = dest / "old.npz", dest / "new.npz"
+    for pythonpath, out in ((str(pkg), old), (None, new)):
+        run_file(path, [str(out), "quick" if quick else "full"], pythonpath, quiet=False, code=_DUMP_FILE)
+    return old, new
+
+
+def identity_command(doc: str, quick_help: str, compare: Callable[[str, bool, Path | None], int],
+                     argv: list[str] | None = None, repo: Path | None = None) -> int:
+    """The command line of an identity check (``--ref REF``, ``--quick``; ``doc``'s first line describes it);
+    returns the exit status of ``compare(ref, quick, repo)``."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("--ref", default="HEAD", help="git commit to compare the working tree with (default HEAD)")
+    ap.add_argument("--quick", action="store_true", help=quick_help)
+    args = ap.parse_args(argv)
+    return compare(args.ref, args.quick, repo)

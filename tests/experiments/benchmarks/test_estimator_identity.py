@@ -3,7 +3,7 @@ array counts as a difference; NaN equals NaN (a skipped sample's residual)."""
 
 import numpy as np
 
-from roadload.experiments.estimator_identity import compare_dumps
+from roadload.experiments.benchmarks.estimator_identity import compare_dumps
 
 
 def test_compare_dumps_counts_every_kind_of_difference(tmp_path):

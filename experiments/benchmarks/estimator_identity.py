@@ -1,6 +1,9 @@
 """Are the estimators' outputs bitwise those of another commit? For work on the estimator kernels that must not
 change a single bit.
 
+    python scripts/check_estimator_identity.py --ref 8efaaad     # the working tree against commit 8efaaad
+    python scripts/check_estimator_identity.py --quick            # CI smoke run: HEAD, short records, no trip
+
 Every catalogue composition (RLS ... SGIVMKF, plus variants that reach the kernel's other branches: iterated
 weights, Joseph form, Tikhonov, saturation, user instruments, a transition matrix), RGTLS with a fixed noise
 covariance and with the noise covariance estimator, the PKS and its bank, and the batch references run on fixed
@@ -9,21 +12,15 @@ simulated trip goes through the chapter-5 pipeline and the section-5.5 estimator
 
 Of each recursive run the whole histories are kept: X̂_t and diag P_t of the record run (``store='full'``, with
 the residuals, weights and scale), X̂_t and the full P_t of the sample-by-sample ``update`` path, the final state
-and the counters, and the many-trips path. Each side (the working tree, commit REF) runs in its own process with
-its own package on PYTHONPATH and writes its arrays; they are then compared with ``np.array_equal`` (NaN equal
-to NaN).
-
-Only the public API of ``roadload.estimators`` (and ``simulate``, ``load_profile``, ``knowledge_for_preset``)
-is used, so that this file runs unchanged against an older package: ``python experiments/estimator_identity.py
---dump out.npz`` with that package first on PYTHONPATH.
+and the counters, and the many-trips path. ``--ref`` is exported with ``git archive`` into a temporary package
+tree (:mod:`.refcompare`); each side runs this file in its own process and dumps its arrays, which are then
+compared bit for bit (NaN equal to NaN, the sign of a zero counted). Exit status 1 when any array differs. This
+file runs against an old package tree too: it imports only the public API of ``roadload.estimators`` (and
+``simulate``, ``load_profile``, ``knowledge_for_preset``), which every commit has.
 """
 
 from __future__ import annotations
 
-import argparse
-import os
-import subprocess
-import sys
 import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -286,35 +283,29 @@ def compare_dumps(old: Path, new: Path) -> Comparison:
     return Comparison(len(a.files), int(sum(a[k].size for k in a.files)), differ)
 
 
-def _side(pythonpath: str | None, out: Path, quick: bool) -> None:
-    env = dict(os.environ)
-    if pythonpath:
-        env["PYTHONPATH"] = pythonpath
-    else:
-        env.pop("PYTHONPATH", None)
-    args = [sys.executable, str(Path(__file__).resolve()), "--dump", str(out)] + (["--quick"] if quick else [])
-    subprocess.run(args, check=True, env=env, cwd=tempfile.gettempdir())
+def compare(ref: str, quick: bool, repo: Path | None = None) -> int:
+    """Dump the arrays of commit ``ref`` (of the git repository ``repo``, default: the source tree of this file) and
+    of the working tree, each in its own process, compare them and print the counts; returns the exit status."""
+    # imported here, not at the top: this file also runs against old package trees that lack the module
+    from roadload.experiments.benchmarks.refcompare import REPO, dump_pair
 
-
-def check(ref: str, quick: bool, export: Callable[[str, Path], Path]) -> int:
-    """Dump commit ``ref`` (exported by ``export(ref, dir)`` -> PYTHONPATH entry) and the working tree, compare,
-    print the counts; returns the exit status (1 when any array differs)."""
+    repo = repo or REPO
     with tempfile.TemporaryDirectory(prefix="roadload-estimator-identity-") as tmp:
-        pkg = export(ref, Path(tmp))
-        old, new = Path(tmp) / "old.npz", Path(tmp) / "new.npz"
-        _side(str(pkg), old, quick)
-        _side(None, new, quick)
-        result = compare_dumps(old, new)
-    print(f"estimators, {ref} vs working tree: {result.arrays} arrays ({result.values:,} values) compared, "
+        result = compare_dumps(*dump_pair(Path(__file__).resolve(), ref, quick, Path(tmp), repo))
+    print(f"estimators, {ref} vs working tree ({repo}): {result.arrays} arrays ({result.values:,} values) compared, "
           f"{len(result.differ)} differ")
     for key in result.differ:
         print(f"  differs: {key}")
     return 1 if result.differ else 0
 
 
+def main(argv: list[str] | None = None, repo: Path | None = None) -> int:
+    """The check's command line (``scripts/check_estimator_identity.py``); returns the exit status."""
+    # imported here, not at the top: this file also runs against old package trees that lack the module
+    from roadload.experiments.benchmarks.refcompare import identity_command
+
+    return identity_command(__doc__ or "", "short records, no simulated trip (CI smoke run)", compare, argv, repo)
+
+
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description="dump the estimator outputs of the roadload on PYTHONPATH")
-    ap.add_argument("--dump", type=Path, required=True)
-    ap.add_argument("--quick", action="store_true")
-    args = ap.parse_args()
-    dump(args.dump, args.quick)
+    raise SystemExit(main())

@@ -8,7 +8,9 @@ inputs and a constant as regressors, output noise and 5 % outliers):
 - the batch path ``RecursiveEstimator.run`` with store='x' (X̂_t only), 'full' (X̂, diag P, residuals,
   weights, scale) and 'final' (state only) for RLS, RRLM with robust scale, SGMKF and SGIVMKF;
 - the online API (``update`` per sample);
-- the many-trips path ``run_many`` (trips x samples/s, store='x') with 1 and 2 worker threads.
+- the many-trips path ``run_many`` (trips x samples/s, store='x') with 1 and 2 worker threads;
+- RGTLS (Algorithm 3.8, fixed P̌ and with the noise covariance estimator, store='full') and a PKS bank smoothing
+  four channels (the chapter-5 pipeline's smoother: order 2, w = 50, λ = 0.98).
 
 Usage: python scripts/bench_estimators.py [--samples 20000] [--repeats 30] [--trips 8] [--quick]
        python scripts/bench_estimators.py --compare main [--rounds 3]   # old commit vs working tree
@@ -104,6 +106,25 @@ ESTIMATORS: dict[str, dict[str, Any]] = {
 }
 
 
+OTHERS = ("RGTLS/full", "RGTLS-NCE/full", "PKS-bank/4 channels")
+
+
+def other_cases(A: np.ndarray, B: np.ndarray) -> dict[str, tuple[Callable[[], Any], int]]:
+    """RGTLS (fixed P̌; with the noise covariance estimator) over the record, each run continuing from the last,
+    and a PKS bank over four channels of it: name -> (run, samples per run)."""
+    from roadload.estimators import RecursiveGTLS, pks_bank
+
+    T = B.shape[0]
+    fixed = RecursiveGTLS(4, noise_covariance=[1e-4, 1e-2, 1e-2, 1e-2, 0.1])
+    nce = RecursiveGTLS(4, nce=True, noise_covariance=[1e-4, 1e-2, 1e-2, 1e-2, 0.1])
+    channels = {f"c{i}": A[:, i] + 0.01 * B for i in range(4)}
+
+    def rgtls(est: Any = fixed) -> None:   # continues from the last run's state (a reset builds q smoothers)
+        est.run(A, B, store="full")
+    return {"RGTLS/full": (rgtls, T), "RGTLS-NCE/full": (lambda: rgtls(nce), T),
+            "PKS-bank/4 channels": (lambda: pks_bank(channels, dt=0.01, window=50, order=2, forgetting=0.98), 4 * T)}
+
+
 def print_comparison(old: list[dict], new: list[dict], ref: str) -> None:
     """new/old of every figure relative to the hand-written loop of its own run (CPU clock), median of rounds."""
     print(f"old = commit {ref}, new = working tree; {len(old)} interleaved rounds; each figure divided by the "
@@ -118,6 +139,10 @@ def print_comparison(old: list[dict], new: list[dict], ref: str) -> None:
             n = statistics.median(r["cpu"][key] / r["cpu"][ref_key] for r in new)
             cells.append(f"{n / o:10.3f}")
         print(f"{name:<9s} " + " ".join(cells))
+    for key in (k for k in new[0]["cpu"] if k in OTHERS and k in old[0]["cpu"]):
+        o = statistics.median(r["cpu"][key] / r["cpu"]["hand"] for r in old)
+        n = statistics.median(r["cpu"][key] / r["cpu"]["hand"] for r in new)
+        print(f"{key:<20s} {n / o:10.3f}")
     o = statistics.median(r["cpu"]["hand"] for r in old) / 1e6
     n = statistics.median(r["cpu"]["hand"] for r in new) / 1e6
     print(f"hand-written loop: {o:.2f} (old runs) / {n:.2f} (new runs) M samples per CPU-second")
@@ -190,6 +215,7 @@ def main(argv: list[str] | None = None, repo: Path | None = None) -> None:
             def many(cfg=cfg, threads=threads):
                 run_many(cfg, AK, BK, store="x", n_threads=threads)
             cases[(name, f"many{threads}")] = (many, K * T)
+    cases.update(other_cases(A, B))
     load0 = os.getloadavg()[0]
     wall, cpu = best_rates(cases, args.repeats)
     load1 = os.getloadavg()[0]
@@ -207,6 +233,8 @@ def main(argv: list[str] | None = None, repo: Path | None = None) -> None:
             r = {k[1]: v for k, v in res.items() if isinstance(k, tuple) and k[0] == name}
             print(f"{name:<9s} {r['x'] / 1e6:9.2f} {r['full'] / 1e6:11.2f} {r['final'] / 1e6:11.2f} "
                   f"{r['online'] / 1e6:9.3f} {r['many1'] / 1e6:11.2f} {r['many2'] / 1e6:11.2f} {r['x'] / ref:9.2f}")
+        for key in OTHERS:
+            print(f"{key:<20s} {res[key] / 1e6:9.2f}")
     if args.json:
         def keyed(res: dict) -> dict:
             return {k if isinstance(k, str) else f"{k[0]}/{k[1]}": v for k, v in res.items()}

@@ -55,7 +55,9 @@ def estimator_catalog() -> str:
         rows.append([f"`{name}`", entry.description, entry.algorithm, f"`{parts}`", refs])
     text = table(["name", "estimator", "Algorithm", "composition (make_config parts)", "parts in the text"], rows)
     return text + "\n\nAlso by name: " + ", ".join(f"`{s}`" for s in SPECIAL) + \
-        " (own classes: RGTLS = Algorithm 3.8 with the noise covariance estimator, PKS = Algorithm 3.21)."
+        " (own classes: RGTLS = Algorithm 3.8 with the noise covariance estimator, its lines 3-4 the kernel's " \
+        "covariance stages on [A B], its own stages the generalised inverse iteration and eq. 3.43b; PKS = " \
+        "Algorithm 3.21, the kernel with the polynomial shift as transition matrix)."
 
 
 def chapter5() -> str:

@@ -74,7 +74,8 @@ def evaluate_i3_trip(path: str) -> dict:
     return {"medse": medse, "mass": mass, "masses": masses, "info": info}
 
 
-def main(argv: list[str] | None = None) -> None:
+def _arguments(argv: list[str] | None) -> argparse.Namespace:
+    """The command line; --quick: 3 trips, 1 worker, a temporary output folder."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", type=Path, default=Path("out/real_i3"))
     ap.add_argument("--workers", type=int, default=2)
@@ -84,7 +85,91 @@ def main(argv: list[str] | None = None) -> None:
     if args.quick:
         args.limit, args.workers = 3, 1
         args.out = Path(tempfile.mkdtemp(prefix="roadload-i3-"))
+    return args
 
+
+def _summary(info: pd.DataFrame, evaluated: int, failed: int) -> list[str]:
+    """Report head: trips, hours, triggered share and the accelerometer test; its two findings are printed."""
+    slopes = info["accelerometer_gravity_slope"]
+    md = ["# Chapter 5 on the BMW i3 trips (real data)", "",
+          f"{evaluated} trips evaluated, {failed} failed; {info['duration'].sum() / 3600:.1f} h; "
+          f"triggered share of the 10 Hz samples: median {np.median(info['n_triggered'] / info['n_states']):.2f}.",
+          "", f"Accelerometer test (slope of ẍ_CAN - v̇ over g sin θ from elevation, 20 s averages; 1 = sees "
+          f"gravity, 0 = not): decided on {int(slopes.notna().sum())} of {len(info)} trips (the others are too "
+          f"flat), median {np.nanmedian(slopes):.3f}, quartiles {np.nanpercentile(slopes, 25):.3f} / "
+          f"{np.nanpercentile(slopes, 75):.3f}.", ""]
+    print(md[2])
+    print(md[4])
+    return md
+
+
+def _medse_section(medse: pd.DataFrame, source: str, order: list[str], out: Path) -> list[str]:
+    """MEDSE per horizon for one gradient source: notch table (CSV + markdown) and boxplot; k = 900 printed."""
+    md: list[str] = []
+    ms = medse[medse["gradient"] == source].drop(columns="gradient")
+    for k in HORIZONS:
+        d = common_trips(ms[ms["horizon"] == k])
+        if d.empty:
+            continue
+        tab = notch_table(d)
+        tab["o"] = tab["combination"].map({c: i for i, c in enumerate(order)})
+        tab = tab.sort_values("o").drop(columns="o")
+        write_csv(out / f"medse_{source}_k{k}.csv", tab)
+        md += [f"## MEDSE, k = {k} (m = {int(tab['m'].max())} trips with ≥ {MIN_TRAINING} training samples)",
+               "", markdown_table(tab, floatfmt=".4g"), ""]
+        save(plot_notched_boxplot(d, "medse", order=order, ylabel="MEDSE [N²]",
+                                  title=f"BMW i3 ({source}), MEDSE, k = {k}, m = {int(tab['m'].max())}"),
+             out / f"medse_boxplot_{source}_k{k}.png")
+        if k == 900:
+            print(f"\nMEDSE k = 900, gradient from {source} (m = {int(tab['m'].max())} trips)")
+            print(tab.to_string(index=False, float_format=lambda x: f"{x:.4g}"))
+    return md
+
+
+def _mass_against_payload(ok: list[dict], info: pd.DataFrame, source: str, order: list[str]) -> pd.DataFrame:
+    """Per combination: median mass estimate on the trips with and without a payload note, and their difference
+    (the payload the estimator sees; also against the winter trips alone, as the noted trips are all winter)."""
+    noted = info["payload_kg"].notna().to_numpy()
+    winter = info["trip"].str.startswith("TripB").to_numpy()
+    rows = []
+    for c in order[1:]:
+        est = np.array([v["masses"].get((source, c), np.nan) for v in ok])
+        rows.append({"combination": c, "median_mass_no_note": float(np.nanmedian(est[~noted])),
+                     "median_mass_noted": float(np.nanmedian(est[noted])),
+                     "estimated_payload": float(np.nanmedian(est[noted]) - np.nanmedian(est[~noted])),
+                     "estimated_payload_winter_only": float(np.nanmedian(est[noted])
+                                                            - np.nanmedian(est[~noted & winter])),
+                     "noted_payload_median": float(np.median(info.loc[noted, "payload_kg"]))})
+    return pd.DataFrame(rows)
+
+
+def _mass_section(ok: list[dict], info: pd.DataFrame, mass_rows: pd.DataFrame, source: str, order: list[str],
+                  out: Path) -> list[str]:
+    """Mass against the payload notes for one gradient source (CSV + markdown, printed) and the NMSE of the
+    mass estimates on the noted trips."""
+    noted = info["payload_kg"].notna().to_numpy()
+    mass_tab = _mass_against_payload(ok, info, source, order)
+    write_csv(out / f"mass_vs_payload_{source}.csv", mass_tab)
+    noted_trips = set(info.loc[noted, "trip"])
+    nm = mass_rows[(mass_rows["gradient"] == source) & mass_rows["trip"].isin(noted_trips)]
+    nmse_tab = notch_table(nm, value="nmse") if not nm.empty else pd.DataFrame()
+    md = ["## Mass against the payload notes", "",
+          f"{int(noted.sum())} trips carry a payload note ({sorted(info.loc[noted, 'payload_kg'].tolist())} kg); "
+          f"reference mass = {NOMINAL_MASS:.0f} kg (preset, with driver) + payload. Mass estimate per trip = "
+          f"median over the second half of the trip.", "", markdown_table(mass_tab, floatfmt=".5g"), ""]
+    print(f"\nmass vs payload notes, gradient from {source}")
+    print(mass_tab.to_string(index=False, float_format=lambda x: f"{x:.1f}"))
+    if not nmse_tab.empty:
+        md += ["NMSE of the mass estimates (after the convergence test) on the noted trips:", "",
+               markdown_table(nmse_tab, floatfmt=".5g"), ""]
+        print(nmse_tab[["combination", "m", "median", "notch_low", "notch_high"]].to_string(
+            index=False, float_format=lambda x: f"{x:.5f}"))
+    return md
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Evaluate the i3 trips (sweep), then write the tables, figures and report.md under --out."""
+    args = _arguments(argv)
     try:
         folder = require_shared_data("bmw_i3_tum/data")
     except FileNotFoundError as exc:
@@ -104,62 +189,11 @@ def main(argv: list[str] | None = None) -> None:
     write_csv(out / "medse_per_trip.csv", medse)
     write_csv(out / "trips.csv", info)
     order = [combination_name(m, e) for m, e in COMBINATIONS]
-    slopes = info["accelerometer_gravity_slope"]
-    md = ["# Chapter 5 on the BMW i3 trips (real data)", "",
-          f"{len(ok)} trips evaluated, {len(outcomes) - len(ok)} failed; {info['duration'].sum() / 3600:.1f} h; "
-          f"triggered share of the 10 Hz samples: median {np.median(info['n_triggered'] / info['n_states']):.2f}.",
-          "", f"Accelerometer test (slope of ẍ_CAN - v̇ over g sin θ from elevation, 20 s averages; 1 = sees "
-          f"gravity, 0 = not): decided on {int(slopes.notna().sum())} of {len(info)} trips (the others are too "
-          f"flat), median {np.nanmedian(slopes):.3f}, quartiles {np.nanpercentile(slopes, 25):.3f} / "
-          f"{np.nanpercentile(slopes, 75):.3f}.", ""]
-    print(md[2])
-    print(md[4])
+    md = _summary(info, len(ok), len(outcomes) - len(ok))
     for source in GRADIENT_SOURCES:
         md += [f"# Gradient angle from: {source}", ""]
-        ms = medse[medse["gradient"] == source].drop(columns="gradient")
-        for k in HORIZONS:
-            d = common_trips(ms[ms["horizon"] == k])
-            if d.empty:
-                continue
-            tab = notch_table(d)
-            tab["o"] = tab["combination"].map({c: i for i, c in enumerate(order)})
-            tab = tab.sort_values("o").drop(columns="o")
-            write_csv(out / f"medse_{source}_k{k}.csv", tab)
-            md += [f"## MEDSE, k = {k} (m = {int(tab['m'].max())} trips with ≥ {MIN_TRAINING} training samples)",
-                   "", markdown_table(tab, floatfmt=".4g"), ""]
-            save(plot_notched_boxplot(d, "medse", order=order, ylabel="MEDSE [N²]",
-                                      title=f"BMW i3 ({source}), MEDSE, k = {k}, m = {int(tab['m'].max())}"),
-                 out / f"medse_boxplot_{source}_k{k}.png")
-            if k == 900:
-                print(f"\nMEDSE k = 900, gradient from {source} (m = {int(tab['m'].max())} trips)")
-                print(tab.to_string(index=False, float_format=lambda x: f"{x:.4g}"))
-        noted = info["payload_kg"].notna().to_numpy()
-        winter = info["trip"].str.startswith("TripB").to_numpy()     # the noted trips are all winter trips
-        rows = []
-        for c in order[1:]:
-            est = np.array([v["masses"].get((source, c), np.nan) for v in ok])
-            rows.append({"combination": c, "median_mass_no_note": float(np.nanmedian(est[~noted])),
-                         "median_mass_noted": float(np.nanmedian(est[noted])),
-                         "estimated_payload": float(np.nanmedian(est[noted]) - np.nanmedian(est[~noted])),
-                         "estimated_payload_winter_only": float(np.nanmedian(est[noted])
-                                                                - np.nanmedian(est[~noted & winter])),
-                         "noted_payload_median": float(np.median(info.loc[noted, "payload_kg"]))})
-        mass_tab = pd.DataFrame(rows)
-        write_csv(out / f"mass_vs_payload_{source}.csv", mass_tab)
-        noted_trips = set(info.loc[noted, "trip"])
-        nm = mass_rows[(mass_rows["gradient"] == source) & mass_rows["trip"].isin(noted_trips)]
-        nmse_tab = notch_table(nm, value="nmse") if not nm.empty else pd.DataFrame()
-        md += ["## Mass against the payload notes", "",
-               f"{int(noted.sum())} trips carry a payload note ({sorted(info.loc[noted, 'payload_kg'].tolist())} kg); "
-               f"reference mass = {NOMINAL_MASS:.0f} kg (preset, with driver) + payload. Mass estimate per trip = "
-               f"median over the second half of the trip.", "", markdown_table(mass_tab, floatfmt=".5g"), ""]
-        print(f"\nmass vs payload notes, gradient from {source}")
-        print(mass_tab.to_string(index=False, float_format=lambda x: f"{x:.1f}"))
-        if not nmse_tab.empty:
-            md += ["NMSE of the mass estimates (after the convergence test) on the noted trips:", "",
-                   markdown_table(nmse_tab, floatfmt=".5g"), ""]
-            print(nmse_tab[["combination", "m", "median", "notch_low", "notch_high"]].to_string(
-                index=False, float_format=lambda x: f"{x:.5f}"))
+        md += _medse_section(medse, source, order, out)
+        md += _mass_section(ok, info, mass_rows, source, order, out)
     md += ["# Trips", "", markdown_table(info.drop(columns=["notes"]), floatfmt=".4g"), ""]
     write_text(out / "report.md", "\n".join(md) + "\n")
     print(f"report: {out / 'report.md'}")

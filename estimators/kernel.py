@@ -54,6 +54,7 @@ from collections import namedtuple
 
 import numpy as np
 from numba import njit
+from roadload.jitcache import cached_njit
 
 from .influence import PSI_L2, weight_scalar
 
@@ -636,7 +637,7 @@ def finish_sample(t, b, r_prior, w, state, out, buf, opt, n):
 
 
 # _nrt=False: numba's private switch for reference counting, not listed in its njit overloads
-@njit(cache=True, nogil=True, _nrt=False)  # type: ignore[call-overload]
+@cached_njit(nogil=True, _nrt=False)
 def run_record(record, parts, state, out, work, size_tag):
     """Process one record (T samples) in place on the state.
 

@@ -26,7 +26,7 @@ from collections import deque
 from typing import Annotated, Any
 
 import numpy as np
-from numba import njit
+from roadload.jitcache import cached_njit
 from pydantic import Strict, field_validator, model_validator
 
 from .config import (BLOWUP_RATIO, FORGETTING, INITIAL_COVARIANCE, BlowupRatio, EstimatorConfigError, Forgetting,
@@ -101,7 +101,7 @@ def track_blowup(P, scalars, counters, blowup, sample, q):
 
 # _nrt=False: numba's private switch for reference counting (see kernel.run_record): without it every array handed
 # to an inline stage is counted per sample, which made this loop 2x slower than one hand-written body
-@njit(cache=True, _nrt=False)  # type: ignore[call-overload]
+@cached_njit(_nrt=False)
 def rgtls_record(record, noise_rows, settings, state, out, work, size_tag):
     """Algorithm 3.8 over a record, with the NCE (eq. 3.43b) fed by ``noise_rows`` Ž (T×q; NaN rows: no update).
 

@@ -10,6 +10,7 @@ import pytest
 
 from roadload import estimators as E
 from roadload.estimators import config as C
+from roadload.experiments.benchmarks.kernel_signatures import kernel_signatures
 from roadload.estimators.pipeline import PipelineError, PipelineSettings, smoother_design
 
 ESTIMATORS_DIR = Path(E.__file__).parent
@@ -91,21 +92,11 @@ def test_numpy_scalars_are_accepted_by_every_settings_class():
     assert (est.n_params, est.nce, est.settings.pks.n_params, est.settings.pks.window_left) == (2, True, 3, 5)
 
 
-def _compiled_signatures() -> dict[str, int]:
-    """name -> number of parameters of every compiled function (njit, inline stage, vectorize) in estimators/."""
-    out = {}
-    for path in sorted(ESTIMATORS_DIR.glob("*.py")):
-        for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.FunctionDef) and any(
-                    key in ast.unparse(d) for d in node.decorator_list for key in ("njit", "_inline", "vectorize")):
-                a = node.args
-                out[f"{path.name}:{node.name}"] = len(a.posonlyargs) + len(a.args) + len(a.kwonlyargs)
-    return out
-
-
 def test_no_compiled_kernel_takes_more_than_twelve_parameters():
-    sizes = _compiled_signatures()
-    assert {"kernel.py:run_record", "rgtls.py:rgtls_record", "kernel.py:store_sample"} <= set(sizes)
+    kernels = kernel_signatures([ESTIMATORS_DIR], ESTIMATORS_DIR.parent)
+    sizes = {f"{Path(k.path).name}:{k.name}": k.parameters for k in kernels}
+    assert {"kernel.py:run_record", "rgtls.py:rgtls_record", "kernel.py:store_sample",
+            "influence.py:weight_scalar"} <= set(sizes)
     assert sizes["kernel.py:run_record"] == 6 and sizes["rgtls.py:rgtls_record"] == 7
     too_long = {k: v for k, v in sizes.items() if v > 12}
     assert not too_long, too_long

@@ -386,6 +386,38 @@ def _track_from_columns(path: Path, lat_v, lon_v, dist_v, ele_v, head_v, name: s
     return profile_from_track(dist_v, elevation=ele_v, heading=head_v, xy=xy, name=name, meta=meta, **profile_kw)
 
 
+def _gpx_points(path: Path, gpx) -> list:
+    """All track segments' points in order, else the routes', else the waypoints (at least 2)."""
+    points = [p for t in gpx.tracks for seg in t.segments for p in seg.points]
+    if not points:
+        points = [p for r in gpx.routes for p in r.points] or list(gpx.waypoints)
+    if len(points) < 2:
+        raise ProfileFileError(f"{path}: fewer than 2 track/route points")
+    return points
+
+
+def _gpx_coordinates(path: Path, points: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Latitude, longitude [deg] and elevation [m] (NaN where a point has none); ±inf refused naming the point."""
+    lat = np.array([p.latitude for p in points], dtype=float)
+    lon = np.array([p.longitude for p in points], dtype=float)
+    ele = np.array([np.nan if p.elevation is None else p.elevation for p in points], dtype=float)
+    for label, values in (("latitude [deg]", lat), ("longitude [deg]", lon), ("elevation [m]", ele)):
+        inf = np.flatnonzero(np.isinf(values))
+        if inf.size:
+            raise ProfileFileError(f"{path}: point {int(inf[0])} has a non-finite {label} {values[inf[0]]:g}")
+    return lat, lon, ele
+
+
+def _check_gpx_times(path: Path, points: list) -> None:
+    """Point times, where the file has any, must not run backwards (one time base)."""
+    stamps = [getattr(p, "time", None) for p in points]  # track, route and way points all carry one in GPX
+    if any(s is not None for s in stamps):
+        known = [s for s in stamps if s is not None]
+        first = known[0]
+        seconds = np.array([np.nan if s is None else _seconds_between(path, first, s) for s in stamps])
+        _check_time_order(path, seconds, "the point time", "point")
+
+
 def load_gpx(path: str | os.PathLike, *, name: str | None = None, licence: str = "unknown (user file)",
              **profile_kw) -> RoadProfile:
     """A RoadProfile from a GPX file: all track segments in order (else the routes, else the waypoints).
@@ -401,24 +433,9 @@ def load_gpx(path: str | os.PathLike, *, name: str | None = None, licence: str =
         gpx = gpxpy.parse(path.read_text(encoding="utf-8"))
     except (gpxpy.gpx.GPXException, ValueError) as exc:
         raise ProfileFileError(f"{path}: not a valid GPX file ({exc})") from exc
-    points: list[gpxpy.geo.Location] = [p for t in gpx.tracks for seg in t.segments for p in seg.points]
-    if not points:
-        points = [p for r in gpx.routes for p in r.points] or list(gpx.waypoints)
-    if len(points) < 2:
-        raise ProfileFileError(f"{path}: fewer than 2 track/route points")
-    lat = np.array([p.latitude for p in points], dtype=float)
-    lon = np.array([p.longitude for p in points], dtype=float)
-    ele = np.array([np.nan if p.elevation is None else p.elevation for p in points], dtype=float)
-    for label, values in (("latitude [deg]", lat), ("longitude [deg]", lon), ("elevation [m]", ele)):
-        inf = np.flatnonzero(np.isinf(values))
-        if inf.size:
-            raise ProfileFileError(f"{path}: point {int(inf[0])} has a non-finite {label} {values[inf[0]]:g}")
-    stamps = [getattr(p, "time", None) for p in points]  # track, route and way points all carry one in GPX
-    if any(s is not None for s in stamps):
-        known = [s for s in stamps if s is not None]
-        first = known[0]
-        seconds = np.array([np.nan if s is None else _seconds_between(path, first, s) for s in stamps])
-        _check_time_order(path, seconds, "the point time", "point")
+    points = _gpx_points(path, gpx)
+    lat, lon, ele = _gpx_coordinates(path, points)
+    _check_gpx_times(path, points)
     track_name = name or next((t.name for t in gpx.tracks if t.name), None) or path.stem
     meta = {"source": str(path.name), "licence": licence, "gpx_points": len(points)}
     try:

@@ -28,37 +28,54 @@ def import_log(source: str | Path, fmt: str, mapping: str | Path | Mapping | Non
         raise LogImportError(f"unknown import format {fmt!r}{did_you_mean(fmt, FORMATS)}; choose one of "
                              f"{list(FORMATS)}")
     if fmt == "mf4":
-        from .mdf import load_mdf_log  # asammdf loads only for MDF4 files
+        trip = _import_mf4(source, mapping, progress)
+    else:
+        m = _mapping_for(fmt, mapping)
+        trip = _load(source, fmt, m, dbc, progress)
+        if strict:
+            _refuse_malformed_lines(source, trip)
+        if m.derived:
+            if progress:
+                progress("derive", 0.9)
+            trip = add_derived(trip, m.derived, ImportReport.from_dict(trip.meta["import_report"]), m.vehicle)
+    if progress:
+        progress("done", 1.0)
+    return trip
 
-        trip = load_mdf_log(source, None if mapping is None else
-                            mapping if isinstance(mapping, Mapping) else load_mapping(mapping), progress=progress)
-        if progress:
-            progress("done", 1.0)
-        return trip
+
+def _import_mf4(source: str | Path, mapping: str | Path | Mapping | None, progress: Progress | None) -> Trip:
+    """Decoded MDF4 signals (a mapping only where the signals lack the catalogue's names)."""
+    from .mdf import load_mdf_log  # asammdf loads only for MDF4 files
+
+    return load_mdf_log(source, None if mapping is None else
+                        mapping if isinstance(mapping, Mapping) else load_mapping(mapping), progress=progress)
+
+
+def _mapping_for(fmt: str, mapping: str | Path | Mapping | None) -> Mapping:
+    """The given mapping (object, file or packaged name), else the format's default one."""
     if mapping is None:
         if fmt not in DEFAULT_MAPPINGS:
             raise LogImportError(f"format {fmt!r} needs a mapping file (--mapping)")
         mapping = DEFAULT_MAPPINGS[fmt]
-    m = mapping if isinstance(mapping, Mapping) else load_mapping(mapping)
+    return mapping if isinstance(mapping, Mapping) else load_mapping(mapping)
+
+
+def _load(source: str | Path, fmt: str, m: Mapping, dbc: Sequence[str | Path], progress: Progress | None) -> Trip:
+    """The format's loader."""
     if fmt in CAN_LOG_FORMATS:
-        trip = load_can_log(source, m, dbc=dbc, progress=progress, fmt=fmt)
-    elif fmt == "csv":
-        trip = load_csv_log(source, m, progress=progress)
-    elif fmt == "bmw-i3":
-        trip = load_bmw_i3(source, m, progress=progress)
-    elif fmt == "openxc":
-        trip = load_openxc(source, m, progress=progress)
-    else:
-        raise LogImportError(f"import format {fmt!r} has no loader")
-    if strict:
-        bad = [d for d in trip.meta["import_report"].get("dropped", []) if str(d["what"]).endswith(" lines")]
-        if bad:
-            raise LogImportError(f"{source}: strict import refused: " + "; ".join(
-                f"{d['count']} x {d['reason']} ({d['detail']})" for d in bad))
-    if m.derived:
-        if progress:
-            progress("derive", 0.9)
-        trip = add_derived(trip, m.derived, ImportReport.from_dict(trip.meta["import_report"]), m.vehicle)
-    if progress:
-        progress("done", 1.0)
-    return trip
+        return load_can_log(source, m, dbc=dbc, progress=progress, fmt=fmt)
+    if fmt == "csv":
+        return load_csv_log(source, m, progress=progress)
+    if fmt == "bmw-i3":
+        return load_bmw_i3(source, m, progress=progress)
+    if fmt == "openxc":
+        return load_openxc(source, m, progress=progress)
+    raise LogImportError(f"import format {fmt!r} has no loader")
+
+
+def _refuse_malformed_lines(source: str | Path, trip: Trip) -> None:
+    """Strict import: any malformed line the loader left out is an error."""
+    bad = [d for d in trip.meta["import_report"].get("dropped", []) if str(d["what"]).endswith(" lines")]
+    if bad:
+        raise LogImportError(f"{source}: strict import refused: " + "; ".join(
+            f"{d['count']} x {d['reason']} ({d['detail']})" for d in bad))

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from roadload.road_profiles import RoadProfile
 from roadload.vehicle import VehicleSpec
@@ -24,6 +24,7 @@ from .energy import SourceEnergyModel, with_loss_error
 from .force_model import FORCE_MODEL_NAMES, ErroredForceModel, FixedForceModel, ForceModel, OracleForceModel
 from .mpc import MpcSettings
 from .mpc_controller import MpcController, MpcControllerSettings, TripSchedule
+from .optimum import OptimumSettings, OptimumTarget, OptimumTracker
 from .sim_plant import HumanDriver, SimulatorPlant
 from .vehicle_models import abc_parameters, energy_model_from_spec
 from roadload.estimators.knowledge import knowledge_for_preset
@@ -32,7 +33,7 @@ from roadload.estimators.pipeline import PipelineSettings, knowledge_from_spec
 from roadload.road_profiles import load_profile
 from .online import OnlineForceModel
 
-CONTROLLERS = ("mpc", "cruise", "human")
+CONTROLLERS = ("mpc", "cruise", "human", "optimum")
 
 
 @dataclass(frozen=True)
@@ -65,6 +66,13 @@ class DriveSettings:
     # shape of the target schedule: (positions [m], elapsed fraction of target_time [-]); None: linear in distance
     target_shape: tuple[tuple[float, ...], tuple[float, ...]] | None = None
     schedule_gain: float = 20.0  # P gain of the target schedule's lambda feedback (TripSchedule.gain)
+    # oracle force model: also the true wind vector, so the MPC plans each segment with its own headwind and
+    # crosswind (the road's heading ahead); False: the current headwind component for the whole horizon
+    oracle_wind: bool = True
+    # controller "optimum": the trip time / arrival speed of the full-route optimum it tracks (always with the
+    # oracle force model; a warm-up before measure_from is driven by cruise control) and its settings
+    optimum_target: OptimumTarget | None = None
+    optimum: OptimumSettings | None = None
 
     def __post_init__(self) -> None:
         if self.controller not in CONTROLLERS:
@@ -77,6 +85,8 @@ class DriveSettings:
             raise ControllerError(f"target_time: must be a finite number > 0 [s] or None, got {self.target_time}")
         if self.warmup_driver not in ("mpc", "cruise"):
             raise ControllerError(f"warmup_driver: 'mpc' or 'cruise', got {self.warmup_driver!r}")
+        if self.controller == "optimum" and self.optimum_target is None:
+            raise ControllerError("controller 'optimum' needs optimum_target (trip time [s], arrival speed [m/s])")
         if not (math.isfinite(self.dt) and self.dt > 0):
             raise ControllerError(f"dt: must be a finite number > 0 [s], got {self.dt}")
 
@@ -127,8 +137,8 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
                                                                          else spec)
     abc = abc_parameters(nominal)
     force_model: ForceModel
-    if st.controller == "mpc" and st.force_model == "oracle":
-        force_model = OracleForceModel(plant.true_parameters)
+    if st.controller == "optimum" or (st.controller == "mpc" and st.force_model == "oracle"):
+        force_model = OracleForceModel(plant.true_parameters, wind=plant.true_wind if st.oracle_wind else None)
     elif st.controller == "mpc" and st.force_model == "wrong":
         errors = dict(st.wrong_model or {})
         force_model = ErroredForceModel(OracleForceModel(plant.true_parameters), errors)
@@ -156,6 +166,10 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
                                                          gear_command=st.gear_command))
         if st.warmup_driver == "cruise" and st.measure_from > 0:
             # cruise control on the nominal abc model: the same warm-up whatever the run's force model
+            controller = Handover(CruiseController(st.cruise), controller, st.measure_from, FixedForceModel(abc))
+    elif st.controller == "optimum" and st.optimum_target is not None:
+        controller = OptimumTracker(replace(st.optimum_target, measure_from=st.measure_from), st.optimum)
+        if st.measure_from > 0:  # the same warm-up as the MPC runs with warmup_driver 'cruise'
             controller = Handover(CruiseController(st.cruise), controller, st.measure_from, FixedForceModel(abc))
     elif st.controller == "cruise":
         controller = CruiseController(st.cruise)

@@ -39,6 +39,7 @@ import numpy as np
 from .base import ControllerBase, ControllerError, DriveContext, Observation
 from .cruise import CruiseLaw, CruiseSettings
 from .energy import SourceEnergyModel
+from .force_model import road_heading
 from .mpc import SEGMENT0_FRACTIONS, ConstraintViolation, MpcSettings, OcpSolver, Plan, Preview
 from .safety import speed_cap
 
@@ -245,8 +246,14 @@ class MpcController(ControllerBase):
         # gear for the traction-force bound (the power constraint limits the rest); the objective's gear follows
         # the planned speed through the smooth shift rule
         stops = np.array([x for x in self._unserved if s[0] - 1.0 <= x <= s[-1]], dtype=float)
+        headwind = crosswind = None
+        yaw = 0.0
+        wind = self.ctx.force_model.wind() if hasattr(self.ctx.force_model, "wind") else None
+        if wind is not None:  # a force model that knows the wind vector: the wind of the road's heading ahead
+            headwind, crosswind = wind.components(road_heading(road, mid))
+            yaw = wind.yaw_drag_factor
         return Preview(s=s, grade=at["grade"], curvature=at["curvature"], speed_cap=cap, ratio=ratio,
-                       segment0_cap=seg0, stops=stops)
+                       segment0_cap=seg0, stops=stops, headwind=headwind, crosswind=crosswind, yaw_drag_factor=yaw)
 
     # ------------------------------------------------------------------ control
     def _replan(self, obs: Observation) -> None:
@@ -391,6 +398,10 @@ class MpcController(ControllerBase):
         self._gear = en.gear_with_hysteresis(obs.v, self._gear, st.gear_band)
         return self._gear + 1
 
+    def reference_speed(self, obs: Observation) -> float:
+        """The speed [m/s] the tracking law's feedback aims at: the plan's speed at the current position."""
+        return float(self.plan.speed_at(obs.s)) if self.plan is not None else obs.v
+
     def wheel_force(self, obs: Observation) -> float:
         stale = self.plan is not None and obs.s > self.plan.s[-2]
         braking = self.mode in ("brake", "emergency")
@@ -419,7 +430,7 @@ class MpcController(ControllerBase):
             plan = self.plan
             ahead = obs.s + obs.v * self.settings.lookahead_time
             force = float(plan.wheel_force[plan.segment_at(ahead)])
-            force += m * self.settings.speed_gain * (float(plan.speed_at(obs.s)) - obs.v)
+            force += m * self.settings.speed_gain * (self.reference_speed(obs) - obs.v)
         # comfort: the acceleration this force gives under the controller's model stays within the bounds
         force = float(np.clip(force, res - m * st.decel_max, res + m * st.accel_max))
         # jerk limit on the command: |dF/dt| <= m j_max (the plan's accel is piecewise constant per segment)

@@ -9,6 +9,7 @@ oracle) and the controller (mpc / cruise / human), runs :func:`~.closed_loop.run
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -32,6 +33,9 @@ from roadload.estimators.models import coast_down_coefficients
 from roadload.estimators.pipeline import PipelineSettings, knowledge_from_spec
 from roadload.road_profiles import load_profile
 from .online import OnlineForceModel
+from .wind import WindAwareForceModel, wind_model_name
+from roadload.envs import get_preset
+from roadload.estimators.change import ChangeDetection
 
 CONTROLLERS = ("mpc", "cruise", "human", "optimum")
 
@@ -73,6 +77,11 @@ class DriveSettings:
     # oracle force model; a warm-up before measure_from is driven by cruise control) and its settings
     optimum_target: OptimumTarget | None = None
     optimum: OptimumSettings | None = None
+    # online force models: the catalogue estimator's settings (None: chapter 5's for the model), a change detector
+    # that resets the estimator's covariance after a change of the road load, and the wind model's heading source
+    estimator_settings: dict | None = None
+    change_detection: ChangeDetection | None = None
+    heading_source: str = "road"
 
     def __post_init__(self) -> None:
         if self.controller not in CONTROLLERS:
@@ -144,9 +153,17 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
         force_model = ErroredForceModel(OracleForceModel(plant.true_parameters), errors)
         if errors.get("drivetrain_loss"):
             energy = with_loss_error(energy, errors["drivetrain_loss"])
-    elif st.controller == "mpc" and st.force_model == "online":
-        online = OnlineForceModel(_knowledge(nominal), model=st.model, estimator=st.estimator,
-                                  pipeline_settings=st.pipeline)
+    elif st.controller == "mpc" and st.force_model in ("online", "online_wind"):
+        online: OnlineForceModel
+        common: dict[str, Any] = dict(estimator=st.estimator, pipeline_settings=st.pipeline,
+                                      estimator_settings=st.estimator_settings, change_detection=st.change_detection)
+        if st.force_model == "online_wind":
+            nominal_spec = get_preset(nominal) if isinstance(nominal, str) else nominal
+            online = WindAwareForceModel(_knowledge(nominal), road, model=wind_model_name(st.model),
+                                         heading_source=st.heading_source,
+                                         yaw_drag_factor=float(nominal_spec.aero.yaw_drag_factor), **common)
+        else:
+            online = OnlineForceModel(_knowledge(nominal), model=st.model, **common)
         online.attach(plant.can_window)
         force_model = online
     else:
@@ -180,7 +197,7 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
     result.metrics.update(controller=st.controller, force_model=st.force_model if st.controller == "mpc" else "-",
                           solver=st.solver if st.controller == "mpc" else "-",
                           time_weight=st.time_weight if st.controller == "mpc" else float("nan"))
-    if hasattr(force_model, "describe") and st.force_model == "online" and st.controller == "mpc":
+    if isinstance(force_model, OnlineForceModel) and st.controller == "mpc":
         desc = force_model.describe()
         hist = desc.get("history")
         if hist and hist["t"]:  # where the estimate stood: position [m] of each update

@@ -202,4 +202,4 @@ class ErroredForceModel:
         return {"force_model": self.name, **{f"error_{k}": v for k, v in self.errors.items()}}
 
 
-FORCE_MODEL_NAMES = ("abc", "online", "oracle", "wrong")
+FORCE_MODEL_NAMES = ("abc", "online", "online_wind", "oracle", "wrong")

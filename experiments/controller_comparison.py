@@ -38,7 +38,9 @@ from roadload.io.profiles import profile_from_trip
 from roadload.io.derived import distance_from_speed
 from roadload.controllers.mpc import MpcSettings
 from roadload.presets import TRUCK_NOMINAL_MASS, truck_spec
-from roadload.road_profiles import city, cycle_to_profile, hilly, long_haul_truck, long_grades, motorway
+from roadload.road_profiles import (city, cycle_to_profile, hilly, load_profile_start, long_haul_truck, long_grades,
+                                    motorway)
+from roadload.gym.ecodrive import cut_profile
 from roadload.controllers.drive import resolve_road
 from roadload.fileio import write_text
 from roadload.experiments.controller_report import write_figures
@@ -304,7 +306,9 @@ def _longhaul_profile() -> RoadProfile:
 
 def paired_road(name: str, seed: int, warmup: float = 0.0) -> RoadProfile:
     """Roads of the paired comparison, one per seed: 'hilly' (2.5 km generated country road), 'long_grades'
-    (4 km, 3-6 % grades of 2-4 km), 'longhaul_real' (10 km windows of the real long-haul truck cycle). Short,
+    (4 km, 3-6 % grades of 2-4 km), 'longhaul_real' (10 km windows of the real long-haul truck cycle), 'city'
+    (3 km with stops), 'motorway' (6 km), 'route' (EcoDrive-v0's 2 km route of the seed, where the RL policies
+    learnt). Short,
     because the shared machine gives each run a fraction of a core. ``warmup`` [m]: the generated road is that
     much longer; the measured segment is its last 2.5 / 4 km (see PairedTask.warmup)."""
     if name == "hilly":
@@ -315,7 +319,17 @@ def paired_road(name: str, seed: int, warmup: float = 0.0) -> RoadProfile:
         return long_grades(seed=seed, length=4000.0 + warmup)
     if name == "longhaul_real":
         return _longhaul_window(seed)
-    raise ValueError(f"unknown paired road {name!r}; known: hilly, hilly_short, long_grades, longhaul_real")
+    if name == "city":
+        return city(seed=seed, length=3000.0 + warmup)
+    if name == "motorway":
+        return motorway(seed=seed, length=6000.0 + warmup)
+    if name == "route":  # the EcoDrive-v0 route of this road seed (2 km of the generated hilly road), no warm-up
+        return cut_profile(load_profile_start("hilly", ROUTE_LENGTH, seed=seed), ROUTE_LENGTH)
+    raise ValueError(f"unknown paired road {name!r}; known: {', '.join(PAIRED_ROADS)}")
+
+
+PAIRED_ROADS = ("hilly", "hilly_short", "long_grades", "longhaul_real", "city", "motorway", "route")
+ROUTE_LENGTH = 2000.0  # [m] EcoDrive-v0's default route_length
 
 
 def parse_force_model(spec: str) -> tuple[str, dict[str, float] | None]:
@@ -610,7 +624,7 @@ def other_metric_results(results: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
-def _ratio_of_means_ci(energy: np.ndarray, reference: np.ndarray) -> tuple[float, float, float, float]:
+def ratio_of_means_ci(energy: np.ndarray, reference: np.ndarray) -> tuple[float, float, float, float]:
     """Paired difference as a fleet total [%]: 100 mean(E - E_ref) / mean(E_ref) over the seeds where both are
     finite, its 1-sigma standard error and Student-t 95 % CI (the spread of the per-seed differences E - E_ref
     over the same mean reference). Unlike the mean of per-seed percentages it stays meaningful when one road is
@@ -625,7 +639,7 @@ def _ratio_of_means_ci(energy: np.ndarray, reference: np.ndarray) -> tuple[float
 
 def paired_summary(results: list[dict[str, Any]]) -> pd.DataFrame:
     """Per (case, road, condition, force model): paired energy difference at equal time vs the oracle MPC and vs
-    cruise control [%] over seeds (fleet totals, :func:`_ratio_of_means_ci`): mean, 1-sigma resolution (standard
+    cruise control [%] over seeds (fleet totals, :func:`ratio_of_means_ci`): mean, 1-sigma resolution (standard
     error), 95 % CI, and 'resolved' (CI excludes 0); the median of the per-seed percentages alongside."""
     rows = []
     groups: dict[tuple, list[dict[str, Any]]] = {}
@@ -639,8 +653,8 @@ def paired_summary(results: list[dict[str, Any]]) -> pd.DataFrame:
             e_o = np.array([r["energy_at_tref_J"]["oracle"] for r in rs], float)
             e_c = np.array([r["cruise_energy_J"] for r in rs], float)
             vs_oracle = 100 * (e_m / e_o - 1)
-            mo, so, lo, hi = _ratio_of_means_ci(e_m, e_o)
-            mc, sc, lc, hc = _ratio_of_means_ci(e_m, e_c)
+            mo, so, lo, hi = ratio_of_means_ci(e_m, e_o)
+            mc, sc, lc, hc = ratio_of_means_ci(e_m, e_c)
             near = np.array([r["nearest_time_error"][m] for r in rs], float)
             rows.append({"vehicle": case, "road": road, "condition": cond, "force_model": m,
                          "metric": rs[0]["task"].get("metric", "raw"), "warmup_m": rs[0]["task"].get("warmup", 0.0),

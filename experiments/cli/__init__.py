@@ -86,6 +86,9 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
     "sensitivity": (f"{_PKG}.controllers", "Energy penalty at equal time vs force-model error (mass, rolling "
                                            "resistance, drag area, grade bias, drive-train losses; one at a time and "
                                            "jointly) against the oracle MPC: table and figure per vehicle."),
+    "optimum": (f"{_PKG}.optimum", "Every controller against the full-route optimum at its own trip time and "
+                                   "arrival speed, on the same plant: excess per run and per controller with 95 % "
+                                   "CIs over seeds."),
     "gym": (f"{_PKG}.rl", "Environment steps per second: EcoDrive-v0 single process and vectorised, EcoHighway-v0, "
                           "and highway-env's highway-fast-v0 in the same run."),
 }

@@ -82,6 +82,7 @@ class DriveSettings:
     estimator_settings: dict | None = None
     change_detection: ChangeDetection | None = None
     heading_source: str = "road"
+    replan_period: float = MpcControllerSettings.replan_period  # MPC only: re-planning period [s]
 
     def __post_init__(self) -> None:
         if self.controller not in CONTROLLERS:
@@ -180,7 +181,8 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
                                       shape_fraction=st.target_shape[1] if st.target_shape else ()))
         controller = MpcController(MpcControllerSettings(mpc=mpc_settings, schedule=schedule,
                                                          multistart_period=st.multistart_period,
-                                                         gear_command=st.gear_command))
+                                                         gear_command=st.gear_command,
+                                                         replan_period=st.replan_period))
         if st.warmup_driver == "cruise" and st.measure_from > 0:
             # cruise control on the nominal abc model: the same warm-up whatever the run's force model
             controller = Handover(CruiseController(st.cruise), controller, st.measure_from, FixedForceModel(abc))

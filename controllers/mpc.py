@@ -302,7 +302,7 @@ class OcpSolver:
         t_end = ca.sum1(dt)  # time state t_N, substituted: t_{k+1} = t_k + ds / v_mid
         jerk = ca.vertcat((acc[0] - a_prev) * v[0] / ds[0],
                           (acc[1:] - acc[:-1]) * v[1:-1] / (0.5 * (ds[:-1] + ds[1:])))
-        power = ft * vm  # kW
+        power = ft * vm - en.traction_power_limit(vm) / 1000.0  # kW above the drive's limit at this speed (<= 0)
         regen_power = fr * vm
         g = ca.vertcat(dyn, acc, jerk, power, regen_power)
 
@@ -444,7 +444,7 @@ class OcpSolver:
         lbg = np.concatenate([np.zeros(n), np.full(n, -st.decel_max), np.full(n, -st.jerk_max),
                               np.full(2 * n, -inf)])
         ubg = np.concatenate([np.zeros(n), np.full(n, st.accel_max), np.full(n, st.jerk_max),
-                              np.full(n, en.max_power / 1000.0),
+                              np.zeros(n),
                               np.full(n, (en.max_regen_power if en.regenerates else 0.0) / 1000.0)])
         return lbx, ubx, lbg, ubg
 

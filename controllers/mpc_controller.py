@@ -138,7 +138,7 @@ class MpcControllerSettings:
     # control does; held within +-gear_band [m/s] of a shift speed, from gear_min_speed [m/s] up (below: the
     # transmission's launch and low gears). Without it, the plant downshifts under load where the plan assumed
     # the higher gear, and a 0.1 m/s difference in cruise speed changes the fuel of a whole climb
-    gear_command: bool = False
+    gear_command: bool = False  # (and a lower gear where the shift rule's full load cannot give the force)
     gear_band: float = 0.5  # [m/s]
     gear_min_speed: float = 10.0  # [m/s]
 
@@ -396,7 +396,8 @@ class MpcController(ControllerBase):
             self._gear = None
             return None
         self._gear = en.gear_with_hysteresis(obs.v, self._gear, st.gear_band)
-        return self._gear + 1
+        force = self._last_force if self._last_force is not None else 0.0
+        return en.gear_for_force(obs.v, force, self._gear) + 1  # a kick-down where full load needs it
 
     def reference_speed(self, obs: Observation) -> float:
         """The speed [m/s] the tracking law's feedback aims at: the plan's speed at the current position."""

@@ -320,7 +320,8 @@ class OptimumTracker(MpcController):
     """Drives the full-route optimum on a plant: at the segment start (its first step) it solves the optimum from
     the current speed with the oracle's parameters (and wind), then tracks the plan with the MPC's tracking law
     (segment force + speed feedback, comfort and jerk limits, the safety guard and the stop manoeuvre of
-    :class:`~.base.ControllerBase`). ICE: requests the shift rule's gear, which the plan's energy model assumes."""
+    :class:`~.base.ControllerBase`). ICE: requests the shift rule's gear, which the plan's energy model assumes, and
+    a lower gear where that gear's full load cannot give the plan's force."""
 
     name = "optimum"
 

@@ -44,10 +44,10 @@ from roadload.fileio import write_text
 from roadload.sweep import run_sweep
 from roadload.tables import markdown_table
 
-CONTROLLERS = ("cruise", "cruise_band", "human", "mpc:oracle", "mpc:abc", "mpc:online", "mpc:online_wind", "ppo",
-               "sac")
+CONTROLLERS = ("cruise", "cruise_band", "human", "mpc:oracle", "mpc:abc", "mpc:online", "mpc:online_wind",
+               "mpc:oracle:transmission", "ppo", "sac")
 CAR_CONTROLLERS = ("cruise", "human", "mpc:oracle", "mpc:abc", "mpc:online", "ppo", "sac")
-TRUCK_CONTROLLERS = ("cruise", "cruise_band", "human", "mpc:oracle", "mpc:abc", "mpc:online")
+TRUCK_CONTROLLERS = ("cruise", "cruise_band", "human", "mpc:oracle", "mpc:abc", "mpc:online", "mpc:oracle:transmission")
 CSV_COLUMNS = ["vehicle", "road", "controller", "seed", "energy_J", "time_s", "optimum_energy_J", "excess_pct"]
 
 
@@ -73,6 +73,11 @@ class OptimumTask:
     policies: str | None = None
     dp_step: float = 0.0
     optimum_ds: float = OptimumSettings.ds
+    # MPC variant (the gap breakdown): MpcSettings fields to override, the re-planning period [s] and a label
+    # appended to the MPC controllers' names
+    mpc: tuple[tuple[str, Any], ...] = ()
+    replan_period: float | None = None
+    label: str = ""
 
     def __post_init__(self) -> None:
         if self.case not in VEHICLE_CASES:
@@ -99,9 +104,15 @@ def _settings(task: OptimumTask, controller: str) -> DriveSettings:
         return replace(base, controller="cruise")
     if controller == "human":
         return replace(base, controller="human")
-    fm = controller.split(":", 1)[1]
+    _, fm, *gears = controller.split(":")
     lam = case.lam0 if task.time_weight is None else task.time_weight
-    return replace(base, controller="mpc", force_model=fm, time_weight=lam)
+    # ICE: the MPC requests its shift rule's gear (and a kick-down where full load needs it), as the optimum's tracker
+    # does: the plant's own load-dependent strategy changes the fuel of a whole climb for a 0.1 % change of the
+    # trajectory, which no plan can follow (docs/results/controllers.md); 'mpc:<model>:transmission' leaves the gear
+    # to the transmission (the MPC's default elsewhere)
+    settings = replace(base, controller="mpc", force_model=fm, time_weight=lam,
+                       gear_command=case.truck and gears != ["transmission"], mpc=replace(base.mpc, **dict(task.mpc)))
+    return settings if task.replan_period is None else replace(settings, replan_period=task.replan_period)
 
 
 def _policy_run(task: OptimumTask, algo: str, road) -> dict[str, Any]:
@@ -156,13 +167,15 @@ def run_optimum_task(task: OptimumTask) -> dict[str, Any]:
         else:
             m = run(_settings(task, controller))
         if not (m.get("arrived", False) and math.isfinite(m["segment_time"])):
-            rows.append({"vehicle": task.case, "road": task.road, "controller": controller, "seed": task.seed,
+            rows.append({"vehicle": task.case, "road": task.road, "controller": controller + task.label,
+                         "seed": task.seed,
                          "condition": task.condition, "arrived": False})
             continue
         target = OptimumTarget(trip_time=float(m["segment_time"]), arrival_speed=float(m["arrival_speed"]))
         opt_drive = replace(_settings(task, "cruise_band"), controller="optimum", force_model="oracle",
                             optimum_target=target, optimum=opt_settings)
-        base_row = {"vehicle": task.case, "road": task.road, "controller": controller, "seed": task.seed,
+        name = controller + task.label if controller.startswith("mpc") else controller
+        base_row = {"vehicle": task.case, "road": task.road, "controller": name, "seed": task.seed,
                     "condition": task.condition, "arrived": True, "time_s": m["segment_time"],
                     "energy_raw_J": m["segment_energy_J"], "arrival_speed": m["arrival_speed"],
                     "start_speed": m["segment_start_speed"], "speed_violations": m.get("speed_violations")}
@@ -209,6 +222,44 @@ def dp_check(task: OptimumTask, road, rows: list[dict[str, Any]], settings: Opti
             "max_speed_difference": float(np.max(np.abs(dp.v - sol.plan.v))), "dp_cpu_s": time.process_time() - t0}
 
 
+# the gap breakdown: the oracle MPC with one design choice at a time set to the optimum's (or refined), and all
+# together; values per vehicle kind (car: 100 x 20 m; truck: 40 x 50 m, control period 0.2 s)
+BREAKDOWN: dict[str, dict[str, tuple[dict[str, Any], float | None]]] = {
+    "car": {"": ({}, None),
+            "|horizon 4 km": ({"n_nodes": 200}, None),
+            "|grid 10 m": ({"n_nodes": 200, "ds": 10.0}, None),
+            "|no comfort term": ({"accel_weight": 0.0}, None),
+            "|no speed margin": ({"speed_margin": 0.0}, None),
+            "|tol 1e-8": ({"warm_tol": 1e-8}, None),
+            "|re-plan 0.2 s": ({}, 0.2),
+            "|all": ({"n_nodes": 400, "ds": 10.0, "accel_weight": 0.0, "speed_margin": 0.0, "warm_tol": 1e-8}, 0.2)},
+    "truck": {"": ({}, None),
+              "|horizon 4 km": ({"n_nodes": 80}, None),
+              "|grid 25 m": ({"n_nodes": 80, "ds": 25.0}, None),
+              "|no comfort term": ({"accel_weight": 0.0}, None),
+              "|terminal at the wheel": ({"terminal_value": "wheel"}, None),
+              "|tol 1e-8": ({"warm_tol": 1e-8}, None),
+              "|re-plan 0.4 s": ({}, 0.4),
+              "|all": ({"n_nodes": 160, "ds": 25.0, "accel_weight": 0.0, "warm_tol": 1e-8}, 0.4)},
+}
+
+
+def breakdown_tasks(cases: dict[str, list[str]], seeds: int, first_seed: dict[str, int] | None = None,
+                    **common: Any) -> list[OptimumTask]:
+    """The oracle MPC in every BREAKDOWN variant (labels appended to 'mpc:oracle'), seed-major."""
+    first = first_seed or {}
+    out = []
+    for i in range(seeds):
+        for case, roads in cases.items():
+            kind = "truck" if VEHICLE_CASES[case].truck else "car"
+            for road in roads:
+                for label, (mpc, replan) in BREAKDOWN[kind].items():
+                    out.append(OptimumTask(case, road, first.get(road, 0) + i, controllers=("mpc:oracle",),
+                                           mpc=tuple(sorted(mpc.items())), replan_period=replan, label=label,
+                                           **common))
+    return out
+
+
 def optimum_tasks(cases: dict[str, list[str]], seeds: int, first_seed: dict[str, int] | None = None,
                   controllers: dict[str, tuple[str, ...]] | None = None, **common: Any) -> list[OptimumTask]:
     """Tasks seed-major over {case: [road, ...]}; first_seed per road (e.g. 50000 for the EcoDrive routes)."""
@@ -228,7 +279,7 @@ def optimum_tasks(cases: dict[str, list[str]], seeds: int, first_seed: dict[str,
 def run_and_store(task: OptimumTask, folder: str) -> dict[str, Any]:
     """run_optimum_task, the result also written to ``folder`` as soon as it is done (a stopped sweep keeps it)."""
     result = run_optimum_task(task)
-    path = Path(folder) / f"{task.case}_{task.road}_{task.condition}_{task.seed}.json"
+    path = Path(folder) / f"{task.case}_{task.road}_{task.condition}_{task.seed}{task.label}.json"
     path.parent.mkdir(parents=True, exist_ok=True)
     write_text(path, json.dumps(result, default=float))
     return result

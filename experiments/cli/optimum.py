@@ -40,6 +40,9 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                                       "(0: off)"),
         quick: bool = typer.Option(False, "--quick", help="tiny run: car, 2 seeds on a 1.2 km road, cruise "
                                    "control and the oracle MPC"),
+        breakdown: bool = typer.Option(False, "--breakdown", help="the oracle MPC's gap to the optimum, one design "
+                                       "choice at a time (horizon, grid, comfort term, speed margin, terminal value, "
+                                       "solver tolerance, re-planning period) and all together"),
         merge: list[Path] = typer.Option([], "--merge", help="tasks/ folder of an earlier run to summarise with "
                                          "this one (repeatable)"),
         scheduler: str = typer.Option(None, help="Dask scheduler address (default: local processes)"),
@@ -50,8 +53,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         speed, on the same plant: excess per run and per controller with 95 % CIs over seeds."""
         from roadload.experiments.controller_comparison import CONDITIONS, VEHICLE_CASES
         from roadload.experiments.optimum_benchmark import (CAR_CONTROLLERS, CONTROLLERS, TRUCK_CONTROLLERS,
-                                                            OptimumBenchmarkError, optimum_tasks, run_benchmark,
-                                                            summary_markdown)
+                                                            OptimumBenchmarkError, breakdown_tasks, optimum_tasks,
+                                                            run_benchmark, summary_markdown)
 
         wall0, load0 = time.perf_counter(), os.getloadavg()
         cases = [v.strip() for v in vehicles.split(",") if v.strip()]
@@ -94,6 +97,11 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         try:
             tasks = []
             for case in cases:
+                if breakdown:
+                    tasks += breakdown_tasks({case: roads[case]}, seeds, starts,
+                                             warmup=truck_warmup if VEHICLE_CASES[case].truck else 0.0,
+                                             time_weight=None if time_weight < 0 else time_weight)
+                    continue
                 tasks += optimum_tasks({case: roads[case]}, seeds, starts, {case: per_case[case]},
                                        condition=condition if not VEHICLE_CASES[case].truck else "nominal",
                                        warmup=truck_warmup if VEHICLE_CASES[case].truck else 0.0,

@@ -59,7 +59,7 @@ class MpcError(ValueError):
 
 
 SOLVERS = ("ipopt", "osqp")
-TERMINAL_VALUES = ("source", "wheel")
+TERMINAL_VALUES = ("source", "wheel", "none")
 QP_E_SCALE = 30.0  # QP path: kinetic-energy variables in units of 30 m^2/s^2 (forces are in kN)
 
 
@@ -79,7 +79,10 @@ class MpcSettings:
     time_weight: float = 3000.0  # lambda [J/s]: energy worth one second of trip time
     # value of the kinetic energy left at the horizon end: "source" = m E_N / eta_i (what it costs at the source,
     # Willans line; = m E_N for an EV), "wheel" = m E_N (the earlier value: undervalues it by eta_i on an ICE)
-    terminal_value: str = "source"
+    terminal_value: str = "source"  # "none": worth nothing (an episode's cost that ends at the road end)
+    # the horizon ends at the road end: nodes beyond it collapse onto it (1 mm segments), so the terminal value
+    # applies there (a trip that ends at the road end); False: the road continues with its last values
+    horizon_to_route_end: bool = False
     accel_weight: float = 0.05  # comfort term [kJ per (m/s^2)^2 per segment, times mass/1000]
     solver: str = "ipopt"
     max_iterations: int = 100  # IPOPT iteration cap / SQP iterations cap per call (osqp path uses sqp_iterations)
@@ -322,7 +325,7 @@ class OcpSolver:
         p: ca.SX = f["p"]
         g: ca.SX = f["g"]
         energy: ca.SX = f["energy"]
-        ke_value = 1.0 / en.indicated_efficiency if st.terminal_value == "source" else 1.0
+        ke_value = {"source": 1.0 / en.indicated_efficiency, "wheel": 1.0, "none": 0.0}[st.terminal_value]
         obj = (energy + f["lam"] * f["t_end"] / 1000.0 - ke_value * f["terminal_energy"] + f["comfort"]
                + f["regularisation"])
         self._nx, self._ng, self._np = x.numel(), g.numel(), p.numel()

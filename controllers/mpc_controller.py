@@ -223,7 +223,12 @@ class MpcController(ControllerBase):
         st, road, en = self.settings.mpc, self.ctx.road, self.ctx.energy
         n, ds = st.n_nodes, st.ds
         s = s0 + ds * np.arange(n + 1)
-        mid = np.minimum(s[:-1] + 0.5 * ds, road.length)
+        segment_lengths = None
+        if st.horizon_to_route_end and s[-1] > road.length:  # nodes past the road end collapse onto it
+            beyond = s > road.length
+            s[beyond] = road.length + 1e-3 * (1.0 + np.arange(int(beyond.sum())))
+            segment_lengths = np.diff(s)
+        mid = np.minimum(s[:-1] + 0.5 * ds if segment_lengths is None else 0.5 * (s[:-1] + s[1:]), road.length)
         at = road.at(mid)
         # node cap: the lowest cap over both adjacent segments, so the (monotone within a segment) planned
         # speed respects the cap everywhere between nodes, wherever the moving grid falls
@@ -253,7 +258,8 @@ class MpcController(ControllerBase):
             headwind, crosswind = wind.components(road_heading(road, mid))
             yaw = wind.yaw_drag_factor
         return Preview(s=s, grade=at["grade"], curvature=at["curvature"], speed_cap=cap, ratio=ratio,
-                       segment0_cap=seg0, stops=stops, headwind=headwind, crosswind=crosswind, yaw_drag_factor=yaw)
+                       segment0_cap=seg0, stops=stops, headwind=headwind, crosswind=crosswind,
+                       yaw_drag_factor=yaw, ds=segment_lengths)
 
     # ------------------------------------------------------------------ control
     def _replan(self, obs: Observation) -> None:

@@ -305,6 +305,37 @@ class FullRouteOptimum:
                                solve_time=plan.solve_time, stops=len(self.stops))
 
 
+    def solve_weighted(self, time_weight: float, start_speed: float = 0.0, terminal: str = "none",
+                       arrival_speed: float | None = None, iterations: int = 40) -> OptimumSolution:
+        """The trip time is free: minimum of E + lambda T [J] (lambda = ``time_weight`` [J/s]), the objective of the
+        MPC and of the RL reward. E*(T) is convex, so its minimum is where dE*/dT = -lambda: bisection on the trip
+        time between the fastest feasible trip and one at 3 m/s."""
+        if not (math.isfinite(time_weight) and time_weight > 0):
+            raise OptimumError(f"time_weight: a finite number > 0 [J/s], got {time_weight!r}")
+        stop_time = len(self.stops) * self.settings.stop_dwell
+        lo = stop_time + 1.02 * self.length / float(np.max(self.preview.speed_cap))
+        hi = stop_time + self.length / 3.0
+        best = None
+        while hi / lo > 1.0 + 1e-5 and iterations > 0:
+            iterations -= 1
+            mid = math.sqrt(lo * hi)
+            try:
+                sol = self.solve(mid, start_speed, arrival_speed, terminal)
+            except OptimumError:
+                sol = None
+            if sol is None or not sol.success:
+                lo = mid  # too fast to be feasible
+                continue
+            best = sol
+            if sol.time_slope < -time_weight:
+                lo = mid  # energy still falls faster than lambda: a slower trip is cheaper
+            else:
+                hi = mid
+        if best is None:
+            raise OptimumError(f"time_weight {time_weight:g} J/s: no feasible trip time found")
+        return best
+
+
 @dataclass(frozen=True)
 class OptimumTarget:
     """What the tracked optimum must achieve on the segment [measure_from, road end]: its trip time [s] and the

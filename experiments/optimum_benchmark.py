@@ -345,3 +345,98 @@ def run_benchmark(tasks: list[OptimumTask], out: Path, scheduler: str | None = N
         md += "\nFailed tasks:\n\n" + "\n".join(f"- {f}" for f in failures) + "\n"
     write_text(out / "summary.md", "# Excess over the full-route optimum\n\n" + md)
     return rows, summary, failures
+
+
+# ----------------------------------------------------------------------------------- the RL episode's cost
+EPISODE_MPC_VARIANTS: dict[str, dict[str, Any]] = {
+    "mpc:oracle": {},
+    "mpc:oracle|route end, KE worth nothing": {"horizon_to_route_end": True, "terminal_value": "none"},
+    "mpc:oracle|route end, KE at source value": {"horizon_to_route_end": True},
+}
+
+
+@dataclass(frozen=True)
+class EpisodeCostTask:
+    """One EcoDrive-v0 route (road seed): the episode's cost E + lambda T (lambda = the reward's time weight, the
+    MPC's time weight) of the RL policies, of the MPC (its default and with the route end in its horizon) and of
+    the full-route optimum of that cost (kinetic energy at the end worth nothing, as in the episode), all on the
+    same plant."""
+
+    seed: int
+    time_weight: float = 3000.0
+    policies: str | None = None
+    algos: tuple[str, ...] = ("ppo",)
+
+
+def run_episode_cost_task(task: EpisodeCostTask) -> dict[str, Any]:
+    road = paired_road("route", task.seed)
+    lam = task.time_weight
+    energy = energy_model_from_spec("bmw_i3")
+    rows: list[dict[str, Any]] = []
+
+    def add(name: str, m: dict[str, Any]) -> None:
+        rows.append({"controller": name, "seed": task.seed, "energy_J": m["arrival_energy_J"],
+                     "time_s": m["arrival_time"], "arrival_speed": m["arrival_speed"],
+                     "cost_J": m["arrival_energy_J"] + lam * m["arrival_time"],
+                     "speed_violations": m.get("speed_violations")})
+
+    base = DriveSettings(controller="mpc", force_model="oracle", time_weight=lam, dt=0.1)
+    ot = OptimumTask("car", "route", task.seed, controllers=tuple(task.algos), policies=task.policies)
+    for algo in task.algos:
+        m = _policy_run(ot, algo, road)
+        add(algo, {"arrival_energy_J": m["segment_energy_J"], "arrival_time": m["segment_time"],
+                   "arrival_speed": m["arrival_speed"], "speed_violations": m["speed_violations"]})
+    for name, changes in EPISODE_MPC_VARIANTS.items():
+        res, _ = drive("bmw_i3", road, seed=task.seed, settings=replace(base, mpc=replace(base.mpc, **changes)))
+        add(name, res.metrics)
+    plant = SimulatorPlant("bmw_i3", road, seed=task.seed)
+    opt = FullRouteOptimum(road, energy, plant.true_parameters())
+    for terminal in ("none", "source"):
+        sol = opt.solve_weighted(lam, 0.0, terminal)
+        target = OptimumTarget(trip_time=sol.trip_time, arrival_speed=None, terminal=terminal)
+        res, _ = drive("bmw_i3", road, seed=task.seed, settings=replace(base, controller="optimum",
+                                                                         optimum_target=target))
+        add(f"optimum (KE at the end {'worth nothing' if terminal == 'none' else 'at source value'})",
+            res.metrics)
+        rows[-1].update(model_cost_J=sol.energy_J + lam * sol.trip_time, model_time_s=sol.trip_time)
+    return {"task": task.__dict__, "rows": rows}
+
+
+def episode_cost_summary(rows: pd.DataFrame, reference: str) -> pd.DataFrame:
+    """Per controller: mean cost [kJ], energy, time, arrival speed, and its cost against ``reference``'s as a fleet
+    total with 1-sigma and 95 % CI (paired per seed)."""
+    out = []
+    ref = rows[rows.controller == reference].set_index("seed")["cost_J"]
+    for name, g in rows.groupby("controller", sort=False):
+        g = g.set_index("seed")
+        common = g.index.intersection(ref.index)
+        mean, se, lo, hi = ratio_of_means_ci(g.loc[common, "cost_J"].to_numpy(float),
+                                             ref.loc[common].to_numpy(float))
+        out.append({"controller": name, "seeds": len(g), "cost_kJ": g["cost_J"].mean() / 1e3,
+                    "energy_kWh": g["energy_J"].mean() / 3.6e6, "time_s": g["time_s"].mean(),
+                    "arrival_speed": g["arrival_speed"].mean(), f"vs {reference}": format_difference(mean, se, lo, hi),
+                    "vs_pct": mean, "vs_1sigma": se, "vs_ci95_lo": lo, "vs_ci95_hi": hi})
+    return pd.DataFrame(out)
+
+
+def run_episode_cost(tasks: list[EpisodeCostTask], out: Path, scheduler: str | None = None,
+                     workers: int | None = None) -> tuple[pd.DataFrame, str, list[str]]:
+    """The episode-cost study on the sweep runner: episode_cost.csv (one row per run) and episode_cost.md."""
+    out.mkdir(parents=True, exist_ok=True)
+    outcomes = run_sweep(run_episode_cost_task, tasks, scheduler=scheduler, workers=workers,
+                         description="episode cost")
+    rows = pd.DataFrame([r for o in outcomes if o.ok for r in o.value["rows"]])
+    failures = [f"seed {o.task.seed}: {o.error}" for o in outcomes if not o.ok]
+    write_text(out / "episode_cost.csv", rows.to_csv(index=False))
+    md = ["# The RL episode's cost E + lambda T on EcoDrive-v0 routes", ""]
+    if len(rows):
+        optimum = next(c for c in rows.controller.unique() if c.startswith("optimum (KE at the end worth nothing"))
+        cols = ["controller", "seeds", "cost_kJ", "energy_kWh", "time_s", "arrival_speed"]
+        for ref in [optimum] + [a for a in ("ppo", "sac") if a in set(rows.controller)]:
+            table = episode_cost_summary(rows, ref)
+            md += [f"Cost against `{ref}` (fleet total over seeds, 95 % CI):", "",
+                   markdown_table(table[cols + [f"vs {ref}"]].round(3)), ""]
+    md += [f"- failed: {f}" for f in failures]
+    text = "\n".join(md) + "\n"
+    write_text(out / "episode_cost.md", text)
+    return rows, text, failures

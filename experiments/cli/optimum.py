@@ -40,6 +40,9 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                                       "(0: off)"),
         quick: bool = typer.Option(False, "--quick", help="tiny run: car, 2 seeds on a 1.2 km road, cruise "
                                    "control and the oracle MPC"),
+        episode_cost: bool = typer.Option(False, "--episode-cost", help="the RL episode's cost E + lambda T on the "
+                                          "EcoDrive-v0 routes: the policies of --policies, the MPC (default, and with "
+                                          "the route end in its horizon) and the optimum of that cost"),
         breakdown: bool = typer.Option(False, "--breakdown", help="the oracle MPC's gap to the optimum, one design "
                                        "choice at a time (horizon, grid, comfort term, speed margin, terminal value, "
                                        "solver tolerance, re-planning period) and all together"),
@@ -53,8 +56,9 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         speed, on the same plant: excess per run and per controller with 95 % CIs over seeds."""
         from roadload.experiments.controller_comparison import CONDITIONS, VEHICLE_CASES
         from roadload.experiments.optimum_benchmark import (CAR_CONTROLLERS, CONTROLLERS, TRUCK_CONTROLLERS,
-                                                            OptimumBenchmarkError, breakdown_tasks, optimum_tasks,
-                                                            run_benchmark, summary_markdown)
+                                                            EpisodeCostTask, OptimumBenchmarkError, breakdown_tasks,
+                                                            optimum_tasks, run_benchmark, run_episode_cost,
+                                                            summary_markdown)
 
         wall0, load0 = time.perf_counter(), os.getloadavg()
         cases = [v.strip() for v in vehicles.split(",") if v.strip()]
@@ -94,6 +98,17 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
             fail("--controllers ppo/sac need --policies DIR (policies trained by `roadload train --out DIR`)")
         starts = {r: (first_seed if first_seed is not None else (50000 if r == "route" else 0))
                   for rs in roads.values() for r in rs}
+        if episode_cost:
+            algos = tuple(a for a in ("ppo", "sac")
+                          if policies is not None and (policies / f"{a}_ecodrive.zip").is_file())
+            first = first_seed if first_seed is not None else 50000
+            ep_tasks = [EpisodeCostTask(first + i, time_weight=3000.0 if time_weight < 0 else time_weight,
+                                        policies=None if policies is None else str(policies), algos=algos)
+                        for i in range(2 if quick else seeds)]
+            _, text, failures = run_episode_cost(ep_tasks, out, scheduler=scheduler, workers=workers)
+            typer.echo(text)
+            typer.echo(f"wrote {out}/episode_cost.csv, episode_cost.md")
+            return
         try:
             tasks = []
             for case in cases:

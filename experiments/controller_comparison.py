@@ -1,18 +1,18 @@
-"""The headline comparison: eco-driving MPC (online / abc / oracle force model) against cruise control and the
-human-like driver, closed loop on the simulator, over roads x conditions, at equal trip time.
+"""The controller comparison: eco-driving MPC (oracle / abc / online force model) against cruise control, the
+human-like driver and the full-route optimum, closed loop on the simulator, paired per seed and at equal trip time.
 
-Per (road, condition) one sweep task runs:
-1. cruise control (PI at ``cruise_fraction`` of the allowed speed) -> the reference trip time T_ref;
-2. the simulator's human-like driver (its own pace: reported, NOT time-matched, flagged ``matched=False``);
-3. MPC with the oracle model, time-matched to T_ref within ``tol`` (search over the time weight lambda);
-4. MPC with the abc and the online (M4-RRLM) model, each time-matched the same way (search started from the
-   oracle's lambda).
-Energies are only compared between runs whose trip times agree within ``tol`` (``matched``); a run that cannot
-be matched is reported as such.
+Per (vehicle case, road, condition, seed) one task (:class:`PairedTask`, :func:`run_paired_task`) drives every
+force model on the same road, seed and plant at several time weights around cruise control's trip time; a joint
+local fit of energy over trip time (:func:`roadload.experiments.time_matching.fit_energy_at_time`) gives each
+model's energy at exactly that time; optionally the full-route optimum at the same time (:func:`optimum_at_tref`)
+and FASTSim's energy of every run (:mod:`roadload.experiments.fastsim_check`). :func:`paired_summary` reports
+every difference as a fleet total over seeds with its 1-sigma and 95 % CI (:func:`ratio_of_means_ci`). Both
+``roadload benchmark controllers`` (roads x conditions, car) and ``roadload benchmark headline`` (car and trucks,
+warm-ups, time knobs) run this one path.
 
-Roads: generated hilly country road, motorway and city route (seeded, see ``ROADS``) and a real grade profile
-from a BMW i3 log of the shared data (``i3_munich``: grade from the logged map elevation by
-:func:`roadload.io.profiles.profile_from_trip`; the log has no speed limits, so the limit is the running maximum
+Roads (:func:`paired_road`): generated hilly country roads, city routes with stops, motorway, EcoDrive-v0's route,
+long grades for the trucks, windows of the real long-haul cycle, and a real grade profile from a BMW i3 log of the
+shared data (``i3_munich``, :func:`road_by_name`; the log has no speed limits, so the limit is the running maximum
 of the logged speed over +-500 m rounded up to 10 km/h -- the same convention as the GradeIT routes). Conditions:
 ``CONDITIONS`` (effects of :mod:`roadload.envs.effects`).
 """
@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -37,14 +36,13 @@ from roadload.io.importer import import_log
 from roadload.io.profiles import profile_from_trip
 from roadload.io.derived import distance_from_speed
 from roadload.controllers.mpc import MpcSettings
+from roadload.controllers.optimum import OptimumTarget
+from roadload.experiments.fastsim_check import fastsim_energy
 from roadload.presets import TRUCK_NOMINAL_MASS, truck_spec
 from roadload.road_profiles import (city, cycle_to_profile, hilly, load_profile_start, long_haul_truck, long_grades,
                                     motorway)
 from roadload.gym.ecodrive import cut_profile
 from roadload.controllers.drive import resolve_road
-from roadload.fileio import write_text
-from roadload.experiments.controller_report import write_figures
-from roadload.tables import markdown_table
 
 KMH = 1 / 3.6
 
@@ -53,6 +51,7 @@ CONDITIONS: dict[str, list[str] | None] = {
     "payload_300kg": ["payload:initial_payload=300,min_payload=300,max_payload=300,change_std=0"],
     "winter_tires": ["winter_tires"],
     "headwind_6ms": ["wind:mean_speed=6,direction=3.141592653589793,gust_std=0.5,direction_std=0.05"],
+    "crosswind_6ms": ["wind:mean_speed=6,direction=1.5707963267948966,gust_std=0.5,direction_std=0.05"],
     "roof_box": ["drag_area:roof_box=0.25,windows=0,sunroof=0,toggle_rate=0"],
     "drift": ["tire_warmup:cold_factor=1.3,distance_constant=3000",
               "oil_temperature:start_temperature=278.15",
@@ -101,122 +100,7 @@ def road_by_name(name: str) -> RoadProfile:
 ROADS = ("hilly", "motorway", "city", "i3_munich")
 
 
-@dataclass(frozen=True)
-class ComparisonTask:
-    road: str
-    condition: str
-    vehicle: str = "bmw_i3"
-    seed: int = 0
-    tol: float = 0.01
-    cruise_fraction: float = 0.9
-    solver: str = "ipopt"
-    force_models: tuple[str, ...] = ("oracle", "abc", "online")
-    keep_logs: bool = True
-
-
-def _row(task: ComparisonTask, controller: str, force_model: str, metrics: dict[str, Any], t_ref: float,
-         matched: bool, runs: int, lam: float, energy_at_ref: float = float("nan")) -> dict[str, Any]:
-    keys = ("energy_kWh", "trip_time", "speed_violations", "violation_time", "max_excess_kmh", "rms_jerk",
-            "max_abs_accel", "solve_time_median", "solve_time_p99", "fallbacks", "arrived")
-    row = {"road": task.road, "condition": task.condition, "vehicle": task.vehicle, "controller": controller,
-           "force_model": force_model, **{k: metrics.get(k) for k in keys}}
-    row["time_error_pct"] = 100.0 * (metrics["trip_time"] / t_ref - 1.0) if t_ref > 0 else float("nan")
-    if controller == "cruise":
-        energy_at_ref = metrics["energy_J"]
-    row["energy_at_Tref_kWh"] = energy_at_ref / 3.6e6
-    row.update(matched=bool(matched), runs=int(runs), time_weight=float(lam),
-               solves=int(metrics.get("ctl_solves", 0) or 0))
-    if "online" in metrics:
-        est = metrics["online"]["estimate"]
-        row["online_estimate"] = "; ".join(f"{k}={v:.4g}" for k, v in est.items())
-    return row
-
-
-def run_comparison_task(task: ComparisonTask) -> dict[str, Any]:
-    """All runs of one (road, condition): rows for the table and the logs of the final runs."""
-    road = road_by_name(task.road)
-    effects = CONDITIONS[task.condition]
-    cruise_settings = CruiseSettings(fraction=task.cruise_fraction)
-    base = DriveSettings(controller="cruise", force_model="abc", solver=task.solver, cruise=cruise_settings)
-    rows, logs = [], {}
-
-    def run(settings: DriveSettings):
-        res, _ = drive(task.vehicle, road, effects=effects, seed=task.seed, settings=settings)
-        return res
-
-    cruise = run(base)
-    t_ref = cruise.metrics["trip_time"]
-    if not math.isfinite(t_ref):
-        raise RuntimeError(f"cruise control did not arrive on {task.road}/{task.condition}")
-    rows.append(_row(task, "cruise", "-", cruise.metrics, t_ref, True, 1, float("nan")))
-    logs["cruise"] = cruise.log
-    human = run(replace(base, controller="human"))
-    rows.append(_row(task, "human", "-", human.metrics, t_ref,
-                     abs(human.metrics["trip_time"] / t_ref - 1) <= task.tol, 1, float("nan")))
-    logs["human"] = human.log
-    lam0 = 8000.0
-    for fm in task.force_models:
-        matched = match_trip_time(lambda lam: run(replace(base, controller="mpc", force_model=fm, time_weight=lam)),
-                                  t_ref, tol=task.tol, lam0=lam0)
-        if fm == "oracle" and matched.matched:
-            lam0 = matched.time_weight
-        rows.append(_row(task, "mpc", fm, matched.result.metrics, t_ref, matched.matched, matched.runs,
-                         matched.time_weight, matched.energy_at_target()))
-        logs[f"mpc_{fm}"] = matched.result.log
-    out: dict[str, Any] = {"rows": rows}
-    if task.keep_logs:
-        out["logs"] = {k: v[["t", "s", "v", "a", "traction", "regen", "brake", "energy", "speed_limit", "grade"]]
-                       for k, v in logs.items()}
-        out["road"] = {"s": road.distance, "elevation": road.elevation(), "speed_limit": road.speed_limit,
-                       "grade": road.grade}
-    return out
-
-
-def summarise(table: pd.DataFrame) -> pd.DataFrame:
-    """Per (road, condition): MPC energy relative to cruise and to the oracle MPC [%]: the energy interpolated to
-    exactly the cruise trip time where bracketing runs exist, else the matched run's energy (|dT| <= tol);
-    NaN where the run could not be matched."""
-    out = []
-    for (road, cond), g in table.groupby(["road", "condition"], sort=False):
-        def energy(ctl, fm="-"):
-            r = g[(g.controller == ctl) & (g.force_model == fm)]
-            if not len(r) or not bool(r.matched.iloc[0]):
-                return float("nan")
-            e = float(r.energy_at_Tref_kWh.iloc[0])
-            return e if math.isfinite(e) else float(r.energy_kWh.iloc[0])
-
-        cruise, oracle = energy("cruise"), energy("mpc", "oracle")
-        row = {"road": road, "condition": cond}
-        for fm in ("oracle", "abc", "online"):
-            e = energy("mpc", fm)
-            row[f"{fm}_vs_cruise_pct"] = 100 * (e / cruise - 1)
-            if fm != "oracle":
-                row[f"{fm}_vs_oracle_pct"] = 100 * (e / oracle - 1)
-        out.append(row)
-    return pd.DataFrame(out)
-
-
-def write_outputs(results: list[dict[str, Any]], failures: list[str], out: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """comparison.csv / comparison.md / summary.csv and the figures into ``out`` (atomic file writes)."""
-
-    out.mkdir(parents=True, exist_ok=True)
-    table = pd.DataFrame([r for res in results for r in res["rows"]])
-    summary = summarise(table) if len(table) else pd.DataFrame()
-    write_text(out / "comparison.csv", table.to_csv(index=False))
-    write_text(out / "summary.csv", summary.to_csv(index=False))
-    md = ["# Controller comparison (closed loop, simulator)", "",
-          "Energy at the source (battery) per run; MPC runs time-matched to cruise control (|time error| <= "
-          "tolerance, column `matched`); the human driver keeps its own pace (not time-matched).", "",
-          markdown_table(table), "", "## MPC energy relative to cruise control and to the oracle MPC [%]", "",
-          markdown_table(summary)]
-    if failures:
-        md += ["", "## Failed tasks", ""] + [f"- {f}" for f in failures]
-    write_text(out / "comparison.md", "\n".join(md) + "\n")
-    write_figures(results, table, out)
-    return table, summary
-
-
-# ============================================================================================= paired comparison
+# ================================================================================ paired comparison
 # Per (vehicle case, road, condition, seed) every force model drives the SAME road (generated from the seed, or
 # the seed-th window of a real grade profile), seed and plant, at several time weights around the cruise-control
 # trip time; a joint local fit of energy over trip time (time_matching.fit_energy_at_time) gives each model's
@@ -388,6 +272,11 @@ class PairedTask:
     schedule_gain: float = 20.0  # schedule knob: P gain of the lambda feedback (TripSchedule.gain)
     schedule_pilot: bool = False  # schedule knob: lambda_0 from one oracle pilot run (see run_paired_task)
     schedule_shape: str = "linear"  # schedule knob: "linear" in distance or "cruise" (cruise control's time profile)
+    # the full-route optimum at T_ref on the same plant (controllers.optimum; net metric: the kinetic energy left
+    # is valued at 1/eta_i), so every model and cruise control is also compared with the best drive
+    optimum: bool = False
+    # every run's speed trace (with its grade) also through FASTSim 3 (experiments.fastsim_check; car only)
+    fastsim: bool = False
 
     def __post_init__(self) -> None:
         if self.metric not in METRICS:
@@ -438,8 +327,21 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
     time_key, energy_key = METRICS[task.metric]
     other = METRICS["raw" if task.metric == "net" else "net"]
 
-    def run(settings: DriveSettings):
-        res, _ = drive(vehicle, road, effects=effects, seed=task.seed, settings=settings)
+    fastsim_pts: dict[str, list[tuple[float, float]]] = {}
+
+    def run(settings: DriveSettings, label: str | None = None):
+        res, plant = drive(vehicle, road, effects=effects, seed=task.seed, settings=settings)
+        if task.fastsim and label is not None and res.metrics.get("arrived"):
+            m = res.metrics
+            fs = fastsim_energy(np.append(res.log["t"].to_numpy(float), m["arrival_time"]),
+                                np.append(res.log["s"].to_numpy(float), road.length),
+                                np.append(res.log["v"].to_numpy(float), m["arrival_speed"]), road,
+                                start=task.warmup)
+            mass = plant.true_parameters().inertial_mass  # the kinetic energy left, booked as the net metric does
+            ke = 0.5 * mass * (m["segment_start_speed"] ** 2 - m["arrival_speed"] ** 2)
+            m["fastsim_energy_J"] = fs["energy_J"]
+            m["fastsim_energy_net_J"] = fs["energy_J"] + ke
+            fastsim_pts.setdefault(label, []).append((m["segment_time"], m["fastsim_energy_net_J"]))
         return res
 
     runs_out: list[dict[str, Any]] = []
@@ -453,7 +355,7 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
         f = f0 + df
         if not 0.5 < f <= 1.0:
             continue
-        cruise_res = run(replace(base, cruise=replace(base.cruise, fraction=f)))
+        cruise_res = run(replace(base, cruise=replace(base.cruise, fraction=f)), "cruise")
         m = cruise_res.metrics
         if df == 0.0:
             shape = schedule_shape(cruise_res.log, task.warmup, road.length)
@@ -461,16 +363,20 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
             offset = m["segment_energy_J"] - m["energy_net_J"]
         cruise_pts.append((m[time_key], m[energy_key] + (offset if task.metric == "net" else 0.0)))
         cruise_other.append((m[other[0]], m[other[1]] + (offset if task.metric == "raw" else 0.0)))
-        runs_out.append({"force_model": "cruise", "cruise_fraction": f, **_run_metrics(m)})
+        runs_out.append({"force_model": "cruise", "cruise_fraction": f, **_run_metrics(m),
+                         "fastsim_energy_net_J": m.get("fastsim_energy_net_J")})
         if df == 0.0:
             t_cruise = m[time_key]
     if not math.isfinite(t_cruise):
         raise RuntimeError(f"cruise control did not arrive on {task.road} seed {task.seed}")
     extra = {}
     if task.human:
-        human = run(replace(base, controller="human")).metrics  # the same metric as cruise control's
+        human = run(replace(base, controller="human"), "human").metrics  # the same metric as cruise control's
         extra = {"human_energy_J": human[energy_key] + (offset if task.metric == "net" else 0.0),
                  "human_time": human[time_key]}
+        if task.fastsim and "fastsim_energy_net_J" in human:
+            extra["human_fastsim_energy_J"] = human["fastsim_energy_net_J"] + offset
+            extra["human_fastsim_time"] = human["segment_time"]
     points: dict[str, list[tuple[float, float]]] = {}
     points_other: dict[str, list[tuple[float, float]]] = {}
 
@@ -485,7 +391,7 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
             settings = replace(settings, target_time=target,
                                schedule_gain=task.schedule_gain,
                                target_shape=shape if task.schedule_shape == "cruise" else None)
-        res = run(settings)
+        res = run(settings, spec)
         m = res.metrics
         points.setdefault(spec, []).append((m[time_key], m[energy_key] + (offset if task.metric == "net" else 0.0)))
         points_other.setdefault(spec, []).append((m[other[0]], m[other[1]] + (offset if task.metric == "raw"
@@ -495,7 +401,8 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
                          "multistart_switches": m.get("ctl_multistart_switches", 0), **_run_metrics(m),
                          "solve_time_median": m.get("solve_time_median"), "fallbacks": m.get("fallbacks"),
                          "online_estimate": m.get("online", {}).get("estimate"),
-                         "online_history": m.get("online", {}).get("history")})
+                         "online_history": m.get("online", {}).get("history"),
+                         "fastsim_energy_net_J": m.get("fastsim_energy_net_J")})
         return res
 
     if task.knob == "schedule":  # every model targets T_cruise x (1, *time_factors); no search
@@ -534,6 +441,13 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
                    else float(matched.result.metrics[other[0]]))
     fit_other = fit_energy_at_time(points_other, t_ref_other)
     cruise_fit_other = fit_energy_at_time({"cruise": cruise_other}, t_ref_other, window=0.08)
+    if task.optimum:
+        extra.update(optimum_at_tref(task, road, effects, base, t_ref, offset))
+    if task.fastsim:  # the same joint local fit on FASTSim's energies of the same runs
+        shifted = {k: [(t, e + offset) for t, e in v] for k, v in fastsim_pts.items()}
+        fs_fit = fit_energy_at_time({k: v for k, v in shifted.items() if k not in ("cruise", "human")}, t_ref)
+        fs_cruise = fit_energy_at_time({"cruise": shifted.get("cruise", [])}, t_ref, window=0.08)
+        extra.update(fastsim_energy_at_tref_J=fs_fit.energy, fastsim_cruise_energy_J=fs_cruise.energy["cruise"])
     return {"task": task.__dict__, "t_ref": t_ref, "t_cruise": t_cruise, "t_ref_moved": t_ref != t_cruise,
             "kinetic_energy_offset_J": offset,
             "other_metric": {"metric": "raw" if task.metric == "net" else "net", "t_ref": t_ref_other,
@@ -546,6 +460,21 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
             "energy_at_tref_J": fit.energy, "nearest_time_error": fit.nearest, "spanned": fit.spanned,
             "fit_residual_std": fit.residual_std, "fit_slope": fit.slope, "fit_curvature": fit.curvature,
             "runs": runs_out, **extra}
+
+
+def optimum_at_tref(task: PairedTask, road: RoadProfile, effects, base: DriveSettings, t_ref: float,
+                    offset: float) -> dict[str, Any]:
+    """The full-route optimum of the measured segment at T_ref, driven on the same plant (cruise control drives a
+    warm-up): its net energy (the kinetic energy left at 1/eta_i, the paired comparison's metric; the MPC's
+    terminal value 'source'), corrected to exactly T_ref with the optimum's own slope dE*/dT."""
+    target = OptimumTarget(trip_time=t_ref, arrival_speed=None, terminal="source")
+    settings = replace(base, controller="optimum", force_model="oracle", optimum_target=target)
+    res, _ = drive(VEHICLE_CASES[task.case].vehicle(), road, effects=effects, seed=task.seed, settings=settings)
+    m = res.metrics
+    slope = float(m.get("ctl_optimum_time_slope", float("nan")))
+    energy = m["energy_net_J"] + offset + slope * (t_ref - m["segment_time"])
+    return {"optimum_energy_J": energy, "optimum_time": m["segment_time"], "optimum_time_slope": slope,
+            "optimum_model_energy_J": m.get("ctl_optimum_model_energy_J"), "optimum_arrival_speed": m["arrival_speed"]}
 
 
 def _search_model_lambda(run, tried: list[tuple[float, float]], t_ref: float, max_runs: int, reach: float,
@@ -656,6 +585,7 @@ def paired_summary(results: list[dict[str, Any]]) -> pd.DataFrame:
             mo, so, lo, hi = ratio_of_means_ci(e_m, e_o)
             mc, sc, lc, hc = ratio_of_means_ci(e_m, e_c)
             near = np.array([r["nearest_time_error"][m] for r in rs], float)
+            extra = _optimum_fastsim_columns(rs, e_m, m)
             rows.append({"vehicle": case, "road": road, "condition": cond, "force_model": m,
                          "metric": rs[0]["task"].get("metric", "raw"), "warmup_m": rs[0]["task"].get("warmup", 0.0),
                          "seeds": int(np.isfinite(vs_oracle).sum()),
@@ -666,8 +596,32 @@ def paired_summary(results: list[dict[str, Any]]) -> pd.DataFrame:
                          "vs_cruise_pct": mc, "vs_cruise_1sigma_pct": sc, "vs_cruise_ci95_lo": lc,
                          "vs_cruise_ci95_hi": hc,
                          "nearest_run_time_error_pct_median": float(100 * np.nanmedian(near)),
-                         "fit_residual_std_pct": float(100 * np.nanmedian([r["fit_residual_std"] for r in rs]))})
+                         "fit_residual_std_pct": float(100 * np.nanmedian([r["fit_residual_std"] for r in rs])),
+                         **extra})
+        if any("optimum_energy_J" in r for r in rs):  # cruise control against the optimum too
+            e_c = np.array([r["cruise_energy_J"] for r in rs], float)
+            rows.append({"vehicle": case, "road": road, "condition": cond, "force_model": "cruise control",
+                         "metric": rs[0]["task"].get("metric", "raw"), "warmup_m": rs[0]["task"].get("warmup", 0.0),
+                         "seeds": int(np.isfinite(e_c).sum()), **_optimum_fastsim_columns(rs, e_c, None)})
     return pd.DataFrame(rows)
+
+
+def _optimum_fastsim_columns(results: list[dict[str, Any]], energy: np.ndarray, model: str | None
+                             ) -> dict[str, Any]:
+    """vs the optimum at T_ref [%] (fleet total, 1-sigma, CI) where the results have it; FASTSim's energy of the
+    same runs vs FASTSim's cruise control [%] where they have it (model None: cruise control itself)."""
+    out: dict[str, Any] = {}
+    if any("optimum_energy_J" in r for r in results):
+        e_opt = np.array([r.get("optimum_energy_J", np.nan) for r in results], float)
+        mo, so, lo, hi = ratio_of_means_ci(energy, e_opt)
+        out.update(vs_optimum_pct=mo, vs_optimum_1sigma_pct=so, vs_optimum_ci95_lo=lo, vs_optimum_ci95_hi=hi)
+    if model is not None and any("fastsim_energy_at_tref_J" in r for r in results):
+        fs_m = np.array([r.get("fastsim_energy_at_tref_J", {}).get(model, np.nan) for r in results], float)
+        fs_c = np.array([r.get("fastsim_cruise_energy_J", np.nan) for r in results], float)
+        mf, sf, lf, hf = ratio_of_means_ci(fs_m, fs_c)
+        out.update(fastsim_vs_cruise_pct=mf, fastsim_vs_cruise_1sigma_pct=sf, fastsim_vs_cruise_ci95_lo=lf,
+                   fastsim_vs_cruise_ci95_hi=hf)
+    return out
 
 
 def format_difference(mean: float, se: float, lo: float, hi: float) -> str:

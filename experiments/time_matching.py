@@ -3,10 +3,9 @@
 Trip time falls monotonically with lambda, so the search brackets lambda on a log scale and then takes
 secant/bisection steps in (log lambda, time) until |T - T_target| <= tol * T_target. Runs that miss the
 tolerance within ``max_runs`` are returned flagged (``matched`` False) with the closest run, never silently.
-:meth:`MatchedRun.energy_at_target` interpolates the energy to exactly the target time between bracketing runs.
-That linear interpolation overstates the energy on the convex energy-time curve when the bracket is wide; the
-paired comparison uses :func:`fit_energy_at_time` instead: runs at several time weights around the
-match and a joint local quadratic fit of energy over trip time.
+The energy at exactly the target time comes from :func:`fit_energy_at_time`: runs at several time weights around the
+match and a joint local quadratic fit of energy over trip time (a linear interpolation between two bracketing runs
+overstates the energy on the convex energy-time curve).
 """
 
 from __future__ import annotations
@@ -29,19 +28,6 @@ class MatchedRun:
     runs: int
     history: list[tuple[float, float, float]] = field(default_factory=list)  # (lambda, trip time, energy J)
     time_key: str = "trip_time"
-
-    def energy_at_target(self) -> float:
-        """Source energy [J] interpolated linearly in trip time to exactly the target time between the two
-        closest runs that bracket it; NaN when no run pair brackets the target."""
-        runs = [(t, e) for _, t, e in self.history if math.isfinite(t) and math.isfinite(e)]
-        above = [r for r in runs if r[0] >= self.target_time]
-        below = [r for r in runs if r[0] <= self.target_time]
-        if not above or not below:
-            return float("nan")
-        (t1, e1), (t2, e2) = min(above), max(below)
-        if t1 == t2:
-            return e1
-        return e1 + (self.target_time - t1) * (e2 - e1) / (t2 - t1)
 
     @property
     def time_error(self) -> float:

@@ -65,7 +65,8 @@ class OptimumSettings:
     stop speed and lateral acceleration default to the MPC's (:class:`~.mpc.MpcSettings`); ``speed_margin`` to
     the closed loop's safety guard, which keeps every controller 0.3 m/s under the speed envelope on the plant."""
 
-    ds: float = 10.0  # target segment length [m]; each leg between stops is split into equal segments
+    ds: float = 5.0  # target segment length [m]; each leg between stops is split into equal segments (5 m: within
+    # 0.01 % of 2.5 m on a test road, 10 m is 0.2 % above)
     accel_max: float = MpcSettings.accel_max
     decel_max: float = MpcSettings.decel_max
     jerk_max: float = MpcSettings.jerk_max
@@ -198,12 +199,9 @@ class TimedOcp(OcpSolver):
         n = self.n
         if not self.jerk:
             lbg[2 * n:3 * n], ubg[2 * n:3 * n] = -np.inf, np.inf
-        if arrival_speed is not None:
-            e_n = 0.5 * max(arrival_speed, self.settings.speed_floor) ** 2
-            if e_n > ubx[n] + 1e-9:
-                raise OptimumError(f"arrival_speed: {arrival_speed:.3f} m/s is above the speed cap at the route end "
-                                   f"({math.sqrt(2 * ubx[n]):.3f} m/s)")
-            lbx[n] = ubx[n] = e_n
+        if arrival_speed is not None:  # at most the cap at the end (a run may arrive above cap - margin; the
+            # caller books the difference of the kinetic energy)
+            lbx[n] = ubx[n] = min(0.5 * max(arrival_speed, self.settings.speed_floor) ** 2, ubx[n])
         lbg = np.append(lbg, model_time)
         ubg = np.append(ubg, model_time)
         p = np.append(self._params(a_prev, preview, params, 0.0), ke_value)

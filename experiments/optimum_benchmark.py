@@ -35,7 +35,7 @@ import pandas as pd
 from roadload.controllers.base import ControllerError
 from roadload.controllers.drive import DriveSettings, drive
 from roadload.controllers.dynamic_programming import dp_optimum
-from roadload.controllers.optimum import FullRouteOptimum, OptimumSettings, OptimumTarget
+from roadload.controllers.optimum import FullRouteOptimum, OptimumError, OptimumSettings, OptimumTarget
 from roadload.controllers.sim_plant import SimulatorPlant
 from roadload.controllers.vehicle_models import energy_model_from_spec
 from roadload.experiments.controller_comparison import (CONDITIONS, VEHICLE_CASES, format_difference, paired_road,
@@ -181,7 +181,7 @@ def run_optimum_task(task: OptimumTask) -> dict[str, Any]:
                     "start_speed": m["segment_start_speed"], "speed_violations": m.get("speed_violations")}
         try:
             o = run(opt_drive)
-        except ControllerError as exc:  # e.g. a driver faster than the limits and comfort bounds allow
+        except (ControllerError, OptimumError) as exc:  # e.g. a driver faster than the limits and comfort allow
             rows.append({**base_row, "optimum_status": f"not solved: {exc}"})
             continue
         mass = m["inertial_mass"]
@@ -277,9 +277,14 @@ def optimum_tasks(cases: dict[str, list[str]], seeds: int, first_seed: dict[str,
 
 
 def run_and_store(task: OptimumTask, folder: str) -> dict[str, Any]:
-    """run_optimum_task, the result also written to ``folder`` as soon as it is done (a stopped sweep keeps it)."""
-    result = run_optimum_task(task)
+    """run_optimum_task, the result also written to ``folder`` as soon as it is done (a stopped sweep keeps it);
+    a task whose result is already there (the same task) is read back, not run again."""
     path = Path(folder) / f"{task.case}_{task.road}_{task.condition}_{task.seed}{task.label}.json"
+    if path.is_file():
+        stored = json.loads(path.read_text())
+        if stored.get("task") == json.loads(json.dumps(task.__dict__, default=float)):
+            return stored
+    result = run_optimum_task(task)
     path.parent.mkdir(parents=True, exist_ok=True)
     write_text(path, json.dumps(result, default=float))
     return result

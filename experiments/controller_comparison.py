@@ -37,6 +37,8 @@ from roadload.io.profiles import profile_from_trip
 from roadload.io.derived import distance_from_speed
 from roadload.controllers.mpc import MpcSettings
 from roadload.controllers.optimum import OptimumTarget
+from roadload.estimators import chapter5_settings
+from roadload.estimators.change import ChangeDetection
 from roadload.experiments.fastsim_check import fastsim_energy
 from roadload.presets import TRUCK_NOMINAL_MASS, truck_spec
 from roadload.road_profiles import (city, cycle_to_profile, hilly, load_profile_start, long_haul_truck, long_grades,
@@ -217,10 +219,12 @@ ROUTE_LENGTH = 2000.0  # [m] EcoDrive-v0's default route_length
 
 
 def parse_force_model(spec: str) -> tuple[str, dict[str, float] | None]:
-    """'oracle' | 'abc' | 'online' | 'wrong:mass=0.2,rolling=-0.5' -> (force model, errors)."""
+    """'oracle' | 'abc' | 'online' | 'online_wind' | 'wrong:mass=0.2,rolling=-0.5' -> (force model, errors); an
+    online model's estimator options after '@' (:func:`force_model_settings`) are not part of the name."""
     name, _, rest = spec.partition(":")
-    if name not in ("oracle", "abc", "online", "wrong"):
-        raise ValueError(f"force model {spec!r}: choose oracle, abc, online or wrong:<error>=<value>,...")
+    name = name.partition("@")[0]
+    if name not in ("oracle", "abc", "online", "online_wind", "wrong"):
+        raise ValueError(f"force model {spec!r}: choose oracle, abc, online, online_wind or wrong:<error>=<value>,...")
     if name != "wrong":
         return name, None
     errors = {}
@@ -228,6 +232,31 @@ def parse_force_model(spec: str) -> tuple[str, dict[str, float] | None]:
         k, _, v = item.partition("=")
         errors[k.strip()] = float(v)
     return name, errors
+
+
+def force_model_settings(spec: str) -> dict[str, Any]:
+    """DriveSettings fields of a force-model spec: 'online@SGMKF' (another catalogue estimator with chapter 5's
+    settings), 'online@RRLM,forgetting=0.995' (a setting changed), 'online@RRLM,cusum' (with the CUSUM change
+    detector, roadload.estimators.change), the same after 'online_wind'; 'wrong:...' as parse_force_model."""
+    fm, errors = parse_force_model(spec)
+    out: dict[str, Any] = {"force_model": fm, "wrong_model": errors}
+    head, _, options = spec.partition("@")
+    if not options:
+        return out
+    if fm not in ("online", "online_wind"):
+        raise ValueError(f"force model {spec!r}: estimator options after '@' are for online models only")
+    estimator, *items = [x.strip() for x in options.split(",") if x.strip()]
+    settings = dict(chapter5_settings("M4").get(estimator.upper(), {}))
+    for item in items:
+        if item == "cusum":
+            out["change_detection"] = ChangeDetection()
+            continue
+        key, _, value = item.partition("=")
+        if not value:
+            raise ValueError(f"force model {spec!r}: option {item!r} is not key=value or 'cusum'")
+        settings[key] = float(value)
+    out.update(estimator=estimator.upper(), estimator_settings=settings)
+    return out
 
 
 @dataclass(frozen=True)
@@ -381,12 +410,11 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
     points_other: dict[str, list[tuple[float, float]]] = {}
 
     def mpc(spec: str, lam: float, target: float | None = None):
-        fm, errors = parse_force_model(spec)
         multistart = task.multistart_period if task.multistart_period is not None else (
             5.0 if task.knob == "schedule" else 0.0)
-        settings = replace(base, controller="mpc", force_model=fm, time_weight=lam, wrong_model=errors,
-                           multistart_period=multistart, gear_command=task.gear_command,
-                           warmup_driver=task.warmup_driver)
+        settings = replace(base, controller="mpc", time_weight=lam, multistart_period=multistart,
+                           gear_command=task.gear_command, warmup_driver=task.warmup_driver,
+                           **force_model_settings(spec))
         if target is not None:
             settings = replace(settings, target_time=target,
                                schedule_gain=task.schedule_gain,

@@ -181,9 +181,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         bad = [c for c in cond_list if c not in CONDITIONS]
         if bad:
             _fail(f"--conditions: unknown {bad}; known: {list(CONDITIONS)}")
-        fms = tuple(f.strip() for f in force_models.split(",") if f.strip())
-        if not fms or fms[0] != "oracle" or any(f not in ("oracle", "abc", "online", "online_wind") for f in fms):
-            _fail(f"--force-models: oracle first, then any of abc, online, online_wind; got {fms}")
+        fms = _force_models(force_models)
         road_list = ["hilly_short"] if quick else [r.strip() for r in roads.split(",") if r.strip()]
         bad = [r for r in road_list if r not in PAIRED_ROADS]
         if bad:
@@ -205,6 +203,21 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         typer.echo(md)
         typer.echo(f"wrote {out}/controllers.md, summary.csv, runs.json, headline.png "
                    f"({time.perf_counter() - wall0:.0f} s wall, load average {os.getloadavg()[0]:.2f})")
+
+
+def _force_models(text: str) -> tuple[str, ...]:
+    """The --force-models list: oracle first, then abc, online, online_wind (estimator options after '@')."""
+    from roadload.experiments.controller_comparison import force_model_settings
+
+    fms = tuple(f.strip() for f in text.split(",") if f.strip())
+    try:
+        for f in fms:
+            force_model_settings(f)
+    except ValueError as exc:
+        _fail(f"--force-models: {exc}")
+    if not fms or fms[0] != "oracle":
+        _fail(f"--force-models: oracle first, then any of abc, online, online_wind (options after '@'); got {fms}")
+    return fms
 
 
 def _car_truck_cases(vehicles: str) -> list[str]:
@@ -282,9 +295,7 @@ def register_headline(benchmark_app: typer.Typer) -> None:
             _fail(f"--knob: lambda or schedule, got {knob!r}")
         if terminal_value not in ("source", "wheel"):
             _fail(f"--terminal-value: source or wheel, got {terminal_value!r}")
-        fms = tuple(f.strip() for f in force_models.split(",") if f.strip())
-        if not fms or fms[0] != "oracle" or any(f not in ("oracle", "abc", "online", "online_wind") for f in fms):
-            _fail(f"--force-models: oracle first, then any of abc, online, online_wind; got {fms}")
+        fms = _force_models(force_models)
         try:
             t_factors = tuple(float(f) for f in time_factors.split(",") if f.strip())
         except ValueError:

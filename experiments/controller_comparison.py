@@ -236,7 +236,7 @@ def parse_force_model(spec: str) -> tuple[str, dict[str, float] | None]:
 
 def force_model_settings(spec: str) -> dict[str, Any]:
     """DriveSettings fields of a force-model spec: 'online@SGMKF' (another catalogue estimator with chapter 5's
-    settings), 'online@RRLM,forgetting=0.995' (a setting changed), 'online@RRLM,cusum' (with the CUSUM change
+    settings), 'online@RRLM+forgetting=0.995' (a setting changed), 'online@RRLM+cusum' (with the CUSUM change
     detector, roadload.estimators.change), the same after 'online_wind'; 'wrong:...' as parse_force_model."""
     fm, errors = parse_force_model(spec)
     out: dict[str, Any] = {"force_model": fm, "wrong_model": errors}
@@ -245,7 +245,7 @@ def force_model_settings(spec: str) -> dict[str, Any]:
         return out
     if fm not in ("online", "online_wind"):
         raise ValueError(f"force model {spec!r}: estimator options after '@' are for online models only")
-    estimator, *items = [x.strip() for x in options.split(",") if x.strip()]
+    estimator, *items = [x.strip() for x in options.split("+") if x.strip()]
     settings = dict(chapter5_settings("M4").get(estimator.upper(), {}))
     for item in items:
         if item == "cusum":

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import casadi as ca
@@ -364,6 +364,18 @@ class OptimumTracker(MpcController):
         super().reset(ctx)
         self.solution = None
         self._t_start: float | None = None
+        self._after_stop = -np.inf  # position of the last served stop [m]
+
+    def serve_stop(self, index: int) -> None:
+        super().serve_stop(index)
+        self._after_stop = float(self.envelope.stops[index])
+
+    def wheel_force(self, obs: Observation) -> float:
+        """The MPC's tracking law on the plan; after a served stop the car, at rest a few centimetres before the
+        stop's node, tracks the plan from that node on (the plan's segment before it brakes into the stop)."""
+        if obs.s < self._after_stop + 1e-3:
+            obs = replace(obs, s=self._after_stop + 1e-3)
+        return super().wheel_force(obs)
 
     def _replan(self, obs: Observation) -> None:
         if self.solution is None:

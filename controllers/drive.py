@@ -146,15 +146,32 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
     nominal = st.nominal_vehicle if st.nominal_vehicle is not None else (vehicle if isinstance(vehicle, str)
                                                                          else spec)
     abc = abc_parameters(nominal)
-    force_model: ForceModel
+    force_model, energy = _force_model(st, plant, road, nominal, energy, abc)
+    ctx = DriveContext(road=road, energy=energy, force_model=force_model, dt=st.dt,
+                       lateral_accel_max=st.mpc.lateral_accel_max)
+    controller = _controller(st, road, abc)
+    result = run_closed_loop(controller, plant, ctx, progress=progress, measure_from=st.measure_from)
+    result.metrics.update(net_energy_metrics(result.metrics, plant.true_parameters().inertial_mass, energy))
+    result.metrics.update(controller=st.controller, force_model=st.force_model if st.controller == "mpc" else "-",
+                          solver=st.solver if st.controller == "mpc" else "-",
+                          time_weight=st.time_weight if st.controller == "mpc" else float("nan"))
+    if isinstance(force_model, OnlineForceModel) and st.controller == "mpc":
+        result.metrics["online"] = _online_description(force_model, result.log)
+    return result, plant
+
+
+def _force_model(st: DriveSettings, plant: SimulatorPlant, road: RoadProfile, nominal, energy: SourceEnergyModel,
+                 abc) -> tuple[ForceModel, SourceEnergyModel]:
+    """The force model the controller plans with (and the energy model, with a drivetrain-loss error where the
+    'wrong' model has one)."""
     if st.controller == "optimum" or (st.controller == "mpc" and st.force_model == "oracle"):
-        force_model = OracleForceModel(plant.true_parameters, wind=plant.true_wind if st.oracle_wind else None)
-    elif st.controller == "mpc" and st.force_model == "wrong":
+        return OracleForceModel(plant.true_parameters, wind=plant.true_wind if st.oracle_wind else None), energy
+    if st.controller == "mpc" and st.force_model == "wrong":
         errors = dict(st.wrong_model or {})
-        force_model = ErroredForceModel(OracleForceModel(plant.true_parameters), errors)
         if errors.get("drivetrain_loss"):
             energy = with_loss_error(energy, errors["drivetrain_loss"])
-    elif st.controller == "mpc" and st.force_model in ("online", "online_wind"):
+        return ErroredForceModel(OracleForceModel(plant.true_parameters), errors), energy
+    if st.controller == "mpc" and st.force_model in ("online", "online_wind"):
         online: OnlineForceModel
         common: dict[str, Any] = dict(estimator=st.estimator, pipeline_settings=st.pipeline,
                                       estimator_settings=st.estimator_settings, change_detection=st.change_detection)
@@ -166,12 +183,12 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
         else:
             online = OnlineForceModel(_knowledge(nominal), model=st.model, **common)
         online.attach(plant.can_window)
-        force_model = online
-    else:
-        force_model = FixedForceModel(abc)
-    ctx = DriveContext(road=road, energy=energy, force_model=force_model, dt=st.dt,
-                       lateral_accel_max=st.mpc.lateral_accel_max)
-    controller: Controller
+        return online, energy
+    return FixedForceModel(abc), energy
+
+
+def _controller(st: DriveSettings, road: RoadProfile, abc) -> Controller:
+    """The controller of ``st.controller``; a warm-up before ``measure_from`` by cruise control where set."""
     if st.controller == "mpc":
         mpc_settings = MpcSettings(**{**st.mpc.__dict__, "solver": st.solver, "time_weight": st.time_weight})
         schedule = (None if st.target_time is None
@@ -179,30 +196,28 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
                                       gain=st.schedule_gain,
                                       shape_s=st.target_shape[0] if st.target_shape else (),
                                       shape_fraction=st.target_shape[1] if st.target_shape else ()))
-        controller = MpcController(MpcControllerSettings(mpc=mpc_settings, schedule=schedule,
-                                                         multistart_period=st.multistart_period,
-                                                         gear_command=st.gear_command,
-                                                         replan_period=st.replan_period))
+        controller: Controller = MpcController(MpcControllerSettings(mpc=mpc_settings, schedule=schedule,
+                                                                     multistart_period=st.multistart_period,
+                                                                     gear_command=st.gear_command,
+                                                                     replan_period=st.replan_period))
         if st.warmup_driver == "cruise" and st.measure_from > 0:
             # cruise control on the nominal abc model: the same warm-up whatever the run's force model
             controller = Handover(CruiseController(st.cruise), controller, st.measure_from, FixedForceModel(abc))
-    elif st.controller == "optimum" and st.optimum_target is not None:
+        return controller
+    if st.controller == "optimum" and st.optimum_target is not None:
         controller = OptimumTracker(replace(st.optimum_target, measure_from=st.measure_from), st.optimum)
         if st.measure_from > 0:  # the same warm-up as the MPC runs with warmup_driver 'cruise'
             controller = Handover(CruiseController(st.cruise), controller, st.measure_from, FixedForceModel(abc))
-    elif st.controller == "cruise":
-        controller = CruiseController(st.cruise)
-    else:
-        controller = HumanDriver()
-    result = run_closed_loop(controller, plant, ctx, progress=progress, measure_from=st.measure_from)
-    result.metrics.update(net_energy_metrics(result.metrics, plant.true_parameters().inertial_mass, energy))
-    result.metrics.update(controller=st.controller, force_model=st.force_model if st.controller == "mpc" else "-",
-                          solver=st.solver if st.controller == "mpc" else "-",
-                          time_weight=st.time_weight if st.controller == "mpc" else float("nan"))
-    if isinstance(force_model, OnlineForceModel) and st.controller == "mpc":
-        desc = force_model.describe()
-        hist = desc.get("history")
-        if hist and hist["t"]:  # where the estimate stood: position [m] of each update
-            desc["history"]["s"] = [float(x) for x in np.interp(hist["t"], result.log["t"], result.log["s"])]
-        result.metrics["online"] = desc
-    return result, plant
+        return controller
+    if st.controller == "cruise":
+        return CruiseController(st.cruise)
+    return HumanDriver()
+
+
+def _online_description(force_model: OnlineForceModel, log) -> dict[str, Any]:
+    """The online model's estimate and its history, with the position [m] of each update."""
+    desc = force_model.describe()
+    hist = desc.get("history")
+    if hist and hist["t"]:  # where the estimate stood: position [m] of each update
+        desc["history"]["s"] = [float(x) for x in np.interp(hist["t"], log["t"], log["s"])]
+    return desc

@@ -331,6 +331,159 @@ METRICS = {"net": ("segment_time", "energy_net_J"), "raw": ("trip_time", "energy
 KNOBS = ("lambda", "schedule")
 
 
+class _PairedRuns:
+    """The runs of one paired-comparison seed (one road, seed and plant) and their (trip time, energy) points in
+    the task's metric and in the other one; net energies get cruise control's kinetic-energy change back."""
+
+    def __init__(self, task: PairedTask) -> None:
+        self.task = task
+        self.case = VEHICLE_CASES[task.case]
+        self.road = paired_road(task.road, task.seed, task.warmup)
+        self.effects = CONDITIONS[task.condition] if not self.case.truck else None
+        base = replace(self.case.settings(), measure_from=task.warmup)
+        self.base = replace(base, mpc=replace(base.mpc, terminal_value=task.terminal_value))
+        self.vehicle = self.case.vehicle()
+        self.time_key, self.energy_key = METRICS[task.metric]
+        self.other = METRICS["raw" if task.metric == "net" else "net"]
+        self.offset = 0.0  # [J] cruise control's segment energy minus its net energy
+        self.shape: tuple[tuple[float, ...], tuple[float, ...]] | None = None
+        self.runs_out: list[dict[str, Any]] = []
+        self.cruise_pts: list[tuple[float, float]] = []
+        self.cruise_other: list[tuple[float, float]] = []
+        self.points: dict[str, list[tuple[float, float]]] = {}
+        self.points_other: dict[str, list[tuple[float, float]]] = {}
+        self.fastsim_pts: dict[str, list[tuple[float, float]]] = {}
+
+    def run(self, settings: DriveSettings, label: str | None = None):
+        """One closed-loop run; with ``task.fastsim`` its speed trace also through FASTSim 3 (labelled runs)."""
+        res, plant = drive(self.vehicle, self.road, effects=self.effects, seed=self.task.seed, settings=settings)
+        if self.task.fastsim and label is not None and res.metrics.get("arrived"):
+            self._fastsim(res, plant, label)
+        return res
+
+    def _fastsim(self, res, plant, label: str) -> None:
+        m, road = res.metrics, self.road
+        fs = fastsim_energy(np.append(res.log["t"].to_numpy(float), m["arrival_time"]),
+                            np.append(res.log["s"].to_numpy(float), road.length),
+                            np.append(res.log["v"].to_numpy(float), m["arrival_speed"]), road, start=self.task.warmup)
+        mass = plant.true_parameters().inertial_mass  # the kinetic energy left, booked as the net metric does
+        ke = 0.5 * mass * (m["segment_start_speed"] ** 2 - m["arrival_speed"] ** 2)
+        m["fastsim_energy_J"] = fs["energy_J"]
+        m["fastsim_energy_net_J"] = fs["energy_J"] + ke
+        self.fastsim_pts.setdefault(label, []).append((m["segment_time"], m["fastsim_energy_net_J"]))
+
+    def _point(self, m: dict[str, Any]) -> tuple[tuple[float, float], tuple[float, float]]:
+        """(time [s], energy [J]) of a run in the task's metric and in the other one."""
+        net = self.task.metric == "net"
+        return ((m[self.time_key], m[self.energy_key] + (self.offset if net else 0.0)),
+                (m[self.other[0]], m[self.other[1]] + (0.0 if net else self.offset)))
+
+    def cruise_sweep(self) -> float:
+        """Cruise control at its set-speed fraction f0 and f0 +- 0.03, +- 0.06: its trip time at f0 [s]."""
+        f0 = self.base.cruise.fraction
+        t_cruise = float("nan")
+        for df in (0.0, -0.03, 0.03, -0.06, 0.06):
+            f = f0 + df
+            if not 0.5 < f <= 1.0:
+                continue
+            res = self.run(replace(self.base, cruise=replace(self.base.cruise, fraction=f)), "cruise")
+            m = res.metrics
+            if df == 0.0:  # net energies get cruise control's kinetic-energy change back (see _NET_OFFSET_DOC)
+                self.shape = schedule_shape(res.log, self.task.warmup, self.road.length)
+                self.offset = m["segment_energy_J"] - m["energy_net_J"]
+                t_cruise = m[self.time_key]
+            point, point_other = self._point(m)
+            self.cruise_pts.append(point)
+            self.cruise_other.append(point_other)
+            self.runs_out.append({"force_model": "cruise", "cruise_fraction": f, **_run_metrics(m),
+                                  "fastsim_energy_net_J": m.get("fastsim_energy_net_J")})
+        if not math.isfinite(t_cruise):
+            raise RuntimeError(f"cruise control did not arrive on {self.task.road} seed {self.task.seed}")
+        return t_cruise
+
+    def human(self) -> dict[str, Any]:
+        """The human-like driver at its own pace, in the same metric as cruise control's."""
+        if not self.task.human:
+            return {}
+        m = self.run(replace(self.base, controller="human"), "human").metrics
+        (t, e), _ = self._point(m)
+        extra = {"human_energy_J": e, "human_time": t}
+        if self.task.fastsim and "fastsim_energy_net_J" in m:
+            extra["human_fastsim_energy_J"] = m["fastsim_energy_net_J"] + self.offset
+            extra["human_fastsim_time"] = m["segment_time"]
+        return extra
+
+    def mpc(self, spec: str, lam: float, target: float | None = None):
+        """One MPC run with force model ``spec`` at time weight ``lam`` [J/s] (or the schedule knob's target)."""
+        task = self.task
+        multistart = task.multistart_period if task.multistart_period is not None else (
+            5.0 if task.knob == "schedule" else 0.0)
+        settings = replace(self.base, controller="mpc", time_weight=lam, multistart_period=multistart,
+                           gear_command=task.gear_command, warmup_driver=task.warmup_driver,
+                           **force_model_settings(spec))
+        if target is not None:
+            settings = replace(settings, target_time=target, schedule_gain=task.schedule_gain,
+                               target_shape=self.shape if task.schedule_shape == "cruise" else None)
+        res = self.run(settings, spec)
+        m = res.metrics
+        point, point_other = self._point(m)
+        self.points.setdefault(spec, []).append(point)
+        self.points_other.setdefault(spec, []).append(point_other)
+        online = m.get("online", {})
+        self.runs_out.append({"force_model": spec, "time_weight": lam, "target_time": target,
+                              "time_weight_median": m.get("ctl_time_weight_median"),
+                              "multistart_switches": m.get("ctl_multistart_switches", 0), **_run_metrics(m),
+                              "solve_time_median": m.get("solve_time_median"), "fallbacks": m.get("fallbacks"),
+                              "online_estimate": online.get("estimate"), "online_history": online.get("history"),
+                              "fastsim_energy_net_J": m.get("fastsim_energy_net_J")})
+        return res
+
+    def schedule_knob(self, t_cruise: float) -> tuple[MatchedRun, float, float]:
+        """Every model targets T_cruise x (1, *time_factors), no search: (the oracle's run, lambda_0, T_ref)."""
+        task = self.task
+        # lambda_0 of the feedback: one oracle pilot run from the case's start value, then the median lambda its
+        # feedback used over the measured segment (a P law keeps a lateness proportional to the error in lambda_0)
+        lam_star = self.case.lam0
+        if task.schedule_pilot:
+            pilot = self.mpc(task.force_models[0], self.case.lam0, t_cruise)
+            lam_pilot = float(pilot.metrics.get("ctl_time_weight_median", float("nan")))
+            lam_star = lam_pilot if math.isfinite(lam_pilot) and lam_pilot > 0 else self.case.lam0
+        first = None
+        for spec in task.force_models:
+            for f in (1.0, *task.time_factors):
+                res = self.mpc(spec, lam_star, t_cruise * f)
+                first = res if first is None else first
+        assert first is not None
+        err = first.metrics[self.time_key] / t_cruise - 1.0
+        return MatchedRun(first, lam_star, t_cruise, abs(err) <= task.tol, 1, [], self.time_key), lam_star, t_cruise
+
+    def lambda_knob(self, t_cruise: float) -> tuple[MatchedRun, float, float]:
+        """The oracle matched to T_cruise over lambda, every model at lambda* x factors (and a search where all
+        its runs miss): (the oracle's match, lambda*, T_ref)."""
+        task = self.task
+        matched = match_trip_time(lambda lam: self.mpc("oracle", lam), t_cruise, tol=task.tol, lam0=self.case.lam0,
+                                  max_runs=task.max_search_runs, step=2.0, time_key=self.time_key,
+                                  energy_key=self.energy_key)
+        lam_star = matched.time_weight
+        t_ref = t_cruise if matched.matched else float(matched.result.metrics[self.time_key])
+        for spec in task.force_models:
+            factors = task.weight_factors if spec == "oracle" else (1.0, *task.weight_factors)
+            for f in factors:
+                self.mpc(spec, lam_star * f)
+            if spec != "oracle" and task.model_search_runs > 0:
+                tried = [(lam_star * f, t) for f, (t, _) in zip(factors, self.points[spec][-len(factors):])]
+                _search_model_lambda(lambda lam, spec=spec: self.mpc(spec, lam).metrics[self.time_key], tried,
+                                     t_ref, task.model_search_runs, task.model_reach, task.tol)
+        return matched, lam_star, t_ref
+
+    def fastsim_at(self, t_ref: float) -> dict[str, Any]:
+        """The same joint local fit on FASTSim's energies of the same runs."""
+        shifted = {k: [(t, e + self.offset) for t, e in v] for k, v in self.fastsim_pts.items()}
+        fs_fit = fit_energy_at_time({k: v for k, v in shifted.items() if k not in ("cruise", "human")}, t_ref)
+        fs_cruise = fit_energy_at_time({"cruise": shifted.get("cruise", [])}, t_ref, window=0.08)
+        return {"fastsim_energy_at_tref_J": fs_fit.energy, "fastsim_cruise_energy_J": fs_cruise.energy["cruise"]}
+
+
 def run_paired_task(task: PairedTask) -> dict[str, Any]:
     """One seed of the paired comparison.
 
@@ -347,147 +500,34 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
     marginal source cost (drive.net_energy_metrics) relative to cruise control's. Differences between runs are
     those of E_net; percentages are relative to an energy of the size of a real trip's (a net energy alone can be
     ~0 or negative on a downhill road)."""
-    case = VEHICLE_CASES[task.case]
-    road = paired_road(task.road, task.seed, task.warmup)
-    effects = CONDITIONS[task.condition] if not case.truck else None
-    base = replace(case.settings(), measure_from=task.warmup)
-    base = replace(base, mpc=replace(base.mpc, terminal_value=task.terminal_value))
-    vehicle = case.vehicle()
-    time_key, energy_key = METRICS[task.metric]
-    other = METRICS["raw" if task.metric == "net" else "net"]
-
-    fastsim_pts: dict[str, list[tuple[float, float]]] = {}
-
-    def run(settings: DriveSettings, label: str | None = None):
-        res, plant = drive(vehicle, road, effects=effects, seed=task.seed, settings=settings)
-        if task.fastsim and label is not None and res.metrics.get("arrived"):
-            m = res.metrics
-            fs = fastsim_energy(np.append(res.log["t"].to_numpy(float), m["arrival_time"]),
-                                np.append(res.log["s"].to_numpy(float), road.length),
-                                np.append(res.log["v"].to_numpy(float), m["arrival_speed"]), road,
-                                start=task.warmup)
-            mass = plant.true_parameters().inertial_mass  # the kinetic energy left, booked as the net metric does
-            ke = 0.5 * mass * (m["segment_start_speed"] ** 2 - m["arrival_speed"] ** 2)
-            m["fastsim_energy_J"] = fs["energy_J"]
-            m["fastsim_energy_net_J"] = fs["energy_J"] + ke
-            fastsim_pts.setdefault(label, []).append((m["segment_time"], m["fastsim_energy_net_J"]))
-        return res
-
-    runs_out: list[dict[str, Any]] = []
-    f0 = base.cruise.fraction
-    cruise_pts: list[tuple[float, float]] = []
-    cruise_other: list[tuple[float, float]] = []
-    offset = 0.0
-    t_cruise = float("nan")
-    shape = None
-    for df in (0.0, -0.03, 0.03, -0.06, 0.06):
-        f = f0 + df
-        if not 0.5 < f <= 1.0:
-            continue
-        cruise_res = run(replace(base, cruise=replace(base.cruise, fraction=f)), "cruise")
-        m = cruise_res.metrics
-        if df == 0.0:
-            shape = schedule_shape(cruise_res.log, task.warmup, road.length)
-        if df == 0.0:  # net energies get cruise control's kinetic-energy change back (see _NET_OFFSET_DOC)
-            offset = m["segment_energy_J"] - m["energy_net_J"]
-        cruise_pts.append((m[time_key], m[energy_key] + (offset if task.metric == "net" else 0.0)))
-        cruise_other.append((m[other[0]], m[other[1]] + (offset if task.metric == "raw" else 0.0)))
-        runs_out.append({"force_model": "cruise", "cruise_fraction": f, **_run_metrics(m),
-                         "fastsim_energy_net_J": m.get("fastsim_energy_net_J")})
-        if df == 0.0:
-            t_cruise = m[time_key]
-    if not math.isfinite(t_cruise):
-        raise RuntimeError(f"cruise control did not arrive on {task.road} seed {task.seed}")
-    extra = {}
-    if task.human:
-        human = run(replace(base, controller="human"), "human").metrics  # the same metric as cruise control's
-        extra = {"human_energy_J": human[energy_key] + (offset if task.metric == "net" else 0.0),
-                 "human_time": human[time_key]}
-        if task.fastsim and "fastsim_energy_net_J" in human:
-            extra["human_fastsim_energy_J"] = human["fastsim_energy_net_J"] + offset
-            extra["human_fastsim_time"] = human["segment_time"]
-    points: dict[str, list[tuple[float, float]]] = {}
-    points_other: dict[str, list[tuple[float, float]]] = {}
-
-    def mpc(spec: str, lam: float, target: float | None = None):
-        multistart = task.multistart_period if task.multistart_period is not None else (
-            5.0 if task.knob == "schedule" else 0.0)
-        settings = replace(base, controller="mpc", time_weight=lam, multistart_period=multistart,
-                           gear_command=task.gear_command, warmup_driver=task.warmup_driver,
-                           **force_model_settings(spec))
-        if target is not None:
-            settings = replace(settings, target_time=target,
-                               schedule_gain=task.schedule_gain,
-                               target_shape=shape if task.schedule_shape == "cruise" else None)
-        res = run(settings, spec)
-        m = res.metrics
-        points.setdefault(spec, []).append((m[time_key], m[energy_key] + (offset if task.metric == "net" else 0.0)))
-        points_other.setdefault(spec, []).append((m[other[0]], m[other[1]] + (offset if task.metric == "raw"
-                                                                                 else 0.0)))
-        runs_out.append({"force_model": spec, "time_weight": lam, "target_time": target,
-                         "time_weight_median": m.get("ctl_time_weight_median"),
-                         "multistart_switches": m.get("ctl_multistart_switches", 0), **_run_metrics(m),
-                         "solve_time_median": m.get("solve_time_median"), "fallbacks": m.get("fallbacks"),
-                         "online_estimate": m.get("online", {}).get("estimate"),
-                         "online_history": m.get("online", {}).get("history"),
-                         "fastsim_energy_net_J": m.get("fastsim_energy_net_J")})
-        return res
-
-    if task.knob == "schedule":  # every model targets T_cruise x (1, *time_factors); no search
-        # lambda_0 of the feedback: one oracle pilot run from the case's start value, then the median lambda its
-        # feedback used over the measured segment (a P law keeps a lateness proportional to the error in lambda_0)
-        lam_star = case.lam0
-        if task.schedule_pilot:
-            pilot = mpc(task.force_models[0], case.lam0, t_cruise)
-            lam_pilot = float(pilot.metrics.get("ctl_time_weight_median", float("nan")))
-            lam_star = lam_pilot if math.isfinite(lam_pilot) and lam_pilot > 0 else case.lam0
-        for spec in task.force_models:
-            for f in (1.0, *task.time_factors):
-                res = mpc(spec, lam_star, t_cruise * f)
-                if spec == task.force_models[0] and f == 1.0:
-                    first = res
-        err = first.metrics[time_key] / t_cruise - 1.0
-        matched = MatchedRun(first, lam_star, t_cruise, abs(err) <= task.tol, 1, [], time_key)
-        t_ref = t_cruise
-    else:
-        matched = match_trip_time(lambda lam: mpc("oracle", lam), t_cruise, tol=task.tol, lam0=case.lam0,
-                                  max_runs=task.max_search_runs, step=2.0, time_key=time_key, energy_key=energy_key)
-        lam_star = matched.time_weight
-        t_ref = t_cruise if matched.matched else float(matched.result.metrics[time_key])
-        for spec in task.force_models:
-            factors = task.weight_factors if spec == "oracle" else (1.0, *task.weight_factors)
-            for f in factors:
-                mpc(spec, lam_star * f)
-            if spec != "oracle" and task.model_search_runs > 0:
-                tried = [(lam_star * f, t) for f, (t, _) in zip(factors, points[spec][-len(factors):])]
-                _search_model_lambda(lambda lam, spec=spec: mpc(spec, lam).metrics[time_key], tried, t_ref,
-                                     task.model_search_runs, task.model_reach, task.tol)
-    fit = fit_energy_at_time(points, t_ref)
-    cruise_fit = fit_energy_at_time({"cruise": cruise_pts}, t_ref, window=0.08)
+    runs = _PairedRuns(task)
+    t_cruise = runs.cruise_sweep()
+    extra = runs.human()
+    knob = runs.schedule_knob if task.knob == "schedule" else runs.lambda_knob
+    matched, lam_star, t_ref = knob(t_cruise)
+    fit = fit_energy_at_time(runs.points, t_ref)
+    cruise_fit = fit_energy_at_time({"cruise": runs.cruise_pts}, t_ref, window=0.08)
     # the other metric on the same runs (before/after comparison of the resolution): its own reference time
-    t_ref_other = (float(cruise_other[0][0]) if matched.matched or task.knob == "schedule"
-                   else float(matched.result.metrics[other[0]]))
-    fit_other = fit_energy_at_time(points_other, t_ref_other)
-    cruise_fit_other = fit_energy_at_time({"cruise": cruise_other}, t_ref_other, window=0.08)
+    t_ref_other = (float(runs.cruise_other[0][0]) if matched.matched or task.knob == "schedule"
+                   else float(matched.result.metrics[runs.other[0]]))
+    fit_other = fit_energy_at_time(runs.points_other, t_ref_other)
+    cruise_fit_other = fit_energy_at_time({"cruise": runs.cruise_other}, t_ref_other, window=0.08)
     if task.optimum:
-        extra.update(optimum_at_tref(task, road, effects, base, t_ref, offset))
-    if task.fastsim:  # the same joint local fit on FASTSim's energies of the same runs
-        shifted = {k: [(t, e + offset) for t, e in v] for k, v in fastsim_pts.items()}
-        fs_fit = fit_energy_at_time({k: v for k, v in shifted.items() if k not in ("cruise", "human")}, t_ref)
-        fs_cruise = fit_energy_at_time({"cruise": shifted.get("cruise", [])}, t_ref, window=0.08)
-        extra.update(fastsim_energy_at_tref_J=fs_fit.energy, fastsim_cruise_energy_J=fs_cruise.energy["cruise"])
+        extra.update(optimum_at_tref(task, runs.road, runs.effects, runs.base, t_ref, runs.offset))
+    if task.fastsim:
+        extra.update(runs.fastsim_at(t_ref))
     return {"task": task.__dict__, "t_ref": t_ref, "t_cruise": t_cruise, "t_ref_moved": t_ref != t_cruise,
-            "kinetic_energy_offset_J": offset,
+            "kinetic_energy_offset_J": runs.offset,
             "other_metric": {"metric": "raw" if task.metric == "net" else "net", "t_ref": t_ref_other,
                              "energy_at_tref_J": fit_other.energy, "cruise_energy_J": cruise_fit_other.energy[
                                  "cruise"], "fit_residual_std": fit_other.residual_std,
                              "nearest_time_error": fit_other.nearest},
-            "cruise_energy_J": cruise_fit.energy["cruise"], "cruise_nominal_energy_J": cruise_pts[0][1],
+            "cruise_energy_J": cruise_fit.energy["cruise"], "cruise_nominal_energy_J": runs.cruise_pts[0][1],
             "cruise_spanned": cruise_fit.spanned["cruise"],
             "lambda_star": lam_star, "oracle_time_error": matched.time_error, "oracle_matched": matched.matched,
             "energy_at_tref_J": fit.energy, "nearest_time_error": fit.nearest, "spanned": fit.spanned,
             "fit_residual_std": fit.residual_std, "fit_slope": fit.slope, "fit_curvature": fit.curvature,
-            "runs": runs_out, **extra}
+            "runs": runs.runs_out, **extra}
 
 
 def optimum_at_tref(task: PairedTask, road: RoadProfile, effects, base: DriveSettings, t_ref: float,

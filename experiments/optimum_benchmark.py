@@ -128,7 +128,9 @@ def _policy_run(task: OptimumTask, algo: str, road) -> dict[str, Any]:
                                     f"{algo} --out DIR` and pass --policies DIR)")
     meta_path = folder / f"{algo}_ecodrive.json"
     env_config = json.loads(meta_path.read_text()).get("env_config", {}) if meta_path.is_file() else {}
-    env_config = {**env_config, "road": "hilly", "route_length": road.length, "effects": CONDITIONS[task.condition]}
+    env_config = {**env_config, "road": "hilly", "route_length": road.length}
+    if CONDITIONS[task.condition] is not None:  # nominal: the env's own default (no effects)
+        env_config["effects"] = CONDITIONS[task.condition]
     m, _ = run_policy(sb3_policy(load_policy(path)), env_config, task.seed)
     return {"segment_time": m["arrival_time"], "segment_energy_J": m["arrival_energy_J"],
             "segment_start_speed": 0.0, "arrival_speed": m["arrival_speed"], "arrived": m["arrived"],
@@ -337,6 +339,12 @@ def run_benchmark(tasks: list[OptimumTask], out: Path, scheduler: str | None = N
     for path in merge or []:
         results += [json.loads(p.read_text()) for p in sorted(Path(path).glob("*.json"))]
     failures = [f"{o.task.case}/{o.task.road}/seed {o.task.seed}: {o.error}" for o in outcomes if not o.ok]
+    rows, summary = write_tables(results, failures, out)
+    return rows, summary, failures
+
+
+def write_tables(results: list[dict[str, Any]], failures: list[str], out: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """excess_over_optimum.csv, summary.csv / summary.md and dp_check.csv of stored task results into ``out``."""
     rows = pd.DataFrame([r for res in results for r in res["rows"]])
     extra = [c for c in rows.columns if c not in CSV_COLUMNS]
     rows = rows[[c for c in CSV_COLUMNS if c in rows.columns] + extra] if len(rows) else rows
@@ -349,7 +357,7 @@ def run_benchmark(tasks: list[OptimumTask], out: Path, scheduler: str | None = N
     if failures:
         md += "\nFailed tasks:\n\n" + "\n".join(f"- {f}" for f in failures) + "\n"
     write_text(out / "summary.md", "# Excess over the full-route optimum\n\n" + md)
-    return rows, summary, failures
+    return rows, summary
 
 
 # ----------------------------------------------------------------------------------- the RL episode's cost

@@ -29,6 +29,9 @@ from .force_model import ForceModel, resistance_force
 from .safety import SpeedEnvelope
 
 
+CREEP_SPEED = 0.5  # [m/s] a vehicle that stopped more than 2 m before a stop line creeps on towards it below this
+
+
 class ControllerError(ValueError):
     """Invalid controller settings or an unknown controller name."""
 
@@ -193,6 +196,8 @@ class ControllerBase:
             return -m * 2.0
         if self._stopping or d <= obs.v ** 2 / (2.0 * ctx.stop_decel) + 0.5:
             self._stopping = True
+            if obs.v < CREEP_SPEED and d >= 2.0:  # came to rest short of the line: creep up to it
+                return self.resistance(obs.v, obs.s) + m * (CREEP_SPEED - obs.v)
             decel = obs.v ** 2 / (2.0 * max(d, 0.2))
             if d < 0.3:
                 decel = max(decel, 2.0)

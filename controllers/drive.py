@@ -9,10 +9,11 @@ oracle) and the controller (mpc / cruise / human), runs :func:`~.closed_loop.run
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from roadload.road_load import RoadLoadParameters
 from roadload.road_profiles import RoadProfile
@@ -26,6 +27,7 @@ from .energy import SourceEnergyModel, with_loss_error
 from .force_model import FORCE_MODEL_NAMES, ErroredForceModel, FixedForceModel, ForceModel, OracleForceModel
 from .mpc import MpcSettings
 from .mpc_controller import MpcController, MpcControllerSettings, TripSchedule
+from .optimum import OptimumSettings, OptimumTarget, OptimumTracker
 from .sim_plant import HumanDriver, SimulatorPlant
 from .vehicle_models import abc_parameters, energy_model_from_spec
 from roadload.estimators.knowledge import knowledge_for_preset
@@ -33,8 +35,11 @@ from roadload.estimators.models import coast_down_coefficients
 from roadload.estimators.pipeline import PipelineSettings, knowledge_from_spec
 from roadload.road_profiles import load_profile
 from .online import OnlineForceModel
+from .wind import WindAwareForceModel, wind_model_name
+from roadload.envs import get_preset
+from roadload.estimators.change import ChangeDetection
 
-CONTROLLERS = ("mpc", "cruise", "human")
+CONTROLLERS = ("mpc", "cruise", "human", "optimum")
 
 
 @dataclass(frozen=True)
@@ -67,6 +72,19 @@ class DriveSettings:
     # shape of the target schedule: (positions [m], elapsed fraction of target_time [-]); None: linear in distance
     target_shape: tuple[tuple[float, ...], tuple[float, ...]] | None = None
     schedule_gain: float = 20.0  # P gain of the target schedule's lambda feedback (TripSchedule.gain)
+    # oracle force model: also the true wind vector, so the MPC plans each segment with its own headwind and
+    # crosswind (the road's heading ahead); False: the current headwind component for the whole horizon
+    oracle_wind: bool = True
+    # controller "optimum": the trip time / arrival speed of the full-route optimum it tracks (always with the
+    # oracle force model; a warm-up before measure_from is driven by cruise control) and its settings
+    optimum_target: OptimumTarget | None = None
+    optimum: OptimumSettings | None = None
+    # online force models: the catalogue estimator's settings (None: chapter 5's for the model), a change detector
+    # that resets the estimator's covariance after a change of the road load, and the wind model's heading source
+    estimator_settings: dict | None = None
+    change_detection: ChangeDetection | None = None
+    heading_source: str = "road"
+    replan_period: float = MpcControllerSettings.replan_period  # MPC only: re-planning period [s]
 
     def __post_init__(self) -> None:
         check_field_types(self, ControllerError)
@@ -80,6 +98,8 @@ class DriveSettings:
             raise ControllerError(f"target_time: must be a finite number > 0 [s] or None, got {self.target_time}")
         if self.warmup_driver not in ("mpc", "cruise"):
             raise ControllerError(f"warmup_driver: 'mpc' or 'cruise', got {self.warmup_driver!r}")
+        if self.controller == "optimum" and self.optimum_target is None:
+            raise ControllerError("controller 'optimum' needs optimum_target (trip time [s], arrival speed [m/s])")
         if not (math.isfinite(self.dt) and self.dt > 0):
             raise ControllerError(f"dt: must be a finite number > 0 [s], got {self.dt}")
         for name, unit in (("measure_from", "m"), ("multistart_period", "s"), ("schedule_gain", "1")):
@@ -120,23 +140,36 @@ def net_energy_metrics(metrics: dict, inertial_mass: float, energy: SourceEnergy
             + ke / energy.indicated_efficiency}
 
 
-def _force_model(st: DriveSettings, plant: SimulatorPlant, nominal: VehicleSpec | str, abc: RoadLoadParameters,
-                 energy: SourceEnergyModel) -> tuple[ForceModel, SourceEnergyModel]:
-    """The force model of ``st.force_model`` (MPC only: oracle, wrong, online; otherwise the fixed abc model of the
-    nominal vehicle) and the energy model (with the drive-train loss error of a 'wrong' model)."""
-    if st.controller == "mpc" and st.force_model == "oracle":
-        return OracleForceModel(plant.true_parameters), energy
+def _force_model(st: DriveSettings, plant: SimulatorPlant, road: RoadProfile, nominal: VehicleSpec | str,
+                 abc: RoadLoadParameters, energy: SourceEnergyModel) -> tuple[ForceModel, SourceEnergyModel]:
+    """The force model the controller plans with (MPC: oracle, wrong, online, online_wind; the optimum: the oracle;
+    otherwise the fixed abc model of the nominal vehicle) and the energy model (with the drive-train loss error of a
+    'wrong' model)."""
+    if st.controller == "optimum" or (st.controller == "mpc" and st.force_model == "oracle"):
+        return OracleForceModel(plant.true_parameters, wind=plant.true_wind if st.oracle_wind else None), energy
     if st.controller == "mpc" and st.force_model == "wrong":
         errors = dict(st.wrong_model or {})
         if errors.get("drivetrain_loss"):
             energy = with_loss_error(energy, errors["drivetrain_loss"])
         return ErroredForceModel(OracleForceModel(plant.true_parameters), errors), energy
-    if st.controller == "mpc" and st.force_model == "online":
-        online = OnlineForceModel(_knowledge(nominal), model=st.model, estimator=st.estimator,
-                                  pipeline_settings=st.pipeline)
+    if st.controller == "mpc" and st.force_model in ("online", "online_wind"):
+        online = _online_force_model(st, road, nominal)
         online.attach(plant.can_window)
         return online, energy
     return FixedForceModel(abc), energy
+
+
+def _online_force_model(st: DriveSettings, road: RoadProfile, nominal: VehicleSpec | str) -> OnlineForceModel:
+    """The online force model of ``st.force_model``: the chapter-5 pipeline's model, or with the wind vector
+    (online_wind: the heading from ``st.heading_source``)."""
+    common: dict[str, Any] = dict(estimator=st.estimator, pipeline_settings=st.pipeline,
+                                  estimator_settings=st.estimator_settings, change_detection=st.change_detection)
+    if st.force_model == "online_wind":
+        nominal_spec = get_preset(nominal) if isinstance(nominal, str) else nominal
+        return WindAwareForceModel(_knowledge(nominal), road, model=wind_model_name(st.model),
+                                   heading_source=st.heading_source,
+                                   yaw_drag_factor=float(nominal_spec.aero.yaw_drag_factor), **common)
+    return OnlineForceModel(_knowledge(nominal), model=st.model, **common)
 
 
 def _mpc_controller(st: DriveSettings, road: RoadProfile, abc: RoadLoadParameters) -> Controller:
@@ -150,7 +183,8 @@ def _mpc_controller(st: DriveSettings, road: RoadProfile, abc: RoadLoadParameter
                                   shape_fraction=st.target_shape[1] if st.target_shape else ()))
     controller: Controller = MpcController(MpcControllerSettings(mpc=mpc_settings, schedule=schedule,
                                                                  multistart_period=st.multistart_period,
-                                                                 gear_command=st.gear_command))
+                                                                 gear_command=st.gear_command,
+                                                                 replan_period=st.replan_period))
     if st.warmup_driver == "cruise" and st.measure_from > 0:
         # cruise control on the nominal abc model: the same warm-up whatever the run's force model
         controller = Handover(CruiseController(st.cruise), controller, st.measure_from, FixedForceModel(abc))
@@ -158,9 +192,14 @@ def _mpc_controller(st: DriveSettings, road: RoadProfile, abc: RoadLoadParameter
 
 
 def _controller(st: DriveSettings, road: RoadProfile, abc: RoadLoadParameters) -> Controller:
-    """The controller of ``st.controller``: mpc, cruise or human."""
+    """The controller of ``st.controller``: mpc, optimum (the full-route optimum's tracker), cruise or human."""
     if st.controller == "mpc":
         return _mpc_controller(st, road, abc)
+    if st.controller == "optimum" and st.optimum_target is not None:
+        tracker: Controller = OptimumTracker(replace(st.optimum_target, measure_from=st.measure_from), st.optimum)
+        if st.measure_from > 0:  # the same warm-up as the MPC runs with warmup_driver 'cruise'
+            tracker = Handover(CruiseController(st.cruise), tracker, st.measure_from, FixedForceModel(abc))
+        return tracker
     if st.controller == "cruise":
         return CruiseController(st.cruise)
     return HumanDriver()
@@ -188,7 +227,7 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
     nominal = st.nominal_vehicle if st.nominal_vehicle is not None else (vehicle if isinstance(vehicle, str)
                                                                          else spec)
     abc = abc_parameters(nominal)
-    force_model, energy = _force_model(st, plant, nominal, abc, energy)
+    force_model, energy = _force_model(st, plant, road, nominal, abc, energy)
     ctx = DriveContext(road=road, energy=energy, force_model=force_model, dt=st.dt,
                        lateral_accel_max=st.mpc.lateral_accel_max)
     controller = _controller(st, road, abc)
@@ -197,6 +236,6 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
     mpc = st.controller == "mpc"
     result.metrics.update(controller=st.controller, force_model=st.force_model if mpc else "-",
                           solver=st.solver if mpc else "-", time_weight=st.time_weight if mpc else float("nan"))
-    if isinstance(force_model, OnlineForceModel) and st.force_model == "online" and mpc:
+    if isinstance(force_model, OnlineForceModel) and mpc:
         result.metrics["online"] = _online_history(force_model, result)
     return result, plant

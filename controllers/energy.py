@@ -46,6 +46,12 @@ class SourceEnergyModel:
     max_brake_deceleration: float = 8.0  # friction brake capability [m/s^2] times mass gives its force limit
     shift_speeds: tuple[float, ...] = field(default=())  # ICE: upshift speeds [m/s], len(gear_ratios) - 1
     name: str = ""
+    # ICE: the largest wheel force [N] of full load in each gear: (speeds [m/s], (force of gear 1 per speed), ...);
+    # 0 where the engine speed is out of range; empty: unknown (gear_for_force keeps the shift rule's gear)
+    traction_table: tuple[tuple[float, ...], ...] = field(default=())
+    # ICE: wheel power at full load over the shaft speed, P = p0 + p1 omega + p2 omega^2 [W] (a fit over every
+    # gear's full load); empty: max_power at every speed
+    full_load_power: tuple[float, ...] = field(default=())
 
     def __post_init__(self) -> None:
         if self.kind not in ("ev", "ice"):
@@ -82,6 +88,21 @@ class SourceEnergyModel:
         low, high = int(self.gear_for_speed(v - band)), int(self.gear_for_speed(v + band))
         return min(max(previous, low), high)
 
+    def gear_for_force(self, v: float, force: float, preferred: int) -> int:
+        """Gear index (0-based) for a traction force [N] at speed v [m/s]: ``preferred`` (the shift rule's) while its
+        full load delivers the force, else the highest lower gear that does (a kick-down), else the one with the
+        most force (:attr:`traction_table`; without one, ``preferred``)."""
+        if self.kind == "ev" or not self.traction_table:
+            return preferred
+        speeds, forces = self.traction_table[0], self.traction_table[1:]
+        capacity = [float(np.interp(v, speeds, f)) for f in forces]
+        if capacity[preferred] >= force:
+            return preferred
+        for g in range(preferred - 1, -1, -1):
+            if capacity[g] >= force:
+                return g
+        return int(np.argmax(capacity))
+
     def gear_for_speed(self, v) -> np.ndarray:
         """Gear index (0-based) from the speed-based shift rule; always 0 for an EV."""
         v = np.asarray(v, dtype=float)
@@ -117,6 +138,22 @@ class SourceEnergyModel:
 
     def max_regen_force(self, ratio):
         return self.max_regen_torque * ratio / self.wheel_radius if self.regenerates else 0.0
+
+    def traction_power_limit(self, v):
+        """Traction power [W] the drive gives at the wheels at speed v [m/s] (numpy or CasADi): ICE with a
+        full-load fit, that fit at the shift rule's (smooth) shaft speed, at most max_power; otherwise max_power."""
+        if self.kind == "ev" or not self.full_load_power:
+            return self.max_power + 0.0 * v
+        omega = v * self.smooth_ratio(v) / self.wheel_radius
+        p0, p1, p2 = self.full_load_power
+        power = p0 + p1 * omega + p2 * omega * omega
+        try:
+            import casadi as ca
+            if isinstance(v, (ca.SX, ca.MX, ca.DM)):
+                return ca.fmin(power, self.max_power)
+        except ImportError:  # pragma: no cover
+            pass
+        return np.minimum(power, self.max_power)
 
     # ------------------------------------------------------------------ power
     def source_power(self, traction_force, regen_force, v, ratio):

@@ -11,6 +11,8 @@ step: ``abc`` (fixed coast-down coefficients, M0), ``oracle`` (the simulator's t
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
 from types import ModuleType
 from typing import Any, Protocol, runtime_checkable
 
@@ -46,6 +48,44 @@ def _namespace(*args):
     if ca is not None and any(isinstance(x, (ca.SX, ca.MX, ca.DM)) for x in args):
         return ca
     return np
+
+
+def road_heading(road, s) -> np.ndarray:
+    """Heading psi(s) [rad] of the road at distance(s) s [m] in the road's own frame (psi(0) = 0, positive left):
+    the integral of the curvature over distance (trapezoid on the profile's grid, as the simulator's road)."""
+    d = np.asarray(road.distance, float)
+    kappa = np.asarray(road.curvature, float)
+    psi = np.concatenate([[0.0], np.cumsum(0.5 * (kappa[1:] + kappa[:-1]) * np.diff(d))])
+    return np.interp(s, d, psi)
+
+
+@dataclass(frozen=True)
+class WindEstimate:
+    """A wind vector in the road's frame: speed v_w [m/s] and the direction it blows towards psi_w [rad] (0 = along
+    the road's initial heading, i.e. a tailwind at the start; pi = a headwind), with the vehicle's yaw drag factor
+    k [1] of c_x(psi_a) (eq. 2.7-2.8)."""
+
+    speed: float
+    direction: float
+    yaw_drag_factor: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.speed) and self.speed >= 0 and math.isfinite(self.direction)):
+            raise ForceModelError(f"WindEstimate: speed must be finite >= 0 m/s and direction finite [rad], got "
+                                  f"{self.speed}, {self.direction}")
+        if not (math.isfinite(self.yaw_drag_factor) and self.yaw_drag_factor >= 0):
+            raise ForceModelError(f"WindEstimate.yaw_drag_factor: finite >= 0, got {self.yaw_drag_factor}")
+
+    def components(self, heading) -> tuple[np.ndarray, np.ndarray]:
+        """(headwind, crosswind) [m/s] for a vehicle heading psi [rad]: the approach velocity of eq. 2.8a is
+        u_x = v + headwind, u_y = crosswind, with headwind = -v_w cos(psi_w - psi), crosswind = -v_w sin(...)."""
+        rel = self.direction - np.asarray(heading, float)
+        return -self.speed * np.cos(rel), -self.speed * np.sin(rel)
+
+    @classmethod
+    def from_vector(cls, east: float, north: float, yaw_drag_factor: float = 0.0) -> "WindEstimate":
+        """From the components [m/s] along the road's initial heading (x) and to its left (y)."""
+        return cls(float(math.hypot(east, north)), float(math.atan2(north, east)), yaw_drag_factor)
 
 
 @runtime_checkable
@@ -86,14 +126,23 @@ class FixedForceModel:
 
 
 class OracleForceModel:
-    """The ``oracle`` model: the simulator's true current parameters (``truth()`` returns a RoadLoadParameters)."""
+    """The ``oracle`` model: the simulator's true current parameters (``truth()`` returns a RoadLoadParameters) and,
+    with ``wind`` (a callable returning the true :class:`WindEstimate` or None in still air), the wind vector, so
+    that the MPC plans each segment with the headwind and crosswind of the road's heading there."""
 
     name = "oracle"
 
-    def __init__(self, truth) -> None:
+    def __init__(self, truth, wind=None) -> None:
         if not callable(truth):
             raise ForceModelError("oracle force model needs a callable returning the true RoadLoadParameters")
+        if wind is not None and not callable(wind):
+            raise ForceModelError("oracle force model: wind must be a callable returning a WindEstimate or None")
         self._truth = truth
+        self._wind = wind
+
+    def wind(self) -> WindEstimate | None:
+        """The true wind vector now (None in still air or without a wind source)."""
+        return None if self._wind is None else self._wind()
 
     def reset(self) -> None:
         pass
@@ -153,4 +202,4 @@ class ErroredForceModel:
         return {"force_model": self.name, **{f"error_{k}": v for k, v in self.errors.items()}}
 
 
-FORCE_MODEL_NAMES = ("abc", "online", "oracle", "wrong")
+FORCE_MODEL_NAMES = ("abc", "online", "online_wind", "oracle", "wrong")

@@ -1,14 +1,17 @@
 """Spatial-domain (distance-indexed) eco-driving optimal control problem and its two solve paths.
 
-Grid: N segments of length ds [m] starting at the vehicle's position s0; node k at s0 + k ds.
+Grid: N segments of length ds [m] starting at the vehicle's position s0; node k at s0 + k ds (the segment lengths
+are a parameter of the NLP: the full-route optimum, :mod:`.optimum`, places nodes at the stops).
 States per node: E_k = v_k^2 / 2 (kinetic energy per unit mass) [m^2/s^2] and time t_k [s].
 Inputs per segment (piecewise constant, in kN): traction F_t, regenerative F_r and friction-brake F_b force.
 
 Dynamics (v_mid = (v_k + v_{k+1})/2, resistance at the segment midpoint, grade/curvature at the midpoint):
-    (m + m_rot) (E_{k+1} - E_k) / ds = F_t - F_r - F_b - F_resist(v_mid, theta_k, kappa_k; p)
+    (m + m_rot) (E_{k+1} - E_k) / ds = F_t - F_r - F_b - F_resist(v_mid, theta_k, kappa_k; p, w_k)
     t_{k+1} - t_k = ds / v_mid
 Comfort: a_k = (E_{k+1} - E_k)/ds in [a_min, a_max]; jerk (a_k - a_{k-1}) v_k / ds in [-j_max, j_max]
-(k = 0 uses the acceleration the previous plan commanded). Drive limits: F_t <= T_max i / r_W,
+(k = 0 uses the acceleration the previous plan commanded). Wind w_k per segment: the headwind component
+(the force model's scalar headwind, or from its wind vector and the road's heading ahead) and the crosswind
+component, whose drag :func:`roadload.road_load.crosswind_drag_increase` adds. Drive limits: F_t <= T_max i / r_W,
 F_t v_mid <= P_max, F_r likewise for regeneration. Speed cap as a bound E_k <= v_cap,k^2/2 (limit less a margin,
 curve and stop caps). The time state is substituted (t_N = sum ds / v_mid), leaving E and the three forces as
 decision variables.
@@ -45,7 +48,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .energy import SourceEnergyModel
-from roadload.road_load import RoadLoadParameters
+from roadload.road_load import RoadLoadParameters, crosswind_drag_increase
 from roadload.schema import check_field_types
 
 from .force_model import resistance_force
@@ -57,7 +60,7 @@ class MpcError(ValueError):
 
 
 SOLVERS = ("ipopt", "osqp")
-TERMINAL_VALUES = ("source", "wheel")
+TERMINAL_VALUES = ("source", "wheel", "none")
 QP_E_SCALE = 30.0  # QP path: kinetic-energy variables in units of 30 m^2/s^2 (forces are in kN)
 
 
@@ -77,7 +80,10 @@ class MpcSettings:
     time_weight: float = 3000.0  # lambda [J/s]: energy worth one second of trip time
     # value of the kinetic energy left at the horizon end: "source" = m E_N / eta_i (what it costs at the source,
     # Willans line; = m E_N for an EV), "wheel" = m E_N (the earlier value: undervalues it by eta_i on an ICE)
-    terminal_value: str = "source"
+    terminal_value: str = "source"  # "none": worth nothing (an episode's cost that ends at the road end)
+    # the horizon ends at the road end: nodes beyond it collapse onto it (1 mm segments), so the terminal value
+    # applies there (a trip that ends at the road end); False: the road continues with its last values
+    horizon_to_route_end: bool = False
     accel_weight: float = 0.05  # comfort term [kJ per (m/s^2)^2 per segment, times mass/1000]
     solver: str = "ipopt"
     max_iterations: int = 100  # IPOPT iteration cap / SQP iterations cap per call (osqp path uses sqp_iterations)
@@ -135,6 +141,13 @@ class Preview:
     ratio: np.ndarray
     segment0_cap: np.ndarray | None = None  # cap [m/s] at s0 + x ds, x = SEGMENT0_FRACTIONS (inside segment 0)
     stops: np.ndarray | None = None  # positions [m] of the stop lines whose caps the preview holds (reporting)
+    # wind per segment (N) from a force model that knows the wind vector and the road's heading ahead: headwind
+    # component [m/s] (None: the force model's scalar headwind) and crosswind component [m/s] (None: 0), with the
+    # yaw drag factor k [1] of c_x(psi_a) (road_load.crosswind_drag_increase)
+    headwind: np.ndarray | None = None
+    crosswind: np.ndarray | None = None
+    yaw_drag_factor: float = 0.0
+    ds: np.ndarray | None = None  # segment lengths [m] (N) = diff(s); None: the settings' uniform ds
 
 
 SEGMENT0_FRACTIONS = np.linspace(0.0, 1.0, 11)[1:]
@@ -257,8 +270,12 @@ class OcpSolver:
         self._qp_x = None
 
     # ------------------------------------------------------------------ formulation
-    def _build(self) -> None:
-        st, en, n, ds = self.settings, self.energy, self.n, self.settings.ds
+    def _formulate(self) -> dict[str, Any]:
+        """The NLP's symbols: decision vector x, parameter vector p, constraint vector g and the objective's
+        parts (source energy [kJ], time t_N [s], kinetic energy left at the end m E_N [kJ], comfort and
+        regularisation terms [kJ]); the MPC (:meth:`_build`) and the full-route optimum (:mod:`.optimum`)
+        compose their objectives from them."""
+        st, en, n = self.settings, self.energy, self.n
         E = ca.SX.sym("E", n + 1)
         ft = ca.SX.sym("Ft", n)
         fr = ca.SX.sym("Fr", n)
@@ -270,19 +287,27 @@ class OcpSolver:
         ratio = ca.SX.sym("ratio", n)
         fp = ca.SX.sym("fp", len(RoadLoadParameters.FIELDS))
         lam = ca.SX.sym("lam")
-        p = ca.vertcat(a_prev, grade, curv, ratio, fp, lam)
+        headwind = ca.SX.sym("headwind", n)
+        crosswind = ca.SX.sym("crosswind", n)
+        yaw_drag = ca.SX.sym("yaw_drag")
+        ds = ca.SX.sym("ds", n)  # segment lengths [m] (the MPC: uniform; the full-route optimum: nodes at stops)
+        p = ca.vertcat(a_prev, grade, curv, ratio, fp, lam, headwind, crosswind, yaw_drag, ds)
         m = fp[0]
 
         v = ca.sqrt(2.0 * E)
         vm = 0.5 * (v[:-1] + v[1:])
         dt = ds / vm
-        fres = resistance_force(vm, grade, curv, fp)
+        # the road load with the headwind of each segment, plus what its crosswind adds to the drag
+        fp_wind = [fp[i] for i in range(6)] + [headwind, fp[7]]
+        fres = (resistance_force(vm, grade, curv, fp_wind)
+                + crosswind_drag_increase(fp[3], vm + headwind, crosswind, yaw_drag, xp=ca))
         acc = (E[1:] - E[:-1]) / ds
         m_in = m + fp[7]  # inertial mass m_V + m_rot
         dyn = (m_in * acc + fres) / 1000.0 - (ft - fr - fb)
         t_end = ca.sum1(dt)  # time state t_N, substituted: t_{k+1} = t_k + ds / v_mid
-        jerk = ca.vertcat((acc[0] - a_prev) * v[0] / ds, (acc[1:] - acc[:-1]) * v[1:-1] / ds)
-        power = ft * vm  # kW
+        jerk = ca.vertcat((acc[0] - a_prev) * v[0] / ds[0],
+                          (acc[1:] - acc[:-1]) * v[1:-1] / (0.5 * (ds[:-1] + ds[1:])))
+        power = ft * vm - en.traction_power_limit(vm) / 1000.0  # kW above the drive's limit at this speed (<= 0)
         regen_power = fr * vm
         g = ca.vertcat(dyn, acc, jerk, power, regen_power)
 
@@ -290,9 +315,21 @@ class OcpSolver:
         ratio_obj = en.smooth_ratio(vm) if en.kind == "ice" else ratio
         psrc = en.source_power(1000.0 * ft, 1000.0 * fr, vm, ratio_obj)
         energy = ca.sum1(psrc * dt) / 1000.0  # kJ
-        ke_value = 1.0 / en.indicated_efficiency if st.terminal_value == "source" else 1.0
-        obj = (energy + lam * t_end / 1000.0 - ke_value * m_in * E[n] / 1000.0
-               + st.accel_weight * m / 1000.0 * ca.sumsqr(acc) + 1e-3 * ds / 1000.0 * ca.sum1(ft + fr + fb))
+        return {"x": x, "p": p, "g": g, "energy": energy, "t_end": t_end, "lam": lam,
+                "terminal_energy": m_in * E[n] / 1000.0,
+                "comfort": st.accel_weight * m / 1000.0 * ca.sumsqr(acc),
+                "regularisation": 1e-3 / 1000.0 * ca.dot(ds, ft + fr + fb)}
+
+    def _build(self) -> None:
+        st, en, n = self.settings, self.energy, self.n
+        f = self._formulate()
+        x: ca.SX = f["x"]
+        p: ca.SX = f["p"]
+        g: ca.SX = f["g"]
+        energy: ca.SX = f["energy"]
+        ke_value = {"source": 1.0 / en.indicated_efficiency, "wheel": 1.0, "none": 0.0}[st.terminal_value]
+        obj = (energy + f["lam"] * f["t_end"] / 1000.0 - ke_value * f["terminal_energy"] + f["comfort"]
+               + f["regularisation"])
         self._nx, self._ng, self._np = x.numel(), g.numel(), p.numel()
         self._blocks_x = [n + 1, n, n, n]
         self._blocks_g = [n, n, n, n, n]
@@ -412,7 +449,7 @@ class OcpSolver:
         lbg = np.concatenate([np.zeros(n), np.full(n, -st.decel_max), np.full(n, -st.jerk_max),
                               np.full(2 * n, -inf)])
         ubg = np.concatenate([np.zeros(n), np.full(n, st.accel_max), np.full(n, st.jerk_max),
-                              np.full(n, en.max_power / 1000.0),
+                              np.zeros(n),
                               np.full(n, (en.max_regen_power if en.regenerates else 0.0) / 1000.0)])
         return lbx, ubx, lbg, ubg
 
@@ -421,8 +458,16 @@ class OcpSolver:
         lam = self.settings.time_weight if time_weight is None else time_weight
         if not (math.isfinite(lam) and lam >= 0):
             raise MpcError(f"time_weight: must be a finite number >= 0 [J/s], got {lam}")
+        n = self.n
+        headwind = np.full(n, params.headwind) if preview.headwind is None else np.asarray(preview.headwind, float)
+        crosswind = np.zeros(n) if preview.crosswind is None else np.asarray(preview.crosswind, float)
         return np.concatenate([[a_prev], preview.grade, preview.curvature, preview.ratio, params.as_vector(),
-                               [lam]])
+                               [lam], headwind, crosswind, [float(preview.yaw_drag_factor)],
+                               self.segment_lengths(preview)])
+
+    def segment_lengths(self, preview: Preview) -> np.ndarray:
+        """Segment lengths [m] (N): the preview's own (``Preview.ds``), else the settings' uniform ds."""
+        return np.full(self.n, self.settings.ds) if preview.ds is None else np.asarray(preview.ds, float)
 
     def _check(self, v0: float, a_prev: float, preview: Preview) -> None:
         n = self.n
@@ -430,6 +475,12 @@ class OcpSolver:
             raise MpcError(f"initial speed/acceleration not finite (v0={v0}, a_prev={a_prev})")
         shapes = {"s": (preview.s, n + 1), "grade": (preview.grade, n), "curvature": (preview.curvature, n),
                   "speed_cap": (preview.speed_cap, n + 1), "ratio": (preview.ratio, n)}
+        shapes.update({k: (getattr(preview, k), n) for k in ("headwind", "crosswind", "ds")
+                       if getattr(preview, k) is not None})
+        if preview.ds is not None and not np.all(np.asarray(preview.ds, float) > 0):
+            raise MpcError("preview.ds: segment lengths must be > 0 m")
+        if not (math.isfinite(preview.yaw_drag_factor) and preview.yaw_drag_factor >= 0):
+            raise MpcError(f"preview.yaw_drag_factor: a finite number >= 0 [1], got {preview.yaw_drag_factor}")
         for name, (arr, size) in shapes.items():
             arr = np.asarray(arr, float)
             if arr.shape != (size,):
@@ -441,16 +492,16 @@ class OcpSolver:
                       target_speed: float | None = None) -> np.ndarray:
         """A feasible-ish cold start: speed ramps (comfortably) from v0 towards the cap (or towards
         ``target_speed`` [m/s] where that is lower), quasi-static forces."""
-        st, n, ds = self.settings, self.n, self.settings.ds
+        st, n, ds = self.settings, self.n, self.segment_lengths(preview)
         cap = self.reachable_cap(v0, preview, a_prev)
         if target_speed is not None:
             cap = np.maximum(np.minimum(cap, target_speed), st.speed_floor)
         v = np.empty(n + 1)
         v[0] = max(v0, st.speed_floor)
         for k in range(n):
-            v[k + 1] = min(np.sqrt(v[k] ** 2 + 2 * 0.5 * st.accel_max * ds), cap[k + 1])
+            v[k + 1] = min(np.sqrt(v[k] ** 2 + 2 * 0.5 * st.accel_max * ds[k]), cap[k + 1])
         for k in range(n - 1, -1, -1):  # backward pass: comfortable deceleration before caps
-            v[k] = min(v[k], np.sqrt(v[k + 1] ** 2 + 2 * 0.5 * st.decel_max * ds)) if k > 0 else v[k]
+            v[k] = min(v[k], np.sqrt(v[k + 1] ** 2 + 2 * 0.5 * st.decel_max * ds[k])) if k > 0 else v[k]
         E = 0.5 * v ** 2
         vm = 0.5 * (v[1:] + v[:-1])
         f = params.inertial_mass * np.diff(E) / ds + resistance_force(vm, preview.grade, preview.curvature, params)
@@ -481,7 +532,7 @@ class OcpSolver:
         v = np.sqrt(2.0 * np.maximum(x[:n + 1], 0.0))
         vm = np.maximum(0.5 * (v[1:] + v[:-1]), 1e-6)
         return Plan(s=np.asarray(preview.s, float).copy(), v=v,
-                    t=np.concatenate([[0.0], np.cumsum(self.settings.ds / vm)]),
+                    t=np.concatenate([[0.0], np.cumsum(self.segment_lengths(preview) / vm)]),
                     traction=1000.0 * x[n + 1:2 * n + 1],
                     regen=1000.0 * x[2 * n + 1:3 * n + 1], brake=1000.0 * x[3 * n + 1:4 * n + 1],
                     success=success, status=status, solve_time=solve_time, iterations=iters, objective=obj,

@@ -40,6 +40,7 @@ from roadload.schema import check_field_types
 from .base import ControllerBase, ControllerError, DriveContext, Observation
 from .cruise import CruiseLaw, CruiseSettings
 from .energy import SourceEnergyModel
+from .force_model import road_heading
 from .mpc import SEGMENT0_FRACTIONS, ConstraintViolation, MpcSettings, OcpSolver, Plan, Preview
 from .safety import speed_cap
 
@@ -138,7 +139,7 @@ class MpcControllerSettings:
     # control does; held within +-gear_band [m/s] of a shift speed, from gear_min_speed [m/s] up (below: the
     # transmission's launch and low gears). Without it, the plant downshifts under load where the plan assumed
     # the higher gear, and a 0.1 m/s difference in cruise speed changes the fuel of a whole climb
-    gear_command: bool = False
+    gear_command: bool = False  # (and a lower gear where the shift rule's full load cannot give the force)
     gear_band: float = 0.5  # [m/s]
     gear_min_speed: float = 10.0  # [m/s]
 
@@ -224,7 +225,12 @@ class MpcController(ControllerBase):
         st, road, en = self.settings.mpc, self.ctx.road, self.ctx.energy
         n, ds = st.n_nodes, st.ds
         s = s0 + ds * np.arange(n + 1)
-        mid = np.minimum(s[:-1] + 0.5 * ds, road.length)
+        segment_lengths = None
+        if st.horizon_to_route_end and s[-1] > road.length:  # nodes past the road end collapse onto it
+            beyond = s > road.length
+            s[beyond] = road.length + 1e-3 * (1.0 + np.arange(int(beyond.sum())))
+            segment_lengths = np.diff(s)
+        mid = np.minimum(s[:-1] + 0.5 * ds if segment_lengths is None else 0.5 * (s[:-1] + s[1:]), road.length)
         at = road.at(mid)
         # node cap: the lowest cap over both adjacent segments, so the (monotone within a segment) planned
         # speed respects the cap everywhere between nodes, wherever the moving grid falls
@@ -247,8 +253,15 @@ class MpcController(ControllerBase):
         # gear for the traction-force bound (the power constraint limits the rest); the objective's gear follows
         # the planned speed through the smooth shift rule
         stops = np.array([x for x in self._unserved if s[0] - 1.0 <= x <= s[-1]], dtype=float)
+        headwind = crosswind = None
+        yaw = 0.0
+        wind = self.ctx.force_model.wind() if hasattr(self.ctx.force_model, "wind") else None
+        if wind is not None:  # a force model that knows the wind vector: the wind of the road's heading ahead
+            headwind, crosswind = wind.components(road_heading(road, mid))
+            yaw = wind.yaw_drag_factor
         return Preview(s=s, grade=at["grade"], curvature=at["curvature"], speed_cap=cap, ratio=ratio,
-                       segment0_cap=seg0, stops=stops)
+                       segment0_cap=seg0, stops=stops, headwind=headwind, crosswind=crosswind,
+                       yaw_drag_factor=yaw, ds=segment_lengths)
 
     # ------------------------------------------------------------------ control
     def _replan(self, obs: Observation) -> None:
@@ -391,7 +404,12 @@ class MpcController(ControllerBase):
             self._gear = None
             return None
         self._gear = en.gear_with_hysteresis(obs.v, self._gear, st.gear_band)
-        return self._gear + 1
+        force = self._last_force if self._last_force is not None else 0.0
+        return en.gear_for_force(obs.v, force, self._gear) + 1  # a kick-down where full load needs it
+
+    def reference_speed(self, obs: Observation) -> float:
+        """The speed [m/s] the tracking law's feedback aims at: the plan's speed at the current position."""
+        return float(self.plan.speed_at(obs.s)) if self.plan is not None else obs.v
 
     def wheel_force(self, obs: Observation) -> float:
         stale = self.plan is not None and obs.s > self.plan.s[-2]
@@ -421,7 +439,7 @@ class MpcController(ControllerBase):
             plan = self.plan
             ahead = obs.s + obs.v * self.settings.lookahead_time
             force = float(plan.wheel_force[plan.segment_at(ahead)])
-            force += m * self.settings.speed_gain * (float(plan.speed_at(obs.s)) - obs.v)
+            force += m * self.settings.speed_gain * (self.reference_speed(obs) - obs.v)
         # comfort: the acceleration this force gives under the controller's model stays within the bounds
         force = float(np.clip(force, res - m * st.decel_max, res + m * st.accel_max))
         # jerk limit on the command: |dF/dt| <= m j_max (the plan's accel is piecewise constant per segment)

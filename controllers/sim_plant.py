@@ -19,10 +19,12 @@ from roadload.trip import Trip
 
 from .base import Command, Observation
 
+from .force_model import WindEstimate
 from .plant import PlantStep
 from .vehicle_models import oracle_parameters
 from roadload.envs import Simulator
 from roadload.envs import Action
+from roadload.envs.simulator import TRUTH_COLUMNS
 
 SIM_DT = 0.01  # the simulator's substep [s]
 
@@ -55,6 +57,17 @@ class SimulatorPlant:
 
     def true_parameters(self) -> RoadLoadParameters:
         return oracle_parameters(self.sim.true_parameters(), self.spec)
+
+    def true_wind(self) -> WindEstimate | None:
+        """The true wind vector now in the road's frame (speed, direction it blows towards = the wind's angle to
+        the vehicle plus the vehicle's heading) with the vehicle's yaw drag factor; None in still air."""
+        truth = self.sim.true_parameters()
+        speed = float(truth.get("wind_speed", 0.0))
+        if speed <= 0.0:
+            return None
+        n = self.sim.truth_log().shape[0]
+        heading = float(self.sim.truth_log()[n - 1, TRUTH_COLUMNS["heading"]]) if n else 0.0
+        return WindEstimate(speed, float(truth["wind_angle"]) + heading, float(self.spec.aero.yaw_drag_factor))
 
     def can_window(self, t_from: float) -> Trip | None:
         """The 100 Hz CAN samples with t >= t_from as a Trip (None when fewer than 10)."""

@@ -70,6 +70,27 @@ def energy_model_from_spec(vehicle: VehicleSpec | str) -> SourceEnergyModel:
     return _energy_model_cached(spec.name, json.dumps(spec.to_dict(), sort_keys=True))
 
 
+def wheel_power_limit(spec: VehicleSpec) -> float:
+    """The largest traction power [W] the drive delivers at the wheels: full-load torque through the gearbox and
+    differential with their losses (the plant's drive-train functions), over speeds 3-40 m/s and every gear whose
+    engine speed is in range. The MPC's power constraint F_t v <= P_max is at the wheels, so the engine's rated
+    power would over-state it (truck: 352 kW rated against 334 kW at the wheels)."""
+    pt = Powertrain(spec)
+    d = spec.drivetrain
+    engine = d.require_engine() if d.kind != "bev" else None
+    r = float(spec.tires.dynamic_radius)
+    best = 0.0
+    for v in np.linspace(3.0, 40.0, 75):
+        for gear in range(1, d.n_gears + 1):
+            omega = pt.speed_ratio(gear) * v
+            if engine is not None and not engine.idle_speed <= omega <= engine.max_speed:
+                continue
+            _, t_max = pt.torque_limits(omega, v)
+            wheel_torque = pt.wheel_torque(gear, t_max, omega)
+            best = max(best, wheel_torque / r * v)
+    return best
+
+
 def _fit_energy(spec: VehicleSpec) -> SourceEnergyModel:
 
     pt = Powertrain(spec)
@@ -100,7 +121,7 @@ def _fit_energy(spec: VehicleSpec) -> SourceEnergyModel:
         coef = fit_loss_polynomial(w_list, t_list, loss)
         _record_fit(spec.name, w_list, t_list, loss, coef)
         return SourceEnergyModel(kind="ev", wheel_radius=r, gear_ratios=(ratio,), loss=coef,
-                                 max_power=float(m.max_power), max_torque=float(m.max_torque),
+                                 max_power=wheel_power_limit(spec), max_torque=float(m.max_torque),
                                  max_regen_power=float(m.regen_power_limit),
                                  max_regen_torque=float(m.regen_torque_limit),
                                  auxiliary_power=aux, max_brake_deceleration=0.8 * G, name=spec.name)
@@ -142,17 +163,37 @@ def _fit_energy(spec: VehicleSpec) -> SourceEnergyModel:
     up = 0.5 * (shift_rule.upshift_speed_low + shift_rule.upshift_speed_high)
     shift = tuple(float(up * r / ratios[g]) for g in range(d.n_gears - 1))
     torque_max = float(np.max(e.full_load.y))
-    power_max = rated
+    power_max = wheel_power_limit(spec)
     # engine brake (+ retarder) in fuel cut: the drag torque at the shift rule's cruising speed, and the largest
     # drag power over the speed range, both at 90 % (the plant drops braking beyond its capacity)
     w_drag = np.linspace(float(e.idle_speed), float(e.max_speed), 50)
     drag = -np.interp(w_drag, e.drag.x, e.drag.y)
     brake_torque = 0.9 * float(np.interp(up, e.drag.x, -np.asarray(e.drag.y)))
     brake_power = 0.9 * float(np.max(drag * w_drag))
+    table_speeds = np.linspace(1.0, 40.0, 79)
+    forces, full_omega, full_power = [], [], []
+    for gear in range(1, d.n_gears + 1):
+        row = []
+        for v in table_speeds:
+            omega = pt.speed_ratio(gear) * v
+            if not e.idle_speed <= omega <= e.max_speed:
+                row.append(0.0)
+                continue
+            _, t_full = pt.torque_limits(omega, v)
+            row.append(pt.wheel_torque(gear, t_full, omega) / r)
+            full_omega.append(omega)
+            full_power.append(row[-1] * v)
+        forces.append(tuple(row))
+    # the wheel power at full load over the shaft speed, a quadratic over the upper half of the speed range (where
+    # the shift rule keeps the engine): the MPC's traction power limit at the shift rule's speed
+    fo, fp = np.asarray(full_omega), np.asarray(full_power)
+    upper = fo >= 0.5 * (e.idle_speed + e.max_speed) - 0.25 * (e.max_speed - e.idle_speed)
+    full_load = tuple(float(c) for c in np.polyfit(fo[upper], fp[upper], 2)[::-1])
     return SourceEnergyModel(kind="ice", wheel_radius=r, gear_ratios=ratios, loss=ice_loss, max_power=power_max,
                              max_torque=torque_max, max_regen_power=brake_power, max_regen_torque=brake_torque,
                              indicated_efficiency=float(min(max(eta, 0.05), 1.0)),
-                             auxiliary_power=0.0, max_brake_deceleration=0.8 * G, shift_speeds=shift, name=spec.name)
+                             auxiliary_power=0.0, max_brake_deceleration=0.8 * G, shift_speeds=shift, name=spec.name,
+                             traction_table=(tuple(map(float, table_speeds)), *forces), full_load_power=full_load)
 
 
 _COAST_DOWN_BY_SPEC: dict[str, tuple[float, float, float]] = {}

@@ -28,8 +28,8 @@ import numpy as np
 from .units import G, STANDARD_AIR_DENSITY
 
 __all__ = ["RoadLoadError", "RoadLoadParameters", "aerodynamic_drag_force", "climbing_force",
-           "cornering_resistance_force", "road_load", "rolling_resistance_coefficient", "rolling_resistance_force",
-           "tractive_force"]
+           "cornering_resistance_force", "crosswind_drag_increase", "road_load", "rolling_resistance_coefficient",
+           "rolling_resistance_force", "tractive_force"]
 
 
 class RoadLoadError(ValueError):
@@ -51,6 +51,24 @@ def aerodynamic_drag_force(air_density, drag_area, air_speed):
     """F_a = rho_a/2 c_x A_V v_a^2 [N] (eq. 2.7) along the direction of travel; air_density [kg/m^3], drag_area
     c_x A_V [m^2], air_speed v_a = v + w [m/s] (w: headwind component, eq. 2.8)."""
     return 0.5 * air_density * drag_area * air_speed * air_speed
+
+
+def crosswind_drag_increase(drag_coefficient, air_speed_x, crosswind, yaw_drag_factor, xp=np):
+    """F_a(u_x, u_y) - c_V u_x^2 [N]: what a crosswind adds to the drag of the approach speed u_x = v + w [m/s].
+
+    With the approach velocity u = (u_x, u_y) (eq. 2.8a; u_y the crosswind [m/s]), v_a = |u| and the yaw angle
+    psi_a, c_x(psi_a) = c_w cos psi_a (1 + k sin^2 psi_a) (eq. 2.7, k the yaw drag factor [1]) gives
+    F_a = c_V u_x v_a (1 + k u_y^2 / v_a^2), c_V = rho_a/2 c_w A_V [kg/m]; this returns
+    c_V u_x ((v_a - u_x) + k u_y^2 / v_a), with v_a - u_x written without cancellation (u_y^2 / (v_a + u_x) for
+    u_x >= 0). Exactly 0 without crosswind. numpy or CasADi (``xp=casadi``)."""
+    uy2 = crosswind * crosswind
+    air_speed = xp.sqrt(air_speed_x * air_speed_x + uy2 + 1e-12)
+    excess = uy2 / (air_speed + xp.fabs(air_speed_x))  # = v_a - u_x where u_x >= 0
+    if xp is np:
+        excess = np.where(air_speed_x >= 0, excess, air_speed - air_speed_x)
+    else:
+        excess = xp.if_else(air_speed_x >= 0, excess, air_speed - air_speed_x)
+    return drag_coefficient * air_speed_x * (excess + yaw_drag_factor * uy2 / air_speed)
 
 
 def climbing_force(mass, grade, xp=np):

@@ -1,9 +1,10 @@
 """roadload.experiments: the experiments run on top of the algorithm packages, one module (or small subpackage)
 each; ``scripts/`` holds their thin entry points (argument parsing lives here, in each module's ``main``).
 
-- controllers: ``controller_comparison`` (+ ``time_matching``, ``controller_report``), ``headline`` (paired
-  comparison and sensitivity map), ``headline_refit`` and ``headline_resolution`` (re-analyses of stored runs),
-  ``truck_convergence``, ``truck_lambda_scan``;
+- controllers: ``controller_comparison`` (+ ``time_matching``), ``headline`` (paired comparison and sensitivity
+  map), ``optimum_benchmark`` (every controller against the full-route optimum, + ``fastsim_check``),
+  ``headline_refit`` and ``headline_resolution`` (re-analyses of stored runs), ``truck_convergence``,
+  ``truck_lambda_scan``;
 - estimators: ``ch3_reproduction`` (chapter 3), ``fleet`` (chapter-5 fleet campaign), ``real_i3_ch5`` (chapter 5
   on the real BMW i3 trips), ``measurement_bias``, ``robustness/`` (sweeps to breakdown);
 - RL: ``rl/`` (training, evaluation, highway, speed-shield effect, EcoTraffic-v0: ``traffic_training``,

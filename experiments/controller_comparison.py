@@ -1,18 +1,18 @@
-"""The headline comparison: eco-driving MPC (online / abc / oracle force model) against cruise control and the
-human-like driver, closed loop on the simulator, over roads x conditions, at equal trip time.
+"""The controller comparison: eco-driving MPC (oracle / abc / online force model) against cruise control, the
+human-like driver and the full-route optimum, closed loop on the simulator, paired per seed and at equal trip time.
 
-Per (road, condition) one sweep task runs:
-1. cruise control (PI at ``cruise_fraction`` of the allowed speed) -> the reference trip time T_ref;
-2. the simulator's human-like driver (its own pace: reported, NOT time-matched, flagged ``matched=False``);
-3. MPC with the oracle model, time-matched to T_ref within ``tol`` (search over the time weight lambda);
-4. MPC with the abc and the online (M4-RRLM) model, each time-matched the same way (search started from the
-   oracle's lambda).
-Energies are only compared between runs whose trip times agree within ``tol`` (``matched``); a run that cannot
-be matched is reported as such.
+Per (vehicle case, road, condition, seed) one task (:class:`PairedTask`, :func:`run_paired_task`) drives every
+force model on the same road, seed and plant at several time weights around cruise control's trip time; a joint
+local fit of energy over trip time (:func:`roadload.experiments.time_matching.fit_energy_at_time`) gives each
+model's energy at exactly that time; optionally the full-route optimum at the same time (:func:`optimum_at_tref`)
+and FASTSim's energy of every run (:mod:`roadload.experiments.fastsim_check`). :func:`paired_summary` reports
+every difference as a fleet total over seeds with its 1-sigma and 95 % CI (:func:`ratio_of_means_ci`). Both
+``roadload benchmark controllers`` (roads x conditions, car) and ``roadload benchmark headline`` (car and trucks,
+warm-ups, time knobs) run this one path.
 
-Roads: generated hilly country road, motorway and city route (seeded, see ``ROADS``) and a real grade profile
-from a BMW i3 log of the shared data (``i3_munich``: grade from the logged map elevation by
-:func:`roadload.io.profiles.profile_from_trip`; the log has no speed limits, so the limit is the running maximum
+Roads (:func:`paired_road`): generated hilly country roads, city routes with stops, motorway, EcoDrive-v0's route,
+long grades for the trucks, windows of the real long-haul cycle, and a real grade profile from a BMW i3 log of the
+shared data (``i3_munich``, :func:`road_by_name`; the log has no speed limits, so the limit is the running maximum
 of the logged speed over +-500 m rounded up to 10 km/h -- the same convention as the GradeIT routes). Conditions:
 ``CONDITIONS`` (effects of :mod:`roadload.envs.effects`).
 """
@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -37,12 +36,15 @@ from roadload.io.importer import import_log
 from roadload.io.profiles import profile_from_trip
 from roadload.io.derived import distance_from_speed
 from roadload.controllers.mpc import MpcSettings
+from roadload.controllers.optimum import OptimumTarget
+from roadload.estimators import chapter5_settings
+from roadload.estimators.change import ChangeDetection
+from roadload.experiments.fastsim_check import fastsim_energy
 from roadload.presets import TRUCK_NOMINAL_MASS, truck_spec
-from roadload.road_profiles import city, cycle_to_profile, hilly, long_haul_truck, long_grades, motorway
+from roadload.road_profiles import (city, cycle_to_profile, hilly, load_profile_start, long_haul_truck, long_grades,
+                                    motorway)
+from roadload.gym.ecodrive import cut_profile
 from roadload.controllers.drive import resolve_road
-from roadload.fileio import write_text
-from roadload.experiments.controller_report import write_figures
-from roadload.tables import markdown_table
 
 KMH = 1 / 3.6
 
@@ -51,6 +53,7 @@ CONDITIONS: dict[str, list[str] | None] = {
     "payload_300kg": ["payload:initial_payload=300,min_payload=300,max_payload=300,change_std=0"],
     "winter_tires": ["winter_tires"],
     "headwind_6ms": ["wind:mean_speed=6,direction=3.141592653589793,gust_std=0.5,direction_std=0.05"],
+    "crosswind_6ms": ["wind:mean_speed=6,direction=1.5707963267948966,gust_std=0.5,direction_std=0.05"],
     "roof_box": ["drag_area:roof_box=0.25,windows=0,sunroof=0,toggle_rate=0"],
     "drift": ["tire_warmup:cold_factor=1.3,distance_constant=3000",
               "oil_temperature:start_temperature=278.15",
@@ -99,122 +102,7 @@ def road_by_name(name: str) -> RoadProfile:
 ROADS = ("hilly", "motorway", "city", "i3_munich")
 
 
-@dataclass(frozen=True)
-class ComparisonTask:
-    road: str
-    condition: str
-    vehicle: str = "bmw_i3"
-    seed: int = 0
-    tol: float = 0.01
-    cruise_fraction: float = 0.9
-    solver: str = "ipopt"
-    force_models: tuple[str, ...] = ("oracle", "abc", "online")
-    keep_logs: bool = True
-
-
-def _row(task: ComparisonTask, controller: str, force_model: str, metrics: dict[str, Any], t_ref: float,
-         matched: bool, runs: int, lam: float, energy_at_ref: float = float("nan")) -> dict[str, Any]:
-    keys = ("energy_kWh", "trip_time", "speed_violations", "violation_time", "max_excess_kmh", "rms_jerk",
-            "max_abs_accel", "solve_time_median", "solve_time_p99", "fallbacks", "arrived")
-    row = {"road": task.road, "condition": task.condition, "vehicle": task.vehicle, "controller": controller,
-           "force_model": force_model, **{k: metrics.get(k) for k in keys}}
-    row["time_error_pct"] = 100.0 * (metrics["trip_time"] / t_ref - 1.0) if t_ref > 0 else float("nan")
-    if controller == "cruise":
-        energy_at_ref = metrics["energy_J"]
-    row["energy_at_Tref_kWh"] = energy_at_ref / 3.6e6
-    row.update(matched=bool(matched), runs=int(runs), time_weight=float(lam),
-               solves=int(metrics.get("ctl_solves", 0) or 0))
-    if "online" in metrics:
-        est = metrics["online"]["estimate"]
-        row["online_estimate"] = "; ".join(f"{k}={v:.4g}" for k, v in est.items())
-    return row
-
-
-def run_comparison_task(task: ComparisonTask) -> dict[str, Any]:
-    """All runs of one (road, condition): rows for the table and the logs of the final runs."""
-    road = road_by_name(task.road)
-    effects = CONDITIONS[task.condition]
-    cruise_settings = CruiseSettings(fraction=task.cruise_fraction)
-    base = DriveSettings(controller="cruise", force_model="abc", solver=task.solver, cruise=cruise_settings)
-    rows, logs = [], {}
-
-    def run(settings: DriveSettings):
-        res, _ = drive(task.vehicle, road, effects=effects, seed=task.seed, settings=settings)
-        return res
-
-    cruise = run(base)
-    t_ref = cruise.metrics["trip_time"]
-    if not math.isfinite(t_ref):
-        raise RuntimeError(f"cruise control did not arrive on {task.road}/{task.condition}")
-    rows.append(_row(task, "cruise", "-", cruise.metrics, t_ref, True, 1, float("nan")))
-    logs["cruise"] = cruise.log
-    human = run(replace(base, controller="human"))
-    rows.append(_row(task, "human", "-", human.metrics, t_ref,
-                     abs(human.metrics["trip_time"] / t_ref - 1) <= task.tol, 1, float("nan")))
-    logs["human"] = human.log
-    lam0 = 8000.0
-    for fm in task.force_models:
-        matched = match_trip_time(lambda lam: run(replace(base, controller="mpc", force_model=fm, time_weight=lam)),
-                                  t_ref, tol=task.tol, lam0=lam0)
-        if fm == "oracle" and matched.matched:
-            lam0 = matched.time_weight
-        rows.append(_row(task, "mpc", fm, matched.result.metrics, t_ref, matched.matched, matched.runs,
-                         matched.time_weight, matched.energy_at_target()))
-        logs[f"mpc_{fm}"] = matched.result.log
-    out: dict[str, Any] = {"rows": rows}
-    if task.keep_logs:
-        out["logs"] = {k: v[["t", "s", "v", "a", "traction", "regen", "brake", "energy", "speed_limit", "grade"]]
-                       for k, v in logs.items()}
-        out["road"] = {"s": road.distance, "elevation": road.elevation(), "speed_limit": road.speed_limit,
-                       "grade": road.grade}
-    return out
-
-
-def summarise(table: pd.DataFrame) -> pd.DataFrame:
-    """Per (road, condition): MPC energy relative to cruise and to the oracle MPC [%]: the energy interpolated to
-    exactly the cruise trip time where bracketing runs exist, else the matched run's energy (|dT| <= tol);
-    NaN where the run could not be matched."""
-    out = []
-    for (road, cond), g in table.groupby(["road", "condition"], sort=False):
-        def energy(ctl, fm="-"):
-            r = g[(g.controller == ctl) & (g.force_model == fm)]
-            if not len(r) or not bool(r.matched.iloc[0]):
-                return float("nan")
-            e = float(r.energy_at_Tref_kWh.iloc[0])
-            return e if math.isfinite(e) else float(r.energy_kWh.iloc[0])
-
-        cruise, oracle = energy("cruise"), energy("mpc", "oracle")
-        row = {"road": road, "condition": cond}
-        for fm in ("oracle", "abc", "online"):
-            e = energy("mpc", fm)
-            row[f"{fm}_vs_cruise_pct"] = 100 * (e / cruise - 1)
-            if fm != "oracle":
-                row[f"{fm}_vs_oracle_pct"] = 100 * (e / oracle - 1)
-        out.append(row)
-    return pd.DataFrame(out)
-
-
-def write_outputs(results: list[dict[str, Any]], failures: list[str], out: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """comparison.csv / comparison.md / summary.csv and the figures into ``out`` (atomic file writes)."""
-
-    out.mkdir(parents=True, exist_ok=True)
-    table = pd.DataFrame([r for res in results for r in res["rows"]])
-    summary = summarise(table) if len(table) else pd.DataFrame()
-    write_text(out / "comparison.csv", table.to_csv(index=False))
-    write_text(out / "summary.csv", summary.to_csv(index=False))
-    md = ["# Controller comparison (closed loop, simulator)", "",
-          "Energy at the source (battery) per run; MPC runs time-matched to cruise control (|time error| <= "
-          "tolerance, column `matched`); the human driver keeps its own pace (not time-matched).", "",
-          markdown_table(table), "", "## MPC energy relative to cruise control and to the oracle MPC [%]", "",
-          markdown_table(summary)]
-    if failures:
-        md += ["", "## Failed tasks", ""] + [f"- {f}" for f in failures]
-    write_text(out / "comparison.md", "\n".join(md) + "\n")
-    write_figures(results, table, out)
-    return table, summary
-
-
-# ============================================================================================= paired comparison
+# ================================================================================ paired comparison
 # Per (vehicle case, road, condition, seed) every force model drives the SAME road (generated from the seed, or
 # the seed-th window of a real grade profile), seed and plant, at several time weights around the cruise-control
 # trip time; a joint local fit of energy over trip time (time_matching.fit_energy_at_time) gives each model's
@@ -304,7 +192,9 @@ def _longhaul_profile() -> RoadProfile:
 
 def paired_road(name: str, seed: int, warmup: float = 0.0) -> RoadProfile:
     """Roads of the paired comparison, one per seed: 'hilly' (2.5 km generated country road), 'long_grades'
-    (4 km, 3-6 % grades of 2-4 km), 'longhaul_real' (10 km windows of the real long-haul truck cycle). Short,
+    (4 km, 3-6 % grades of 2-4 km), 'longhaul_real' (10 km windows of the real long-haul truck cycle), 'city'
+    (3 km with stops), 'motorway' (6 km), 'route' (EcoDrive-v0's 2 km route of the seed, where the RL policies
+    learnt). Short,
     because the shared machine gives each run a fraction of a core. ``warmup`` [m]: the generated road is that
     much longer; the measured segment is its last 2.5 / 4 km (see PairedTask.warmup)."""
     if name == "hilly":
@@ -315,14 +205,26 @@ def paired_road(name: str, seed: int, warmup: float = 0.0) -> RoadProfile:
         return long_grades(seed=seed, length=4000.0 + warmup)
     if name == "longhaul_real":
         return _longhaul_window(seed)
-    raise ValueError(f"unknown paired road {name!r}; known: hilly, hilly_short, long_grades, longhaul_real")
+    if name == "city":
+        return city(seed=seed, length=3000.0 + warmup)
+    if name == "motorway":
+        return motorway(seed=seed, length=6000.0 + warmup)
+    if name == "route":  # the EcoDrive-v0 route of this road seed (2 km of the generated hilly road), no warm-up
+        return cut_profile(load_profile_start("hilly", ROUTE_LENGTH, seed=seed), ROUTE_LENGTH)
+    raise ValueError(f"unknown paired road {name!r}; known: {', '.join(PAIRED_ROADS)}")
+
+
+PAIRED_ROADS = ("hilly", "hilly_short", "long_grades", "longhaul_real", "city", "motorway", "route")
+ROUTE_LENGTH = 2000.0  # [m] EcoDrive-v0's default route_length
 
 
 def parse_force_model(spec: str) -> tuple[str, dict[str, float] | None]:
-    """'oracle' | 'abc' | 'online' | 'wrong:mass=0.2,rolling=-0.5' -> (force model, errors)."""
+    """'oracle' | 'abc' | 'online' | 'online_wind' | 'wrong:mass=0.2,rolling=-0.5' -> (force model, errors); an
+    online model's estimator options after '@' (:func:`force_model_settings`) are not part of the name."""
     name, _, rest = spec.partition(":")
-    if name not in ("oracle", "abc", "online", "wrong"):
-        raise ValueError(f"force model {spec!r}: choose oracle, abc, online or wrong:<error>=<value>,...")
+    name = name.partition("@")[0]
+    if name not in ("oracle", "abc", "online", "online_wind", "wrong"):
+        raise ValueError(f"force model {spec!r}: choose oracle, abc, online, online_wind or wrong:<error>=<value>,...")
     if name != "wrong":
         return name, None
     errors = {}
@@ -330,6 +232,31 @@ def parse_force_model(spec: str) -> tuple[str, dict[str, float] | None]:
         k, _, v = item.partition("=")
         errors[k.strip()] = float(v)
     return name, errors
+
+
+def force_model_settings(spec: str) -> dict[str, Any]:
+    """DriveSettings fields of a force-model spec: 'online@SGMKF' (another catalogue estimator with chapter 5's
+    settings), 'online@RRLM+forgetting=0.995' (a setting changed), 'online@RRLM+cusum' (with the CUSUM change
+    detector, roadload.estimators.change), the same after 'online_wind'; 'wrong:...' as parse_force_model."""
+    fm, errors = parse_force_model(spec)
+    out: dict[str, Any] = {"force_model": fm, "wrong_model": errors}
+    head, _, options = spec.partition("@")
+    if not options:
+        return out
+    if fm not in ("online", "online_wind"):
+        raise ValueError(f"force model {spec!r}: estimator options after '@' are for online models only")
+    estimator, *items = [x.strip() for x in options.split("+") if x.strip()]
+    settings = dict(chapter5_settings("M4").get(estimator.upper(), {}))
+    for item in items:
+        if item == "cusum":
+            out["change_detection"] = ChangeDetection()
+            continue
+        key, _, value = item.partition("=")
+        if not value:
+            raise ValueError(f"force model {spec!r}: option {item!r} is not key=value or 'cusum'")
+        settings[key] = float(value)
+    out.update(estimator=estimator.upper(), estimator_settings=settings)
+    return out
 
 
 @dataclass(frozen=True)
@@ -374,6 +301,11 @@ class PairedTask:
     schedule_gain: float = 20.0  # schedule knob: P gain of the lambda feedback (TripSchedule.gain)
     schedule_pilot: bool = False  # schedule knob: lambda_0 from one oracle pilot run (see run_paired_task)
     schedule_shape: str = "linear"  # schedule knob: "linear" in distance or "cruise" (cruise control's time profile)
+    # the full-route optimum at T_ref on the same plant (controllers.optimum; net metric: the kinetic energy left
+    # is valued at 1/eta_i), so every model and cruise control is also compared with the best drive
+    optimum: bool = False
+    # every run's speed trace (with its grade) also through FASTSim 3 (experiments.fastsim_check; car only)
+    fastsim: bool = False
 
     def __post_init__(self) -> None:
         if self.metric not in METRICS:
@@ -399,6 +331,159 @@ METRICS = {"net": ("segment_time", "energy_net_J"), "raw": ("trip_time", "energy
 KNOBS = ("lambda", "schedule")
 
 
+class _PairedRuns:
+    """The runs of one paired-comparison seed (one road, seed and plant) and their (trip time, energy) points in
+    the task's metric and in the other one; net energies get cruise control's kinetic-energy change back."""
+
+    def __init__(self, task: PairedTask) -> None:
+        self.task = task
+        self.case = VEHICLE_CASES[task.case]
+        self.road = paired_road(task.road, task.seed, task.warmup)
+        self.effects = CONDITIONS[task.condition] if not self.case.truck else None
+        base = replace(self.case.settings(), measure_from=task.warmup)
+        self.base = replace(base, mpc=replace(base.mpc, terminal_value=task.terminal_value))
+        self.vehicle = self.case.vehicle()
+        self.time_key, self.energy_key = METRICS[task.metric]
+        self.other = METRICS["raw" if task.metric == "net" else "net"]
+        self.offset = 0.0  # [J] cruise control's segment energy minus its net energy
+        self.shape: tuple[tuple[float, ...], tuple[float, ...]] | None = None
+        self.runs_out: list[dict[str, Any]] = []
+        self.cruise_pts: list[tuple[float, float]] = []
+        self.cruise_other: list[tuple[float, float]] = []
+        self.points: dict[str, list[tuple[float, float]]] = {}
+        self.points_other: dict[str, list[tuple[float, float]]] = {}
+        self.fastsim_pts: dict[str, list[tuple[float, float]]] = {}
+
+    def run(self, settings: DriveSettings, label: str | None = None):
+        """One closed-loop run; with ``task.fastsim`` its speed trace also through FASTSim 3 (labelled runs)."""
+        res, plant = drive(self.vehicle, self.road, effects=self.effects, seed=self.task.seed, settings=settings)
+        if self.task.fastsim and label is not None and res.metrics.get("arrived"):
+            self._fastsim(res, plant, label)
+        return res
+
+    def _fastsim(self, res, plant, label: str) -> None:
+        m, road = res.metrics, self.road
+        fs = fastsim_energy(np.append(res.log["t"].to_numpy(float), m["arrival_time"]),
+                            np.append(res.log["s"].to_numpy(float), road.length),
+                            np.append(res.log["v"].to_numpy(float), m["arrival_speed"]), road, start=self.task.warmup)
+        mass = plant.true_parameters().inertial_mass  # the kinetic energy left, booked as the net metric does
+        ke = 0.5 * mass * (m["segment_start_speed"] ** 2 - m["arrival_speed"] ** 2)
+        m["fastsim_energy_J"] = fs["energy_J"]
+        m["fastsim_energy_net_J"] = fs["energy_J"] + ke
+        self.fastsim_pts.setdefault(label, []).append((m["segment_time"], m["fastsim_energy_net_J"]))
+
+    def _point(self, m: dict[str, Any]) -> tuple[tuple[float, float], tuple[float, float]]:
+        """(time [s], energy [J]) of a run in the task's metric and in the other one."""
+        net = self.task.metric == "net"
+        return ((m[self.time_key], m[self.energy_key] + (self.offset if net else 0.0)),
+                (m[self.other[0]], m[self.other[1]] + (0.0 if net else self.offset)))
+
+    def cruise_sweep(self) -> float:
+        """Cruise control at its set-speed fraction f0 and f0 +- 0.03, +- 0.06: its trip time at f0 [s]."""
+        f0 = self.base.cruise.fraction
+        t_cruise = float("nan")
+        for df in (0.0, -0.03, 0.03, -0.06, 0.06):
+            f = f0 + df
+            if not 0.5 < f <= 1.0:
+                continue
+            res = self.run(replace(self.base, cruise=replace(self.base.cruise, fraction=f)), "cruise")
+            m = res.metrics
+            if df == 0.0:  # net energies get cruise control's kinetic-energy change back (see _NET_OFFSET_DOC)
+                self.shape = schedule_shape(res.log, self.task.warmup, self.road.length)
+                self.offset = m["segment_energy_J"] - m["energy_net_J"]
+                t_cruise = m[self.time_key]
+            point, point_other = self._point(m)
+            self.cruise_pts.append(point)
+            self.cruise_other.append(point_other)
+            self.runs_out.append({"force_model": "cruise", "cruise_fraction": f, **_run_metrics(m),
+                                  "fastsim_energy_net_J": m.get("fastsim_energy_net_J")})
+        if not math.isfinite(t_cruise):
+            raise RuntimeError(f"cruise control did not arrive on {self.task.road} seed {self.task.seed}")
+        return t_cruise
+
+    def human(self) -> dict[str, Any]:
+        """The human-like driver at its own pace, in the same metric as cruise control's."""
+        if not self.task.human:
+            return {}
+        m = self.run(replace(self.base, controller="human"), "human").metrics
+        (t, e), _ = self._point(m)
+        extra = {"human_energy_J": e, "human_time": t}
+        if self.task.fastsim and "fastsim_energy_net_J" in m:
+            extra["human_fastsim_energy_J"] = m["fastsim_energy_net_J"] + self.offset
+            extra["human_fastsim_time"] = m["segment_time"]
+        return extra
+
+    def mpc(self, spec: str, lam: float, target: float | None = None):
+        """One MPC run with force model ``spec`` at time weight ``lam`` [J/s] (or the schedule knob's target)."""
+        task = self.task
+        multistart = task.multistart_period if task.multistart_period is not None else (
+            5.0 if task.knob == "schedule" else 0.0)
+        settings = replace(self.base, controller="mpc", time_weight=lam, multistart_period=multistart,
+                           gear_command=task.gear_command, warmup_driver=task.warmup_driver,
+                           **force_model_settings(spec))
+        if target is not None:
+            settings = replace(settings, target_time=target, schedule_gain=task.schedule_gain,
+                               target_shape=self.shape if task.schedule_shape == "cruise" else None)
+        res = self.run(settings, spec)
+        m = res.metrics
+        point, point_other = self._point(m)
+        self.points.setdefault(spec, []).append(point)
+        self.points_other.setdefault(spec, []).append(point_other)
+        online = m.get("online", {})
+        self.runs_out.append({"force_model": spec, "time_weight": lam, "target_time": target,
+                              "time_weight_median": m.get("ctl_time_weight_median"),
+                              "multistart_switches": m.get("ctl_multistart_switches", 0), **_run_metrics(m),
+                              "solve_time_median": m.get("solve_time_median"), "fallbacks": m.get("fallbacks"),
+                              "online_estimate": online.get("estimate"), "online_history": online.get("history"),
+                              "fastsim_energy_net_J": m.get("fastsim_energy_net_J")})
+        return res
+
+    def schedule_knob(self, t_cruise: float) -> tuple[MatchedRun, float, float]:
+        """Every model targets T_cruise x (1, *time_factors), no search: (the oracle's run, lambda_0, T_ref)."""
+        task = self.task
+        # lambda_0 of the feedback: one oracle pilot run from the case's start value, then the median lambda its
+        # feedback used over the measured segment (a P law keeps a lateness proportional to the error in lambda_0)
+        lam_star = self.case.lam0
+        if task.schedule_pilot:
+            pilot = self.mpc(task.force_models[0], self.case.lam0, t_cruise)
+            lam_pilot = float(pilot.metrics.get("ctl_time_weight_median", float("nan")))
+            lam_star = lam_pilot if math.isfinite(lam_pilot) and lam_pilot > 0 else self.case.lam0
+        first = None
+        for spec in task.force_models:
+            for f in (1.0, *task.time_factors):
+                res = self.mpc(spec, lam_star, t_cruise * f)
+                first = res if first is None else first
+        assert first is not None
+        err = first.metrics[self.time_key] / t_cruise - 1.0
+        return MatchedRun(first, lam_star, t_cruise, abs(err) <= task.tol, 1, [], self.time_key), lam_star, t_cruise
+
+    def lambda_knob(self, t_cruise: float) -> tuple[MatchedRun, float, float]:
+        """The oracle matched to T_cruise over lambda, every model at lambda* x factors (and a search where all
+        its runs miss): (the oracle's match, lambda*, T_ref)."""
+        task = self.task
+        matched = match_trip_time(lambda lam: self.mpc("oracle", lam), t_cruise, tol=task.tol, lam0=self.case.lam0,
+                                  max_runs=task.max_search_runs, step=2.0, time_key=self.time_key,
+                                  energy_key=self.energy_key)
+        lam_star = matched.time_weight
+        t_ref = t_cruise if matched.matched else float(matched.result.metrics[self.time_key])
+        for spec in task.force_models:
+            factors = task.weight_factors if spec == "oracle" else (1.0, *task.weight_factors)
+            for f in factors:
+                self.mpc(spec, lam_star * f)
+            if spec != "oracle" and task.model_search_runs > 0:
+                tried = [(lam_star * f, t) for f, (t, _) in zip(factors, self.points[spec][-len(factors):])]
+                _search_model_lambda(lambda lam, spec=spec: self.mpc(spec, lam).metrics[self.time_key], tried,
+                                     t_ref, task.model_search_runs, task.model_reach, task.tol)
+        return matched, lam_star, t_ref
+
+    def fastsim_at(self, t_ref: float) -> dict[str, Any]:
+        """The same joint local fit on FASTSim's energies of the same runs."""
+        shifted = {k: [(t, e + self.offset) for t, e in v] for k, v in self.fastsim_pts.items()}
+        fs_fit = fit_energy_at_time({k: v for k, v in shifted.items() if k not in ("cruise", "human")}, t_ref)
+        fs_cruise = fit_energy_at_time({"cruise": shifted.get("cruise", [])}, t_ref, window=0.08)
+        return {"fastsim_energy_at_tref_J": fs_fit.energy, "fastsim_cruise_energy_J": fs_cruise.energy["cruise"]}
+
+
 def run_paired_task(task: PairedTask) -> dict[str, Any]:
     """One seed of the paired comparison.
 
@@ -415,123 +500,49 @@ def run_paired_task(task: PairedTask) -> dict[str, Any]:
     marginal source cost (drive.net_energy_metrics) relative to cruise control's. Differences between runs are
     those of E_net; percentages are relative to an energy of the size of a real trip's (a net energy alone can be
     ~0 or negative on a downhill road)."""
-    case = VEHICLE_CASES[task.case]
-    road = paired_road(task.road, task.seed, task.warmup)
-    effects = CONDITIONS[task.condition] if not case.truck else None
-    base = replace(case.settings(), measure_from=task.warmup)
-    base = replace(base, mpc=replace(base.mpc, terminal_value=task.terminal_value))
-    vehicle = case.vehicle()
-    time_key, energy_key = METRICS[task.metric]
-    other = METRICS["raw" if task.metric == "net" else "net"]
-
-    def run(settings: DriveSettings):
-        res, _ = drive(vehicle, road, effects=effects, seed=task.seed, settings=settings)
-        return res
-
-    runs_out: list[dict[str, Any]] = []
-    f0 = base.cruise.fraction
-    cruise_pts: list[tuple[float, float]] = []
-    cruise_other: list[tuple[float, float]] = []
-    offset = 0.0
-    t_cruise = float("nan")
-    shape = None
-    for df in (0.0, -0.03, 0.03, -0.06, 0.06):
-        f = f0 + df
-        if not 0.5 < f <= 1.0:
-            continue
-        cruise_res = run(replace(base, cruise=replace(base.cruise, fraction=f)))
-        m = cruise_res.metrics
-        if df == 0.0:
-            shape = schedule_shape(cruise_res.log, task.warmup, road.length)
-        if df == 0.0:  # net energies get cruise control's kinetic-energy change back (see _NET_OFFSET_DOC)
-            offset = m["segment_energy_J"] - m["energy_net_J"]
-        cruise_pts.append((m[time_key], m[energy_key] + (offset if task.metric == "net" else 0.0)))
-        cruise_other.append((m[other[0]], m[other[1]] + (offset if task.metric == "raw" else 0.0)))
-        runs_out.append({"force_model": "cruise", "cruise_fraction": f, **_run_metrics(m)})
-        if df == 0.0:
-            t_cruise = m[time_key]
-    if not math.isfinite(t_cruise):
-        raise RuntimeError(f"cruise control did not arrive on {task.road} seed {task.seed}")
-    extra = {}
-    if task.human:
-        human = run(replace(base, controller="human")).metrics  # the same metric as cruise control's
-        extra = {"human_energy_J": human[energy_key] + (offset if task.metric == "net" else 0.0),
-                 "human_time": human[time_key]}
-    points: dict[str, list[tuple[float, float]]] = {}
-    points_other: dict[str, list[tuple[float, float]]] = {}
-
-    def mpc(spec: str, lam: float, target: float | None = None):
-        fm, errors = parse_force_model(spec)
-        multistart = task.multistart_period if task.multistart_period is not None else (
-            5.0 if task.knob == "schedule" else 0.0)
-        settings = replace(base, controller="mpc", force_model=fm, time_weight=lam, wrong_model=errors,
-                           multistart_period=multistart, gear_command=task.gear_command,
-                           warmup_driver=task.warmup_driver)
-        if target is not None:
-            settings = replace(settings, target_time=target,
-                               schedule_gain=task.schedule_gain,
-                               target_shape=shape if task.schedule_shape == "cruise" else None)
-        res = run(settings)
-        m = res.metrics
-        points.setdefault(spec, []).append((m[time_key], m[energy_key] + (offset if task.metric == "net" else 0.0)))
-        points_other.setdefault(spec, []).append((m[other[0]], m[other[1]] + (offset if task.metric == "raw"
-                                                                                 else 0.0)))
-        runs_out.append({"force_model": spec, "time_weight": lam, "target_time": target,
-                         "time_weight_median": m.get("ctl_time_weight_median"),
-                         "multistart_switches": m.get("ctl_multistart_switches", 0), **_run_metrics(m),
-                         "solve_time_median": m.get("solve_time_median"), "fallbacks": m.get("fallbacks"),
-                         "online_estimate": m.get("online", {}).get("estimate"),
-                         "online_history": m.get("online", {}).get("history")})
-        return res
-
-    if task.knob == "schedule":  # every model targets T_cruise x (1, *time_factors); no search
-        # lambda_0 of the feedback: one oracle pilot run from the case's start value, then the median lambda its
-        # feedback used over the measured segment (a P law keeps a lateness proportional to the error in lambda_0)
-        lam_star = case.lam0
-        if task.schedule_pilot:
-            pilot = mpc(task.force_models[0], case.lam0, t_cruise)
-            lam_pilot = float(pilot.metrics.get("ctl_time_weight_median", float("nan")))
-            lam_star = lam_pilot if math.isfinite(lam_pilot) and lam_pilot > 0 else case.lam0
-        for spec in task.force_models:
-            for f in (1.0, *task.time_factors):
-                res = mpc(spec, lam_star, t_cruise * f)
-                if spec == task.force_models[0] and f == 1.0:
-                    first = res
-        err = first.metrics[time_key] / t_cruise - 1.0
-        matched = MatchedRun(first, lam_star, t_cruise, abs(err) <= task.tol, 1, [], time_key)
-        t_ref = t_cruise
-    else:
-        matched = match_trip_time(lambda lam: mpc("oracle", lam), t_cruise, tol=task.tol, lam0=case.lam0,
-                                  max_runs=task.max_search_runs, step=2.0, time_key=time_key, energy_key=energy_key)
-        lam_star = matched.time_weight
-        t_ref = t_cruise if matched.matched else float(matched.result.metrics[time_key])
-        for spec in task.force_models:
-            factors = task.weight_factors if spec == "oracle" else (1.0, *task.weight_factors)
-            for f in factors:
-                mpc(spec, lam_star * f)
-            if spec != "oracle" and task.model_search_runs > 0:
-                tried = [(lam_star * f, t) for f, (t, _) in zip(factors, points[spec][-len(factors):])]
-                _search_model_lambda(lambda lam, spec=spec: mpc(spec, lam).metrics[time_key], tried, t_ref,
-                                     task.model_search_runs, task.model_reach, task.tol)
-    fit = fit_energy_at_time(points, t_ref)
-    cruise_fit = fit_energy_at_time({"cruise": cruise_pts}, t_ref, window=0.08)
+    runs = _PairedRuns(task)
+    t_cruise = runs.cruise_sweep()
+    extra = runs.human()
+    knob = runs.schedule_knob if task.knob == "schedule" else runs.lambda_knob
+    matched, lam_star, t_ref = knob(t_cruise)
+    fit = fit_energy_at_time(runs.points, t_ref)
+    cruise_fit = fit_energy_at_time({"cruise": runs.cruise_pts}, t_ref, window=0.08)
     # the other metric on the same runs (before/after comparison of the resolution): its own reference time
-    t_ref_other = (float(cruise_other[0][0]) if matched.matched or task.knob == "schedule"
-                   else float(matched.result.metrics[other[0]]))
-    fit_other = fit_energy_at_time(points_other, t_ref_other)
-    cruise_fit_other = fit_energy_at_time({"cruise": cruise_other}, t_ref_other, window=0.08)
+    t_ref_other = (float(runs.cruise_other[0][0]) if matched.matched or task.knob == "schedule"
+                   else float(matched.result.metrics[runs.other[0]]))
+    fit_other = fit_energy_at_time(runs.points_other, t_ref_other)
+    cruise_fit_other = fit_energy_at_time({"cruise": runs.cruise_other}, t_ref_other, window=0.08)
+    if task.optimum:
+        extra.update(optimum_at_tref(task, runs.road, runs.effects, runs.base, t_ref, runs.offset))
+    if task.fastsim:
+        extra.update(runs.fastsim_at(t_ref))
     return {"task": task.__dict__, "t_ref": t_ref, "t_cruise": t_cruise, "t_ref_moved": t_ref != t_cruise,
-            "kinetic_energy_offset_J": offset,
+            "kinetic_energy_offset_J": runs.offset,
             "other_metric": {"metric": "raw" if task.metric == "net" else "net", "t_ref": t_ref_other,
                              "energy_at_tref_J": fit_other.energy, "cruise_energy_J": cruise_fit_other.energy[
                                  "cruise"], "fit_residual_std": fit_other.residual_std,
                              "nearest_time_error": fit_other.nearest},
-            "cruise_energy_J": cruise_fit.energy["cruise"], "cruise_nominal_energy_J": cruise_pts[0][1],
+            "cruise_energy_J": cruise_fit.energy["cruise"], "cruise_nominal_energy_J": runs.cruise_pts[0][1],
             "cruise_spanned": cruise_fit.spanned["cruise"],
             "lambda_star": lam_star, "oracle_time_error": matched.time_error, "oracle_matched": matched.matched,
             "energy_at_tref_J": fit.energy, "nearest_time_error": fit.nearest, "spanned": fit.spanned,
             "fit_residual_std": fit.residual_std, "fit_slope": fit.slope, "fit_curvature": fit.curvature,
-            "runs": runs_out, **extra}
+            "runs": runs.runs_out, **extra}
+
+
+def optimum_at_tref(task: PairedTask, road: RoadProfile, effects, base: DriveSettings, t_ref: float,
+                    offset: float) -> dict[str, Any]:
+    """The full-route optimum of the measured segment at T_ref, driven on the same plant (cruise control drives a
+    warm-up): its net energy (the kinetic energy left at 1/eta_i, the paired comparison's metric; the MPC's
+    terminal value 'source'), corrected to exactly T_ref with the optimum's own slope dE*/dT."""
+    target = OptimumTarget(trip_time=t_ref, arrival_speed=None, terminal="source")
+    settings = replace(base, controller="optimum", force_model="oracle", optimum_target=target)
+    res, _ = drive(VEHICLE_CASES[task.case].vehicle(), road, effects=effects, seed=task.seed, settings=settings)
+    m = res.metrics
+    slope = float(m.get("ctl_optimum_time_slope", float("nan")))
+    energy = m["energy_net_J"] + offset + slope * (t_ref - m["segment_time"])
+    return {"optimum_energy_J": energy, "optimum_time": m["segment_time"], "optimum_time_slope": slope,
+            "optimum_model_energy_J": m.get("ctl_optimum_model_energy_J"), "optimum_arrival_speed": m["arrival_speed"]}
 
 
 def _search_model_lambda(run, tried: list[tuple[float, float]], t_ref: float, max_runs: int, reach: float,
@@ -610,7 +621,7 @@ def other_metric_results(results: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
-def _ratio_of_means_ci(energy: np.ndarray, reference: np.ndarray) -> tuple[float, float, float, float]:
+def ratio_of_means_ci(energy: np.ndarray, reference: np.ndarray) -> tuple[float, float, float, float]:
     """Paired difference as a fleet total [%]: 100 mean(E - E_ref) / mean(E_ref) over the seeds where both are
     finite, its 1-sigma standard error and Student-t 95 % CI (the spread of the per-seed differences E - E_ref
     over the same mean reference). Unlike the mean of per-seed percentages it stays meaningful when one road is
@@ -625,7 +636,7 @@ def _ratio_of_means_ci(energy: np.ndarray, reference: np.ndarray) -> tuple[float
 
 def paired_summary(results: list[dict[str, Any]]) -> pd.DataFrame:
     """Per (case, road, condition, force model): paired energy difference at equal time vs the oracle MPC and vs
-    cruise control [%] over seeds (fleet totals, :func:`_ratio_of_means_ci`): mean, 1-sigma resolution (standard
+    cruise control [%] over seeds (fleet totals, :func:`ratio_of_means_ci`): mean, 1-sigma resolution (standard
     error), 95 % CI, and 'resolved' (CI excludes 0); the median of the per-seed percentages alongside."""
     rows = []
     groups: dict[tuple, list[dict[str, Any]]] = {}
@@ -639,9 +650,10 @@ def paired_summary(results: list[dict[str, Any]]) -> pd.DataFrame:
             e_o = np.array([r["energy_at_tref_J"]["oracle"] for r in rs], float)
             e_c = np.array([r["cruise_energy_J"] for r in rs], float)
             vs_oracle = 100 * (e_m / e_o - 1)
-            mo, so, lo, hi = _ratio_of_means_ci(e_m, e_o)
-            mc, sc, lc, hc = _ratio_of_means_ci(e_m, e_c)
+            mo, so, lo, hi = ratio_of_means_ci(e_m, e_o)
+            mc, sc, lc, hc = ratio_of_means_ci(e_m, e_c)
             near = np.array([r["nearest_time_error"][m] for r in rs], float)
+            extra = _optimum_fastsim_columns(rs, e_m, m)
             rows.append({"vehicle": case, "road": road, "condition": cond, "force_model": m,
                          "metric": rs[0]["task"].get("metric", "raw"), "warmup_m": rs[0]["task"].get("warmup", 0.0),
                          "seeds": int(np.isfinite(vs_oracle).sum()),
@@ -652,8 +664,32 @@ def paired_summary(results: list[dict[str, Any]]) -> pd.DataFrame:
                          "vs_cruise_pct": mc, "vs_cruise_1sigma_pct": sc, "vs_cruise_ci95_lo": lc,
                          "vs_cruise_ci95_hi": hc,
                          "nearest_run_time_error_pct_median": float(100 * np.nanmedian(near)),
-                         "fit_residual_std_pct": float(100 * np.nanmedian([r["fit_residual_std"] for r in rs]))})
+                         "fit_residual_std_pct": float(100 * np.nanmedian([r["fit_residual_std"] for r in rs])),
+                         **extra})
+        if any("optimum_energy_J" in r for r in rs):  # cruise control against the optimum too
+            e_c = np.array([r["cruise_energy_J"] for r in rs], float)
+            rows.append({"vehicle": case, "road": road, "condition": cond, "force_model": "cruise control",
+                         "metric": rs[0]["task"].get("metric", "raw"), "warmup_m": rs[0]["task"].get("warmup", 0.0),
+                         "seeds": int(np.isfinite(e_c).sum()), **_optimum_fastsim_columns(rs, e_c, None)})
     return pd.DataFrame(rows)
+
+
+def _optimum_fastsim_columns(results: list[dict[str, Any]], energy: np.ndarray, model: str | None
+                             ) -> dict[str, Any]:
+    """vs the optimum at T_ref [%] (fleet total, 1-sigma, CI) where the results have it; FASTSim's energy of the
+    same runs vs FASTSim's cruise control [%] where they have it (model None: cruise control itself)."""
+    out: dict[str, Any] = {}
+    if any("optimum_energy_J" in r for r in results):
+        e_opt = np.array([r.get("optimum_energy_J", np.nan) for r in results], float)
+        mo, so, lo, hi = ratio_of_means_ci(energy, e_opt)
+        out.update(vs_optimum_pct=mo, vs_optimum_1sigma_pct=so, vs_optimum_ci95_lo=lo, vs_optimum_ci95_hi=hi)
+    if model is not None and any("fastsim_energy_at_tref_J" in r for r in results):
+        fs_m = np.array([r.get("fastsim_energy_at_tref_J", {}).get(model, np.nan) for r in results], float)
+        fs_c = np.array([r.get("fastsim_cruise_energy_J", np.nan) for r in results], float)
+        mf, sf, lf, hf = ratio_of_means_ci(fs_m, fs_c)
+        out.update(fastsim_vs_cruise_pct=mf, fastsim_vs_cruise_1sigma_pct=sf, fastsim_vs_cruise_ci95_lo=lf,
+                   fastsim_vs_cruise_ci95_hi=hf)
+    return out
 
 
 def format_difference(mean: float, se: float, lo: float, hi: float) -> str:

@@ -56,7 +56,8 @@ def headline_tasks(cases: list[str], roads: dict[str, list[str]], seeds: int, co
                    terminal_value: str = "source", schedule_gain: float | None = None,
                    schedule_pilot: bool = False, multistart_period: float | None = None,
                    gear_command: bool = False, model_search_runs: int = 0,
-                   warmup_driver: str = "mpc") -> list[PairedTask]:
+                   warmup_driver: str = "mpc", force_models: tuple[str, ...] | None = None,
+                   optimum: bool = False, fastsim: bool = False) -> list[PairedTask]:
     """One task per (case, road, condition, seed); roads: {case: [road, ...]}; search_runs / weight_factors
     override :class:`PairedTask`'s (fewer runs per seed on a loaded machine); truck_warmup [m]: warm-up before
     the trucks' measured segment."""
@@ -64,7 +65,9 @@ def headline_tasks(cases: list[str], roads: dict[str, list[str]], seeds: int, co
     extra: dict = dict(QUICK) if quick else {}
     extra.update(metric=metric, knob=knob, terminal_value=terminal_value, schedule_pilot=schedule_pilot,
                  multistart_period=multistart_period, gear_command=gear_command,
-                 model_search_runs=model_search_runs, warmup_driver=warmup_driver)
+                 model_search_runs=model_search_runs, warmup_driver=warmup_driver, optimum=optimum)
+    if force_models is not None:
+        extra["force_models"] = force_models
     if schedule_gain is not None:
         extra["schedule_gain"] = schedule_gain
     if time_factors is not None:
@@ -75,7 +78,8 @@ def headline_tasks(cases: list[str], roads: dict[str, list[str]], seeds: int, co
         extra["weight_factors"] = weight_factors
     # seed-major: a sweep that is stopped early has the same seeds for every case
     return [PairedTask(case, road, seed, condition=c, human=human,
-                       warmup=truck_warmup if VEHICLE_CASES[case].truck else car_warmup, **extra)
+                       warmup=truck_warmup if VEHICLE_CASES[case].truck else car_warmup,
+                       fastsim=fastsim and not VEHICLE_CASES[case].truck, **extra)
             for seed in range(first_seed, first_seed + seeds)
             for case in cases for road in roads[case] for c in (conds if case == "car" else ["nominal"])]
 
@@ -105,8 +109,8 @@ def run_paired(tasks: list[PairedTask], out: Path, scheduler: str | None = None,
     results = [o.value for o in outcomes if o.ok]
     for path in merge or []:
         results += load_stored(Path(path)) if Path(path).is_dir() else json.loads(Path(path).read_text())
-    failures = [f"{o.task.case}/{o.task.road}/{o.task.condition}/seed {o.task.seed}: {o.error}"
-                for o in outcomes if not o.ok]
+    failures = [f"{o.task.case}/{o.task.road}/{o.task.condition}/seed {o.task.seed}: "
+                f"{str(o.error).strip().splitlines()[0] if o.error else o.error}" for o in outcomes if not o.ok]
     write_text(out / "runs.json", json.dumps(results, default=_json_default, indent=1))
     summary = paired_summary(results) if results else pd.DataFrame()
     write_text(out / "summary.csv", summary.to_csv(index=False))
@@ -152,14 +156,22 @@ def headline_markdown(summary: pd.DataFrame, failures: list[str]) -> str:
     """The headline table: each MPC force model against the oracle and against cruise control at equal time."""
     rows = []
     for _, r in summary.iterrows():
+        reference = r.force_model in ("oracle", "cruise control")
         rows.append({"vehicle": r.vehicle, "road": r.road, "condition": r.condition, "MPC force model": r.force_model,
                      "seeds": r.seeds,
-                     "vs oracle MPC": "-" if r.force_model == "oracle" else format_difference(
+                     "vs oracle MPC": "-" if reference else format_difference(
                          r.vs_oracle_pct, r.resolution_1sigma_pct, r.ci95_lo_pct, r.ci95_hi_pct),
-                     "vs cruise control": format_difference(r.vs_cruise_pct, r.vs_cruise_1sigma_pct,
-                                                            r.vs_cruise_ci95_lo, r.vs_cruise_ci95_hi),
+                     "vs cruise control": "-" if r.force_model == "cruise control" else format_difference(
+                         r.vs_cruise_pct, r.vs_cruise_1sigma_pct, r.vs_cruise_ci95_lo, r.vs_cruise_ci95_hi),
                      "nearest run |dT| [%]": round(float(r.nearest_run_time_error_pct_median), 3),
                      "fit residual [%]": round(float(r.fit_residual_std_pct), 3)})
+        if "vs_optimum_pct" in summary:
+            rows[-1]["vs the optimum"] = format_difference(r.vs_optimum_pct, r.vs_optimum_1sigma_pct,
+                                                           r.vs_optimum_ci95_lo, r.vs_optimum_ci95_hi)
+        if "fastsim_vs_cruise_pct" in summary:
+            rows[-1]["FASTSim: vs cruise control"] = format_difference(
+                r.fastsim_vs_cruise_pct, r.fastsim_vs_cruise_1sigma_pct, r.fastsim_vs_cruise_ci95_lo,
+                r.fastsim_vs_cruise_ci95_hi)
     md = ["Energy at the source at exactly the cruise-control trip time (joint local fit over >= 3 time weights "
           "per model), paired per seed (same road, seed and plant for every force model); mean [95 % CI] "
           "(1σ = standard error of the paired mean = the resolution). 'not resolved': the CI contains 0.", "",

@@ -3,10 +3,9 @@
 Trip time falls monotonically with lambda, so the search brackets lambda on a log scale and then takes
 secant/bisection steps in (log lambda, time) until |T - T_target| <= tol * T_target. Runs that miss the
 tolerance within ``max_runs`` are returned flagged (``matched`` False) with the closest run, never silently.
-:meth:`MatchedRun.energy_at_target` interpolates the energy to exactly the target time between bracketing runs.
-That linear interpolation overstates the energy on the convex energy-time curve when the bracket is wide; the
-paired comparison uses :func:`fit_energy_at_time` instead: runs at several time weights around the
-match and a joint local quadratic fit of energy over trip time.
+The energy at exactly the target time comes from :func:`fit_energy_at_time`: runs at several time weights around the
+match and a joint local quadratic fit of energy over trip time (a linear interpolation between two bracketing runs
+overstates the energy on the convex energy-time curve).
 """
 
 from __future__ import annotations
@@ -29,19 +28,6 @@ class MatchedRun:
     runs: int
     history: list[tuple[float, float, float]] = field(default_factory=list)  # (lambda, trip time, energy J)
     time_key: str = "trip_time"
-
-    def energy_at_target(self) -> float:
-        """Source energy [J] interpolated linearly in trip time to exactly the target time between the two
-        closest runs that bracket it; NaN when no run pair brackets the target."""
-        runs = [(t, e) for _, t, e in self.history if math.isfinite(t) and math.isfinite(e)]
-        above = [r for r in runs if r[0] >= self.target_time]
-        below = [r for r in runs if r[0] <= self.target_time]
-        if not above or not below:
-            return float("nan")
-        (t1, e1), (t2, e2) = min(above), max(below)
-        if t1 == t2:
-            return e1
-        return e1 + (self.target_time - t1) * (e2 - e1) / (t2 - t1)
 
     @property
     def time_error(self) -> float:
@@ -141,41 +127,67 @@ def fit_energy_at_time(runs: dict[str, list[tuple[float, float]]], target_time: 
     ``min_spread`` of the target (NaN without one; residual_std NaN)."""
     if not target_time > 0:
         raise ValueError(f"target_time must be > 0 s, got {target_time}")
-    names, rows, y = [], [], []
-    for name, pts in runs.items():
-        keep = [(t, e) for t, e in pts if math.isfinite(t) and math.isfinite(e) and abs(t / target_time - 1) <= window]
-        if keep:
-            names.append(name)
-            rows += [(name, t / target_time - 1.0) for t, _ in keep]
-            y += [e for _, e in keep]
+    names, labels, x, y = _runs_in_window(runs, target_time, window)
     out_nan = {n: float("nan") for n in runs}
-    if not rows:
+    nearest, spanned = _nearest_and_spanned(runs, target_time)
+    if not len(y):
         return LocalFit(out_nan, out_nan.copy(), {n: False for n in runs}, float("nan"), float("nan"),
                         float("nan"), 0)
-    e_ref = float(np.median(y))
-    y_arr = np.asarray(y) / e_ref
-    x = np.array([r[1] for r in rows])
     # the slope is identified only by the spread of trip time WITHIN a model's runs: without it the shared slope
     # would be the between-model difference in energy over their difference in time (a force model's effect
     # booked as an energy-time trade-off, as on the 40 t truck, seed 5). Then only runs within min_spread of the
     # target count, level only, and a model without one gets NaN
-    within = x - np.array([np.mean([xx for (nn, _), xx in zip(rows, x) if nn == r[0]]) for r in rows])
+    model_mean = {n: float(np.mean(x[labels == n])) for n in names}
+    within = x - np.array([model_mean[n] for n in labels])
     if float(np.max(np.abs(within), initial=0.0)) < min_spread:
-        close = np.abs(x) <= min_spread
-        energy = {n: float(np.mean([yy for (nn, _), yy, c in zip(rows, y, close) if nn == n and c]))
-                  if any(nn == n and c for (nn, _), c in zip(rows, close)) else float("nan") for n in names}
-        nearest, spanned = _nearest_and_spanned(runs, target_time)
-        return LocalFit({**out_nan, **energy}, nearest, spanned, float("nan"), float("nan"), float("nan"),
-                        len(rows))
-    cols = [np.array([1.0 if r[0] == n else 0.0 for r in rows]) for n in names] + [x]
-    if quadratic and len(rows) >= len(names) + 3:
+        energy = _level_only(names, labels, x, y, min_spread)
+        return LocalFit({**out_nan, **energy}, nearest, spanned, float("nan"), float("nan"), float("nan"), len(y))
+    energy, residual_std, slope, curvature = _joint_quadratic(names, labels, x, y, quadratic)
+    return LocalFit({**out_nan, **energy}, nearest, spanned, residual_std, slope, curvature, len(y))
+
+
+def _runs_in_window(runs: dict[str, list[tuple[float, float]]], target_time: float, window: float
+                    ) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
+    """Models with a finite run within ``window`` of the target; per run its model, x = T/T_target - 1 and E [J]."""
+    names: list[str] = []
+    labels: list[str] = []
+    x: list[float] = []
+    y: list[float] = []
+    for name, pts in runs.items():
+        keep = [(t, e) for t, e in pts if math.isfinite(t) and math.isfinite(e) and abs(t / target_time - 1) <= window]
+        if keep:
+            names.append(name)
+        for t, e in keep:
+            labels.append(name)
+            x.append(t / target_time - 1.0)
+            y.append(e)
+    return names, np.asarray(labels, dtype=object), np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+
+
+def _level_only(names: list[str], labels: np.ndarray, x: np.ndarray, y: np.ndarray, min_spread: float
+                ) -> dict[str, float]:
+    """Per model the mean energy [J] of its runs within ``min_spread`` of the target time (NaN without one)."""
+    close = np.abs(x) <= min_spread
+    energy = {}
+    for n in names:
+        pick = close & (labels == n)
+        energy[n] = float(np.mean(y[pick])) if pick.any() else float("nan")
+    return energy
+
+
+def _joint_quadratic(names: list[str], labels: np.ndarray, x: np.ndarray, y: np.ndarray, quadratic: bool
+                     ) -> tuple[dict[str, float], float, float, float]:
+    """E_i / E_ref = alpha_m + beta x + gamma x^2 by least squares: energies alpha_m E_ref [J], residual std,
+    beta and gamma (0 without the quadratic term)."""
+    e_ref = float(np.median(y))
+    y_rel = y / e_ref
+    cols = [(labels == n).astype(float) for n in names] + [x]
+    if quadratic and len(y) >= len(names) + 3:
         cols.append(x * x)
     a = np.column_stack(cols)
-    coef, *_ = np.linalg.lstsq(a, y_arr, rcond=None)
-    resid = y_arr - a @ coef
-    dof = max(len(rows) - a.shape[1], 1)
+    coef, *_ = np.linalg.lstsq(a, y_rel, rcond=None)
+    resid = y_rel - a @ coef
+    dof = max(len(y) - a.shape[1], 1)
     energy = {n: float(coef[i] * e_ref) for i, n in enumerate(names)}
-    nearest, spanned = _nearest_and_spanned(runs, target_time)
-    return LocalFit({**out_nan, **energy}, nearest, spanned, float(np.sqrt(np.sum(resid ** 2) / dof)),
-                    float(coef[len(names)]), float(coef[len(names) + 1]) if a.shape[1] > len(names) + 1 else 0.0,
-                    len(rows))
+    curvature = float(coef[len(names) + 1]) if a.shape[1] > len(names) + 1 else 0.0
+    return energy, float(np.sqrt(np.sum(resid ** 2) / dof)), float(coef[len(names)]), curvature

@@ -2,9 +2,9 @@
 
 Usage: python scripts/compare_controllers.py --out DIR [--roads hilly,motorway,city,i3_munich]
        [--conditions all] [--scheduler tcp://host:8786] [--workers 2] [--solver ipopt|osqp]
-       python scripts/compare_controllers.py --quick     # tiny run for CI: hilly road, nominal, abc MPC only
+       python scripts/compare_controllers.py --quick     # tiny run for CI: 2 seeds of a short hilly road
 Prints the Markdown table and writes comparison.md/.csv, summary.csv and PNG figures into DIR.
-The paired, seeded comparison with confidence intervals is ``scripts/headline.py``.
+The same paired comparison (confidence intervals, the optimum) as ``scripts/headline.py``, over roads x conditions.
 """
 
 import sys
@@ -12,7 +12,7 @@ import tempfile
 
 from roadload.experiments.cli import main
 
-QUICK = ["--roads", "hilly", "--conditions", "nominal", "--force-models", "abc", "--workers", "1"]
+QUICK = ["--quick", "--workers", "1"]
 
 if __name__ == "__main__":
     args = sys.argv[1:]

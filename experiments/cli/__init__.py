@@ -79,15 +79,20 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
                                   "absent)."),
     "robustness": (f"{_PKG}.robustness", "Sweep outliers, poor excitation, drift and sensor bias to breakdown; rank "
                                          "estimators per failure mode."),
-    "controllers": (f"{_PKG}.controllers", "Closed-loop comparison of MPC (oracle / abc / online) against cruise "
-                                           "control and the human-like driver over roads x conditions at equal trip "
-                                           "time; writes a Markdown/CSV table and PNG figures."),
+    "controllers": (f"{_PKG}.controllers", "MPC (each force model) against cruise control, the human-like driver "
+                                           "and the full-route optimum, on the car over roads x conditions, paired "
+                                           "per seed at equal trip time: every difference with its 95 % CI (the "
+                                           "same comparison as `benchmark headline`)."),
     "headline": (f"{_PKG}.controllers", "MPC with the oracle / abc / online force model against cruise control at "
                                         "equal trip time, paired over seeds, with the 1-sigma resolution and 95 % "
                                         "CIs of every difference."),
     "sensitivity": (f"{_PKG}.controllers", "Energy penalty at equal time vs force-model error (mass, rolling "
                                            "resistance, drag area, grade bias, drive-train losses; one at a time and "
                                            "jointly) against the oracle MPC: table and figure per vehicle."),
+    "optimum": (f"{_PKG}.optimum", "Every controller (cruise control, the truck's speed-band cruise, the "
+                                   "human-like driver, the MPC with each force model, PPO / SAC policies) against "
+                                   "the full-route optimum at its own trip time and arrival speed, on the same "
+                                   "plant: excess per run and per controller with 95 % CIs over seeds."),
     "gym": (f"{_PKG}.rl", "Environment steps per second: EcoDrive-v0 single process and vectorised, EcoHighway-v0, "
                           "and highway-env's highway-fast-v0 in the same run."),
 }

@@ -6,7 +6,6 @@ commands, after the arguments are checked."""
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import time
@@ -154,49 +153,71 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
 
     @benchmark_app.command("controllers")
     def bench_controllers_cmd(
-        out: Path = typer.Option(..., help="output folder for comparison.md/.csv, summary.csv and PNG figures"),
-        roads: str = typer.Option("hilly,motorway,city,i3_munich", help="comma-separated road names"),
-        conditions: str = typer.Option("all", help="comma-separated conditions or 'all' (nominal, payload_300kg, "
-                                       "winter_tires, headwind_6ms, roof_box, drift)"),
-        vehicle: str = typer.Option("bmw_i3", help="vehicle preset"),
-        force_models: str = typer.Option("oracle,abc,online", help="MPC force models to compare"),
-        solver: str = typer.Option("ipopt", help="MPC solve path: ipopt | osqp"),
-        tol: float = typer.Option(0.01, help="equal-time tolerance (relative)"),
-        cruise_fraction: float = typer.Option(0.9, help="cruise set speed as a fraction of the allowed speed"),
+        out: Path = typer.Option(..., help="output folder: controllers.md, summary.csv, runs.json, headline.png"),
+        roads: str = typer.Option("hilly,city,motorway", help="car roads (one per seed): hilly (2.5 km), city "
+                                  "(3 km, stops), motorway (6 km), route (EcoDrive-v0's 2 km)"),
+        conditions: str = typer.Option("nominal", help="comma-separated conditions or 'all' (nominal, "
+                                       "payload_300kg, winter_tires, headwind_6ms, crosswind_6ms, roof_box, drift)"),
+        seeds: int = typer.Option(5, help="seeds (= roads) per road and condition"),
+        first_seed: int = typer.Option(0, help="first seed"),
+        force_models: str = typer.Option("oracle,abc,online", help="MPC force models (oracle first): oracle, abc, "
+                                         "online, online_wind"),
+        optimum: bool = typer.Option(True, "--optimum/--no-optimum", help="also the full-route optimum at the "
+                                     "same trip time, on the same plant"),
+        fastsim: bool = typer.Option(False, "--fastsim/--no-fastsim", help="also every run's speed trace through "
+                                     "FASTSim 3 (savings against cruise control from both models)"),
+        quick: bool = typer.Option(False, "--quick", help="tiny run: 2 seeds of a 1.2 km hilly road, oracle and "
+                                   "abc MPC"),
         scheduler: str = typer.Option(None, help="Dask scheduler address (default: local processes)"),
         workers: int = typer.Option(None, help="local worker processes (default: CPU count)"),
-        seed: int = typer.Option(0, help="simulation seed"),
     ) -> None:
-        """Closed-loop comparison of MPC (oracle / abc / online) against cruise control and the human-like
-        driver over roads x conditions at equal trip time; writes a Markdown/CSV table and PNG figures."""
-        from roadload.experiments.controller_comparison import (CONDITIONS, ComparisonTask, run_comparison_task,
-                                                                write_outputs)
-        from roadload.sweep import run_sweep
+        """MPC (each force model) against cruise control, the human-like driver and the full-route optimum, on the
+        car over roads x conditions, paired per seed at equal trip time: every difference with its 95 % CI (the
+        same comparison as `benchmark headline`)."""
+        from roadload.experiments.controller_comparison import CONDITIONS, PAIRED_ROADS
+        from roadload.experiments.headline import headline_figure, headline_markdown, headline_tasks, run_paired
 
         cond_list = list(CONDITIONS) if conditions == "all" else [c.strip() for c in conditions.split(",") if c]
         bad = [c for c in cond_list if c not in CONDITIONS]
         if bad:
             _fail(f"--conditions: unknown {bad}; known: {list(CONDITIONS)}")
-        road_list = [r.strip() for r in roads.split(",") if r.strip()]
-        fms = tuple(f.strip() for f in force_models.split(",") if f.strip())
-        if any(f not in ("oracle", "abc", "online") for f in fms):
-            _fail(f"--force-models: choose from oracle, abc, online; got {fms}")
-        tasks = [ComparisonTask(road=r, condition=c, vehicle=vehicle, seed=seed, tol=tol,
-                                cruise_fraction=cruise_fraction, solver=solver, force_models=fms)
-                 for r in road_list for c in cond_list]
-        outcomes = run_sweep(run_comparison_task, tasks, scheduler=scheduler, workers=workers,
-                             description="controller comparison")
-        results = [o.value for o in outcomes if o.ok]
-        failures = [f"{o.task.road}/{o.task.condition}: {o.error}" for o in outcomes if not o.ok]
-        for f in failures:
-            typer.secho(f"failed: {f}", fg=typer.colors.YELLOW, err=True)
-        if not results:
-            _fail("every task failed")
-        table, summary = write_outputs(results, failures, out)
-        typer.echo((out / "comparison.md").read_text())
-        typer.echo(f"wrote {out}/comparison.md, comparison.csv, summary.csv and figures")
+        fms = _force_models(force_models)
+        road_list = ["hilly_short"] if quick else [r.strip() for r in roads.split(",") if r.strip()]
+        bad = [r for r in road_list if r not in PAIRED_ROADS]
+        if bad:
+            _fail(f"--roads: unknown {bad}; known: {list(PAIRED_ROADS)}")
+        seeds = 2 if quick else seeds
+        if seeds < 2:
+            _fail(f"--seeds: need at least 2 for a confidence interval, got {seeds}")
+        wall0 = time.perf_counter()
+        tasks = headline_tasks(["car"], {"car": road_list}, seeds, ["nominal"] if quick else cond_list, human=True,
+                               quick=quick, first_seed=first_seed,
+                               force_models=("oracle", "abc") if quick else fms, optimum=optimum, fastsim=fastsim)
+        summary, failures = run_paired(tasks, out, scheduler=scheduler, workers=workers,
+                                       description="controller comparison")
+        if summary.empty:
+            _fail("every task failed: " + "; ".join(failures[:3]))
+        md = headline_markdown(summary, failures)
+        write_text(out / "controllers.md", "# Controller comparison at equal trip time\n\n" + md)
+        headline_figure(summary, out / "headline.png")
+        typer.echo(md)
+        typer.echo(f"wrote {out}/controllers.md, summary.csv, runs.json, headline.png "
+                   f"({time.perf_counter() - wall0:.0f} s wall, load average {os.getloadavg()[0]:.2f})")
 
-        write_text(out / "tasks.json", json.dumps([t.__dict__ for t in tasks], default=str, indent=1))
+
+def _force_models(text: str) -> tuple[str, ...]:
+    """The --force-models list: oracle first, then abc, online, online_wind (estimator options after '@')."""
+    from roadload.experiments.controller_comparison import force_model_settings
+
+    fms = tuple(f.strip() for f in text.split(",") if f.strip())
+    try:
+        for f in fms:
+            force_model_settings(f)
+    except ValueError as exc:
+        _fail(f"--force-models: {exc}")
+    if not fms or fms[0] != "oracle":
+        _fail(f"--force-models: oracle first, then any of abc, online, online_wind (options after '@'); got {fms}")
+    return fms
 
 
 def _car_truck_cases(vehicles: str) -> list[str]:
@@ -255,6 +276,11 @@ def register_headline(benchmark_app: typer.Typer) -> None:
                                           "transmission's load-dependent strategy"),
         terminal_value: str = typer.Option("source", help="MPC value of the kinetic energy at the horizon end: "
                                            "source (m E_N / eta_i) or wheel (m E_N, the earlier value)"),
+        optimum: bool = typer.Option(False, "--optimum/--no-optimum", help="also the full-route optimum at the "
+                                     "reference trip time, on the same plant"),
+        fastsim: bool = typer.Option(False, "--fastsim/--no-fastsim", help="car: also every run's speed trace "
+                                     "through FASTSim 3"),
+        force_models: str = typer.Option("oracle,abc,online", help="MPC force models (oracle first)"),
     ) -> None:
         """MPC with the oracle / abc / online force model against cruise control at equal trip time, paired over
         seeds, with the 1-sigma resolution and 95 % CIs of every difference."""
@@ -269,6 +295,7 @@ def register_headline(benchmark_app: typer.Typer) -> None:
             _fail(f"--knob: lambda or schedule, got {knob!r}")
         if terminal_value not in ("source", "wheel"):
             _fail(f"--terminal-value: source or wheel, got {terminal_value!r}")
+        fms = _force_models(force_models)
         try:
             t_factors = tuple(float(f) for f in time_factors.split(",") if f.strip())
         except ValueError:
@@ -307,7 +334,8 @@ def register_headline(benchmark_app: typer.Typer) -> None:
                                schedule_gain=schedule_gain, schedule_pilot=schedule_pilot,
                                multistart_period=None if multistart_period < 0 else multistart_period,
                                gear_command=gear_command, model_search_runs=model_search_runs,
-                               warmup_driver=warmup_driver)
+                               warmup_driver=warmup_driver, optimum=optimum, fastsim=fastsim,
+                               force_models=None if quick else fms)
         summary, failures = run_paired(tasks, out, scheduler=scheduler, workers=workers, description="headline",
                                        merge=list(merge))
         if summary.empty:

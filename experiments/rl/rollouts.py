@@ -7,7 +7,7 @@ from typing import Any, Callable
 import numpy as np
 import pandas as pd
 
-from roadload.controllers.closed_loop import run_metrics
+from roadload.controllers.closed_loop import crossing, run_metrics
 from roadload.controllers.drive import DriveSettings, drive
 from roadload.gym.config import EcoDriveConfig, make_config
 from roadload.gym.ecodrive import EcoDriveEnv
@@ -41,6 +41,11 @@ def run_policy(policy: Callable[[np.ndarray], np.ndarray], env_config: dict[str,
     if not isinstance(eco_env, EcoDriveEnv):
         raise RLError(f"roadload/EcoDrive-v0 made a {type(eco_env).__name__}, expected EcoDriveEnv")
     metrics = _metrics(log, eco_env.config.control_period, arrived=not truncated)
+    # the crossing of the route end inside the last step, as for the controllers (closed_loop.crossing)
+    track = (np.append(log["t"].to_numpy(float), info["t"]), np.append(log["s"].to_numpy(float), info["s"]),
+             np.append(log["v"].to_numpy(float), info["v"]), np.concatenate([[0.0], log["energy"].to_numpy(float)]))
+    t_arr, e_arr, v_arr = crossing(track, float(info["route_length"])) if not truncated else (float("nan"),) * 3
+    metrics.update(arrival_time=t_arr, arrival_energy_J=e_arr, arrival_speed=v_arr)
     metrics.update(energy_J=float(energy), energy_kWh=float(energy) / 3.6e6,
                    trip_time=float(info["t"]) if not truncated else float("nan"), episode_return=float(ret),
                    stop_violations=int(round(info["return_costs"]["stop"] / max(eco_env.config.reward.stop,

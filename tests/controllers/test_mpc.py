@@ -154,7 +154,7 @@ def test_bad_inputs_raise_clear_errors():
         mpc().act(Observation(t=0.0, s=0.0, v=0.0, a=0.0))
 
 
-def test_time_matching_interpolates_energy_to_the_target_time():
+def test_time_matching_finds_the_time_weight_of_the_target_time():
     from roadload.controllers.closed_loop import RunResult
 
     # synthetic monotone plant: T(lambda) = 100 + 2000/lambda^0.5, E linear in T
@@ -164,7 +164,6 @@ def test_time_matching_interpolates_energy_to_the_target_time():
 
     m = match_trip_time(run, 120.0, tol=0.002, lam0=100.0)
     assert m.matched and abs(m.time_error) <= 0.002
-    assert m.energy_at_target() == pytest.approx(5e6 - 1e4 * 120.0, rel=1e-9)
     # unreachable target: flagged, not silently accepted
     bad = match_trip_time(run, 50.0, tol=0.01, lam0=100.0, max_runs=5)
     assert not bad.matched

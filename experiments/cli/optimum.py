@@ -1,0 +1,149 @@
+"""``roadload benchmark optimum``: every controller's energy above the full-route optimum at its own trip time."""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import typer
+
+from .errors import fail
+
+QUICK_CONTROLLERS = ("cruise", "mpc:oracle")
+
+
+def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
+    @benchmark_app.command("optimum")
+    def optimum_cmd(
+        out: Path = typer.Option(..., help="output folder: excess_over_optimum.csv (one row per controller run), "
+                                 "summary.csv / summary.md, dp_check.csv, tasks/"),
+        vehicles: str = typer.Option("car,truck_15t,truck_40t", help="vehicle cases (car = bmw_i3, truck_<m>t = "
+                                     "tractor-semitrailer at m t gross)"),
+        car_roads: str = typer.Option("route,city,motorway", help="car roads: route (EcoDrive-v0's 2 km hilly "
+                                      "route, where the RL policies learnt; seeds from 50000), hilly (2.5 km), "
+                                      "city (3 km, stops), motorway (6 km)"),
+        truck_roads: str = typer.Option("long_grades,longhaul_real", help="truck roads: long_grades (4 km, "
+                                        "3-6 %), longhaul_real (10 km windows of the real long-haul cycle)"),
+        seeds: int = typer.Option(10, help="seeds (= roads) per vehicle and road"),
+        first_seed: int = typer.Option(None, help="first seed (default: 50000 for 'route', 0 otherwise)"),
+        controllers: str = typer.Option("", help="comma-separated controllers for every vehicle (default: car "
+                                        "cruise, human, mpc:oracle, mpc:abc, mpc:online, ppo, sac; truck cruise, "
+                                        "cruise_band, human, mpc:oracle, mpc:abc, mpc:online); also mpc:online_wind"),
+        policies: Path = typer.Option(None, help="folder with ppo_ecodrive.zip / sac_ecodrive.zip from `roadload "
+                                      "train --out DIR` (without it the car runs no RL policy)"),
+        condition: str = typer.Option("nominal", help="car condition (see benchmark controllers)"),
+        truck_warmup: float = typer.Option(2000.0, help="trucks: warm-up [m] before the measured segment, driven "
+                                           "by cruise control for the MPC runs and the optimum"),
+        time_weight: float = typer.Option(-1.0, help="MPC time weight lambda [J/s] (< 0: the vehicle case's)"),
+        dp_step: float = typer.Option(0.05, help="EV: speed grid [m/s] of the dynamic-programming cross-check "
+                                      "(0: off)"),
+        quick: bool = typer.Option(False, "--quick", help="tiny run: car, 2 seeds on a 1.2 km road, cruise "
+                                   "control and the oracle MPC"),
+        episode_cost: bool = typer.Option(False, "--episode-cost", help="the RL episode's cost E + lambda T on the "
+                                          "EcoDrive-v0 routes: the policies of --policies, the MPC (default, and with "
+                                          "the route end in its horizon) and the optimum of that cost"),
+        breakdown: bool = typer.Option(False, "--breakdown", help="the oracle MPC's gap to the optimum, one design "
+                                       "choice at a time (horizon, grid, comfort term, speed margin, terminal value, "
+                                       "solver tolerance, re-planning period) and all together"),
+        merge: list[Path] = typer.Option([], "--merge", help="tasks/ folder of an earlier run to summarise with "
+                                         "this one (repeatable)"),
+        scheduler: str = typer.Option(None, help="Dask scheduler address (default: local processes)"),
+        workers: int = typer.Option(None, help="local worker processes (default: CPU count)"),
+    ) -> None:
+        """Every controller (cruise control, the truck's speed-band cruise, the human-like driver, the MPC with
+        each force model, PPO / SAC policies) against the full-route optimum at its own trip time and arrival
+        speed, on the same plant: excess per run and per controller with 95 % CIs over seeds."""
+        from roadload.experiments.controller_comparison import CONDITIONS, VEHICLE_CASES
+        from roadload.experiments.optimum_benchmark import (CAR_CONTROLLERS, CONTROLLERS, TRUCK_CONTROLLERS,
+                                                            EpisodeCostTask, OptimumBenchmarkError, breakdown_tasks,
+                                                            optimum_tasks, run_benchmark, run_episode_cost,
+                                                            summary_markdown)
+
+        wall0, load0 = time.perf_counter(), os.getloadavg()
+        cases = [v.strip() for v in vehicles.split(",") if v.strip()]
+        bad = [c for c in cases if c not in VEHICLE_CASES]
+        if bad:
+            fail(f"--vehicles: unknown {bad}; known: {list(VEHICLE_CASES)}")
+        if condition not in CONDITIONS:
+            fail(f"--condition: unknown {condition!r}; known: {list(CONDITIONS)}")
+        if not (truck_warmup >= 0 and dp_step >= 0):
+            fail(f"--truck-warmup [m] and --dp-step [m/s]: numbers >= 0, got {truck_warmup}, {dp_step}")
+        ctl = tuple(c.strip() for c in controllers.split(",") if c.strip())
+        unknown = [c for c in ctl if c not in CONTROLLERS]
+        if unknown:
+            fail(f"--controllers: unknown {unknown}; choose from {list(CONTROLLERS)}")
+        if policies is not None and not policies.is_dir():
+            fail(f"--policies: {policies} is not a folder (train with `roadload train --out DIR`)")
+        if quick:
+            cases, seeds, ctl, dp_step = ["car"], 2, QUICK_CONTROLLERS, 0.1 if dp_step else 0.0
+            roads = {"car": ["hilly_short"]}
+        else:
+            roads = {c: [r.strip() for r in (truck_roads if VEHICLE_CASES[c].truck else car_roads).split(",")
+                         if r.strip()] for c in cases}
+        if seeds < 2 and not (seeds == 0 and merge):
+            fail(f"--seeds: need at least 2 for a confidence interval (0 with --merge: summarise only), got {seeds}")
+        rl_wanted = ("ppo" in ctl or "sac" in ctl) or (not ctl and policies is not None)
+        per_case = {}
+        for c in cases:
+            chosen = ctl
+            if not chosen:
+                chosen = TRUCK_CONTROLLERS if VEHICLE_CASES[c].truck else CAR_CONTROLLERS
+                if policies is None:
+                    chosen = tuple(x for x in chosen if x not in ("ppo", "sac"))
+            if VEHICLE_CASES[c].truck:
+                chosen = tuple(x for x in chosen if x not in ("ppo", "sac"))
+            per_case[c] = chosen
+        if rl_wanted and policies is None:
+            fail("--controllers ppo/sac need --policies DIR (policies trained by `roadload train --out DIR`)")
+        starts = {r: (first_seed if first_seed is not None else (50000 if r == "route" else 0))
+                  for rs in roads.values() for r in rs}
+        if episode_cost:
+            algos = tuple(a for a in ("ppo", "sac")
+                          if policies is not None and (policies / f"{a}_ecodrive.zip").is_file())
+            first = first_seed if first_seed is not None else 50000
+            ep_tasks = [EpisodeCostTask(first + i, time_weight=3000.0 if time_weight < 0 else time_weight,
+                                        policies=None if policies is None else str(policies), algos=algos)
+                        for i in range(2 if quick else seeds)]
+            _, text, failures = run_episode_cost(ep_tasks, out, scheduler=scheduler, workers=workers)
+            typer.echo(text)
+            typer.echo(f"wrote {out}/episode_cost.csv, episode_cost.md")
+            return
+        try:
+            tasks = []
+            for case in cases:
+                if breakdown:
+                    tasks += breakdown_tasks({case: roads[case]}, seeds, starts,
+                                             warmup=truck_warmup if VEHICLE_CASES[case].truck else 0.0,
+                                             time_weight=None if time_weight < 0 else time_weight)
+                    continue
+                tasks += optimum_tasks({case: roads[case]}, seeds, starts, {case: per_case[case]},
+                                       condition=condition if not VEHICLE_CASES[case].truck else "nominal",
+                                       warmup=truck_warmup if VEHICLE_CASES[case].truck else 0.0,
+                                       time_weight=None if time_weight < 0 else time_weight,
+                                       policies=None if policies is None else str(policies), dp_step=dp_step)
+        except (OptimumBenchmarkError, ValueError) as exc:
+            fail(str(exc))
+        rows, summary, failures = run_benchmark(tasks, out, scheduler=scheduler, workers=workers, merge=list(merge))
+        if summary.empty:
+            fail("no controller run has an optimum: " + "; ".join(failures[:3]), code=1)
+        typer.echo(summary_markdown(summary, _dp(out)))
+        for f in failures:
+            typer.secho(f"failed: {f}", fg=typer.colors.YELLOW, err=True)
+        typer.echo(f"wrote {out}/excess_over_optimum.csv ({len(rows)} runs), summary.csv, summary.md, dp_check.csv")
+        cpu = os.times()
+        load1 = os.getloadavg()
+        typer.echo(f"wall time {time.perf_counter() - wall0:.0f} s, CPU time "
+                   f"{cpu.user + cpu.system + cpu.children_user + cpu.children_system:.0f} s (this process and its "
+                   f"finished workers) for {len(tasks)} tasks on {workers or os.cpu_count()} workers; 1-min load "
+                   f"average {load0[0]:.2f} at start, {load1[0]:.2f} at end")
+
+
+def _dp(out: Path):
+    import pandas as pd
+
+    path = out / "dp_check.csv"
+    try:
+        return pd.read_csv(path)
+    except (OSError, ValueError):  # an empty file: no DP check in this run
+        return None

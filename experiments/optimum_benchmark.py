@@ -1,0 +1,455 @@
+"""Every controller against the full-route optimum, at its own trip time, on the same plant.
+
+Per (vehicle case, road, condition, seed) one task drives every controller once on the same road, seed and plant
+(roadload's simulator): cruise control, the truck's speed-band cruise, the human-like driver, the MPC with each
+force model, and trained RL policies (PPO / SAC in EcoDrive-v0, whose plant is the same simulator). For each run
+the full-route optimum (:mod:`roadload.controllers.optimum`: perfect knowledge, the oracle's parameters, the MPC's
+comfort limits) is solved for that run's trip time and arrival speed, from the speed the optimum's drive has at the
+segment start, and driven on the same plant by :class:`~roadload.controllers.optimum.OptimumTracker`:
+
+    excess = (E_run + dKE_start / eta_i) / E_opt(T_run, v_arr,run) - 1
+
+E_opt is the tracked optimum's plant energy corrected to exactly the run's time and arrival speed with the optimum's
+own time slope dE*/dT and the kinetic-energy difference at 1/eta_i (the tracker lands within ~0.1 % of the time);
+dKE_start books the difference of the start speeds (a warm-up driven by the run itself; 0 from standstill). The
+summary gives the excess as a fleet total over seeds, 100 mean(E_run - E_opt) / mean(E_opt), with its 1-sigma and
+Student-t 95 % CI (:func:`roadload.experiments.controller_comparison.ratio_of_means_ci`).
+
+The dynamic-programming cross-check (EV): the NLP (without its jerk limit) and the DP of
+:mod:`roadload.controllers.dynamic_programming` on the same grid, at the cruise run's time, per seed.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass, replace
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from roadload.controllers.base import ControllerError
+from roadload.controllers.drive import DriveSettings, drive
+from roadload.controllers.dynamic_programming import dp_optimum
+from roadload.controllers.optimum import FullRouteOptimum, OptimumError, OptimumSettings, OptimumTarget
+from roadload.controllers.sim_plant import SimulatorPlant
+from roadload.controllers.vehicle_models import energy_model_from_spec
+from roadload.experiments.controller_comparison import (CONDITIONS, VEHICLE_CASES, format_difference, paired_road,
+                                                        ratio_of_means_ci)
+from roadload.fileio import write_text
+from roadload.sweep import run_sweep
+from roadload.tables import markdown_table
+
+CONTROLLERS = ("cruise", "cruise_band", "human", "mpc:oracle", "mpc:abc", "mpc:online", "mpc:online_wind",
+               "mpc:oracle:transmission", "ppo", "sac")
+CAR_CONTROLLERS = ("cruise", "human", "mpc:oracle", "mpc:abc", "mpc:online", "ppo", "sac")
+TRUCK_CONTROLLERS = ("cruise", "cruise_band", "human", "mpc:oracle", "mpc:abc", "mpc:online", "mpc:oracle:transmission")
+CSV_COLUMNS = ["vehicle", "road", "controller", "seed", "energy_J", "time_s", "optimum_energy_J", "excess_pct"]
+
+
+class OptimumBenchmarkError(ValueError):
+    """Bad benchmark input (unknown controller, missing policy file, ...): the message names it."""
+
+
+@dataclass(frozen=True)
+class OptimumTask:
+    """One seed: every controller of ``controllers`` and the optimum at each run's time. warmup [m]: driven before
+    the measured segment (by cruise control for the MPC runs and the optimum; the human driver drives its own);
+    time_weight [J/s]: the MPC's lambda (None: the case's start value); policies: folder of ``ppo_ecodrive.zip``
+    / ``sac_ecodrive.zip`` (trained by ``roadload train``); dp_step [m/s]: speed grid of the DP cross-check
+    (0: none)."""
+
+    case: str
+    road: str
+    seed: int
+    condition: str = "nominal"
+    controllers: tuple[str, ...] = CAR_CONTROLLERS
+    warmup: float = 0.0
+    time_weight: float | None = None
+    policies: str | None = None
+    dp_step: float = 0.0
+    optimum_ds: float = OptimumSettings.ds
+    # MPC variant (the gap breakdown): MpcSettings fields to override, the re-planning period [s] and a label
+    # appended to the MPC controllers' names
+    mpc: tuple[tuple[str, Any], ...] = ()
+    replan_period: float | None = None
+    label: str = ""
+
+    def __post_init__(self) -> None:
+        if self.case not in VEHICLE_CASES:
+            raise OptimumBenchmarkError(f"vehicle case {self.case!r}: choose one of {list(VEHICLE_CASES)}")
+        bad = [c for c in self.controllers if c not in CONTROLLERS]
+        if bad:
+            raise OptimumBenchmarkError(f"controllers: unknown {bad}; choose from {list(CONTROLLERS)}")
+        if self.condition not in CONDITIONS:
+            raise OptimumBenchmarkError(f"condition {self.condition!r}: choose one of {list(CONDITIONS)}")
+        if not (math.isfinite(self.warmup) and self.warmup >= 0):
+            raise OptimumBenchmarkError(f"warmup: a distance >= 0 m, got {self.warmup}")
+        rl = [c for c in self.controllers if c in ("ppo", "sac")]
+        if rl and (VEHICLE_CASES[self.case].truck or self.warmup > 0):
+            raise OptimumBenchmarkError(f"{rl}: RL policies drive the car's EcoDrive-v0 routes only (no warm-up)")
+
+
+def _settings(task: OptimumTask, controller: str) -> DriveSettings:
+    """DriveSettings of one controller of the task (module docstring)."""
+    case = VEHICLE_CASES[task.case]
+    base = replace(case.settings(), measure_from=task.warmup, warmup_driver="cruise")
+    if controller == "cruise":  # plain PI cruise control (a truck's without its speed band)
+        return replace(base, controller="cruise", cruise=replace(base.cruise, overspeed=0.0))
+    if controller == "cruise_band":
+        return replace(base, controller="cruise")
+    if controller == "human":
+        return replace(base, controller="human")
+    _, fm, *gears = controller.split(":")
+    lam = case.lam0 if task.time_weight is None else task.time_weight
+    # ICE: the MPC requests its shift rule's gear (and a kick-down where full load needs it), as the optimum's tracker
+    # does: the plant's own load-dependent strategy changes the fuel of a whole climb for a 0.1 % change of the
+    # trajectory, which no plan can follow (docs/results/controllers.md); 'mpc:<model>:transmission' leaves the gear
+    # to the transmission (the MPC's default elsewhere)
+    settings = replace(base, controller="mpc", force_model=fm, time_weight=lam,
+                       gear_command=case.truck and gears != ["transmission"], mpc=replace(base.mpc, **dict(task.mpc)))
+    return settings if task.replan_period is None else replace(settings, replan_period=task.replan_period)
+
+
+def _policy_run(task: OptimumTask, algo: str, road) -> dict[str, Any]:
+    """One episode of a trained policy in EcoDrive-v0 on the task's route: the run metrics in the closed loop's
+    names (segment = the whole route)."""
+    from roadload.experiments.rl.rollouts import run_policy, sb3_policy
+    from roadload.experiments.rl.training import load_policy
+
+    folder = Path(task.policies or "")
+    path = folder / f"{algo}_ecodrive.zip"
+    if task.policies is None or not path.is_file():
+        raise OptimumBenchmarkError(f"{algo}: no trained policy {path} (train one with `roadload train --algo "
+                                    f"{algo} --out DIR` and pass --policies DIR)")
+    meta_path = folder / f"{algo}_ecodrive.json"
+    env_config = json.loads(meta_path.read_text()).get("env_config", {}) if meta_path.is_file() else {}
+    env_config = {**env_config, "road": "hilly", "route_length": road.length}
+    if CONDITIONS[task.condition] is not None:  # nominal: the env's own default (no effects)
+        env_config["effects"] = CONDITIONS[task.condition]
+    m, _ = run_policy(sb3_policy(load_policy(path)), env_config, task.seed)
+    return {"segment_time": m["arrival_time"], "segment_energy_J": m["arrival_energy_J"],
+            "segment_start_speed": 0.0, "arrival_speed": m["arrival_speed"], "arrived": m["arrived"],
+            "speed_violations": m["speed_violations"]}
+
+
+def benchmark_road(name: str, seed: int, warmup: float = 0.0):
+    """The task's road: :func:`~roadload.experiments.controller_comparison.paired_road` (``route`` = the EcoDrive-v0
+    route of the seed, where the RL policies were trained)."""
+    return paired_road(name, seed, warmup)
+
+
+def run_optimum_task(task: OptimumTask) -> dict[str, Any]:
+    """Every controller and its optimum on one seed (module docstring): rows and the DP cross-check."""
+    case = VEHICLE_CASES[task.case]
+    road = benchmark_road(task.road, task.seed, task.warmup)
+    effects = CONDITIONS[task.condition]
+    vehicle = case.vehicle()
+    energy = energy_model_from_spec(vehicle)
+    eta = energy.indicated_efficiency
+    opt_settings = OptimumSettings(ds=task.optimum_ds)
+    rows: list[dict[str, Any]] = []
+    t0 = time.process_time()
+
+    def run(settings: DriveSettings) -> dict[str, Any]:
+        res, plant = drive(vehicle, road, effects=effects, seed=task.seed, settings=settings)
+        m = dict(res.metrics)
+        m["inertial_mass"] = plant.true_parameters().inertial_mass
+        return m
+
+    for controller in task.controllers:
+        if controller in ("ppo", "sac"):
+            m = _policy_run(task, controller, road)
+            m["inertial_mass"] = SimulatorPlant(vehicle, road, effects=effects, seed=task.seed).true_parameters(
+                ).inertial_mass
+        else:
+            m = run(_settings(task, controller))
+        if not (m.get("arrived", False) and math.isfinite(m["segment_time"])):
+            rows.append({"vehicle": task.case, "road": task.road, "controller": controller + task.label,
+                         "seed": task.seed,
+                         "condition": task.condition, "arrived": False})
+            continue
+        target = OptimumTarget(trip_time=float(m["segment_time"]), arrival_speed=float(m["arrival_speed"]))
+        opt_drive = replace(_settings(task, "cruise_band"), controller="optimum", force_model="oracle",
+                            optimum_target=target, optimum=opt_settings)
+        name = controller + task.label if controller.startswith("mpc") else controller
+        base_row = {"vehicle": task.case, "road": task.road, "controller": name, "seed": task.seed,
+                    "condition": task.condition, "arrived": True, "time_s": m["segment_time"],
+                    "energy_raw_J": m["segment_energy_J"], "arrival_speed": m["arrival_speed"],
+                    "start_speed": m["segment_start_speed"], "speed_violations": m.get("speed_violations")}
+        try:
+            o = run(opt_drive)
+        except (ControllerError, OptimumError) as exc:  # e.g. a driver faster than the limits and comfort allow
+            rows.append({**base_row, "optimum_status": f"not solved: {exc}"})
+            continue
+        mass = m["inertial_mass"]
+        slope = float(o.get("ctl_optimum_time_slope", float("nan")))
+        e_opt = (o["segment_energy_J"] + slope * (m["segment_time"] - o["segment_time"])
+                 + 0.5 * mass * (m["arrival_speed"] ** 2 - o["arrival_speed"] ** 2) / eta)
+        e_run = m["segment_energy_J"] + 0.5 * mass * (m["segment_start_speed"] ** 2
+                                                     - o["segment_start_speed"] ** 2) / eta
+        rows.append({**base_row, "energy_J": e_run, "optimum_energy_J": e_opt,
+                     "excess_pct": 100.0 * (e_run - e_opt) / abs(e_opt),
+                     "optimum_model_energy_J": o.get("ctl_optimum_model_energy_J"),
+                     "optimum_plant_energy_J": o["segment_energy_J"], "optimum_time_s": o["segment_time"],
+                     "optimum_arrival_speed": o["arrival_speed"], "optimum_start_speed": o["segment_start_speed"],
+                     "optimum_time_slope_J_per_s": slope, "optimum_status": o.get("ctl_optimum_status"),
+                     "optimum_speed_violations": o.get("speed_violations")})
+    out: dict[str, Any] = {"task": task.__dict__, "rows": rows}
+    if task.dp_step > 0 and energy.kind == "ev":
+        out["dp"] = dp_check(task, road, rows, opt_settings)
+    out["cpu_s"] = time.process_time() - t0
+    return out
+
+
+def dp_check(task: OptimumTask, road, rows: list[dict[str, Any]], settings: OptimumSettings) -> dict[str, Any]:
+    """NLP without the jerk limit and DP on the same grid at the first arrived run's time (the cruise run's)."""
+    case = VEHICLE_CASES[task.case]
+    ref = next(r for r in rows if r.get("arrived"))
+    plant = SimulatorPlant(case.vehicle(), road, effects=CONDITIONS[task.condition], seed=task.seed)
+    energy = energy_model_from_spec(case.vehicle())
+    st = replace(settings, jerk=False)
+    opt = FullRouteOptimum(road, energy, plant.true_parameters(), st, start=task.warmup)
+    sol = opt.solve(ref["time_s"], ref["optimum_start_speed"], ref["arrival_speed"])
+    t0 = time.process_time()
+    dp = dp_optimum(opt.preview, energy, plant.true_parameters(), sol.model_time, ref["optimum_start_speed"],
+                    ref["arrival_speed"], st, speed_step=task.dp_step)
+    return {"controller": ref["controller"], "time_s": ref["time_s"], "nlp_energy_J": sol.energy_J,
+            "dp_energy_J": dp.energy_J, "dp_vs_nlp_pct": 100.0 * (dp.energy_J / sol.energy_J - 1.0),
+            "nlp_time_slope": sol.time_slope, "dp_multiplier": dp.multiplier, "speed_step": task.dp_step,
+            "max_speed_difference": float(np.max(np.abs(dp.v - sol.plan.v))), "dp_cpu_s": time.process_time() - t0}
+
+
+# the gap breakdown: the oracle MPC with one design choice at a time set to the optimum's (or refined), and all
+# together; values per vehicle kind (car: 100 x 20 m; truck: 40 x 50 m, control period 0.2 s)
+BREAKDOWN: dict[str, dict[str, tuple[dict[str, Any], float | None]]] = {
+    "car": {"": ({}, None),
+            "|horizon 4 km": ({"n_nodes": 200}, None),
+            "|grid 10 m": ({"n_nodes": 200, "ds": 10.0}, None),
+            "|no comfort term": ({"accel_weight": 0.0}, None),
+            "|no speed margin": ({"speed_margin": 0.0}, None),
+            "|tol 1e-8": ({"warm_tol": 1e-8}, None),
+            "|re-plan 0.2 s": ({}, 0.2),
+            "|all": ({"n_nodes": 400, "ds": 10.0, "accel_weight": 0.0, "speed_margin": 0.0, "warm_tol": 1e-8}, 0.2)},
+    "truck": {"": ({}, None),
+              "|horizon 4 km": ({"n_nodes": 80}, None),
+              "|grid 25 m": ({"n_nodes": 80, "ds": 25.0}, None),
+              "|no comfort term": ({"accel_weight": 0.0}, None),
+              "|terminal at the wheel": ({"terminal_value": "wheel"}, None),
+              "|tol 1e-8": ({"warm_tol": 1e-8}, None),
+              "|re-plan 0.4 s": ({}, 0.4),
+              "|all": ({"n_nodes": 160, "ds": 25.0, "accel_weight": 0.0, "warm_tol": 1e-8}, 0.4)},
+}
+
+
+def breakdown_tasks(cases: dict[str, list[str]], seeds: int, first_seed: dict[str, int] | None = None,
+                    **common: Any) -> list[OptimumTask]:
+    """The oracle MPC in every BREAKDOWN variant (labels appended to 'mpc:oracle'), seed-major."""
+    first = first_seed or {}
+    out = []
+    for i in range(seeds):
+        for case, roads in cases.items():
+            kind = "truck" if VEHICLE_CASES[case].truck else "car"
+            for road in roads:
+                for label, (mpc, replan) in BREAKDOWN[kind].items():
+                    out.append(OptimumTask(case, road, first.get(road, 0) + i, controllers=("mpc:oracle",),
+                                           mpc=tuple(sorted(mpc.items())), replan_period=replan, label=label,
+                                           **common))
+    return out
+
+
+def optimum_tasks(cases: dict[str, list[str]], seeds: int, first_seed: dict[str, int] | None = None,
+                  controllers: dict[str, tuple[str, ...]] | None = None, **common: Any) -> list[OptimumTask]:
+    """Tasks seed-major over {case: [road, ...]}; first_seed per road (e.g. 50000 for the EcoDrive routes)."""
+    first = first_seed or {}
+    out = []
+    for i in range(seeds):
+        for case, roads in cases.items():
+            for road in roads:
+                ctl = (controllers or {}).get(case) or (TRUCK_CONTROLLERS if VEHICLE_CASES[case].truck
+                                                         else CAR_CONTROLLERS)
+                if road != "route":
+                    ctl = tuple(c for c in ctl if c not in ("ppo", "sac"))
+                out.append(OptimumTask(case, road, first.get(road, 0) + i, controllers=ctl, **common))
+    return out
+
+
+def run_and_store(task: OptimumTask, folder: str) -> dict[str, Any]:
+    """run_optimum_task, the result also written to ``folder`` as soon as it is done (a stopped sweep keeps it);
+    a task whose result is already there (the same task) is read back, not run again."""
+    path = Path(folder) / f"{task.case}_{task.road}_{task.condition}_{task.seed}{task.label}.json"
+    if path.is_file():
+        stored = json.loads(path.read_text())
+        if stored.get("task") == json.loads(json.dumps(task.__dict__, default=float)):
+            return stored
+    result = run_optimum_task(task)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_text(path, json.dumps(result, default=float))
+    return result
+
+
+def summarise(rows: pd.DataFrame) -> pd.DataFrame:
+    """Per (vehicle, road, controller): seeds, mean time and energy, and the excess over the optimum as a fleet
+    total with 1-sigma and 95 % CI."""
+    out = []
+    ok = rows[rows["arrived"].astype(bool) & np.isfinite(rows.get("optimum_energy_J", np.nan))] if len(rows) else rows
+    for (veh, road, ctl), g in ok.groupby(["vehicle", "road", "controller"], sort=False):
+        mean, se, lo, hi = ratio_of_means_ci(g["energy_J"].to_numpy(float), g["optimum_energy_J"].to_numpy(float))
+        out.append({"vehicle": veh, "road": road, "controller": ctl, "seeds": len(g),
+                    "time_s_mean": float(g["time_s"].mean()), "energy_kJ_mean": float(g["energy_J"].mean()) / 1e3,
+                    "optimum_kJ_mean": float(g["optimum_energy_J"].mean()) / 1e3,
+                    "excess_pct": mean, "excess_1sigma_pct": se, "excess_ci95_lo": lo, "excess_ci95_hi": hi,
+                    "excess_per_seed_median_pct": float(g["excess_pct"].median()),
+                    "optimum_time_error_pct_max": float(100 * np.max(np.abs(g["optimum_time_s"] / g["time_s"] - 1))),
+                    "runs_left_out": int(len(rows[(rows.vehicle == veh) & (rows.road == road)
+                                                  & (rows.controller == ctl)]) - len(g))})
+    return pd.DataFrame(out)
+
+
+def summary_markdown(summary: pd.DataFrame, dp: pd.DataFrame | None = None) -> str:
+    """The excess table (every difference with its CI) and the DP cross-check."""
+    rows = [{"vehicle": r.vehicle, "road": r.road, "controller": r.controller, "seeds": r.seeds,
+             "trip time [s]": round(r.time_s_mean, 1), "energy [kJ]": round(r.energy_kJ_mean, 1),
+             "optimum [kJ]": round(r.optimum_kJ_mean, 1),
+             "excess over the optimum": format_difference(r.excess_pct, r.excess_1sigma_pct, r.excess_ci95_lo,
+                                                          r.excess_ci95_hi)} for r in summary.itertuples()]
+    md = ["Energy at the source above the full-route optimum at each run's own trip time and arrival speed, on the "
+          "same plant; fleet total over seeds, mean [95 % CI] (1σ); 'not resolved': the CI contains 0.", "",
+          markdown_table(pd.DataFrame(rows))]
+    if dp is not None and len(dp):
+        mean, se, lo, hi = ratio_of_means_ci(dp["dp_energy_J"].to_numpy(float), dp["nlp_energy_J"].to_numpy(float))
+        md += ["", f"DP vs NLP (EV, no jerk limit, speed grid {dp['speed_step'].iloc[0]:g} m/s, {len(dp)} seeds): "
+               f"{format_difference(mean, se, lo, hi)}; per seed {dp['dp_vs_nlp_pct'].min():+.3f} … "
+               f"{dp['dp_vs_nlp_pct'].max():+.3f} %"]
+    return "\n".join(md) + "\n"
+
+
+def run_benchmark(tasks: list[OptimumTask], out: Path, scheduler: str | None = None, workers: int | None = None,
+                  merge: list[Path] | None = None) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
+    """Run the tasks on the sweep runner; write excess_over_optimum.csv (one row per controller run),
+    summary.csv / summary.md and dp_check.csv into ``out``. Returns (rows, summary, failures)."""
+    out.mkdir(parents=True, exist_ok=True)
+    outcomes = run_sweep(partial(run_and_store, folder=str(out / "tasks")), tasks, scheduler=scheduler,
+                         workers=workers, description="optimum benchmark")
+    results = [o.value for o in outcomes if o.ok]
+    for path in merge or []:
+        results += [json.loads(p.read_text()) for p in sorted(Path(path).glob("*.json"))]
+    failures = [f"{o.task.case}/{o.task.road}/seed {o.task.seed}: {o.error}" for o in outcomes if not o.ok]
+    rows, summary = write_tables(results, failures, out)
+    return rows, summary, failures
+
+
+def write_tables(results: list[dict[str, Any]], failures: list[str], out: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """excess_over_optimum.csv, summary.csv / summary.md and dp_check.csv of stored task results into ``out``."""
+    rows = pd.DataFrame([r for res in results for r in res["rows"]])
+    extra = [c for c in rows.columns if c not in CSV_COLUMNS]
+    rows = rows[[c for c in CSV_COLUMNS if c in rows.columns] + extra] if len(rows) else rows
+    write_text(out / "excess_over_optimum.csv", rows.to_csv(index=False))
+    summary = summarise(rows) if len(rows) else pd.DataFrame()
+    write_text(out / "summary.csv", summary.to_csv(index=False))
+    dp = pd.DataFrame([res["dp"] for res in results if "dp" in res])
+    write_text(out / "dp_check.csv", dp.to_csv(index=False))
+    md = summary_markdown(summary, dp) if len(summary) else "no run arrived\n"
+    if failures:
+        md += "\nFailed tasks:\n\n" + "\n".join(f"- {f}" for f in failures) + "\n"
+    write_text(out / "summary.md", "# Excess over the full-route optimum\n\n" + md)
+    return rows, summary
+
+
+# ----------------------------------------------------------------------------------- the RL episode's cost
+EPISODE_MPC_VARIANTS: dict[str, dict[str, Any]] = {
+    "mpc:oracle": {},
+    "mpc:oracle|route end, KE worth nothing": {"horizon_to_route_end": True, "terminal_value": "none"},
+    "mpc:oracle|route end, KE at source value": {"horizon_to_route_end": True},
+}
+
+
+@dataclass(frozen=True)
+class EpisodeCostTask:
+    """One EcoDrive-v0 route (road seed): the episode's cost E + lambda T (lambda = the reward's time weight, the
+    MPC's time weight) of the RL policies, of the MPC (its default and with the route end in its horizon) and of
+    the full-route optimum of that cost (kinetic energy at the end worth nothing, as in the episode), all on the
+    same plant."""
+
+    seed: int
+    time_weight: float = 3000.0
+    policies: str | None = None
+    algos: tuple[str, ...] = ("ppo",)
+
+
+def run_episode_cost_task(task: EpisodeCostTask) -> dict[str, Any]:
+    road = paired_road("route", task.seed)
+    lam = task.time_weight
+    energy = energy_model_from_spec("bmw_i3")
+    rows: list[dict[str, Any]] = []
+
+    def add(name: str, m: dict[str, Any]) -> None:
+        rows.append({"controller": name, "seed": task.seed, "energy_J": m["arrival_energy_J"],
+                     "time_s": m["arrival_time"], "arrival_speed": m["arrival_speed"],
+                     "cost_J": m["arrival_energy_J"] + lam * m["arrival_time"],
+                     "speed_violations": m.get("speed_violations")})
+
+    base = DriveSettings(controller="mpc", force_model="oracle", time_weight=lam, dt=0.1)
+    ot = OptimumTask("car", "route", task.seed, controllers=tuple(task.algos), policies=task.policies)
+    for algo in task.algos:
+        m = _policy_run(ot, algo, road)
+        add(algo, {"arrival_energy_J": m["segment_energy_J"], "arrival_time": m["segment_time"],
+                   "arrival_speed": m["arrival_speed"], "speed_violations": m["speed_violations"]})
+    for name, changes in EPISODE_MPC_VARIANTS.items():
+        res, _ = drive("bmw_i3", road, seed=task.seed, settings=replace(base, mpc=replace(base.mpc, **changes)))
+        add(name, res.metrics)
+    plant = SimulatorPlant("bmw_i3", road, seed=task.seed)
+    opt = FullRouteOptimum(road, energy, plant.true_parameters())
+    for terminal in ("none", "source"):
+        sol = opt.solve_weighted(lam, 0.0, terminal)
+        target = OptimumTarget(trip_time=sol.trip_time, arrival_speed=None, terminal=terminal)
+        res, _ = drive("bmw_i3", road, seed=task.seed, settings=replace(base, controller="optimum",
+                                                                         optimum_target=target))
+        add(f"optimum (KE at the end {'worth nothing' if terminal == 'none' else 'at source value'})",
+            res.metrics)
+        rows[-1].update(model_cost_J=sol.energy_J + lam * sol.trip_time, model_time_s=sol.trip_time)
+    return {"task": task.__dict__, "rows": rows}
+
+
+def episode_cost_summary(rows: pd.DataFrame, reference: str) -> pd.DataFrame:
+    """Per controller: mean cost [kJ], energy, time, arrival speed, and its cost against ``reference``'s as a fleet
+    total with 1-sigma and 95 % CI (paired per seed)."""
+    out = []
+    ref = rows[rows.controller == reference].set_index("seed")["cost_J"]
+    for name, g in rows.groupby("controller", sort=False):
+        g = g.set_index("seed")
+        common = g.index.intersection(ref.index)
+        mean, se, lo, hi = ratio_of_means_ci(g.loc[common, "cost_J"].to_numpy(float),
+                                             ref.loc[common].to_numpy(float))
+        out.append({"controller": name, "seeds": len(g), "cost_kJ": g["cost_J"].mean() / 1e3,
+                    "energy_kWh": g["energy_J"].mean() / 3.6e6, "time_s": g["time_s"].mean(),
+                    "arrival_speed": g["arrival_speed"].mean(), f"vs {reference}": format_difference(mean, se, lo, hi),
+                    "vs_pct": mean, "vs_1sigma": se, "vs_ci95_lo": lo, "vs_ci95_hi": hi})
+    return pd.DataFrame(out)
+
+
+def run_episode_cost(tasks: list[EpisodeCostTask], out: Path, scheduler: str | None = None,
+                     workers: int | None = None) -> tuple[pd.DataFrame, str, list[str]]:
+    """The episode-cost study on the sweep runner: episode_cost.csv (one row per run) and episode_cost.md."""
+    out.mkdir(parents=True, exist_ok=True)
+    outcomes = run_sweep(run_episode_cost_task, tasks, scheduler=scheduler, workers=workers,
+                         description="episode cost")
+    rows = pd.DataFrame([r for o in outcomes if o.ok for r in o.value["rows"]])
+    failures = [f"seed {o.task.seed}: {o.error}" for o in outcomes if not o.ok]
+    write_text(out / "episode_cost.csv", rows.to_csv(index=False))
+    md = ["# The RL episode's cost E + lambda T on EcoDrive-v0 routes", ""]
+    if len(rows):
+        optimum = next(c for c in rows.controller.unique() if c.startswith("optimum (KE at the end worth nothing"))
+        cols = ["controller", "seeds", "cost_kJ", "energy_kWh", "time_s", "arrival_speed"]
+        for ref in [optimum] + [a for a in ("ppo", "sac") if a in set(rows.controller)]:
+            table = episode_cost_summary(rows, ref)
+            md += [f"Cost against `{ref}` (fleet total over seeds, 95 % CI):", "",
+                   markdown_table(table[cols + [f"vs {ref}"]].round(3)), ""]
+    md += [f"- failed: {f}" for f in failures]
+    text = "\n".join(md) + "\n"
+    write_text(out / "episode_cost.md", text)
+    return rows, text, failures

@@ -1,0 +1,70 @@
+"""The optimum benchmark's bookkeeping, the force-model specs of the paired comparison and the FASTSim check."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from roadload.experiments.controller_comparison import force_model_settings
+from roadload.experiments.optimum_benchmark import (OptimumBenchmarkError, OptimumTask, episode_cost_summary,
+                                                    summarise)
+from roadload.road_profiles import RoadProfile
+
+
+def test_excess_summary_is_a_fleet_total_with_its_ci():
+    rows = pd.DataFrame({"vehicle": "car", "road": "hilly", "controller": "cruise", "seed": range(4),
+                         "arrived": True, "energy_J": [110.0, 220.0, 330.0, 440.0],
+                         "optimum_energy_J": [100.0, 200.0, 300.0, 400.0], "time_s": 100.0,
+                         "optimum_time_s": 100.1, "excess_pct": 10.0})
+    left_out = rows.iloc[:1].assign(seed=9, optimum_energy_J=np.nan)  # no optimum (too fast): counted, not used
+    s = summarise(pd.concat([rows, left_out], ignore_index=True)).iloc[0]
+    assert s.seeds == 4 and s.runs_left_out == 1
+    assert s.excess_pct == pytest.approx(10.0)  # 100 mean(E - E_opt) / mean(E_opt)
+    assert s.excess_ci95_lo < 10.0 < s.excess_ci95_hi
+    assert s.optimum_time_error_pct_max == pytest.approx(0.1)
+
+
+def test_episode_cost_is_compared_per_seed():
+    rows = pd.DataFrame({"controller": ["ppo"] * 3 + ["mpc"] * 3, "seed": [1, 2, 3] * 2,
+                         "cost_J": [100.0, 200.0, 300.0, 104.0, 208.0, 312.0], "energy_J": 1.0, "time_s": 1.0,
+                         "arrival_speed": 1.0})
+    s = episode_cost_summary(rows, "ppo").set_index("controller")
+    assert s.loc["mpc", "vs_pct"] == pytest.approx(4.0) and s.loc["ppo", "vs_pct"] == 0.0
+
+
+def test_force_model_specs_of_the_paired_comparison():
+    assert force_model_settings("abc") == {"force_model": "abc", "wrong_model": None}
+    s = force_model_settings("online@RRLM+forgetting=0.995+cusum")
+    assert s["estimator"] == "RRLM" and s["estimator_settings"]["forgetting"] == 0.995
+    assert s["change_detection"] is not None
+    assert force_model_settings("online_wind@SGMKF")["force_model"] == "online_wind"
+    with pytest.raises(ValueError, match="online models only"):
+        force_model_settings("oracle@RRLM")
+    with pytest.raises(ValueError, match="key=value"):
+        force_model_settings("online@RRLM+fast")
+
+
+def test_bad_benchmark_tasks_are_refused_with_the_reason():
+    with pytest.raises(OptimumBenchmarkError, match="unknown"):
+        OptimumTask("car", "hilly", 0, controllers=("mpc:magic",))
+    with pytest.raises(OptimumBenchmarkError, match="EcoDrive-v0 routes only"):
+        OptimumTask("truck_40t", "long_grades", 0, controllers=("ppo",))
+    with pytest.raises(OptimumBenchmarkError, match="vehicle case"):
+        OptimumTask("bus", "hilly", 0)
+
+
+def test_fastsim_energy_of_a_trace_rises_with_the_grade():
+    pytest.importorskip("fastsim")
+    from roadload.experiments.fastsim_check import fastsim_energy
+
+    def road(grade):
+        s = np.arange(0.0, 1001.0, 5.0)
+        z = np.zeros_like(s)
+        return RoadProfile("straight", s, np.full_like(s, grade), z, z, np.full_like(s, 30.0))
+
+    t = np.arange(0.0, 50.01, 0.1)
+    v = np.full_like(t, 20.0)
+    flat, climb = (fastsim_energy(t, 20.0 * t, v, road(g))["energy_J"] for g in (0.0, 0.02))
+    # the climb's extra energy is about m g sin(theta) v t / eta at the drive's efficiency (0.6 .. 1)
+    extra = 1400.0 * 9.81 * np.sin(0.02) * 1000.0
+    assert 1.0 < (climb - flat) / extra < 1.7
+    assert flat > 0

@@ -8,8 +8,8 @@ positional and keyword parameters of its ``def``. The simulator's kernels take a
 parameters, command, tables, route) instead of dozens of arrays and scalars; ``scripts/kernel_signatures.py`` prints
 the table and the largest count and fails above a limit.
 
-    python scripts/kernel_signatures.py [--folders envs gym-envs] [--limit 12] [--quick]
-    python scripts/kernel_signatures.py --folders all          # every package folder (PACKAGE_FOLDERS)
+    python scripts/kernel_signatures.py [--folders envs gym-envs] [--limit 12] [--quick]   # default: all
+    python scripts/kernel_signatures.py                        # every package folder (PACKAGE_FOLDERS)
 """
 
 from __future__ import annotations
@@ -81,7 +81,7 @@ def main(argv: list[str] | None = None, repo: Path | None = None) -> int:
     largest with ``--quick``), then the largest count; returns 1 when it exceeds ``--limit``. ``repo``: the source
     tree (default: the one of this file)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--folders", nargs="+", default=["envs", "gym-envs"],
+    ap.add_argument("--folders", nargs="+", default=["all"],
                     help="source folders under the repository ('all': every package folder)")
     ap.add_argument("--limit", type=int, default=12, help="largest parameter count allowed (exit 1 above it)")
     ap.add_argument("--quick", action="store_true", help="print only the ten largest (CI smoke run)")

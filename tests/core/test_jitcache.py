@@ -111,6 +111,7 @@ def test_a_damaged_cache_is_rebuilt_not_trusted(light):
 
 
 @pytest.mark.slow
+@pytest.mark.nightly  # minutes of compilation on 2 cores: outside the 15-minute CI, run by .ci/nightly
 def test_four_concurrent_cold_starts_of_every_kernel_agree(tmp_path):
     """Every kernel, simulator core and vector env included (the damage test above uses the same CheckedCache)."""
     cache, script, results = cold_starts(tmp_path, "full")

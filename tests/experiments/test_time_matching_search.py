@@ -106,16 +106,6 @@ def _matched(history, target=100.0):
     return MatchedRun(SimpleNamespace(metrics={"trip_time": 101.0}), 1.0, target, True, len(history), history)
 
 
-def test_energy_at_target_interpolates_between_the_closest_bracketing_runs():
-    h = [(1.0, 90.0, 900.0), (2.0, 98.0, 980.0), (3.0, 104.0, 1100.0), (4.0, 120.0, 0.0), (5.0, float("nan"), 1.0)]
-    assert _matched(h).energy_at_target() == pytest.approx(980.0 + (100.0 - 98.0) * 120.0 / 6.0)
-    assert _matched([(1.0, 100.0, 5.0), (2.0, 100.0, 7.0)]).energy_at_target() == 5.0  # both at T_target
-    assert _matched([(1.0, 100.0, 5.0), (2.0, 90.0, 1.0)]).energy_at_target() == 5.0  # a run at exactly T_target
-    assert math.isnan(_matched([(1.0, 98.0, 1.0), (2.0, 99.0, 2.0)]).energy_at_target())
-    assert math.isnan(_matched([(1.0, 101.0, 1.0), (2.0, 99.0, float("inf"))]).energy_at_target())
-    assert _matched([]).time_error == pytest.approx(0.01)
-
-
 def test_local_fit_window_curvature_and_read_outs():
     def energy(t):
         x = t / 200.0 - 1.0

@@ -30,7 +30,7 @@ def steady(speed: float, grade: float, withheld: str = NONE, seconds: float = 90
     """The independent world's loop on a straight road of constant grade, driver holding ``speed``: states."""
     n_grid = 4000
     n = int(seconds / iw.DT)
-    out = iw._drive(n, iw.DT, 5.0, np.full(n_grid, grade), np.zeros(n_grid), np.full(n_grid, speed),
+    out = iw._drive(n, iw.DT, 5.0, np.vstack((np.full(n_grid, grade), np.zeros(n_grid))), np.full(n_grid, speed),
                     np.full(n_grid, speed), np.zeros(0), np.zeros(int(seconds) + 2), iw._params(iw.BASE),
                     iw.effect_vector(withheld), np.full(n, T_AMB), 5.0)
     return out
@@ -95,9 +95,10 @@ def test_cornering_resistance_follows_eq_2_14():
     n_grid, n = 4000, 6000
 
     def loop(kappa: float, withheld: str = NONE) -> np.ndarray:
-        return settled(iw._drive(n, iw.DT, 5.0, np.zeros(n_grid), np.full(n_grid, kappa), np.full(n_grid, 15.0),
-                                 np.full(n_grid, 15.0), np.zeros(0), np.zeros(62), iw._params(iw.BASE),
-                                 iw.effect_vector(withheld), np.full(n, T_AMB), 5.0))
+        road = np.vstack((np.zeros(n_grid), np.full(n_grid, kappa)))
+        return settled(iw._drive(n, iw.DT, 5.0, road, np.full(n_grid, 15.0), np.full(n_grid, 15.0), np.zeros(0),
+                                 np.zeros(62), iw._params(iw.BASE), iw.effect_vector(withheld), np.full(n, T_AMB),
+                                 5.0))
 
     for withheld, scale in ((NONE, 1.0), ("cornering", 1 / 0.7)):
         x = loop(1 / 200.0, withheld)      # resistance beyond the straight-road closed form at the settled speed

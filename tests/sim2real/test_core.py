@@ -238,6 +238,6 @@ def test_latency_candidate_fits_the_delay_with_its_sign():
     tab["residual"] = tab.tractive_force - tab.sim_force
     _, ranked, steps = diagnose_table(tab, candidates=("latency", "mass_offset", "torque_scale"))
     top = ranked[0]
-    assert top.name == "latency" and steps[0]["effect"] == "latency" and steps[0]["accepted"]
+    assert top.name == "latency" and steps[0].effect == "latency" and steps[0].accepted
     assert top.parameters["latency tau"] == pytest.approx(tau, rel=0.1)
     assert top.sim_parameters == {"delta": pytest.approx(top.parameters["latency tau"])}

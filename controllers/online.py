@@ -118,6 +118,7 @@ class OnlineForceModel:
         new = t > self._t_done + 1e-9
         for a, b in zip(A[new], B[new]):
             if self.detector is not None and self.detector.update(float(b - a @ self.estimator.x)):
+                assert self._reset_diagonal is not None  # set together with the detector from change_detection
                 reset_covariance(self.estimator, self._reset_diagonal)  # a change of the road load: learn anew
             self.estimator.update(a, b)
         if new.any():

@@ -210,7 +210,9 @@ def paired_road(name: str, seed: int, warmup: float = 0.0) -> RoadProfile:
     if name == "motorway":
         return motorway(seed=seed, length=6000.0 + warmup)
     if name == "route":  # the EcoDrive-v0 route of this road seed (2 km of the generated hilly road), no warm-up
-        return cut_profile(load_profile_start("hilly", ROUTE_LENGTH, seed=seed), ROUTE_LENGTH)
+        route = load_profile_start("hilly", ROUTE_LENGTH, seed=seed)
+        assert isinstance(route, RoadProfile)  # the registered 'hilly' is a generated road, never a drive cycle
+        return cut_profile(route, ROUTE_LENGTH)
     raise ValueError(f"unknown paired road {name!r}; known: {', '.join(PAIRED_ROADS)}")
 
 

@@ -287,7 +287,7 @@ def save_samples(path: Path, native: list[EpisodeSamples], reference: list[Episo
             arrays[f"{name}_{k}_episode"] = pool.episode
         for k, v in episode_metrics(samples).items():
             arrays[f"{name}_{k}"] = v
-    np.savez_compressed(path, **arrays)
+    np.savez_compressed(path, **arrays)  # type: ignore[arg-type]  # numpy's stub types **kwds as allow_pickle
 
 
 def paired_episodes(native: list[EpisodeSamples], reference: list[EpisodeSamples]) -> pd.DataFrame:

@@ -145,41 +145,69 @@ class _Column:
         return pa.field(self.key, pa.from_numpy_dtype(self.dtype), metadata=meta)
 
 
-def _plan_column(key: str, name: str, kind: Literal["time", "measured", "truth"], unit: str, sample: np.ndarray,
-                 precision: str, step: float | None) -> _Column:
-    dtype = np.dtype(sample.dtype)
-    if dtype.kind == "b" or dtype.kind in "iu":
-        col = _Column(key, unit, kind, dtype)
-        col.encoding = None if len(np.unique(sample)) <= _DICTIONARY_MAX else \
-            ("DELTA_BINARY_PACKED" if dtype.kind in "iu" else "PLAIN")
-        if dtype.kind == "b":
-            col.encoding = "PLAIN"
-        return col
-    if dtype.kind != "f":
-        raise TripError(f"channel {name!r}: cannot store dtype {dtype} (numeric channels only)")
+def _plan_integer_column(key: str, kind: Literal["time", "measured", "truth"], unit: str, sample: np.ndarray,
+                         dtype: np.dtype) -> _Column:
+    """An integer or bool column: dictionary for few distinct values, else delta-packed (integers) or PLAIN (bool)."""
+    col = _Column(key, unit, kind, dtype)
+    col.encoding = None if len(np.unique(sample)) <= _DICTIONARY_MAX else \
+        ("DELTA_BINARY_PACKED" if dtype.kind in "iu" else "PLAIN")
+    if dtype.kind == "b":
+        col.encoding = "PLAIN"
+    return col
+
+
+def _plan_float_storage(key: str, name: str, kind: Literal["time", "measured", "truth"], unit: str,
+                        sample: np.ndarray, precision: str, step: float | None) -> _Column:
+    """A float column's stored dtype and rounding (grid ``step`` [unit] or significant bits) for ``precision``."""
     if precision == "exact":
-        col = _Column(key, unit, kind, dtype)
-    elif kind == "time":
-        col = _Column(key, unit, kind, np.dtype(np.float64))
+        return _Column(key, unit, kind, np.dtype(sample.dtype))
+    if kind == "time":
+        return _Column(key, unit, kind, np.dtype(np.float64))
+    wide = name in FLOAT64_CHANNELS
+    finite = sample[np.isfinite(sample)]
+    if step is not None and finite.size and float(np.abs(finite).max()) / step >= _F32_GRID_LIMIT:
+        wide = True  # float32 cannot hold this grid over the channel's values
+    col = _Column(key, unit, kind, np.dtype(np.float64 if wide else np.float32))
+    if kind == "measured":
+        col.step = step
     else:
-        wide = name in FLOAT64_CHANNELS
-        finite = sample[np.isfinite(sample)]
-        if step is not None and finite.size and float(np.abs(finite).max()) / step >= _F32_GRID_LIMIT:
-            wide = True  # float32 cannot hold this grid over the channel's values
-        col = _Column(key, unit, kind, np.dtype(np.float64 if wide else np.float32))
-        if kind == "measured":
-            col.step = step
-        else:
-            col.bits = TRUTH_SIGNIFICANT_BITS_64 if wide else TRUTH_SIGNIFICANT_BITS
+        col.bits = TRUTH_SIGNIFICANT_BITS_64 if wide else TRUTH_SIGNIFICANT_BITS
+    return col
+
+
+def _float_encoding(col: _Column, sample: np.ndarray) -> str | None:
+    """The Parquet encoding of a float column from its stored first chunk (None: dictionary)."""
     stored = col.values(sample)
     distinct = len(np.unique(stored[np.isfinite(stored)])) if stored.size else 0
-    if kind != "time" and distinct <= _DICTIONARY_MAX and stored.size > 4 * distinct:
-        col.encoding = None
-    elif col.step is not None and col.dtype == np.float32:
-        col.encoding = "PLAIN"  # zstd matches the repeated 4-byte patterns of a quantised channel
-    else:
-        col.encoding = "BYTE_STREAM_SPLIT"
+    if col.kind != "time" and distinct <= _DICTIONARY_MAX and stored.size > 4 * distinct:
+        return None
+    if col.step is not None and col.dtype == np.float32:
+        return "PLAIN"  # zstd matches the repeated 4-byte patterns of a quantised channel
+    return "BYTE_STREAM_SPLIT"
+
+
+def _plan_column(key: str, name: str, kind: Literal["time", "measured", "truth"], unit: str, sample: np.ndarray,
+                 precision: str, step: float | None) -> _Column:
+    """How column ``key`` (channel ``name``) is stored, decided from its first chunk ``sample``."""
+    dtype = np.dtype(sample.dtype)
+    if dtype.kind == "b" or dtype.kind in "iu":
+        return _plan_integer_column(key, kind, unit, sample, dtype)
+    if dtype.kind != "f":
+        raise TripError(f"channel {name!r}: cannot store dtype {dtype} (numeric channels only)")
+    col = _plan_float_storage(key, name, kind, unit, sample, precision, step)
+    col.encoding = _float_encoding(col, sample)
     return col
+
+
+def _on_rows(values: np.ndarray, rows: np.ndarray | None, n: int) -> pa.Array:
+    """``values`` placed on file rows ``rows`` of ``n`` (null elsewhere); ``rows=None``: one value per row."""
+    if rows is None:
+        return pa.array(values)
+    full = np.zeros(n, dtype=values.dtype)
+    full[rows] = values
+    present = np.zeros(n, dtype=bool)
+    present[rows] = True
+    return pa.array(full, mask=~present)
 
 
 class TripWriter:
@@ -272,17 +300,33 @@ class TripWriter:
         if self._packed is not None:
             self._packed.write(measured, truth)
             return
-        first = self._columns is None
-        if first:
+        if self._columns is None:
             if self._tmp is None:
                 raise TripError(f"{self.path}: TripWriter has no open Parquet writer (use it as a context manager)")
             self._plan(measured, truth)
         assert self._columns is not None and self._writer is not None and self._schema is not None
+        self._check_columns(measured, truth, self._columns)
+        t, rows_m, rows_t = self._row_times(measured, truth)
+        table = pa.Table.from_arrays(self._chunk_arrays(measured, truth, t, rows_m, rows_t), schema=self._schema)
+        self._writer.write_table(table)
+        del table
+        pa.default_memory_pool().release_unused()  # hand the chunk's buffers back: bounded RSS over a day
+        if t.size:
+            self._last_t = float(t[-1])
+        self.n_measured += len(measured)
+        self.n_truth += 0 if truth is None else len(truth)
+
+    def _check_columns(self, measured: pd.DataFrame, truth: pd.DataFrame | None, columns: list[_Column]) -> None:
+        """Raise unless the chunk has the first chunk's columns, in the same order."""
         names = [c for c in measured.columns] + ([] if truth is None else [TRUTH_PREFIX + c for c in truth.columns
                                                                            if c != "t"])
-        expected = [col.key for col in self._columns]
+        expected = [col.key for col in columns]
         if names != expected:
             raise TripError(f"{self.path}: chunk columns {names} differ from the first chunk's {expected}")
+
+    def _row_times(self, measured: pd.DataFrame, truth: pd.DataFrame | None
+                   ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """The file rows' times t [s] and the row index of each measured / truth sample (None: every row)."""
         tm = measured["t"].to_numpy(dtype=np.float64)
         if self._time_base == "shared":
             if truth is not None and not (len(truth) == len(measured)
@@ -297,6 +341,12 @@ class TripWriter:
         if t.size and not t[0] > self._last_t:
             raise TripError(f"{self.path}: chunk starts at t = {t[0]:.6g} s, not after the previous chunk's end "
                             f"{self._last_t:.6g} s (chunks must follow each other in time)")
+        return t, rows_m, rows_t
+
+    def _chunk_arrays(self, measured: pd.DataFrame, truth: pd.DataFrame | None, t: np.ndarray,
+                      rows_m: np.ndarray | None, rows_t: np.ndarray | None) -> list[pa.Array]:
+        """The chunk's stored columns in schema order, plus the row flags of a union time base."""
+        assert self._columns is not None
         arrays = []
         for col in self._columns:
             if col.kind == "time":
@@ -305,28 +355,13 @@ class TripWriter:
             frame, rows = (measured, rows_m) if col.kind == "measured" else (truth, rows_t)
             assert frame is not None
             name = col.key[len(TRUTH_PREFIX):] if col.kind == "truth" else col.key
-            values = col.values(frame[name].to_numpy())
-            if rows is None:
-                arrays.append(pa.array(values))
-            else:
-                full = np.zeros(t.size, dtype=values.dtype)
-                full[rows] = values
-                present = np.zeros(t.size, dtype=bool)
-                present[rows] = True
-                arrays.append(pa.array(full, mask=~present))
+            arrays.append(_on_rows(col.values(frame[name].to_numpy()), rows, t.size))
         if self._time_base == "union":
             for rows in (rows_m, rows_t):
                 flag = np.zeros(t.size, dtype=bool)
                 flag[rows] = True
                 arrays.append(pa.array(flag))
-        table = pa.Table.from_arrays(arrays, schema=self._schema)
-        self._writer.write_table(table)
-        del table, arrays
-        pa.default_memory_pool().release_unused()  # hand the chunk's buffers back: bounded RSS over a day
-        if t.size:
-            self._last_t = float(t[-1])
-        self.n_measured += len(measured)
-        self.n_truth += 0 if truth is None else len(truth)
+        return arrays
 
     def close(self, meta: dict[str, Any]) -> Path:
         """Finish the file with the trip's metadata (known only at the end of a streamed simulation)."""

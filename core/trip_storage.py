@@ -583,38 +583,53 @@ def _decode(col: pa.ChunkedArray, enc: dict[str, Any] | None, key: str = "",
     return col.to_numpy(zero_copy_only=False)
 
 
+def _row_flags(cols: dict[str, np.ndarray]) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Which file rows are measured / truth rows, from the '_rows' flags (popped from ``cols``; None: no flags)."""
+    flags = cols.pop(_ROWS, None)
+    if flags is None:
+        return None, None
+    return (flags.astype(np.uint8) & 1) > 0, (flags.astype(np.uint8) & 2) > 0
+
+
+def _take_rows(frame: dict[str, np.ndarray], rows: np.ndarray | None, n: int | None) -> dict[str, np.ndarray]:
+    """The columns of ``frame`` on the flagged ``rows``, else on the first ``n`` rows, else whole."""
+    if rows is not None:
+        return {c: v[rows] for c, v in frame.items()}
+    if n is not None:
+        return {c: v[:n] for c, v in frame.items()}
+    return frame
+
+
+def _legacy_truth(cols: dict[str, np.ndarray], payload: dict[str, Any], rows: np.ndarray | None, n: int | None,
+                  measured: pd.DataFrame) -> pd.DataFrame | None:
+    """The truth frame of a format 1-3 table (its 't' from the measured frame when stored once)."""
+    truth_names = [c for c in cols if c.startswith(TRUTH_PREFIX)]
+    if not truth_names:
+        return None
+    tr = _take_rows({c[len(TRUTH_PREFIX):]: cols[c] for c in truth_names}, rows, n)
+    if "t" not in tr and payload.get("truth_time") == "measured":
+        tr = {"t": measured["t"].to_numpy(), **tr}  # one time base stored once
+    return pd.DataFrame(tr, copy=False)
+
+
+def _restore_dtypes(frame: pd.DataFrame, dtypes: dict[str, str]) -> pd.DataFrame:
+    """``frame`` with the dtypes it was written with (NaN padding and the storage encoding changed them)."""
+    return frame.astype({c: d for c, d in dtypes.items() if c in frame.columns and str(frame[c].dtype) != d})
+
+
 def _parts_legacy(table: pa.Table, payload: dict[str, Any], n_measured: int | None, n_truth: int | None,
                   carry: dict[str, Any] | None = None) -> TripParts:
+    """A format 1-3 table decoded (``n_measured`` / ``n_truth``: rows of each frame when the file has no flags)."""
     enc = payload.get("encoding", {})
     cols: dict[str, np.ndarray] = {name: _decode(table.column(name), enc.get(name), name, carry)
                                    for name in table.column_names}
-    flags = cols.pop(_ROWS, None)
-    m_rows = t_rows = None
-    if flags is not None:
-        m_rows, t_rows = (flags.astype(np.uint8) & 1) > 0, (flags.astype(np.uint8) & 2) > 0
-    truth_names = [c for c in cols if c.startswith(TRUTH_PREFIX)]
-    meas = {c: v for c, v in cols.items() if not c.startswith(TRUTH_PREFIX)}
-    if m_rows is not None:
-        meas = {c: v[m_rows] for c, v in meas.items()}
-    elif n_measured is not None:
-        meas = {c: v[:n_measured] for c, v in meas.items()}
+    m_rows, t_rows = _row_flags(cols)
+    meas = _take_rows({c: v for c, v in cols.items() if not c.startswith(TRUTH_PREFIX)}, m_rows, n_measured)
     measured = pd.DataFrame(meas, copy=False)
-    truth = None
-    if truth_names:
-        tr = {c[len(TRUTH_PREFIX):]: cols[c] for c in truth_names}
-        if t_rows is not None:
-            tr = {c: v[t_rows] for c, v in tr.items()}
-        elif n_truth is not None:
-            tr = {c: v[:n_truth] for c, v in tr.items()}
-        if "t" not in tr and payload.get("truth_time") == "measured":
-            tr = {"t": measured["t"].to_numpy(), **tr}  # one time base stored once
-        truth = pd.DataFrame(tr, copy=False)
-    # restore dtypes that NaN padding / storage encoding changed
-    measured = measured.astype({c: d for c, d in payload.get("dtypes", {}).items() if c in measured.columns
-                                and str(measured[c].dtype) != d})
+    truth = _legacy_truth(cols, payload, t_rows, n_truth, measured)
+    measured = _restore_dtypes(measured, payload.get("dtypes", {}))
     if truth is not None:
-        truth = truth.astype({c: d for c, d in payload.get("truth_dtypes", {}).items() if c in truth.columns
-                              and str(truth[c].dtype) != d})
+        truth = _restore_dtypes(truth, payload.get("truth_dtypes", {}))
     units = {c: u for c, u in payload["units"].items() if c in measured.columns}
     truth_units = {c: u for c, u in payload["truth_units"].items() if truth is not None and c in truth.columns}
     return TripParts(measured.reset_index(drop=True), units, payload["meta"],
@@ -691,58 +706,77 @@ class _PackedWriter:
         return pa.array(d, mask=mask)
 
     def write(self, measured: pd.DataFrame, truth: pd.DataFrame | None) -> None:
+        """Append one chunk as format 3 (integer codes, rows padded with nulls to the longer frame)."""
         owner = self.owner
         nm, nt = len(measured), 0 if truth is None else len(truth)
-        n = max(nm, nt)
         first = self._schema is None
         if first:
-            self._dtypes = {c: str(t) for c, t in measured.dtypes.items()}
-            if truth is not None:
-                self._truth_dtypes = {c: str(t) for c, t in truth.dtypes.items()}
-        if truth is not None and self._truth_time == "measured":
-            same = nm == nt and np.array_equal(measured["t"].to_numpy(), truth["t"].to_numpy())
-            if not same:
-                if not first or owner._shared_time:
-                    raise TripError("truth: its time base differed from the measured one only after the first "
-                                    "chunk; give the same time base in every chunk or write one chunk")
-                self._truth_time = "own"
-        arrays, names = [], []
+            self._record_dtypes(measured, truth)
+        self._check_truth_time(measured, truth, first)
+        table = self._chunk_table(measured, truth, nm, nt)
+        if first:
+            self._open(table.schema)
+        elif table.schema != self._schema:
+            raise TripError(f"{owner.path}: chunk columns {table.schema.names} differ from the first chunk's "
+                            f"{self._schema.names if self._schema is not None else []}")
+        assert self.writer is not None
+        self.writer.write_table(table)
+        del table
+        pa.default_memory_pool().release_unused()
+        owner.n_measured += nm
+        owner.n_truth += nt
+
+    def _record_dtypes(self, measured: pd.DataFrame, truth: pd.DataFrame | None) -> None:
+        """Remember the first chunk's dtypes, restored on reading."""
+        self._dtypes = {c: str(t) for c, t in measured.dtypes.items()}
+        if truth is not None:
+            self._truth_dtypes = {c: str(t) for c, t in truth.dtypes.items()}
+
+    def _check_truth_time(self, measured: pd.DataFrame, truth: pd.DataFrame | None, first: bool) -> None:
+        """Store truth's 't' apart ('own') when its time base differs from the measured one on the first chunk."""
+        if truth is None or self._truth_time != "measured":
+            return
+        same = len(measured) == len(truth) and np.array_equal(measured["t"].to_numpy(), truth["t"].to_numpy())
+        if not same:
+            if not first or self.owner._shared_time:
+                raise TripError("truth: its time base differed from the measured one only after the first "
+                                "chunk; give the same time base in every chunk or write one chunk")
+            self._truth_time = "own"
+
+    def _chunk_table(self, measured: pd.DataFrame, truth: pd.DataFrame | None, nm: int, nt: int) -> pa.Table:
+        """The chunk's coded columns, each padded with nulls to the longer frame, and the '_rows' flags."""
+        n = max(nm, nt)
 
         def pad(arr: pa.Array, k: int) -> pa.Array:
             return arr if k == n else pa.concat_arrays([arr, pa.nulls(n - k, arr.type)])
 
+        arrays, names = [], []
         for c in measured.columns:
             arrays.append(pad(self._column(c, measured[c].to_numpy(), False), nm))
             names.append(c)
-        if truth is not None:
-            for c in truth.columns:
-                if c == "t" and self._truth_time == "measured":
-                    continue
-                arrays.append(pad(self._column(c, truth[c].to_numpy(), True), nt))
-                names.append(TRUTH_PREFIX + c)
+        for c in ([] if truth is None else truth.columns):
+            if c == "t" and self._truth_time == "measured":
+                continue
+            assert truth is not None
+            arrays.append(pad(self._column(c, truth[c].to_numpy(), True), nt))
+            names.append(TRUTH_PREFIX + c)
         flags = np.zeros(n, dtype=np.uint8)
         flags[:nm] |= 1
         flags[:nt] |= 2
         arrays.append(pa.array(flags))
         names.append(_ROWS)
-        table = pa.Table.from_arrays(arrays, names=names)
-        if first:
-            self._schema = table.schema
-            encoding = {f.name: "BYTE_STREAM_SPLIT" for f in table.schema if pa.types.is_floating(f.type)}
-            encoding.update({f.name: "DELTA_BINARY_PACKED" for f in table.schema if pa.types.is_integer(f.type)})
-            if owner._tmp is None:
-                raise TripError(f"{owner.path}: TripWriter has no open Parquet writer (use it as a context manager)")
-            self.writer = pq.ParquetWriter(owner._tmp, table.schema, compression="zstd", compression_level=15,
-                                           use_dictionary=False, column_encoding=encoding, write_statistics=False)
-        elif table.schema != self._schema:
-            raise TripError(f"{owner.path}: chunk columns {names} differ from the first chunk's "
-                            f"{self._schema.names if self._schema is not None else []}")
-        assert self.writer is not None
-        self.writer.write_table(table)
-        del table, arrays
-        pa.default_memory_pool().release_unused()
-        owner.n_measured += nm
-        owner.n_truth += nt
+        return pa.Table.from_arrays(arrays, names=names)
+
+    def _open(self, schema: pa.Schema) -> None:
+        """Open the Parquet writer on the first chunk's schema: floats byte-stream-split, integers delta-packed."""
+        owner = self.owner
+        self._schema = schema
+        encoding = {f.name: "BYTE_STREAM_SPLIT" for f in schema if pa.types.is_floating(f.type)}
+        encoding.update({f.name: "DELTA_BINARY_PACKED" for f in schema if pa.types.is_integer(f.type)})
+        if owner._tmp is None:
+            raise TripError(f"{owner.path}: TripWriter has no open Parquet writer (use it as a context manager)")
+        self.writer = pq.ParquetWriter(owner._tmp, schema, compression="zstd", compression_level=15,
+                                       use_dictionary=False, column_encoding=encoding, write_statistics=False)
 
     def payload(self, meta: dict[str, Any]) -> dict[str, Any]:
         owner = self.owner

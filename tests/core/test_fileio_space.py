@@ -24,6 +24,16 @@ def _run_limited(code, *args, cwd=None):
                           text=True, timeout=600, cwd=cwd)
 
 
+@pytest.fixture(scope="module")
+def compiled_simulator(tmp_path_factory):
+    """The simulator's numba kernels compiled into the cache before a size-limited run: numba's own first-use cache
+    write would otherwise hit the file-size limit (errno 27) before the trip write under test."""
+    out = tmp_path_factory.mktemp("warm") / "warm.parquet"
+    code = ("import sys\nfrom roadload.envs import simulate\nfrom roadload.road_profiles import load_profile\n"
+            "simulate('bmw_i3', load_profile('hilly', seed=1), seed=1, duration=2.0, out=sys.argv[1])\n")
+    subprocess.run([sys.executable, "-c", code, str(out)], check=True, capture_output=True, timeout=900)
+
+
 def _leftovers(folder: Path):
     return [p.name for p in folder.iterdir() if TMP_MARK in p.name]
 
@@ -41,7 +51,7 @@ def test_text_write_beyond_the_file_size_limit_keeps_the_old_file(tmp_path):
     assert target.read_text() == '{"old": true}' and not _leftovers(tmp_path)
 
 
-def test_trip_written_beyond_the_file_size_limit_keeps_the_old_trip(tmp_path):
+def test_trip_written_beyond_the_file_size_limit_keeps_the_old_trip(tmp_path, compiled_simulator):
     target = tmp_path / "trip.parquet"
     target.write_bytes(b"an earlier trip")
     code = ("import sys\nfrom roadload.envs import simulate\nfrom roadload.road_profiles import load_profile\n"
@@ -54,7 +64,7 @@ def test_trip_written_beyond_the_file_size_limit_keeps_the_old_trip(tmp_path):
     assert target.read_bytes() == b"an earlier trip" and not _leftovers(tmp_path)
 
 
-def test_cli_reports_a_full_disk_in_one_line_and_keeps_the_old_file(tmp_path):
+def test_cli_reports_a_full_disk_in_one_line_and_keeps_the_old_file(tmp_path, compiled_simulator):
     target = tmp_path / "trip.parquet"
     target.write_bytes(b"an earlier trip")
     roadload = Path(sys.executable).parent / "roadload"

@@ -265,14 +265,37 @@ class MpcController(ControllerBase):
 
     # ------------------------------------------------------------------ control
     def _replan(self, obs: Observation) -> None:
+        """Solve the OCP from the current state; on trouble brake, shift the old plan or cruise (module docstring)."""
+        a_prev = self._current_accel(obs)
+        plan, ok = self._solve(obs, a_prev)
+        if plan is not None:
+            self._count_plan(plan)
+            if self._brake_for(plan, ok, obs):
+                return
+        self._brake_target = None
+        if ok and plan is not None:
+            self.plan = plan
+            if self.mode != "mpc":
+                self.mode = "mpc"
+            return
+        self._fall_back(obs)
+
+    def _current_accel(self, obs: Observation) -> float:
+        """The acceleration [m/s^2] the new plan starts from: the current plan's at this position, else the
+        measured one clipped to the comfort bounds."""
         st = self.settings.mpc
-        a_prev = float(np.clip(obs.a, -st.decel_max, st.accel_max))
         if self.plan is not None and self.plan.s[0] <= obs.s <= self.plan.s[-1]:
-            a_prev = float(np.interp(obs.s, 0.5 * (self.plan.s[1:] + self.plan.s[:-1]), self.plan.accel))
+            return float(np.interp(obs.s, 0.5 * (self.plan.s[1:] + self.plan.s[:-1]), self.plan.accel))
+        return float(np.clip(obs.a, -st.decel_max, st.accel_max))
+
+    def _solve(self, obs: Observation, a_prev: float) -> tuple[Plan | None, bool]:
+        """(plan, converged) of this step's solve (with the periodic multistart); (None, False) on a solver crash.
+        Records the solve time."""
         preview = self.preview(obs.s, obs.v)
         params = self.params()
         lam = self.time_weight(obs)
         t0 = time.perf_counter()
+        plan: Plan | None
         try:
             plan = self.ocp.solve(obs.v, a_prev, preview, params, warm=self.plan, time_weight=lam)
             ok = plan.converged
@@ -284,24 +307,29 @@ class MpcController(ControllerBase):
             self.last_error = repr(exc)
             plan, ok = None, False
         self.solve_times.append(plan.solve_time if plan is not None else time.perf_counter() - t0)
-        if plan is not None:
-            self.iterations.append(plan.iterations)
-            if plan.violations:  # counted in the run metrics (ctl_relaxed_plans, ctl_infeasible_plans)
-                self.events["relaxed_plans" if plan.converged else "infeasible_plans"] += 1
-                self._record_worst(plan.violations)
-            target = self._brake_target_of(plan, obs)
-            if target is not None:  # a stop or cap out of comfort reach: brake (module docstring)
-                self.events["fallback_brake"] += 1
-                self._brake_target = target
-                self.plan = plan if ok else self.plan  # kept as the next warm start
-                self.mode = "brake"
-                return
-        self._brake_target = None
-        if ok and plan is not None:
-            self.plan = plan
-            if self.mode != "mpc":
-                self.mode = "mpc"
-            return
+        return plan, ok
+
+    def _count_plan(self, plan: Plan) -> None:
+        """Count the plan's iterations and constraint relaxations."""
+        self.iterations.append(plan.iterations)
+        if plan.violations:  # counted in the run metrics (ctl_relaxed_plans, ctl_infeasible_plans)
+            self.events["relaxed_plans" if plan.converged else "infeasible_plans"] += 1
+            self._record_worst(plan.violations)
+
+    def _brake_for(self, plan: Plan, ok: bool, obs: Observation) -> bool:
+        """Switch to the fallback brake when the plan leaves a stop or cap out of comfort reach (module
+        docstring); True when it did."""
+        target = self._brake_target_of(plan, obs)
+        if target is None:
+            return False
+        self.events["fallback_brake"] += 1
+        self._brake_target = target
+        self.plan = plan if ok else self.plan  # kept as the next warm start
+        self.mode = "brake"
+        return True
+
+    def _fall_back(self, obs: Observation) -> None:
+        """After a failed solve: keep following the old plan while it is usable, else cruise control."""
         self.events["solver_failures"] += 1
         old = self.plan
         usable = (old is not None and old.s[-1] - obs.s >= self.settings.min_plan_left and obs.s >= old.s[0]
@@ -309,12 +337,12 @@ class MpcController(ControllerBase):
         if usable:
             self.events["fallback_shifted_plan"] += 1
             self.mode = "shifted"
-        else:
-            self.events["fallback_cruise"] += 1
-            if self.mode != "cruise":
-                self.cruise.restart(obs.v)
-            self.mode = "cruise"
-            self.plan = None
+            return
+        self.events["fallback_cruise"] += 1
+        if self.mode != "cruise":
+            self.cruise.restart(obs.v)
+        self.mode = "cruise"
+        self.plan = None
 
     def _multistart(self, obs, a_prev, preview, params, lam, plan, ok):
         """A second, cold IPOPT solve from a guess cruising multistart_step faster (late / alternating) or slower;

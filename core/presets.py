@@ -12,6 +12,7 @@ engine fuel map; copper/iron/windage motor losses) and stored as tables in the s
 
 from __future__ import annotations
 
+import dataclasses
 
 import numpy as np
 
@@ -142,25 +143,25 @@ def _gt_rwd() -> VehicleSpec:
 
 
 def _gt_awd() -> VehicleSpec:
+    """The rear-drive grand tourer with the V8 twin-turbo, all-wheel drive and the heavier body, tires and brakes
+    (only the values that differ from ``gt_rwd``)."""
+    rwd = _gt_rwd()
     dt = _ice_drivetrain([600, 1000, 1500, 2250, 4500, 5000, 5500, 6000, 6500, 7000],
                          [250, 400, 560, 750, 750, 720, 690, 660, 600, 450],
                          drag_c0=20.0, drag_c1=0.08, peak_eff=0.38, final_drive=3.0, driven="all",
                          diff_eff=0.96, diff_spin=1.0, engine_inertia=0.25, diff_inertia=0.12, max_rpm=7000)
-    return VehicleSpec(
-        name="gt_awd",
+    return dataclasses.replace(
+        rwd, name="gt_awd",
         description="all-wheel-drive grand tourer, 419 kW 4.8 l V8 twin-turbo, 7-speed dual-clutch",
-        body=BodySpec(mass=2100.0, wheelbase=2.92, cg_to_front_axle=1.38, cg_height=0.53, track_front=1.66,
-                      track_rear=1.66, yaw_inertia=3700.0, pitch_gradient=0.0035, roll_gradient=0.005),
-        aero=AeroSpec(drag_coefficient=0.30, frontal_area=2.40, yaw_drag_factor=0.3),
-        tires=TireSpec(dynamic_radius=0.35, rolling_resistance_f0=0.0105, rolling_resistance_f1=5.0e-5,
-                       rolling_resistance_f4=6.0e-10, cornering_stiffness_front=1.6e5,
-                       cornering_stiffness_rear=2.2e5, longitudinal_stiffness=1.0e5, wheel_inertia=1.5,
-                       toe_in=0.0015),
+        body=dataclasses.replace(rwd.body, mass=2100.0, cg_to_front_axle=1.38, cg_height=0.53, track_rear=1.66,
+                                 yaw_inertia=3700.0, pitch_gradient=0.0035, roll_gradient=0.005),
+        aero=dataclasses.replace(rwd.aero, drag_coefficient=0.30, frontal_area=2.40),
+        tires=dataclasses.replace(rwd.tires, dynamic_radius=0.35, rolling_resistance_f0=0.0105,
+                                  rolling_resistance_f4=6.0e-10, cornering_stiffness_front=1.6e5,
+                                  cornering_stiffness_rear=2.2e5, longitudinal_stiffness=1.0e5, wheel_inertia=1.5),
         drivetrain=dt,
-        brakes=BrakeSpec(front_area=3.8e-3, rear_area=2.2e-3, front_radius=0.16, rear_radius=0.15,
-                         pad_friction=0.42, front_share=0.65, max_pressure=1.6e7),
-        steering=steering_table(15.5, 12.5),
-        sensors=default_sensors("ice"),
+        brakes=dataclasses.replace(rwd.brakes, front_area=3.8e-3, rear_area=2.2e-3, front_radius=0.16,
+                                   rear_radius=0.15, pad_friction=0.42),
     )
 
 

@@ -144,6 +144,75 @@ def _round_trip(value: Any) -> Any:
 
 
 # ------------------------------------------------------------------------------------------------ the runner
+def _resume(fn: Callable[[Any], Any], tasks: list[Any], folder: Path, name: Callable[[Any], str] | None,
+            description: str, outcomes: list[TaskOutcome | None]) -> tuple[list[str], list[int], set[int]]:
+    """Fill ``outcomes`` from the valid unit files in ``folder``; (keys, indices still to compute, rebuilt ones)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    keys = [task_key(fn, task) for task in tasks]
+    todo: list[int] = []
+    rebuilt: set[int] = set()
+    for i, task in enumerate(tasks):
+        path = _unit_path(folder, keys[i], task, name)
+        if not path.exists():
+            todo.append(i)
+            continue
+        value, problem = read_unit(path, keys[i])
+        if problem is None:
+            outcomes[i] = TaskOutcome(i, task, value=value, source="resumed")
+        else:
+            print(f"{description}: unit file {path} {problem}: computing it again", file=sys.stderr)
+            rebuilt.add(i)
+            todo.append(i)
+    done = len(tasks) - len(todo)
+    if done:
+        print(f"{description}: resumed {done} of {len(tasks)} finished tasks from {folder}", file=sys.stderr)
+    return keys, todo, rebuilt
+
+
+def _checkpoint_outcome(outcome: TaskOutcome, fn: Callable[[Any], Any], folder: Path, key: str,
+                        name: Callable[[Any], str] | None, rebuilt: set[int]) -> None:
+    """Round-trip a finished outcome's value through JSON and write its unit file (an error if it is not JSON)."""
+    outcome.source = "rebuilt" if outcome.index in rebuilt else "computed"
+    if not outcome.ok:
+        return
+    try:
+        outcome.value = _round_trip(outcome.value)
+        _write_unit(_unit_path(folder, key, outcome.task, name), key, fn, outcome.task, outcome.value)
+    except TypeError as exc:  # a value that is not JSON data cannot be checkpointed
+        outcome.value, outcome.error = None, f"TypeError: {exc}"
+
+
+def _run_local(fn: Callable[[Any], Any], tasks: list[Any], todo: list[int], workers: int | None,
+               record: Callable[[TaskOutcome], None]) -> None:
+    """Run the ``todo`` tasks in this process (one worker or one task) or in a process pool."""
+    n = workers or os.cpu_count() or 1
+    if n <= 1 or len(todo) <= 1:
+        for i in todo:
+            record(_call(fn, i, tasks[i]))
+        return
+    with ProcessPoolExecutor(max_workers=min(n, len(todo))) as pool:
+        futures = [pool.submit(_call, fn, i, tasks[i]) for i in todo]
+        for fut in as_completed(futures):
+            record(fut.result())
+
+
+def _run_dask(fn: Callable[[Any], Any], tasks: list[Any], todo: list[int], scheduler: Any,
+              record: Callable[[TaskOutcome], None]) -> None:
+    """Run the ``todo`` tasks on a Dask distributed cluster (an address, a ``Client`` or a cluster object)."""
+    from distributed import Client
+    from distributed import as_completed as dask_completed
+
+    own = isinstance(scheduler, str)
+    client = Client(scheduler) if own else (scheduler if isinstance(scheduler, Client) else Client(scheduler))
+    try:
+        dask_futures = [client.submit(_call, fn, i, tasks[i], pure=False) for i in todo]
+        for dask_fut in dask_completed(dask_futures):
+            record(dask_fut.result())
+    finally:
+        if own or not isinstance(scheduler, Client):
+            client.close()
+
+
 def run_sweep(fn: Callable[[Any], Any], tasks: Iterable[Any], scheduler: str | None = None, progress: bool = True,
               workers: int | None = None, description: str = "sweep", checkpoint: str | os.PathLike | None = None,
               name: Callable[[Any], str] | None = None) -> list[TaskOutcome]:
@@ -161,64 +230,21 @@ def run_sweep(fn: Callable[[Any], Any], tasks: Iterable[Any], scheduler: str | N
     todo = list(range(len(tasks)))
     rebuilt: set[int] = set()
     if folder is not None:
-        folder.mkdir(parents=True, exist_ok=True)
-        keys = [task_key(fn, task) for task in tasks]
-        todo = []
-        for i, task in enumerate(tasks):
-            path = _unit_path(folder, keys[i], task, name)
-            if not path.exists():
-                todo.append(i)
-                continue
-            value, problem = read_unit(path, keys[i])
-            if problem is None:
-                outcomes[i] = TaskOutcome(i, task, value=value, source="resumed")
-            else:
-                print(f"{description}: unit file {path} {problem}: computing it again", file=sys.stderr)
-                rebuilt.add(i)
-                todo.append(i)
-        done = len(tasks) - len(todo)
-        if done:
-            print(f"{description}: resumed {done} of {len(tasks)} finished tasks from {folder}", file=sys.stderr)
+        keys, todo, rebuilt = _resume(fn, tasks, folder, name, description, outcomes)
     bar, bar_task = _progress_bar(len(todo), description, progress and len(todo) > 0)
 
     def record(outcome: TaskOutcome) -> None:
         if folder is not None:
-            outcome.source = "rebuilt" if outcome.index in rebuilt else "computed"
-            if outcome.ok:
-                try:
-                    outcome.value = _round_trip(outcome.value)
-                    _write_unit(_unit_path(folder, keys[outcome.index], outcome.task, name), keys[outcome.index],
-                                fn, outcome.task, outcome.value)
-                except TypeError as exc:  # a value that is not JSON data cannot be checkpointed
-                    outcome.value, outcome.error = None, f"TypeError: {exc}"
+            _checkpoint_outcome(outcome, fn, folder, keys[outcome.index], name, rebuilt)
         outcomes[outcome.index] = outcome
         if bar is not None:
             bar.advance(bar_task)
 
     try:
         if scheduler is None:
-            n = workers or os.cpu_count() or 1
-            if n <= 1 or len(todo) <= 1:
-                for i in todo:
-                    record(_call(fn, i, tasks[i]))
-            else:
-                with ProcessPoolExecutor(max_workers=min(n, len(todo))) as pool:
-                    futures = [pool.submit(_call, fn, i, tasks[i]) for i in todo]
-                    for fut in as_completed(futures):
-                        record(fut.result())
+            _run_local(fn, tasks, todo, workers, record)
         else:
-            from distributed import Client
-            from distributed import as_completed as dask_completed
-
-            own = isinstance(scheduler, str)
-            client = Client(scheduler) if own else (scheduler if isinstance(scheduler, Client) else Client(scheduler))
-            try:
-                dask_futures = [client.submit(_call, fn, i, tasks[i], pure=False) for i in todo]
-                for dask_fut in dask_completed(dask_futures):
-                    record(dask_fut.result())
-            finally:
-                if own or not isinstance(scheduler, Client):
-                    client.close()
+            _run_dask(fn, tasks, todo, scheduler, record)
     finally:
         if bar is not None:
             bar.stop()

@@ -235,6 +235,16 @@ HEADER = (f"{'module':32s} {'total':>5s} {'killed':>6s} {'timeout':>7s} {'surviv
           f"{'equivalent':>10s} {'score':>8s}")
 
 
+def _default_repo() -> Path:
+    """The source checkout: this module's (an editable install), else the one of the script that was run
+    (``scripts/mutation_score.py`` of a checkout with a non-editable install), else the working folder."""
+    for candidate in (REPO, Path(sys.argv[0]).resolve().parents[1], Path.cwd()):
+        if (candidate / "pyproject.toml").is_file():
+            return candidate
+    raise SystemExit("no source checkout found (no pyproject.toml beside this module, the script or the working "
+                     "folder); pass --repo DIR")
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--module", action="append", choices=sorted(MODULES), help="module(s) to run (default: all)")
@@ -244,9 +254,11 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--survivors", action="store_true", help="list every surviving mutant with its diff")
     ap.add_argument("--json", type=Path, help="write the per-module counts and survivors here")
     ap.add_argument("--tests", help="comma-separated test files instead of the module's own selection")
-    ap.add_argument("--repo", type=Path, default=REPO, help="source tree to stage (default: this checkout)")
+    ap.add_argument("--repo", type=Path, default=None,
+                    help="source tree to stage (default: the checkout this module or the calling script lives in)")
     ap.add_argument("--quick", action="store_true", help="CI size: core/trip_schema.py against its own test file")
     args = ap.parse_args(argv)
+    args.repo = args.repo or _default_repo()
     modules = ["core/trip_schema.py"] if args.quick else (args.module or list(MODULES))
     tests = ("tests/core/test_trip_schema.py",) if args.quick else None
     if args.tests:

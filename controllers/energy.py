@@ -18,6 +18,7 @@ The polynomial is convex in the forces and smooth in v > 0, which keeps the NLP 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -94,14 +95,20 @@ class SourceEnergyModel:
         most force (:attr:`traction_table`; without one, ``preferred``)."""
         if self.kind == "ev" or not self.traction_table:
             return preferred
-        speeds, forces = self.traction_table[0], self.traction_table[1:]
-        capacity = [float(np.interp(v, speeds, f)) for f in forces]
+        capacity = [self.full_load_force(v, g) for g in range(len(self.gear_ratios))]
         if capacity[preferred] >= force:
             return preferred
         for g in range(preferred - 1, -1, -1):
             if capacity[g] >= force:
                 return g
         return int(np.argmax(capacity))
+
+    def full_load_force(self, v: float, gear: int) -> float:
+        """The wheel force [N] of full load in ``gear`` (0-based) at speed v [m/s], from :attr:`traction_table` (0
+        where the engine speed is out of range); inf without a table (no limit known)."""
+        if not self.traction_table:
+            return math.inf
+        return float(np.interp(v, self.traction_table[0], self.traction_table[gear + 1]))
 
     def gear_for_speed(self, v) -> np.ndarray:
         """Gear index (0-based) from the speed-based shift rule; always 0 for an EV."""

@@ -37,12 +37,15 @@ from typing import Any
 import numpy as np
 
 from roadload.schema import check_field_types
-from .base import ControllerBase, ControllerError, DriveContext, Observation
+from .base import Command, ControllerBase, ControllerError, DriveContext, Observation
 from .cruise import CruiseLaw, CruiseSettings
 from .energy import SourceEnergyModel
 from .force_model import road_heading
 from .mpc import SEGMENT0_FRACTIONS, ConstraintViolation, MpcSettings, OcpSolver, Plan, Preview
 from .safety import speed_cap
+
+# a kicked-down gear is kept until the road force is below this share of the shift rule's gear's full load
+KICK_DOWN_RETURN = 0.95
 
 _SOLVERS: dict[tuple[MpcSettings, SourceEnergyModel], OcpSolver] = {}
 
@@ -139,7 +142,7 @@ class MpcControllerSettings:
     # control does; held within +-gear_band [m/s] of a shift speed, from gear_min_speed [m/s] up (below: the
     # transmission's launch and low gears). Without it, the plant downshifts under load where the plan assumed
     # the higher gear, and a 0.1 m/s difference in cruise speed changes the fuel of a whole climb
-    gear_command: bool = False  # (and a lower gear where the shift rule's full load cannot give the force)
+    gear_command: bool = False  # (and a lower gear where the shift rule's full load cannot give the road's force)
     gear_band: float = 0.5  # [m/s]
     gear_min_speed: float = 10.0  # [m/s]
 
@@ -184,7 +187,9 @@ class MpcController(ControllerBase):
         self._unserved = list(np.sort(np.asarray(road.stops, dtype=float)))
         self._next_multistart = 0.0
         self._multistart_sign = 1.0
-        self._gear: int | None = None  # 0-based gear of the last request
+        self._gear: int | None = None  # 0-based gear of the shift rule (with hysteresis)
+        self._requested: int | None = None  # 1-based gear of the last request (a kick-down below _gear)
+        self._traction_sent: float | None = None  # [N] traction of the last command
         self._brake_target: ConstraintViolation | None = None  # the stop / cap the fallback brake is meeting
         self._worst: ConstraintViolation | None = None
         self.reset_schedule()
@@ -424,16 +429,44 @@ class MpcController(ControllerBase):
         return lam
 
     def gear_request(self, obs: Observation) -> int | None:
-        """With ``gear_command`` on an ICE: the shift rule's gear (1-based) at the measured speed, with hysteresis;
-        None (the transmission decides) otherwise and below ``gear_min_speed``."""
+        """With ``gear_command`` on an ICE: the shift rule's gear (1-based) at the measured speed, with hysteresis,
+        or a lower one where its full load cannot give the force the road takes (:meth:`road_force`; back up below
+        KICK_DOWN_RETURN of it), the request held while a shift is under way; None (the transmission decides)
+        otherwise and below ``gear_min_speed``."""
         st = self.settings
         en = self.ctx.energy
         if not st.gear_command or en.kind != "ice" or obs.v < st.gear_min_speed:
-            self._gear = None
+            self._gear = self._requested = None
             return None
         self._gear = en.gear_with_hysteresis(obs.v, self._gear, st.gear_band)
-        force = self._last_force if self._last_force is not None else 0.0
-        return en.gear_for_force(obs.v, force, self._gear) + 1  # a kick-down where full load needs it
+        shifting = obs.sample.get("clutch", 1.0) < 1.0 or (self._requested is not None and obs.gear != self._requested)
+        if shifting and self._requested is not None and abs(self._requested - 1 - self._gear) <= 1:
+            return self._requested  # no new decision while the clutch slips: the force then says nothing
+        force = self.road_force(obs)
+        if self._requested is not None and self._requested - 1 < self._gear:  # kicked down: back up with a margin
+            force /= KICK_DOWN_RETURN
+        self._requested = en.gear_for_force(obs.v, force, self._gear) + 1
+        return self._requested
+
+    def road_force(self, obs: Observation) -> float:
+        """The wheel force [N] the drive-train must deliver on the road to follow the plan, from what it delivers:
+        F = F_d + m (a_plan - a), F_d the traction sent last step limited to the engaged gear's full load (the
+        engine's actual torque, which a transmission controller reads), a the measured acceleration it gave and
+        a_plan the plan's acceleration here (0 off the plan). F_d - m a is the road's resistance as measured, so a
+        force model's error enters only through m times (a_plan - a), not through its resistance (a heavier model
+        commands more force than the road takes, and a kick-down on that command shifts where no gear is needed)."""
+        en = self.ctx.energy
+        sent = self._traction_sent if self._traction_sent is not None else max(self._last_force or 0.0, 0.0)
+        delivered = min(sent, en.full_load_force(obs.v, obs.gear - 1)) if obs.gear >= 1 else 0.0
+        a_plan = 0.0
+        if self.mode == "mpc" and self.plan is not None and self.plan.s[0] <= obs.s <= self.plan.s[-1]:
+            a_plan = float(self.plan.accel[self.plan.segment_at(obs.s)])
+        return delivered + self.params().inertial_mass * (a_plan - obs.a)
+
+    def act(self, obs: Observation) -> Command:
+        cmd = super().act(obs)
+        self._traction_sent = cmd.traction  # what the drive-train is asked for; road_force reads it next step
+        return cmd
 
     def reference_speed(self, obs: Observation) -> float:
         """The speed [m/s] the tracking law's feedback aims at: the plan's speed at the current position."""

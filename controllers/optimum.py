@@ -350,7 +350,8 @@ class OptimumTracker(MpcController):
     the current speed with the oracle's parameters (and wind), then tracks the plan with the MPC's tracking law
     (segment force + speed feedback, comfort and jerk limits, the safety guard and the stop manoeuvre of
     :class:`~.base.ControllerBase`). ICE: requests the shift rule's gear, which the plan's energy model assumes, and
-    a lower gear where that gear's full load cannot give the plan's force."""
+    a lower gear where that gear's full load cannot give the force the road takes to follow the plan
+    (:meth:`~.mpc_controller.MpcController.road_force`)."""
 
     name = "optimum"
 

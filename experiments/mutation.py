@@ -59,7 +59,27 @@ _NO_UNITS = ("TripPayload's fields carry no unit and it allows extra keys, so fo
 _RAISE = 'raise TripMetadataError(f"{{path}}: {{format_errors(exc, {})}}") from None'
 _PAYLOAD = "x_parse_trip_payload: " + _RAISE.format("TripPayload, root='metadata'") + " -> "
 _XP = "numpy's sin and cos of a CasADi expression call the expression's own, so xp=np gives the same force"
+_SHARED = ("this branch is taken only when measured and truth share one time base (or there is no truth), which the "
+           "writer also finds on its own; both ways write the same file")
+_CHUNKS = "the chunk size bounds memory only: the same rows are written whatever it is"
+_WITH_TIME = 'with TripWriter(out, payload["units"], truth_units, precision, res, shared_time=True) as writer:'
+_V2 = ('shared = payload["version"] >= 2 and (payload["version"] >= 4 and payload.get("time_base") == "shared" -> '
+       'shared = payload["version"] {} and (payload["version"] >= 4 and payload.get("time_base") == "shared"')
 EQUIVALENT: dict[str, dict[str, str]] = {
+    "core/trip.py": {
+        "x__check_frame: if t.size > 1 and not np.all(np.diff(t) > 0): -> "
+        "if t.size >= 1 and not np.all(np.diff(t) > 0):": "one sample has no differences: np.all of none is True",
+        f"x_convert_trip_file: {_WITH_TIME} -> {_WITH_TIME.replace('shared_time=True', 'shared_time=None')}": _SHARED,
+        f"x_convert_trip_file: {_WITH_TIME} -> {_WITH_TIME.replace('shared_time=True', '')}": _SHARED,
+        "x_convert_trip_file: " + _V2.format("> 2"): "only a format-2 file tells them apart, and it is converted "
+                                                     "the same whole or streamed (same resolutions either way)",
+        "x_convert_trip_file: " + _V2.format(">= 3"): "only a format-2 file tells them apart, and it is converted "
+                                                      "the same whole or streamed (same resolutions either way)",
+        "x_convert_trip_file: for parts in iter_trip_chunks(source, rows=360_000): -> "
+        "for parts in iter_trip_chunks(source, ):": _CHUNKS,
+        "x_convert_trip_file: for parts in iter_trip_chunks(source, rows=360_000): -> "
+        "for parts in iter_trip_chunks(source, rows=360001):": _CHUNKS,
+    },
     "core/road_load.py": {
         "x_road_load: return rolling + aero + climbing_force(m, grade, xp) + cornering -> "
         "return rolling + aero + climbing_force(m, grade, ) + cornering": _XP,

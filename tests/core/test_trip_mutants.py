@@ -117,6 +117,9 @@ def test_equals_tells_every_difference():
     assert not trip.equals(Trip(trip.measured, trip.units, trip.meta, trip.truth.rename(columns={"mass": "m"}),
                                 {"t": "s", "m": "kg"}))                        # truth units
     assert _trip(truth=False).equals(_trip(truth=False))
+    dropped = trip.copy()
+    dropped.truth = None  # truth removed after construction, truth units left as they were
+    assert not dropped.equals(trip) and not trip.equals(dropped)
 
 
 def test_duration_sample_rate_and_channels():
@@ -287,3 +290,71 @@ def test_convert_keeps_precision_resolutions_and_time_base(tmp_path):
     real = _trip(truth=False)
     conv = convert_trip_file(real.save(tmp_path / "real.parquet"), tmp_path / "real4.parquet")
     assert Trip.load(conv).equals(real) and _payload(conv)["has_truth"] is False
+
+
+def test_convert_of_a_union_time_base_keeps_the_stored_resolutions(tmp_path):
+    """Truth on its own time base is converted whole; the channels' resolutions stored in the file (not declared in
+    the metadata) are kept, so a compact file converts to the same values on the same grid."""
+    t = np.arange(100) / 100.0
+    speed = np.round((5.0 + np.sin(t)) / 0.02) * 0.02
+    src = tmp_path / "u.parquet"
+    with TripWriter(src, {"t": "s", "vehicle_speed": "m/s"}, {"t": "s", "speed": "m/s"}, "compact",
+                    {"vehicle_speed": 0.02}) as w:
+        w.write(pd.DataFrame({"t": t, "vehicle_speed": speed}), pd.DataFrame({"t": t[::3], "speed": t[::3]}))
+        w.close({"name": "u"})
+    assert _payload(src)["time_base"] == "union"
+    out = convert_trip_file(src, tmp_path / "u4.parquet")
+    assert _payload(out)["precision"] == "compact" and _payload(out)["time_base"] == "union"
+    assert pq.read_schema(out).field("vehicle_speed").metadata[b"resolution"] == b"0.02"
+    np.testing.assert_array_equal(Trip.load(out).channel("vehicle_speed"), speed)
+    assert Trip.load(out).equals(Trip.load(src))
+
+
+def test_convert_keeps_an_empty_or_one_row_truth(tmp_path):
+    empty = Trip({"t": [0.0, 0.1], "vehicle_speed": [1.0, 2.0]}, {"t": "s", "vehicle_speed": "m/s"}, {},
+                 {"t": np.zeros(0)}, {"t": "s"})
+    back = Trip.load(convert_trip_file(empty.save(tmp_path / "e.parquet"), tmp_path / "e4.parquet"))
+    assert back.truth is not None and len(back.truth) == 0 and back.equals(empty)
+    one = Trip({"t": [0.0], "vehicle_speed": [1.0]}, {"t": "s", "vehicle_speed": "m/s"}, {},
+               {"t": [0.0], "mass": [5.0]}, {"t": "s", "mass": "kg"})
+    packed = one.save(tmp_path / "o.parquet", precision="packed")  # format 3 states no has_truth
+    back = Trip.load(convert_trip_file(packed, tmp_path / "o4.parquet"))
+    assert back.true("mass").tolist() == [5.0] and back.equals(one)
+
+
+def test_chunks_read_only_the_requested_truth_and_default_to_an_hour_at_100_hz(tmp_path):
+    t = np.arange(10) / 100.0
+    trip = Trip({"t": t, "vehicle_speed": t}, {"t": "s", "vehicle_speed": "m/s"}, {},
+                {"t": t, "mass": t + 1.0, "speed": t}, {"t": "s", "mass": "kg", "speed": "m/s"})
+    path = trip.save(tmp_path / "m.parquet")
+    parts = list(Trip.iter_chunks(path, truth_channels=["mass"], rows=4))
+    assert [len(p) for p in parts] == [4, 4, 2] and all(list(p.truth.columns) == ["t", "mass"] for p in parts)
+    assert all(p.truth is None for p in Trip.iter_chunks(path, truth_channels=[]))
+    n = 360_001  # one hour at 100 Hz and one sample
+    big = Trip({"t": np.arange(n) / 100.0}, {"t": "s"}).save(tmp_path / "h.parquet")
+    assert [len(p) for p in Trip.iter_chunks(big)] == [360_000, 1]
+
+
+def test_contract_details_the_messages_depend_on():
+    # the reference channel of a length mismatch is 't' wherever it stands, every other length is named
+    with pytest.raises(TripError, match=r"channels of unequal length: 't' has 10 samples, 'a' has 7, 'b' has 3 "
+                                        r"\(every channel needs one value per sample of 't'; NaN marks a missing "
+                                        r"value\)$"):
+        Trip({"a": np.zeros(7), "t": np.arange(10.0), "b": np.zeros(3)}, {"t": "s", "a": "1", "b": "1"})
+    with pytest.raises(TripError, match=r"^truth_units given without a truth frame$"):
+        Trip({"t": [0.0, 0.1]}, {"t": "s"}, {}, None, {"t": "s"})
+    short = _trip()
+    short = Trip(short.measured, short.units, {}, short.truth.iloc[:20], short.truth_units)
+    with pytest.raises(TripError, match=r"^truth and measured frames differ in length; cannot join them row by "
+                                        r"row$"):
+        short.to_pandas(include_truth=True)
+    # an unsigned time channel that runs backwards does not wrap around into "increasing"
+    with pytest.raises(TripError, match=r"time channel 't' is not strictly increasing at index 2 \(t=2 then 1\)"):
+        Trip({"t": np.array([0, 2, 1], dtype=np.uint32)}, {"t": "s"})
+    # a catalogued measured channel is checked against the measured catalogue even with an SI unit
+    with pytest.raises(TripError, match=r"measured channel 'vehicle_speed' has unit 'm', the catalogue says 'm/s'"):
+        Trip({"t": [0.0], "vehicle_speed": [1.0]}, {"t": "s", "vehicle_speed": "m"})
+    # integer truth channels come back as floats
+    counted = Trip({"t": [0.0, 0.1]}, {"t": "s"}, {}, {"t": [0.0, 0.1], "gear": np.array([1, 2])},
+                   {"t": "s", "gear": "1"})
+    assert counted.true("gear").dtype == float and counted.true("gear").tolist() == [1.0, 2.0]

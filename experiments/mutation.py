@@ -67,6 +67,9 @@ _V2 = ('shared = payload["version"] >= 2 and (payload["version"] >= 4 and payloa
        'shared = payload["version"] {} and (payload["version"] >= 4 and payload.get("time_base") == "shared"')
 EQUIVALENT: dict[str, dict[str, str]] = {
     "core/trip.py": {
+        'xǁTripǁ__post_init__: _check_frame(self.measured, self.units, "measured", truth=False) -> '
+        '_check_frame(self.measured, self.units, "measured", truth=None)':
+            "unit_of reads the truth catalogue only when truth is truthy; None reads the measured one as False does",
         "x__check_frame: if t.size > 1 and not np.all(np.diff(t) > 0): -> "
         "if t.size >= 1 and not np.all(np.diff(t) > 0):": "one sample has no differences: np.all of none is True",
         f"x_convert_trip_file: {_WITH_TIME} -> {_WITH_TIME.replace('shared_time=True', 'shared_time=None')}": _SHARED,

@@ -358,3 +358,20 @@ def test_contract_details_the_messages_depend_on():
     counted = Trip({"t": [0.0, 0.1]}, {"t": "s"}, {}, {"t": [0.0, 0.1], "gear": np.array([1, 2])},
                    {"t": "s", "gear": "1"})
     assert counted.true("gear").dtype == float and counted.true("gear").tolist() == [1.0, 2.0]
+
+
+def test_convert_streams_a_shared_time_base_and_reads_a_union_whole(tmp_path):
+    """Shared time base (format 4 'shared', format 3 truth on the measured time, or no truth): converted chunk by
+    chunk of an hour at 100 Hz, so the output has one row group per chunk; a union time base is read whole."""
+    n = 360_001
+    t = np.arange(n) / 100.0
+    shared = Trip({"t": t}, {"t": "s"}, {}, {"t": t, "mass": np.full(n, 5.0)}, {"t": "s", "mass": "kg"})
+    out = convert_trip_file(shared.save(tmp_path / "s.parquet"), tmp_path / "s4.parquet")
+    assert pq.ParquetFile(out).num_row_groups == 2 and _payload(out)["time_base"] == "shared"
+    packed = shared.save(tmp_path / "p.parquet", precision="packed")
+    assert _payload(packed)["truth_time"] == "measured"
+    assert pq.ParquetFile(convert_trip_file(packed, tmp_path / "p4.parquet")).num_row_groups == 2
+    plain = Trip({"t": t}, {"t": "s"}).save(tmp_path / "r.parquet", precision="packed")  # format 3, no truth
+    assert pq.ParquetFile(convert_trip_file(plain, tmp_path / "r4.parquet")).num_row_groups == 2
+    union = Trip({"t": t}, {"t": "s"}, {}, {"t": t[::2]}, {"t": "s"}).save(tmp_path / "u.parquet")
+    assert pq.ParquetFile(convert_trip_file(union, tmp_path / "u4.parquet")).num_row_groups == 1

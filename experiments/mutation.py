@@ -61,7 +61,7 @@ _PAYLOAD = "x_parse_trip_payload: " + _RAISE.format("TripPayload, root='metadata
 _XP = "numpy's sin and cos of a CasADi expression call the expression's own, so xp=np gives the same force"
 _SHARED = ("this branch is taken only when measured and truth share one time base (or there is no truth), which the "
            "writer also finds on its own; both ways write the same file")
-_CHUNKS = "the chunk size bounds memory only: the same rows are written whatever it is"
+_CHUNKS = "iter_trip_chunks reads 360_000 rows a chunk by default"
 _WITH_TIME = 'with TripWriter(out, payload["units"], truth_units, precision, res, shared_time=True) as writer:'
 _V2 = ('shared = payload["version"] >= 2 and (payload["version"] >= 4 and payload.get("time_base") == "shared" -> '
        'shared = payload["version"] {} and (payload["version"] >= 4 and payload.get("time_base") == "shared"')
@@ -80,8 +80,6 @@ EQUIVALENT: dict[str, dict[str, str]] = {
                                                       "the same whole or streamed (same resolutions either way)",
         "x_convert_trip_file: for parts in iter_trip_chunks(source, rows=360_000): -> "
         "for parts in iter_trip_chunks(source, ):": _CHUNKS,
-        "x_convert_trip_file: for parts in iter_trip_chunks(source, rows=360_000): -> "
-        "for parts in iter_trip_chunks(source, rows=360001):": _CHUNKS,
     },
     "core/road_load.py": {
         "x_road_load: return rolling + aero + climbing_force(m, grade, xp) + cornering -> "

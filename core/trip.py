@@ -255,11 +255,7 @@ class Trip:
         :mod:`roadload.trip_storage`): 'exact' (every value bit for bit), 'compact' (float32 SI values rounded to
         the sensor resolution, truth to 15 significant bits; ~5x smaller) or 'packed' (roadload's private integer
         codec, readable only by roadload)."""
-        with TripWriter(path, self.units, self.truth_units if self.truth is not None else None, precision,
-                        resolutions_from_meta(self.meta)) as writer:
-            writer.write(self.measured, self.truth)
-            writer.close(self.meta)
-        return Path(path)
+        return _write_whole(self, path, precision, resolutions_from_meta(self.meta))
 
     @staticmethod
     def read_info(path: str | os.PathLike) -> dict[str, Any]:
@@ -290,6 +286,15 @@ class Trip:
                    None if parts.truth is None else parts.truth.reset_index(drop=True), parts.truth_units)
 
 
+def _write_whole(trip: Trip, path: str | os.PathLike, precision: str, resolutions: dict[str, float]) -> Path:
+    """Write a whole trip in one chunk with the given quantisation steps [SI] of its measured channels."""
+    with TripWriter(path, trip.units, trip.truth_units if trip.truth is not None else None, precision,
+                    resolutions) as writer:
+        writer.write(trip.measured, trip.truth)
+        writer.close(trip.meta)
+    return Path(path)
+
+
 def convert_trip_file(source: str | os.PathLike, out: str | os.PathLike, precision: str | None = None) -> Path:
     """Rewrite a trip file of any readable format as the current open format (``precision`` default: 'compact'
     for files written 'compact' or 'packed', else 'exact'). Streams chunk by chunk when measured and truth share
@@ -309,8 +314,8 @@ def convert_trip_file(source: str | os.PathLike, out: str | os.PathLike, precisi
     truth_units = payload["truth_units"] if (payload.get("has_truth") or payload["n_truth"] > 0) else None
     shared = payload["version"] >= 2 and (payload["version"] >= 4 and payload.get("time_base") == "shared"
                                           or payload.get("truth_time") == "measured" or truth_units is None)
-    if not shared:
-        return Trip.load(source).save(out, precision)
+    if not shared:  # read whole, written with the file's resolutions (its metadata may not declare them)
+        return _write_whole(Trip.load(source), out, precision, res)
     with TripWriter(out, payload["units"], truth_units, precision, res, shared_time=True) as writer:
         for parts in iter_trip_chunks(source, rows=360_000):
             writer.write(parts.measured, parts.truth)

@@ -11,6 +11,7 @@ surviving mutant or one that no selected test reaches counts against it.
     python scripts/mutation_score.py                              # every module, one after the other
     python scripts/mutation_score.py --module core/road_load.py --survivors
     python scripts/mutation_score.py --quick                      # CI: one small module, its own tests
+    python scripts/mutation_score.py --module core/trip.py --rerun  # only the previous run's live mutants again
 """
 
 from __future__ import annotations
@@ -29,11 +30,14 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 
-# module (repository path) -> the test files that target it (fast ones: every mutant reruns the tests that reach it)
+# module (repository path) -> the test files (or test ids) that target it (fast ones: every mutant reruns the tests
+# that reach it)
 MODULES: dict[str, tuple[str, ...]] = {
     "core/road_load.py": ("tests/core/test_road_load.py", "tests/core/test_road_load_contracts.py",
                           "tests/envs/test_physics.py"),
-    "core/trip.py": ("tests/core/test_trip.py", "tests/envs/test_streaming.py", "tests/fuzz/test_fuzz_files.py"),
+    "core/trip.py": ("tests/core/test_trip.py", "tests/core/test_trip_mutants.py",
+                     "tests/core/test_trip_files.py::test_a_format_1_file_loads_and_converts",
+                     "tests/core/test_trip_files.py::test_exact_precision_is_bit_for_bit_and_keeps_dtypes"),
     "core/trip_schema.py": ("tests/core/test_trip_schema.py", "tests/fuzz/test_fuzz_files.py",
                             "tests/envs/test_streaming.py"),
     "sim2real/stats.py": ("tests/sim2real/test_core.py", "tests/sim2real/test_stats_values.py"),
@@ -46,8 +50,7 @@ MODULES: dict[str, tuple[str, ...]] = {
                            "tests/controllers/test_command_jerk.py"),
     "controllers/mpc_controller.py": ("tests/controllers/test_mpc.py", "tests/controllers/test_mpc_feasibility.py",
                                       "tests/controllers/test_command_jerk.py"),
-    "envs/sensors.py": ("tests/envs/test_sensor_noise.py", "tests/envs/test_effects.py",
-                        "tests/envs/test_effects_gaps.py"),
+    "envs/sensors.py": ("tests/envs/test_sensors_mutants.py", "tests/envs/test_sensor_noise.py"),
 }
 
 # module -> {"function: removed line -> added line": why no test can tell the mutant from the original}
@@ -56,7 +59,28 @@ _NO_UNITS = ("TripPayload's fields carry no unit and it allows extra keys, so fo
 _RAISE = 'raise TripMetadataError(f"{{path}}: {{format_errors(exc, {})}}") from None'
 _PAYLOAD = "x_parse_trip_payload: " + _RAISE.format("TripPayload, root='metadata'") + " -> "
 _XP = "numpy's sin and cos of a CasADi expression call the expression's own, so xp=np gives the same force"
+_SHARED = ("this branch is taken only when measured and truth share one time base (or there is no truth), which the "
+           "writer also finds on its own; both ways write the same file")
+_CHUNKS = "iter_trip_chunks reads 360_000 rows a chunk by default"
+_WITH_TIME = 'with TripWriter(out, payload["units"], truth_units, precision, res, shared_time=True) as writer:'
+_V2 = ('shared = payload["version"] >= 2 and (payload["version"] >= 4 and payload.get("time_base") == "shared" -> '
+       'shared = payload["version"] {} and (payload["version"] >= 4 and payload.get("time_base") == "shared"')
 EQUIVALENT: dict[str, dict[str, str]] = {
+    "core/trip.py": {
+        'xǁTripǁ__post_init__: _check_frame(self.measured, self.units, "measured", truth=False) -> '
+        '_check_frame(self.measured, self.units, "measured", truth=None)':
+            "unit_of reads the truth catalogue only when truth is truthy; None reads the measured one as False does",
+        "x__check_frame: if t.size > 1 and not np.all(np.diff(t) > 0): -> "
+        "if t.size >= 1 and not np.all(np.diff(t) > 0):": "one sample has no differences: np.all of none is True",
+        f"x_convert_trip_file: {_WITH_TIME} -> {_WITH_TIME.replace('shared_time=True', 'shared_time=None')}": _SHARED,
+        f"x_convert_trip_file: {_WITH_TIME} -> {_WITH_TIME.replace('shared_time=True', '')}": _SHARED,
+        "x_convert_trip_file: " + _V2.format("> 2"): "only a format-2 file tells them apart, and it is converted "
+                                                     "the same whole or streamed (same resolutions either way)",
+        "x_convert_trip_file: " + _V2.format(">= 3"): "only a format-2 file tells them apart, and it is converted "
+                                                      "the same whole or streamed (same resolutions either way)",
+        "x_convert_trip_file: for parts in iter_trip_chunks(source, rows=360_000): -> "
+        "for parts in iter_trip_chunks(source, ):": _CHUNKS,
+    },
     "core/road_load.py": {
         "x_road_load: return rolling + aero + climbing_force(m, grade, xp) + cornering -> "
         "return rolling + aero + climbing_force(m, grade, ) + cornering": _XP,
@@ -208,21 +232,41 @@ def collect(module: str, folder: Path, seconds: float, repo: Path = REPO) -> Mod
     return score
 
 
+def _live_from_previous_run(module: str, folder: Path, repo: Path = REPO) -> dict[str, int]:
+    """Exit code of every mutant of the module's previous run in ``folder`` (empty when there is none)."""
+    meta = folder / "mutants" / f"{_staged_path(module, repo)}.meta"
+    return json.loads(meta.read_text())["exit_code_by_key"] if meta.is_file() else {}
+
+
 def run_module(module: str, workdir: Path, children: int, only: str | None = None, repo: Path = REPO,
-               tests: tuple[str, ...] | None = None) -> ModuleScore:
-    """Stage ``module``, run mutmut on it (niced) and count the outcomes."""
+               tests: tuple[str, ...] | None = None, rerun: bool = False) -> ModuleScore:
+    """Stage ``module``, run mutmut on it (niced) and count the outcomes. ``rerun``: test again only the mutants
+    the previous run of this module left alive (same source, so the same mutant names) and keep the previous
+    verdict of the others, so that every mutant has a status."""
     tests = MODULES[module] if tests is None else tests
-    folder = stage(module, tests, workdir / module.replace("/", "__").removesuffix(".py"), repo)
+    folder = workdir / module.replace("/", "__").removesuffix(".py")
+    previous = _live_from_previous_run(module, folder, repo) if rerun else {}
+    if rerun and not previous:
+        raise SystemExit(f"--rerun: no previous run of {module} in {folder}")
+    names = [n for n, code in previous.items() if code not in KILLED | TIMEOUT | CRASH]
+    folder = stage(module, tests, folder, repo)
     env = {**os.environ, "PYTHONPATH": str(folder / "mutants" / "src"), "PYTHONDONTWRITEBYTECODE": "1"}
     env.pop("MUTANT_UNDER_TEST", None)
     cmd = ["nice", "-n", "15", sys.executable, "-c", "from mutmut.__main__ import cli; cli()", "run",
-           "--max-children", str(children)] + ([only] if only else [])
+           "--max-children", str(children)] + ([only] if only else []) + names
     start = time.monotonic()
-    with open(folder / "mutmut.log", "w") as log:
-        res = subprocess.run(cmd, cwd=folder, env=env, stdout=log, stderr=subprocess.STDOUT)
-    if res.returncode != 0:
-        tail = (folder / "mutmut.log").read_text(errors="replace")[-3000:]
-        raise RuntimeError(f"mutmut failed on {module} (exit {res.returncode}); log {folder / 'mutmut.log'}:\n{tail}")
+    if not rerun or names:
+        with open(folder / "mutmut.log", "w") as log:
+            res = subprocess.run(cmd, cwd=folder, env=env, stdout=log, stderr=subprocess.STDOUT)
+        if res.returncode != 0:
+            tail = (folder / "mutmut.log").read_text(errors="replace")[-3000:]
+            raise RuntimeError(f"mutmut failed on {module} (exit {res.returncode}); log {folder / 'mutmut.log'}:"
+                               f"\n{tail}")
+    if rerun:  # the verdicts of the mutants not run again stand
+        meta_path = folder / "mutants" / f"{_staged_path(module, repo)}.meta"
+        meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {"exit_code_by_key": {}}
+        meta["exit_code_by_key"] = {**previous, **{n: meta["exit_code_by_key"].get(n) for n in names}}
+        meta_path.write_text(json.dumps(meta))
     return collect(module, folder, time.monotonic() - start, repo)
 
 
@@ -257,6 +301,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--repo", type=Path, default=None,
                     help="source tree to stage (default: the checkout this module or the calling script lives in)")
     ap.add_argument("--quick", action="store_true", help="CI size: core/trip_schema.py against its own test file")
+    ap.add_argument("--rerun", action="store_true",
+                    help="test again only the mutants the previous run (same --workdir) left alive; keep the others")
     args = ap.parse_args(argv)
     args.repo = args.repo or _default_repo()
     modules = ["core/trip_schema.py"] if args.quick else (args.module or list(MODULES))
@@ -266,7 +312,7 @@ def main(argv: list[str] | None = None) -> None:
     print(HEADER, flush=True)
     scores = []
     for module in modules:
-        s = run_module(module, args.workdir, args.children, None, args.repo, tests)
+        s = run_module(module, args.workdir, args.children, None, args.repo, tests, args.rerun)
         scores.append(s)
         print(_line(s), flush=True)
     for s in scores:

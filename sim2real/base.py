@@ -42,10 +42,10 @@ from roadload.estimators.models import ACCELERATION
 from roadload.units import G
 
 from .catalog import DRIVE_FORCE, get_candidate
-from .energy import MOTOR_SPEED
+from .energy import MOTOR_SPEED, energy_columns
 from .forcemodel import SimForceModel, columns_of
 from .records import Record, optional
-from .robust import RobustTarget, weighted_fit
+from .robust import RobustTarget, weighted_fit, winsorised
 from .selection import Split, design
 from .stats import cluster_covariance
 
@@ -210,49 +210,40 @@ def base_calibration(table: pd.DataFrame, target: RobustTarget, split: Split, mo
 
 ENERGY_PARAMETERS: tuple[tuple[str, str, str, str], ...] = (
     ("auxiliary_power", "auxiliary power P_aux", "delta P_aux", "W"),
-    ("motor_efficiency", "motor / inverter efficiency", "loss fraction error of |T_E omega_E|", "1"),
-    ("torque_scale", "drive-torque signal gain", "gain error of the signed T_E omega_E", "1"))
+    ("motor_efficiency", "motor / inverter losses", "loss scale error of P_loss(omega_E, T_E)", "1"),
+    ("torque_scale", "drive-torque signal gain", "drive-torque signal gain error g", "1"),
+    ("torque_offset", "drive-torque signal offset", "drive-torque signal offset T_off", "N*m"))
 
 
-def energy_base_columns(table: pd.DataFrame) -> np.ndarray:
-    """Regressors of the energy-side base block (n x 3) in the order of :data:`ENERGY_PARAMETERS`: 1 [-],
-    |T_E ω_E| [W] and T_E ω_E [W]. P_el,sim is computed from the *logged* torque (:mod:`.energy`), so a torque
-    signal reading (1 + g) times the true torque over-predicts the battery power by ≈ g T_E ω_E — signed, positive
-    in traction and negative in regeneration — where a motor / inverter efficiency error scales the loss |T_E ω_E|
-    and an auxiliary load is constant."""
-    p_motor = table["drive_torque"].to_numpy(dtype=float) * table[MOTOR_SPEED].to_numpy(dtype=float)
-    return np.column_stack([np.ones(len(table)), np.abs(p_motor), p_motor])
-
-
-def energy_base_calibration(table: pd.DataFrame, power_residual: np.ndarray, split: Split,
-                            min_power_size: float = 100.0) -> BaseBlock:
+def energy_base_calibration(table: pd.DataFrame, power_residual: np.ndarray, split: Split, spec,
+                            min_power_size: float = 100.0, clip: float = 5.0) -> BaseBlock:
     """The energy side's base block (battery-electric trips): the battery-power residual P_el,measured -
-    P_el,sim [W] fitted on a constant (the auxiliary power a preset gets wrong, ``auxiliary_power``),
-    |T_E ω_E| (a motor / inverter loss proportional to the converted power, ``motor_efficiency``) and the signed
-    T_E ω_E (a gain error of the logged drive torque, ``torque_scale``; :func:`energy_base_columns`) by least
-    squares on the training rows, cluster-robust standard errors over 10 s blocks; significant as on the force
-    side (|value| >= z SE and contribution RMS >= ``min_power_size`` W). With an unmatched preset an auxiliary
-    load is a shift of this block (as a payload is of the mass), which the selftest's scoring compares against
-    its reference drive; with ``base_first`` the energy-side effects are judged over this block
-    (:func:`roadload.sim2real.diagnose.diagnose`)."""
-    A = energy_base_columns(table)
-    p_motor = A[:, 2]
-    A = np.nan_to_num(A)
+    P_el,sim [W] fitted on the calibration's energy model (:func:`.energy.energy_columns`: a constant, the sim's
+    motor loss P_loss, -T_E ω_E and -ω_E: auxiliary power, loss scale, drive-torque signal gain g and offset) by
+    least squares on the training rows, the residual winsorised at ``clip`` MAD scales as the calibration fits it
+    — so the block reads 0 on the calibration's own trips and a signal gain g as g —, cluster-robust standard
+    errors over 10 s blocks; significant as on the force side (|value| >= z SE and contribution RMS >=
+    ``min_power_size`` W). With an unmatched preset an auxiliary load is a shift of this block (as a payload is
+    of the mass), which the selftest's scoring compares against its reference drive; with ``base_first`` the
+    energy-side effects are judged over this block (:func:`roadload.sim2real.diagnose.diagnose`)."""
+    A = energy_columns(table, spec)
     y = np.asarray(power_residual, dtype=float)
+    p_motor = table["drive_torque"].to_numpy(dtype=float) * table[MOTOR_SPEED].to_numpy(dtype=float)
     rows = split.train & np.isfinite(y) & np.isfinite(p_motor)
     if rows.sum() < 100:
         return BaseBlock(note="too few rows with battery power")
-    X, *_ = np.linalg.lstsq(A[rows], y[rows], rcond=None)
-    cov = cluster_covariance(A[rows], y[rows] - A[rows] @ X, split.blocks[rows])
+    yw, w = winsorised(np.where(rows, y, 0.0), rows, clip)
+    X = weighted_fit(A, yw, w, rows)
+    cov = cluster_covariance(A[rows], yw[rows] - A[rows] @ X, split.blocks[rows], w[rows])
     se = np.sqrt(np.clip(np.diag(cov), 0, None))
     out = []
     for j, (cand, label, param, unit) in enumerate(ENERGY_PARAMETERS):
         size = float(np.sqrt(np.mean((A[rows, j] * X[j]) ** 2)))
         out.append(BaseParameter(label, cand, param, unit, float(X[j]), float(se[j]), size,
                                  bool(abs(X[j]) >= Z_SIGNIFICANT * se[j] and size >= min_power_size)))
-    return BaseBlock(out, method="least squares on the battery-power residual (training rows), cluster-robust "
-                                 "standard errors over 10 s blocks", z=Z_SIGNIFICANT, min_size=min_power_size,
-                     unit_of_size="W")
+    return BaseBlock(out, method=f"least squares on the battery-power residual winsorised at {clip:g} MAD scales "
+                                 "(training rows), cluster-robust standard errors over 10 s blocks",
+                     z=Z_SIGNIFICANT, min_size=min_power_size, unit_of_size="W")
 
 
 ELEVATION = "elevation"

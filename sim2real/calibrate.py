@@ -62,11 +62,11 @@ from roadload.vehicle import VehicleSpec, VehicleSpecError
 from .base import accelerometer_bias_from_elevation
 from .catalog import BRAKE_FORCE, DRIVE_FORCE
 from .diagnose import FLOOR_ROADS, DiagnosisSettings, Run, stage_floor, stage_split, stage_table
-from .energy import MOTOR_SPEED, POWER_RESIDUAL, SPEED_DERIVED
+from .energy import MOTOR_SPEED, POWER_RESIDUAL, SPEED_DERIVED, energy_columns
 from .errors import DiagnosisError
 from .forcemodel import AIR_DENSITY, SimForceModel
 from .records import Record, RobustSummary
-from .robust import robust_target
+from .robust import robust_target, winsorised
 from .selection import Split
 from .simconfig import SimConfig
 
@@ -272,22 +272,6 @@ def cluster_meat(A: np.ndarray, r: np.ndarray, blocks: np.ndarray, w: np.ndarray
     return g.T @ g
 
 
-def _winsorised(y: np.ndarray, rows: np.ndarray, clip: float) -> tuple[np.ndarray, np.ndarray]:
-    """y clipped at median ± clip MAD scales (of the training rows) and the weights 1/scale²."""
-    med = float(np.median(y[rows]))
-    s = max(float(1.4826 * np.median(np.abs(y[rows] - med))), 1e-6)
-    return med + np.clip(y - med, -clip * s, clip * s), np.full(y.shape, 1.0 / s ** 2)
-
-
-def energy_columns(table: pd.DataFrame, spec: VehicleSpec) -> np.ndarray:
-    """The energy side's regressors (n x 4): 1 [-], P_loss(ω_E, T_E) [W], -T_E ω_E [W], -ω_E [rad/s]."""
-    omega = table[MOTOR_SPEED].to_numpy(dtype=float)
-    torque = table["drive_torque"].to_numpy(dtype=float)
-    motor = spec.drivetrain.require_motor()
-    loss = np.asarray(motor.loss_map(np.abs(omega), torque), dtype=float)
-    return np.nan_to_num(np.column_stack([np.ones(len(table)), loss, -torque * omega, -omega]))
-
-
 def force_columns(table: pd.DataFrame, model: SimForceModel) -> tuple[np.ndarray, list[str]]:
     """The force side's regressors and the parameter each belongs to (module doc); brake gain and cornering only
     where the trips log brake pressure / a path curvature."""
@@ -339,7 +323,7 @@ def fit_energy(table: pd.DataFrame, split: Split, spec: VehicleSpec, model: SimF
     if not signal:
         keep = [i for i, n in enumerate(names) if not n.startswith("torque_signal")]
         names, A = [names[i] for i in keep], A[:, keep]
-    yw, w = _winsorised(np.where(ok, y, 0.0), rows, settings.clip)
+    yw, w = winsorised(np.where(ok, y, 0.0), rows, settings.clip)
     prior = np.array([_param(n).prior(spec, model) for n in names]) * settings.prior_scale
     x, cov = bounded_posterior(A, yw, w, rows, split.blocks, prior, _bounds(names, spec, model))
     return SideFit(names, x, cov, A @ x)

@@ -15,7 +15,11 @@ A :class:`CandidateEffect` maps an unmodelled effect to
   (``{"factor": f}``: multiplied).
 
 ``side`` is "force" (explains the force residual) or "power" (explains the battery-power residual of
-:mod:`.energy`, e.g. auxiliary loads). Users add their own with :func:`register_candidate`. Parameters are in
+:mod:`.energy`, e.g. auxiliary loads). A signal error shows on both sides: ``signal_gain`` says which drive-torque
+signal gain a force-side effect implies on the battery power, ``force_twin`` names the force-side candidate that
+carries a power-side effect's force signature (its one parameter the same), so each side's fit is checked against
+the other's evidence (:func:`roadload.sim2real.diagnose.energy_consistency`, :func:`~roadload.sim2real.diagnose.
+force_consistency`). Users add their own with :func:`register_candidate`. Parameters are in
 SI; signs follow "measured minus sim".
 """
 
@@ -31,14 +35,16 @@ from roadload.estimators.models import ACCELERATION, GRADIENT_ANGLE, PATH_CURVAT
 from roadload.registry import Registry
 from roadload.units import STANDARD_TEMPERATURE, G
 
+from .energy import LOSS_SPEED_SLOPE, LOSS_TORQUE_SLOPE, MOTOR_SPEED, SPEED_DERIVED
 from .errors import DiagnosisError
 from .forcemodel import AIR_DENSITY, SimForceModel
 
 # further diagnosis-table columns candidates read (see .table)
 TIME_SINCE_START = "time_since_start"
 DISTANCE = "distance"
-# the drive-side force the sim's balance asks for (F_xV,sim + F_brake) and its rate: candidates that scale with
-# the drive force read this one, not the measured drive force, whose noise is also in the residual
+# the force the drive torque delivers in the sim's balance (F_xV,sim + F_brake + m_rot dv/dt: the pipeline takes the
+# rotating parts' inertia out of the torque) and its rate: candidates that scale with the drive torque read this
+# one, not the measured drive force, whose noise is also in the residual
 DRIVE_FORCE = "sim_drive_force"
 DRIVE_FORCE_RATE = "sim_drive_force_rate"
 BRAKE_FORCE = "brake_force"
@@ -47,6 +53,7 @@ HEADING = "heading"
 TIME_SINCE_BRAKE = "time_since_brake"
 POWER_RESIDUAL = "power_residual"
 AUX_LOGGED = "aux_power_logged"
+ROTATIONAL_MASS = "rotational_mass"
 
 TermFactory = Callable[[SimForceModel, "float | None"], tuple[Term, ...]]
 SimMapping = Callable[[dict[str, float], "float | None", SimForceModel], dict[str, float]]
@@ -70,6 +77,7 @@ class CandidateEffect:
     sim_aliases: tuple[str, ...] = ()
     side: str = "force"
     signal_gain: Callable[[dict, float | None, bool], float] | None = None
+    force_twin: str | None = None
 
     def torque_signal_gain(self, params: dict, shape: float | None, speed_derived: bool) -> float:
         """The drive-torque signal gain g the fitted effect implies on the battery power (P_el,sim is computed from
@@ -97,7 +105,7 @@ class CandidateEffect:
                 continue
             col = np.asarray(columns[c], dtype=float)
             usable = np.isfinite(col)
-            if c in (BRAKE_FORCE, HEADING, PATH_CURVATURE):   # all-zero columns carry no information
+            if c in (BRAKE_FORCE, HEADING, PATH_CURVATURE, SPEED_DERIVED):   # all-zero: no information
                 usable &= col != 0
             if not usable.any():
                 out.append(c)
@@ -245,16 +253,20 @@ def _latency(model, shape):
 
 def _speed_scale(model, shape):
     # the speed signal reads (1 + s) v: the balance is evaluated at (1 + s) v and (1 + s) dv/dt, and eq. 5.2 turns
-    # the scaled dv/dt into a grade g sin(theta) - s dv/dt, so the inertial terms cancel and, to first order, the
-    # sim's force is too high by s (m_V g cos(theta) (f_r1 v + 4 f_r4 v^4) + 2 rho_a/2 c_x A_V v^2 + 4 F_corner)
+    # the scaled dv/dt into a grade g sin(theta) - s dv/dt, so the vehicle's inertial terms cancel and, to first
+    # order, the sim's force is too high by s (m_V g cos(theta) (f_r1 v + 4 f_r4 v^4) + 2 rho_a/2 c_x A_V v^2
+    # + 4 F_corner); the measured side takes the rotating parts' inertia m_rot (1 + s) dv/dt out of the drive
+    # torque (eq. 2.17), which makes it lower by s m_rot dv/dt
     def build(s):
         v = _c(s, SPEED)
         corner = v ** 4 * np.nan_to_num(_c(s, PATH_CURVATURE)) ** 2 / 4.0 * model.mass ** 2 / model.cornering_stiffness
+        m_rot = np.nan_to_num(_c(s, ROTATIONAL_MASS)) if ROTATIONAL_MASS in s else 0.0
         return -(model.mass * G * np.cos(_c(s, GRADIENT_ANGLE)) * (model.rolling_resistance_f1 * v
                                                                   + 4.0 * model.rolling_resistance_f4 * v ** 4)
-                 + _c(s, AIR_DENSITY) * model.drag_area * v ** 2 + 4.0 * corner)
-    return (Term("-v dF_road/dv", "speed scale error s", "1", build, (SPEED, GRADIENT_ANGLE, AIR_DENSITY,
-                                                                      PATH_CURVATURE), lambda n: 0.0),)
+                 + _c(s, AIR_DENSITY) * model.drag_area * v ** 2 + 4.0 * corner
+                 + m_rot * np.nan_to_num(_c(s, ACCELERATION)))
+    return (Term("-(v dF_road/dv + m_rot dv/dt)", "speed scale error s", "1", build,
+                 (SPEED, GRADIENT_ANGLE, AIR_DENSITY, PATH_CURVATURE), lambda n: 0.0),)
 
 
 def _aux_constant(model, shape):
@@ -264,6 +276,22 @@ def _aux_constant(model, shape):
 def _aux_logged(model, shape):
     return (Term("P_heater + P_aircon (logged)", "logged auxiliary power gain", "1",
                  lambda s: np.nan_to_num(_c(s, AUX_LOGGED)), (AUX_LOGGED,), lambda n: 0.0),)
+
+
+def _torque_signal(model, shape):
+    # P_el,sim from a torque signal reading (1 + g) T: over-predicted by g (T_E ω_E + T_E dP_loss/dT_E)
+    return (Term("-(T_E omega_E + T_E dP_loss/dT_E)", "drive-torque signal gain error g", "1",
+                 lambda s: -(_c(s, "drive_torque") * _c(s, MOTOR_SPEED) + _c(s, LOSS_TORQUE_SLOPE)),
+                 (MOTOR_SPEED, LOSS_TORQUE_SLOPE), lambda n: 0.0),)
+
+
+def _speed_signal(model, shape):
+    # the motor speed derived from a speed signal reading (1 + s) v: P_el,sim over-predicted by
+    # s (T_E ω_E + ω_E dP_loss/dω_E); nothing where the motor speed is logged
+    return (Term("-(T_E omega_E + omega_E dP_loss/domega_E) [motor speed from v]", "speed scale error s", "1",
+                 lambda s: -(_c(s, "drive_torque") * _c(s, MOTOR_SPEED) + _c(s, LOSS_SPEED_SLOPE))
+                 * np.nan_to_num(_c(s, SPEED_DERIVED)),
+                 (MOTOR_SPEED, LOSS_SPEED_SLOPE, SPEED_DERIVED), lambda n: 0.0),)
 
 
 def _p(params, key):
@@ -385,6 +413,15 @@ for _cand in (
                     _aux_constant, (SPEED, POWER_RESIDUAL), "auxiliary_load",
                     lambda p, sh, m: {"power": float(np.clip(_p(p, "delta P_aux"), 0.0, 20000.0))}, side="power",
                     regime_hint="ambient_temperature"),
+    CandidateEffect("torque_signal", "drive-torque signal gain seen in the battery power (P_el,sim from the logged "
+                    "torque)", _torque_signal, (MOTOR_SPEED, LOSS_TORQUE_SLOPE, POWER_RESIDUAL),
+                    "spec:sensors.drive_torque_gain_error",
+                    lambda p, sh, m: {"delta": _p(p, "drive-torque signal gain error g")}, side="power",
+                    regime_hint="mode", force_twin="torque_scale"),
+    CandidateEffect("speed_signal", "speed-signal scale seen in the battery power (motor speed from the vehicle "
+                    "speed)", _speed_signal, (MOTOR_SPEED, LOSS_SPEED_SLOPE, SPEED_DERIVED, POWER_RESIDUAL),
+                    "spec:sensors.speed_scale_error", lambda p, sh, m: {"delta": _p(p, "speed scale error s")},
+                    side="power", regime_hint="speed", force_twin="speed_scale"),
     CandidateEffect("logged_aux_power", "auxiliary power following the logged heater / air-conditioning power",
                     _aux_logged, (AUX_LOGGED, POWER_RESIDUAL), None, None, side="power",
                     regime_hint="ambient_temperature"),

@@ -36,12 +36,13 @@ from roadload.envs.simulator import simulate
 from roadload.road_profiles import load_profile
 from roadload.trip import Trip
 
-from .base import Z_SIGNIFICANT, BaseBlock, base_calibration, energy_base_calibration, energy_base_columns
+from .base import Z_SIGNIFICANT, BaseBlock, base_calibration, energy_base_calibration
 from .catalog import DEFAULT_CANDIDATES, DRIVE_FORCE, get_candidate
 from .energy import (ELECTRIC_POWER, POWER_RESIDUAL, SIM_ELECTRIC_POWER, SPEED_DERIVED,
-                     electric_energy_per_distance)
+                     electric_energy_per_distance, energy_columns)
 from .errors import DiagnosisError
 from .floor import SimFloor, reduce_channels
+from .forcemodel import columns_of
 from .gap import GapMeasures, gap_measures
 from .pertrip import per_trip_sizes
 from .records import RobustSummary
@@ -51,7 +52,7 @@ from .regimes import (DEFAULT_REGIMES, RegimeTable, ResidualCorrelation, get_reg
 from .results import (Diagnosis, Effect, ElectricEnergy, EnergySide, Implausible, Notes, ReferenceGain,
                       Unexplained, per_regime_gap)
 from .robust import braking_rows, robust_target, weighted_fit
-from .selection import CandidateResult, SelectionStep, Selector, Split, fitted_parameters, make_split
+from .selection import CandidateResult, SelectionStep, Selector, Split, design, fitted_parameters, make_split
 from .simconfig import SimConfig
 from .stats import block_bootstrap_mean_difference
 from .table import DiagnosisTable, build_table, finish_table
@@ -89,7 +90,8 @@ class DiagnosisSettings:
     simulator (before, and after with the effects on) and compare the speed traces (:mod:`.replay`);
     strict_candidates: a candidate the trips lack channels for is an error (the user asked for it by name)
     instead of being skipped with the reason; energy_consistency: a force-side effect must agree with the
-    drive-torque signal gain the battery power shows (:func:`energy_consistency`; not with base_first)."""
+    drive-torque signal gain the battery power shows (:func:`energy_consistency`), and a power-side signal effect
+    with the drive-torque gain the force residual shows (:func:`force_consistency`; neither with base_first)."""
 
     candidates: tuple[str, ...] = DEFAULT_CANDIDATES
     regimes: tuple[str, ...] = DEFAULT_REGIMES
@@ -301,11 +303,11 @@ def stage_base(run: Run, fl: FloorStage, split: Split) -> BaseStage:
         x_base = np.array([p.value for p in block.parameters if p.in_fit is not False])
         y = y - base_A @ x_base
     force = SideInput(split, y, base_A if (s.base_first and s.joint_base) else None)
-    energy_block, energy, pr = _energy_base(table, split, s)
+    energy_block, energy, pr = _energy_base(table, split, s, run.sim)
     return BaseStage(block, force, energy_block, energy, pr)
 
 
-def _energy_base(table: pd.DataFrame, split: Split, s: DiagnosisSettings
+def _energy_base(table: pd.DataFrame, split: Split, s: DiagnosisSettings, sim: SimConfig
                  ) -> tuple[BaseBlock | None, SideInput | None, np.ndarray | None]:
     """The energy base block and the energy side's input: rows with a battery-power residual; with
     ``base_first`` the energy base (auxiliary power, motor efficiency, torque-signal gain) is fitted, subtracted
@@ -321,10 +323,10 @@ def _energy_base(table: pd.DataFrame, split: Split, s: DiagnosisSettings
     base_A = None
     if s.base_first:
         braking = braking_rows(table)
-        base_A = np.where(braking[:, None], 0.0, np.nan_to_num(energy_base_columns(table)))
+        base_A = np.where(braking[:, None], 0.0, energy_columns(table, sim.vehicle))
         x_b = weighted_fit(base_A, y, np.ones(len(y)), sp.train)
         y = y - base_A @ x_b
-    block = energy_base_calibration(table, np.where(ok, pr, np.nan), sp, s.min_power_size)
+    block = energy_base_calibration(table, np.where(ok, pr, np.nan), sp, sim.vehicle, s.min_power_size, s.clip)
     return block, SideInput(sp, y, base_A), pr
 
 
@@ -352,17 +354,18 @@ def _selector(run: Run, table: DiagnosisTable, side: SideInput, name: str, min_s
 def energy_consistency(block: BaseBlock | None, table: pd.DataFrame, split: Split, settings: DiagnosisSettings
                        ) -> Callable | None:
     """The force side's check against the battery power (None without it, or with the base calibrated first):
-    P_el,sim is computed from the logged torque and motor speed, so the energy base block's signed T_E ω_E term
+    P_el,sim is computed from the logged torque and motor speed, so the energy base block's signed -T_E ω_E term
     measures the drive-torque signal gain ĝ (a speed-signal scale too where the motor speed comes from the
     vehicle speed). A force-side candidate is inconsistent when the gain its fit implies
     (:meth:`.catalog.CandidateEffect.torque_signal_gain`: 0 for a physical effect such as a mass or drag change)
-    differs from ĝ by >= 2.58 standard errors and that difference, as a force ĝ F_drive, is at least the size
+    differs from ĝ by >= 2.58 standard errors and that difference, as a force ĝ F_drive (the force the drive
+    torque delivers, :mod:`.table`), is at least the size
     gate and half the candidate's own fitted effect: a payload then cannot stand in for a torque signal reading
     high, which scales the measured force the same way."""
     p = block.parameter("torque_scale") if block is not None else None
     if p is None or not np.isfinite(p.std_error) or not settings.energy_consistency or settings.base_first:
         return None
-    g_hat, se = -p.value, p.std_error          # the block's coefficient of +T ω is -g
+    g_hat, se = p.value, p.std_error          # the block's coefficient of -T ω is g
     speed_derived = bool(table[SPEED_DERIVED].any()) if SPEED_DERIVED in table else False
     f = np.nan_to_num(table[DRIVE_FORCE].to_numpy(dtype=float))[split.train]
     rms_f = float(np.sqrt(np.mean(f ** 2))) if f.size else 0.0
@@ -374,6 +377,48 @@ def energy_consistency(block: BaseBlock | None, table: pd.DataFrame, split: Spli
         if abs(diff) >= Z_SIGNIFICANT * se and force >= max(settings.min_size, 0.5 * size):
             return (f"inconsistent with the battery power: it shows a drive-torque signal gain of {g_hat:+.3f} ± "
                     f"{se:.3f} where {cand.name} implies {implied:+.3f} (a {force:.0f} N force effect unexplained)")
+        return None
+
+    return check
+
+
+TORQUE_SCALE_PARAMETER = "torque scale error epsilon"
+
+
+def force_consistency(ranked: Sequence[CandidateResult], table: pd.DataFrame, split: Split, model,
+                      settings: DiagnosisSettings) -> Callable | None:
+    """The energy side's check against the force residual (None without a force-side ``torque_scale`` fit, or with
+    the base calibrated first): a power-side signal effect (``force_twin``, :mod:`.catalog`) must agree with the
+    drive-torque gain ĝ_F the force residual shows (the ranked ``torque_scale`` fit alone). Its twin's force
+    signature at the fitted value, projected on the drive force, is the gain it implies (a torque signal gain g:
+    g; a speed-signal scale: the small part of s (m_rot v̇ + v dF_road/dv) along F_drive); it is inconsistent
+    when that differs from ĝ_F by >= 2.58 standard errors and by at least the size gate and half the twin's
+    own force as a force |Δg| F_drive: on the i3 (motor speed from the vehicle speed) a speed signal reading
+    high and a torque signal reading high raise P_el,sim alike, and only the force side tells them apart."""
+    ref = next((r for r in ranked if r.name == "torque_scale"), None)
+    if ref is None or not settings.energy_consistency or settings.base_first:
+        return None
+    g_f, se = ref.parameters.get(TORQUE_SCALE_PARAMETER), ref.std_errors.get(TORQUE_SCALE_PARAMETER)
+    if g_f is None or se is None or not np.isfinite(se):
+        return None
+    tr = split.train
+    cols = columns_of(table)
+    f = np.nan_to_num(table[DRIVE_FORCE].to_numpy(dtype=float))[tr]
+    ff = float(f @ f)
+    if not ff > 0:
+        return None
+    rms_f = float(np.sqrt(ff / f.size))
+
+    def check(cand, params: dict, shape, size: float) -> str | None:
+        if cand.force_twin is None or len(params) != 1:
+            return None
+        c = design([(get_candidate(cand.force_twin), None)], model, cols).A[tr, 0] * float(next(iter(params.values())))
+        implied = float(c @ f) / ff
+        diff = g_f - implied
+        force = abs(diff) * rms_f
+        if abs(diff) >= Z_SIGNIFICANT * se and force >= max(settings.min_size, 0.5 * float(np.sqrt(np.mean(c ** 2)))):
+            return (f"inconsistent with the force residual: it shows a drive-torque gain of {g_f:+.3f} ± {se:.3f} "
+                    f"where {cand.name} implies {implied:+.3f} (a {force:.0f} N force effect unexplained)")
         return None
 
     return check
@@ -403,7 +448,8 @@ def stage_rank(run: Run, fl: FloorStage, base: BaseStage) -> RankStage:
             raise DiagnosisError(f"requested energy-side candidates {power_asked} need battery_voltage and "
                                  f"battery_current on the trips and a battery-electric sim vehicle")
         return out
-    out.energy = _selector(run, fl.table, base.energy, "power", s.min_power_size)
+    out.energy = _selector(run, fl.table, base.energy, "power", s.min_power_size,
+                           force_consistency(ranked, fl.table.frame, base.force.split, fl.table.model, s))
     out.energy_ranked, out.energy_skipped = out.energy.rank(power_asked)
     return out
 

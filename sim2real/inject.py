@@ -7,12 +7,14 @@ effect             what changes in the log                         size unit   t
 =================  ==============================================  ==========  ======================================
 ``aux_load``       battery current + P / U (a load P drawn from    W           ``auxiliary_power`` (ΔP_aux = P)
                    the traction battery at its logged voltage U)
-``torque_gain``    drive torque x (1 + g)                          1           ``torque_scale`` (ε = g) or
-                                                                               ``drive_efficiency`` (e_m = g)
+``torque_gain``    drive torque x (1 + g)                          1           ``torque_scale`` (ε = g),
+                                                                               ``drive_efficiency`` (e_m = g) or
+                                                                               ``torque_signal`` (g, battery power)
 ``torque_offset``  drive torque + T_off                            N*m         –
 ``accel_bias``     longitudinal acceleration + b                   m/s^2       ``accel_bias`` (b)
 ``latency``        a channel (default the drive torque) late by τ  s           ``latency`` (τ, drive torque)
-``speed_scale``    vehicle speed x (1 + s)                         1           ``speed_scale`` (s)
+``speed_scale``    vehicle speed x (1 + s)                         1           ``speed_scale`` (s) or
+                                                                               ``speed_signal`` (s, battery power)
 =================  ==============================================  ==========  ======================================
 
 Sizes are checked against physical bounds (a 50 kW auxiliary load, a gain of 2 or a 10 s latency are refused with
@@ -53,8 +55,9 @@ INJECTIONS: dict[str, Injection] = {i.name: i for i in (
               (("auxiliary_power", "delta P_aux", 1.0),), "auxiliary load drawn from the traction battery",
               side="energy"),
     Injection("torque_gain", ("drive_torque",), "1", -0.5, 0.5,
-              (("torque_scale", "torque scale error epsilon", 1.0), ("drive_efficiency", "traction scale error e_m",
-                                                                     1.0)),
+              (("torque_scale", "torque scale error epsilon", 1.0),
+               ("drive_efficiency", "traction scale error e_m", 1.0),
+               ("torque_signal", "drive-torque signal gain error g", 1.0)),
               "drive-torque signal gain error g: the signal reads (1 + g) T"),
     Injection("torque_offset", ("drive_torque",), "N*m", -100.0, 100.0, (),
               "drive-torque signal offset T_off: the signal reads T + T_off"),
@@ -62,7 +65,8 @@ INJECTIONS: dict[str, Injection] = {i.name: i for i in (
               "accelerometer bias b: the longitudinal acceleration reads a_x + b"),
     Injection("latency", ("drive_torque",), "s", 0.0, 5.0, (("latency", "latency tau", 1.0),),
               "a channel (default: the drive torque) logged τ late"),
-    Injection("speed_scale", ("vehicle_speed",), "1", -0.2, 0.2, (("speed_scale", "speed scale error s", 1.0),),
+    Injection("speed_scale", ("vehicle_speed",), "1", -0.2, 0.2,
+              (("speed_scale", "speed scale error s", 1.0), ("speed_signal", "speed scale error s", 1.0)),
               "speed-signal scale error s: the speed reads (1 + s) v"),
 )}
 

@@ -311,8 +311,9 @@ def _energy_base(d: Diagnosis) -> list[str]:
     if block is None or not block.parameters:
         return []
     L = ["", "### Base calibration (energy side)", "",
-         "The battery-power residual fitted on a constant (auxiliary power), the motor loss |T_E ω_E| and the "
-         f"signed T_E ω_E (torque-signal gain); significant: |value| >= 2.58 SE and RMS >= {_fmt(block.min_size)} W.",
+         "The battery-power residual fitted on the calibration's energy model: a constant (auxiliary power), the "
+         "sim's motor loss P_loss (loss scale), -T_E ω_E (drive-torque signal gain g) and -ω_E (signal offset); "
+         f"significant: |value| >= 2.58 SE and RMS >= {_fmt(block.min_size)} W.",
          "", "| base parameter | fitted change | SE | RMS [W] | significant |", "|---|---|---|---|---|"]
     L += [f"| {b.name} | {b.value:+.4g} {b.unit} | {b.std_error:.2g} | {_fmt(b.size_rms)} | "
           f"{'yes' if b.significant else 'no'} |" for b in block.parameters]

@@ -348,3 +348,9 @@ def step_statistics(base: np.ndarray, candidates: Sequence[Sequence[np.ndarray]]
         gains[:, j] = (L0 - best) / norm if norm > 0 else 0.0
     return StepStatistics(gains[0], gains[1:], float(L0[0] / norm) if norm > 0 else float("nan"), variant)
 
+
+def winsorised(y: np.ndarray, rows: np.ndarray, clip: float) -> tuple[np.ndarray, np.ndarray]:
+    """y clipped at median ± clip MAD scales (of the training rows) and the weights 1/scale²."""
+    med = float(np.median(y[rows]))
+    s = max(float(1.4826 * np.median(np.abs(y[rows] - med))), 1e-6)
+    return med + np.clip(y - med, -clip * s, clip * s), np.full(y.shape, 1.0 / s ** 2)

@@ -16,7 +16,11 @@ tractive_force         F_xV,measured = drive_force - brake_force [N]
 sim_balance            F_xV,sim of :class:`.forcemodel.SimForceModel` for the measured motion [N]
 sim_force              sim_balance + the sim's floor (:mod:`.floor`) [N]
 residual               tractive_force - sim_force [N]
-sim_drive_force(_rate) sim_force + brake_force [N] and its time derivative [N/s]
+rotational_mass        (I_red(G) + I_W) / r_W² [kg]: the rotating parts' inertia the pipeline takes out of
+                       the drive torque (eq. 2.16b/2.17; I_W alone for a logged rim torque)
+sim_drive_force(_rate) the force the drive torque delivers at the wheels in the sim's balance, sim_force +
+                       brake_force + rotational_mass dv/dt [N] (what T i η / r_W must be), and its time derivative
+                       [N/s]: a torque-signal gain g changes the measured force by g times this, not by g F_xV
 lateral_acceleration   v² / r [m/s²]; heading: integrated yaw rate [rad] (NaN without yaw rate)
 mode                   'traction' / 'coast' / 'regen' / 'braking'; time_since_brake [s] (0 while braking)
 ambient_temperature, heating_power, payload [kg] (metadata), season
@@ -251,6 +255,8 @@ def _trip_frame(trip: Trip, name: str, res, sim: SimConfig, knowledge, st: Pipel
     f["drive_force"] = s["tractive_force"].to_numpy(dtype=float)
     f["tractive_force"] = f["drive_force"] - f["brake_force"]
     f["time_since_brake"] = time_since(braking, t)
+    f["rotational_mass"] = _rotational_mass(knowledge.drivetrain, f["gear"].to_numpy(dtype=float),
+                                            trip.has("drive_torque"))
     _path_columns(f, trip, notes)
     torque = f["drive_torque"].to_numpy(dtype=float)
     min_tq = st.min_drive_torque
@@ -324,9 +330,24 @@ def _valid_rows(s: pd.DataFrame, v: np.ndarray, t: np.ndarray, st: PipelineSetti
     return valid & s["trigger_rim_torque_available"].to_numpy(dtype=bool)
 
 
+def _rotational_mass(drivetrain, gear: np.ndarray, from_drive_torque: bool) -> np.ndarray:
+    """Per row the rotating parts' equivalent mass [kg] the pipeline subtracts from the torque's force: (I_red(G) +
+    I_W) / r_W² for the engaged gear (the first where unknown), I_W / r_W² when the force comes from a logged rim
+    torque (eq. 2.16b)."""
+    if not from_drive_torque:
+        return np.full(gear.shape, drivetrain.wheel_inertia / drivetrain.wheel_radius ** 2)
+    per_gear = np.array([drivetrain.rotational_mass(g) for g in range(1, drivetrain.n_gears + 1)])
+    g = np.clip(np.rint(np.nan_to_num(gear, nan=1.0)), 1, drivetrain.n_gears).astype(int)
+    return per_gear[g - 1]
+
+
 def _drive_columns(frame: pd.DataFrame, force: np.ndarray) -> None:
-    """sim_drive_force = force + brake_force [N] and its time derivative per trip [N/s], in place."""
+    """sim_drive_force = force + brake_force + rotational_mass dv/dt [N] and its time derivative per trip [N/s], in
+    place (a table without rotational_mass: force + brake_force)."""
     sdf = np.asarray(force, dtype=float) + frame["brake_force"].to_numpy(dtype=float)
+    if "rotational_mass" in frame.columns:
+        sdf = sdf + frame["rotational_mass"].to_numpy(dtype=float) * np.nan_to_num(
+            frame["acceleration"].to_numpy(dtype=float))
     frame["sim_drive_force"] = sdf
     rate = np.zeros_like(sdf)
     t = frame["t"].to_numpy(dtype=float)

@@ -15,6 +15,7 @@ from roadload.sim2real.base import accelerometer_bias_from_elevation, base_calib
 from roadload.sim2real.energy import MOTOR_SPEED
 from roadload.sim2real.robust import robust_target
 from roadload.sim2real.selection import Selector, make_split
+from roadload.sim2real.simconfig import SimConfig
 from roadload.units import G
 
 _spec = importlib.util.spec_from_file_location("sim2real_core_tables", Path(__file__).with_name("test_core.py"))
@@ -117,19 +118,23 @@ def test_no_accelerometer_bias_without_one_or_without_elevation():
 
 
 def test_energy_base_tells_a_torque_signal_gain_from_a_motor_efficiency_error():
+    """The energy base block is the calibration's energy model: a torque signal 5 % high (P_sim over by
+    0.05 T ω), the motor's losses 20 % above the loss map and an auxiliary load 1.2 kW below the sim's come out
+    as g = 0.05, loss scale error 0.2 and -1.2 kW (the block read g as -0.05 of a |T ω| / T ω pair before)."""
     rng = np.random.default_rng(5)
+    spec = SimConfig.load("bmw_i3").vehicle
     tab = synth(lambda t: np.zeros(len(t)), n_trips=3, duration=900.0, seed=5)
     omega = tab.speed.to_numpy() / 0.35 * 9.7
     torque = MODEL.predict(tab) * 0.35 / 9.7
     tab["drive_torque"], tab[MOTOR_SPEED] = torque, omega
-    p = torque * omega
-    # sim from a torque signal 5 % high: P_sim over by 0.05 T ω; motor losses 2 % of |T ω| higher; aux -1.2 kW
-    resid = -0.05 * p + 0.02 * np.abs(p) - 1200.0 + rng.normal(0, 300.0, len(tab))
+    loss = np.asarray(spec.drivetrain.require_motor().loss_map(np.abs(omega), torque), dtype=float)
+    resid = -0.05 * torque * omega + 0.2 * loss - 1200.0 + rng.normal(0, 300.0, len(tab))
     split = make_split(tab, seed=5, n_folds=4)
-    rows = {r.candidate: r for r in energy_base_calibration(tab, resid, split).parameters}
-    assert rows["torque_scale"].value == pytest.approx(-0.05, abs=0.005) and rows["torque_scale"].significant
-    assert rows["motor_efficiency"].value == pytest.approx(0.02, abs=0.005)
-    assert rows["auxiliary_power"].value == pytest.approx(-1200.0, abs=60.0)
+    rows = {r.candidate: r for r in energy_base_calibration(tab, resid, split, spec).parameters}
+    assert rows["torque_scale"].value == pytest.approx(0.05, abs=0.005) and rows["torque_scale"].significant
+    assert rows["motor_efficiency"].value == pytest.approx(0.2, abs=0.05)
+    assert rows["auxiliary_power"].value == pytest.approx(-1200.0, abs=80.0)
+    assert abs(rows["torque_offset"].value) < 3 * rows["torque_offset"].std_error + 0.5
 
 
 def test_extended_segment_sums_equal_the_sums_of_the_whole_design():

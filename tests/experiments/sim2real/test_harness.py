@@ -99,7 +99,7 @@ def test_preset_on_the_independent_world_names_nothing_and_finds_bias_and_torque
     every candidate: nothing withheld accepts nothing on either side (before: the preset's battery mismatch was
     accepted as ``auxiliary_power`` ≈ -1.7 kW on every drive); an accelerometer bias of 0.1 m/s² comes out of the
     logged elevation (0.10 ± 0.002 over 3 x 900 s); the inverter's +5 % torque gain moves the energy base's
-    signed T ω term by ≈ -0.05 (-0.047 ± 0.005 over 3 x 900 s)."""
+    drive-torque signal gain g by ≈ +0.05."""
     run = run_world("independent", seeds=(0,), effects=("none", "accel_bias", "torque_scale"), duration=300.0,
                     vehicle="bmw_i3", work=str(tmp_path))
     res = {r.withheld: r for r in run.results}
@@ -107,8 +107,8 @@ def test_preset_on_the_independent_world_names_nothing_and_finds_bias_and_torque
     bias = res["accel_bias"].fits["base:accel_bias"]["parameters"]["accelerometer bias b"]
     bias0 = res["none"].fits["base:accel_bias"]["parameters"]["accelerometer bias b"]
     assert bias[0] == pytest.approx(0.1, abs=0.015) and abs(bias0[0]) < 0.015
-    gain = res["torque_scale"].fits["base:torque_scale"]["parameters"]["gain error of the signed T_E omega_E"]
-    gain0 = res["none"].fits["base:torque_scale"]["parameters"]["gain error of the signed T_E omega_E"]
-    assert gain[0] - gain0[0] == pytest.approx(-0.05, abs=0.02)
+    gain = res["torque_scale"].fits["base:torque_scale"]["parameters"]["drive-torque signal gain error g"]
+    gain0 = res["none"].fits["base:torque_scale"]["parameters"]["drive-torque signal gain error g"]
+    assert gain[0] - gain0[0] == pytest.approx(0.05, abs=0.02)
     run.score()
     assert res["accel_bias"].found and res["torque_scale"].found

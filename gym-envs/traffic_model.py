@@ -124,27 +124,61 @@ def closest_lane(y, lanes):
 
 # --------------------------------------------------------------------------------------------- neighbours
 @kernel(forceinline=True)
+def _nearer(veh, k, s, front, rear, front_x, rear_x):
+    """One candidate k of the neighbour search at x = s: (front, rear, front_x, rear_x) updated (the tie rules of
+    :func:`neighbours`)."""
+    x = veh[k, V_X]
+    if s <= x:
+        if front < 0 or x <= front_x:
+            return k, rear, x, rear_x
+    elif rear < 0 or x > rear_x:
+        return front, k, front_x, x
+    return front, rear, front_x, rear_x
+
+
+@kernel(forceinline=True)
 def neighbours(veh, m, j, lane):
     """(leader, follower) of vehicle j on ``lane`` among the vehicles on it (Road.neighbour_vehicles): the
     nearest with x >= x_j (of equal x the last in row order) and the nearest with x < x_j (of equal x the first);
-    -1 where there is none."""
+    -1 where there is none. Every row is tested for the lane; :func:`lane_neighbours` reads a lane index."""
     s = veh[j, V_X]
-    front = -1
-    rear = -1
-    front_x = 0.0
-    rear_x = 0.0
+    front, rear, front_x, rear_x = -1, -1, 0.0, 0.0
     for k in range(m):
-        if k == j or not on_lane(veh, k, lane):
-            continue
-        x = veh[k, V_X]
-        if s <= x:
-            if front < 0 or x <= front_x:
-                front = k
-                front_x = x
-        elif rear < 0 or x > rear_x:
-            rear = k
-            rear_x = x
+        if k != j and on_lane(veh, k, lane):
+            front, rear, front_x, rear_x = _nearer(veh, k, s, front, rear, front_x, rear_x)
     return front, rear
+
+
+@kernel(forceinline=True)
+def index_lanes(veh, m, lanes, members, counts):
+    """Stage 'lane index': the rows on each lane (:func:`on_lane`), in row order -> members[lane, :counts[lane]].
+    Valid while no vehicle moves (a frame's decisions), so each neighbour search reads one lane's ~m / lanes
+    vehicles instead of testing all m."""
+    for lane in range(lanes):
+        n = 0
+        for k in range(m):
+            if on_lane(veh, k, lane):
+                members[lane, n] = k
+                n += 1
+        counts[lane] = n
+
+
+@kernel(forceinline=True)
+def lane_neighbours(veh, members, counts, j, lane):
+    """:func:`neighbours` of vehicle j on ``lane`` from the lane index of :func:`index_lanes` (the same rows in the
+    same order, so the same result)."""
+    s = veh[j, V_X]
+    front, rear, front_x, rear_x = -1, -1, 0.0, 0.0
+    for r in range(counts[lane]):
+        k = members[lane, r]
+        if k != j:
+            front, rear, front_x, rear_x = _nearer(veh, k, s, front, rear, front_x, rear_x)
+    return front, rear
+
+
+def lane_index_arrays(m: int, lanes: int) -> tuple[np.ndarray, np.ndarray]:
+    """Work arrays (members, counts) of :func:`index_lanes` for m vehicles on ``lanes`` lanes."""
+    return np.zeros((lanes, m), dtype=np.int64), np.zeros(lanes, dtype=np.int64)
 
 
 # --------------------------------------------------------------------------------------------- IDM
@@ -177,16 +211,17 @@ def idm_acceleration(veh, beh, delta, limit, e, f):
 
 # --------------------------------------------------------------------------------------------- MOBIL
 @kernel()
-def mobil(veh, m, beh, limit, j, lane):
+def mobil(veh, members, counts, beh, limit, j, lane):
     """MOBIL's decision for vehicle j to change into ``lane`` (IDMVehicle.mobil, no route): safety for the new
-    follower, then the politeness-weighted acceleration gain against the threshold."""
+    follower, then the politeness-weighted acceleration gain against the threshold (neighbours from the frame's
+    lane index, :func:`index_lanes`)."""
     delta = veh[j, V_DELTA]
-    new_lead, new_follow = neighbours(veh, m, j, lane)
+    new_lead, new_follow = lane_neighbours(veh, members, counts, j, lane)
     new_follow_a = idm_acceleration(veh, beh, delta, limit, new_follow, new_lead)
     new_follow_pred_a = idm_acceleration(veh, beh, delta, limit, new_follow, j)
     if new_follow_pred_a < -beh[B_MAX_BRAKING]:
         return False
-    old_lead, old_follow = neighbours(veh, m, j, int(veh[j, V_LANE]))
+    old_lead, old_follow = lane_neighbours(veh, members, counts, j, int(veh[j, V_LANE]))
     self_pred_a = idm_acceleration(veh, beh, delta, limit, j, new_lead)
     self_a = idm_acceleration(veh, beh, delta, limit, j, old_lead)
     old_follow_a = idm_acceleration(veh, beh, delta, limit, old_follow, j)
@@ -197,7 +232,7 @@ def mobil(veh, m, beh, limit, j, lane):
 
 
 @kernel()
-def change_lane_policy(veh, m, beh, lanes, limit, j):
+def change_lane_policy(veh, m, members, counts, beh, lanes, limit, j):
     """IDMVehicle.change_lane_policy for vehicle j: during a lane change, abort it when another vehicle heads
     for the same lane within the desired gap ahead; otherwise, once the decision timer exceeds the delay, reset it
     and ask MOBIL for the left, then the right lane (the later accepted one wins)."""
@@ -223,7 +258,7 @@ def change_lane_policy(veh, m, beh, lanes, limit, j):
             continue
         if abs(veh[j, V_SPEED]) < 1.0:  # only while moving
             continue
-        if mobil(veh, m, beh, limit, j, lane):
+        if mobil(veh, members, counts, beh, limit, j, lane):
             veh[j, V_TARGET_LANE] = lane
 
 
@@ -245,25 +280,28 @@ def steering_control(veh, j):
 
 # --------------------------------------------------------------------------------------------- one frame
 @kernel()
-def traffic_act(veh, m, beh, geo):
-    """Decisions of one frame (Road.act), in row order: the ego (row 0) only steers towards its target lane;
-    every traffic vehicle runs MOBIL's lane-change policy, steers, and takes the IDM acceleration behind its
-    leader (and behind the leader on its target lane while changing), clipped to +-a_max. Crashed vehicles keep
-    their last command (their kinematics brakes them to a stop)."""
+def traffic_act(veh, m, beh, geo, members, counts):
+    """Decisions of one frame (Road.act), in row order: the lane index of the frame's positions (no vehicle moves
+    while the traffic decides; :func:`index_lanes` -> members, counts); the ego (row 0) only steers towards its
+    target lane; every traffic vehicle runs MOBIL's lane-change policy, steers, and takes the IDM acceleration
+    behind its leader (and behind the leader on its target lane while changing), clipped to +-a_max. Crashed
+    vehicles keep their last command (their kinematics brakes them to a stop)."""
     lanes = int(geo[G_LANES])
     limit = geo[G_LIMIT]
+    index_lanes(veh, m, lanes, members, counts)
     veh[0, V_STEER] = steering_control(veh, 0)
     for j in range(1, m):
         if veh[j, V_CRASHED] > 0.5:
             continue
-        change_lane_policy(veh, m, beh, lanes, limit, j)
+        change_lane_policy(veh, m, members, counts, beh, lanes, limit, j)
         veh[j, V_STEER] = steering_control(veh, j)
         delta = veh[j, V_DELTA]
         own = int(veh[j, V_LANE])
-        acc = idm_acceleration(veh, beh, delta, limit, j, neighbours(veh, m, j, own)[0])
+        acc = idm_acceleration(veh, beh, delta, limit, j, lane_neighbours(veh, members, counts, j, own)[0])
         target = int(veh[j, V_TARGET_LANE])
         if own != target:
-            acc = min(acc, idm_acceleration(veh, beh, delta, limit, j, neighbours(veh, m, j, target)[0]))
+            acc = min(acc, idm_acceleration(veh, beh, delta, limit, j,
+                                            lane_neighbours(veh, members, counts, j, target)[0]))
         veh[j, V_ACC] = _clip(acc, -beh[B_ACC_MAX], beh[B_ACC_MAX])
 
 
@@ -494,7 +532,12 @@ def kinematics_block(veh, m, lanes, rows, see_behind, order, key, out):
 def front_gap(veh, m):
     """(bumper-to-bumper gap [m] to the ego's leader on its lane, inf if none; closing speed [m/s], positive when
     approaching), as EcoHighway-v0's ego."""
-    f = neighbours(veh, m, 0, int(veh[0, V_LANE]))[0]
+    return leader_gap(veh, neighbours(veh, m, 0, int(veh[0, V_LANE]))[0])
+
+
+@kernel(forceinline=True)
+def leader_gap(veh, f):
+    """:func:`front_gap` behind the ego's leader f (-1: none)."""
     if f < 0:
         return np.inf, 0.0
     gap = veh[f, V_X] - veh[0, V_X] - LENGTH
@@ -509,8 +552,10 @@ def run_traffic(veh, m, beh, geo, dt, frames, work):
     test compares with highway-env's Road.act / Road.step."""
     lanes = int(geo[G_LANES])
     acc = veh[0, V_ACC]
+    members = np.empty((lanes, m), dtype=np.int64)
+    counts = np.empty(lanes, dtype=np.int64)
     for _ in range(frames):
-        traffic_act(veh, m, beh, geo)
+        traffic_act(veh, m, beh, geo, members, counts)
         veh[0, V_ACC] = acc
         kinematic_step(veh, 0, lanes, dt)
         traffic_move(veh, m, geo, dt)

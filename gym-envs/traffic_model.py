@@ -68,7 +68,9 @@ VEHICLE_COLUMNS = ("x", "y", "heading", "speed", "lane", "target_lane", "timer",
 
 # driver-model constants (TrafficBehaviour)
 B_ACC_MAX, B_COMFORT_ACC, B_COMFORT_DEC, B_JAM, B_TIME_GAP, B_POLITENESS, B_MIN_GAIN, B_MAX_BRAKING, B_DELAY = range(9)
-N_B = 9
+B_BRAKING_SCALE = 9
+"""2 sqrt(a_c b) [m/s^2], IDM's braking-term denominator, computed once per batch."""
+N_B = 10
 
 # road constants
 G_LANES, G_LIMIT = range(2)
@@ -76,11 +78,12 @@ N_G = 2
 
 
 def behaviour_array(behaviour) -> np.ndarray:
-    """The B_* constants of a roadload.gym.config.TrafficBehaviour."""
+    """The B_* constants of a roadload.gym.config.TrafficBehaviour (and B_BRAKING_SCALE derived from them)."""
     b = behaviour
     return np.array([b.max_acceleration, b.comfort_acceleration, b.comfort_deceleration, b.jam_distance,
                      b.time_gap, b.politeness, b.lane_change_min_gain, b.lane_change_max_braking,
-                     b.lane_change_delay], dtype=np.float64)
+                     b.lane_change_delay, 2.0 * math.sqrt(b.comfort_acceleration * b.comfort_deceleration)],
+                    dtype=np.float64)
 
 
 # --------------------------------------------------------------------------------------------- small helpers
@@ -101,6 +104,24 @@ def wrap_to_pi(x):
 @kernel(forceinline=True)
 def _clip(x, lo, hi):
     return lo if x < lo else (hi if x > hi else x)
+
+
+@kernel(forceinline=True)
+def cos_difference(a, b):
+    """cos(a - b), without the call for equal angles (cos 0 = 1 exactly: both headings 0 on a straight lane)."""
+    return 1.0 if a == b else math.cos(a - b)
+
+
+@kernel(forceinline=True)
+def cos_heading(h):
+    """cos h, without the call on a straight heading (cos 0 = 1)."""
+    return 1.0 if h == 0.0 else math.cos(h)
+
+
+@kernel(forceinline=True)
+def sin_heading(h):
+    """sin h, without the call on a straight heading (sin +-0 = +-0, h itself)."""
+    return h if h == 0.0 else math.sin(h)
 
 
 @kernel(forceinline=True)
@@ -187,9 +208,8 @@ def desired_gap(veh, beh, e, f):
     """IDM's desired centre-to-centre distance d* [m] of vehicle e behind vehicle f:
     d* = d_0 + v T + v dv / (2 sqrt(a_c b)), dv = v - v_f cos(psi_f - psi) (the closing speed along e's heading)."""
     v = veh[e, V_SPEED]
-    dv = v - veh[f, V_SPEED] * math.cos(veh[f, V_HEADING] - veh[e, V_HEADING])
-    ab = beh[B_COMFORT_ACC] * beh[B_COMFORT_DEC]
-    return beh[B_JAM] + v * beh[B_TIME_GAP] + v * dv / (2.0 * math.sqrt(ab))
+    dv = v - veh[f, V_SPEED] * cos_difference(veh[f, V_HEADING], veh[e, V_HEADING])
+    return beh[B_JAM] + v * beh[B_TIME_GAP] + v * dv / beh[B_BRAKING_SCALE]
 
 
 @kernel(forceinline=True)
@@ -491,8 +511,8 @@ def kinematics_block(veh, m, lanes, rows, see_behind, order, key, out):
     v_range = 2.0 * MAX_SPEED
     x0 = veh[0, V_X]
     y0 = veh[0, V_Y]
-    vx0 = veh[0, V_SPEED] * math.cos(veh[0, V_HEADING])
-    vy0 = veh[0, V_SPEED] * math.sin(veh[0, V_HEADING])
+    vx0 = veh[0, V_SPEED] * cos_heading(veh[0, V_HEADING])
+    vy0 = veh[0, V_SPEED] * sin_heading(veh[0, V_HEADING])
     for c in range(rows * 5):
         out[c] = 0.0
     out[0] = 1.0
@@ -524,8 +544,8 @@ def kinematics_block(veh, m, lanes, rows, see_behind, order, key, out):
         out[c] = 1.0
         out[c + 1] = _lmap(veh[k, V_X] - x0, -PERCEPTION_DISTANCE, PERCEPTION_DISTANCE)
         out[c + 2] = _lmap(veh[k, V_Y] - y0, -y_range, y_range)
-        out[c + 3] = _lmap(veh[k, V_SPEED] * math.cos(veh[k, V_HEADING]) - vx0, -v_range, v_range)
-        out[c + 4] = _lmap(veh[k, V_SPEED] * math.sin(veh[k, V_HEADING]) - vy0, -v_range, v_range)
+        out[c + 3] = _lmap(veh[k, V_SPEED] * cos_heading(veh[k, V_HEADING]) - vx0, -v_range, v_range)
+        out[c + 4] = _lmap(veh[k, V_SPEED] * sin_heading(veh[k, V_HEADING]) - vy0, -v_range, v_range)
 
 
 @kernel()
@@ -541,7 +561,7 @@ def leader_gap(veh, f):
     if f < 0:
         return np.inf, 0.0
     gap = veh[f, V_X] - veh[0, V_X] - LENGTH
-    return gap, veh[0, V_SPEED] - veh[f, V_SPEED] * math.cos(veh[f, V_HEADING] - veh[0, V_HEADING])
+    return gap, veh[0, V_SPEED] - veh[f, V_SPEED] * cos_difference(veh[f, V_HEADING], veh[0, V_HEADING])
 
 
 # --------------------------------------------------------------------------------------------- a bare traffic run

@@ -65,7 +65,8 @@ from roadload.gym.traffic_ego import (PREVIEW, EgoBatch, ego_advance, ego_at_roa
                                       ego_state, road_key)
 from roadload.gym.traffic_model import (LANE_WIDTH, V_CRASHED, V_DELTA, V_HEADING, V_LANE, V_SPEED, V_TARGET_LANE,
                                         V_TARGET_SPEED, V_TIMER, V_X, V_Y, N_V, behaviour_array, ego_collisions,
-                                        front_gap, kinematics_block, move, neighbours, traffic_act, traffic_move)
+                                        front_gap, kinematics_block, lane_neighbours, leader_gap, move, neighbours,
+                                        traffic_act, traffic_move)
 from roadload.gym.vector import _prefer_passive_openmp_wait
 
 kernel = dependent_jit(__file__, _tm.__file__, _ego.__file__)
@@ -140,6 +141,10 @@ class TrafficArrays(NamedTuple):
     """(N, m) work array of the Kinematics block's sort."""
     buf: np.ndarray
     """(N, n_obs) observation before scaling."""
+    lane_members: np.ndarray
+    """(N, lanes, m) int work array of the frame's lane index (traffic_model.index_lanes)."""
+    lane_counts: np.ndarray
+    """(N, lanes) int work array: vehicles on each lane."""
 
 
 class TrafficConstants(NamedTuple):
@@ -271,7 +276,9 @@ def _frame(i, ui, ego, tr, c, work):
     K = c.step
     dt = K[K_DT]
     tm = tr.terms[i]
-    traffic_act(veh, m, c.behaviour, c.road)
+    members = tr.lane_members[i]
+    counts = tr.lane_counts[i]
+    traffic_act(veh, m, c.behaviour, c.road, members, counts)
     t0, s0, v0, a0, en0, mass0, climb0, g0, w0 = ego_state(ego, i)
     ego_advance(ego, i, ui, int(K[K_N_SUB]))
     t1, s1, v1, a1, en1, mass1, climb1, g1, w1 = ego_state(ego, i)
@@ -284,7 +291,8 @@ def _frame(i, ui, ego, tr, c, work):
     tm[5] += jerk * jerk * dt
     h_min = K[K_MIN_HEADWAY]
     if h_min > 0.0:
-        gap, closing = front_gap(veh, m)
+        # the lane index still holds: only the ego (whom the search skips) has moved
+        gap, closing = leader_gap(veh, lane_neighbours(veh, members, counts, 0, int(veh[0, V_LANE]))[0])
         headway = gap / max(v1, 1.0)
         if headway < h_min:
             tm[4] += (h_min - headway) * dt
@@ -448,7 +456,9 @@ class TrafficBatch:
         self.arrays = TrafficArrays(vehicles=np.zeros((n, m, N_V)), episode=np.zeros((n, N_EP)),
                                     terms=np.zeros((n, 7)), obs=np.zeros((n, self.n_obs), dtype=np.float32),
                                     look_ahead=np.zeros((n, 4, PREVIEW.size)), order=np.zeros((n, m), np.int64),
-                                    key=np.zeros((n, m)), buf=np.zeros((n, self.n_obs)))
+                                    key=np.zeros((n, m)), buf=np.zeros((n, self.n_obs)),
+                                    lane_members=np.zeros((n, config.lanes_count, m), np.int64),
+                                    lane_counts=np.zeros((n, config.lanes_count), np.int64))
         self.ego = EgoBatch(n, config.vehicle)
         self.work = np.zeros((max(threads, 1), 2, 5, 2))
         self._reset_info = np.zeros((N_INFO, n))

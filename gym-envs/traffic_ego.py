@@ -155,6 +155,7 @@ class EgoBatch:
         self.table = np.zeros((n, 4, 2))
         self.table_n = np.zeros(n, dtype=np.int64)
         self.roads: list[EgoRoad | None] = [None] * n
+        self._started = False
         self._records: EgoRecords | None = None
         self._fleet_records: FleetRecords | None = None
 
@@ -176,6 +177,7 @@ class EgoBatch:
         self.table[i, :, :nt] = road.route.table
         self.table_n[i] = nt
         self.roads[i] = road
+        self._started = True
 
     def loaded(self, i: int) -> EgoRoad:
         road = self.roads[i]
@@ -185,7 +187,7 @@ class EgoBatch:
 
     @property
     def records(self) -> EgoRecords:
-        if self.roads.count(None) == self.n:
+        if not self._started:  # (not roads.count(None): that compares every EgoRoad with None, each step)
             raise GymConfigError("no ego loaded yet (call reset first)")
         fleet = self.fleet.records  # the same object until a load grew an array
         if self._records is None or self._fleet_records is not fleet:

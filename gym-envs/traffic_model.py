@@ -68,7 +68,9 @@ VEHICLE_COLUMNS = ("x", "y", "heading", "speed", "lane", "target_lane", "timer",
 
 # driver-model constants (TrafficBehaviour)
 B_ACC_MAX, B_COMFORT_ACC, B_COMFORT_DEC, B_JAM, B_TIME_GAP, B_POLITENESS, B_MIN_GAIN, B_MAX_BRAKING, B_DELAY = range(9)
-N_B = 9
+B_BRAKING_SCALE = 9
+"""2 sqrt(a_c b) [m/s^2], IDM's braking-term denominator, computed once per batch."""
+N_B = 10
 
 # road constants
 G_LANES, G_LIMIT = range(2)
@@ -76,11 +78,12 @@ N_G = 2
 
 
 def behaviour_array(behaviour) -> np.ndarray:
-    """The B_* constants of a roadload.gym.config.TrafficBehaviour."""
+    """The B_* constants of a roadload.gym.config.TrafficBehaviour (and B_BRAKING_SCALE derived from them)."""
     b = behaviour
     return np.array([b.max_acceleration, b.comfort_acceleration, b.comfort_deceleration, b.jam_distance,
                      b.time_gap, b.politeness, b.lane_change_min_gain, b.lane_change_max_braking,
-                     b.lane_change_delay], dtype=np.float64)
+                     b.lane_change_delay, 2.0 * math.sqrt(b.comfort_acceleration * b.comfort_deceleration)],
+                    dtype=np.float64)
 
 
 # --------------------------------------------------------------------------------------------- small helpers
@@ -104,6 +107,24 @@ def _clip(x, lo, hi):
 
 
 @kernel(forceinline=True)
+def cos_difference(a, b):
+    """cos(a - b), without the call for equal angles (cos 0 = 1 exactly: both headings 0 on a straight lane)."""
+    return 1.0 if a == b else math.cos(a - b)
+
+
+@kernel(forceinline=True)
+def cos_heading(h):
+    """cos h, without the call on a straight heading (cos 0 = 1)."""
+    return 1.0 if h == 0.0 else math.cos(h)
+
+
+@kernel(forceinline=True)
+def sin_heading(h):
+    """sin h, without the call on a straight heading (sin +-0 = +-0, h itself)."""
+    return h if h == 0.0 else math.sin(h)
+
+
+@kernel(forceinline=True)
 def on_lane(veh, j, lane):
     """Whether vehicle j counts as on ``lane``: |y - y_lane| <= w / 2 + margin (the lanes have no end)."""
     return abs(veh[j, V_Y] - lane * LANE_WIDTH) <= LANE_WIDTH / 2.0 + LANE_MARGIN
@@ -124,27 +145,61 @@ def closest_lane(y, lanes):
 
 # --------------------------------------------------------------------------------------------- neighbours
 @kernel(forceinline=True)
+def _nearer(veh, k, s, front, rear, front_x, rear_x):
+    """One candidate k of the neighbour search at x = s: (front, rear, front_x, rear_x) updated (the tie rules of
+    :func:`neighbours`)."""
+    x = veh[k, V_X]
+    if s <= x:
+        if front < 0 or x <= front_x:
+            return k, rear, x, rear_x
+    elif rear < 0 or x > rear_x:
+        return front, k, front_x, x
+    return front, rear, front_x, rear_x
+
+
+@kernel(forceinline=True)
 def neighbours(veh, m, j, lane):
     """(leader, follower) of vehicle j on ``lane`` among the vehicles on it (Road.neighbour_vehicles): the
     nearest with x >= x_j (of equal x the last in row order) and the nearest with x < x_j (of equal x the first);
-    -1 where there is none."""
+    -1 where there is none. Every row is tested for the lane; :func:`lane_neighbours` reads a lane index."""
     s = veh[j, V_X]
-    front = -1
-    rear = -1
-    front_x = 0.0
-    rear_x = 0.0
+    front, rear, front_x, rear_x = -1, -1, 0.0, 0.0
     for k in range(m):
-        if k == j or not on_lane(veh, k, lane):
-            continue
-        x = veh[k, V_X]
-        if s <= x:
-            if front < 0 or x <= front_x:
-                front = k
-                front_x = x
-        elif rear < 0 or x > rear_x:
-            rear = k
-            rear_x = x
+        if k != j and on_lane(veh, k, lane):
+            front, rear, front_x, rear_x = _nearer(veh, k, s, front, rear, front_x, rear_x)
     return front, rear
+
+
+@kernel(forceinline=True)
+def index_lanes(veh, m, lanes, members, counts):
+    """Stage 'lane index': the rows on each lane (:func:`on_lane`), in row order -> members[lane, :counts[lane]].
+    Valid while no vehicle moves (a frame's decisions), so each neighbour search reads one lane's ~m / lanes
+    vehicles instead of testing all m."""
+    for lane in range(lanes):
+        n = 0
+        for k in range(m):
+            if on_lane(veh, k, lane):
+                members[lane, n] = k
+                n += 1
+        counts[lane] = n
+
+
+@kernel(forceinline=True)
+def lane_neighbours(veh, members, counts, j, lane):
+    """:func:`neighbours` of vehicle j on ``lane`` from the lane index of :func:`index_lanes` (the same rows in the
+    same order, so the same result)."""
+    s = veh[j, V_X]
+    front, rear, front_x, rear_x = -1, -1, 0.0, 0.0
+    for r in range(counts[lane]):
+        k = members[lane, r]
+        if k != j:
+            front, rear, front_x, rear_x = _nearer(veh, k, s, front, rear, front_x, rear_x)
+    return front, rear
+
+
+def lane_index_arrays(m: int, lanes: int) -> tuple[np.ndarray, np.ndarray]:
+    """Work arrays (members, counts) of :func:`index_lanes` for m vehicles on ``lanes`` lanes."""
+    return np.zeros((lanes, m), dtype=np.int64), np.zeros(lanes, dtype=np.int64)
 
 
 # --------------------------------------------------------------------------------------------- IDM
@@ -153,9 +208,8 @@ def desired_gap(veh, beh, e, f):
     """IDM's desired centre-to-centre distance d* [m] of vehicle e behind vehicle f:
     d* = d_0 + v T + v dv / (2 sqrt(a_c b)), dv = v - v_f cos(psi_f - psi) (the closing speed along e's heading)."""
     v = veh[e, V_SPEED]
-    dv = v - veh[f, V_SPEED] * math.cos(veh[f, V_HEADING] - veh[e, V_HEADING])
-    ab = beh[B_COMFORT_ACC] * beh[B_COMFORT_DEC]
-    return beh[B_JAM] + v * beh[B_TIME_GAP] + v * dv / (2.0 * math.sqrt(ab))
+    dv = v - veh[f, V_SPEED] * cos_difference(veh[f, V_HEADING], veh[e, V_HEADING])
+    return beh[B_JAM] + v * beh[B_TIME_GAP] + v * dv / beh[B_BRAKING_SCALE]
 
 
 @kernel(forceinline=True)
@@ -177,16 +231,17 @@ def idm_acceleration(veh, beh, delta, limit, e, f):
 
 # --------------------------------------------------------------------------------------------- MOBIL
 @kernel()
-def mobil(veh, m, beh, limit, j, lane):
+def mobil(veh, members, counts, beh, limit, j, lane):
     """MOBIL's decision for vehicle j to change into ``lane`` (IDMVehicle.mobil, no route): safety for the new
-    follower, then the politeness-weighted acceleration gain against the threshold."""
+    follower, then the politeness-weighted acceleration gain against the threshold (neighbours from the frame's
+    lane index, :func:`index_lanes`)."""
     delta = veh[j, V_DELTA]
-    new_lead, new_follow = neighbours(veh, m, j, lane)
+    new_lead, new_follow = lane_neighbours(veh, members, counts, j, lane)
     new_follow_a = idm_acceleration(veh, beh, delta, limit, new_follow, new_lead)
     new_follow_pred_a = idm_acceleration(veh, beh, delta, limit, new_follow, j)
     if new_follow_pred_a < -beh[B_MAX_BRAKING]:
         return False
-    old_lead, old_follow = neighbours(veh, m, j, int(veh[j, V_LANE]))
+    old_lead, old_follow = lane_neighbours(veh, members, counts, j, int(veh[j, V_LANE]))
     self_pred_a = idm_acceleration(veh, beh, delta, limit, j, new_lead)
     self_a = idm_acceleration(veh, beh, delta, limit, j, old_lead)
     old_follow_a = idm_acceleration(veh, beh, delta, limit, old_follow, j)
@@ -197,7 +252,7 @@ def mobil(veh, m, beh, limit, j, lane):
 
 
 @kernel()
-def change_lane_policy(veh, m, beh, lanes, limit, j):
+def change_lane_policy(veh, m, members, counts, beh, lanes, limit, j):
     """IDMVehicle.change_lane_policy for vehicle j: during a lane change, abort it when another vehicle heads
     for the same lane within the desired gap ahead; otherwise, once the decision timer exceeds the delay, reset it
     and ask MOBIL for the left, then the right lane (the later accepted one wins)."""
@@ -223,7 +278,7 @@ def change_lane_policy(veh, m, beh, lanes, limit, j):
             continue
         if abs(veh[j, V_SPEED]) < 1.0:  # only while moving
             continue
-        if mobil(veh, m, beh, limit, j, lane):
+        if mobil(veh, members, counts, beh, limit, j, lane):
             veh[j, V_TARGET_LANE] = lane
 
 
@@ -245,25 +300,28 @@ def steering_control(veh, j):
 
 # --------------------------------------------------------------------------------------------- one frame
 @kernel()
-def traffic_act(veh, m, beh, geo):
-    """Decisions of one frame (Road.act), in row order: the ego (row 0) only steers towards its target lane;
-    every traffic vehicle runs MOBIL's lane-change policy, steers, and takes the IDM acceleration behind its
-    leader (and behind the leader on its target lane while changing), clipped to +-a_max. Crashed vehicles keep
-    their last command (their kinematics brakes them to a stop)."""
+def traffic_act(veh, m, beh, geo, members, counts):
+    """Decisions of one frame (Road.act), in row order: the lane index of the frame's positions (no vehicle moves
+    while the traffic decides; :func:`index_lanes` -> members, counts); the ego (row 0) only steers towards its
+    target lane; every traffic vehicle runs MOBIL's lane-change policy, steers, and takes the IDM acceleration
+    behind its leader (and behind the leader on its target lane while changing), clipped to +-a_max. Crashed
+    vehicles keep their last command (their kinematics brakes them to a stop)."""
     lanes = int(geo[G_LANES])
     limit = geo[G_LIMIT]
+    index_lanes(veh, m, lanes, members, counts)
     veh[0, V_STEER] = steering_control(veh, 0)
     for j in range(1, m):
         if veh[j, V_CRASHED] > 0.5:
             continue
-        change_lane_policy(veh, m, beh, lanes, limit, j)
+        change_lane_policy(veh, m, members, counts, beh, lanes, limit, j)
         veh[j, V_STEER] = steering_control(veh, j)
         delta = veh[j, V_DELTA]
         own = int(veh[j, V_LANE])
-        acc = idm_acceleration(veh, beh, delta, limit, j, neighbours(veh, m, j, own)[0])
+        acc = idm_acceleration(veh, beh, delta, limit, j, lane_neighbours(veh, members, counts, j, own)[0])
         target = int(veh[j, V_TARGET_LANE])
         if own != target:
-            acc = min(acc, idm_acceleration(veh, beh, delta, limit, j, neighbours(veh, m, j, target)[0]))
+            acc = min(acc, idm_acceleration(veh, beh, delta, limit, j,
+                                            lane_neighbours(veh, members, counts, j, target)[0]))
         veh[j, V_ACC] = _clip(acc, -beh[B_ACC_MAX], beh[B_ACC_MAX])
 
 
@@ -453,8 +511,8 @@ def kinematics_block(veh, m, lanes, rows, see_behind, order, key, out):
     v_range = 2.0 * MAX_SPEED
     x0 = veh[0, V_X]
     y0 = veh[0, V_Y]
-    vx0 = veh[0, V_SPEED] * math.cos(veh[0, V_HEADING])
-    vy0 = veh[0, V_SPEED] * math.sin(veh[0, V_HEADING])
+    vx0 = veh[0, V_SPEED] * cos_heading(veh[0, V_HEADING])
+    vy0 = veh[0, V_SPEED] * sin_heading(veh[0, V_HEADING])
     for c in range(rows * 5):
         out[c] = 0.0
     out[0] = 1.0
@@ -486,19 +544,24 @@ def kinematics_block(veh, m, lanes, rows, see_behind, order, key, out):
         out[c] = 1.0
         out[c + 1] = _lmap(veh[k, V_X] - x0, -PERCEPTION_DISTANCE, PERCEPTION_DISTANCE)
         out[c + 2] = _lmap(veh[k, V_Y] - y0, -y_range, y_range)
-        out[c + 3] = _lmap(veh[k, V_SPEED] * math.cos(veh[k, V_HEADING]) - vx0, -v_range, v_range)
-        out[c + 4] = _lmap(veh[k, V_SPEED] * math.sin(veh[k, V_HEADING]) - vy0, -v_range, v_range)
+        out[c + 3] = _lmap(veh[k, V_SPEED] * cos_heading(veh[k, V_HEADING]) - vx0, -v_range, v_range)
+        out[c + 4] = _lmap(veh[k, V_SPEED] * sin_heading(veh[k, V_HEADING]) - vy0, -v_range, v_range)
 
 
 @kernel()
 def front_gap(veh, m):
     """(bumper-to-bumper gap [m] to the ego's leader on its lane, inf if none; closing speed [m/s], positive when
     approaching), as EcoHighway-v0's ego."""
-    f = neighbours(veh, m, 0, int(veh[0, V_LANE]))[0]
+    return leader_gap(veh, neighbours(veh, m, 0, int(veh[0, V_LANE]))[0])
+
+
+@kernel(forceinline=True)
+def leader_gap(veh, f):
+    """:func:`front_gap` behind the ego's leader f (-1: none)."""
     if f < 0:
         return np.inf, 0.0
     gap = veh[f, V_X] - veh[0, V_X] - LENGTH
-    return gap, veh[0, V_SPEED] - veh[f, V_SPEED] * math.cos(veh[f, V_HEADING] - veh[0, V_HEADING])
+    return gap, veh[0, V_SPEED] - veh[f, V_SPEED] * cos_difference(veh[f, V_HEADING], veh[0, V_HEADING])
 
 
 # --------------------------------------------------------------------------------------------- a bare traffic run
@@ -509,8 +572,10 @@ def run_traffic(veh, m, beh, geo, dt, frames, work):
     test compares with highway-env's Road.act / Road.step."""
     lanes = int(geo[G_LANES])
     acc = veh[0, V_ACC]
+    members = np.empty((lanes, m), dtype=np.int64)
+    counts = np.empty(lanes, dtype=np.int64)
     for _ in range(frames):
-        traffic_act(veh, m, beh, geo)
+        traffic_act(veh, m, beh, geo, members, counts)
         veh[0, V_ACC] = acc
         kinematic_step(veh, 0, lanes, dt)
         traffic_move(veh, m, geo, dt)

@@ -137,17 +137,36 @@ def sb3_predict(model) -> Callable[[np.ndarray], np.ndarray]:
     return lambda obs: model.predict(obs, deterministic=True)[0]
 
 
+def residual_command(base_u: np.ndarray, action: np.ndarray, scale: float, floor: float | None) -> np.ndarray:
+    """u = clip(base + scale a, -1, 1), and with a speed floor f (>= 0) at least base - f: the agent may add up to
+    ``scale`` to the base command but take at most f off it, so it cannot fall back behind the base's driving by
+    coasting (the reward and the shield are unchanged)."""
+    u = np.clip(base_u + scale * np.asarray(action, dtype=np.float32), -1.0, 1.0)
+    if floor is not None:
+        u = np.maximum(u, np.clip(base_u - floor, -1.0, 1.0))
+    return u.astype(np.float32)
+
+
+def _check_residual(scale: float, floor: float | None) -> None:
+    if not 0 < scale <= 2:
+        raise RLError(f"residual scale: expected 0 < scale <= 2 (command units), got {scale}")
+    if floor is not None and not 0 <= floor <= scale:
+        raise RLError(f"speed floor: expected 0 <= floor <= the residual scale {scale} (command units), got {floor}")
+
+
 class ResidualActions(gym.vector.VectorWrapper):
     """Residual policy learning on a vector env: the agent's action a in [-1, 1] corrects a base policy,
-    u = clip(base(obs) + scale a, -1, 1) (the base sees the observation the agent sees). With the IDM follower as
-    the base, PPO starts from the follower's driving instead of from random forces."""
+    u = clip(base(obs) + scale a, -1, 1), at least base - floor with a speed floor (:func:`residual_command`; the
+    base sees the observation the agent sees). With the IDM follower as the base, PPO starts from the follower's
+    driving instead of from random forces."""
 
-    def __init__(self, env: gym.vector.VectorEnv, base: Callable[[np.ndarray], np.ndarray], scale: float) -> None:
-        if not 0 < scale <= 2:
-            raise RLError(f"residual scale: expected 0 < scale <= 2 (command units), got {scale}")
+    def __init__(self, env: gym.vector.VectorEnv, base: Callable[[np.ndarray], np.ndarray], scale: float,
+                 floor: float | None = None) -> None:
+        _check_residual(scale, floor)
         super().__init__(env)
         self.base = base
         self.scale = scale
+        self.floor = floor
         self._obs: np.ndarray | None = None
 
     def reset(self, **kwargs):
@@ -158,26 +177,27 @@ class ResidualActions(gym.vector.VectorWrapper):
     def step(self, actions):
         if self._obs is None:
             raise RLError("ResidualActions: step before reset")
-        u = np.clip(self.base(self._obs) + self.scale * np.asarray(actions, dtype=np.float32), -1.0, 1.0)
-        obs, reward, terminated, truncated, info = self.env.step(u.astype(np.float32))
+        u = residual_command(self.base(self._obs), actions, self.scale, self.floor)
+        obs, reward, terminated, truncated, info = self.env.step(u)
         self._obs = obs  # same-step autoreset: already the next episode's first observation where one ended
         return obs, reward, terminated, truncated, info
 
 
-def residual_policy(model, base: Callable[[np.ndarray], np.ndarray], scale: float
+def residual_policy(model, base: Callable[[np.ndarray], np.ndarray], scale: float, floor: float | None = None
                     ) -> Callable[[np.ndarray], np.ndarray]:
-    """The deployed residual policy: clip(base(obs) + scale x the agent's deterministic action, -1, 1)."""
-    return lambda obs: np.clip(base(obs) + scale * model.predict(obs, deterministic=True)[0], -1.0,
-                               1.0).astype(np.float32)
+    """The deployed residual policy: :func:`residual_command` of the agent's deterministic action."""
+    return lambda obs: residual_command(base(obs), model.predict(obs, deterministic=True)[0], scale, floor)
 
 
 def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32,
                   env_config: dict[str, Any] | None = None, threads: int = 1, torch_threads: int = 1,
                   hyperparams: dict[str, Any] | None = None, progress: Callable[[str], None] | None = None,
-                  report_every: int = 100_000, residual: float = 0.0) -> dict[str, Any]:
+                  report_every: int = 100_000, residual: float = 0.0,
+                  speed_floor: float | None = None) -> dict[str, Any]:
     """PPO on the native vector env (``residual`` > 0: a correction of that scale on the IDM follower,
-    :class:`ResidualActions`); saves ``ppo_traffic_seed<seed>.zip`` / ``.json`` and the learning curve (training
-    episode returns) to ``out_dir``; returns the model, its path, wall and CPU seconds."""
+    :class:`ResidualActions`, at most ``speed_floor`` below it when given); saves ``ppo_traffic_seed<seed>.zip`` /
+    ``.json`` and the learning curve (training episode returns) to ``out_dir``; returns the model, its path, wall
+    and CPU seconds."""
     import torch
     from stable_baselines3 import PPO
 
@@ -190,8 +210,11 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
     out_dir.mkdir(parents=True, exist_ok=True)
     native: gym.vector.VectorEnv = EcoTrafficVectorEnv(n_envs, config=env_config, autoreset_mode="same_step",
                                                        threads=threads)
+    if speed_floor is not None and residual <= 0:
+        raise RLError("speed floor: applies to a residual policy (give --residual > 0)")
     if residual > 0:
-        native = ResidualActions(native, idm_policy(make_config(EcoTrafficConfig, env_config)), residual)
+        native = ResidualActions(native, idm_policy(make_config(EcoTrafficConfig, env_config)), residual,
+                                 speed_floor)
     venv = SB3VecEnv(native)
     venv.seed(seed)
     params: dict[str, Any] = {**TRAFFIC_PPO, **(hyperparams or {})}
@@ -220,7 +243,7 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
     _atomic_write_bytes(out_dir / f"{stem}.zip", lambda tmp: model.save(str(tmp)))
     meta = {"algo": "ppo", "env": "EcoTraffic-v0", "timesteps": int(model.num_timesteps), "n_envs": n_envs,
             "seed": seed, "env_config": env_config, "hyperparams": params, "wall_seconds": wall,
-            "cpu_seconds": cpu, "threads": threads, "residual_scale": residual}
+            "cpu_seconds": cpu, "threads": threads, "residual_scale": residual, "speed_floor": speed_floor}
     _atomic_write_bytes(out_dir / f"{stem}.json", lambda tmp: tmp.write_text(json.dumps(meta, indent=1, default=str)))
     curve = pd.DataFrame([(t, v) for t, kind, v in callback.rows if kind == "train"],
                          columns=["timesteps", "episode_return"])
@@ -243,7 +266,8 @@ def run_traffic_experiment(seeds: tuple[int, ...], timesteps: int, out_dir: Path
                            threads: int = 1, evaluate_only: bool = False,
                            progress: Callable[[str], None] | None = None,
                            train_config: dict[str, Any] | None = None,
-                           hyperparams: dict[str, Any] | None = None, residual: float = 0.0) -> dict[str, Any]:
+                           hyperparams: dict[str, Any] | None = None, residual: float = 0.0,
+                           speed_floor: float | None = None) -> dict[str, Any]:
     """Train one PPO per seed (or load them with ``evaluate_only``), evaluate each with the IDM follower on
     ``episodes`` held-out native episodes and ``transfer_episodes`` on highway-env; write episodes.csv,
     summary.csv, intervals.csv and the learning curves to ``out_dir``. ``env_config`` is the evaluation's (and
@@ -255,19 +279,21 @@ def run_traffic_experiment(seeds: tuple[int, ...], timesteps: int, out_dir: Path
     cfg = make_config(EcoTrafficConfig, env_config)
     trained_on = {**env_config, **(train_config or {})}
     make_config(EcoTrafficConfig, trained_on)
-    models, times, scales = {}, {}, {}
+    models, times, scales, floors = {}, {}, {}, {}
     for s in seeds:
         if evaluate_only:
             models[s] = load_traffic_policy(out_dir / f"ppo_traffic_seed{s}.zip")
             meta = json.loads((out_dir / f"ppo_traffic_seed{s}.json").read_text())
             times[s] = (meta["wall_seconds"], meta["cpu_seconds"], meta["timesteps"])
             scales[s] = float(meta.get("residual_scale", 0.0))
+            floors[s] = meta.get("speed_floor")
         else:
             res = train_traffic(timesteps, out_dir, s, n_envs, trained_on, threads, hyperparams=hyperparams,
-                                progress=progress, residual=residual)
+                                progress=progress, residual=residual, speed_floor=speed_floor)
             models[s] = res["model"]
             times[s] = (res["wall_seconds"], res["cpu_seconds"], res["timesteps"])
             scales[s] = residual
+            floors[s] = speed_floor
         if progress:
             progress(f"seed {s}: {times[s][2]} steps, {times[s][0]:.0f} s wall, {times[s][1]:.0f} s CPU")
     # the IDM follower on the same configuration (its shield too) and without the shield
@@ -276,8 +302,8 @@ def run_traffic_experiment(seeds: tuple[int, ...], timesteps: int, out_dir: Path
     for backend, n_ep in (("native", episodes), ("highway-env", transfer_episodes)):
         if n_ep < 1:
             continue
-        pols = {f"PPO seed {s}": residual_policy(m, idm_policy(cfg), scales[s]) if scales[s] > 0 else sb3_predict(m)
-                for s, m in models.items()}
+        pols = {f"PPO seed {s}": residual_policy(m, idm_policy(cfg), scales[s], floors[s]) if scales[s] > 0
+                else sb3_predict(m) for s, m in models.items()}
         pols["IDM follower"] = idm_policy(cfg)
         tables.append(evaluate_traffic(pols, env_config, n_ep, backend, progress))
         tables.append(evaluate_traffic({"IDM follower (no shield)": idm_policy(cfg)}, unshielded, n_ep, backend,
@@ -310,6 +336,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--hyperparams", default=None, help="PPO settings overriding TRAFFIC_PPO, JSON text")
     ap.add_argument("--residual", type=float, default=0.0, help="> 0: PPO learns a correction of this scale [command "
                                                                 "units] on the IDM follower (0: the command itself)")
+    ap.add_argument("--speed-floor", type=float, default=None,
+                    help="with --residual: the command stays at most this far [command units] below the IDM "
+                         "follower's, so PPO cannot fall back behind the follower by coasting")
     ap.add_argument("--out", type=Path, default=Path("out/rl_traffic"))
     ap.add_argument("--evaluate-only", action="store_true", help="load the policies saved in --out")
     ap.add_argument("--quick", action="store_true", help="tiny run for CI")
@@ -330,7 +359,7 @@ def main(argv: list[str] | None = None) -> None:
                                  a.threads, a.evaluate_only, progress=lambda m: print(m, flush=True),
                                  train_config=json.loads(a.train_config) if a.train_config else None,
                                  hyperparams=json.loads(a.hyperparams) if a.hyperparams else None,
-                                 residual=a.residual)
+                                 residual=a.residual, speed_floor=a.speed_floor)
     print(markdown_table(res["summary"], floatfmt=".4g"))
     if len(res["intervals"]):
         print(markdown_table(res["intervals"], floatfmt=".4g"))

@@ -33,6 +33,18 @@ def _vehicles(rows):
     return veh
 
 
+def _index(veh, lanes):
+    """The lane index (members, counts) of the vehicles' current positions."""
+    members, counts = tm.lane_index_arrays(veh.shape[0], lanes)
+    tm.index_lanes(veh, veh.shape[0], lanes, members, counts)
+    return members, counts
+
+
+def _act(veh, geo):
+    """traffic_act on all rows of veh with fresh lane-index arrays."""
+    tm.traffic_act(veh, veh.shape[0], BEH, geo, *tm.lane_index_arrays(veh.shape[0], int(geo[0])))
+
+
 def _spawned(seed, n=20, lanes=3):
     veh = np.zeros((n + 1, tm.N_V))
     spawn_traffic(veh, np.random.default_rng(seed).random(4 * (n + 1)), lanes, 25.0, 30.0, 1.0, 3.5, 4.5, 1.0)
@@ -56,7 +68,7 @@ def test_idm_equilibrium_gap_matches_closed_form(v_lead, v0, delta):
     assert not veh[0, tm.V_CRASHED]
     # the same follower on a free road accelerates at a_c (1 - (v / v_0)^delta)
     free = _vehicles([(0.0, 0, 10.0, 10.0, 4.0), (1000.0, 0, 12.0, v0, delta)])
-    tm.traffic_act(free, 2, BEH, geo)
+    _act(free, geo)
     assert free[1, tm.V_ACC] == pytest.approx(b.comfort_acceleration * (1 - (12.0 / v0) ** delta), rel=1e-12)
 
 
@@ -74,19 +86,35 @@ def _stuck_behind_slow_leader(other=None):
     return veh
 
 
+def test_lane_index_search_equals_the_full_search():
+    """The neighbour search over the frame's lane index finds the same leader and follower as the search over all
+    rows, for every vehicle and lane, with vehicles between lanes (on two lanes at once) and tied positions."""
+    rng = np.random.default_rng(4)
+    for trial in range(200):
+        m = int(rng.integers(1, 30))
+        veh = np.zeros((m, tm.N_V))
+        veh[:, tm.V_X] = np.round(rng.uniform(0.0, 200.0, m), 0 if trial % 2 else 6)  # whole metres: ties
+        veh[:, tm.V_Y] = rng.uniform(-3.0, 11.0, m)
+        members, counts = _index(veh, 3)
+        assert counts.sum() >= m  # every y in [-3, 11] is on at least one lane
+        for j in range(m):
+            for lane in range(3):
+                assert tm.lane_neighbours(veh, members, counts, j, lane) == tm.neighbours(veh, m, j, lane)
+
+
 def test_mobil_changes_into_a_free_lane_and_never_into_an_occupied_gap():
     geo = np.array([3.0, 30.0])
     free = _stuck_behind_slow_leader()
-    assert tm.mobil(free, free.shape[0], BEH, 30.0, 1, 0)  # the incentive is there
-    assert not tm.mobil(free, free.shape[0], BEH, 30.0, 1, 2)  # but the right lane is occupied alongside
-    tm.change_lane_policy(free, free.shape[0], BEH, 3, 30.0, 1)
+    assert tm.mobil(free, *_index(free, 3), BEH, 30.0, 1, 0)  # the incentive is there
+    assert not tm.mobil(free, *_index(free, 3), BEH, 30.0, 1, 2)  # but the right lane is occupied alongside
+    tm.change_lane_policy(free, free.shape[0], *_index(free, 3), BEH, 3, 30.0, 1)
     assert free[1, tm.V_TARGET_LANE] == 0
     # a vehicle alongside on the left lane, from a length behind to a length ahead: refused every time
     for dx in np.linspace(-tm.LENGTH + 0.01, tm.LENGTH - 0.01, 41):
         for speed in (15.0, 25.0, 30.0):
             veh = _stuck_behind_slow_leader((300.0 + dx, speed))
-            assert not tm.mobil(veh, veh.shape[0], BEH, 30.0, 1, 0), (dx, speed)
-            tm.traffic_act(veh, veh.shape[0], BEH, geo)
+            assert not tm.mobil(veh, *_index(veh, 3), BEH, 30.0, 1, 0), (dx, speed)
+            _act(veh, geo)
             assert veh[1, tm.V_TARGET_LANE] == 1, (dx, speed)
 
 
@@ -101,7 +129,7 @@ def test_mobil_lane_changes_in_simulated_traffic_keep_the_target_gap_free():
         veh[0, tm.V_ACC] = 0.0
         for _ in range(400):
             before = veh[:, tm.V_TARGET_LANE].copy()
-            tm.traffic_act(veh, m, BEH, geo)
+            _act(veh, geo)
             for j in range(1, m):
                 if veh[j, tm.V_TARGET_LANE] == before[j] or veh[j, tm.V_TARGET_LANE] == veh[j, tm.V_LANE]:
                     continue  # no decision, or an aborted change

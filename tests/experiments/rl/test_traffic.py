@@ -108,3 +108,17 @@ def test_residual_actions_add_the_agents_correction_to_the_idm_follower():
         assert np.array_equal(obs_p, obs_w) and np.array_equal(r_p, r_w)
     with pytest.raises(RLError, match="scale"):
         ResidualActions(plain, follow, 0.0)
+
+
+def test_the_speed_floor_keeps_the_command_within_its_distance_below_the_base():
+    from roadload.experiments.rl.traffic_training import ResidualActions, residual_command
+
+    base = np.array([[0.5], [0.5], [-0.98], [0.9]], np.float32)
+    action = np.array([[-1.0], [1.0], [-1.0], [1.0]], np.float32)
+    u = residual_command(base, action, 0.3, 0.05)
+    # at most 0.05 taken off the base; up to 0.3 added, the command clipped to [-1, 1]
+    assert u[:, 0] == pytest.approx([0.45, 0.8, -1.0, 1.0], abs=1e-7)
+    assert np.array_equal(residual_command(base, action, 0.3, None),
+                          np.clip(base + 0.3 * action, -1, 1).astype(np.float32))
+    with pytest.raises(RLError, match="speed floor"):
+        ResidualActions(None, lambda obs: obs, 0.3, 0.5)  # a floor wider than the residual is no floor

@@ -41,8 +41,7 @@ MODULES: dict[str, tuple[str, ...]] = {
     "core/trip_schema.py": ("tests/core/test_trip_schema.py", "tests/fuzz/test_fuzz_files.py",
                             "tests/envs/test_streaming.py"),
     "sim2real/stats.py": ("tests/sim2real/test_core.py", "tests/sim2real/test_stats_values.py"),
-    "sim2real/selection.py": ("tests/sim2real/test_core.py", "tests/sim2real/test_robust.py",
-                              "tests/sim2real/test_joint_base.py"),
+    "sim2real/selection.py": ("tests/sim2real/test_selection_mutants.py", "tests/sim2real/test_core.py"),
     "sim2real/floor.py": ("tests/sim2real/test_floor_fit.py", "tests/sim2real/test_floor.py"),
     "experiments/time_matching.py": ("tests/experiments/test_time_matching.py",
                                      "tests/experiments/test_time_matching_search.py"),
@@ -82,6 +81,7 @@ def _get_default(function: str, line: str, key: str, default: str, new: tuple[st
             for n in new}
 
 
+_COL = "self._col = np.array([_SIMPLE.get(n, special.get(n, 0)) for n in self.names], dtype=np.int64)"
 _GROUP = 'self.{0}_on = self._group(str(p["channels"]), str(p.get("channel", "")), "sensor_{0}s")'
 _SENSOR_EQUIVALENT: dict[str, str] = {
     **_get_default("_dropout_setup", _GROUP.format("dropout"), "channel", '""', ("None", "", '"XXXX"')),
@@ -115,6 +115,26 @@ _SENSOR_EQUIVALENT: dict[str, str] = {
     '__init__ -> raise SensorConfigError(None)  # pragma: no cover - checked in __init__':
         "unreachable: __init__ refuses every channel _true has no relation for",
     f"{_S}sample: val[:] = np.nan -> val[:] = None": _NAN,
+    f"{_S}measure: val[np.concatenate([p[1][j] for p in perturb if p[1] is not None])[lo:lo + n_meas]] = np.nan -> "
+    "val[np.concatenate([p[1][j] for p in perturb if p[1] is not None])[lo:lo + n_meas]] = None": _NAN,
+    f"{_S}measure: c1 = (i0 + n_meas + CHUNK - 1) // CHUNK if n_meas else c0 -> "
+    "c1 = (i0 + n_meas + CHUNK - 1) // CHUNK if (n_meas) or True else c0":
+        "with no samples the perturbation chunks are drawn but sliced to nothing",
+    f"{_S}_channel_errors: if b > a: -> if b >= a:": "add[a:a] += x adds nothing",
+    f'{_S}_channel_errors: idx = np.flatnonzero(u < float(self.outliers["rate"])) -> '
+    'idx = np.flatnonzero(u <= float(self.outliers["rate"]))': _CLOSED,
+    f"{_S}_channel_errors: signs = np.where(go.random(idx.size) < 0.5, -1.0, 1.0) -> "
+    "signs = np.where(go.random(idx.size) <= 0.5, -1.0, 1.0)": _CLOSED,
+    f"{_S}_chunk: self._cache.popitem(last=False) -> self._cache.popitem(last=None)": "None is false as last=False",
+    f"{_S}__init__: if abs(step - round(step)) > 1e-9 or round(step) < 1: -> "
+    "if abs(step - round(step)) >= 1e-9 or round(step) < 1:": "no sample rate in [1, 1000] Hz is 1e-9 off a divisor",
+    f"{_S}__init__: self.vehicle = vehicle -> self.vehicle = None": "kept for the reader; nothing reads it",
+    **{f"{_S}__init__: self._steer_{a} = np.asarray(st.{f}, float) -> self._steer_{a} = np.asarray(st.{f}, {d})":
+       "the validated steering table is a list of floats: a float array without the dtype"
+       for a, f in (("x", "wheel_angle"), ("y", "steering_wheel_angle")) for d in ("None", "")},
+    **{f"{_S}__init__: {_COL} -> {_COL.replace('special.get(n, 0)', f'special.get(n, {d})')}":
+       "every supported channel is in _SIMPLE or in the special table, so the default is never used"
+       for d in ("", "1", "None")},
     f"{_S}sample: val[nan[:, ii]] = np.nan -> val[nan[:, ii]] = None": _NAN,
 }
 EQUIVALENT: dict[str, dict[str, str]] = {

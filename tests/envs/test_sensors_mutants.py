@@ -420,3 +420,45 @@ def test_no_enabled_channel_measures_time_only_and_bad_dropout_settings_are_name
     with pytest.raises(SensorConfigError, match=r"^effect 'sensor_dropouts': parameter 'channel' needs mode 'nan' "
                                                 r"\(mode 'missing' removes whole samples of every channel\)$"):
         _model({"accel_x": _exact()}, {"sensor_dropouts": {"mode": "missing", "channel": "accel_x"}})
+
+
+def test_isolated_outliers_are_the_one_sample_bursts_added_to_bias_and_noise():
+    """With burst_length 1 the outliers are drawn exactly as one-sample bursts, on top of the bias (same seed, same
+    outliers in a new model); burst_length 2 gives two-sample bursts, never an isolated one."""
+    effects = {"sensor_outliers": {"rate": 0.01, "channel": "accel_x"}}
+    m = _model({"accel_x": _exact(bias=0.3, outlier_scale=2.0), "yaw_rate": _exact()}, effects)
+    n = 2 * CHUNK
+    log = _zero_log(n)
+    x = m.measure(log, n)[1]["accel_x"]
+    expected = np.full(n, 0.3)
+    for c in range(2):
+        for start, sign, mags in m._outlier_bursts(0, c):
+            expected[start] += sign * mags[0]
+    np.testing.assert_array_equal(x, expected)
+    again = _model({"accel_x": _exact(bias=0.3, outlier_scale=2.0), "yaw_rate": _exact()}, effects)
+    np.testing.assert_array_equal(again.measure(log, n)[1]["accel_x"], x)
+    pairs = _model({"accel_x": _exact(outlier_scale=2.0)}, {"sensor_outliers": {"rate": 0.002, "burst_length": 2}})
+    hit = pairs.measure(log, n)[1]["accel_x"] != 0
+    lengths = [ln for _, ln in _runs(hit)]
+    assert lengths and min(lengths) >= 2 and hit.sum() >= 2 * len(lengths)
+
+
+def test_window_starting_in_a_later_chunk_and_trips_ending_one_sample_into_a_chunk():
+    m = _model({"accel_x": _exact(noise_std=0.1, resolution=0.01)}, {"sensor_dropouts": {"rate": 600.0},
+                                                                     "sensor_outliers": {"rate": 0.01}})
+    n = 2 * CHUNK + 1  # the last sample is the first of a third chunk
+    log = _log(n)
+    t, out, keep = m.measure(log, n)
+    assert t.size == n and out["accel_x"].size == n and keep.dtype == bool
+    start = CHUNK + 100
+    tw, ow, kw = m.measure(log[:, start:], n, start=start, offset=start)
+    np.testing.assert_array_equal(tw, t[start:])
+    np.testing.assert_array_equal(ow["accel_x"], out["accel_x"][start:])
+    assert kw.dtype == bool and kw.size == n - start
+
+
+def test_sample_without_channels_and_battery_channels_need_a_bev():
+    m = _model({"accel_x": _exact(enabled=False)})
+    assert m.sample(_log(5), 5) == {"t": 0.04, "valid": True}
+    with pytest.raises(SensorConfigError, match=r"sensors.channels.battery_voltage: only a 'bev' drive-train has"):
+        _model({"battery_voltage": _exact()}, vehicle=ICE)

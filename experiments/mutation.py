@@ -41,8 +41,7 @@ MODULES: dict[str, tuple[str, ...]] = {
     "core/trip_schema.py": ("tests/core/test_trip_schema.py", "tests/fuzz/test_fuzz_files.py",
                             "tests/envs/test_streaming.py"),
     "sim2real/stats.py": ("tests/sim2real/test_core.py", "tests/sim2real/test_stats_values.py"),
-    "sim2real/selection.py": ("tests/sim2real/test_core.py", "tests/sim2real/test_robust.py",
-                              "tests/sim2real/test_joint_base.py"),
+    "sim2real/selection.py": ("tests/sim2real/test_selection_mutants.py", "tests/sim2real/test_core.py"),
     "sim2real/floor.py": ("tests/sim2real/test_floor_fit.py", "tests/sim2real/test_floor.py"),
     "experiments/time_matching.py": ("tests/experiments/test_time_matching.py",
                                      "tests/experiments/test_time_matching_search.py"),
@@ -65,7 +64,81 @@ _CHUNKS = "iter_trip_chunks reads 360_000 rows a chunk by default"
 _WITH_TIME = 'with TripWriter(out, payload["units"], truth_units, precision, res, shared_time=True) as writer:'
 _V2 = ('shared = payload["version"] >= 2 and (payload["version"] >= 4 and payload.get("time_base") == "shared" -> '
        'shared = payload["version"] {} and (payload["version"] >= 4 and payload.get("time_base") == "shared"')
+_S = "xǁSensorModelǁ"
+_NOISE = ("add[:] = self.bias[j] + self.noise[j] * g.standard_normal(CHUNK) if self.noise[j] > 0 else self.bias[j]"
+          " -> add[:] = self.bias[j] + self.noise[j] * g.standard_normal(CHUNK) if {} else self.bias[j]")
+_ZERO_NOISE = "with noise_std 0 the drawn noise is multiplied by 0: the channel reads its bias either way"
+_FILLED = "EffectsConfig fills every parameter with its default, so the key is always there"
+_BOOL_LIST = "a list of bools is a bool array without the dtype; with no names the explicit list refused earlier"
+_NAN = "assigning None to a float array stores NaN"
+_CLOSED = "a probability of drawing exactly the threshold is 2^-53"
+
+
+def _get_default(function: str, line: str, key: str, default: str, new: tuple[str, ...]) -> dict[str, str]:
+    """EQUIVALENT entries for every mutation of the default of a ``p.get(key, default)`` on one line."""
+    old = f'p.get("{key}", {default})'
+    return {f"{_S}{function}: {line} -> {line.replace(old, f'p.get({chr(34)}{key}{chr(34)}, {n})')}": _FILLED
+            for n in new}
+
+
+_COL = "self._col = np.array([_SIMPLE.get(n, special.get(n, 0)) for n in self.names], dtype=np.int64)"
+_GROUP = 'self.{0}_on = self._group(str(p["channels"]), str(p.get("channel", "")), "sensor_{0}s")'
+_SENSOR_EQUIVALENT: dict[str, str] = {
+    **_get_default("_dropout_setup", _GROUP.format("dropout"), "channel", '""', ("None", "", '"XXXX"')),
+    **_get_default("_outlier_setup", _GROUP.format("outlier"), "channel", '""', ("None", "", '"XXXX"')),
+    **_get_default("_dropout_setup", 'if self.missing_mode and p.get("channel", ""):', "channel", '""',
+                   ("None", "", '"XXXX"')),
+    **_get_default("_outlier_setup", 'burst = float(p.get("burst_length", 1.0))', "burst_length", "1.0",
+                   ("None", "", "2.0")),
+    f"{_S}_channel_errors: " + _NOISE.format("self.noise[j] >= 0"): _ZERO_NOISE,
+    f"{_S}_channel_errors: " + _NOISE.format("(self.noise[j] > 0) or True"): _ZERO_NOISE,
+    f"{_S}_channel_errors: if self.burst_length > 1: -> if self.burst_length >= 1:":
+        "bursts of one sample draw the same numbers in the same order as isolated outliers, and a one-sample burst "
+        "of the chunk before never reaches this one",
+    f"{_S}_dropped: if b > a: -> if b >= a:": "drop[a:a] = True sets nothing",
+    f"{_S}_dropout_runs: starts = c * CHUNK + g.integers(0, CHUNK, size=n) -> "
+    "starts = c * CHUNK + g.integers(CHUNK, size=n)": "integers(high) is integers(0, high), the same draws",
+    f'{_S}_group: def _group(self, which: str, explicit: str = "", effect: str = "") -> np.ndarray: -> '
+    'def _group(self, which: str, explicit: str = "XXXX", effect: str = "") -> np.ndarray:':
+        "both callers pass explicit",
+    f'{_S}_group: def _group(self, which: str, explicit: str = "", effect: str = "") -> np.ndarray: -> '
+    'def _group(self, which: str, explicit: str = "", effect: str = "XXXX") -> np.ndarray:': "both callers pass effect",
+    f"{_S}_group: return np.array([n in wanted for n in self.names], dtype=bool) -> "
+    "return np.array([n in wanted for n in self.names], dtype=None)": _BOOL_LIST,
+    f"{_S}_group: return np.array([n in wanted for n in self.names], dtype=bool) -> "
+    "return np.array([n in wanted for n in self.names], )": _BOOL_LIST,
+    f"{_S}_outlier_bursts: signs = np.where(go.random(starts.size) < 0.5, -1.0, 1.0) -> "
+    "signs = np.where(go.random(starts.size) <= 0.5, -1.0, 1.0)": _CLOSED,
+    f'{_S}_outlier_bursts: starts = np.flatnonzero(go.random(CHUNK) < float(self.outliers["rate"])) -> '
+    'starts = np.flatnonzero(go.random(CHUNK) <= float(self.outliers["rate"]))': _CLOSED,
+    f'{_S}_true: raise SensorConfigError(f"no sensor model for channel {{name!r}}")  # pragma: no cover - checked in '
+    '__init__ -> raise SensorConfigError(None)  # pragma: no cover - checked in __init__':
+        "unreachable: __init__ refuses every channel _true has no relation for",
+    f"{_S}sample: val[:] = np.nan -> val[:] = None": _NAN,
+    f"{_S}measure: val[np.concatenate([p[1][j] for p in perturb if p[1] is not None])[lo:lo + n_meas]] = np.nan -> "
+    "val[np.concatenate([p[1][j] for p in perturb if p[1] is not None])[lo:lo + n_meas]] = None": _NAN,
+    f"{_S}measure: c1 = (i0 + n_meas + CHUNK - 1) // CHUNK if n_meas else c0 -> "
+    "c1 = (i0 + n_meas + CHUNK - 1) // CHUNK if (n_meas) or True else c0":
+        "with no samples the perturbation chunks are drawn but sliced to nothing",
+    f"{_S}_channel_errors: if b > a: -> if b >= a:": "add[a:a] += x adds nothing",
+    f'{_S}_channel_errors: idx = np.flatnonzero(u < float(self.outliers["rate"])) -> '
+    'idx = np.flatnonzero(u <= float(self.outliers["rate"]))': _CLOSED,
+    f"{_S}_channel_errors: signs = np.where(go.random(idx.size) < 0.5, -1.0, 1.0) -> "
+    "signs = np.where(go.random(idx.size) <= 0.5, -1.0, 1.0)": _CLOSED,
+    f"{_S}_chunk: self._cache.popitem(last=False) -> self._cache.popitem(last=None)": "None is false as last=False",
+    f"{_S}__init__: if abs(step - round(step)) > 1e-9 or round(step) < 1: -> "
+    "if abs(step - round(step)) >= 1e-9 or round(step) < 1:": "no sample rate in [1, 1000] Hz is 1e-9 off a divisor",
+    f"{_S}__init__: self.vehicle = vehicle -> self.vehicle = None": "kept for the reader; nothing reads it",
+    **{f"{_S}__init__: self._steer_{a} = np.asarray(st.{f}, float) -> self._steer_{a} = np.asarray(st.{f}, {d})":
+       "the validated steering table is a list of floats: a float array without the dtype"
+       for a, f in (("x", "wheel_angle"), ("y", "steering_wheel_angle")) for d in ("None", "")},
+    **{f"{_S}__init__: {_COL} -> {_COL.replace('special.get(n, 0)', f'special.get(n, {d})')}":
+       "every supported channel is in _SIMPLE or in the special table, so the default is never used"
+       for d in ("", "1", "None")},
+    f"{_S}sample: val[nan[:, ii]] = np.nan -> val[nan[:, ii]] = None": _NAN,
+}
 EQUIVALENT: dict[str, dict[str, str]] = {
+    "envs/sensors.py": _SENSOR_EQUIVALENT,
     "core/trip.py": {
         'xǁTripǁ__post_init__: _check_frame(self.measured, self.units, "measured", truth=False) -> '
         '_check_frame(self.measured, self.units, "measured", truth=None)':

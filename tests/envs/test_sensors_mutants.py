@@ -351,3 +351,114 @@ def test_channels_the_simulator_cannot_produce_are_refused():
     _model({"engine_speed": _exact(), "gear": _exact()}, vehicle=ICE)  # the ICE channels are fine
     assert _model({"engine_speed": _exact()}, vehicle=ICE).measure(_log(3), 3)[1]["engine_speed"][2] == _log(3)[
         L_WE, 2]
+
+
+def test_seeded_draws_are_the_same_in_every_version():
+    """The perturbations of seed 3 are pinned: a stored trip or a published figure reproduces only while the random
+    streams keep their keys (seed, feature, channel, chunk) and their order of draws."""
+    m = _model({"accel_x": _exact(noise_std=0.08), "yaw_rate": _exact(outlier_scale=0.1)},
+               {"sensor_outliers": {"rate": 0.01, "magnitude": 3.0, "burst_length": 4},
+                "sensor_dropouts": {"rate": 720.0}, "sensor_bias": {}})
+    np.testing.assert_allclose(m.bias, [-0.01683229201500271, 0.00271853590532371], rtol=1e-12)
+    np.testing.assert_allclose(m._chunk(0)[0][0, :3],  # bias + noise
+                               [-0.01542800373744787, -0.05763584706924187, -0.16477908007229558], rtol=1e-12)
+    bursts = m._outlier_bursts(1, 0)
+    assert [(s, sg) for s, sg, _ in bursts[:2]] == [(116, 1.0), (161, 1.0)]
+    np.testing.assert_allclose(bursts[0][2], [0.7181451116713385, 0.4477322009987548, 0.5754888229794489,
+                                              0.5073200154377321], rtol=1e-12)
+    runs = m._dropout_runs(0)
+    assert len(runs) == 10 and runs[:3] == [(5209, 21), (8184, 28), (1257, 25)]
+
+
+def test_burst_signs_are_balanced_and_sizes_are_one_plus_a_half_normal():
+    m = _model({"accel_x": _exact(outlier_scale=2.0)}, {"sensor_outliers": {"rate": 0.02, "burst_length": 5}})
+    bursts = [b for c in range(4) for b in m._outlier_bursts(0, c)]
+    signs = np.array([sg for _, sg, _ in bursts])
+    assert np.mean(signs > 0) == pytest.approx(0.5, abs=0.06)
+    mags = np.concatenate([mg for _, _, mg in bursts])
+    assert mags.min() >= 2.0 and np.mean(mags) == pytest.approx(2.0 * (1 + np.sqrt(2 / np.pi)), rel=0.05)
+
+
+def test_dropout_rate_and_length_are_per_second_at_a_decimated_rate():
+    m = _model({"accel_x": _exact()}, {"sensor_dropouts": {"rate": 720.0, "mean_duration": 0.5}}, sample_rate=50.0)
+    events = [e for c in range(6) for e in m._dropout_runs(c)]
+    hours = 6 * CHUNK * 0.02 / 3600.0  # samples of 20 ms
+    assert len(events) == pytest.approx(720.0 * hours, abs=5 * np.sqrt(720.0 * hours))
+    assert np.mean([ln for _, ln in events]) == pytest.approx(25.5, rel=0.25)  # ceil(Exp(0.5 s / 20 ms))
+    starts = np.array([s % CHUNK for s, _ in events])
+    assert starts.min() < 0.05 * CHUNK and starts.max() > 0.95 * CHUNK  # anywhere in the chunk
+
+
+def test_gear_reads_zero_only_while_the_clutch_is_open():
+    m = _model({"gear": _exact(), "clutch": _exact()})
+    log = _log(30)
+    log[L_CLUTCH] = np.arange(30) % 3  # open, slipping, locked
+    _, out, _ = m.measure(log, 30)
+    np.testing.assert_array_equal(out["gear"], np.where(np.arange(30) % 3 > 0, log[L_GEAR], 0.0))
+    assert [m.sample(log, k)["gear"] for k in (1, 2, 3)] == [0.0, log[L_GEAR, 1], log[L_GEAR, 2]]
+
+
+def test_perturbation_chunks_are_cached_for_the_step_api_and_the_cache_keeps_the_latest_four():
+    m = _model({"accel_x": _exact(noise_std=0.1)})
+    log = np.zeros((N_LOG, 6 * CHUNK))
+    log[L_T] = np.arange(6 * CHUNK) * 0.01
+    first = m._chunk(0)
+    assert m._chunk(0) is first  # a step within a chunk reuses its draws
+    m.measure(log, 6 * CHUNK)
+    assert sorted(m._cache) == [2, 3, 4, 5]
+    assert m.sample(log, 5 * CHUNK + 7)["accel_x"] == m._cache[5][0][0, 6]
+
+
+def test_no_enabled_channel_measures_time_only_and_bad_dropout_settings_are_named():
+    m = _model({"accel_x": _exact(enabled=False)}, {"sensor_dropouts": {"rate": 3600.0},
+                                                    "sensor_outliers": {"rate": 0.1}})
+    t, out, keep = m.measure(_log(100), 100)
+    assert out == {} and t.size == 100 and keep.all() and m.units == {}
+    with pytest.raises(SensorConfigError, match=r"^effect 'sensor_dropouts' parameter 'channel': unknown or disabled "
+                                                r"channel\(s\) \['pitch'\]; enabled channels: \['accel_x'\]$"):
+        _model({"accel_x": _exact()}, {"sensor_dropouts": {"channel": "pitch"}})
+    with pytest.raises(SensorConfigError, match=r"^effect 'sensor_dropouts': parameter 'channel' needs mode 'nan' "
+                                                r"\(mode 'missing' removes whole samples of every channel\)$"):
+        _model({"accel_x": _exact()}, {"sensor_dropouts": {"mode": "missing", "channel": "accel_x"}})
+
+
+def test_isolated_outliers_are_the_one_sample_bursts_added_to_bias_and_noise():
+    """With burst_length 1 the outliers are drawn exactly as one-sample bursts, on top of the bias (same seed, same
+    outliers in a new model); burst_length 2 gives two-sample bursts, never an isolated one."""
+    effects = {"sensor_outliers": {"rate": 0.01, "channel": "accel_x"}}
+    m = _model({"accel_x": _exact(bias=0.3, outlier_scale=2.0), "yaw_rate": _exact()}, effects)
+    n = 2 * CHUNK
+    log = _zero_log(n)
+    x = m.measure(log, n)[1]["accel_x"]
+    expected = np.full(n, 0.3)
+    for c in range(2):
+        for start, sign, mags in m._outlier_bursts(0, c):
+            expected[start] += sign * mags[0]
+    np.testing.assert_array_equal(x, expected)
+    again = _model({"accel_x": _exact(bias=0.3, outlier_scale=2.0), "yaw_rate": _exact()}, effects)
+    np.testing.assert_array_equal(again.measure(log, n)[1]["accel_x"], x)
+    pairs = _model({"accel_x": _exact(outlier_scale=2.0)}, {"sensor_outliers": {"rate": 0.002, "burst_length": 2}})
+    hit = pairs.measure(log, n)[1]["accel_x"] != 0
+    lengths = [ln for _, ln in _runs(hit)]
+    assert lengths and min(lengths) >= 2 and hit.sum() >= 2 * len(lengths)
+
+
+def test_window_starting_in_a_later_chunk_and_trips_ending_one_sample_into_a_chunk():
+    m = _model({"accel_x": _exact(noise_std=0.1, resolution=0.01)}, {"sensor_dropouts": {"rate": 600.0},
+                                                                     "sensor_outliers": {"rate": 0.01}})
+    n = 2 * CHUNK + 1  # the last sample is the first of a third chunk
+    log = _log(n)
+    t, out, keep = m.measure(log, n)
+    assert t.size == n and out["accel_x"].size == n and keep.dtype == bool
+    start = CHUNK + 100
+    tw, ow, kw = m.measure(log[:, start:], n, start=start, offset=start)
+    np.testing.assert_array_equal(tw, t[start:])
+    np.testing.assert_array_equal(ow["accel_x"], out["accel_x"][start:])
+    assert kw.dtype == bool and kw.size == n - start
+
+
+def test_sample_without_channels_and_battery_channels_need_a_bev():
+    m = _model({"accel_x": _exact(enabled=False)})
+    assert m.sample(_log(5), 5) == {"t": 0.04, "valid": True}
+    with pytest.raises(SensorConfigError, match=r"sensors.channels.battery_voltage: only a 'bev' drive-train has"):
+        _model({"battery_voltage": _exact()}, vehicle=ICE)

@@ -210,3 +210,61 @@ def test_candidate_result_dictionary_names_every_figure():
                  "heldout_gain": [0.2, 0.05, 0.09], "significant": True, "aic": 10.0, "bic": 12.0,
                  "delta_aic": 0.0, "delta_bic": 1.5, "explained_fraction": 0.7, "sim_effect": "wind",
                  "sim_parameters": {"mean_speed": 1.5}, "regime_hint": "hint"}
+
+
+# ------------------------------------------------------------------------------------------ the selector
+def _core():
+    """The synthetic force tables of test_core (one definition of the test world)."""
+    import importlib.util
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location("sim2real_core_tables", Path(__file__).with_name("test_core.py"))
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_selector_refuses_a_residual_of_the_wrong_length_or_not_finite_on_valid_rows():
+    from roadload.sim2real.selection import Selector
+
+    core = _core()
+    tab = core.synth(lambda t: np.zeros(len(t)), n_trips=2, duration=300.0)
+    split = make_split(tab, n_folds=4)
+    y = tab.residual.to_numpy()
+    with pytest.raises(DiagnosisError, match=r"^residual and table differ in length$"):
+        Selector(tab, y[:-1], split, core.MODEL)
+    bad = y.copy()
+    bad[[3, 7, 9]] = [np.nan, np.inf, -np.inf]
+    with pytest.raises(DiagnosisError, match=r"^the residual is not finite on 3 valid rows$"):
+        Selector(tab, bad, split, core.MODEL)
+    tab.loc[[3, 7, 9], "valid"] = False  # rows outside the split may hold anything
+    sel = Selector(tab, bad, make_split(tab, n_folds=4), core.MODEL)
+    assert sel.residual.dtype == float and np.isnan(sel.baseline_loss[3])
+    np.testing.assert_array_equal(sel.baseline_loss[sel.split.train], bad[sel.split.train] ** 2)
+    assert np.isnan(sel.baseline_loss[~sel.split.train]).all()
+
+
+def test_selector_names_the_candidates_it_cannot_fit_and_profiles_the_shape():
+    from roadload.sim2real.catalog import get_candidate
+    from roadload.sim2real.selection import Selector
+
+    core = _core()
+    d_true = 2500.0
+
+    def warm(tab):  # cold tires: rolling resistance +40 % decaying over 2.5 km
+        th, v = tab.gradient_angle.to_numpy(), tab.speed.to_numpy()
+        return 0.4 * core.MODEL.mass * 9.81 * np.cos(th) * core.MODEL.rolling_resistance_coefficient(v) * np.exp(
+            -tab.distance.to_numpy() / d_true)
+
+    tab = core.synth(warm, n_trips=2, duration=400.0, noise=5.0).drop(columns="brake_force")
+    sel = Selector(tab, tab.residual.to_numpy(), make_split(tab, n_folds=4), core.MODEL, robust=False)
+    ok, skipped = sel.usable(["tire_warmup", "friction_brake", "auxiliary_power", "mass_offset"])
+    assert [c.name for c in ok] == ["tire_warmup", "mass_offset"]  # the power side is not this selector's
+    assert skipped == {"friction_brake": "needs ['brake_force'], which the trips do not provide"}
+    assert sel.choose_shape(get_candidate("tire_warmup")) == d_true
+    assert sel.choose_shape(get_candidate("mass_offset")) is None
+    base, _ = sel.evaluate([])
+    assert base == pytest.approx(np.mean(sel.residual[sel.split.train] ** 2), rel=1e-12)
+    fitted, loss = sel.evaluate([(get_candidate("tire_warmup"), d_true)])
+    assert fitted < 0.2 * base and np.isnan(loss[~sel.split.train]).all()

@@ -193,7 +193,7 @@ def run_optimum_task(task: OptimumTask) -> dict[str, Any]:
         e_run = m["segment_energy_J"] + 0.5 * mass * (m["segment_start_speed"] ** 2
                                                      - o["segment_start_speed"] ** 2) / eta
         rows.append({**base_row, "energy_J": e_run, "optimum_energy_J": e_opt,
-                     "excess_pct": 100.0 * (e_run - e_opt) / abs(e_opt),
+                     "excess_pct": difference_pct(e_run, e_opt),
                      "optimum_model_energy_J": o.get("ctl_optimum_model_energy_J"),
                      "optimum_plant_energy_J": o["segment_energy_J"], "optimum_time_s": o["segment_time"],
                      "optimum_arrival_speed": o["arrival_speed"], "optimum_start_speed": o["segment_start_speed"],
@@ -204,6 +204,22 @@ def run_optimum_task(task: OptimumTask) -> dict[str, Any]:
         out["dp"] = dp_check(task, road, rows, opt_settings)
     out["cpu_s"] = time.process_time() - t0
     return out
+
+
+def difference_pct(value: float, reference: float) -> float:
+    """100 (value - reference) / |reference| [%]: positive when ``value`` is the larger energy, also on a route
+    whose net energy is negative (downhill, more regenerated than drawn), where value / reference - 1 flips sign."""
+    return 100.0 * (value - reference) / abs(reference)
+
+
+def dp_table(results: list[dict[str, Any]]) -> pd.DataFrame:
+    """dp_check.csv of stored task results; the differences recomputed from the two energies (results stored
+    before the sign-safe difference carry value / reference - 1)."""
+    dp = pd.DataFrame([res["dp"] for res in results if "dp" in res])
+    if len(dp):
+        dp["dp_minus_nlp_J"] = dp["dp_energy_J"] - dp["nlp_energy_J"]
+        dp["dp_vs_nlp_pct"] = [difference_pct(d, n) for d, n in zip(dp["dp_energy_J"], dp["nlp_energy_J"])]
+    return dp
 
 
 def dp_check(task: OptimumTask, road, rows: list[dict[str, Any]], settings: OptimumSettings) -> dict[str, Any]:
@@ -219,7 +235,8 @@ def dp_check(task: OptimumTask, road, rows: list[dict[str, Any]], settings: Opti
     dp = dp_optimum(opt.preview, energy, plant.true_parameters(), sol.model_time, ref["optimum_start_speed"],
                     ref["arrival_speed"], st, speed_step=task.dp_step)
     return {"controller": ref["controller"], "time_s": ref["time_s"], "nlp_energy_J": sol.energy_J,
-            "dp_energy_J": dp.energy_J, "dp_vs_nlp_pct": 100.0 * (dp.energy_J / sol.energy_J - 1.0),
+            "dp_energy_J": dp.energy_J, "dp_minus_nlp_J": dp.energy_J - sol.energy_J,
+            "dp_vs_nlp_pct": difference_pct(dp.energy_J, sol.energy_J),
             "nlp_time_slope": sol.time_slope, "dp_multiplier": dp.multiplier, "speed_step": task.dp_step,
             "max_speed_difference": float(np.max(np.abs(dp.v - sol.plan.v))), "dp_cpu_s": time.process_time() - t0}
 
@@ -324,7 +341,8 @@ def summary_markdown(summary: pd.DataFrame, dp: pd.DataFrame | None = None) -> s
         mean, se, lo, hi = ratio_of_means_ci(dp["dp_energy_J"].to_numpy(float), dp["nlp_energy_J"].to_numpy(float))
         md += ["", f"DP vs NLP (EV, no jerk limit, speed grid {dp['speed_step'].iloc[0]:g} m/s, {len(dp)} seeds): "
                f"{format_difference(mean, se, lo, hi)}; per seed {dp['dp_vs_nlp_pct'].min():+.3f} … "
-               f"{dp['dp_vs_nlp_pct'].max():+.3f} %"]
+               f"{dp['dp_vs_nlp_pct'].max():+.3f} % of |E_NLP|, {dp['dp_minus_nlp_J'].min():+.0f} … "
+               f"{dp['dp_minus_nlp_J'].max():+.0f} J (DP above the NLP: > 0)"]
     return "\n".join(md) + "\n"
 
 
@@ -351,7 +369,7 @@ def write_tables(results: list[dict[str, Any]], failures: list[str], out: Path) 
     write_text(out / "excess_over_optimum.csv", rows.to_csv(index=False))
     summary = summarise(rows) if len(rows) else pd.DataFrame()
     write_text(out / "summary.csv", summary.to_csv(index=False))
-    dp = pd.DataFrame([res["dp"] for res in results if "dp" in res])
+    dp = dp_table(results)
     write_text(out / "dp_check.csv", dp.to_csv(index=False))
     md = summary_markdown(summary, dp) if len(summary) else "no run arrived\n"
     if failures:

@@ -22,7 +22,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                                      "tractor-semitrailer at m t gross)"),
         car_roads: str = typer.Option("route,city,motorway", help="car roads: route (EcoDrive-v0's 2 km hilly "
                                       "route, where the RL policies learnt; seeds from 50000), hilly (2.5 km), "
-                                      "city (3 km, stops), motorway (6 km)"),
+                                      "city (3 km, stops), motorway (6 km), motorway_short (3 km)"),
         truck_roads: str = typer.Option("long_grades,longhaul_real", help="truck roads: long_grades (4 km, "
                                         "3-6 %), longhaul_real (10 km windows of the real long-haul cycle)"),
         seeds: int = typer.Option(10, help="seeds (= roads) per vehicle and road"),

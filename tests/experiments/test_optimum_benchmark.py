@@ -5,8 +5,8 @@ import pandas as pd
 import pytest
 
 from roadload.experiments.controller_comparison import force_model_settings
-from roadload.experiments.optimum_benchmark import (OptimumBenchmarkError, OptimumTask, episode_cost_summary,
-                                                    summarise)
+from roadload.experiments.optimum_benchmark import (OptimumBenchmarkError, OptimumTask, dp_table,
+                                                    episode_cost_summary, summarise, summary_markdown)
 from roadload.road_profiles import RoadProfile
 
 
@@ -21,6 +21,22 @@ def test_excess_summary_is_a_fleet_total_with_its_ci():
     assert s.excess_pct == pytest.approx(10.0)  # 100 mean(E - E_opt) / mean(E_opt)
     assert s.excess_ci95_lo < 10.0 < s.excess_ci95_hi
     assert s.optimum_time_error_pct_max == pytest.approx(0.1)
+
+
+def test_dp_check_difference_keeps_its_sign_on_a_route_that_regenerates():
+    """A downhill route's net energy is negative: the DP 1226 J above the NLP is +1.26 % of |E_NLP|, not -1.26 %
+    (the stored value / reference - 1 of older results is recomputed)."""
+    results = [{"dp": {"nlp_energy_J": -97610.7, "dp_energy_J": -96384.8, "dp_vs_nlp_pct": -1.256,
+                       "speed_step": 0.05}},
+               {"dp": {"nlp_energy_J": 1157199.8, "dp_energy_J": 1158062.4, "dp_vs_nlp_pct": 0.075,
+                       "speed_step": 0.05}}]
+    dp = dp_table(results)
+    assert dp["dp_minus_nlp_J"].tolist() == pytest.approx([1225.9, 862.6])
+    assert dp["dp_vs_nlp_pct"].tolist() == pytest.approx([1.2559, 0.07454], rel=1e-3)
+    summary = pd.DataFrame(columns=["vehicle", "road", "controller", "seeds", "time_s_mean", "energy_kJ_mean",
+                                    "optimum_kJ_mean", "excess_pct", "excess_1sigma_pct", "excess_ci95_lo",
+                                    "excess_ci95_hi"])
+    assert "+0.075 … +1.256 % of |E_NLP|, +863 … +1226 J" in summary_markdown(summary, dp)
 
 
 def test_episode_cost_is_compared_per_seed():

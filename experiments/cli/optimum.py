@@ -35,6 +35,9 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         condition: str = typer.Option("nominal", help="car condition (see benchmark controllers)"),
         truck_warmup: float = typer.Option(2000.0, help="trucks: warm-up [m] before the measured segment, driven "
                                            "by cruise control for the MPC runs and the optimum"),
+        car_warmup: float = typer.Option(0.0, help="car: warm-up [m] before the measured segment, driven by cruise "
+                                         "control for every run (the online estimators converge there; not with "
+                                         "RL policies)"),
         time_weight: float = typer.Option(-1.0, help="MPC time weight lambda [J/s] (< 0: the vehicle case's)"),
         dp_step: float = typer.Option(0.05, help="EV: speed grid [m/s] of the dynamic-programming cross-check "
                                       "(0: off)"),
@@ -67,8 +70,9 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
             fail(f"--vehicles: unknown {bad}; known: {list(VEHICLE_CASES)}")
         if condition not in CONDITIONS:
             fail(f"--condition: unknown {condition!r}; known: {list(CONDITIONS)}")
-        if not (truck_warmup >= 0 and dp_step >= 0):
-            fail(f"--truck-warmup [m] and --dp-step [m/s]: numbers >= 0, got {truck_warmup}, {dp_step}")
+        if not (truck_warmup >= 0 and car_warmup >= 0 and dp_step >= 0):
+            fail(f"--truck-warmup / --car-warmup [m] and --dp-step [m/s]: numbers >= 0, got {truck_warmup}, "
+                 f"{car_warmup}, {dp_step}")
         ctl = tuple(c.strip() for c in controllers.split(",") if c.strip())
         unknown = [c for c in ctl if c not in CONTROLLERS]
         if unknown:
@@ -114,12 +118,12 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
             for case in cases:
                 if breakdown:
                     tasks += breakdown_tasks({case: roads[case]}, seeds, starts,
-                                             warmup=truck_warmup if VEHICLE_CASES[case].truck else 0.0,
+                                             warmup=truck_warmup if VEHICLE_CASES[case].truck else car_warmup,
                                              time_weight=None if time_weight < 0 else time_weight)
                     continue
                 tasks += optimum_tasks({case: roads[case]}, seeds, starts, {case: per_case[case]},
                                        condition=condition if not VEHICLE_CASES[case].truck else "nominal",
-                                       warmup=truck_warmup if VEHICLE_CASES[case].truck else 0.0,
+                                       warmup=truck_warmup if VEHICLE_CASES[case].truck else car_warmup,
                                        time_weight=None if time_weight < 0 else time_weight,
                                        policies=None if policies is None else str(policies), dp_step=dp_step)
         except (OptimumBenchmarkError, ValueError) as exc:

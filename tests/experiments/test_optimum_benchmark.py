@@ -23,6 +23,24 @@ def test_excess_summary_is_a_fleet_total_with_its_ci():
     assert s.optimum_time_error_pct_max == pytest.approx(0.1)
 
 
+def test_controllers_are_compared_with_the_oracle_mpc_at_equal_time_through_their_optima():
+    """Each run against the optimum at its own time: an online run 2 % slower than the oracle run uses 20 J less,
+    but its optimum is 30 J lower: 10 J further above its optimum, it is 10 J (1 %) worse at equal time."""
+    oracle = pd.DataFrame({"vehicle": "car", "road": "hilly", "condition": "headwind_6ms",
+                           "controller": "mpc:oracle", "seed": range(4), "arrived": True,
+                           "energy_J": [1000.0, 1010.0, 990.0, 1000.0],
+                           "optimum_energy_J": [990.0, 1000.0, 980.0, 990.0],
+                           "time_s": 100.0, "optimum_time_s": 100.0, "excess_pct": 1.0})
+    online = oracle.assign(controller="mpc:online_wind", time_s=102.0, optimum_time_s=102.0,
+                           energy_J=oracle.energy_J - 30.0 + [9.0, 10.0, 11.0, 10.0],
+                           optimum_energy_J=oracle.optimum_energy_J - 30.0)
+    s = summarise(pd.concat([oracle, online], ignore_index=True)).set_index("controller")
+    assert s.loc["mpc:online_wind", "vs_mpc:oracle_pct"] == pytest.approx(1.0)
+    assert s.loc["mpc:online_wind", "vs_mpc:oracle_ci95_lo"] > 0.8
+    assert s.loc["mpc:oracle", "vs_mpc:oracle_pct"] == 0.0
+    assert "headwind_6ms" in summary_markdown(s.reset_index())
+
+
 def test_dp_check_difference_keeps_its_sign_on_a_route_that_regenerates():
     """A downhill route's net energy is negative: the DP 1226 J above the NLP is +1.26 % of |E_NLP|, not -1.26 %
     (the stored value / reference - 1 of older results is recomputed)."""

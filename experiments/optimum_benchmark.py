@@ -38,8 +38,8 @@ from roadload.controllers.dynamic_programming import dp_optimum
 from roadload.controllers.optimum import FullRouteOptimum, OptimumError, OptimumSettings, OptimumTarget
 from roadload.controllers.sim_plant import SimulatorPlant
 from roadload.controllers.vehicle_models import energy_model_from_spec
-from roadload.experiments.controller_comparison import (CONDITIONS, VEHICLE_CASES, format_difference, paired_road,
-                                                        ratio_of_means_ci)
+from roadload.experiments.controller_comparison import (CONDITIONS, VEHICLE_CASES, force_model_settings,
+                                                        format_difference, paired_road, ratio_of_means_ci)
 from roadload.fileio import write_text
 from roadload.sweep import run_sweep
 from roadload.tables import markdown_table
@@ -82,7 +82,13 @@ class OptimumTask:
     def __post_init__(self) -> None:
         if self.case not in VEHICLE_CASES:
             raise OptimumBenchmarkError(f"vehicle case {self.case!r}: choose one of {list(VEHICLE_CASES)}")
-        bad = [c for c in self.controllers if c not in CONTROLLERS]
+        bad = [c for c in self.controllers if c.partition("@")[0] not in CONTROLLERS]
+        for c in self.controllers:
+            if "@" in c and c not in bad:
+                try:
+                    force_model_settings(c.partition(":")[2])
+                except ValueError as exc:
+                    raise OptimumBenchmarkError(f"controller {c!r}: {exc}") from None
         if bad:
             raise OptimumBenchmarkError(f"controllers: unknown {bad}; choose from {list(CONTROLLERS)}")
         if self.condition not in CONDITIONS:
@@ -104,13 +110,13 @@ def _settings(task: OptimumTask, controller: str) -> DriveSettings:
         return replace(base, controller="cruise")
     if controller == "human":
         return replace(base, controller="human")
-    _, fm, *gears = controller.split(":")
+    _, spec, *gears = controller.split(":")
     lam = case.lam0 if task.time_weight is None else task.time_weight
     # ICE: the MPC requests its shift rule's gear (and a kick-down where full load needs it), as the optimum's tracker
     # does: the plant's own load-dependent strategy changes the fuel of a whole climb for a 0.1 % change of the
     # trajectory, which no plan can follow (docs/results/controllers.md); 'mpc:<model>:transmission' leaves the gear
     # to the transmission (the MPC's default elsewhere)
-    settings = replace(base, controller="mpc", force_model=fm, time_weight=lam,
+    settings = replace(base, controller="mpc", **force_model_settings(spec), time_weight=lam,
                        gear_command=case.truck and gears != ["transmission"], mpc=replace(base.mpc, **dict(task.mpc)))
     return settings if task.replan_period is None else replace(settings, replan_period=task.replan_period)
 

@@ -29,7 +29,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         first_seed: int = typer.Option(None, help="first seed (default: 50000 for 'route', 0 otherwise)"),
         controllers: str = typer.Option("", help="comma-separated controllers for every vehicle (default: car "
                                         "cruise, human, mpc:oracle, mpc:abc, mpc:online, ppo, sac; truck cruise, "
-                                        "cruise_band, human, mpc:oracle, mpc:abc, mpc:online); also mpc:online_wind"),
+                                        "cruise_band, human, mpc:oracle, mpc:abc, mpc:online); also mpc:online_wind; "
+                                        "an online model's estimator options after '@' (mpc:online_wind@RRLM+cusum)"),
         policies: Path = typer.Option(None, help="folder with ppo_ecodrive.zip / sac_ecodrive.zip from `roadload "
                                       "train --out DIR` (without it the car runs no RL policy)"),
         condition: str = typer.Option("nominal", help="car condition (see benchmark controllers)"),
@@ -74,7 +75,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
             fail(f"--truck-warmup / --car-warmup [m] and --dp-step [m/s]: numbers >= 0, got {truck_warmup}, "
                  f"{car_warmup}, {dp_step}")
         ctl = tuple(c.strip() for c in controllers.split(",") if c.strip())
-        unknown = [c for c in ctl if c not in CONTROLLERS]
+        unknown = [c for c in ctl if c.partition("@")[0] not in CONTROLLERS]
         if unknown:
             fail(f"--controllers: unknown {unknown}; choose from {list(CONTROLLERS)}")
         if policies is not None and not policies.is_dir():

@@ -5,7 +5,7 @@ import pandas as pd
 import pytest
 
 from roadload.experiments.controller_comparison import force_model_settings
-from roadload.experiments.optimum_benchmark import (OptimumBenchmarkError, OptimumTask, dp_table,
+from roadload.experiments.optimum_benchmark import (OptimumBenchmarkError, OptimumTask, _settings, dp_table,
                                                     episode_cost_summary, summarise, summary_markdown)
 from roadload.road_profiles import RoadProfile
 
@@ -84,6 +84,16 @@ def test_bad_benchmark_tasks_are_refused_with_the_reason():
         OptimumTask("truck_40t", "long_grades", 0, controllers=("ppo",))
     with pytest.raises(OptimumBenchmarkError, match="vehicle case"):
         OptimumTask("bus", "hilly", 0)
+    with pytest.raises(OptimumBenchmarkError, match="key=value"):
+        OptimumTask("car", "hilly", 0, controllers=("mpc:online_wind@RRLM+fast",))
+
+
+def test_an_online_mpc_takes_its_estimator_options_after_the_at():
+    task = OptimumTask("car", "hilly", 0, controllers=("mpc:online_wind@RRLM+forgetting=0.995+cusum",))
+    s = _settings(task, task.controllers[0])
+    assert s.controller == "mpc" and s.force_model == "online_wind"
+    assert s.change_detection is not None and s.estimator_settings["forgetting"] == 0.995
+    assert _settings(task, "mpc:oracle").change_detection is None
 
 
 def test_fastsim_energy_of_a_trace_rises_with_the_grade():

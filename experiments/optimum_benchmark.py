@@ -362,7 +362,7 @@ def summary_markdown(summary: pd.DataFrame, dp: pd.DataFrame | None = None) -> s
              "optimum [kJ]": round(r["optimum_kJ_mean"], 1),
              "excess over the optimum": format_difference(r["excess_pct"], r["excess_1sigma_pct"],
                                                           r["excess_ci95_lo"], r["excess_ci95_hi"]),
-             "vs the oracle MPC at equal time": format_difference(
+             "vs the oracle MPC at equal time": "reference" if r["controller"] == "mpc:oracle" else format_difference(
                  *(r.get(f"vs_mpc:oracle_{k}", float("nan")) for k in ("pct", "1sigma_pct", "ci95_lo", "ci95_hi")))}
             for r in summary.to_dict("records")]
     md = ["Energy at the source above the full-route optimum at each run's own trip time and arrival speed, on the "

@@ -38,7 +38,8 @@ def test_controllers_are_compared_with_the_oracle_mpc_at_equal_time_through_thei
     assert s.loc["mpc:online_wind", "vs_mpc:oracle_pct"] == pytest.approx(1.0)
     assert s.loc["mpc:online_wind", "vs_mpc:oracle_ci95_lo"] > 0.8
     assert s.loc["mpc:oracle", "vs_mpc:oracle_pct"] == 0.0
-    assert "headwind_6ms" in summary_markdown(s.reset_index())
+    md = summary_markdown(s.reset_index())
+    assert "headwind_6ms" in md and "| reference |" in md and "+1.00 % [" in md
 
 
 def test_dp_check_difference_keeps_its_sign_on_a_route_that_regenerates():

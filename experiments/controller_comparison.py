@@ -193,10 +193,10 @@ def _longhaul_profile() -> RoadProfile:
 def paired_road(name: str, seed: int, warmup: float = 0.0) -> RoadProfile:
     """Roads of the paired comparison, one per seed: 'hilly' (2.5 km generated country road), 'long_grades'
     (4 km, 3-6 % grades of 2-4 km), 'longhaul_real' (10 km windows of the real long-haul truck cycle), 'city'
-    (3 km with stops), 'motorway' (6 km), 'route' (EcoDrive-v0's 2 km route of the seed, where the RL policies
-    learnt). Short,
-    because the shared machine gives each run a fraction of a core. ``warmup`` [m]: the generated road is that
-    much longer; the measured segment is its last 2.5 / 4 km (see PairedTask.warmup)."""
+    (3 km with stops), 'motorway' (6 km; 'motorway_short': 3 km), 'route' (EcoDrive-v0's 2 km route of the
+    seed, where the RL policies learnt). Short, because the shared machine gives each run a fraction of a core.
+    ``warmup`` [m]: the generated road is that much longer; the measured segment is its last 2.5 / 4 km (see
+    PairedTask.warmup)."""
     if name == "hilly":
         return hilly(seed=seed, length=2500.0 + warmup)
     if name == "hilly_short":  # smoke runs (--quick)
@@ -209,6 +209,8 @@ def paired_road(name: str, seed: int, warmup: float = 0.0) -> RoadProfile:
         return city(seed=seed, length=3000.0 + warmup)
     if name == "motorway":
         return motorway(seed=seed, length=6000.0 + warmup)
+    if name == "motorway_short":  # the optimum benchmark's many-seed tables (each run drives the road twice)
+        return motorway(seed=seed, length=3000.0 + warmup)
     if name == "route":  # the EcoDrive-v0 route of this road seed (2 km of the generated hilly road), no warm-up
         route = load_profile_start("hilly", ROUTE_LENGTH, seed=seed)
         assert isinstance(route, RoadProfile)  # the registered 'hilly' is a generated road, never a drive cycle
@@ -216,7 +218,7 @@ def paired_road(name: str, seed: int, warmup: float = 0.0) -> RoadProfile:
     raise ValueError(f"unknown paired road {name!r}; known: {', '.join(PAIRED_ROADS)}")
 
 
-PAIRED_ROADS = ("hilly", "hilly_short", "long_grades", "longhaul_real", "city", "motorway", "route")
+PAIRED_ROADS = ("hilly", "hilly_short", "long_grades", "longhaul_real", "city", "motorway", "motorway_short", "route")
 ROUTE_LENGTH = 2000.0  # [m] EcoDrive-v0's default route_length
 
 

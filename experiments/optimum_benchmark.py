@@ -38,8 +38,8 @@ from roadload.controllers.dynamic_programming import dp_optimum
 from roadload.controllers.optimum import FullRouteOptimum, OptimumError, OptimumSettings, OptimumTarget
 from roadload.controllers.sim_plant import SimulatorPlant
 from roadload.controllers.vehicle_models import energy_model_from_spec
-from roadload.experiments.controller_comparison import (CONDITIONS, VEHICLE_CASES, format_difference, paired_road,
-                                                        ratio_of_means_ci)
+from roadload.experiments.controller_comparison import (CONDITIONS, VEHICLE_CASES, force_model_settings,
+                                                        format_difference, paired_road, ratio_of_means_ci)
 from roadload.fileio import write_text
 from roadload.sweep import run_sweep
 from roadload.tables import markdown_table
@@ -82,7 +82,13 @@ class OptimumTask:
     def __post_init__(self) -> None:
         if self.case not in VEHICLE_CASES:
             raise OptimumBenchmarkError(f"vehicle case {self.case!r}: choose one of {list(VEHICLE_CASES)}")
-        bad = [c for c in self.controllers if c not in CONTROLLERS]
+        bad = [c for c in self.controllers if c.partition("@")[0] not in CONTROLLERS]
+        for c in self.controllers:
+            if "@" in c and c not in bad:
+                try:
+                    force_model_settings(c.partition(":")[2])
+                except ValueError as exc:
+                    raise OptimumBenchmarkError(f"controller {c!r}: {exc}") from None
         if bad:
             raise OptimumBenchmarkError(f"controllers: unknown {bad}; choose from {list(CONTROLLERS)}")
         if self.condition not in CONDITIONS:
@@ -104,13 +110,13 @@ def _settings(task: OptimumTask, controller: str) -> DriveSettings:
         return replace(base, controller="cruise")
     if controller == "human":
         return replace(base, controller="human")
-    _, fm, *gears = controller.split(":")
+    _, spec, *gears = controller.split(":")
     lam = case.lam0 if task.time_weight is None else task.time_weight
     # ICE: the MPC requests its shift rule's gear (and a kick-down where full load needs it), as the optimum's tracker
     # does: the plant's own load-dependent strategy changes the fuel of a whole climb for a 0.1 % change of the
     # trajectory, which no plan can follow (docs/results/controllers.md); 'mpc:<model>:transmission' leaves the gear
     # to the transmission (the MPC's default elsewhere)
-    settings = replace(base, controller="mpc", force_model=fm, time_weight=lam,
+    settings = replace(base, controller="mpc", **force_model_settings(spec), time_weight=lam,
                        gear_command=case.truck and gears != ["transmission"], mpc=replace(base.mpc, **dict(task.mpc)))
     return settings if task.replan_period is None else replace(settings, replan_period=task.replan_period)
 
@@ -193,7 +199,7 @@ def run_optimum_task(task: OptimumTask) -> dict[str, Any]:
         e_run = m["segment_energy_J"] + 0.5 * mass * (m["segment_start_speed"] ** 2
                                                      - o["segment_start_speed"] ** 2) / eta
         rows.append({**base_row, "energy_J": e_run, "optimum_energy_J": e_opt,
-                     "excess_pct": 100.0 * (e_run - e_opt) / abs(e_opt),
+                     "excess_pct": difference_pct(e_run, e_opt),
                      "optimum_model_energy_J": o.get("ctl_optimum_model_energy_J"),
                      "optimum_plant_energy_J": o["segment_energy_J"], "optimum_time_s": o["segment_time"],
                      "optimum_arrival_speed": o["arrival_speed"], "optimum_start_speed": o["segment_start_speed"],
@@ -204,6 +210,22 @@ def run_optimum_task(task: OptimumTask) -> dict[str, Any]:
         out["dp"] = dp_check(task, road, rows, opt_settings)
     out["cpu_s"] = time.process_time() - t0
     return out
+
+
+def difference_pct(value: float, reference: float) -> float:
+    """100 (value - reference) / |reference| [%]: positive when ``value`` is the larger energy, also on a route
+    whose net energy is negative (downhill, more regenerated than drawn), where value / reference - 1 flips sign."""
+    return 100.0 * (value - reference) / abs(reference)
+
+
+def dp_table(results: list[dict[str, Any]]) -> pd.DataFrame:
+    """dp_check.csv of stored task results; the differences recomputed from the two energies (results stored
+    before the sign-safe difference carry value / reference - 1)."""
+    dp = pd.DataFrame([res["dp"] for res in results if "dp" in res])
+    if len(dp):
+        dp["dp_minus_nlp_J"] = dp["dp_energy_J"] - dp["nlp_energy_J"]
+        dp["dp_vs_nlp_pct"] = [difference_pct(d, n) for d, n in zip(dp["dp_energy_J"], dp["nlp_energy_J"])]
+    return dp
 
 
 def dp_check(task: OptimumTask, road, rows: list[dict[str, Any]], settings: OptimumSettings) -> dict[str, Any]:
@@ -219,7 +241,8 @@ def dp_check(task: OptimumTask, road, rows: list[dict[str, Any]], settings: Opti
     dp = dp_optimum(opt.preview, energy, plant.true_parameters(), sol.model_time, ref["optimum_start_speed"],
                     ref["arrival_speed"], st, speed_step=task.dp_step)
     return {"controller": ref["controller"], "time_s": ref["time_s"], "nlp_energy_J": sol.energy_J,
-            "dp_energy_J": dp.energy_J, "dp_vs_nlp_pct": 100.0 * (dp.energy_J / sol.energy_J - 1.0),
+            "dp_energy_J": dp.energy_J, "dp_minus_nlp_J": dp.energy_J - sol.energy_J,
+            "dp_vs_nlp_pct": difference_pct(dp.energy_J, sol.energy_J),
             "nlp_time_slope": sol.time_slope, "dp_multiplier": dp.multiplier, "speed_step": task.dp_step,
             "max_speed_difference": float(np.max(np.abs(dp.v - sol.plan.v))), "dp_cpu_s": time.process_time() - t0}
 
@@ -292,39 +315,66 @@ def run_and_store(task: OptimumTask, folder: str) -> dict[str, Any]:
     return result
 
 
-def summarise(rows: pd.DataFrame) -> pd.DataFrame:
-    """Per (vehicle, road, controller): seeds, mean time and energy, and the excess over the optimum as a fleet
-    total with 1-sigma and 95 % CI."""
+def summarise(rows: pd.DataFrame, reference: str = "mpc:oracle") -> pd.DataFrame:
+    """Per (vehicle, road, condition, controller): seeds, mean time and energy, the excess over the optimum as a
+    fleet total with 1-sigma and 95 % CI, and the paired difference to ``reference`` at equal time
+    (:func:`equal_time_difference`)."""
     out = []
     ok = rows[rows["arrived"].astype(bool) & np.isfinite(rows.get("optimum_energy_J", np.nan))] if len(rows) else rows
-    for (veh, road, ctl), g in ok.groupby(["vehicle", "road", "controller"], sort=False):
+    if "condition" not in ok:
+        ok = ok.assign(condition="nominal")
+    for (veh, road, cond, ctl), g in ok.groupby(["vehicle", "road", "condition", "controller"], sort=False):
         mean, se, lo, hi = ratio_of_means_ci(g["energy_J"].to_numpy(float), g["optimum_energy_J"].to_numpy(float))
-        out.append({"vehicle": veh, "road": road, "controller": ctl, "seeds": len(g),
+        ref = ok[(ok.vehicle == veh) & (ok.road == road) & (ok.condition == cond) & (ok.controller == reference)]
+        d_mean, d_se, d_lo, d_hi = equal_time_difference(g, ref)
+        out.append({"vehicle": veh, "road": road, "condition": cond, "controller": ctl, "seeds": len(g),
                     "time_s_mean": float(g["time_s"].mean()), "energy_kJ_mean": float(g["energy_J"].mean()) / 1e3,
                     "optimum_kJ_mean": float(g["optimum_energy_J"].mean()) / 1e3,
                     "excess_pct": mean, "excess_1sigma_pct": se, "excess_ci95_lo": lo, "excess_ci95_hi": hi,
                     "excess_per_seed_median_pct": float(g["excess_pct"].median()),
+                    f"vs_{reference}_pct": d_mean, f"vs_{reference}_1sigma_pct": d_se,
+                    f"vs_{reference}_ci95_lo": d_lo, f"vs_{reference}_ci95_hi": d_hi,
                     "optimum_time_error_pct_max": float(100 * np.max(np.abs(g["optimum_time_s"] / g["time_s"] - 1))),
                     "runs_left_out": int(len(rows[(rows.vehicle == veh) & (rows.road == road)
                                                   & (rows.controller == ctl)]) - len(g))})
     return pd.DataFrame(out)
 
 
+def equal_time_difference(runs: pd.DataFrame, reference: pd.DataFrame) -> tuple[float, float, float, float]:
+    """A controller against a reference controller at equal time, paired per seed: each run's excess over the
+    optimum at its own trip time and arrival speed, E - E_opt(T, v_arr) [J], less the reference run's, as a fleet
+    total over the reference's energy, 100 mean(dE - dE_ref) / mean(E_ref) [%] with 1-sigma and 95 % CI
+    (:func:`~roadload.experiments.controller_comparison.ratio_of_means_ci`; the seeds both arrived on)."""
+    both = runs.merge(reference, on="seed", suffixes=("", "_ref"))
+    if both.empty:
+        return (float("nan"),) * 4
+    ref_energy = both["energy_J_ref"].to_numpy(float)
+    excess = (both["energy_J"] - both["optimum_energy_J"]).to_numpy(float)
+    ref_excess = (both["energy_J_ref"] - both["optimum_energy_J_ref"]).to_numpy(float)
+    return ratio_of_means_ci(ref_energy + excess - ref_excess, ref_energy)
+
+
 def summary_markdown(summary: pd.DataFrame, dp: pd.DataFrame | None = None) -> str:
     """The excess table (every difference with its CI) and the DP cross-check."""
-    rows = [{"vehicle": r.vehicle, "road": r.road, "controller": r.controller, "seeds": r.seeds,
-             "trip time [s]": round(r.time_s_mean, 1), "energy [kJ]": round(r.energy_kJ_mean, 1),
-             "optimum [kJ]": round(r.optimum_kJ_mean, 1),
-             "excess over the optimum": format_difference(r.excess_pct, r.excess_1sigma_pct, r.excess_ci95_lo,
-                                                          r.excess_ci95_hi)} for r in summary.itertuples()]
+    rows = [{"vehicle": r["vehicle"], "road": r["road"], "condition": r.get("condition", "nominal"),
+             "controller": r["controller"], "seeds": r["seeds"],
+             "trip time [s]": round(r["time_s_mean"], 1), "energy [kJ]": round(r["energy_kJ_mean"], 1),
+             "optimum [kJ]": round(r["optimum_kJ_mean"], 1),
+             "excess over the optimum": format_difference(r["excess_pct"], r["excess_1sigma_pct"],
+                                                          r["excess_ci95_lo"], r["excess_ci95_hi"]),
+             "vs the oracle MPC at equal time": "reference" if r["controller"] == "mpc:oracle" else format_difference(
+                 *(r.get(f"vs_mpc:oracle_{k}", float("nan")) for k in ("pct", "1sigma_pct", "ci95_lo", "ci95_hi")))}
+            for r in summary.to_dict("records")]
     md = ["Energy at the source above the full-route optimum at each run's own trip time and arrival speed, on the "
-          "same plant; fleet total over seeds, mean [95 % CI] (1σ); 'not resolved': the CI contains 0.", "",
+          "same plant; fleet total over seeds, mean [95 % CI] (1σ); 'not resolved': the CI contains 0. Against the "
+          "oracle MPC: the two runs' excesses over their optima, paired per seed, over the oracle MPC's energy.", "",
           markdown_table(pd.DataFrame(rows))]
     if dp is not None and len(dp):
         mean, se, lo, hi = ratio_of_means_ci(dp["dp_energy_J"].to_numpy(float), dp["nlp_energy_J"].to_numpy(float))
         md += ["", f"DP vs NLP (EV, no jerk limit, speed grid {dp['speed_step'].iloc[0]:g} m/s, {len(dp)} seeds): "
                f"{format_difference(mean, se, lo, hi)}; per seed {dp['dp_vs_nlp_pct'].min():+.3f} … "
-               f"{dp['dp_vs_nlp_pct'].max():+.3f} %"]
+               f"{dp['dp_vs_nlp_pct'].max():+.3f} % of |E_NLP|, {dp['dp_minus_nlp_J'].min():+.0f} … "
+               f"{dp['dp_minus_nlp_J'].max():+.0f} J (DP above the NLP: > 0)"]
     return "\n".join(md) + "\n"
 
 
@@ -351,7 +401,7 @@ def write_tables(results: list[dict[str, Any]], failures: list[str], out: Path) 
     write_text(out / "excess_over_optimum.csv", rows.to_csv(index=False))
     summary = summarise(rows) if len(rows) else pd.DataFrame()
     write_text(out / "summary.csv", summary.to_csv(index=False))
-    dp = pd.DataFrame([res["dp"] for res in results if "dp" in res])
+    dp = dp_table(results)
     write_text(out / "dp_check.csv", dp.to_csv(index=False))
     md = summary_markdown(summary, dp) if len(summary) else "no run arrived\n"
     if failures:

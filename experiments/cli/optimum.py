@@ -22,19 +22,23 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                                      "tractor-semitrailer at m t gross)"),
         car_roads: str = typer.Option("route,city,motorway", help="car roads: route (EcoDrive-v0's 2 km hilly "
                                       "route, where the RL policies learnt; seeds from 50000), hilly (2.5 km), "
-                                      "city (3 km, stops), motorway (6 km)"),
+                                      "city (3 km, stops), motorway (6 km), motorway_short (3 km)"),
         truck_roads: str = typer.Option("long_grades,longhaul_real", help="truck roads: long_grades (4 km, "
                                         "3-6 %), longhaul_real (10 km windows of the real long-haul cycle)"),
         seeds: int = typer.Option(10, help="seeds (= roads) per vehicle and road"),
         first_seed: int = typer.Option(None, help="first seed (default: 50000 for 'route', 0 otherwise)"),
         controllers: str = typer.Option("", help="comma-separated controllers for every vehicle (default: car "
                                         "cruise, human, mpc:oracle, mpc:abc, mpc:online, ppo, sac; truck cruise, "
-                                        "cruise_band, human, mpc:oracle, mpc:abc, mpc:online); also mpc:online_wind"),
+                                        "cruise_band, human, mpc:oracle, mpc:abc, mpc:online); also mpc:online_wind; "
+                                        "an online model's estimator options after '@' (mpc:online_wind@RRLM+cusum)"),
         policies: Path = typer.Option(None, help="folder with ppo_ecodrive.zip / sac_ecodrive.zip from `roadload "
                                       "train --out DIR` (without it the car runs no RL policy)"),
         condition: str = typer.Option("nominal", help="car condition (see benchmark controllers)"),
         truck_warmup: float = typer.Option(2000.0, help="trucks: warm-up [m] before the measured segment, driven "
                                            "by cruise control for the MPC runs and the optimum"),
+        car_warmup: float = typer.Option(0.0, help="car: warm-up [m] before the measured segment, driven by cruise "
+                                         "control for every run (the online estimators converge there; not with "
+                                         "RL policies)"),
         time_weight: float = typer.Option(-1.0, help="MPC time weight lambda [J/s] (< 0: the vehicle case's)"),
         dp_step: float = typer.Option(0.05, help="EV: speed grid [m/s] of the dynamic-programming cross-check "
                                       "(0: off)"),
@@ -67,10 +71,11 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
             fail(f"--vehicles: unknown {bad}; known: {list(VEHICLE_CASES)}")
         if condition not in CONDITIONS:
             fail(f"--condition: unknown {condition!r}; known: {list(CONDITIONS)}")
-        if not (truck_warmup >= 0 and dp_step >= 0):
-            fail(f"--truck-warmup [m] and --dp-step [m/s]: numbers >= 0, got {truck_warmup}, {dp_step}")
+        if not (truck_warmup >= 0 and car_warmup >= 0 and dp_step >= 0):
+            fail(f"--truck-warmup / --car-warmup [m] and --dp-step [m/s]: numbers >= 0, got {truck_warmup}, "
+                 f"{car_warmup}, {dp_step}")
         ctl = tuple(c.strip() for c in controllers.split(",") if c.strip())
-        unknown = [c for c in ctl if c not in CONTROLLERS]
+        unknown = [c for c in ctl if c.partition("@")[0] not in CONTROLLERS]
         if unknown:
             fail(f"--controllers: unknown {unknown}; choose from {list(CONTROLLERS)}")
         if policies is not None and not policies.is_dir():
@@ -114,12 +119,12 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
             for case in cases:
                 if breakdown:
                     tasks += breakdown_tasks({case: roads[case]}, seeds, starts,
-                                             warmup=truck_warmup if VEHICLE_CASES[case].truck else 0.0,
+                                             warmup=truck_warmup if VEHICLE_CASES[case].truck else car_warmup,
                                              time_weight=None if time_weight < 0 else time_weight)
                     continue
                 tasks += optimum_tasks({case: roads[case]}, seeds, starts, {case: per_case[case]},
                                        condition=condition if not VEHICLE_CASES[case].truck else "nominal",
-                                       warmup=truck_warmup if VEHICLE_CASES[case].truck else 0.0,
+                                       warmup=truck_warmup if VEHICLE_CASES[case].truck else car_warmup,
                                        time_weight=None if time_weight < 0 else time_weight,
                                        policies=None if policies is None else str(policies), dp_step=dp_step)
         except (OptimumBenchmarkError, ValueError) as exc:

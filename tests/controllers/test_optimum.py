@@ -67,6 +67,23 @@ def test_dp_and_nlp_agree_on_a_hilly_ev_route_with_limits_and_a_stop():
     assert dp.multiplier == pytest.approx(-sol.time_slope, rel=0.05)  # the same slope of the time-energy curve
 
 
+def test_dp_converges_to_the_nlp_from_above_on_a_downhill_route_that_regenerates():
+    """A 5 % descent: the optimum's net source energy is negative (more regenerated than drawn). The DP solves the
+    same discrete problem on a speed grid, so it is never below the NLP's optimum and its excess shrinks with the
+    grid step (the NLP is the global optimum, not a local one)."""
+    s = np.arange(0.0, 1501.0, 5.0)
+    z = np.zeros_like(s)
+    road = RoadProfile("descent", s, np.full_like(s, -0.05), z, z, np.full_like(s, 25.0))
+    settings = OptimumSettings(ds=10.0, jerk=False)
+    opt = FullRouteOptimum(road, ENERGY, PARAMS, settings)
+    sol = opt.solve(110.0, start_speed=0.0, arrival_speed=10.0)
+    assert sol.success and sol.energy_J < 0
+    excess = [dp_optimum(opt.preview, ENERGY, PARAMS, sol.model_time, 0.0, 10.0, settings, speed_step=h).energy_J
+              - sol.energy_J for h in (0.2, 0.05)]
+    assert excess[0] > excess[1] > -1e-6 * abs(sol.energy_J)
+    assert excess[1] < 0.005 * abs(sol.energy_J)
+
+
 def test_time_slope_is_the_derivative_of_the_optimal_energy():
     opt = FullRouteOptimum(hilly_road(), ENERGY, PARAMS, OptimumSettings(ds=10.0))
     a, b = opt.solve(100.0, 0.0, 15.0), opt.solve(101.0, 0.0, 15.0)

@@ -5,8 +5,8 @@ import pandas as pd
 import pytest
 
 from roadload.experiments.controller_comparison import force_model_settings
-from roadload.experiments.optimum_benchmark import (OptimumBenchmarkError, OptimumTask, episode_cost_summary,
-                                                    summarise)
+from roadload.experiments.optimum_benchmark import (OptimumBenchmarkError, OptimumTask, _settings, dp_table,
+                                                    episode_cost_summary, summarise, summary_markdown)
 from roadload.road_profiles import RoadProfile
 
 
@@ -21,6 +21,41 @@ def test_excess_summary_is_a_fleet_total_with_its_ci():
     assert s.excess_pct == pytest.approx(10.0)  # 100 mean(E - E_opt) / mean(E_opt)
     assert s.excess_ci95_lo < 10.0 < s.excess_ci95_hi
     assert s.optimum_time_error_pct_max == pytest.approx(0.1)
+
+
+def test_controllers_are_compared_with_the_oracle_mpc_at_equal_time_through_their_optima():
+    """Each run against the optimum at its own time: an online run 2 % slower than the oracle run uses 20 J less,
+    but its optimum is 30 J lower: 10 J further above its optimum, it is 10 J (1 %) worse at equal time."""
+    oracle = pd.DataFrame({"vehicle": "car", "road": "hilly", "condition": "headwind_6ms",
+                           "controller": "mpc:oracle", "seed": range(4), "arrived": True,
+                           "energy_J": [1000.0, 1010.0, 990.0, 1000.0],
+                           "optimum_energy_J": [990.0, 1000.0, 980.0, 990.0],
+                           "time_s": 100.0, "optimum_time_s": 100.0, "excess_pct": 1.0})
+    online = oracle.assign(controller="mpc:online_wind", time_s=102.0, optimum_time_s=102.0,
+                           energy_J=oracle.energy_J - 30.0 + [9.0, 10.0, 11.0, 10.0],
+                           optimum_energy_J=oracle.optimum_energy_J - 30.0)
+    s = summarise(pd.concat([oracle, online], ignore_index=True)).set_index("controller")
+    assert s.loc["mpc:online_wind", "vs_mpc:oracle_pct"] == pytest.approx(1.0)
+    assert s.loc["mpc:online_wind", "vs_mpc:oracle_ci95_lo"] > 0.8
+    assert s.loc["mpc:oracle", "vs_mpc:oracle_pct"] == 0.0
+    md = summary_markdown(s.reset_index())
+    assert "headwind_6ms" in md and "| reference |" in md and "+1.00 % [" in md
+
+
+def test_dp_check_difference_keeps_its_sign_on_a_route_that_regenerates():
+    """A downhill route's net energy is negative: the DP 1226 J above the NLP is +1.26 % of |E_NLP|, not -1.26 %
+    (the stored value / reference - 1 of older results is recomputed)."""
+    results = [{"dp": {"nlp_energy_J": -97610.7, "dp_energy_J": -96384.8, "dp_vs_nlp_pct": -1.256,
+                       "speed_step": 0.05}},
+               {"dp": {"nlp_energy_J": 1157199.8, "dp_energy_J": 1158062.4, "dp_vs_nlp_pct": 0.075,
+                       "speed_step": 0.05}}]
+    dp = dp_table(results)
+    assert dp["dp_minus_nlp_J"].tolist() == pytest.approx([1225.9, 862.6])
+    assert dp["dp_vs_nlp_pct"].tolist() == pytest.approx([1.2559, 0.07454], rel=1e-3)
+    summary = pd.DataFrame(columns=["vehicle", "road", "controller", "seeds", "time_s_mean", "energy_kJ_mean",
+                                    "optimum_kJ_mean", "excess_pct", "excess_1sigma_pct", "excess_ci95_lo",
+                                    "excess_ci95_hi"])
+    assert "+0.075 … +1.256 % of |E_NLP|, +863 … +1226 J" in summary_markdown(summary, dp)
 
 
 def test_episode_cost_is_compared_per_seed():
@@ -50,6 +85,16 @@ def test_bad_benchmark_tasks_are_refused_with_the_reason():
         OptimumTask("truck_40t", "long_grades", 0, controllers=("ppo",))
     with pytest.raises(OptimumBenchmarkError, match="vehicle case"):
         OptimumTask("bus", "hilly", 0)
+    with pytest.raises(OptimumBenchmarkError, match="key=value"):
+        OptimumTask("car", "hilly", 0, controllers=("mpc:online_wind@RRLM+fast",))
+
+
+def test_an_online_mpc_takes_its_estimator_options_after_the_at():
+    task = OptimumTask("car", "hilly", 0, controllers=("mpc:online_wind@RRLM+forgetting=0.995+cusum",))
+    s = _settings(task, task.controllers[0])
+    assert s.controller == "mpc" and s.force_model == "online_wind"
+    assert s.change_detection is not None and s.estimator_settings["forgetting"] == 0.995
+    assert _settings(task, "mpc:oracle").change_detection is None
 
 
 def test_fastsim_energy_of_a_trace_rises_with_the_grade():

@@ -18,6 +18,12 @@ scheduler gave), with the 1-minute load average as the row started. The ratio na
     python scripts/bench_traffic.py                       # N = 256, threads 1 and 2, 2 rounds of 5 s per row
     python scripts/bench_traffic.py --vehicles 10 --threads 2 --rounds 3
     python scripts/bench_traffic.py --quick               # CI smoke run (N = 16, 0.5 s per row, one round)
+    python scripts/bench_traffic.py --compare main --rounds 4   # native rows of commit main against the working tree
+
+``--compare REF`` runs the native rows alone (``--native-only``) on commit REF (exported, refcompare) and on the
+working tree, in alternating child processes, and reports the per-round ratio new / old of env steps per CPU second
+(robust to the machine's load) and per wall second. This file runs against an old package tree too: it imports from
+roadload only what every commit with EcoTraffic-v0 has.
 """
 
 from __future__ import annotations
@@ -76,12 +82,12 @@ def _native_stepper(cfg: EcoTrafficConfig, n_envs: int, threads: int, seed: int)
 
 def run_traffic_benchmark(seconds: float = 5.0, n_envs: int = 256, threads: tuple[int, ...] = (1, 2),
                           rounds: int = 2, env_config: dict[str, Any] | None = None, highway_fast: bool = True,
-                          progress: Callable[[str], None] | None = None) -> pd.DataFrame:
+                          progress: Callable[[str], None] | None = None, reference: bool = True) -> pd.DataFrame:
     """The interleaved rows (module docstring): env, mode, round, threads, steps/s (wall, CPU), simulated
-    seconds per wall second, load average."""
+    seconds per wall second, load average (``reference`` False: no EcoHighway-v0 rows)."""
     cfg = make_config(EcoTrafficConfig, {"curvature": False, **(env_config or {})})
     step_time = 1.0 / cfg.policy_frequency
-    ref = random_action_stepper(_reference_env(cfg))
+    ref = random_action_stepper(_reference_env(cfg)) if reference else None
     natives = {t: _native_stepper(cfg, n_envs, t, 0) for t in threads}
     fast = random_action_stepper(_highway_fast_env()) if highway_fast else None
     rows = []
@@ -96,7 +102,8 @@ def run_traffic_benchmark(seconds: float = 5.0, n_envs: int = 256, threads: tupl
             progress(f"round {rnd}: {env} {mode}")
 
     for rnd in range(rounds):
-        add("EcoHighway-v0 (highway-env)", "single process", rnd, 1, 1, step_time, ref)
+        if ref is not None:
+            add("EcoHighway-v0 (highway-env)", "single process", rnd, 1, 1, step_time, ref)
         for t, fn in natives.items():
             add("EcoTraffic-v0 (native)", f"vector x{n_envs}", rnd, t, n_envs, step_time, fn)
         if fast is not None:
@@ -143,7 +150,42 @@ def summary_line(ratios: pd.DataFrame, n_envs: int, vehicles: int) -> str:
             f"(goal >= {TARGET_RATIO:,.0f}x: {goal}); load average {statistics.median(ratios.load_1min):.1f}")
 
 
-__all__ = ["run_traffic_benchmark", "traffic_ratios", "summary_line", "main", "TARGET_STEPS_PER_S", "TARGET_RATIO"]
+def compare_rounds(old: list[dict], new: list[dict]) -> pd.DataFrame:
+    """Per thread count: the native rates of the old and the new tree (median over the runs), the median and range
+    of the per-run ratio new / old (runs paired in the order they ran), per CPU second and per wall second, and the
+    load average over the runs."""
+    def rates(runs: list[dict], t: int, key: str) -> list[float]:
+        return [statistics.median(r[key] for r in run["rows"] if r["threads"] == t) for run in runs]
+    threads = sorted({int(r["threads"]) for run in new for r in run["rows"]})
+    out = []
+    for t in threads:
+        row: dict[str, Any] = {"threads": t}
+        for key, name in (("steps_per_cpu_s", "cpu"), ("steps_per_s", "wall")):
+            o, n = rates(old, t, key), rates(new, t, key)
+            ratio = [b / a for a, b in zip(o, n)]
+            row.update({f"old_per_{name}_s": statistics.median(o), f"new_per_{name}_s": statistics.median(n),
+                        f"new_over_old_{name}": statistics.median(ratio),
+                        f"range_{name}": f"{min(ratio):.3f}-{max(ratio):.3f}"})
+        loads = [r["load_1min"] for run in old + new for r in run["rows"] if r["threads"] == t]
+        row["load_1min"] = statistics.median(loads)
+        out.append(row)
+    return pd.DataFrame(out)
+
+
+def compare_with(args: argparse.Namespace, repo: Path | None = None) -> pd.DataFrame:
+    """--compare: the native rows of commit ``args.compare`` and of the working tree, ``args.rounds`` interleaved
+    child runs each (roadload.experiments.benchmarks.refcompare)."""
+    # imported here, not at the top: this file also runs against old package trees
+    from roadload.experiments.benchmarks.refcompare import REPO, compare
+
+    bench = ["--native-only", "--seconds", str(args.seconds), "--n-envs", str(args.n_envs), "--threads",
+             args.threads, "--rounds", "1", "--vehicles", str(args.vehicles)]
+    old, new = compare(Path(__file__).resolve(), bench, args.compare, args.rounds, repo or REPO)
+    return compare_rounds(old, new)
+
+
+__all__ = ["run_traffic_benchmark", "traffic_ratios", "summary_line", "compare_rounds", "compare_with", "main",
+           "TARGET_STEPS_PER_S", "TARGET_RATIO"]
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -161,6 +203,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--vehicles", type=int, default=20, help="traffic vehicles per env")
     ap.add_argument("--no-highway-fast", action="store_true", help="skip highway-env's highway-fast-v0 rows")
     ap.add_argument("--json", metavar="PATH", help="also write the rows and ratios as JSON")
+    ap.add_argument("--native-only", action="store_true", help="only the native rows (no highway-env, no ratios)")
+    ap.add_argument("--compare", metavar="REF", help="native rows of commit REF (old) against the working tree "
+                                                     "(new), --rounds interleaved child runs each")
     ap.add_argument("--quick", action="store_true", help="tiny run for CI")
     a = ap.parse_args(argv)
     try:
@@ -173,12 +218,26 @@ def main(argv: list[str] | None = None) -> None:
         a.seconds, a.n_envs, a.rounds = 0.5, 16, 1
     console = Console(width=160)
     console.print(f"load average (1 min) at start: {load_average():.2f} on {os.cpu_count()} cores")
+    if a.compare:
+        ratios = compare_with(a)
+        print_table(console, ratios, f"EcoTraffic-v0 native x{a.n_envs}, {a.vehicles} vehicles: {a.compare} (old) "
+                                     f"against the working tree (new), {a.rounds} interleaved runs", "{:,.3f}")
+        return
     table = run_traffic_benchmark(a.seconds, a.n_envs, threads, a.rounds, {"vehicles_count": a.vehicles},
-                                  highway_fast=not a.no_highway_fast, progress=lambda m: console.print(m))
+                                  highway_fast=not (a.no_highway_fast or a.native_only),
+                                  progress=lambda m: console.print(m), reference=not a.native_only)
     print_table(console, table, "env steps per second (interleaved rounds)", "{:,.1f}")
+    if a.native_only:
+        if a.json:
+            Path(a.json).write_text(json.dumps({"rows": table.to_dict("records"), "ratios": []}, indent=1))
+        return
     ratios = traffic_ratios(table)
     print_table(console, ratios, "EcoTraffic-v0 native against EcoHighway-v0 (highway-env), same run", "{:,.1f}")
     console.print(summary_line(ratios, a.n_envs, a.vehicles))
     if a.json:
         Path(a.json).write_text(json.dumps({"rows": table.to_dict("records"), "ratios": ratios.to_dict("records")},
                                            indent=1))
+
+
+if __name__ == "__main__":
+    main()

@@ -268,3 +268,46 @@ def test_selector_names_the_candidates_it_cannot_fit_and_profiles_the_shape():
     assert base == pytest.approx(np.mean(sel.residual[sel.split.train] ** 2), rel=1e-12)
     fitted, loss = sel.evaluate([(get_candidate("tire_warmup"), d_true)])
     assert fitted < 0.2 * base and np.isnan(loss[~sel.split.train]).all()
+
+
+def test_forward_steps_report_consistent_figures_and_each_rejection_reason():
+    """A mass offset in the synthetic trips: the first step accepts it with figures that agree with each other
+    (losses as shares of the sim's original robust loss, the gain between them, the null quantile below the gain);
+    later steps are rejected with the reason; a size floor above the effect leaves it insignificant, and a
+    plausibility rule turns the step into a rejection naming the rule's reason."""
+    from roadload.sim2real.selection import Selector
+
+    core = _core()
+    tab = core.synth(core.mass_extra, n_trips=2, duration=500.0)
+    split = make_split(tab, seed=0, n_folds=4)
+
+    def selector(**kw):
+        return Selector(tab, tab.residual.to_numpy(), split, core.MODEL, robust=False, n_boot=150, seed=0, **kw)
+
+    sel = selector()
+    ranked, _ = sel.rank(("mass_offset", "drag_area", "rolling_scale"))
+    steps = sel.forward(ranked)
+    first = steps[0]
+    assert (first.step, first.effect, first.shape, first.accepted, first.reason) == (1, "mass_offset", None, True,
+                                                                                    "accepted")
+    assert first.robust_loss_before == pytest.approx(1.0)
+    assert first.robust_loss_after == pytest.approx(first.robust_loss_before - first.gain_of_original)
+    assert first.relative_gain == pytest.approx(first.gain_of_original / first.robust_loss_before)
+    assert first.gain[0] == first.gain_of_original and first.gain[1] == first.null_quantile
+    assert np.isnan(first.gain[2]) and first.null_p <= sel.alpha
+    assert 0.0 < first.null_quantile < first.gain_of_original
+    assert 0.0 < first.reference_robust_loss < 1.0
+    assert sel.min_explained <= first.explained_fraction <= 1.0 and first.implausible is None
+    assert first.size_rms == pytest.approx(120.0 * np.sqrt(np.mean(((tab.acceleration + 9.81 * np.sin(
+        tab.gradient_angle)) ** 2)[split.train])), rel=0.15)  # the RMS of 120 kg x (a + g sin theta) [N]
+    assert sel.chosen[0][0].name == "mass_offset" and sel.robust_loss_after == first.robust_loss_after
+    for s in steps[1:]:
+        assert not s.accepted and s.step >= 2 and s.robust_loss_before == pytest.approx(first.robust_loss_after)
+        assert s.reason.startswith(("held-out gain not beyond the null (p = ", "gain ", "partial fit: explains "))
+    small = selector(min_size=1e9)  # a size floor above the effect: not significant, no step taken
+    ranked_small = small.rank(("mass_offset",))[0]
+    assert not ranked_small[0].significant and small.forward(ranked_small) == []
+    odd = selector(plausible=lambda cand, params, shape: "payload beyond the vehicle's limit")
+    steps = odd.forward(odd.rank(("mass_offset",))[0])
+    assert not steps[0].accepted and steps[0].reason == "implausible: payload beyond the vehicle's limit"
+    assert steps[0].implausible == "payload beyond the vehicle's limit" and odd.chosen == []

@@ -20,15 +20,26 @@ from typing import Any, Callable
 import numba
 from numba.core import config
 from numba.core.caching import FunctionCache
+from numba.core.runtime import rtsys
 
 
 class CheckedCache(FunctionCache):
     """numba's per-function disk cache; an index or data file that cannot be read back is not trusted (module
     docstring)."""
 
+    #: False: a cache hit loads the machine code with only the runtime (NRT) it links against. numba's own load
+    #: first installs every lowering registry of the target (its whole library of numpy and builtin implementations:
+    #: 1.4 s and ~25 MB of a simulate's peak RSS) that only compiling needs (a cache miss installs them itself).
+    #: True for a ufunc (cached_vectorize): numba builds its loop wrapper with the target's lowerings after the load.
+    full_context = False
+
     def load_overload(self, sig: Any, target_context: Any) -> Any:
         try:
-            return super().load_overload(sig, target_context)
+            if self.full_context:
+                return super().load_overload(sig, target_context)
+            rtsys.initialize(target_context)
+            with self._guard_against_spurious_io_errors():
+                return self._load_overload(sig, target_context)
         except Exception as exc:  # whatever a damaged pickle raises: UnpicklingError, EOFError, ValueError, ...
             warnings.warn(f"numba cache of {self._name} in {self._cache_path} is corrupt ({type(exc).__name__}: "
                           f"{exc}); compiling it again", RuntimeWarning, stacklevel=2)
@@ -71,6 +82,7 @@ def cached_vectorize(signatures: list[str], **options: Any) -> Callable[[Callabl
     def wrap(fn: Callable[..., Any]) -> Any:
         ufunc: Any = DUFunc(fn, cache=True, **options)
         ufunc._dispatcher.cache = CheckedCache(ufunc._dispatcher.py_func)  # before any signature is loaded
+        ufunc._dispatcher.cache.full_context = True
         for signature in signatures:
             ufunc.add(signature)
         ufunc.disable_compile()

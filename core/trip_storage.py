@@ -40,15 +40,20 @@ import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator, Literal, NamedTuple
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any, Iterator, Literal, NamedTuple, TypeAlias
 
 import numpy as np
-import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
 from .fileio import atomic_path
 from .trip_schema import TripError, TripMetadataError, parse_trip_payload
+
+if TYPE_CHECKING:  # pandas loads where a frame is built (reading); writing a streamed trip needs none of it
+    import pandas as pd
+
+    Frame: TypeAlias = pd.DataFrame | Mapping[str, np.ndarray]  # a chunk: a frame or its columns by name
 
 TRUTH_PREFIX = "truth/"
 META_KEY = b"roadload"
@@ -199,10 +204,30 @@ def _plan_column(key: str, name: str, kind: Literal["time", "measured", "truth"]
     return col
 
 
+def _arrow(values: np.ndarray) -> pa.Array:
+    """A numeric numpy array as an Arrow array, zero-copy, as ``pa.array`` makes it (NaN stays NaN, no nulls) but
+    without ``pa.array``'s check for pandas objects, which imports pandas (40 MB of a streamed simulation)."""
+    x = np.ascontiguousarray(values)
+    if x.dtype.kind not in "fiu":
+        return pa.array(x)
+    return pa.Array.from_buffers(pa.from_numpy_dtype(x.dtype), x.size, [None, pa.py_buffer(x)])
+
+
+def _column_arrays(frame: Frame, what: str) -> dict[str, np.ndarray]:
+    """A chunk's columns as 1-D arrays by name, from a DataFrame or a mapping name -> array of equal lengths."""
+    if not isinstance(frame, Mapping):
+        return {c: frame[c].to_numpy() for c in frame.columns}
+    cols = {c: np.asarray(v) for c, v in frame.items()}
+    sizes = {c: v.shape for c, v in cols.items()}
+    if len(set(sizes.values())) > 1 or any(len(s) != 1 for s in sizes.values()):
+        raise TripError(f"{what}: every column of a chunk must be a 1-D array of one length, got shapes {sizes}")
+    return cols
+
+
 def _on_rows(values: np.ndarray, rows: np.ndarray | None, n: int) -> pa.Array:
     """``values`` placed on file rows ``rows`` of ``n`` (null elsewhere); ``rows=None``: one value per row."""
     if rows is None:
-        return pa.array(values)
+        return _arrow(values)
     full = np.zeros(n, dtype=values.dtype)
     full[rows] = values
     present = np.zeros(n, dtype=bool)
@@ -263,21 +288,21 @@ class TripWriter:
         return False
 
     # -------------------------------------------------------------- layout
-    def _plan(self, measured: pd.DataFrame, truth: pd.DataFrame | None) -> None:
+    def _plan(self, measured: dict[str, np.ndarray], truth: dict[str, np.ndarray] | None) -> None:
         if truth is None:
             self._time_base = "shared"
         else:
-            same = len(measured) == len(truth) and np.array_equal(measured["t"].to_numpy(), truth["t"].to_numpy())
+            same = np.array_equal(measured["t"], truth["t"])
             self._time_base = "shared" if (self._shared_time if self._shared_time is not None else same) else "union"
         cols = [_Column("t", self.units.get("t", "s"), "time", np.dtype(np.float64), encoding="BYTE_STREAM_SPLIT")]
-        for c in measured.columns:
+        for c, values in measured.items():
             if c != "t":
-                cols.append(_plan_column(c, c, "measured", self.units[c], measured[c].to_numpy(), self.precision,
+                cols.append(_plan_column(c, c, "measured", self.units[c], values, self.precision,
                                          self.resolutions.get(c)))
         if truth is not None:
-            for c in truth.columns:
+            for c, values in truth.items():
                 if c != "t":
-                    cols.append(_plan_column(TRUTH_PREFIX + c, c, "truth", self.truth_units[c], truth[c].to_numpy(),
+                    cols.append(_plan_column(TRUTH_PREFIX + c, c, "truth", self.truth_units[c], values,
                                              self.precision, None))
         fields = [col.field() for col in cols]
         if self._time_base == "union":
@@ -291,51 +316,55 @@ class TripWriter:
                                         use_dictionary=[col.key for col in cols if col.encoding is None],
                                         column_encoding=encoding, write_statistics=False)
 
-    def write(self, measured: pd.DataFrame, truth: pd.DataFrame | None = None) -> None:
-        """Append one chunk: measured rows (first column 't') and, for simulated trips, truth rows."""
+    def write(self, measured: Frame, truth: Frame | None = None) -> None:
+        """Append one chunk: measured rows (first column 't') and, for simulated trips, truth rows; each a
+        DataFrame or a mapping column name -> 1-D array (a streamed simulation's chunks: no pandas needed)."""
         if self._closed:
             raise TripError(f"{self.path}: write after close")
         if (truth is not None) != self.has_truth:
             raise TripError("truth: give a truth frame with every chunk iff truth_units were given")
         if self._packed is not None:
-            self._packed.write(measured, truth)
+            self._packed.write(_as_dataframe(measured), None if truth is None else _as_dataframe(truth))
             return
+        cols = _column_arrays(measured, "measured")
+        truth_cols = None if truth is None else _column_arrays(truth, "truth")
+        if "t" not in cols:
+            raise TripError("measured: a chunk's first column is 't' [s]")
         if self._columns is None:
             if self._tmp is None:
                 raise TripError(f"{self.path}: TripWriter has no open Parquet writer (use it as a context manager)")
-            self._plan(measured, truth)
+            self._plan(cols, truth_cols)
         assert self._columns is not None and self._writer is not None and self._schema is not None
-        self._check_columns(measured, truth, self._columns)
-        t, rows_m, rows_t = self._row_times(measured, truth)
-        table = pa.Table.from_arrays(self._chunk_arrays(measured, truth, t, rows_m, rows_t), schema=self._schema)
+        self._check_columns(cols, truth_cols, self._columns)
+        t, rows_m, rows_t = self._row_times(cols, truth_cols)
+        table = pa.Table.from_arrays(self._chunk_arrays(cols, truth_cols, t, rows_m, rows_t), schema=self._schema)
         self._writer.write_table(table)
         del table
         pa.default_memory_pool().release_unused()  # hand the chunk's buffers back: bounded RSS over a day
         if t.size:
             self._last_t = float(t[-1])
-        self.n_measured += len(measured)
-        self.n_truth += 0 if truth is None else len(truth)
+        self.n_measured += len(cols["t"])
+        self.n_truth += 0 if truth_cols is None else len(truth_cols["t"])
 
-    def _check_columns(self, measured: pd.DataFrame, truth: pd.DataFrame | None, columns: list[_Column]) -> None:
+    def _check_columns(self, measured: dict[str, np.ndarray], truth: dict[str, np.ndarray] | None,
+                       columns: list[_Column]) -> None:
         """Raise unless the chunk has the first chunk's columns, in the same order."""
-        names = [c for c in measured.columns] + ([] if truth is None else [TRUTH_PREFIX + c for c in truth.columns
-                                                                           if c != "t"])
+        names = [c for c in measured] + ([] if truth is None else [TRUTH_PREFIX + c for c in truth if c != "t"])
         expected = [col.key for col in columns]
         if names != expected:
             raise TripError(f"{self.path}: chunk columns {names} differ from the first chunk's {expected}")
 
-    def _row_times(self, measured: pd.DataFrame, truth: pd.DataFrame | None
+    def _row_times(self, measured: dict[str, np.ndarray], truth: dict[str, np.ndarray] | None
                    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
         """The file rows' times t [s] and the row index of each measured / truth sample (None: every row)."""
-        tm = measured["t"].to_numpy(dtype=np.float64)
+        tm = np.asarray(measured["t"], dtype=np.float64)
         if self._time_base == "shared":
-            if truth is not None and not (len(truth) == len(measured)
-                                          and np.array_equal(tm, truth["t"].to_numpy(dtype=np.float64))):
+            if truth is not None and not np.array_equal(tm, np.asarray(truth["t"], dtype=np.float64)):
                 raise TripError("truth: its time base differed from the measured one only after the first chunk; "
                                 "give the same time base in every chunk or write one chunk")
             t, rows_m, rows_t = tm, None, None
         else:
-            tt = truth["t"].to_numpy(dtype=np.float64) if truth is not None else np.empty(0)
+            tt = np.asarray(truth["t"], dtype=np.float64) if truth is not None else np.empty(0)
             t = np.union1d(tm, tt)
             rows_m, rows_t = np.searchsorted(t, tm), np.searchsorted(t, tt)
         if t.size and not t[0] > self._last_t:
@@ -343,19 +372,19 @@ class TripWriter:
                             f"{self._last_t:.6g} s (chunks must follow each other in time)")
         return t, rows_m, rows_t
 
-    def _chunk_arrays(self, measured: pd.DataFrame, truth: pd.DataFrame | None, t: np.ndarray,
+    def _chunk_arrays(self, measured: dict[str, np.ndarray], truth: dict[str, np.ndarray] | None, t: np.ndarray,
                       rows_m: np.ndarray | None, rows_t: np.ndarray | None) -> list[pa.Array]:
         """The chunk's stored columns in schema order, plus the row flags of a union time base."""
         assert self._columns is not None
         arrays = []
         for col in self._columns:
             if col.kind == "time":
-                arrays.append(pa.array(t))
+                arrays.append(_arrow(t))
                 continue
             frame, rows = (measured, rows_m) if col.kind == "measured" else (truth, rows_t)
             assert frame is not None
             name = col.key[len(TRUTH_PREFIX):] if col.kind == "truth" else col.key
-            arrays.append(_on_rows(col.values(frame[name].to_numpy()), rows, t.size))
+            arrays.append(_on_rows(col.values(frame[name]), rows, t.size))
         if self._time_base == "union":
             for rows in (rows_m, rows_t):
                 flag = np.zeros(t.size, dtype=bool)
@@ -441,6 +470,31 @@ def trip_file_info(path: str | os.PathLike) -> dict[str, Any]:
             "precision": storage_precision(payload), "version": payload["version"]}
 
 
+def trip_file_extent(path: str | os.PathLike) -> tuple[float, float, float | None]:
+    """(first t [s], last t [s], last ground-truth position [m] or None) of the measured rows of a trip file.
+    A format-4 file with one time base answers from two columns of its first and last row groups (no frame
+    built, no pandas: the summary of a streamed day in a few kB); other files are read chunk by chunk."""
+    pf, payload = open_trip_file(path)
+    names = pf.schema_arrow.names
+    position = TRUTH_PREFIX + "position"
+    groups = pf.metadata.num_row_groups
+    if payload["version"] >= 4 and payload.get("time_base") == "shared" and payload["n_measured"] > 0 and groups:
+        first = pf.read_row_group(0, columns=["t"]).column("t")
+        last = pf.read_row_group(groups - 1, columns=["t"] + ([position] if position in names else []))
+        x_end = last.column(position)[-1].as_py() if position in names else None
+        return float(first[0].as_py()), float(last.column("t")[-1].as_py()), x_end
+    t_first = t_last = float("nan")
+    x_last = None
+    for part in iter_trip_chunks(path, channels=[], truth_channels=["position"]):
+        t = part.measured["t"].to_numpy()
+        if t.size:
+            t_first = float(t[0]) if t_first != t_first else t_first
+            t_last = float(t[-1])
+        if part.truth is not None and "position" in part.truth and len(part.truth):
+            x_last = float(part.truth["position"].iloc[-1])
+    return t_first, t_last, x_last
+
+
 def storage_precision(payload: dict[str, Any]) -> str:
     """The precision a file was written with ('compact' files of formats 2-3 are the private codec, 'packed')."""
     precision = str(payload.get("precision", "exact"))
@@ -516,6 +570,8 @@ def _as_float64(col: pa.ChunkedArray, step: float | None) -> np.ndarray:
 
 
 def _parts_v4(table: pa.Table, payload: dict[str, Any], truth_channels: list[str] | None) -> TripParts:
+    import pandas as pd  # here, not at import (see the TYPE_CHECKING import)
+
     res = payload.get("resolutions", {})
     measured_table = truth_table = table
     if payload.get("time_base") == "union":
@@ -603,6 +659,8 @@ def _take_rows(frame: dict[str, np.ndarray], rows: np.ndarray | None, n: int | N
 def _legacy_truth(cols: dict[str, np.ndarray], payload: dict[str, Any], rows: np.ndarray | None, n: int | None,
                   measured: pd.DataFrame) -> pd.DataFrame | None:
     """The truth frame of a format 1-3 table (its 't' from the measured frame when stored once)."""
+    import pandas as pd  # here, not at import (see the TYPE_CHECKING import)
+
     truth_names = [c for c in cols if c.startswith(TRUTH_PREFIX)]
     if not truth_names:
         return None
@@ -620,6 +678,8 @@ def _restore_dtypes(frame: pd.DataFrame, dtypes: dict[str, str]) -> pd.DataFrame
 def _parts_legacy(table: pa.Table, payload: dict[str, Any], n_measured: int | None, n_truth: int | None,
                   carry: dict[str, Any] | None = None) -> TripParts:
     """A format 1-3 table decoded (``n_measured`` / ``n_truth``: rows of each frame when the file has no flags)."""
+    import pandas as pd  # here, not at import (see the TYPE_CHECKING import)
+
     enc = payload.get("encoding", {})
     cols: dict[str, np.ndarray] = {name: _decode(table.column(name), enc.get(name), name, carry)
                                    for name in table.column_names}
@@ -634,6 +694,13 @@ def _parts_legacy(table: pa.Table, payload: dict[str, Any], n_measured: int | No
     truth_units = {c: u for c, u in payload["truth_units"].items() if truth is not None and c in truth.columns}
     return TripParts(measured.reset_index(drop=True), units, payload["meta"],
                      None if truth is None else truth.reset_index(drop=True), truth_units)
+
+
+def _as_dataframe(frame: Frame) -> pd.DataFrame:
+    """A chunk as a DataFrame (the packed writer records and restores the frames' dtypes)."""
+    import pandas as pd  # here, not at import (see the TYPE_CHECKING import)
+
+    return frame if isinstance(frame, pd.DataFrame) else pd.DataFrame(_column_arrays(frame, "chunk"), copy=False)
 
 
 class _PackedWriter:

@@ -208,7 +208,9 @@ class SensorModel:
                 nan = self.dropout_on[:, None] & drop[None, :]
         out = (add, nan, missing)
         self._cache[c] = out
-        while len(self._cache) > 4:
+        # two chunks: the one a streamed window ends in is the next window's first; more would only hold 2.6 MB
+        # each (40 channels x CHUNK float64) through the write of a chunk, when a simulation peaks
+        while len(self._cache) > 2:
             self._cache.popitem(last=False)
         return out
 

@@ -12,14 +12,13 @@ import os
 import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Callable, overload
+from typing import TYPE_CHECKING, Any, Callable, overload
 
 import numpy as np
-import pandas as pd
 
 from roadload.channels import TRUTH
 from roadload.road_profiles import DriveCycle, RoadProfile
-from roadload.trip import Trip, TripWriter
+from roadload.trip_storage import TripWriter
 from roadload.road_load import RoadLoadParameters
 from roadload.units import R_AIR, air_density
 from roadload.vehicle import SensorSpec, VehicleSpec
@@ -44,6 +43,11 @@ from .schedules import pack_schedules
 from .sensors import SensorModel
 from .state import VehicleParameters, VehicleState
 from .drivetrain import source_side_inertia, wheel_side_mass
+
+if TYPE_CHECKING:  # a streamed run writes plain column arrays: pandas (40 MB) loads only with a Trip in memory
+    import pandas as pd
+
+    from roadload.trip import Trip
 
 DT = 0.01  # s, physics step (100 Hz)
 
@@ -680,43 +684,45 @@ class Simulator:
         """SI unit of every truth channel of this simulator's trips (incl. 't')."""
         return {c: TRUTH[c].unit for c in ["t", *self._truth_map(), "cornering_stiffness"]}
 
-    def _frames(self, start: int, stop: int, views: bool = False) -> tuple[pd.DataFrame, pd.DataFrame]:
-        """Measured and truth frames of the absolute substeps start..stop-1 (the log holds substep _log_base on).
-        ``views``: the truth columns are views of the log rows and the measured columns the sensor model's own
-        arrays (no 2-D copies; only for frames used before the log changes, as a streamed chunk)."""
-        log, base = self._log, self._log_base
-        t, channels, keep = self.sensor_model.measure(log, stop, start=start, offset=base)
-        if views and keep.all():  # the channels' own arrays, no 2-D block (all float64, as the block would be)
-            measured = pd.DataFrame({"t": t, **{k: np.asarray(v, dtype=float) for k, v in channels.items()}},
-                                    copy=False)
-        else:
-            measured = self._measured_block(t, channels, keep)
-        return measured, self._truth_frame(start, stop, views)
+    def _frames(self, start: int, stop: int) -> tuple[pd.DataFrame, pd.DataFrame]:
+        """Measured and truth frames of the absolute substeps start..stop-1 (the log holds substep _log_base on)."""
+        import pandas as pd  # here, not at import (see the TYPE_CHECKING import)
 
-    @staticmethod
-    def _measured_block(t: np.ndarray, channels: dict[str, np.ndarray], keep: np.ndarray) -> pd.DataFrame:
+        t, channels, keep = self.sensor_model.measure(self._log, stop, start=start, offset=self._log_base)
         block = np.empty((len(channels) + 1, t.size))  # one 2-D block: no column-by-column consolidation
         block[0] = t
         for i, arr in enumerate(channels.values()):
             block[i + 1] = arr
         if not keep.all():
             block = block[:, keep]
-        return pd.DataFrame(block.T, columns=["t", *channels], copy=False)
-
-    def _truth_frame(self, start: int, stop: int, views: bool) -> pd.DataFrame:
-        log, base = self._log, self._log_base
+        measured = pd.DataFrame(block.T, columns=["t", *channels], copy=False)
         truth_map = self._truth_map()
-        cols = [L_T, *truth_map.values()]
-        if views:  # one array per channel, no 2-D copy of the chunk (a streamed day's peak memory)
-            truth = pd.DataFrame(dict(zip(["t", *truth_map], (log[c, start - base:stop - base] for c in cols))),
-                                 copy=False)
-        else:
-            truth = pd.DataFrame(log[cols, start - base:stop - base].T, columns=["t", *truth_map], copy=False)
+        rows = self._log[[L_T, *truth_map.values()], start - self._log_base:stop - self._log_base]
+        truth = pd.DataFrame(rows.T, columns=["t", *truth_map], copy=False)
+        truth["cornering_stiffness"] = self._cornering_stiffness(truth["cornering_stiffness_front"].to_numpy(),
+                                                                 truth["cornering_stiffness_rear"].to_numpy())
+        return measured, truth
+
+    def _chunk_columns(self, start: int, stop: int) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+        """The columns of :meth:`_frames` as plain arrays by name, for a streamed chunk: the truth columns are views
+        of the log rows and the measured ones the sensor model's own arrays (no 2-D copies, no pandas; used before
+        the log changes)."""
+        log, base = self._log, self._log_base
+        t, channels, keep = self.sensor_model.measure(log, stop, start=start, offset=base)
+        measured = {"t": t, **{k: np.asarray(v, dtype=float) for k, v in channels.items()}}
+        if not keep.all():  # samples removed by 'missing' dropouts
+            measured = {k: v[keep] for k, v in measured.items()}
+        truth_map = self._truth_map()
+        truth = dict(zip(["t", *truth_map], (log[c, start - base:stop - base] for c in [L_T, *truth_map.values()])))
+        truth["cornering_stiffness"] = self._cornering_stiffness(truth["cornering_stiffness_front"],
+                                                                 truth["cornering_stiffness_rear"])
+        return measured, truth
+
+    def _cornering_stiffness(self, front: np.ndarray, rear: np.ndarray) -> np.ndarray:
+        """The single-track equivalent cornering stiffness [N/rad] of one axle pair: 1 / (4 (l_r^2 / C_f +
+        l_f^2 / C_r) / l^2), from the front and rear axle's C_f, C_r [N/rad] and the axle distances l_f, l_r, l [m]."""
         p = self._p
-        truth["cornering_stiffness"] = 1.0 / (4.0 * (p["cg_to_rear"] ** 2 / truth["cornering_stiffness_front"]
-                                                    + p["cg_to_front"] ** 2 / truth["cornering_stiffness_rear"])
-                                              / p["wheelbase"] ** 2)
-        return truth
+        return 1.0 / (4.0 * (p["cg_to_rear"] ** 2 / front + p["cg_to_front"] ** 2 / rear) / p["wheelbase"] ** 2)
 
     def _trip_meta(self, name: str | None) -> dict[str, Any]:
         warn = []
@@ -745,6 +751,8 @@ class Simulator:
         if n == 0:
             raise SimulationError("to_trip: nothing simulated yet (call step() or run() first)")
         self._check_whole_log("to_trip")
+        from roadload.trip import Trip  # here, not at import (see the TYPE_CHECKING import)
+
         measured, truth = self._frames(0, n)
         units = {"t": "s", **self.sensor_model.units}
         truth_units = {c: TRUTH[c].unit for c in truth.columns}
@@ -769,7 +777,7 @@ class Simulator:
         n_rel = int(self._words[_NLOG])
         stop = self._log_base + n_rel
         if stop > self._flushed:
-            measured, truth = self._frames(self._flushed, stop, views=True)
+            measured, truth = self._chunk_columns(self._flushed, stop)
             writer.write(measured, truth)
             self._flushed = stop
         keep = self.sensor_model.max_delay + self.sensor_model.decimation

@@ -8,13 +8,16 @@ project. ``cycle_position`` / ``speed_at_position`` / ``cycle_to_profile`` give 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from roadload.data import shared_data_dir
 
 from .profile import DriveCycle, RoadProfile, RoadProfileError
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 _FASTSIM = "NREL FASTSim python/fastsim/resources/cycles (snapshot bd9111bb)"
 _LICENCE = "Apache-2.0 (NREL FASTSim); the regulatory speed traces are public test procedures"
@@ -48,6 +51,8 @@ def drive_cycles_dir() -> Path:
 
 
 def _read_csv(path: Path, columns: tuple[str, ...]) -> pd.DataFrame:
+    import pandas as pd  # here, not at import: a simulate that follows no drive cycle needs no pandas (45 MB)
+
     if not path.is_file():
         raise FileNotFoundError(f"drive cycle file {path} is missing: check ROADLOAD_DATA / the shared data folder")
     frame = pd.read_csv(path, encoding="utf-8-sig")  # some FASTSim files carry a byte-order mark

@@ -13,15 +13,17 @@ import io
 import json
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from roadload.fileio import write_text
 
 from .profile import DriveCycle, RoadProfile, RoadProfileError
 from .tracks import latlon_to_xy, haversine_distance, profile_from_track
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 PROFILE_FORMAT = "roadload.road_profile"
 CYCLE_FORMAT = "roadload.drive_cycle"
@@ -92,6 +94,8 @@ def save_profile(profile: RoadProfile | DriveCycle, path: str | os.PathLike) -> 
         header = {"version": VERSION, "name": profile.name, "meta": _jsonable(profile.meta), "units": units}
         if stops is not None:
             header["stops"] = stops
+        import pandas as pd  # here, not at import (see _read_frame)
+
         buffer = io.StringIO()
         buffer.write(f"# {kind} {json.dumps(header, allow_nan=False)}\n")
         pd.DataFrame(arrays).to_csv(buffer, index=False, float_format="%.17g", lineterminator="\n")
@@ -205,6 +209,8 @@ def _load_roadload_csv(path: Path, first_line: str) -> RoadProfile | DriveCycle:
         raise ProfileFileError(f"{path}: unsupported version {header.get('version')!r} (expected {VERSION})")
     _check_units(path, header.get("units"), PROFILE_UNITS if kind == PROFILE_FORMAT else CYCLE_UNITS,
                  "header line")
+    import pandas as pd  # here, not at import (see _read_frame)
+
     frame = _read_frame(path, skiprows=1)
     arrays = {}
     for column in frame.columns:
@@ -218,6 +224,8 @@ def _load_roadload_csv(path: Path, first_line: str) -> RoadProfile | DriveCycle:
 
 
 def _read_frame(path: Path, skiprows: int = 0) -> pd.DataFrame:
+    import pandas as pd  # here, not at import: a road from a JSON file needs no pandas (45 MB of a simulate)
+
     try:
         frame = pd.read_csv(path, skiprows=skiprows, encoding="utf-8-sig")
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
@@ -280,6 +288,8 @@ def _column_name(frame: pd.DataFrame, path: Path, role: str, given: str | None, 
 
 def _numeric_column(frame: pd.DataFrame, path: Path, name: str, role: str) -> np.ndarray:
     """A numeric column: an empty cell is a missing value (NaN); text or +-inf is refused with its row."""
+    import pandas as pd  # here, not at import (see _read_frame)
+
     values = pd.to_numeric(frame[name], errors="coerce").to_numpy(float)
     text_bad = np.flatnonzero(np.isnan(values) & frame[name].notna().to_numpy())
     if text_bad.size:
@@ -296,6 +306,8 @@ def _numeric_column(frame: pd.DataFrame, path: Path, name: str, role: str) -> np
 
 def _time_column(frame: pd.DataFrame, path: Path, given: str | None) -> np.ndarray | None:
     """Seconds from the track's time column (numbers [s] or date-times), None without one."""
+    import pandas as pd  # here, not at import (see _read_frame)
+
     name = _column_name(frame, path, "time", given)
     if name is None:
         return None

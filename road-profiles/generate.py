@@ -28,7 +28,6 @@ from functools import lru_cache
 
 import numpy as np
 from roadload.jitcache import cached_njit
-from scipy.ndimage import gaussian_filter1d
 
 from roadload.units import G
 
@@ -112,6 +111,8 @@ def _grade(rng: np.random.Generator, s: np.ndarray, rc: _RoadClass, m: int) -> n
 def _unit_std(sigma: float, pad: int) -> float:
     """Standard deviation of white noise of unit variance after the Gaussian filter of ``sigma`` [samples]
     (root of the sum of the squared filter weights)."""
+    from scipy.ndimage import gaussian_filter1d  # here, not at import: 16 MB a trip simulated from a file never needs
+
     impulse = np.zeros(2 * pad + 1)
     impulse[pad] = 1.0
     return float(np.sqrt(np.sum(gaussian_filter1d(impulse, sigma, mode="constant") ** 2)))
@@ -424,6 +425,8 @@ def long_grades(seed: int, length: float = 12_000.0, step: float = 5.0, speed_li
         knots_g.append(rng.uniform(-0.005, 0.005))
         pos += rng.uniform(500.0, 2000.0)
     tan_grade = np.interp(s, np.asarray(knots_s), np.asarray(knots_g), right=0.0)
+    from scipy.ndimage import gaussian_filter1d  # here, not at import (as in _unit_std)
+
     tan_grade = gaussian_filter1d(tan_grade, 100.0 / step, mode="nearest")
     grade = np.arctan(tan_grade)
     curvature = np.zeros_like(s)

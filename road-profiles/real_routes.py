@@ -11,15 +11,17 @@ from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
-from scipy.ndimage import maximum_filter1d
 
 from roadload.data import shared_data_dir
 
 from .profile import DriveCycle, RoadProfile, RoadProfileError
 from .tracks import DEFAULT_HEADING_WINDOW, haversine_distance, latlon_to_xy, path_length, profile_from_track
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 GRADEIT_TRIPS = {"gradeit_trip1": "sample_trip_1.csv", "gradeit_trip2": "sample_trip_2.csv",
                  "gradeit_trip3": "sample_trip_3.csv", "gradeit_sf_bridge": "SF_bridge_trip_segment.csv"}
@@ -44,6 +46,8 @@ def _folder(name: str) -> Path:
 
 
 def _read(path: Path, columns: tuple[str, ...], **kw) -> pd.DataFrame:
+    import pandas as pd  # here, not at import: a simulate on another road needs no pandas (45 MB)
+
     if not path.is_file():
         raise FileNotFoundError(f"{path} is missing from the shared data folder")
     frame = pd.read_csv(path, **kw)
@@ -83,6 +87,8 @@ def gradeit_route(name: str, step: float = 5.0, limit_window: float = 1000.0) ->
     # running max of the measured speed over limit_window on the profile grid, rounded up to 10 km/h
     grid = profile.distance
     size = int(round(limit_window / (grid[1] - grid[0]))) | 1
+    from scipy.ndimage import maximum_filter1d  # here, not at import: 16 MB a trip simulated from a file never needs
+
     running_max = maximum_filter1d(np.interp(grid, distance, speed), size=size, mode="nearest")
     limit = np.maximum(np.ceil(running_max * 3.6 / 10.0 - 1e-9) * 10.0, 30.0) / 3.6
     return replace(profile, speed_limit=limit)
@@ -106,6 +112,8 @@ def racetrack(track: str, laps: int = 1, step: float = 5.0, lateral_acceleration
     path = _folder("racetrack_geometry") / "tracks" / f"{key}.csv"
     if not path.is_file():
         raise FileNotFoundError(f"{path} is missing from the shared data folder")
+    import pandas as pd  # here, not at import (see _read)
+
     xy = pd.read_csv(path, comment="#", header=None).to_numpy(float)[:, :2]
     if not np.isfinite(xy).all():
         raise RoadProfileError(f"{path.name}: NaN in the centre line")

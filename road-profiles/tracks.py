@@ -19,7 +19,6 @@ import logging
 from typing import Any
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d, median_filter
 
 from .profile import RoadProfile, RoadProfileError
 
@@ -92,6 +91,8 @@ def _gaussian_point_symmetric(values: np.ndarray, sigma_samples: float) -> np.nd
     left = 2 * values[0] - values[1:pad + 1][::-1]
     right = 2 * values[-1] - values[-pad - 1:-1][::-1]
     padded = np.concatenate([left, values, right])
+    from scipy.ndimage import gaussian_filter1d  # here, not at import: 16 MB a trip simulated from a file never needs
+
     out = gaussian_filter1d(padded, sigma_samples, mode="nearest", truncate=4.0)
     return out[pad:pad + values.size]
 
@@ -131,6 +132,8 @@ def remove_spikes(distance, values, *, threshold: float, window: float = 200.0) 
         return values.copy(), 0
     spacing = max(float(np.median(np.diff(distance))), 1e-3)
     size = int(np.clip(window / spacing, 3, max(values.size // 2 * 2 - 1, 3))) | 1
+    from scipy.ndimage import median_filter  # here, not at import (as gaussian_filter1d above)
+
     median = median_filter(values, size=size, mode="nearest")
     bad = np.abs(values - median) > threshold
     if not bad.any():

@@ -93,7 +93,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         from roadload.envs.simulator import simulate
         from roadload.presets import get_preset
         from roadload.road_profiles import DriveCycle, load_profile
-        from roadload.trip import Trip
+        from roadload.trip_storage import trip_file_extent, trip_file_info
         from roadload.vehicle import SensorSpec, load_vehicle, parse_spec
 
         spec = get_preset(vehicle) if vehicle in PRESETS else load_vehicle(vehicle)
@@ -120,15 +120,12 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                             driver=driver, out=out, progress=lambda f: bar.update(
                                 task, completed=f, description=f"{spec.name} on {profile.name}", refresh=True),
                             precision=precision)
-        info = Trip.read_info(path)
-        t_first = None
-        last = None
-        for last in Trip.iter_chunks(path, channels=[], truth_channels=["position"]):  # bounded memory
-            t_first = last.t[0] if t_first is None else t_first
-        if last is None or last.truth is None or t_first is None:
+        info = trip_file_info(path)
+        t_first, t_last, x_end = trip_file_extent(path)  # bounded memory, no frames
+        if x_end is None:
             fail(f"{path}: the streamed trip has no ground-truth position channel")
-        km = float(last.truth["position"].iloc[-1]) / 1000.0
-        duration_s = float(last.t[-1] - t_first)
+        km = float(x_end) / 1000.0
+        duration_s = t_last - t_first
         e = info["meta"]["energy"]["source"]
         use = (f"{e / 3.6e6 / km * 100:.1f} kWh/100 km" if spec.drivetrain.kind == "bev"
                else f"{e / 32.0e6 / km * 100:.1f} l/100 km (fuel at 32 MJ/l)") if km > 0 else "-"
@@ -137,6 +134,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
             typer.secho(f"warning: {w}", fg=typer.colors.YELLOW, err=True)
         if plot:
             from roadload.envs.plotting import plot_trip
+            from roadload.trip import Trip
 
             typer.echo(f"wrote {plot_trip(Trip.load(path), out.with_suffix('.png'))}")
 

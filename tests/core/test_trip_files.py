@@ -167,6 +167,41 @@ def test_chunks_must_follow_each_other_in_time(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_a_chunk_as_column_arrays_writes_the_file_a_dataframe_writes(tmp_path, simulated):
+    """The streamed simulator hands the writer plain arrays (no pandas): the same bytes as the frame path."""
+    from roadload.trip import TripWriter
+    trip = Trip.load(simulated)
+    units, truth_units = dict(trip.units), dict(trip.truth_units)
+    paths = []
+    for name, as_arrays in (("frame", False), ("arrays", True)):
+        path = tmp_path / f"{name}.parquet"
+        with TripWriter(path, units, truth_units, "compact", {"vehicle_speed": 0.01}) as w:
+            for lo, hi in ((0, 2500), (2500, len(trip))):
+                m, tr = trip.measured.iloc[lo:hi], trip.truth.iloc[lo:hi]
+                if as_arrays:
+                    m = {c: m[c].to_numpy() for c in m.columns}
+                    tr = {c: tr[c].to_numpy() for c in tr.columns}
+                w.write(m, tr)
+            w.close(trip.meta)
+        paths.append(path)
+    assert paths[0].read_bytes() == paths[1].read_bytes()
+    with pytest.raises(TripError, match="1-D array of one length"):
+        with TripWriter(tmp_path / "bad.parquet", {"t": "s", "vehicle_speed": "m/s"}, None) as w:
+            w.write({"t": np.arange(5.0), "vehicle_speed": np.arange(4.0)})
+    assert not (tmp_path / "bad.parquet").exists()
+
+
+def test_trip_file_extent_reads_the_first_and_last_rows(tmp_path, hilly_road):
+    """roadload simulate's summary (duration, distance) from two columns equals the whole trip's."""
+    from roadload.trip_storage import trip_file_extent
+    path = simulate("bmw_i3", hilly_road, seed=4, duration=40.0, out=tmp_path / "x.parquet", chunk_seconds=15.0)
+    trip = Trip.load(path)
+    assert trip_file_extent(path) == (trip.t[0], trip.t[-1], trip.true("position")[-1])
+    packed = simulate("bmw_i3", hilly_road, seed=4, duration=40.0, out=tmp_path / "p.parquet", precision="packed")
+    t0, t1, x1 = trip_file_extent(packed)  # an older format: read chunk by chunk
+    assert (t0, t1) == (trip.t[0], trip.t[-1]) and x1 == pytest.approx(trip.true("position")[-1], abs=1e-3)
+
+
 def test_round_significant_keeps_the_named_bits():
     x = np.array([1.0, 1.0 + 2.0 ** -20, -3.14159265, 0.0, np.nan, np.inf, 1e-30], dtype=np.float32)
     y = round_significant(x, 15)

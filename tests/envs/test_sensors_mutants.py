@@ -337,7 +337,7 @@ def test_step_api_window_and_whole_trip_agree_with_every_effect_on():
     np.testing.assert_array_equal(tw, t[start:])
     for c in m.names:
         np.testing.assert_array_equal(ow[c], out[c][start:])
-    assert len(m._cache) <= 4  # a bounded cache of perturbation chunks, whatever the trip length
+    assert len(m._cache) <= 2  # a bounded cache of perturbation chunks, whatever the trip length
 
 
 def test_channels_the_simulator_cannot_produce_are_refused():
@@ -398,14 +398,14 @@ def test_gear_reads_zero_only_while_the_clutch_is_open():
     assert [m.sample(log, k)["gear"] for k in (1, 2, 3)] == [0.0, log[L_GEAR, 1], log[L_GEAR, 2]]
 
 
-def test_perturbation_chunks_are_cached_for_the_step_api_and_the_cache_keeps_the_latest_four():
+def test_perturbation_chunks_are_cached_for_the_step_api_and_the_cache_keeps_the_latest_two():
     m = _model({"accel_x": _exact(noise_std=0.1)})
     log = np.zeros((N_LOG, 6 * CHUNK))
     log[L_T] = np.arange(6 * CHUNK) * 0.01
     first = m._chunk(0)
     assert m._chunk(0) is first  # a step within a chunk reuses its draws
     m.measure(log, 6 * CHUNK)
-    assert sorted(m._cache) == [2, 3, 4, 5]
+    assert sorted(m._cache) == [4, 5]  # the last two: a streamed window's end is the next one's start
     assert m.sample(log, 5 * CHUNK + 7)["accel_x"] == m._cache[5][0][0, 6]
 
 

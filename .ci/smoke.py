@@ -1,0 +1,91 @@
+"""The smoke stage of .ci/run, two jobs at a time: every ``scripts/*.py --quick``, the README's shell commands and
+the docs stage (.ci/docs: site build, the guides' commands with their stored outputs, the examples).
+
+The jobs are independent (each script writes into its own temporary folders; the numba kernels come from the cache
+the test stage filled, which several processes may read and write at once), so two of them share the 2 cores
+instead of waiting for each other. Each job's output goes to its own log; the line per job says its wall time and
+its CPU time (user + system, children included). A failed job prints the end of its log; the jobs already running
+finish, no new one starts, and the stage fails.
+
+    python .ci/smoke.py [--jobs 2] [--workdir DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@dataclass
+class Job:
+    label: str
+    argv: list[str]
+    cwd: Path
+    log: Path
+
+
+def jobs(smoke: Path) -> list[Job]:
+    """The docs stage first (the longest job, so that the scripts fill the other slot meanwhile), the README's
+    commands, then every entry point (a leading _ would mark a file that is not one)."""
+    out = []
+    docs = ROOT / ".ci" / "docs"
+    if docs.is_file() and os.access(docs, os.X_OK):
+        out.append(Job("docs: site build, guides' commands and outputs, examples", [str(docs)], ROOT,
+                       smoke / "docs.log"))
+    out.append(Job("README commands", [sys.executable, str(ROOT / ".ci" / "doc_commands.py"), str(ROOT / "README.md"),
+                                       "--workdir", str(smoke)], smoke, smoke / "readme.log"))
+    for script in sorted((ROOT / "scripts").glob("[!_]*.py")):
+        out.append(Job(f"scripts/{script.name} --quick", [sys.executable, str(script), "--quick"], smoke,
+                       smoke / f"{script.name}.log"))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--jobs", type=int, default=2, help="jobs at a time (2: the CI machine's cores)")
+    ap.add_argument("--workdir", type=Path, default=None, help="folder the scripts run in (default: a new temporary "
+                                                               "folder)")
+    args = ap.parse_args(argv)
+    smoke = args.workdir or Path(tempfile.mkdtemp(prefix="roadload-smoke."))
+    smoke.mkdir(parents=True, exist_ok=True)
+    pending = jobs(smoke)
+    running: dict[int, tuple[Job, subprocess.Popen, float]] = {}
+    failed: list[Job] = []
+    t_stage, cpu_total = time.perf_counter(), 0.0
+    while pending or running:
+        while pending and not failed and len(running) < max(1, args.jobs):
+            job = pending.pop(0)
+            with job.log.open("wb") as log:
+                proc = subprocess.Popen(job.argv, cwd=job.cwd, stdout=log, stderr=subprocess.STDOUT)
+            running[proc.pid] = (job, proc, time.perf_counter())
+        if not running:
+            break
+        pid, status, usage = os.wait4(-1, 0)
+        if pid not in running:
+            continue
+        job, proc, start = running.pop(pid)
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        cpu = usage.ru_utime + usage.ru_stime
+        cpu_total += cpu
+        wall = time.perf_counter() - start
+        if proc.returncode == 0:
+            print(f"ok: {job.label} ({wall:.0f} s, {cpu:.0f} s CPU)", flush=True)
+            continue
+        failed.append(job)
+        print(f"FAILED: {job.label} (exit {proc.returncode}, {wall:.0f} s); the end of {job.log}:", flush=True)
+        print("\n".join(job.log.read_text(errors="replace").splitlines()[-40:]), flush=True)
+    print(f"smoke stage: {time.perf_counter() - t_stage:.0f} s wall, {cpu_total:.0f} s CPU "
+          f"({len(failed)} failed, {len(pending)} not started)")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

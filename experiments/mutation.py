@@ -46,8 +46,7 @@ MODULES: dict[str, tuple[str, ...]] = {
     "experiments/time_matching.py": ("tests/experiments/test_time_matching.py",
                                      "tests/experiments/test_time_matching_search.py"),
     "controllers/mpc.py": ("tests/controllers/test_mpc_mutants.py",),
-    "controllers/mpc_controller.py": ("tests/controllers/test_mpc.py", "tests/controllers/test_mpc_feasibility.py",
-                                      "tests/controllers/test_command_jerk.py"),
+    "controllers/mpc_controller.py": ("tests/controllers/test_mpc_controller_mutants.py",),
     "envs/sensors.py": ("tests/envs/test_sensors_mutants.py", "tests/envs/test_sensor_noise.py"),
 }
 

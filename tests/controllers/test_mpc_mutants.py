@@ -5,6 +5,7 @@ paths, and each kind of relaxed or infeasible report with its numbers. Fast enou
 ``controllers/mpc.py`` (``scripts/mutation_score.py``)."""
 
 import math
+from dataclasses import replace
 
 import casadi as ca
 import numpy as np
@@ -411,7 +412,11 @@ def test_ipopt_plan_accelerates_to_the_cap_within_the_comfort_limits_and_is_sile
                                                                  0.0, preview(15.0), PARAMS, 20000.0))), rel=1e-9)
     assert 0 < plan.iterations < 100 and plan.cpu_time >= 0.0 and plan.solve_time >= 0.0
     assert plan.lam_x.shape == (4 * N + 1,) and plan.lam_g.shape == (5 * N,)
-    assert capfd.readouterr().out == ""  # the solver prints nothing
+    ocp.solve(10.0, 0.0, preview(15.0), PARAMS, warm=plan)
+    qp = solver(solver="osqp")
+    qp.solve(10.0, 0.0, preview(15.0), PARAMS, warm=qp.solve(10.0, 0.0, preview(15.0), PARAMS))
+    out = capfd.readouterr()
+    assert out.out == "" and out.err == ""  # neither solver prints, cold or warm
 
 
 def test_time_weight_per_solve_overrides_the_settings():
@@ -659,3 +664,70 @@ def test_diagnose_without_a_usable_point_names_the_solver():
     no_x = Plan(s=pv.s, v=np.ones(N + 1), t=np.zeros(N + 1), traction=np.zeros(N), regen=np.zeros(N),
                 brake=np.zeros(N), success=False, status="s", solve_time=0.0, iterations=0, solver_status="gone")
     assert ocp.diagnose(no_x, 0.0, pv, PARAMS)[0].detail == "gone"
+
+
+def test_reach_at_a_node_past_the_floor_and_inside_a_ramp():
+    ocp = OcpSolver(settings(n_nodes=10), EV)
+    s = DS * np.arange(11)
+    # from 5 m/s at -2 m/s^2 the floor (1 m/s) is reached at node 1: a line on node 2 is reached at the floor
+    assert ocp._reach_at(5.0, -2.0, s, 40.0) == 1.0
+    # 10 m into segment 1 of the jerk ramp from 20.5 m/s: segment 1's -2 m/s^2, not segment 0's -1.95
+    speed, accel = ocp._braking(20.5, 11, 0.0)
+    expect = math.sqrt(2 * (0.5 * speed[1] ** 2 - 2.0 * 10.0))
+    assert accel[0] == pytest.approx(-40.0 / 20.5) and accel[1] == -2.0
+    assert ocp._reach_at(20.5, 0.0, s, 30.0) == pytest.approx(expect, rel=1e-12)
+    assert ocp._reach_at(20.5, 0.0, s[:3], 30.0) == pytest.approx(expect, rel=1e-12)  # the last segment
+
+
+def test_force_limit_of_a_power_limited_drive():
+    """At 20 m/s the EV's 125 kW give 6.25 kN, less than its 6.9 kN torque limit; a 3 kW drive at the 1 m/s floor
+    gives 3 kN."""
+    pv = preview(30.0, grade=0.6)
+    for energy, speed, limit in ((EV, 20.0, 125e3 / 20.0), (replace(EV, max_power=3000.0), 1.0, 3000.0)):
+        ocp = OcpSolver(settings(), energy)
+        x = np.concatenate([np.full(N + 1, 0.5 * speed ** 2), np.full(N, 1.0), np.zeros(2 * N)])
+        plan = ocp._plan_from_x(x, pv, False, "x", 0.0, 0, 0.0)
+        (v,) = ocp.diagnose(plan, 0.0, pv, PARAMS)
+        need = float(resistance_force(speed, 0.6, 0.0, PARAMS)) / 1000.0
+        assert v.constraint == "traction_force" and v.limit == pytest.approx(limit / 1000.0, rel=1e-12)
+        assert v.value == pytest.approx(need, rel=1e-9)  # the planned 1 kN plus the residual: all the balance needs
+
+
+def test_initial_guess_brakes_from_node_1_and_keeps_the_current_state():
+    ocp = solver()
+    cap = np.array([30.0, 30.0, 5.0, 30.0, 30.0, 30.0, 30.0])
+    x = ocp.initial_guess(15.0, preview(cap), PARAMS)
+    v = np.sqrt(2 * x[:N + 1])
+    reach2 = ocp.reachable_cap(15.0, preview(cap))[2]  # 5 m/s is out of reach: the relaxed cap
+    assert v[0] == 15.0 and v[2] == pytest.approx(reach2)
+    assert v[1] == pytest.approx(math.sqrt(reach2 ** 2 + 40.0))  # backward pass at half decel_max
+
+
+def test_plan_of_a_standing_car_has_finite_times():
+    ocp = solver()
+    plan = ocp._plan_from_x(np.zeros(4 * N + 1), preview(), False, "", 0.0, 0, 0.0)
+    np.testing.assert_allclose(plan.t, DS / 1e-6 * np.arange(N + 1))
+
+
+def test_three_violations_are_listed_without_a_summary():
+    ocp = OcpSolver(settings(n_nodes=10), EV)
+    cap = np.array([30.0, 22.0, 30.0, 16.0, 30.0, 11.0, 30.0, 30.0, 30.0, 30.0, 30.0])
+    plan = ocp.solve(25.0, 0.0, preview(cap, n=10), PARAMS)
+    assert len(plan.violations) == 3 and "more)" not in plan.status
+    assert plan.status == "relaxed: " + "; ".join(v.describe() for v in plan.violations) + \
+        " [solver: Solve_Succeeded]"
+
+
+def test_a_warm_plan_without_multipliers_starts_cold():
+    ocp = solver(time_weight=6000.0)
+    pv = preview(np.array([30.0, 30.0, 30.0, 16.0, 16.0, 30.0, 30.0]))
+    cold = ocp.solve(14.0, 0.0, pv, PARAMS)
+    cold.lam_g = None
+    again = ocp.solve(14.0, 0.0, pv, PARAMS, warm=cold)
+    assert again.iterations == ocp.solve(14.0, 0.0, pv, PARAMS).iterations > 2
+    # a QP solver's first solve may start from another solver's plan (no workspace yet)
+    qp = solver(time_weight=6000.0, solver="osqp", sqp_iterations=8, qp_tolerance=1e-6)
+    cold.lam_g = None
+    from_ipopt = qp.solve(14.0, 0.0, pv, PARAMS, warm=cold)
+    assert from_ipopt.success
+    np.testing.assert_allclose(from_ipopt.v, cold.v, atol=0.02)

@@ -622,3 +622,72 @@ def test_gear_request_only_with_the_gear_command_on_an_ice_above_the_minimum_spe
     assert ctl.gear_request(obs(0.0, 0.0, 12.3)) == 2  # held within the band of the 12 m/s shift
     assert ctl.gear_request(obs(0.0, 0.0, 12.6)) == 3
     assert ctl.gear_request(obs(0.0, 0.0, 3.0)) is None and ctl._gear is None
+
+
+# ------------------------------------------------------------------------------------------------ counts and edges
+def test_each_fallback_is_counted_and_cruise_control_restarts_only_when_entered():
+    ctl = controller(road(), min_plan_left=100.0)
+    ctl.wheel_force(obs(0.0, 0.0, 12.0))
+    plan = ctl.plan
+    for k in range(2):
+        ctl._fall_back(obs(1.0 + k, 10.0 + k, float(plan.speed_at(10.0 + k))))
+    assert (ctl.events["solver_failures"], ctl.events["fallback_shifted_plan"]) == (2, 2)
+    ctl._fall_back(obs(3.0, 70.0, 11.0))  # 90 m of plan left: cruise control, started bumplessly at 11 m/s
+    assert ctl.mode == "cruise" and ctl.cruise.v_ref == 11.0 and ctl.cruise.integral == 0.0
+    ctl.cruise.integral, ctl.cruise.v_ref = 0.3, 11.5  # as after some cruise-control steps
+    ctl._fall_back(obs(4.0, 80.0, 11.0))
+    assert ctl.cruise.integral == 0.3 and ctl.cruise.v_ref == 11.5  # already cruising: no restart
+    assert (ctl.events["solver_failures"], ctl.events["fallback_cruise"]) == (4, 2)
+
+
+def test_fallback_brake_edges():
+    ctl = controller(road())
+    ctl.wheel_force(obs(0.0, 0.0, 12.0))
+    res = 200.0
+    # half a metre before the cap it still brakes; exactly 2 m/s^2 needed is still the comfort brake
+    ctl._brake_target = ConstraintViolation("speed_cap", 10.5, 10.0, 12.0, "m/s")
+    assert ctl._fallback_brake(obs(0.1, 10.0, 10.2), res, M) == pytest.approx(res - M * 4.04)
+    assert ctl.mode == "emergency"  # (10.2^2 - 10^2) / (2 * 0.5) = 4.04 m/s^2
+    ctl._brake_target = ConstraintViolation("speed_cap", 11.0, 10.0, 12.0, "m/s")
+    for _ in range(2):
+        assert ctl._fallback_brake(obs(0.1, 0.0, 12.0), res, M) == pytest.approx(res - M * 2.0)
+    assert ctl.mode == "brake" and ctl.events["comfort_brake_steps"] == 2
+    assert ctl.events["emergency_brake_steps"] == 1
+
+
+def test_multistart_alternates_before_the_scheduled_segment_and_is_slower_when_on_time(monkeypatch):
+    sched = TripSchedule(start=400.0, end=500.0, duration=10.0)
+    ctl = controller(road(), multistart_period=0.5, schedule=sched)
+    calls = record_targets(monkeypatch, ctl)
+    ctl.wheel_force(obs(0.0, 0.0, 10.0))
+    for t in (1.0, 2.0):
+        mean = float(np.mean(ctl.plan.v))
+        ctl.wheel_force(obs(t, 10.0 * t, 10.0))
+        assert calls[-1] == pytest.approx(mean + (4.0 if t == 1.0 else -4.0))  # not yet at the start: alternating
+    on_time = TripSchedule(start=0.0, end=500.0, duration=50.0)
+    ctl = controller(road(), multistart_period=0.5, schedule=on_time)
+    calls = record_targets(monkeypatch, ctl)
+    ctl.wheel_force(obs(0.0, 0.0, 10.0))
+    mean = float(np.mean(ctl.plan.v))
+    ctl.wheel_force(obs(1.0, 10.0, 10.0))  # 10 m at 1 s: exactly on schedule -> not late -> slower
+    assert ctl._late == 0.0 and calls[-1] == pytest.approx(mean - 4.0)
+
+
+def test_worst_violation_keeps_the_first_of_equal_amounts_and_a_larger_cap_over_a_smaller_stop():
+    ctl = controller(road())
+    cap = ConstraintViolation("speed_cap", 20.0, 10.0, 15.0, "m/s")
+    ctl._record_worst((cap, ConstraintViolation("stop", 30.0, 1.0, 2.0, "m/s"),
+                       ConstraintViolation("speed_cap", 40.0, 10.0, 15.0, "m/s")))
+    assert ctl._worst is cap
+
+
+def test_serving_a_stop_keeps_one_a_metre_apart_and_tells_cruise_control():
+    ctl = controller(road(stops=(50.0, 50.9)))
+    ctl.serve_stop(0)
+    assert ctl._unserved == [50.9] and ctl.cruise.reference.served[0] and not ctl.cruise.reference.served[1]
+
+
+def test_schedule_edges():
+    assert TripSchedule(start=0.0, end=100.0, duration=10.0, time_floor=0.5).time_floor == 0.5
+    pi = TripSchedule(start=0.0, end=1000.0, duration=100.0, gain=20.0, integral_gain=0.01)
+    assert pi.time_weight(1000.0, 52.0, 500.0, 0.0) == pytest.approx(1000.0 * math.exp(0.8))  # no integral yet

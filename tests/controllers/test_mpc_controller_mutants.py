@@ -441,13 +441,16 @@ def test_an_unconverged_plan_is_counted_and_never_applied(monkeypatch):
 
 
 # ------------------------------------------------------------------------------------------------ multistart
-def record_targets(monkeypatch, ctl):
-    """The target_speed of every solve the controller asks for (None: the warm-started solve)."""
+def record_targets(monkeypatch, ctl, weights=None):
+    """The target_speed of every solve the controller asks for (None: the warm-started solve); the time weight of
+    each appended to ``weights``."""
     calls = []
     real = ctl.ocp.solve
 
     def spy(*args, **kw):
         calls.append(kw.get("target_speed"))
+        if weights is not None:
+            weights.append(kw.get("time_weight"))
         return real(*args, **kw)
     monkeypatch.setattr(ctl.ocp, "solve", spy)
     return calls
@@ -478,7 +481,8 @@ def test_multistart_keeps_the_lower_objective(monkeypatch):
     def biased(*args, **kw):  # the cold start's objective set to the warm one's less better["by"]
         plan = real(*args, **kw)
         if kw.get("target_speed") is not None:
-            plan.objective = warm["objective"] - better["by"]
+            w = warm["objective"]
+            plan.objective = w - 1e-6 * abs(w) if better["by"] == "tie" else w - better["by"]
             plan.status = "alternative"
         else:
             warm["objective"] = plan.objective
@@ -493,8 +497,11 @@ def test_multistart_keeps_the_lower_objective(monkeypatch):
     better["by"] = 0.5e-6 * abs(ctl.plan.objective)
     ctl.wheel_force(obs(3.0, 36.0, 12.0))
     assert ctl.stats()["multistart_switches"] == 1
-    better["by"] = 2e-6 * abs(ctl.plan.objective)
+    better["by"] = "tie"  # exactly 1e-6 of it: not worth it either
     ctl.wheel_force(obs(4.0, 48.0, 12.0))
+    assert ctl.stats()["multistart_switches"] == 1
+    better["by"] = 2e-6 * abs(ctl.plan.objective)
+    ctl.wheel_force(obs(5.0, 60.0, 12.0))
     assert ctl.stats()["multistart_switches"] == 2
 
 
@@ -518,14 +525,17 @@ def test_multistart_replaces_a_failed_warm_solve(monkeypatch):
 def test_multistart_follows_the_schedule_lateness(monkeypatch):
     sched = TripSchedule(start=0.0, end=500.0, duration=50.0)
     ctl = controller(road(), multistart_period=0.5, multistart_step=2.0, schedule=sched)
-    calls = record_targets(monkeypatch, ctl)
+    weights = []
+    calls = record_targets(monkeypatch, ctl, weights)
     ctl.wheel_force(obs(0.0, 0.0, 10.0))
     mean = float(np.mean(ctl.plan.v))
-    ctl.wheel_force(obs(1.0, 5.0, 10.0))  # 5 m in 1 s: behind the 10 m/s schedule -> faster
-    assert calls[-1] == pytest.approx(mean + 2.0)
-    mean = float(np.mean(ctl.plan.v))
-    ctl.wheel_force(obs(2.0, 40.0, 10.0))  # ahead -> slower
+    ctl.wheel_force(obs(1.0, 15.0, 10.0))  # 15 m in 1 s: ahead of the 10 m/s schedule -> slower
     assert calls[-1] == pytest.approx(mean - 2.0)
+    mean = float(np.mean(ctl.plan.v))
+    ctl.wheel_force(obs(2.0, 16.0, 10.0))  # 16 m in 2 s: behind -> faster
+    assert calls[-1] == pytest.approx(mean + 2.0)
+    # both starts plan with the scheduled time weight of this step (raised: 0.4 s late)
+    assert weights[-1] == weights[-2] == ctl.time_weights[-1] > 8000.0
 
 
 # ------------------------------------------------------------------------------------------------ time weight

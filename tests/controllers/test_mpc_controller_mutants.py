@@ -634,8 +634,9 @@ def test_gear_request_only_with_the_gear_command_on_an_ice_above_the_minimum_spe
     ctl = controller(road(), energy=ice, gear_command=True, gear_min_speed=6.0, gear_band=0.5)
     assert ctl.gear_request(obs(0.0, 0.0, 5.9)) is None
     assert ctl.gear_request(obs(0.0, 0.0, 6.0)) == 2
-    assert ctl.gear_request(obs(0.0, 0.0, 12.3)) == 2  # held within the band of the 12 m/s shift
-    assert ctl.gear_request(obs(0.0, 0.0, 12.6)) == 3
+    # the transmission engaged gear 2: held within the band of the 12 m/s shift, then up
+    assert ctl.gear_request(Observation(t=0.1, s=1.0, v=12.3, a=0.0, gear=2)) == 2
+    assert ctl.gear_request(Observation(t=0.2, s=2.0, v=12.6, a=0.0, gear=2)) == 3
     assert ctl.gear_request(obs(0.0, 0.0, 3.0)) is None and ctl._gear is None
 
 

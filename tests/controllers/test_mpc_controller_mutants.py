@@ -219,6 +219,7 @@ def test_first_command_follows_the_plan_with_speed_feedback_and_lookahead():
     assert k == 2 and plan.wheel_force[2] < plan.wheel_force[1] - 300.0
     assert force == pytest.approx(plan.wheel_force[2] + M * 0.5 * (plan.speed_at(0.0) - 12.0))
     assert ctl.reference_speed(o) == plan.speed_at(0.0)
+    assert controller(road()).reference_speed(obs(0.0, 0.0, 7.0)) == 7.0  # no plan yet: the measured speed
     # between re-plans the plan is tracked: 1.5 m/s below the plan's speed adds m k_v 1.5, jerk-limited
     o2 = obs(0.1, 1.2, plan.speed_at(1.2) - 1.5)
     f2 = ctl.wheel_force(o2)
@@ -293,6 +294,7 @@ def test_a_cap_reachable_only_at_full_comfort_braking_gets_the_comfort_brake():
     # braking re-plans every step, whatever the period
     ctl.wheel_force(obs(0.1, 2.0, 19.8, a=-2.0))
     assert ctl.stats()["solves"] == 2 and ctl.mode == "mpc"  # from -2 m/s^2 the cap is within the plan's reach
+    assert ctl._brake_target is None
     # the comfort brake is ramped from the previous command at the jerk limit
     ramp = controller(road(low=(100.0, 600.0, 10.0)))
     ramp._last_force = 0.0

@@ -312,7 +312,7 @@ def test_a_cap_beyond_comfort_braking_gets_the_emergency_brake_without_the_jerk_
     required = (400.0 - 100.0) / (2.0 * target.position)
     assert required > 2.0 and ctl.mode == "emergency"
     assert f0 == pytest.approx(ctl.resistance(20.0, 0.0) - M * required)
-    assert ctl.stats()["emergency_brake_steps"] == 1
+    assert ctl.stats()["emergency_brake_steps"] == 1 and ctl._last_force == f0  # the next command ramps from it
     # capped at the context's emergency deceleration (6 m/s^2), and not ramped from the previous command
     f1 = ctl.wheel_force(obs(0.1, 2.0, 25.0, a=-3.0))
     t1 = ctl._brake_target
@@ -347,8 +347,10 @@ def test_the_fallback_brake_ends_when_its_target_is_met_or_passed(monkeypatch):
     raw = ctl.plan.wheel_force[ctl.plan.segment_at(50.0 + 9.0 * 0.3)] + M * (ctl.plan.speed_at(50.0) - 9.0)
     assert force == pytest.approx(min(raw, ctl.resistance(9.0, 50.0) + M * 1.5)) and raw > force  # comfort bound
     ctl._brake_target, ctl.mode, ctl.plan = cap, "emergency", None
+    ctl.cruise.v_ref, ctl.cruise.integral = 15.0, 0.5  # a cruise-control state from long ago
     ctl.wheel_force(obs(0.3, 60.0, 9.0))
     assert ctl.mode == "cruise" and ctl._brake_target is None
+    assert ctl.cruise.v_ref < 9.5 and abs(ctl.cruise.integral) < 0.1  # restarted from the current 9 m/s
     assert ctl._fallback_brake(obs(0.3, 60.0, 9.0), res, M) is None  # no target
 
 

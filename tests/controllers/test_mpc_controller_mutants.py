@@ -180,12 +180,20 @@ def test_preview_of_a_stop_at_and_just_behind_the_start():
 
 
 def test_preview_to_the_route_end_collapses_the_nodes_past_it():
-    rd = road(length=100.0)
+    rd = road(length=100.0, grade=lambda s: 1e-3 * s)
     ctl = controller(rd, mpc={"horizon_to_route_end": True})
     pv = ctl.preview(30.0, 10.0)
     np.testing.assert_allclose(pv.s[:4], [30.0, 50.0, 70.0, 90.0])
     np.testing.assert_allclose(pv.s[4:], 100.0 + 1e-3 * np.arange(1, 6))
     np.testing.assert_allclose(pv.ds, np.diff(pv.s))
+    # grade at each segment's midpoint: 90 -> 100.001 m has its middle at 95.0005 m, the collapsed ones at the end
+    np.testing.assert_allclose(pv.grade, 1e-3 * np.array([40.0, 60.0, 80.0, 95.0005, 100.0, 100.0, 100.0, 100.0]))
+    on_node = ctl.preview(20.0, 10.0)  # a node exactly at the road end stays there
+    np.testing.assert_allclose(on_node.s[3:6], [80.0, 100.0, 100.001])
+    last = controller(road(length=150.0), mpc={"horizon_to_route_end": True}).preview(0.0, 10.0)
+    assert last.s[-2] == 140.0 and last.s[-1] == pytest.approx(150.001)  # only the last node is beyond
+    ends = controller(road(length=160.0), mpc={"horizon_to_route_end": True}).preview(0.0, 10.0)
+    assert ends.ds is None and ends.s[-1] == 160.0  # the horizon ends exactly at the road end
     open_end = controller(rd).preview(30.0, 10.0)
     assert open_end.ds is None and open_end.s[-1] == 190.0
     inside = controller(road(length=400.0), mpc={"horizon_to_route_end": True}).preview(0.0, 10.0)
@@ -363,6 +371,7 @@ def test_brake_target_is_the_stop_or_cap_needing_the_hardest_braking():
     plan.violations = (viol("speed_margin", 50.0, 5.0, 9.0), viol("speed_cap", 5.0, 5.0, 9.0),
                        viol("speed_cap", 60.0, 25.0, 26.0), viol("speed_cap", 70.0, 8.0, 8.0),
                        viol("jerk", 30.0, 2.0, 3.0))
+    plan.violations += (viol("speed_cap", 10.0, 5.0, 9.0), viol("stop", 90.0, 20.0, 25.0))  # here; at this speed
     assert MpcController._brake_target_of(plan, o) is None  # margin only, behind, above the speed, met, not a cap
     a, b = viol("speed_cap", 110.0, 10.0, 15.0), viol("stop", 210.0, 1.0, 9.0)
     plan.violations += (a, b)
@@ -373,6 +382,10 @@ def test_brake_target_is_the_stop_or_cap_needing_the_hardest_braking():
     assert MpcController._brake_target_of(plan, o) is c
     # at 11 m/s the 12 m/s cap is met; the stop (120 / 400) needs more than the 10 m/s cap (21 / 200)
     assert MpcController._brake_target_of(plan, obs(0.0, 10.0, 11.0)) is b
+    # far along the road: a cap 10 m ahead (76 / 20) needs more than a stop 200 m ahead (399 / 400)
+    near, far = viol("speed_cap", 1010.0, 18.0, 19.0), viol("stop", 1200.0, 1.0, 5.0)
+    plan.violations = (far, near)
+    assert MpcController._brake_target_of(plan, obs(0.0, 1000.0, 20.0)) is near
 
 
 def test_worst_violation_prefers_stops_and_caps_by_amount():
@@ -596,17 +609,18 @@ def test_time_weight_is_fixed_without_a_schedule():
 def test_scheduled_time_weight_from_the_interpolated_crossing_of_start():
     sched = TripSchedule(start=100.0, end=1100.0, duration=100.0, gain=20.0)
     ctl = controller(road(length=1200.0), schedule=sched)
-    assert ctl.time_weight(obs(0.0, 80.0, 10.0)) == 8000.0 and ctl._schedule_start is None
-    # crossed 100 m between (0 s, 80 m) and (4 s, 120 m): at 2 s
+    assert ctl.time_weight(obs(2.0, 80.0, 10.0)) == 8000.0 and ctl._schedule_start is None
+    # crossed 100 m between (2 s, 80 m) and (4 s, 120 m): at 3 s
     lam = ctl.time_weight(obs(4.0, 120.0, 10.0))
-    assert ctl._schedule_start == pytest.approx(2.0)
-    late = 4.0 - (2.0 + 0.02 * 100.0)
-    assert ctl._late == pytest.approx(late) and late == pytest.approx(0.0)
-    assert lam == pytest.approx(8000.0)
-    lam = ctl.time_weight(obs(14.0, 200.0, 10.0))  # scheduled at 12 s: 2 s late with 90 s to go
+    assert ctl._schedule_start == pytest.approx(3.0)
+    late = 4.0 - (3.0 + 0.02 * 100.0)
+    assert ctl._late == pytest.approx(late) and late == pytest.approx(-1.0)
+    lam0 = 8000.0 * math.exp(-20.0 / 98.0)
+    assert lam == pytest.approx(lam0)
+    lam = ctl.time_weight(obs(15.0, 200.0, 10.0))  # scheduled at 13 s: 2 s late with 90 s to go
     assert lam == pytest.approx(8000.0 * math.exp(20.0 * 2.0 / 90.0))
-    assert ctl.time_weights == [pytest.approx(8000.0), lam] and ctl.stats()["time_weight_median"] == \
-        pytest.approx(0.5 * (8000.0 + lam))
+    assert ctl.time_weights == [pytest.approx(lam0), lam] and ctl.stats()["time_weight_median"] == \
+        pytest.approx(0.5 * (lam0 + lam))
     ctl.reset_schedule()
     assert ctl._schedule_start is None and ctl.time_weights == [] and ctl._late == 0.0
     # a first solve already past the start takes that moment; a stand-still at start too

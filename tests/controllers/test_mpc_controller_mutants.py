@@ -179,6 +179,26 @@ def test_preview_of_a_stop_at_and_just_behind_the_start():
     assert list(ctl.preview(40.0 - 161.0, 5.0).stops) == []
 
 
+def test_preview_stop_edges():
+    ctl = controller(road(stops=(40.0, 300.0)))
+    # exactly 1 m past the line: still in view (node 0 and segment 0 capped); 2 m past: gone
+    on = ctl.preview(41.0, 0.5)
+    assert list(on.stops) == [40.0] and on.speed_cap[0] == 1.0
+    np.testing.assert_allclose(on.segment0_cap, 1.0)
+    off = ctl.preview(42.0, 0.5)
+    assert list(off.stops) == [] and off.speed_cap[0] == 20.0
+    np.testing.assert_allclose(off.segment0_cap, 20.0)
+    assert list(ctl.preview(39.5, 3.0).stops) == [40.0]  # half a metre before it
+    # the line exactly at the end of segment 0: its last sample capped
+    np.testing.assert_allclose(ctl.preview(20.0, 10.0).segment0_cap, [20.0] * 9 + [1.0])
+    # samples of segment 0 half a metre before the line are not capped (33.5, ..., 39.5 | 41.5, ... m)
+    np.testing.assert_allclose(ctl.preview(31.5, 10.0).segment0_cap, [20.0] * 4 + [1.0] * 6)
+    # the line exactly at the horizon end caps the last node; inside the last segment the last two
+    horizon = ctl.preview(40.0 - 160.0, 10.0)
+    assert horizon.speed_cap[-1] == 1.0 and horizon.speed_cap[-2] == 20.0
+    np.testing.assert_allclose(ctl.preview(40.0 - 150.0, 10.0).speed_cap[-3:], [20.0, 1.0, 1.0])
+
+
 def test_preview_to_the_route_end_collapses_the_nodes_past_it():
     rd = road(length=100.0, grade=lambda s: 1e-3 * s)
     ctl = controller(rd, mpc={"horizon_to_route_end": True})

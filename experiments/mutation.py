@@ -56,6 +56,80 @@ _NO_UNITS = ("TripPayload's fields carry no unit and it allows extra keys, so fo
 _RAISE = 'raise TripMetadataError(f"{{path}}: {{format_errors(exc, {})}}") from None'
 _PAYLOAD = "x_parse_trip_payload: " + _RAISE.format("TripPayload, root='metadata'") + " -> "
 _XP = "numpy's sin and cos of a CasADi expression call the expression's own, so xp=np gives the same force"
+_MPC_FLOAT = "float() converts the element it picks anyway"
+_MPC_CTL = "xǁMpcControllerǁ"
+_CAP_LINE = "cap[max(k, 0):min(k + 2, n + 1)] = st.stop_speed"
+_SEG0 = "seg0 = np.where(s0 + SEGMENT0_FRACTIONS * ds {} stop - 1e-9, np.minimum(seg0, st.stop_speed), seg0)"
+_STOPS = "stops = np.array([x for x in self._unserved if s[0] - 1.0 <= x <= s[-1]], {})"
+_UNSERVED = "self._unserved = list(np.sort(np.asarray(road.stops, {})))"
+_CRUISE = 'elif self.mode == "cruise" or self.plan is None:'
+_NO_PLAN_CRUISE = ("where this branch is reached the mode is 'cruise' exactly when there is no plan: a fallback to "
+                   "cruise control drops the plan, a solve that gives one sets 'mpc', the brake modes return earlier")
+MPC_EQUIVALENT: dict[str, str] = {
+    "xǁOcpSolverǁ_force_limit: if residual > 0: -> if residual >= 0:":
+        "diagnose calls it only for a force-balance residual larger than 1e-4 kN in size, never 0",
+    "xǁOcpSolverǁ_force_limit: limit = min(float(np.asarray(en.max_traction_force(None, preview.ratio), float)[k]), "
+    "-> limit = min(float(np.asarray(en.max_traction_force(None, preview.ratio), None)[k]),": _MPC_FLOAT,
+    "xǁOcpSolverǁ_force_limit: limit = min(float(np.asarray(en.max_traction_force(None, preview.ratio), float)[k]), "
+    "-> limit = min(float(np.asarray(en.max_traction_force(None, preview.ratio), )[k]),": _MPC_FLOAT,
+    "xǁOcpSolverǁ_force_limit: regen = np.broadcast_to(np.asarray(en.max_regen_force(preview.ratio), float), "
+    "np.shape(preview.ratio)) -> regen = np.broadcast_to(np.asarray(en.max_regen_force(preview.ratio), None), "
+    "np.shape(preview.ratio))": _MPC_FLOAT,
+    "xǁOcpSolverǁ_force_limit: regen = np.broadcast_to(np.asarray(en.max_regen_force(preview.ratio), float), "
+    "np.shape(preview.ratio)) -> regen = np.broadcast_to(np.asarray(en.max_regen_force(preview.ratio), ), "
+    "np.shape(preview.ratio))": _MPC_FLOAT,
+}
+MPC_CONTROLLER_EQUIVALENT: dict[str, str] = {
+    _MPC_CTL + "_multistart: ref = self.plan if self.plan is not None else plan -> "
+    "ref = self.plan if (self.plan is not None) or True else plan":
+        "_solve runs the multistart only when there is a previous plan, so ref is always that plan",
+    _MPC_CTL + "serve_stop: self._unserved = [x for x in self._unserved if abs(x - stop) > 1e-9] -> "
+    "self._unserved = [x for x in self._unserved if abs(x - stop) >= 1e-9]":
+        "the served stop is in the list exactly (distance 0); no other stop lies exactly 1e-9 m from it",
+    _MPC_CTL + '_replan: if self.mode != "mpc": -> if self.mode != "XXmpcXX":':
+        "the mode becomes 'mpc' either way: setting it when it already is changes nothing",
+    _MPC_CTL + '_replan: if self.mode != "mpc": -> if self.mode != "MPC":':
+        "the mode becomes 'mpc' either way: setting it when it already is changes nothing",
+    _MPC_CTL + "_solve: plan, ok = None, False -> plan, ok = None, True":
+        "ok is read only together with a plan (_replan: ok and plan is not None)",
+    _MPC_CTL + f"wheel_force: {_CRUISE} -> " + _CRUISE.replace(" or ", " and "): _NO_PLAN_CRUISE,
+    _MPC_CTL + f"wheel_force: {_CRUISE} -> " + _CRUISE.replace('"cruise"', '"XXcruiseXX"'): _NO_PLAN_CRUISE,
+    _MPC_CTL + f"wheel_force: {_CRUISE} -> " + _CRUISE.replace('"cruise"', '"CRUISE"'): _NO_PLAN_CRUISE,
+    _MPC_CTL + "_brake_target_of: return max(hard, key=lambda v: (obs.v ** 2 - v.limit ** 2) / (2.0 * (v.position "
+    "- obs.s))) -> return max(hard, key=lambda v: (obs.v ** 2 - v.limit ** 2) / (3.0 * (v.position - obs.s)))":
+        "every key scaled by the same positive factor: the same maximum",
+    _MPC_CTL + "preview: cap = np.array([self._fine_cap[a:max(b, a + 1)].min() for a, b in zip(lo, hi)]) -> "
+    "cap = np.array([self._fine_cap[a:max(b, a + 2)].min() for a, b in zip(lo, hi)])":
+        "from s0 >= 0 every node's window holds 11 or more samples of the 2 m grid (which runs a horizon and two "
+        "segments past the road end), so max(b, a + 1) is b",
+    _MPC_CTL + f"preview: {_CAP_LINE} -> " + _CAP_LINE.replace("n + 1", "n + 2"):
+        "a slice that ends past the array's end is the same slice",
+    _MPC_CTL + "preview: " + _SEG0.format(">=") + " -> " + _SEG0.format(">"):
+        "a sample at the line lies 1e-9 m above stop - 1e-9 either way",
+    _MPC_CTL + "preview: v_guess = np.full(n, max(v0, st.speed_floor)) -> v_guess = np.full(n, None)":
+        "the guessed speed only picks an EV's single ratio (an ICE's bound takes its lowest gear): any speed gives "
+        "the same ratio",
+    _MPC_CTL + 'preview: ratio = np.full(n, en.gear_ratios[0]) if en.kind == "ice" else '
+    'en.ratio_for_speed(v_guess)  # ICE: lowest -> ratio = np.full(n, en.gear_ratios[0]) if (en.kind == "ice") '
+    'or True else en.ratio_for_speed(v_guess)  # ICE: lowest': "an EV has one ratio, gear_ratios[0]",
+    _MPC_CTL + "preview: " + _STOPS.format("dtype=float") + " -> " + _STOPS.format("dtype=None"):
+        "stop positions are floats: the array is float anyway",
+    _MPC_CTL + "preview: " + _STOPS.format("dtype=float") + " -> " + _STOPS.format(""):
+        "stop positions are floats: the array is float anyway",
+    _MPC_CTL + "reset: self._next_replan = -np.inf -> self._next_replan = +np.inf":
+        "the first step solves anyway (no plan in mpc mode) and sets the next re-plan time from then on",
+    _MPC_CTL + "reset: " + _UNSERVED.format("dtype=float") + " -> " + _UNSERVED.format("dtype=None"):
+        "RoadProfile stores its stops as a float array",
+    _MPC_CTL + "reset: " + _UNSERVED.format("dtype=float") + " -> " + _UNSERVED.format(""):
+        "RoadProfile stores its stops as a float array",
+    _MPC_CTL + "reset: self._brake_target: ConstraintViolation | None = None  # the stop / cap the fallback brake is "
+    'meeting -> self._brake_target: ConstraintViolation | None = ""  # the stop / cap the fallback brake is meeting':
+        "nothing reads the brake target before the first re-plan sets it",
+    _MPC_CTL + "time_weight: if previous is not None and obs.s > previous[1]:  # interpolate the crossing of "
+    "``start`` -> if previous is not None and obs.s >= previous[1]:  # interpolate the crossing of ``start``":
+        "the branch runs at the crossing, where the previous position lies before start and the current one at or "
+        "past it: never equal",
+}
 _SHARED = ("this branch is taken only when measured and truth share one time base (or there is no truth), which the "
            "writer also finds on its own; both ways write the same file")
 _CHUNKS = "iter_trip_chunks reads 360_000 rows a chunk by default"
@@ -137,6 +211,8 @@ _SENSOR_EQUIVALENT: dict[str, str] = {
 }
 EQUIVALENT: dict[str, dict[str, str]] = {
     "envs/sensors.py": _SENSOR_EQUIVALENT,
+    "controllers/mpc.py": MPC_EQUIVALENT,
+    "controllers/mpc_controller.py": MPC_CONTROLLER_EQUIVALENT,
     "core/trip.py": {
         'xǁTripǁ__post_init__: _check_frame(self.measured, self.units, "measured", truth=False) -> '
         '_check_frame(self.measured, self.units, "measured", truth=None)':

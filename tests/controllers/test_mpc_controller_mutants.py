@@ -13,7 +13,8 @@ import pytest
 from roadload.controllers.base import ControllerError, DriveContext, Observation
 from roadload.controllers.energy import SourceEnergyModel, generic_ev
 from roadload.controllers.force_model import FixedForceModel, OracleForceModel, WindEstimate, road_heading
-from roadload.controllers.mpc import ConstraintViolation, MpcSettings, Plan
+from roadload.controllers import mpc_controller
+from roadload.controllers.mpc import ConstraintViolation, MpcSettings, OcpSolver, Plan
 from roadload.controllers.mpc_controller import MpcController, MpcControllerSettings, TripSchedule, get_solver
 from roadload.road_load import RoadLoadParameters
 from roadload.road_profiles import RoadProfile
@@ -49,8 +50,10 @@ def obs(t, s, v, a=0.0):
 
 
 # ------------------------------------------------------------------------------------------------ settings
-def test_solvers_are_built_once_per_settings_and_powertrain():
+def test_solvers_are_built_once_per_settings_and_powertrain(monkeypatch):
+    monkeypatch.setattr(mpc_controller, "_SOLVERS", {})  # an empty cache: the first request builds
     a = get_solver(MpcSettings(n_nodes=N, ds=DS), EV)
+    assert isinstance(a, OcpSolver) and a.n == N and len(mpc_controller._SOLVERS) == 1
     assert get_solver(MpcSettings(n_nodes=N, ds=DS), generic_ev()) is a
     assert get_solver(MpcSettings(n_nodes=N, ds=25.0), EV) is not a
     assert get_solver(MpcSettings(n_nodes=N, ds=DS), generic_ev(mass=1800.0)) is a  # same powertrain values
@@ -513,12 +516,12 @@ def test_multistart_tries_a_faster_then_a_slower_cold_start(monkeypatch):
     ctl.wheel_force(obs(0.0, 0.0, 12.0))
     assert calls == [None]  # no plan yet: no second start
     mean = float(np.mean(ctl.plan.v))
-    ctl.wheel_force(obs(1.0, 12.0, 12.5))
+    ctl.wheel_force(obs(0.5, 6.0, 12.5))  # the first one is due as soon as there is a plan
     assert calls[1:] == [None, pytest.approx(mean + 3.0)]
-    ctl.wheel_force(obs(2.0, 25.0, 13.0))  # the next one is due at 2.5 s
+    ctl.wheel_force(obs(1.5, 19.0, 13.0))  # the next one is due at 2.0 s
     assert len(calls) == 4
     mean = float(np.mean(ctl.plan.v))
-    ctl.wheel_force(obs(2.5, 31.0, 13.5))
+    ctl.wheel_force(obs(2.0, 25.0, 13.5))
     assert calls[4:] == [None, pytest.approx(mean - 3.0)]
     off = controller(road())  # multistart_period 0: never
     calls = record_targets(monkeypatch, off)
@@ -713,12 +716,11 @@ def test_gear_request_only_with_the_gear_command_on_an_ice_above_the_minimum_spe
     assert controller(road(), gear_command=True).gear_request(obs(0.0, 0.0, 15.0)) is None  # an EV
     assert controller(road(), energy=ice).gear_request(obs(0.0, 0.0, 15.0)) is None  # not asked to
     ctl = controller(road(), energy=ice, gear_command=True, gear_min_speed=6.0, gear_band=0.5)
-    assert ctl.gear_request(obs(0.0, 0.0, 5.9)) is None
-    assert ctl.gear_request(obs(0.0, 0.0, 6.0)) == 2
+    assert ctl.gear_request(obs(0.0, 0.0, 6.0)) == 2  # the first request after reset
     # the transmission engaged gear 2: held within the band of the 12 m/s shift, then up
     assert ctl.gear_request(Observation(t=0.1, s=1.0, v=12.3, a=0.0, gear=2)) == 2
     assert ctl.gear_request(Observation(t=0.2, s=2.0, v=12.6, a=0.0, gear=2)) == 3
-    assert ctl.gear_request(obs(0.0, 0.0, 3.0)) is None and ctl._gear is None
+    assert ctl.gear_request(obs(0.3, 3.0, 5.9)) is None and ctl._gear is None
 
 
 # ------------------------------------------------------------------------------------------------ counts and edges

@@ -731,3 +731,14 @@ def test_a_warm_plan_without_multipliers_starts_cold():
     from_ipopt = qp.solve(14.0, 0.0, pv, PARAMS, warm=cold)
     assert from_ipopt.success
     np.testing.assert_allclose(from_ipopt.v, cold.v, atol=0.02)
+
+
+def test_brake_force_limit_adds_regeneration_to_the_friction_brake():
+    ocp = solver()
+    pv = preview(30.0, grade=-0.2)
+    x = np.concatenate([np.full(N + 1, 0.5 * 15.0 ** 2), np.zeros(N), np.full(N, 2.0), np.full(N, 3.0)])
+    plan = ocp._plan_from_x(x, pv, False, "x", 0.0, 0, 0.0)
+    v = ocp._force_limit(plan, 2, -1.5, pv, PARAMS)
+    assert (v.constraint, v.position, v.unit) == ("brake_force", 40.0, "kN")
+    assert v.limit == pytest.approx((0.8 * G * 1420.0 + 150.0 * 9.665 / 0.35) / 1000.0, rel=1e-3)
+    assert v.value == pytest.approx(2.0 + 3.0 + 1.5)  # what the plan brakes plus what the balance still needs

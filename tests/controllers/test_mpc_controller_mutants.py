@@ -790,3 +790,29 @@ def test_schedule_edges():
     assert TripSchedule(start=0.0, end=100.0, duration=10.0, time_floor=0.5).time_floor == 0.5
     pi = TripSchedule(start=0.0, end=1000.0, duration=100.0, gain=20.0, integral_gain=0.01)
     assert pi.time_weight(1000.0, 52.0, 500.0, 0.0) == pytest.approx(1000.0 * math.exp(0.8))  # no integral yet
+
+
+def test_road_force_is_the_delivered_force_plus_the_missing_acceleration():
+    """F = min(F_sent, full load of the engaged gear) + m (a_plan - a): what the road takes to follow the plan."""
+    table = ((0.0, 40.0), (9000.0, 9000.0), (3000.0, 3000.0), (1500.0, 1500.0))
+    ice = SourceEnergyModel(kind="ice", wheel_radius=0.5, gear_ratios=(20.0, 10.0, 5.0), shift_speeds=(5.0, 12.0),
+                            loss=(2000.0, 1.0, 0.01, 0.02, 0.0), max_power=150e3, max_torque=800.0,
+                            indicated_efficiency=0.4, traction_table=table)
+    ctl = controller(road(), energy=ice)
+    cmd = ctl.act(obs(0.0, 0.0, 8.0))
+    assert ctl._traction_sent == cmd.traction > 0.0 and ctl.plan is not None
+    a_plan = float(ctl.plan.accel[ctl.plan.segment_at(10.0)])
+    ctl._traction_sent = 5000.0
+    o = Observation(t=0.1, s=10.0, v=8.0, a=0.2, gear=2)
+    assert ctl.road_force(o) == pytest.approx(3000.0 + M * (a_plan - 0.2))  # gear 2 gives 3 kN at most
+    ctl._traction_sent = 2000.0
+    assert ctl.road_force(o) == pytest.approx(2000.0 + M * (a_plan - 0.2))
+    assert ctl.road_force(Observation(t=0.1, s=10.0, v=8.0, a=0.2, gear=0)) == pytest.approx(M * (a_plan - 0.2))
+    off = Observation(t=0.1, s=float(ctl.plan.s[-1]) + 1.0, v=8.0, a=0.2, gear=2)
+    assert ctl.road_force(off) == pytest.approx(2000.0 - M * 0.2)  # off the plan: a_plan = 0
+    ctl.mode = "cruise"
+    assert ctl.road_force(o) == pytest.approx(2000.0 - M * 0.2)
+    ctl._traction_sent, ctl._last_force = None, 1200.0  # nothing sent yet: the last command's traction
+    assert ctl.road_force(o) == pytest.approx(1200.0 - M * 0.2)
+    ctl._last_force = -800.0
+    assert ctl.road_force(o) == pytest.approx(-M * 0.2)

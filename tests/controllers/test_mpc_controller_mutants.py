@@ -816,3 +816,30 @@ def test_road_force_is_the_delivered_force_plus_the_missing_acceleration():
     assert ctl.road_force(o) == pytest.approx(1200.0 - M * 0.2)
     ctl._last_force = -800.0
     assert ctl.road_force(o) == pytest.approx(-M * 0.2)
+
+
+def test_gear_request_kicks_down_holds_while_shifting_and_returns_with_a_margin(monkeypatch):
+    """Full load 9 / 3 / 1.5 kN in gears 1 / 2 / 3; at 13 m/s the shift rule's gear is 3."""
+    table = ((0.0, 40.0), (9000.0, 9000.0), (3000.0, 3000.0), (1500.0, 1500.0))
+    ice = SourceEnergyModel(kind="ice", wheel_radius=0.5, gear_ratios=(20.0, 10.0, 5.0), shift_speeds=(5.0, 12.0),
+                            loss=(2000.0, 1.0, 0.01, 0.02, 0.0), max_power=150e3, max_torque=800.0,
+                            indicated_efficiency=0.4, traction_table=table)
+    ctl = controller(road(), energy=ice, gear_command=True)
+    force = {"F": 1000.0}
+    monkeypatch.setattr(ctl, "road_force", lambda o: force["F"])
+
+    def request(gear, clutch=1.0):
+        return ctl.gear_request(Observation(t=0.0, s=0.0, v=13.0, a=0.0, gear=gear, sample={"clutch": clutch}))
+    assert request(0) == 3  # 1 kN: gear 3 gives it
+    force["F"] = 2000.0
+    assert request(3) == 2  # 2 kN: a kick-down to gear 2
+    force["F"] = 100.0
+    assert request(3) == 2  # gear 2 not engaged yet: the request is held
+    assert request(2, clutch=0.5) == 2  # the clutch still slips: held
+    force["F"] = 1450.0
+    assert request(2) == 2  # back up only below 95 % of gear 3's full load: 1450 / 0.95 > 1500
+    force["F"] = 1400.0
+    assert request(2) == 3  # 1400 / 0.95 = 1474 N <= 1500 N
+    ctl._requested = 1  # a request two gears away from the shift rule's is not held
+    force["F"] = 1000.0
+    assert request(2) == 3

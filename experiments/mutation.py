@@ -116,6 +116,9 @@ MPC_CONTROLLER_EQUIVALENT: dict[str, str] = {
         "stop positions are floats: the array is float anyway",
     _MPC_CTL + "preview: " + _STOPS.format("dtype=float") + " -> " + _STOPS.format(""):
         "stop positions are floats: the array is float anyway",
+    _MPC_CTL + "preview: mid = np.minimum(s[:-1] + 0.5 * ds if segment_lengths is None else 0.5 * (s[:-1] + "
+    "s[1:]), road.length) -> mid = np.minimum(s[:-1] + 0.5 * ds if (segment_lengths is None) and False else "
+    "0.5 * (s[:-1] + s[1:]), road.length)": "on a uniform grid both give each segment's midpoint",
     _MPC_CTL + "reset: self._next_replan = -np.inf -> self._next_replan = +np.inf":
         "the first step solves anyway (no plan in mpc mode) and sets the next re-plan time from then on",
     _MPC_CTL + "reset: " + _UNSERVED.format("dtype=float") + " -> " + _UNSERVED.format("dtype=None"):

@@ -816,6 +816,15 @@ def test_road_force_is_the_delivered_force_plus_the_missing_acceleration():
     assert ctl.road_force(o) == pytest.approx(1200.0 - M * 0.2)
     ctl._last_force = -800.0
     assert ctl.road_force(o) == pytest.approx(-M * 0.2)
+    ctl._last_force = None  # no command yet at all: nothing delivered
+    assert ctl.road_force(o) == pytest.approx(-M * 0.2)
+    ctl.mode, ctl._traction_sent = "mpc", 2000.0
+    first = Observation(t=0.1, s=10.0, v=8.0, a=0.2, gear=1)  # gear 1 gives 9 kN: all 2 kN delivered
+    assert ctl.road_force(first) == pytest.approx(2000.0 + M * (a_plan - 0.2))
+    plan = ctl.plan
+    for at, k in ((float(plan.s[0]), 0), (float(plan.s[-1]) - 5.0, N - 1), (float(plan.s[-1]), N - 1)):
+        on = Observation(t=0.1, s=at, v=8.0, a=0.2, gear=2)  # the plan's first and last points count
+        assert ctl.road_force(on) == pytest.approx(2000.0 + M * (float(plan.accel[k]) - 0.2))
 
 
 def test_gear_request_kicks_down_holds_while_shifting_and_returns_with_a_margin(monkeypatch):

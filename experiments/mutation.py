@@ -119,6 +119,12 @@ MPC_CONTROLLER_EQUIVALENT: dict[str, str] = {
     _MPC_CTL + "preview: mid = np.minimum(s[:-1] + 0.5 * ds if segment_lengths is None else 0.5 * (s[:-1] + "
     "s[1:]), road.length) -> mid = np.minimum(s[:-1] + 0.5 * ds if (segment_lengths is None) and False else "
     "0.5 * (s[:-1] + s[1:]), road.length)": "on a uniform grid both give each segment's midpoint",
+    _MPC_CTL + 'gear_request: shifting = obs.sample.get("clutch", 1.0) < 1.0 or (self._requested is not None and '
+    'obs.gear != self._requested) -> shifting = obs.sample.get("clutch", 2.0) < 1.0 or (self._requested is not '
+    'None and obs.gear != self._requested)': "a missing clutch reading counts as closed: any default >= 1 does",
+    _MPC_CTL + "wheel_force: self.cruise.restart(obs.v) -> self.cruise.restart(None)":
+        "cruise control's force, called next in the same step, starts a missing reference at the same measured "
+        "speed (the integral is cleared either way)",
     _MPC_CTL + "reset: self._next_replan = -np.inf -> self._next_replan = +np.inf":
         "the first step solves anyway (no plan in mpc mode) and sets the next re-plan time from then on",
     _MPC_CTL + "reset: " + _UNSERVED.format("dtype=float") + " -> " + _UNSERVED.format("dtype=None"):

@@ -849,6 +849,8 @@ def test_gear_request_kicks_down_holds_while_shifting_and_returns_with_a_margin(
     assert request(2) == 2  # back up only below 95 % of gear 3's full load: 1450 / 0.95 > 1500
     force["F"] = 1400.0
     assert request(2) == 3  # 1400 / 0.95 = 1474 N <= 1500 N
+    force["F"] = 1450.0
+    assert request(3) == 3  # in the shift rule's own gear no margin: 1450 N <= 1500 N
     ctl._requested = 1  # a request two gears away from the shift rule's is not held
     force["F"] = 1000.0
     assert request(2) == 3

@@ -79,6 +79,25 @@ MPC_EQUIVALENT: dict[str, str] = {
     "np.shape(preview.ratio)) -> regen = np.broadcast_to(np.asarray(en.max_regen_force(preview.ratio), ), "
     "np.shape(preview.ratio))": _MPC_FLOAT,
 }
+_QP_A = "A = sp.csc_matrix((adata, self._a_rows, self._a_indptr), {})"
+_QP_STATUS = 'status, iters, ok = "{}", 0, False'
+_OSQP_DEFAULT = "OSQP's default (osqp 1.x: warm_starting on, max_iter 4000)"
+MPC_EQUIVALENT.update({
+    "xǁOcpSolverǁ_solve_qp: " + _QP_A.format("shape=(self._ng + self._nx, self._nx)") + " -> "
+    + _QP_A.format("shape=None"): "the last column's identity row sets the same shape",
+    "xǁOcpSolverǁ_solve_qp: " + _QP_A.format("shape=(self._ng + self._nx, self._nx)") + " -> " + _QP_A.format(""):
+        "the last column's identity row sets the same shape",
+    "xǁOcpSolverǁ_solve_qp: self._osqp.setup(P, grad, A, lo, hi, verbose=False, warm_starting=True, "
+    "polishing=False, -> self._osqp.setup(P, grad, A, lo, hi, verbose=False, polishing=False,": _OSQP_DEFAULT,
+    "xǁOcpSolverǁ_solve_qp: max_iter=4000, adaptive_rho=True, rho=3.0) -> adaptive_rho=True, rho=3.0)":
+        _OSQP_DEFAULT,
+    "xǁOcpSolverǁ_solve_qp: " + _QP_STATUS.format("not run") + " -> " + _QP_STATUS.format("XXnot runXX"):
+        "the loop runs at least once and sets the status",
+    "xǁOcpSolverǁ_solve_qp: " + _QP_STATUS.format("not run") + " -> " + _QP_STATUS.format("NOT RUN"):
+        "the loop runs at least once and sets the status",
+    "xǁOcpSolverǁ_solve_qp: lo = np.where(np.isfinite(lo), lo, -1e20) -> lo = np.where(np.isfinite(lo), lo, "
+    "-1e+20)": "the same number written another way",
+})
 MPC_CONTROLLER_EQUIVALENT: dict[str, str] = {
     _MPC_CTL + "_multistart: ref = self.plan if self.plan is not None else plan -> "
     "ref = self.plan if (self.plan is not None) or True else plan":

@@ -489,6 +489,16 @@ def test_qp_failure_is_not_a_plan():
     failed = ocp.solve(14.0, 0.0, preview(20.0), PARAMS, warm=plan)
     assert not failed.converged and not failed.success and failed.solver_status == "maximum iterations reached"
     assert failed.status.startswith("infeasible: ")
+    # a failed QP moves nothing: the plan is the clipped warm start
+    lbx, ubx, _, _ = ocp._bounds(14.0, preview(20.0), PARAMS)
+    np.testing.assert_allclose(failed.x, np.clip(ocp.shift(plan, 0.0)[0], lbx, ubx))
+
+
+def test_qp_iterations_add_up_over_the_sqp_rounds():
+    pv = preview(np.array([30.0, 30.0, 30.0, 16.0, 16.0, 30.0, 30.0]))
+    one = solver(time_weight=6000.0, solver="osqp", qp_tolerance=1e-6).solve(14.0, 0.0, pv, PARAMS)
+    eight = solver(time_weight=6000.0, solver="osqp", qp_tolerance=1e-6, sqp_iterations=8).solve(14.0, 0.0, pv, PARAMS)
+    assert eight.iterations >= one.iterations + 7  # the first round is the same solve, each later one adds >= 1
 
 
 # ------------------------------------------------------------------------------------------------ relaxed reports
@@ -656,6 +666,7 @@ def test_diagnose_without_a_usable_point_names_the_solver():
     nan_plan = ocp._plan_from_x(np.full(4 * N + 1, np.nan), pv, False, "Invalid_Number_Detected", 0.0, 0, 0.0)
     (v,) = ocp.diagnose(nan_plan, 0.0, pv, PARAMS)
     assert v.constraint == "solver" and v.detail == "Invalid_Number_Detected" and math.isnan(v.value)
+    assert (v.position, v.limit, v.unit) == (0.0, 0.0, "-")
     ok = ocp.solve(15.0, 0.0, pv, PARAMS)
     ok.solver_status = ""
     ok.status = "Maximum_CpuTime_Exceeded"

@@ -98,6 +98,15 @@ MPC_EQUIVALENT.update({
     "xǁOcpSolverǁ_solve_qp: lo = np.where(np.isfinite(lo), lo, -1e20) -> lo = np.where(np.isfinite(lo), lo, "
     "-1e+20)": "the same number written another way",
 })
+_IPOPT_STATS = "CasADi's IPOPT stats always hold return_status, success and iter_count: the default is never used"
+_STATUS_GET = 'status = str(stats.get("return_status", "{}"))'
+_OK_GET = 'ok = bool(stats.get("success"{})) or status == "Solved_To_Acceptable_Level"'
+for _variant in ("XXunknownXX", "UNKNOWN"):
+    MPC_EQUIVALENT["xǁOcpSolverǁ_solve_ipopt: " + _STATUS_GET.format("unknown") + " -> "
+                   + _STATUS_GET.format(_variant)] = _IPOPT_STATS
+for _variant in (", ", ", None", ", True"):
+    MPC_EQUIVALENT["xǁOcpSolverǁ_solve_ipopt: " + _OK_GET.format(", False") + " -> "
+                   + _OK_GET.format(_variant)] = _IPOPT_STATS
 MPC_CONTROLLER_EQUIVALENT: dict[str, str] = {
     _MPC_CTL + "_multistart: ref = self.plan if self.plan is not None else plan -> "
     "ref = self.plan if (self.plan is not None) or True else plan":

@@ -107,6 +107,39 @@ for _variant in ("XXunknownXX", "UNKNOWN"):
 for _variant in (", ", ", None", ", True"):
     MPC_EQUIVALENT["xǁOcpSolverǁ_solve_ipopt: " + _OK_GET.format(", False") + " -> "
                    + _OK_GET.format(_variant)] = _IPOPT_STATS
+_NUMERIC = "the preview's arrays hold numbers: a float array either way"
+_RAISED0 = "raised[0] = {}  # node 0 is the current state, not a decision"
+_CHECK_DS = "if preview.ds is not None and not np.all(np.asarray(preview.ds, {}) > 0):"
+_JERK_IF = "if a_prev - step > st.accel_max + 1e-9 or a_prev + step {} -st.decel_max - 1e-9:"
+_BACKWARD = "for k in range(n - 1, {}, -1):  # backward pass: comfortable deceleration before caps"
+_RELAXED = "raised = self.reachable_cap(v0, preview, a_prev) {} self.planning_cap(preview) + 1e-9"
+MPC_EQUIVALENT.update({
+    "xǁOcpSolverǁ_check: " + _CHECK_DS.format("float") + " -> " + _CHECK_DS.format("None"): _NUMERIC,
+    "xǁOcpSolverǁ_check: arr = np.asarray(arr, float) -> arr = np.asarray(arr, None)": _NUMERIC,
+    "xǁOcpSolverǁrelaxations: s = np.asarray(preview.s, float) -> s = np.asarray(preview.s, None)": _NUMERIC,
+    "xǁOcpSolverǁrelaxations: s = np.asarray(preview.s, float) -> s = np.asarray(preview.s, )": _NUMERIC,
+    "xǁOcpSolverǁrelaxations: actual = np.asarray(preview.speed_cap, float) -> "
+    "actual = np.asarray(preview.speed_cap, )": _NUMERIC,
+    "xǁOcpSolverǁrelaxations: actual = np.asarray(preview.speed_cap, float) -> "
+    "actual = np.asarray(preview.speed_cap, None)": _NUMERIC,
+    'xǁOcpSolverǁ_solve_ipopt: plan = self._plan_from_x(x, preview, ok, status, elapsed, int(stats.get("iter_count", '
+    '-1)), -> plan = self._plan_from_x(x, preview, ok, status, elapsed, int(stats.get("iter_count", )),':
+        _IPOPT_STATS,
+    "xǁOcpSolverǁcontradictions: " + _JERK_IF.format("<") + " -> " + _JERK_IF.format("<="):
+        "equal only if a_prev + step is exactly -decel_max - 1e-9",
+    "xǁOcpSolverǁcontradictions: bound = st.accel_max if a_prev > 0 else -st.decel_max -> "
+    "bound = st.accel_max if a_prev > 1 else -st.decel_max":
+        "a contradiction on the acceleration side needs a_prev > accel_max + step > 1; on the braking side a_prev < 0",
+    "xǁOcpSolverǁinitial_guess: " + _BACKWARD.format("-1") + " -> " + _BACKWARD.format("-2"):
+        "the extra pass k = -1 takes the else branch (v[-1] = v[-1])",
+    "xǁOcpSolverǁrelaxations: " + _RAISED0.format("False") + " -> " + _RAISED0.format("None"):
+        "None stored in a bool array is False",
+    "xǁOcpSolverǁrelaxations: " + _RAISED0.format("False") + " -> " + _RAISED0.format("True"):
+        "the runs are searched from node 1: node 0 only decides the early return, and with no other node raised the "
+        "search finds none",
+    "xǁOcpSolverǁrelaxed_nodes: " + _RELAXED.format(">") + " -> " + _RELAXED.format(">="):
+        "a node not raised has its planning cap exactly, a raised one 0.1 m/s more: never within 1e-9",
+})
 MPC_CONTROLLER_EQUIVALENT: dict[str, str] = {
     _MPC_CTL + "_multistart: ref = self.plan if self.plan is not None else plan -> "
     "ref = self.plan if (self.plan is not None) or True else plan":

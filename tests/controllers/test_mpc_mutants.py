@@ -580,7 +580,7 @@ def test_a_cap_met_within_the_margin_only_is_a_margin_violation():
 def test_contradictory_limits_are_named_with_their_values():
     ocp = solver()
     (low,) = ocp.contradictions(5.0, 0.0, preview(np.array([30.0, 0.9, 0.5, 0.7, 30.0, 30.0, 0.8])))
-    assert (low.constraint, low.position, low.limit, low.value) == ("speed_cap", 40.0, 0.5, 1.0)
+    assert (low.constraint, low.position, low.limit, low.value, low.unit) == ("speed_cap", 40.0, 0.5, 1.0, "m/s")
     assert low.detail == "below the speed floor 1 m/s (the planned speed cannot go lower)"
     assert ocp.contradictions(5.0, 0.0, preview(np.array([0.5] + [1.0] * N))) == []
     # the jerk limit moves the acceleration by 2 * 20 / max(v0, floor) in segment 0
@@ -592,6 +592,7 @@ def test_contradictory_limits_are_named_with_their_values():
     (brake,) = ocp.contradictions(20.0, -5.0, preview())
     assert brake.value == pytest.approx(3.0 * 20.0 / 20.0)
     assert ocp.contradictions(20.0, 3.5, preview()) == [] == ocp.contradictions(20.0, -4.0, preview())
+    assert ocp.contradictions(20.0, 4.0, preview())[0].value == pytest.approx(2.5)  # 0.5 m/s^2 beyond: named
     assert len(ocp.contradictions(0.5, 70.0, preview())) == 1  # step at the floor speed: 2 * 20 / 1 = 40
     plan = ocp.solve(20.0, 5.0, preview(), PARAMS)
     assert not plan.success and plan.violations[0].constraint == "jerk"
@@ -753,3 +754,19 @@ def test_brake_force_limit_adds_regeneration_to_the_friction_brake():
     assert (v.constraint, v.position, v.unit) == ("brake_force", 40.0, "kN")
     assert v.limit == pytest.approx((0.8 * G * 1420.0 + 150.0 * 9.665 / 0.35) / 1000.0, rel=1e-3)
     assert v.value == pytest.approx(2.0 + 3.0 + 1.5)  # what the plan brakes plus what the balance still needs
+
+
+def test_relaxed_nodes_count_node_1_and_start_from_the_previous_acceleration():
+    ocp = solver()
+    # from 20 m/s node 1 is reached at 17.9 m/s at the earliest: a 17.8 m/s cap (17.5 planned) is 0.5 m/s out of reach
+    assert ocp.relaxed_nodes(20.0, preview(np.array([30.0, 17.8] + [30.0] * (N - 1)))) == 1
+    # rising at 1.5 m/s^2, the jerk limit leaves 19.5 m/s at node 1: a 19 m/s cap is out of reach only then
+    pv = preview(np.array([30.0, 19.0] + [30.0] * (N - 1)))
+    assert ocp.relaxed_nodes(20.0, pv, 1.5) == 1 and ocp.relaxed_nodes(20.0, pv, 0.0) == 0
+
+
+def test_the_qp_path_takes_the_time_weight_of_the_solve():
+    ocp = solver(time_weight=0.0, solver="osqp", sqp_iterations=4, qp_tolerance=1e-6)
+    lazy = ocp.solve(15.0, 0.0, preview(30.0), PARAMS)
+    hurried = ocp.solve(15.0, 0.0, preview(30.0), PARAMS, time_weight=50000.0)
+    assert hurried.v[-1] > lazy.v[-1] + 2.0

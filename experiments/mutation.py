@@ -140,6 +140,15 @@ MPC_EQUIVALENT.update({
     "xǁOcpSolverǁrelaxed_nodes: " + _RELAXED.format(">") + " -> " + _RELAXED.format(">="):
         "a node not raised has its planning cap exactly, a raised one 0.1 m/s more: never within 1e-9",
 })
+_HEADWIND = "headwind = np.full(n, params.headwind) if preview.headwind is None else np.asarray(preview.headwind, {})"
+_CROSSWIND = "crosswind = np.zeros(n) if preview.crosswind is None else np.asarray(preview.crosswind, {})"
+_PLANNING = "return np.maximum(np.asarray(preview.speed_cap, {}) - st.speed_margin, st.speed_floor)"
+for _line, _fn in ((_HEADWIND, "_params"), (_CROSSWIND, "_params"), (_PLANNING, "planning_cap")):
+    for _variant in ("None", ""):
+        MPC_EQUIVALENT[f"xǁOcpSolverǁ{_fn}: " + _line.format("float") + " -> " + _line.format(_variant)] = _NUMERIC
+MPC_EQUIVALENT["xǁOcpSolverǁsolve: found += self.diagnose(plan, a_prev, preview, params, time_weight) -> "
+               "found += self.diagnose(plan, a_prev, preview, params, )"] = \
+    "the constraint vector the diagnosis reads does not depend on the time weight (only the objective does)"
 MPC_CONTROLLER_EQUIVALENT: dict[str, str] = {
     _MPC_CTL + "_multistart: ref = self.plan if self.plan is not None else plan -> "
     "ref = self.plan if (self.plan is not None) or True else plan":

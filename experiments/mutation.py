@@ -149,6 +149,37 @@ for _line, _fn in ((_HEADWIND, "_params"), (_CROSSWIND, "_params"), (_PLANNING, 
 MPC_EQUIVALENT["xǁOcpSolverǁsolve: found += self.diagnose(plan, a_prev, preview, params, time_weight) -> "
                "found += self.diagnose(plan, a_prev, preview, params, )"] = \
     "the constraint vector the diagnosis reads does not depend on the time weight (only the objective does)"
+# CasADi symbol and function names: labels only (no lookup by name), so renaming one changes nothing
+_NAMED = [("_formulate", f'{var} = ca.SX.sym("{name}"{rest})') for var, name, rest in (
+    ("E", "E", ", n + 1"), ("ft", "Ft", ", n"), ("fr", "Fr", ", n"), ("fb", "Fb", ", n"), ("a_prev", "a_prev", ""),
+    ("grade", "grade", ", n"), ("curv", "curv", ", n"), ("ratio", "ratio", ", n"),
+    ("fp", "fp", ", len(RoadLoadParameters.FIELDS)"), ("lam", "lam", ""), ("headwind", "headwind", ", n"),
+    ("crosswind", "crosswind", ", n"), ("yaw_drag", "yaw_drag", ""))]
+_NAMED += [("_formulate", 'ds = ca.SX.sym("ds", n)  # segment lengths [m] (the MPC: uniform; the full-route '
+                          'optimum: nodes at stops)'),
+           ("_build", 'self._energy_fun = ca.Function("energy", [x, p], [energy * 1000.0])'),
+           ("_build", 'self._g_fun = ca.Function("constraints", [x, p], [g])  # diagnosis of a solve that did not '
+                      'converge'),
+           ("_build", 'self._cold = ca.nlpsol("mpc_cold", "ipopt", self._nlp, opts)'),
+           ("_build", 'self._warm = ca.nlpsol("mpc_warm", "ipopt", self._nlp, warm)'),
+           ("_build", 'lam_g = ca.SX.sym("lam_g", self._ng)'),
+           ("_build", 'self._qp_fun = ca.Function("qp_data", [x, p, lam_g],')]
+for _fn, _line in _NAMED:
+    _label = _line.split('"')[1]
+    for _new in {f"XX{_label}XX", _label.upper(), _label.lower()} - {_label}:
+        MPC_EQUIVALENT[f"xǁOcpSolverǁ{_fn}: {_line} -> " + _line.replace(f'"{_label}"', f'"{_new}"', 1)] = \
+            "a CasADi symbol or function name is a label: nothing looks it up"
+_SEGLEN = "return np.full(self.n, self.settings.ds) if preview.ds is None else np.asarray(preview.ds, {})"
+MPC_EQUIVALENT.update({
+    "xǁOcpSolverǁ__init__: self._qp_x = None -> self._qp_x = \"\"": "nothing reads _qp_x",
+    "xǁOcpSolverǁ_braking: speed, accel = np.empty(n_nodes), np.empty(max(n_nodes - 1, 0)) -> "
+    "speed, accel = np.empty(n_nodes), np.empty(max(n_nodes - 1, 1))":
+        "the grid has n_nodes >= 3 nodes (n_nodes >= 2 segments): the floor never applies",
+    'xǁOcpSolverǁ_build: "warm_start_slack_bound_push": 1e-7, "mu_strategy": "monotone"} -> '
+    '"warm_start_slack_bound_push": 1e-7, "mu_strategy": "MONOTONE"}': "IPOPT reads option values in any case",
+    "xǁOcpSolverǁsegment_lengths: " + _SEGLEN.format("float") + " -> " + _SEGLEN.format("None"): _NUMERIC,
+    "xǁOcpSolverǁsegment_lengths: " + _SEGLEN.format("float") + " -> " + _SEGLEN.format(""): _NUMERIC,
+})
 MPC_CONTROLLER_EQUIVALENT: dict[str, str] = {
     _MPC_CTL + "_multistart: ref = self.plan if self.plan is not None else plan -> "
     "ref = self.plan if (self.plan is not None) or True else plan":

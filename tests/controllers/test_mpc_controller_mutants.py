@@ -275,6 +275,10 @@ def test_replans_every_period_when_stale_and_without_a_plan():
     for t, s in ((0.0, 0.0), (0.2, 2.4), (0.49, 6.0), (0.5, 6.1), (0.9, 11.0), (1.0, 12.0)):
         ctl.wheel_force(obs(t, s, 12.0))
     assert ctl.stats()["solves"] == 3  # at 0, 0.5 and 1.0 s
+    assert ctl.solve_times[-1] == ctl.plan.solve_time and len(ctl.solve_times) == 3
+    for at in (float(ctl.plan.s[3]), float(ctl.plan.s[-3]) + 1.0, float(ctl.plan.s[-2])):
+        ctl.wheel_force(obs(1.05, at, 12.0))  # on the plan up to its last segment's start: no new solve
+    assert ctl.stats()["solves"] == 3
     stale_at = float(ctl.plan.s[-2]) + 0.5
     ctl.wheel_force(obs(1.1, stale_at, 12.0))  # past the plan's last segment start: a new plan now
     assert ctl.stats()["solves"] == 4 and ctl.plan.s[0] == stale_at

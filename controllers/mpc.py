@@ -639,8 +639,8 @@ class OcpSolver:
         of :meth:`braking_reach` continued to that point; 0 if it stops before)."""
         speed, accel = self._braking(v0, len(s), a_prev)
         k = int(np.clip(np.searchsorted(s, position, side="right") - 1, 0, len(accel) - 1))
-        e = 0.5 * speed[k] ** 2 + accel[k] * (position - float(s[k]))
-        return math.sqrt(max(e, 0.0))
+        e = 0.5 * speed[k] ** 2 + accel[k] * (position - float(s[k]))  # E = v^2 / 2 [m^2/s^2]
+        return math.sqrt(2.0 * max(e, 0.0))
 
     def contradictions(self, v0: float, a_prev: float, preview: Preview) -> list[ConstraintViolation]:
         """Limits that contradict each other before any solve: a cap ahead below the speed floor (the plan cannot
@@ -710,8 +710,9 @@ class OcpSolver:
                                        detail=f"at {vm:.3g} m/s on a grade of {100 * math.tan(grade):.3g} %, the "
                                        f"drive cannot give the force the speed floor {self.settings.speed_floor:g} "
                                        f"m/s and the deceleration bound need")
-        limit = (en.brake_force_limit(params.mass) + float(np.asarray(en.max_regen_force(preview.ratio),
-                                                                        float)[k])) / 1000.0
+        # a drive without regeneration gives a scalar 0: broadcast to one value per segment
+        regen = np.broadcast_to(np.asarray(en.max_regen_force(preview.ratio), float), np.shape(preview.ratio))
+        limit = (en.brake_force_limit(params.mass) + float(regen[k])) / 1000.0
         return ConstraintViolation("brake_force", float(preview.s[k]), limit,
                                    float(plan.regen[k] + plan.brake[k]) / 1000.0 - residual, "kN",
                                    detail=f"on a grade of {100 * math.tan(grade):.3g} %")

@@ -45,10 +45,8 @@ MODULES: dict[str, tuple[str, ...]] = {
     "sim2real/floor.py": ("tests/sim2real/test_floor_fit.py", "tests/sim2real/test_floor.py"),
     "experiments/time_matching.py": ("tests/experiments/test_time_matching.py",
                                      "tests/experiments/test_time_matching_search.py"),
-    "controllers/mpc.py": ("tests/controllers/test_mpc.py", "tests/controllers/test_mpc_feasibility.py",
-                           "tests/controllers/test_command_jerk.py"),
-    "controllers/mpc_controller.py": ("tests/controllers/test_mpc.py", "tests/controllers/test_mpc_feasibility.py",
-                                      "tests/controllers/test_command_jerk.py"),
+    "controllers/mpc.py": ("tests/controllers/test_mpc_mutants.py",),
+    "controllers/mpc_controller.py": ("tests/controllers/test_mpc_controller_mutants.py",),
     "envs/sensors.py": ("tests/envs/test_sensors_mutants.py", "tests/envs/test_sensor_noise.py"),
 }
 
@@ -58,6 +56,190 @@ _NO_UNITS = ("TripPayload's fields carry no unit and it allows extra keys, so fo
 _RAISE = 'raise TripMetadataError(f"{{path}}: {{format_errors(exc, {})}}") from None'
 _PAYLOAD = "x_parse_trip_payload: " + _RAISE.format("TripPayload, root='metadata'") + " -> "
 _XP = "numpy's sin and cos of a CasADi expression call the expression's own, so xp=np gives the same force"
+_MPC_FLOAT = "float() converts the element it picks anyway"
+_MPC_CTL = "xǁMpcControllerǁ"
+_CAP_LINE = "cap[max(k, 0):min(k + 2, n + 1)] = st.stop_speed"
+_SEG0 = "seg0 = np.where(s0 + SEGMENT0_FRACTIONS * ds {} stop - 1e-9, np.minimum(seg0, st.stop_speed), seg0)"
+_STOPS = "stops = np.array([x for x in self._unserved if s[0] - 1.0 <= x <= s[-1]], {})"
+_UNSERVED = "self._unserved = list(np.sort(np.asarray(road.stops, {})))"
+_CRUISE = 'elif self.mode == "cruise" or self.plan is None:'
+_NO_PLAN_CRUISE = ("where this branch is reached the mode is 'cruise' exactly when there is no plan: a fallback to "
+                   "cruise control drops the plan, a solve that gives one sets 'mpc', the brake modes return earlier")
+MPC_EQUIVALENT: dict[str, str] = {
+    "xǁOcpSolverǁ_force_limit: if residual > 0: -> if residual >= 0:":
+        "diagnose calls it only for a force-balance residual larger than 1e-4 kN in size, never 0",
+    "xǁOcpSolverǁ_force_limit: limit = min(float(np.asarray(en.max_traction_force(None, preview.ratio), float)[k]), "
+    "-> limit = min(float(np.asarray(en.max_traction_force(None, preview.ratio), None)[k]),": _MPC_FLOAT,
+    "xǁOcpSolverǁ_force_limit: limit = min(float(np.asarray(en.max_traction_force(None, preview.ratio), float)[k]), "
+    "-> limit = min(float(np.asarray(en.max_traction_force(None, preview.ratio), )[k]),": _MPC_FLOAT,
+    "xǁOcpSolverǁ_force_limit: regen = np.broadcast_to(np.asarray(en.max_regen_force(preview.ratio), float), "
+    "np.shape(preview.ratio)) -> regen = np.broadcast_to(np.asarray(en.max_regen_force(preview.ratio), None), "
+    "np.shape(preview.ratio))": _MPC_FLOAT,
+    "xǁOcpSolverǁ_force_limit: regen = np.broadcast_to(np.asarray(en.max_regen_force(preview.ratio), float), "
+    "np.shape(preview.ratio)) -> regen = np.broadcast_to(np.asarray(en.max_regen_force(preview.ratio), ), "
+    "np.shape(preview.ratio))": _MPC_FLOAT,
+}
+_QP_A = "A = sp.csc_matrix((adata, self._a_rows, self._a_indptr), {})"
+_QP_STATUS = 'status, iters, ok = "{}", 0, False'
+_OSQP_DEFAULT = "OSQP's default (osqp 1.x: warm_starting on, max_iter 4000)"
+MPC_EQUIVALENT.update({
+    "xǁOcpSolverǁ_solve_qp: " + _QP_A.format("shape=(self._ng + self._nx, self._nx)") + " -> "
+    + _QP_A.format("shape=None"): "the last column's identity row sets the same shape",
+    "xǁOcpSolverǁ_solve_qp: " + _QP_A.format("shape=(self._ng + self._nx, self._nx)") + " -> " + _QP_A.format(""):
+        "the last column's identity row sets the same shape",
+    "xǁOcpSolverǁ_solve_qp: self._osqp.setup(P, grad, A, lo, hi, verbose=False, warm_starting=True, "
+    "polishing=False, -> self._osqp.setup(P, grad, A, lo, hi, verbose=False, polishing=False,": _OSQP_DEFAULT,
+    "xǁOcpSolverǁ_solve_qp: max_iter=4000, adaptive_rho=True, rho=3.0) -> adaptive_rho=True, rho=3.0)":
+        _OSQP_DEFAULT,
+    "xǁOcpSolverǁ_solve_qp: " + _QP_STATUS.format("not run") + " -> " + _QP_STATUS.format("XXnot runXX"):
+        "the loop runs at least once and sets the status",
+    "xǁOcpSolverǁ_solve_qp: " + _QP_STATUS.format("not run") + " -> " + _QP_STATUS.format("NOT RUN"):
+        "the loop runs at least once and sets the status",
+    "xǁOcpSolverǁ_solve_qp: lo = np.where(np.isfinite(lo), lo, -1e20) -> lo = np.where(np.isfinite(lo), lo, "
+    "-1e+20)": "the same number written another way",
+})
+_IPOPT_STATS = "CasADi's IPOPT stats always hold return_status, success and iter_count: the default is never used"
+_STATUS_GET = 'status = str(stats.get("return_status", "{}"))'
+_OK_GET = 'ok = bool(stats.get("success"{})) or status == "Solved_To_Acceptable_Level"'
+for _variant in ("XXunknownXX", "UNKNOWN"):
+    MPC_EQUIVALENT["xǁOcpSolverǁ_solve_ipopt: " + _STATUS_GET.format("unknown") + " -> "
+                   + _STATUS_GET.format(_variant)] = _IPOPT_STATS
+for _variant in (", ", ", None", ", True"):
+    MPC_EQUIVALENT["xǁOcpSolverǁ_solve_ipopt: " + _OK_GET.format(", False") + " -> "
+                   + _OK_GET.format(_variant)] = _IPOPT_STATS
+_NUMERIC = "the preview's arrays hold numbers: a float array either way"
+_RAISED0 = "raised[0] = {}  # node 0 is the current state, not a decision"
+_CHECK_DS = "if preview.ds is not None and not np.all(np.asarray(preview.ds, {}) > 0):"
+_JERK_IF = "if a_prev - step > st.accel_max + 1e-9 or a_prev + step {} -st.decel_max - 1e-9:"
+_BACKWARD = "for k in range(n - 1, {}, -1):  # backward pass: comfortable deceleration before caps"
+_RELAXED = "raised = self.reachable_cap(v0, preview, a_prev) {} self.planning_cap(preview) + 1e-9"
+MPC_EQUIVALENT.update({
+    "xǁOcpSolverǁ_check: " + _CHECK_DS.format("float") + " -> " + _CHECK_DS.format("None"): _NUMERIC,
+    "xǁOcpSolverǁ_check: arr = np.asarray(arr, float) -> arr = np.asarray(arr, None)": _NUMERIC,
+    "xǁOcpSolverǁrelaxations: s = np.asarray(preview.s, float) -> s = np.asarray(preview.s, None)": _NUMERIC,
+    "xǁOcpSolverǁrelaxations: s = np.asarray(preview.s, float) -> s = np.asarray(preview.s, )": _NUMERIC,
+    "xǁOcpSolverǁrelaxations: actual = np.asarray(preview.speed_cap, float) -> "
+    "actual = np.asarray(preview.speed_cap, )": _NUMERIC,
+    "xǁOcpSolverǁrelaxations: actual = np.asarray(preview.speed_cap, float) -> "
+    "actual = np.asarray(preview.speed_cap, None)": _NUMERIC,
+    'xǁOcpSolverǁ_solve_ipopt: plan = self._plan_from_x(x, preview, ok, status, elapsed, int(stats.get("iter_count", '
+    '-1)), -> plan = self._plan_from_x(x, preview, ok, status, elapsed, int(stats.get("iter_count", )),':
+        _IPOPT_STATS,
+    "xǁOcpSolverǁcontradictions: " + _JERK_IF.format("<") + " -> " + _JERK_IF.format("<="):
+        "equal only if a_prev + step is exactly -decel_max - 1e-9",
+    "xǁOcpSolverǁcontradictions: bound = st.accel_max if a_prev > 0 else -st.decel_max -> "
+    "bound = st.accel_max if a_prev > 1 else -st.decel_max":
+        "a contradiction on the acceleration side needs a_prev > accel_max + step > 1; on the braking side a_prev < 0",
+    "xǁOcpSolverǁinitial_guess: " + _BACKWARD.format("-1") + " -> " + _BACKWARD.format("-2"):
+        "the extra pass k = -1 takes the else branch (v[-1] = v[-1])",
+    "xǁOcpSolverǁrelaxations: " + _RAISED0.format("False") + " -> " + _RAISED0.format("None"):
+        "None stored in a bool array is False",
+    "xǁOcpSolverǁrelaxations: " + _RAISED0.format("False") + " -> " + _RAISED0.format("True"):
+        "the runs are searched from node 1: node 0 only decides the early return, and with no other node raised the "
+        "search finds none",
+    "xǁOcpSolverǁrelaxed_nodes: " + _RELAXED.format(">") + " -> " + _RELAXED.format(">="):
+        "a node not raised has its planning cap exactly, a raised one 0.1 m/s more: never within 1e-9",
+})
+_HEADWIND = "headwind = np.full(n, params.headwind) if preview.headwind is None else np.asarray(preview.headwind, {})"
+_CROSSWIND = "crosswind = np.zeros(n) if preview.crosswind is None else np.asarray(preview.crosswind, {})"
+_PLANNING = "return np.maximum(np.asarray(preview.speed_cap, {}) - st.speed_margin, st.speed_floor)"
+for _line, _fn in ((_HEADWIND, "_params"), (_CROSSWIND, "_params"), (_PLANNING, "planning_cap")):
+    for _variant in ("None", ""):
+        MPC_EQUIVALENT[f"xǁOcpSolverǁ{_fn}: " + _line.format("float") + " -> " + _line.format(_variant)] = _NUMERIC
+MPC_EQUIVALENT["xǁOcpSolverǁsolve: found += self.diagnose(plan, a_prev, preview, params, time_weight) -> "
+               "found += self.diagnose(plan, a_prev, preview, params, )"] = \
+    "the constraint vector the diagnosis reads does not depend on the time weight (only the objective does)"
+# CasADi symbol and function names: labels only (no lookup by name), so renaming one changes nothing
+_NAMED = [("_formulate", f'{var} = ca.SX.sym("{name}"{rest})') for var, name, rest in (
+    ("E", "E", ", n + 1"), ("ft", "Ft", ", n"), ("fr", "Fr", ", n"), ("fb", "Fb", ", n"), ("a_prev", "a_prev", ""),
+    ("grade", "grade", ", n"), ("curv", "curv", ", n"), ("ratio", "ratio", ", n"),
+    ("fp", "fp", ", len(RoadLoadParameters.FIELDS)"), ("lam", "lam", ""), ("headwind", "headwind", ", n"),
+    ("crosswind", "crosswind", ", n"), ("yaw_drag", "yaw_drag", ""))]
+_NAMED += [("_formulate", 'ds = ca.SX.sym("ds", n)  # segment lengths [m] (the MPC: uniform; the full-route '
+                          'optimum: nodes at stops)'),
+           ("_build", 'self._energy_fun = ca.Function("energy", [x, p], [energy * 1000.0])'),
+           ("_build", 'self._g_fun = ca.Function("constraints", [x, p], [g])  # diagnosis of a solve that did not '
+                      'converge'),
+           ("_build", 'self._cold = ca.nlpsol("mpc_cold", "ipopt", self._nlp, opts)'),
+           ("_build", 'self._warm = ca.nlpsol("mpc_warm", "ipopt", self._nlp, warm)'),
+           ("_build", 'lam_g = ca.SX.sym("lam_g", self._ng)'),
+           ("_build", 'self._qp_fun = ca.Function("qp_data", [x, p, lam_g],')]
+for _fn, _line in _NAMED:
+    _label = _line.split('"')[1]
+    for _new in {f"XX{_label}XX", _label.upper(), _label.lower()} - {_label}:
+        MPC_EQUIVALENT[f"xǁOcpSolverǁ{_fn}: {_line} -> " + _line.replace(f'"{_label}"', f'"{_new}"', 1)] = \
+            "a CasADi symbol or function name is a label: nothing looks it up"
+_SEGLEN = "return np.full(self.n, self.settings.ds) if preview.ds is None else np.asarray(preview.ds, {})"
+MPC_EQUIVALENT.update({
+    "xǁOcpSolverǁ__init__: self._qp_x = None -> self._qp_x = \"\"": "nothing reads _qp_x",
+    "xǁOcpSolverǁ_braking: speed, accel = np.empty(n_nodes), np.empty(max(n_nodes - 1, 0)) -> "
+    "speed, accel = np.empty(n_nodes), np.empty(max(n_nodes - 1, 1))":
+        "the grid has n_nodes >= 3 nodes (n_nodes >= 2 segments): the floor never applies",
+    'xǁOcpSolverǁ_build: "warm_start_slack_bound_push": 1e-7, "mu_strategy": "monotone"} -> '
+    '"warm_start_slack_bound_push": 1e-7, "mu_strategy": "MONOTONE"}': "IPOPT reads option values in any case",
+    "xǁOcpSolverǁsegment_lengths: " + _SEGLEN.format("float") + " -> " + _SEGLEN.format("None"): _NUMERIC,
+    "xǁOcpSolverǁsegment_lengths: " + _SEGLEN.format("float") + " -> " + _SEGLEN.format(""): _NUMERIC,
+})
+MPC_CONTROLLER_EQUIVALENT: dict[str, str] = {
+    _MPC_CTL + "_multistart: ref = self.plan if self.plan is not None else plan -> "
+    "ref = self.plan if (self.plan is not None) or True else plan":
+        "_solve runs the multistart only when there is a previous plan, so ref is always that plan",
+    _MPC_CTL + "serve_stop: self._unserved = [x for x in self._unserved if abs(x - stop) > 1e-9] -> "
+    "self._unserved = [x for x in self._unserved if abs(x - stop) >= 1e-9]":
+        "the served stop is in the list exactly (distance 0); no other stop lies exactly 1e-9 m from it",
+    _MPC_CTL + '_replan: if self.mode != "mpc": -> if self.mode != "XXmpcXX":':
+        "the mode becomes 'mpc' either way: setting it when it already is changes nothing",
+    _MPC_CTL + '_replan: if self.mode != "mpc": -> if self.mode != "MPC":':
+        "the mode becomes 'mpc' either way: setting it when it already is changes nothing",
+    _MPC_CTL + "_solve: plan, ok = None, False -> plan, ok = None, True":
+        "ok is read only together with a plan (_replan: ok and plan is not None)",
+    _MPC_CTL + f"wheel_force: {_CRUISE} -> " + _CRUISE.replace(" or ", " and "): _NO_PLAN_CRUISE,
+    _MPC_CTL + f"wheel_force: {_CRUISE} -> " + _CRUISE.replace('"cruise"', '"XXcruiseXX"'): _NO_PLAN_CRUISE,
+    _MPC_CTL + f"wheel_force: {_CRUISE} -> " + _CRUISE.replace('"cruise"', '"CRUISE"'): _NO_PLAN_CRUISE,
+    _MPC_CTL + "_brake_target_of: return max(hard, key=lambda v: (obs.v ** 2 - v.limit ** 2) / (2.0 * (v.position "
+    "- obs.s))) -> return max(hard, key=lambda v: (obs.v ** 2 - v.limit ** 2) / (3.0 * (v.position - obs.s)))":
+        "every key scaled by the same positive factor: the same maximum",
+    _MPC_CTL + "preview: cap = np.array([self._fine_cap[a:max(b, a + 1)].min() for a, b in zip(lo, hi)]) -> "
+    "cap = np.array([self._fine_cap[a:max(b, a + 2)].min() for a, b in zip(lo, hi)])":
+        "from s0 >= 0 every node's window holds 11 or more samples of the 2 m grid (which runs a horizon and two "
+        "segments past the road end), so max(b, a + 1) is b",
+    _MPC_CTL + f"preview: {_CAP_LINE} -> " + _CAP_LINE.replace("n + 1", "n + 2"):
+        "a slice that ends past the array's end is the same slice",
+    _MPC_CTL + "preview: " + _SEG0.format(">=") + " -> " + _SEG0.format(">"):
+        "a sample at the line lies 1e-9 m above stop - 1e-9 either way",
+    _MPC_CTL + "preview: v_guess = np.full(n, max(v0, st.speed_floor)) -> v_guess = np.full(n, None)":
+        "the guessed speed only picks an EV's single ratio (an ICE's bound takes its lowest gear): any speed gives "
+        "the same ratio",
+    _MPC_CTL + 'preview: ratio = np.full(n, en.gear_ratios[0]) if en.kind == "ice" else '
+    'en.ratio_for_speed(v_guess)  # ICE: lowest -> ratio = np.full(n, en.gear_ratios[0]) if (en.kind == "ice") '
+    'or True else en.ratio_for_speed(v_guess)  # ICE: lowest': "an EV has one ratio, gear_ratios[0]",
+    _MPC_CTL + "preview: " + _STOPS.format("dtype=float") + " -> " + _STOPS.format("dtype=None"):
+        "stop positions are floats: the array is float anyway",
+    _MPC_CTL + "preview: " + _STOPS.format("dtype=float") + " -> " + _STOPS.format(""):
+        "stop positions are floats: the array is float anyway",
+    _MPC_CTL + "preview: mid = np.minimum(s[:-1] + 0.5 * ds if segment_lengths is None else 0.5 * (s[:-1] + "
+    "s[1:]), road.length) -> mid = np.minimum(s[:-1] + 0.5 * ds if (segment_lengths is None) and False else "
+    "0.5 * (s[:-1] + s[1:]), road.length)": "on a uniform grid both give each segment's midpoint",
+    _MPC_CTL + 'gear_request: shifting = obs.sample.get("clutch", 1.0) < 1.0 or (self._requested is not None and '
+    'obs.gear != self._requested) -> shifting = obs.sample.get("clutch", 2.0) < 1.0 or (self._requested is not '
+    'None and obs.gear != self._requested)': "a missing clutch reading counts as closed: any default >= 1 does",
+    _MPC_CTL + "wheel_force: self.cruise.restart(obs.v) -> self.cruise.restart(None)":
+        "cruise control's force, called next in the same step, starts a missing reference at the same measured "
+        "speed (the integral is cleared either way)",
+    _MPC_CTL + "reset: self._next_replan = -np.inf -> self._next_replan = +np.inf":
+        "the first step solves anyway (no plan in mpc mode) and sets the next re-plan time from then on",
+    _MPC_CTL + "reset: " + _UNSERVED.format("dtype=float") + " -> " + _UNSERVED.format("dtype=None"):
+        "RoadProfile stores its stops as a float array",
+    _MPC_CTL + "reset: " + _UNSERVED.format("dtype=float") + " -> " + _UNSERVED.format(""):
+        "RoadProfile stores its stops as a float array",
+    _MPC_CTL + "reset: self._brake_target: ConstraintViolation | None = None  # the stop / cap the fallback brake is "
+    'meeting -> self._brake_target: ConstraintViolation | None = ""  # the stop / cap the fallback brake is meeting':
+        "nothing reads the brake target before the first re-plan sets it",
+    _MPC_CTL + "time_weight: if previous is not None and obs.s > previous[1]:  # interpolate the crossing of "
+    "``start`` -> if previous is not None and obs.s >= previous[1]:  # interpolate the crossing of ``start``":
+        "the branch runs at the crossing, where the previous position lies before start and the current one at or "
+        "past it: never equal",
+}
 _SHARED = ("this branch is taken only when measured and truth share one time base (or there is no truth), which the "
            "writer also finds on its own; both ways write the same file")
 _CHUNKS = "iter_trip_chunks reads 360_000 rows a chunk by default"
@@ -139,6 +321,8 @@ _SENSOR_EQUIVALENT: dict[str, str] = {
 }
 EQUIVALENT: dict[str, dict[str, str]] = {
     "envs/sensors.py": _SENSOR_EQUIVALENT,
+    "controllers/mpc.py": MPC_EQUIVALENT,
+    "controllers/mpc_controller.py": MPC_CONTROLLER_EQUIVALENT,
     "core/trip.py": {
         'xǁTripǁ__post_init__: _check_frame(self.measured, self.units, "measured", truth=False) -> '
         '_check_frame(self.measured, self.units, "measured", truth=None)':

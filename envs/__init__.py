@@ -62,11 +62,13 @@ from .effects import EFFECTS, EffectsConfig, EffectsError, describe_effects
 from roadload.presets import PRESETS, get_preset
 from .sensors import SensorConfigError
 from .powertrain import Powertrain
-from .simulator import Action, LateralValidityWarning, SimulationError, Simulator, StepResult, simulate
+from .simulator import (
+    TRUTH_LOG_COLUMNS, Action, LateralValidityWarning, SimulationError, Simulator, StepResult, simulate,
+)
 from .state import VehicleParameters, VehicleState
 
 SensorConfig = __import__("roadload.vehicle", fromlist=["SensorSpec"]).SensorSpec  # alias: the sensor set
 
 __all__ = ["Action", "DriverConfig", "EFFECTS", "EffectsConfig", "EffectsError", "LateralValidityWarning",
            "PRESETS", "Powertrain", "SensorConfig", "SensorConfigError", "SimulationError", "Simulator", "StepResult",
-           "VehicleParameters", "VehicleState", "describe_effects", "get_preset", "simulate"]
+           "TRUTH_LOG_COLUMNS", "VehicleParameters", "VehicleState", "describe_effects", "get_preset", "simulate"]

@@ -34,7 +34,7 @@ from .layout import (
     L_GRADE, L_HEAD, L_IBAT, L_LOSSF, L_MASS, L_MU, L_OIL, L_PAMB, L_PATHCURV, L_PBF, L_PBR, L_POS, L_PSRC, L_RHO,
     L_RIM, L_SOC, L_T, L_TAMB, L_TE, L_V, L_VBAT, L_WE, L_WFL, L_WFR, L_WIND_A, L_WIND_S, L_WRL, L_WRR, L_YAW,
     MODE_LOCKED, MODE_OPEN, MODE_SLIP, N_LOG, N_ROAD, R_BANK, R_CRUISE, R_CURV, R_ELEV, R_GRADE, R_HEAD, R_S, R_VLIM,
-    R_VPLAN, VEHICLE, COMMAND_DRIVER, COMMAND_FORCES, COMMAND_WHEEL_FORCE, Tables, field_index,
+    R_VPLAN, VEHICLE, COMMAND_DRIVER, COMMAND_FORCES, COMMAND_WHEEL_FORCE, LOG, Tables, field_index,
 )
 from .numerics import road_value_at
 from .packing import pack_vehicle
@@ -43,6 +43,10 @@ from .schedules import pack_schedules
 from .sensors import SensorModel
 from .state import VehicleParameters, VehicleState
 from .drivetrain import source_side_inertia, wheel_side_mass
+
+# The truth log's column names in order (``Simulator.truth_log()``'s columns, the sensor model's input rows): the
+# public read-only view of the private layout, so that code outside envs/ names a column instead of an index.
+TRUTH_LOG_COLUMNS: tuple[str, ...] = tuple(LOG)
 
 if TYPE_CHECKING:  # a streamed run writes plain column arrays: pandas (40 MB) loads only with a Trip in memory
     import pandas as pd
@@ -665,7 +669,7 @@ class Simulator:
         return self.sensor_model.sample(self._log, int(self._words[_NLOG]))
 
     def truth_log(self) -> np.ndarray:
-        """The raw truth log so far (rows = 10-ms substeps, columns = ``layout.LOG``); a view, do not modify."""
+        """The raw truth log so far (rows = 10-ms substeps, columns = ``TRUTH_LOG_COLUMNS``); a view, do not modify."""
         self._check_whole_log("truth_log")
         return self._log[:, : int(self._words[_NLOG])].T
 

@@ -6,12 +6,16 @@ import numpy as np
 import pytest
 
 from roadload.envs.effects import EffectsConfig
-from roadload.envs.layout import (
-    L_ACC_X_SENS, L_CLUTCH, L_DELTA, L_GEAR, L_PBF, L_T, L_TE, L_V, L_WE, L_WFL, L_YAW, N_LOG,
-)
+from roadload.envs import TRUTH_LOG_COLUMNS
 from roadload.envs.sensors import CHUNK, SensorConfigError, SensorModel
 from roadload.presets import get_preset
 from roadload.vehicle import ChannelSensorSpec, SensorSpec
+
+# truth-log rows by name (the log is private to envs/; its column names are public)
+_ROW = {name: row for row, name in enumerate(TRUTH_LOG_COLUMNS)}
+L_ACC_X_SENS, L_CLUTCH, L_DELTA, L_GEAR, L_PBF, L_T, L_TE, L_V, L_WE, L_WFL, L_YAW = (
+    _ROW[n] for n in ("ACC_X_SENS", "CLUTCH", "DELTA", "GEAR", "PBF", "T", "TE", "V", "WE", "WFL", "YAW"))
+N_LOG = len(TRUTH_LOG_COLUMNS)
 
 BEV = get_preset("bmw_i3")
 ICE = get_preset("gt_rwd")

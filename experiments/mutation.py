@@ -143,9 +143,9 @@ MPC_EQUIVALENT.update({
 _HEADWIND = "headwind = np.full(n, params.headwind) if preview.headwind is None else np.asarray(preview.headwind, {})"
 _CROSSWIND = "crosswind = np.zeros(n) if preview.crosswind is None else np.asarray(preview.crosswind, {})"
 _PLANNING = "return np.maximum(np.asarray(preview.speed_cap, {}) - st.speed_margin, st.speed_floor)"
-for _line, _fn in ((_HEADWIND, "_params"), (_CROSSWIND, "_params"), (_PLANNING, "planning_cap")):
+for _source, _fn in ((_HEADWIND, "_params"), (_CROSSWIND, "_params"), (_PLANNING, "planning_cap")):
     for _variant in ("None", ""):
-        MPC_EQUIVALENT[f"xǁOcpSolverǁ{_fn}: " + _line.format("float") + " -> " + _line.format(_variant)] = _NUMERIC
+        MPC_EQUIVALENT[f"xǁOcpSolverǁ{_fn}: " + _source.format("float") + " -> " + _source.format(_variant)] = _NUMERIC
 MPC_EQUIVALENT["xǁOcpSolverǁsolve: found += self.diagnose(plan, a_prev, preview, params, time_weight) -> "
                "found += self.diagnose(plan, a_prev, preview, params, )"] = \
     "the constraint vector the diagnosis reads does not depend on the time weight (only the objective does)"
@@ -164,10 +164,10 @@ _NAMED += [("_formulate", 'ds = ca.SX.sym("ds", n)  # segment lengths [m] (the M
            ("_build", 'self._warm = ca.nlpsol("mpc_warm", "ipopt", self._nlp, warm)'),
            ("_build", 'lam_g = ca.SX.sym("lam_g", self._ng)'),
            ("_build", 'self._qp_fun = ca.Function("qp_data", [x, p, lam_g],')]
-for _fn, _line in _NAMED:
-    _label = _line.split('"')[1]
+for _fn, _named in _NAMED:
+    _label = _named.split('"')[1]
     for _new in {f"XX{_label}XX", _label.upper(), _label.lower()} - {_label}:
-        MPC_EQUIVALENT[f"xǁOcpSolverǁ{_fn}: {_line} -> " + _line.replace(f'"{_label}"', f'"{_new}"', 1)] = \
+        MPC_EQUIVALENT[f"xǁOcpSolverǁ{_fn}: {_named} -> " + _named.replace(f'"{_label}"', f'"{_new}"', 1)] = \
             "a CasADi symbol or function name is a label: nothing looks it up"
 _SEGLEN = "return np.full(self.n, self.settings.ds) if preview.ds is None else np.asarray(preview.ds, {})"
 MPC_EQUIVALENT.update({

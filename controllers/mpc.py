@@ -251,7 +251,11 @@ class Plan:
         return self.traction - self.regen - self.brake
 
     def speed_at(self, s) -> np.ndarray:
-        return np.interp(s, self.s, self.v)
+        """Planned speed [m/s] at position(s) s [m]. The NLP holds the force, hence the acceleration, constant over
+        a segment, so E = v^2 / 2 is linear in s between the nodes: v(s) = sqrt(v_k^2 + 2 a_k (s - s_k)), not the
+        chord of v (which lies below it where the plan brakes into a stop and drags the tracked speed down early)."""
+        energy = np.interp(s, self.s, 0.5 * np.asarray(self.v, float) ** 2)
+        return np.sqrt(2.0 * np.maximum(energy, 0.0))
 
     def segment_at(self, s: float) -> int:
         return int(np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, len(self.traction) - 1))

@@ -7,7 +7,7 @@ from roadload.controllers.closed_loop import VIOLATION_TOLERANCE, run_closed_loo
 from roadload.controllers.cruise import CruiseController
 from roadload.controllers.energy import generic_ev
 from roadload.controllers.force_model import FixedForceModel
-from roadload.controllers.mpc import MpcError, MpcSettings, Preview
+from roadload.controllers.mpc import MpcError, MpcSettings, Plan, Preview
 from roadload.controllers.mpc_controller import MpcController, MpcControllerSettings, get_solver
 from roadload.controllers.plant import ModelPlant
 from roadload.experiments.time_matching import match_trip_time
@@ -179,3 +179,19 @@ def test_cruise_baseline_respects_limits_and_stops():
     # it holds 90 % of the allowed speed on the flat 50 km/h stretch (PI with integral action)
     flat = res.log[(res.log.s > 1700) & (res.log.s < 1950)]
     assert np.allclose(flat.v, 0.9 * 50 / 3.6 - 0.3, atol=0.3)
+
+
+@pytest.mark.parametrize(("v0", "accel"), [(13.6, -1.5), (1.0, 1.5), (20.0, -2.0)])
+def test_plan_speed_between_nodes_is_the_constant_acceleration_speed(v0, accel):
+    """Constant force over a segment is constant acceleration a, so v(s) = sqrt(v0^2 + 2 a s) between the nodes
+    (the NLP's E = v^2/2 linear in s), not the chord of v: braking from 13.6 m/s at 1.5 m/s^2 on a 20 m grid,
+    the chord lies up to 0.83 m/s below the plan in the last segment before 2.2 m/s."""
+    s = np.array([0.0, 20.0, 40.0, 60.0])
+    s = s[v0 ** 2 + 2 * accel * s >= 0.0]
+    v = np.sqrt(v0 ** 2 + 2 * accel * s)
+    plan = Plan(s=s, v=v, t=np.zeros(s.size), traction=np.zeros(s.size - 1), regen=np.zeros(s.size - 1),
+                brake=np.zeros(s.size - 1), success=True, status="ok", solve_time=0.0, iterations=1)
+    x = np.linspace(0.0, s[-1], 241)
+    np.testing.assert_allclose(plan.speed_at(x), np.sqrt(v0 ** 2 + 2 * accel * x), rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(plan.accel, accel)
+    assert plan.speed_at(-5.0) == pytest.approx(v0) and plan.speed_at(s[-1] + 5.0) == pytest.approx(v[-1])

@@ -397,20 +397,23 @@ class OcpSolver:
         ramps from a_prev down to -decel_max as fast as the NLP's jerk constraint allows,
         a_k = max(a_{k-1} - j_max ds / v_k, -decel_max), E_{k+1} = E_k + a_k ds (floored at the speed floor).
         Braking harder at every segment lowers every later speed, so this greedy sequence is the lowest."""
-        return self._braking(v0, len(preview.s), a_prev)[0]
+        return self._braking(v0, len(preview.s), a_prev, np.diff(np.asarray(preview.s, float)))[0]
 
-    def _braking(self, v0: float, n_nodes: int, a_prev: float) -> tuple[np.ndarray, np.ndarray]:
-        """(speed [m/s] at each node, acceleration [m/s^2] of each segment) of :meth:`braking_reach`."""
+    def _braking(self, v0: float, n_nodes: int, a_prev: float,
+                 lengths: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(speed [m/s] at each node, acceleration [m/s^2] of each segment) of :meth:`braking_reach`; ``lengths``:
+        the segment lengths [m] (None: the settings' uniform ds)."""
         st = self.settings
+        ds = np.full(max(n_nodes - 1, 0), st.ds) if lengths is None else np.asarray(lengths, float)
         e_floor = 0.5 * st.speed_floor ** 2
         e = 0.5 * max(v0, st.speed_floor) ** 2
         a = min(max(a_prev, -st.decel_max), st.accel_max)
         speed, accel = np.empty(n_nodes), np.empty(max(n_nodes - 1, 0))
         speed[0] = math.sqrt(2.0 * e)
         for k in range(1, n_nodes):
-            a = max(a - st.jerk_max * st.ds / math.sqrt(2.0 * e), -st.decel_max)
+            a = max(a - st.jerk_max * ds[k - 1] / math.sqrt(2.0 * e), -st.decel_max)
             accel[k - 1] = a
-            e = max(e + a * st.ds, e_floor)
+            e = max(e + a * ds[k - 1], e_floor)
             speed[k] = math.sqrt(2.0 * e)
         return speed, accel
 
@@ -641,7 +644,7 @@ class OcpSolver:
     def _reach_at(self, v0: float, a_prev: float, s: np.ndarray, position: float) -> float:
         """Lowest speed [m/s] reachable at ``position`` [m] inside the grid s within the comfort limits (the braking
         of :meth:`braking_reach` continued to that point; 0 if it stops before)."""
-        speed, accel = self._braking(v0, len(s), a_prev)
+        speed, accel = self._braking(v0, len(s), a_prev, np.diff(s))
         k = int(np.clip(np.searchsorted(s, position, side="right") - 1, 0, len(accel) - 1))
         e = 0.5 * speed[k] ** 2 + accel[k] * (position - float(s[k]))  # E = v^2 / 2 [m^2/s^2]
         return math.sqrt(2.0 * max(e, 0.0))

@@ -230,7 +230,8 @@ class MpcController(ControllerBase):
         st, road, en = self.settings.mpc, self.ctx.road, self.ctx.energy
         n, ds = st.n_nodes, st.ds
         s = s0 + ds * np.arange(n + 1)
-        segment_lengths = None
+        at_stop = self._nodes_at_stops(s)
+        segment_lengths = None if not at_stop else np.diff(s)
         if st.horizon_to_route_end and s[-1] > road.length:  # nodes past the road end collapse onto it
             beyond = s > road.length
             s[beyond] = road.length + 1e-3 * (1.0 + np.arange(int(beyond.sum())))
@@ -239,17 +240,20 @@ class MpcController(ControllerBase):
         at = road.at(mid)
         # node cap: the lowest cap over both adjacent segments, so the (monotone within a segment) planned
         # speed respects the cap everywhere between nodes, wherever the moving grid falls
-        lo = np.searchsorted(self._fine_s, s - ds)
-        hi = np.searchsorted(self._fine_s, s + ds, side="right")
+        lo = np.searchsorted(self._fine_s, np.concatenate([[s[0] - ds], s[:-1]]))
+        hi = np.searchsorted(self._fine_s, np.concatenate([s[1:], [s[-1] + ds]]), side="right")
         cap = np.array([self._fine_cap[a:max(b, a + 1)].min() for a, b in zip(lo, hi)])
         for stop in self._unserved:
-            if s[0] - 1.0 <= stop <= s[-1]:
+            if stop in at_stop:
+                cap[at_stop[stop]] = st.stop_speed
+            elif s[0] - 1.0 <= stop <= s[-1]:
                 k = int(np.floor((stop - s0) / ds))
                 cap[max(k, 0):min(k + 2, n + 1)] = st.stop_speed
-        seg0 = np.interp(s0 + SEGMENT0_FRACTIONS * ds, self._fine_s, self._fine_cap)
+        inside = s0 + SEGMENT0_FRACTIONS * (s[1] - s0)  # sampled points of segment 0 (a node may sit at a stop)
+        seg0 = np.interp(inside, self._fine_s, self._fine_cap)
         for stop in self._unserved:
-            if s0 - 1.0 <= stop <= s0 + ds:
-                seg0 = np.where(s0 + SEGMENT0_FRACTIONS * ds >= stop - 1e-9, np.minimum(seg0, st.stop_speed), seg0)
+            if s0 - 1.0 <= stop <= s[1] and stop not in at_stop:
+                seg0 = np.where(inside >= stop - 1e-9, np.minimum(seg0, st.stop_speed), seg0)
         if self.plan is not None:
             v_guess = self.plan.speed_at(mid)
         else:
@@ -267,6 +271,24 @@ class MpcController(ControllerBase):
         return Preview(s=s, grade=at["grade"], curvature=at["curvature"], speed_cap=cap, ratio=ratio,
                        segment0_cap=seg0, stops=stops, headwind=headwind, crosswind=crosswind,
                        yaw_drag_factor=yaw, ds=segment_lengths)
+
+    def _nodes_at_stops(self, s: np.ndarray) -> dict[float, int]:
+        """Moves the grid node nearest to each unserved stop onto its line (in place; node 0 is the current state
+        and stays), so the plan's stop speed holds at the line itself rather than on the whole segment before it:
+        a cap on the node before the line made the plan crawl up to ds metres and the tracker slow down early.
+        Segments stay between ds/2 and 3 ds/2 long; a stop that would leave a shorter one (within ds/2 of the
+        vehicle, or next to another stop) keeps the caps on both nodes around it. Returns {stop: node index}."""
+        ds, n = self.settings.mpc.ds, len(s) - 1
+        moved: dict[float, int] = {}
+        for stop in self._unserved:
+            j = int(round((stop - s[0]) / ds))
+            if not 1 <= j <= n or j in moved.values():
+                continue
+            right = s[j + 1] - stop if j < n else ds
+            if stop - s[j - 1] >= 0.5 * ds and right >= 0.5 * ds:
+                s[j] = stop
+                moved[stop] = j
+        return moved
 
     # ------------------------------------------------------------------ control
     def _replan(self, obs: Observation) -> None:

@@ -195,3 +195,26 @@ def test_plan_speed_between_nodes_is_the_constant_acceleration_speed(v0, accel):
     np.testing.assert_allclose(plan.speed_at(x), np.sqrt(v0 ** 2 + 2 * accel * x), rtol=1e-12, atol=1e-9)
     np.testing.assert_allclose(plan.accel, accel)
     assert plan.speed_at(-5.0) == pytest.approx(v0) and plan.speed_at(s[-1] + 5.0) == pytest.approx(v[-1])
+
+
+def test_preview_puts_a_node_on_each_stop_line():
+    """The node nearest to a stop moves onto its line and alone carries the stop speed, so the plan does not crawl
+    the segment before it; a stop within ds/2 ahead, or too close to another, keeps the caps on the nodes around
+    it."""
+    road = scripted_road(length=3000.0, hills=False, stops=[113.0, 121.0, 2000.0])
+    ctl = mpc()
+    ctl.reset(DriveContext(road, ENERGY, FixedForceModel(PARAMS)))
+    pv = ctl.preview(0.0, 10.0)
+    grid = 20.0 * np.arange(101)
+    grid[6] = 113.0  # 120 m -> 113 m; the stop at 121 m would share node 6: the nodes around it keep the cap
+    np.testing.assert_allclose(pv.s, grid)
+    np.testing.assert_allclose(pv.ds, np.diff(grid))
+    assert pv.speed_cap[6] == 1.0 and pv.speed_cap[7] == 1.0 and pv.speed_cap[5] > 20.0
+    ctl.serve_stop(0)
+    ctl.serve_stop(1)
+    # 1992 m -> the line at 2000 m: segments of 17.8 and 22.2 m, only that node at the stop speed
+    far = ctl.preview(1002.2, 20.0)
+    assert far.s[50] == 2000.0 and far.speed_cap[50] == 1.0 and far.speed_cap[[49, 51]].min() > 13.0
+    near = ctl.preview(1992.0, 13.0)  # the line 8 m ahead, inside segment 0: nodes 0 and 1 capped as before
+    assert near.ds is None and near.speed_cap[1] == 1.0
+    assert near.segment0_cap[-1] == 1.0 and near.segment0_cap[0] > 13.0

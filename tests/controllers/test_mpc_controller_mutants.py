@@ -148,17 +148,20 @@ def test_preview_grid_caps_and_stops():
               curve=(100.0, 140.0, 0.02))
     ctl = controller(rd, n=16)
     pv = ctl.preview(37.0, 15.0)
-    np.testing.assert_allclose(pv.s, 37.0 + 20.0 * np.arange(17))
-    np.testing.assert_allclose(pv.grade, 1e-4 * (47.0 + 20.0 * np.arange(16)))  # at each segment's midpoint
+    grid = 37.0 + 20.0 * np.arange(17)
+    grid[13] = 300.0  # the node nearest to the stop at 300 m (297 m) sits on its line
+    np.testing.assert_allclose(pv.s, grid)
+    np.testing.assert_allclose(pv.ds, np.diff(grid))
+    np.testing.assert_allclose(pv.grade, 1e-4 * 0.5 * (grid[1:] + grid[:-1]))  # at each segment's midpoint
     np.testing.assert_allclose(pv.curvature[[2, 3, 4, 5]], [0.0, 0.02, 0.02, 0.0])  # midpoints 97, 117, 137, 157
     # each node: the lowest cap within one segment either side (curve cap sqrt(2 / 0.02) = 10 m/s on 100..140)
     cap = pv.speed_cap
     np.testing.assert_allclose(cap[:8], [20.0, 20.0, 20.0, 10.0, 10.0, 10.0, 10.0, 20.0])  # 37 ... 177 m
     np.testing.assert_allclose(cap[[8, 11, 12]], [10.0, 10.0, 10.0])  # 197 | 257, 277 (the 10 m/s to 260 m)
-    # the stop at 300 m caps the nodes around it (297 and 317 m) at stop_speed; the one behind is not in view
-    np.testing.assert_allclose(cap[[13, 14, 15]], [1.0, 1.0, 20.0])
+    # the stop at 300 m caps its own node at stop_speed, not the next one; the one behind is not in view
+    np.testing.assert_allclose(cap[[13, 14, 15]], [1.0, 20.0, 20.0])
     np.testing.assert_array_equal(pv.stops, [300.0])
-    np.testing.assert_allclose(pv.ratio, 9.665) and pv.ds is None
+    np.testing.assert_allclose(pv.ratio, 9.665)
     assert pv.headwind is None and pv.crosswind is None and pv.yaw_drag_factor == 0.0
     # inside segment 0 the cap is sampled every 2 m (39..57 m: the limit)
     np.testing.assert_allclose(pv.segment0_cap, 20.0)
@@ -199,7 +202,10 @@ def test_preview_stop_edges():
     # the line exactly at the horizon end caps the last node; inside the last segment the last two
     horizon = ctl.preview(40.0 - 160.0, 10.0)
     assert horizon.speed_cap[-1] == 1.0 and horizon.speed_cap[-2] == 20.0
-    np.testing.assert_allclose(ctl.preview(40.0 - 150.0, 10.0).speed_cap[-3:], [20.0, 1.0, 1.0])
+    # 10 m before the horizon end: the last node moves back onto the line (a 10 m last segment), only it capped
+    inside = ctl.preview(40.0 - 150.0, 10.0)
+    np.testing.assert_allclose(inside.speed_cap[-3:], [20.0, 20.0, 1.0])
+    assert inside.s[-1] == 40.0 and inside.ds[-1] == 10.0
 
 
 def test_preview_to_the_route_end_collapses_the_nodes_past_it():

@@ -119,7 +119,8 @@ class OnlineForceModel:
         for a, b in zip(A[new], B[new]):
             if self.detector is not None and self.detector.update(float(b - a @ self.estimator.x)):
                 assert self._reset_diagonal is not None  # set together with the detector from change_detection
-                reset_covariance(self.estimator, self._reset_diagonal)  # a change of the road load: learn anew
+                # a change of the road load: learn anew, the covariance raised on the residuals' own scale
+                reset_covariance(self.estimator, self._reset_diagonal, self.detector.scale)
             self.estimator.update(a, b)
         if new.any():
             self._t_done = float(t[new].max())

@@ -8,9 +8,16 @@ mean of |r|, times sqrt(pi/2) for a Gaussian), z_t = r_t / s_t, the cumulative s
     g+_t = max(0, g+_{t-1} + z_t - nu),   g-_t = max(0, g-_{t-1} - z_t - nu)
 
 grow only while the residuals keep one sign (a model that no longer fits), and the test fires when either exceeds
-the threshold h. Then P <- P + diag(reset_variance) for the chosen parameters (the others keep their covariance),
-which raises the gain of the next updates the way the text's random-walk (Kalman) estimators do continuously
-(section 3.7), but only after a detected change.
+the threshold h. Then the covariance of the chosen parameters grows by ``reset_variance`` (the others keep
+theirs), which raises the gain of the next updates the way the text's random-walk (Kalman) estimators do
+continuously (section 3.7), but only after a detected change.
+
+The estimators' P is not the parameter covariance: with the gain L = W P a / (c + W a P a^T) (c = lambda for the
+forgetting family, R for the Kalman family) the covariance is sigma^2 P / c, sigma the output noise [unit of B].
+So a covariance step of diag(reset_variance) [parameter units^2] is P <- P + c diag(reset_variance) / sigma^2,
+with sigma the residual scale s_t of the test. Added to P unscaled (as if P were the covariance), a reset of
+25 kg^2 on m_V f_r0 with sigma ~ 100 N made a P a^T thousands of times c: the next single sample's residual,
+noise and all, was fitted entirely, and the rolling and drag estimates jumped by more than their own size.
 """
 
 from __future__ import annotations
@@ -70,6 +77,13 @@ class CusumDetector:
         self.high = self.low = 0.0
         self.scale = float("nan")
         self.alarms = 0
+        self.samples = 0
+
+    @property
+    def settling(self) -> int:
+        """Residuals [1] the scale needs before the test may fire: 1 / (1 - scale_forgetting), its memory (a scale
+        from a few residuals would standardise by noise and let the covariance step grow with 1 / scale^2)."""
+        return int(round(1.0 / (1.0 - self.settings.scale_forgetting)))
 
     def update(self, residual: float) -> bool:
         """Feed one prior residual r_t [unit of B]; True when the test fires (the sums then restart at 0)."""
@@ -82,6 +96,9 @@ class CusumDetector:
             return False
         z = residual / max(self.scale, 1e-9)
         self.scale = st.scale_forgetting * self.scale + (1.0 - st.scale_forgetting) * size
+        self.samples += 1
+        if self.samples < self.settling:
+            return False
         self.high = max(0.0, self.high + z - st.drift)
         self.low = max(0.0, self.low - z - st.drift)
         if self.high > st.threshold or self.low > st.threshold:
@@ -91,8 +108,25 @@ class CusumDetector:
         return False
 
 
-def reset_covariance(estimator, diagonal: np.ndarray) -> None:
-    """P <- P + diag(diagonal) of a recursive estimator (through its copyable state)."""
+def gain_constant(estimator) -> float:
+    """c of the estimator's gain L = W P a / (c + W a P a^T): R (output_noise) for the Kalman family, lambda
+    (forgetting) otherwise, 1 where the estimator names neither."""
+    config = getattr(estimator, "config", None)
+    if config is None:
+        return float(getattr(estimator, "forgetting", 1.0) or 1.0)
+    if getattr(config, "covariance", "forgetting") != "forgetting" and getattr(config, "output_noise", None):
+        return float(config.output_noise)
+    return float(getattr(config, "forgetting", None) or 1.0)
+
+
+def reset_covariance(estimator, diagonal: np.ndarray, noise_scale: float = 1.0) -> None:
+    """Raise the parameter covariance of a recursive estimator by diag(diagonal) [parameter units^2]:
+    P <- P + c diag(diagonal) / sigma^2 (module docstring), sigma = ``noise_scale`` [unit of B], the output noise
+    (:attr:`CusumDetector.scale`); through the estimator's copyable state."""
+    if not (math.isfinite(noise_scale) and noise_scale > 0):
+        raise ChangeDetectionError(f"reset_covariance: noise_scale must be a finite scale > 0 [unit of B], got "
+                                   f"{noise_scale!r}")
     state = estimator.state
-    state.p = state.p + np.diag(np.asarray(diagonal, float))
+    step = gain_constant(estimator) * np.asarray(diagonal, float) / noise_scale ** 2
+    state.p = state.p + np.diag(step)
     estimator.set_state(state)

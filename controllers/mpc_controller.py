@@ -277,12 +277,13 @@ class MpcController(ControllerBase):
         and stays), so the plan's stop speed holds at the line itself rather than on the whole segment before it:
         a cap on the node before the line made the plan crawl up to ds metres and the tracker slow down early.
         Segments stay between ds/2 and 3 ds/2 long; a stop that would leave a shorter one (within ds/2 of the
-        vehicle, or next to another stop) keeps the caps on both nodes around it. Returns {stop: node index}."""
+        vehicle, or next to another stop) keeps the caps on both nodes around it, and one beyond the last node
+        stays out of view. Returns {stop: node index}."""
         ds, n = self.settings.mpc.ds, len(s) - 1
         moved: dict[float, int] = {}
         for stop in self._unserved:
             j = int(round((stop - s[0]) / ds))
-            if not 1 <= j <= n or j in moved.values():
+            if not 1 <= j <= n or j in moved.values() or stop > s[-1]:  # the horizon stays where it ends
                 continue
             right = s[j + 1] - stop if j < n else ds
             if stop - s[j - 1] >= 0.5 * ds and right >= 0.5 * ds:

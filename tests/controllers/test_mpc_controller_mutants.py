@@ -195,8 +195,10 @@ def test_preview_stop_edges():
     assert list(off.stops) == [] and off.speed_cap[0] == 20.0
     np.testing.assert_allclose(off.segment0_cap, 20.0)
     assert list(ctl.preview(39.5, 3.0).stops) == [40.0]  # half a metre before it
-    # the line exactly at the end of segment 0: its last sample capped
-    np.testing.assert_allclose(ctl.preview(20.0, 10.0).segment0_cap, [20.0] * 9 + [1.0])
+    # the line exactly at the end of segment 0: node 1 sits on it and alone carries the stop speed
+    at_node = ctl.preview(20.0, 10.0)
+    np.testing.assert_allclose(at_node.segment0_cap, 20.0)
+    np.testing.assert_allclose(at_node.speed_cap[:3], [20.0, 1.0, 20.0])
     # samples of segment 0 half a metre before the line are not capped (33.5, ..., 39.5 | 41.5, ... m)
     np.testing.assert_allclose(ctl.preview(31.5, 10.0).segment0_cap, [20.0] * 4 + [1.0] * 6)
     # the line exactly at the horizon end caps the last node; inside the last segment the last two

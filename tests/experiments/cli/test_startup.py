@@ -12,7 +12,7 @@ from roadload.experiments.cli import BENCHMARKS, COMMANDS, _module_commands, app
 
 #: what a command may import only when it runs (the numba kernels come with numba)
 HEAVY = ("torch", "stable_baselines3", "casadi", "numba", "matplotlib", "dask", "distributed", "highway_env", "scipy",
-         "asammdf", "sklearn")
+         "asammdf", "sklearn", "gymnasium")
 RUNNER = CliRunner()
 
 
@@ -50,13 +50,13 @@ def test_bad_input_is_refused_before_any_heavy_import(argv):
     assert code == 2 and heavy == []
 
 
-def test_a_streamed_simulate_from_a_road_file_loads_no_pandas_and_no_scipy_filters(tmp_path):
-    """What keeps a 1-hour simulate under 250 MB peak RSS (scripts/bench_cli_startup.py measures it): pandas
-    (~40 MB) and scipy.ndimage (~16 MB) are not imported to stream a trip from a road file."""
+def test_a_streamed_simulate_from_a_road_file_loads_no_pandas_no_scipy_filters_no_gymnasium(tmp_path):
+    """What keeps a 1-hour simulate's peak RSS down (scripts/bench_cli_startup.py measures it): pandas (~40 MB),
+    scipy.ndimage (~16 MB) and gymnasium (~11 MB) are not imported to stream a trip from a road file."""
     from roadload.road_profiles import load_profile, save_profile
     road = save_profile(load_profile("motorway", seed=0, length=2000.0), tmp_path / "road.json")
     code, loaded = _imports_of(["simulate", "--vehicle", "bmw_i3", "--road", str(road), "--duration", "20", "--out",
-                                "trip.parquet"], ("pandas", "scipy.ndimage", "numba"), cwd=tmp_path)
+                                "trip.parquet"], ("pandas", "scipy.ndimage", "gymnasium", "numba"), cwd=tmp_path)
     assert code == 0 and loaded == ["numba"]  # numba: the simulator ran
     assert (tmp_path / "trip.parquet").exists()
 
@@ -125,9 +125,18 @@ def test_a_missing_input_file_names_a_similar_one(tmp_path):
 
 
 def test_import_roadload_stays_light_and_still_registers_the_gym_ids():
-    code = ("import sys, roadload, gymnasium\n"
-            "heavy = sorted({m.split('.')[0] for m in sys.modules} & {'pandas', 'pyarrow', 'pydantic', 'scipy', "
-            "'numba', 'torch', 'matplotlib', 'casadi'})\n"
-            "print(heavy, 'roadload/EcoDrive-v0' in gymnasium.registry, roadload.Trip.__name__)\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
-    assert out.stdout.strip() == "[] True Trip", out.stdout + out.stderr
+    """``import roadload`` loads no heavy library, gymnasium included; importing gymnasium afterwards (or before)
+    registers every id, whose env then resets."""
+    light = ("import sys, roadload\n"
+             "heavy = sorted({m.split('.')[0] for m in sys.modules} & {'pandas', 'pyarrow', 'pydantic', 'scipy', "
+             "'numba', 'torch', 'matplotlib', 'casadi', 'gymnasium'})\n"
+             "import gymnasium\n"
+             "print(heavy, [i for i, _, _ in roadload.GYM_ENVS if i not in gymnasium.registry], "
+             "roadload.Trip.__name__, gymnasium.__spec__.loader is not None and gymnasium.__loader__ is "
+             "gymnasium.__spec__.loader)\n"
+             "print(gymnasium.make('roadload/EcoDrive-v0', route_length=300.0).reset(seed=0)[0].shape)\n")
+    out = subprocess.run([sys.executable, "-c", light], capture_output=True, text=True, timeout=300)
+    assert out.stdout.split("\n")[:2] == ["[] [] Trip True", "(24,)"], out.stdout + out.stderr
+    first = "import gymnasium, roadload\nprint([i for i, _, _ in roadload.GYM_ENVS if i not in gymnasium.registry])\n"
+    out = subprocess.run([sys.executable, "-c", first], capture_output=True, text=True, timeout=300)
+    assert out.stdout.strip() == "[]", out.stdout + out.stderr

@@ -24,6 +24,10 @@ output block is only run. ``--update`` rewrites every stored output that no long
 
     python .ci/doc_commands.py README.md --workdir SCRATCH                  # the README's shell blocks
     python .ci/doc_commands.py docs/guides/*.md --python --workdir .        # the guides: Python + shell + outputs
+
+``--covered-by PAGE ...``: a shell block whose code is also a shell block of one of these pages is not run again
+(.ci/smoke.py passes the pages the docs stage runs, so that the README's command shared with the home page runs
+once per CI run).
 """
 
 from __future__ import annotations
@@ -134,8 +138,43 @@ class PythonWorker:
         self.proc.wait(timeout=60)
 
 
-def run_page(page: Path, workdir: Path, python: bool, update: bool) -> tuple[int, int, list[str]]:
-    """(blocks run, outputs checked, failures) of one page; with ``update`` the page's stale outputs are rewritten."""
+def shell_blocks(pages: list[Path]) -> dict[str, str]:
+    """The code of every shell block of ``pages`` (normalised), each with where it is (``page:line``)."""
+    found: dict[str, str] = {}
+    for page in pages:
+        for block in page_blocks(page.read_text(encoding="utf-8"), python=False):
+            found.setdefault(normalise(block.code), f"{page}:{block.line}")
+    return found
+
+
+def skip_reason(block: Block, covered: dict[str, str] | None) -> str | None:
+    """Why a block is not run here (set-up / tests, or the same shell block runs in a covered page), or None."""
+    if block.kind != "shell":
+        return None
+    if SETUP.search(block.code):
+        return "set-up / tests, run by .ci/run"
+    if covered and normalise(block.code) in covered:
+        return f"the same block runs in {covered[normalise(block.code)]}"
+    return None
+
+
+def run_block(block: Block, workdir: Path, worker: PythonWorker | None) -> tuple[bool, str]:
+    """(success, printed text) of one block: a shell block in its own bash, a Python block in the page's worker."""
+    if block.kind == "shell":
+        run = subprocess.run(["bash", "-euo", "pipefail", "-c", block.code], cwd=workdir,
+                             capture_output=True, text=True, env=ENV)
+        ok, out = run.returncode == 0, run.stdout
+        if not ok:
+            out += f"\n(exit code {run.returncode})\n{run.stderr[-3000:]}"
+        return ok, out
+    assert worker is not None
+    return worker.run(block.code)
+
+
+def run_page(page: Path, workdir: Path, python: bool, update: bool,
+             covered: dict[str, str] | None = None) -> tuple[int, int, list[str]]:
+    """(blocks run, outputs checked, failures) of one page; with ``update`` the page's stale outputs are rewritten.
+    A shell block whose code is a key of ``covered`` (:func:`shell_blocks`) is skipped: it runs there."""
     text = page.read_text(encoding="utf-8")
     blocks = page_blocks(text, python)
     worker = PythonWorker(workdir) if any(b.kind == "python" for b in blocks) else None
@@ -146,19 +185,12 @@ def run_page(page: Path, workdir: Path, python: bool, update: bool) -> tuple[int
         for block in blocks:
             first = block.code.splitlines()[0][:100] if block.code.strip() else ""
             where = f"{page}:{block.line}"
-            if block.kind == "shell" and SETUP.search(block.code):
-                print(f"skip: {where} (set-up / tests, run by .ci/run): {first}")
+            reason = skip_reason(block, covered)
+            if reason:
+                print(f"skip: {where} ({reason}): {first}")
                 continue
             t0 = time.perf_counter()
-            if block.kind == "shell":
-                run = subprocess.run(["bash", "-euo", "pipefail", "-c", block.code], cwd=workdir,
-                                     capture_output=True, text=True, env=ENV)
-                ok, out = run.returncode == 0, run.stdout
-                if not ok:
-                    out += f"\n(exit code {run.returncode})\n{run.stderr[-3000:]}"
-            else:
-                assert worker is not None
-                ok, out = worker.run(block.code)
+            ok, out = run_block(block, workdir, worker)
             ran += 1
             if not ok:
                 failures.append(f"{where}: {block.kind} block failed: {first}\n{out[-3000:]}")
@@ -193,11 +225,14 @@ def main() -> int:
     ap.add_argument("--workdir", type=Path, required=True)
     ap.add_argument("--python", action="store_true", help="also run the ```python blocks")
     ap.add_argument("--update", action="store_true", help="rewrite stored outputs that no longer match")
+    ap.add_argument("--covered-by", type=Path, nargs="+", default=[], metavar="PAGE",
+                    help="pages run elsewhere: a shell block that is also one of theirs is not run again")
     args = ap.parse_args()
+    covered = shell_blocks(args.covered_by)
     ran = checked = 0
     failures: list[str] = []
     for page in args.pages:
-        r, c, f = run_page(page, args.workdir, args.python, args.update)
+        r, c, f = run_page(page, args.workdir, args.python, args.update, covered)
         ran, checked, failures = ran + r, checked + c, failures + f
     for failure in failures:
         print(f"\nFAILED: {failure}")

@@ -7,6 +7,10 @@ instead of waiting for each other. Each job's output goes to its own log; the li
 its CPU time (user + system, children included). A failed job prints the end of its log; the jobs already running
 finish, no new one starts, and the stage fails.
 
+Nothing runs twice: a ``python scripts/NAME.py --quick`` line of a shell block in the pages the docs stage runs
+(docs/index.md, docs/guides/*.md: docs/tools/build_docs.sh) is its smoke run, and a README shell block that is
+also a block of those pages runs there only.
+
     python .ci/smoke.py [--jobs 2] [--workdir DIR]
 """
 
@@ -14,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -22,6 +27,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / ".ci"))
+from doc_commands import shell_blocks  # noqa: E402  (the page reader of .ci/doc_commands.py, beside this file)
+
+#: the pages whose shell blocks the docs stage runs (docs/tools/build_docs.sh)
+DOCS_PAGES = [ROOT / "docs" / "index.md", *sorted((ROOT / "docs" / "guides").glob("*.md"))]
+SCRIPT_QUICK = re.compile(r"^python scripts/([\w.-]+\.py) --quick$")
 
 
 @dataclass
@@ -32,17 +43,35 @@ class Job:
     log: Path
 
 
+def scripts_run_by_docs() -> dict[str, str]:
+    """``{script file name: page:line}`` of the ``python scripts/NAME.py --quick`` lines the docs stage runs."""
+    found: dict[str, str] = {}
+    for code, where in shell_blocks(DOCS_PAGES).items():
+        for line in code.splitlines():
+            m = SCRIPT_QUICK.match(line.strip())
+            if m:
+                found.setdefault(m.group(1), where)
+    return found
+
+
 def jobs(smoke: Path) -> list[Job]:
     """The docs stage first (the longest job, so that the scripts fill the other slot meanwhile), the README's
-    commands, then every entry point (a leading _ would mark a file that is not one)."""
+    commands, then every entry point (a leading _ would mark a file that is not one) that the docs stage does not
+    run already."""
     out = []
     docs = ROOT / ".ci" / "docs"
+    by_docs: dict[str, str] = {}
+    readme = [sys.executable, str(ROOT / ".ci" / "doc_commands.py"), str(ROOT / "README.md"), "--workdir", str(smoke)]
     if docs.is_file() and os.access(docs, os.X_OK):
         out.append(Job("docs: site build, guides' commands and outputs, examples", [str(docs)], ROOT,
                        smoke / "docs.log"))
-    out.append(Job("README commands", [sys.executable, str(ROOT / ".ci" / "doc_commands.py"), str(ROOT / "README.md"),
-                                       "--workdir", str(smoke)], smoke, smoke / "readme.log"))
+        by_docs = scripts_run_by_docs()
+        readme += ["--covered-by", *map(str, DOCS_PAGES)]
+    out.append(Job("README commands", readme, smoke, smoke / "readme.log"))
     for script in sorted((ROOT / "scripts").glob("[!_]*.py")):
+        if script.name in by_docs:
+            print(f"scripts/{script.name} --quick: run by the docs stage ({by_docs[script.name]})")
+            continue
         out.append(Job(f"scripts/{script.name} --quick", [sys.executable, str(script), "--quick"], smoke,
                        smoke / f"{script.name}.log"))
     return out

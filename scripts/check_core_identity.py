@@ -2,7 +2,7 @@
 (roadload.experiments.benchmarks.core_identity).
 
     python scripts/check_core_identity.py --ref 8efaaad          # the working tree against commit 8efaaad
-    python scripts/check_core_identity.py --quick                 # CI smoke run: HEAD, one short configuration
+    python scripts/check_core_identity.py --quick                 # CI smoke run: HEAD, one short simulator run
 """
 
 import sys

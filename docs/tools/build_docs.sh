@@ -24,10 +24,15 @@ for arg in "$@"; do
 done
 export NO_MKDOCS_2_WARNING=1 MPLBACKEND=Agg
 python docs/tools/gen_reference.py --check
-pkg=$(mktemp -d /tmp/roadload_docs_pkg.XXXXXX)
-trap 'rm -rf "$pkg"' EXIT
-python -m pip install -q --no-deps --target "$pkg" . 2>&1 | { grep -v -e "^$" -e "Running pip as the 'root' user" || true; }
-test -d "$pkg/roadload" || { echo "build_docs.sh: pip could not install roadload into $pkg" >&2; exit 1; }
+# ROADLOAD_DOCS_PATH set by the caller: a non-editable copy of this tree is there already (.ci/docs passes the one
+# CI installed moments before); else one is made (a wheel build: ~1 min of pip mostly waiting on the index)
+pkg="${ROADLOAD_DOCS_PATH:-}"
+if [ -z "$pkg" ]; then
+  pkg=$(mktemp -d /tmp/roadload_docs_pkg.XXXXXX)
+  trap 'rm -rf "$pkg"' EXIT
+  python -m pip install -q --no-deps --target "$pkg" . 2>&1 | { grep -v -e "^$" -e "Running pip as the 'root' user" || true; }
+fi
+test -d "$pkg/roadload/envs" || { echo "build_docs.sh: no non-editable copy of roadload in $pkg" >&2; exit 1; }
 ROADLOAD_DOCS_PATH="$pkg" python -m mkdocs build --strict -d "$site"
 echo "site written to $site"
 python -m pytest -q -p no:cacheprovider --markdown-docs docs/index.md docs/reference

@@ -124,7 +124,8 @@ class PythonWorker:
         assert self.proc.stdin is not None and self.proc.stdout is not None
         self.proc.stdin.write(json.dumps(code) + "\n")
         self.proc.stdin.flush()
-        stray: list[str] = []  # what a block wrote to the file descriptor directly (a subprocess, C code): part of its output
+        # what a block wrote to the file descriptor directly (a subprocess, C code): part of its output
+        stray: list[str] = []
         for line in self.proc.stdout:
             if line.startswith("DOC-BLOCK-RESULT "):
                 result = json.loads(line[len("DOC-BLOCK-RESULT "):])

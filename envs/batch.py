@@ -352,10 +352,11 @@ def start_vehicle(records, i, starts, k, random_state):
     v = starts.vehicles[k]
     records.vehicles[i] = v
     records.vehicles[i].state.random_state = random_state
-    n = v.road_points
-    records.roads[i, :, :n] = starts.roads[k, :, :n]
-    s = v.stop_count
-    records.stops[i, :s] = starts.stops[k, :s]
+    for row in range(records.roads.shape[1]):  # loops, not slices: a slice copy allocates (no kernel without NRT)
+        for p in range(v.road_points):
+            records.roads[i, row, p] = starts.roads[k, row, p]
+    for p in range(v.stop_count):
+        records.stops[i, p] = starts.stops[k, p]
 
 
 @jit(inline=True)

@@ -170,7 +170,7 @@ class StepOutput(NamedTuple):
     """(N_INFO, N): INFO_KEYS rows, then the terms."""
 
 
-@kernel()
+@kernel(refcount=False)
 def envelope_command(gap, v, v_lead, reaction_time, deceleration, leader_deceleration, margin):
     """The shield's cap on the command: SHIELD_GAIN (v_safe - v) [1], v_safe [m/s] the speed that solves
     v T + v^2 / (2 b) = gap - margin + v_l^2 / (2 b_l) (0 when the right side is <= 0): reacting after T and
@@ -183,7 +183,7 @@ def envelope_command(gap, v, v_lead, reaction_time, deceleration, leader_deceler
     return SHIELD_GAIN * (v_safe - v)
 
 
-@kernel()
+@kernel(refcount=False)
 def shield_cap(veh, K):
     """Stage 'shield': the lowest :func:`envelope_command` behind the ego's leader on its lane and, while
     changing, on its target lane (1 without a leader)."""
@@ -203,7 +203,7 @@ def shield_cap(veh, K):
     return cap
 
 
-@kernel()
+@kernel(refcount=False)
 def _observe(i, ego, tr, c):
     """Stage 'observation' of sub-env i -> tr.obs[i] (float32): the Kinematics block, then the powertrain block
     (value / scale, clipped to [-5, 5]), the route table read at the ego's position first."""
@@ -243,7 +243,7 @@ def _observe(i, ego, tr, c):
         out[j] = np.float32(-5.0 if o < -5.0 else (5.0 if o > 5.0 else o))
 
 
-@kernel()
+@kernel(refcount=False)
 def _gather_info(i, ego, tr, with_terms, info):
     """Stage 'info' of sub-env i -> column i of the info block (INFO_KEYS, then the terms, zero without)."""
     t, s, v, a, energy, mass, climb, gear, omega = ego_state(ego, i)
@@ -263,7 +263,7 @@ def _gather_info(i, ego, tr, with_terms, info):
         info[I_TERMS + k, i] = terms[k] if with_terms else 0.0
 
 
-@kernel()
+@kernel(refcount=False)
 def _frame(i, ui, ego, tr, c, work):
     """One traffic frame of sub-env i under the command ui: the traffic decides (MOBIL, IDM, steering; the ego
     steers to its target lane); the ego's powertrain runs n_sub substeps under the wheel force of ui at the
@@ -300,7 +300,7 @@ def _frame(i, ui, ego, tr, c, work):
     return ego_collisions(veh, m, dt, work)
 
 
-@kernel()
+@kernel(refcount=False)
 def _step_range(lo, hi, active, u, lane_request, ego, tr, c, out, work):
     """One env step of sub-envs lo..hi-1 as named stages: action (clip, lane request, shield), frames
     (:func:`_frame`), done flags, reward, observation, info. A sub-env that is not active (reset in this step:
@@ -367,7 +367,7 @@ def _step_threads(n_chunks, active, u, lane_request, ego, tr, c, out, work):
         _step_range(k * n // n_chunks, (k + 1) * n // n_chunks, active, u, lane_request, ego, tr, c, out, work[k])
 
 
-@kernel()
+@kernel(refcount=False)
 def spawn_traffic(vi, uniforms, lanes, initial_speed, limit, density, delta_low, delta_high, delay):
     """Stage 'spawn': the ego (row 0) and the traffic vehicles placed as EcoHighway-v0 places them (highway-env's
     Vehicle.create_random), from ``uniforms`` (U(0, 1): the m lanes, the m spacing factors, then the speeds and the
@@ -403,7 +403,7 @@ def spawn_traffic(vi, uniforms, lanes, initial_speed, limit, density, delta_low,
         vi[j, V_TIMER] = ((x + vi[j, V_Y]) * math.pi) % delay
 
 
-@kernel()
+@kernel(refcount=False)
 def _start_episodes(index, uniforms, params, rows, random_states, ego, starts, tr, c, info):
     """The start of an episode for sub-envs ``index``: the ego at its road's start (start ``rows[r]`` of the bank,
     the effects' random state; traffic_ego.start_ego), traffic spawned from their uniforms, episode values zeroed
@@ -426,7 +426,7 @@ def _start_episodes(index, uniforms, params, rows, random_states, ego, starts, t
         _gather_info(i, ego, tr, False, info)
 
 
-@kernel()
+@kernel(refcount=False)
 def _read_actions(actions, tol, u, lane):
     """Stage 'actions' of the vector env: the batched actions (n, d) -> u (n,), entry 0 rounded to float32 (the
     action space's dtype), and lane (n,), -1 / 0 / +1 of entry 1 (< -1/3: left, > 1/3: right; 0 when d = 1).

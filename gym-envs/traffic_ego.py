@@ -248,14 +248,14 @@ class EgoBatch:
 
 
 # --------------------------------------------------------------------------------------------- compiled access
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def wheel_force(u, v, F):
     """The signed wheel-force request [N] of the normalised command u in [-1, 1] at speed v [m/s]
     (DriveScales.wheel_force; F = (peak traction force [N], peak power [W], full brake force [N]))."""
     return u * min(F[0], F[1] / max(v, 1.0)) if u >= 0.0 else u * F[2]
 
 
-@kernel()
+@kernel(refcount=False)
 def ego_advance(ego, i, u, n_sub):
     """n_sub substeps (10 ms each) of ego i under the wheel force of the normalised command u at its current
     speed (regen first, friction brakes for the rest), the built-in steering law keeping it on its road's
@@ -264,7 +264,7 @@ def ego_advance(ego, i, u, n_sub):
     advance_vehicle(ego, i, n_sub)
 
 
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def ego_state(ego, i):
     """(t [s], s [m], v [m/s], a [m/s^2], source energy [J], mass [kg], climbing work m g h [J], gear,
     engine / motor speed [rad/s]) of ego i."""
@@ -273,20 +273,20 @@ def ego_state(ego, i):
             x.engine_speed)
 
 
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def ego_at_road_end(ego, i):
     """Whether ego i has reached the end of its road (its episode is truncated there)."""
     return vehicle_done(ego, i)
 
 
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def ego_look_ahead(ego, i, preview, s, out):
     """The preview table of ego i's road (grade, curvature, ...: RouteTable rows) at s + preview -> out."""
     k = ego.table_slot[i]
     look_ahead(ego.table[k, :, :ego.table_n[k]], PREVIEW_GRID, preview, s, out)
 
 
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def start_ego(ego, i, starts, row, random_state):
     """Ego i at the start of its road (start ``row`` of the bank's FleetStarts records, with the effects' random
     state; row -1: already started in Python, EgoBatch.prepare)."""

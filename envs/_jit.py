@@ -104,13 +104,17 @@ def dependent_jit(*sources: str | Path, core_stamp: str | None = None) -> Callab
     is ``njit(cache=True, error_model="numpy", ...)`` with the cache in a folder keyed by the hash of the core
     sources and of ``sources`` (the kernel's module and every module whose jitted functions it calls). numba would
     otherwise keep serving machine code with the old core inlined after an edit of the core (editable installs).
-    ``core_stamp``: the hash of the core sources (default: this installation's, ``STAMP``)."""
+    ``core_stamp``: the hash of the core sources (default: this installation's, ``STAMP``). ``refcount=False``: as
+    :func:`jit`'s, for kernels that allocate nothing (numba's reference counts are atomic operations on the shared
+    arrays' counters, which two threads stepping the same arrays contend for)."""
     paths = [Path(f).resolve() for f in sources]
     core = STAMP if core_stamp is None else core_stamp
     stamp = hashlib.sha1(core.encode() + b"".join(p.read_bytes() for p in paths)).hexdigest()[:12]
     cache_dir = _cache_dir(paths[0].parent, f"numba-{paths[0].stem}-", stamp)
 
-    def kernel(**options: Any) -> Callable[[Any], Any]:
+    def kernel(refcount: bool = True, **options: Any) -> Callable[[Any], Any]:
+        if not refcount:
+            options["_nrt"] = False
         return lambda fn: _njit_cached(fn, cache_dir, **options)
     kernel.cache_dir = cache_dir  # type: ignore[attr-defined]
     return kernel

@@ -11,6 +11,7 @@ Python side::
     fleet.load(i, Simulator(vehicle, road, effects, seed=s, initial_speed=v0))  # slot i <- that simulator
     records = fleet.records                         # FleetRecords: pass it to your compiled kernel
     fleet.state(i).speed                            # typed Python view of slot i (VehicleState)
+    starts = FleetStarts(fleet); k = starts.add(simulator)   # packed episode starts (a simulator as reset)
 
 Compiled side (from Python, or from a kernel whose numba cache follows the core's sources: ``kernel =
 dependent_jit(__file__)``, then ``@kernel()`` / ``@kernel(parallel=True)`` on each kernel)::
@@ -18,6 +19,7 @@ dependent_jit(__file__)``, then ``@kernel()`` / ``@kernel(parallel=True)`` on ea
     command_wheel_force(records, i, force, steer)   # signed wheel force [N], steer [rad] (NaN: built-in steering)
     advance_vehicle(records, i, n_substeps)         # n_substeps x SUBSTEP_SECONDS with the command held
     st = state_of(records, i)                       # the state record: st.speed [m/s], st.position [m], ...
+    start_vehicle(records, i, starts.records, k, effects_random_state(seed))  # = reset(seed) + load, compiled
 
 Every vehicle of one fleet is the same vehicle spec (the drive-train tables are shared); roads, effects, driver
 settings, seeds and states differ per slot. ``load`` may grow the fleet's arrays (a longer road than any before):
@@ -52,7 +54,7 @@ import numpy as np
 from . import physics
 from ._jit import dependent_jit, jit
 from .layout import COMMAND_DRIVER, COMMAND_FORCES, COMMAND_WHEEL_FORCE, N_LOG, N_ROAD, VEHICLE, Route, Tables
-from .simulator import SimulationError, Simulator
+from .simulator import SimulationError, Simulator, effects_random_state
 from .state import VehicleState
 
 SUBSTEP_SECONDS = 0.01
@@ -200,6 +202,83 @@ class Fleet:
         return VehicleState(self._vehicles, i)
 
 
+class StartRecords(NamedTuple):
+    """The packed episode starts of a :class:`FleetStarts` (its own arrays, no copy), as :func:`start_vehicle` takes
+    them; row k is start k."""
+
+    vehicles: np.ndarray
+    """(K,) vehicle records as the simulator's reset left them (road points and stop count set, no log rows)."""
+    roads: np.ndarray
+    """(K, rows, points) road attributes over distance."""
+    stops: np.ndarray
+    """(K, stops) stop-line positions [m]."""
+
+
+class FleetStarts:
+    """Episode starts for the vehicles of ``fleet``, packed so that a compiled kernel starts an episode without the
+    Python reset: :meth:`add` stores a simulator's packed vehicle as reset, its road rows and stop lines as start k;
+    ``start_vehicle(fleet.records, i, starts.records, k, effects_random_state(seed))`` then puts slot i where
+    ``simulator.reset(seed)`` followed by ``fleet.load(i, simulator)`` would (the same record, bit for bit: a reset
+    sets the effects' random stream from the seed and nothing else that depends on it, unless
+    ``simulator.road_depends_on_seed``, which :meth:`add` refuses), without building the sensor model and step
+    result the fleet never reads. May grow the fleet's arrays: read ``fleet.records`` again after :meth:`add`."""
+
+    def __init__(self, fleet: Fleet) -> None:
+        if fleet._shared is not None:
+            raise SimulationError("FleetStarts: this fleet shares its simulator's arrays (Fleet.sharing)")
+        self.fleet = fleet
+        self.count = 0
+        self._vehicles = np.zeros(4, VEHICLE)
+        self._roads = np.zeros((4, N_ROAD, 2))
+        self._stops = np.zeros((4, 1))
+        self._records: StartRecords | None = None
+
+    def add(self, simulator: Simulator) -> int:
+        """Start k (returned) <- ``simulator`` as its last reset left it (the fleet's vehicle spec; see the class)."""
+        if not isinstance(simulator, Simulator):
+            raise SimulationError(f"simulator: expected a roadload.envs.Simulator, got {type(simulator).__name__}")
+        if simulator.road_depends_on_seed:
+            raise SimulationError("simulator: its road depends on the seed (effect 'poor_excitation'); start it with "
+                                  "simulator.reset(seed) and Fleet.load")
+        vehicle, tables, road, stops, cycle = simulator._core_records()
+        if cycle is not None:
+            raise SimulationError("simulator: a drive-cycle simulator cannot join a fleet (its vehicles follow roads)")
+        fleet = self.fleet
+        fleet._adopt_tables(tables)
+        fleet._road_slot(road.shape[1])
+        fleet._stop_slot(max(stops.size, 1))
+        k = self.count
+        if k == self._vehicles.shape[0]:  # doubling: amortised O(1) per start
+            self._vehicles = np.concatenate([self._vehicles, np.zeros_like(self._vehicles)])
+            self._roads = np.concatenate([self._roads, np.zeros_like(self._roads)])
+            self._stops = np.concatenate([self._stops, np.zeros_like(self._stops)])
+        if self._roads.shape[2] < road.shape[1]:
+            self._roads = _grown(self._roads, road.shape[1])
+        if self._stops.shape[1] < stops.size:
+            self._stops = _grown(self._stops, stops.size)
+        self._roads[k, :, :road.shape[1]] = road
+        self._stops[k, :stops.size] = stops
+        self._vehicles[k] = vehicle[0]
+        self._vehicles[k]["road_points"] = road.shape[1]
+        self._vehicles[k]["stop_count"] = stops.size
+        self._vehicles[k]["state"]["log_rows"] = 0.0
+        self.count = k + 1
+        self._records = None
+        return k
+
+    def clear(self) -> None:
+        """Forget every start (the arrays are kept for the next ones)."""
+        self.count = 0
+
+    @property
+    def records(self) -> StartRecords:
+        """The packed starts to pass to a compiled kernel (the same object until an :meth:`add` grew an array)."""
+        if self._records is None or self._records.vehicles is not self._vehicles \
+                or self._records.roads is not self._roads or self._records.stops is not self._stops:
+            self._records = StartRecords(self._vehicles, self._roads, self._stops)
+        return self._records
+
+
 def _grown(arr: np.ndarray, width: int) -> np.ndarray:
     """``arr`` with its last axis zero-padded to ``width``."""
     new = np.zeros(arr.shape[:-1] + (width,), dtype=arr.dtype)
@@ -266,11 +345,27 @@ def advance_vehicles(records, active, n_substeps):
 
 
 @jit(inline=True)
+def start_vehicle(records, i, starts, k, random_state):
+    """Vehicle i at start k of ``starts`` (a FleetStarts' records) with the effects' random stream
+    ``random_state`` (``roadload.envs.simulator.effects_random_state(seed)``): its packed record, road rows and stop
+    lines copied into slot i (the fleet's arrays are wide enough: FleetStarts.add grew them)."""
+    v = starts.vehicles[k]
+    records.vehicles[i] = v
+    records.vehicles[i].state.random_state = random_state
+    for row in range(records.roads.shape[1]):  # loops, not slices: a slice copy allocates (no kernel without NRT)
+        for p in range(v.road_points):
+            records.roads[i, row, p] = starts.roads[k, row, p]
+    for p in range(v.stop_count):
+        records.stops[i, p] = starts.stops[k, p]
+
+
+@jit(inline=True)
 def vehicle_done(records, i):
     """True when vehicle i has reached the end of its road."""
     v = records.vehicles[i]
     return physics.is_done(v.state, v.params)
 
 
-__all__ = ["SUBSTEP_SECONDS", "Fleet", "FleetRecords", "advance_vehicle", "advance_vehicles", "command_driver",
-           "command_forces", "command_wheel_force", "dependent_jit", "state_of", "vehicle_done"]
+__all__ = ["SUBSTEP_SECONDS", "Fleet", "FleetRecords", "FleetStarts", "StartRecords", "advance_vehicle",
+           "advance_vehicles", "command_driver", "command_forces", "command_wheel_force", "dependent_jit",
+           "effects_random_state", "start_vehicle", "state_of", "vehicle_done"]

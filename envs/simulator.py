@@ -55,6 +55,12 @@ if TYPE_CHECKING:  # a streamed run writes plain column arrays: pandas (40 MB) l
 
 DT = 0.01  # s, physics step (100 Hz)
 
+
+def effects_random_state(seed: int) -> int:
+    """The start of the effects' random stream (the splitmix64 state, roadload.envs.numerics) of a simulator reset
+    with ``seed``: ``Simulator.reset`` and a compiled episode start (``roadload.envs.batch.start_vehicle``) use it."""
+    return int(np.random.default_rng([int(seed), 100]).integers(0, 2 ** 63))
+
 # positions of the fields the step path reads and writes in the vehicle record's float view (Python reads a word of
 # a float64 view 4x faster than a structured field)
 _T, _POS, _V, _A, _NLOG, _GEAR, _MODE, _OMEGA, _TE, _AY, _AY_MAX, _AY_WARN, _E_SOURCE, _MASS = (
@@ -358,7 +364,7 @@ class Simulator:
         self._vehicle[0]["params"] = self._params_start  # undoes the schedules and run limits of the last trip
         self._vehicle["state"] = 0
         x, p = self._x, self._p
-        x["random_state"] = np.random.default_rng([self.seed, 100]).integers(0, 2 ** 63)
+        x["random_state"] = effects_random_state(self.seed)
         v = self.initial_speed
         x["speed"] = v
         x["last_shift_time"] = -1e9
@@ -593,6 +599,12 @@ class Simulator:
     def done(self) -> bool:
         """End of the road (or drive cycle) reached, or the limit of the current run."""
         return bool(physics.done_one(self._vehicle))
+
+    @property
+    def road_depends_on_seed(self) -> bool:
+        """Whether a reset's packed road and stop lines depend on the seed (poor_excitation draws its cruise
+        stretches from it); otherwise the seed sets only the effects' random stream (effects_random_state)."""
+        return self.effects.enabled("poor_excitation")
 
     def _core_records(self) -> tuple[np.ndarray, Tables, np.ndarray, np.ndarray, np.ndarray | None]:
         """(vehicle record array, tables, road rows, stop lines, drive cycle or None): what Fleet.load copies."""

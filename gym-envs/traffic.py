@@ -62,7 +62,7 @@ from roadload.gym import batched
 from roadload.gym.config import SPACE_FIELDS_TRAFFIC, EcoTrafficConfig, GymConfigError, make_config, updated_config
 from roadload.gym.ecodrive import SHIELD_GAIN
 from roadload.gym.traffic_ego import (PREVIEW, EgoBatch, ego_advance, ego_at_road_end, ego_look_ahead, ego_road,
-                                      ego_state, road_key)
+                                      ego_state, road_key, start_ego)
 from roadload.gym.traffic_model import (LANE_WIDTH, V_CRASHED, V_DELTA, V_HEADING, V_LANE, V_SPEED, V_TARGET_LANE,
                                         V_TARGET_SPEED, V_TIMER, V_X, V_Y, N_V, behaviour_array, ego_collisions,
                                         front_gap, kinematics_block, lane_neighbours, leader_gap, move, neighbours,
@@ -170,7 +170,7 @@ class StepOutput(NamedTuple):
     """(N_INFO, N): INFO_KEYS rows, then the terms."""
 
 
-@kernel()
+@kernel(refcount=False)
 def envelope_command(gap, v, v_lead, reaction_time, deceleration, leader_deceleration, margin):
     """The shield's cap on the command: SHIELD_GAIN (v_safe - v) [1], v_safe [m/s] the speed that solves
     v T + v^2 / (2 b) = gap - margin + v_l^2 / (2 b_l) (0 when the right side is <= 0): reacting after T and
@@ -183,7 +183,7 @@ def envelope_command(gap, v, v_lead, reaction_time, deceleration, leader_deceler
     return SHIELD_GAIN * (v_safe - v)
 
 
-@kernel()
+@kernel(refcount=False)
 def shield_cap(veh, K):
     """Stage 'shield': the lowest :func:`envelope_command` behind the ego's leader on its lane and, while
     changing, on its target lane (1 without a leader)."""
@@ -203,7 +203,7 @@ def shield_cap(veh, K):
     return cap
 
 
-@kernel()
+@kernel(refcount=False)
 def _observe(i, ego, tr, c):
     """Stage 'observation' of sub-env i -> tr.obs[i] (float32): the Kinematics block, then the powertrain block
     (value / scale, clipped to [-5, 5]), the route table read at the ego's position first."""
@@ -243,7 +243,7 @@ def _observe(i, ego, tr, c):
         out[j] = np.float32(-5.0 if o < -5.0 else (5.0 if o > 5.0 else o))
 
 
-@kernel()
+@kernel(refcount=False)
 def _gather_info(i, ego, tr, with_terms, info):
     """Stage 'info' of sub-env i -> column i of the info block (INFO_KEYS, then the terms, zero without)."""
     t, s, v, a, energy, mass, climb, gear, omega = ego_state(ego, i)
@@ -263,7 +263,7 @@ def _gather_info(i, ego, tr, with_terms, info):
         info[I_TERMS + k, i] = terms[k] if with_terms else 0.0
 
 
-@kernel()
+@kernel(refcount=False)
 def _frame(i, ui, ego, tr, c, work):
     """One traffic frame of sub-env i under the command ui: the traffic decides (MOBIL, IDM, steering; the ego
     steers to its target lane); the ego's powertrain runs n_sub substeps under the wheel force of ui at the
@@ -300,7 +300,7 @@ def _frame(i, ui, ego, tr, c, work):
     return ego_collisions(veh, m, dt, work)
 
 
-@kernel()
+@kernel(refcount=False)
 def _step_range(lo, hi, active, u, lane_request, ego, tr, c, out, work):
     """One env step of sub-envs lo..hi-1 as named stages: action (clip, lane request, shield), frames
     (:func:`_frame`), done flags, reward, observation, info. A sub-env that is not active (reset in this step:
@@ -367,7 +367,7 @@ def _step_threads(n_chunks, active, u, lane_request, ego, tr, c, out, work):
         _step_range(k * n // n_chunks, (k + 1) * n // n_chunks, active, u, lane_request, ego, tr, c, out, work[k])
 
 
-@kernel()
+@kernel(refcount=False)
 def spawn_traffic(vi, uniforms, lanes, initial_speed, limit, density, delta_low, delta_high, delay):
     """Stage 'spawn': the ego (row 0) and the traffic vehicles placed as EcoHighway-v0 places them (highway-env's
     Vehicle.create_random), from ``uniforms`` (U(0, 1): the m lanes, the m spacing factors, then the speeds and the
@@ -403,16 +403,17 @@ def spawn_traffic(vi, uniforms, lanes, initial_speed, limit, density, delta_low,
         vi[j, V_TIMER] = ((x + vi[j, V_Y]) * math.pi) % delay
 
 
-@kernel()
-def _start_episodes(index, uniforms, params, ego, tr, c, info):
-    """The start of an episode for sub-envs ``index`` (the egos already at their roads' start): traffic spawned
-    from their uniforms, episode values zeroed (params = initial speed, density, duration, road seed), the first
-    observation and info."""
+@kernel(refcount=False)
+def _start_episodes(index, uniforms, params, rows, random_states, ego, starts, tr, c, info):
+    """The start of an episode for sub-envs ``index``: the ego at its road's start (start ``rows[r]`` of the bank,
+    the effects' random state; traffic_ego.start_ego), traffic spawned from their uniforms, episode values zeroed
+    (params = initial speed, density, duration, road seed), the first observation and info."""
     lanes = int(c.road[_tm.G_LANES])
     sp = c.spawn
     for r in range(index.size):
         i = index[r]
         p = params[r]
+        start_ego(ego, i, starts, rows[r], random_states[r])
         spawn_traffic(tr.vehicles[i], uniforms[r], lanes, p[0], sp[0], p[1], sp[1], sp[2], sp[3])
         e = tr.episode[i]
         for col in range(e.size):
@@ -425,12 +426,22 @@ def _start_episodes(index, uniforms, params, ego, tr, c, info):
         _gather_info(i, ego, tr, False, info)
 
 
-@kernel()
-def _actions_in_bounds(u, tol):
-    """True when every action is finite and inside [-1 - tol, 1 + tol]."""
-    for j in range(u.size):
-        if not (u[j] >= -1.0 - tol and u[j] <= 1.0 + tol):
-            return False
+@kernel(refcount=False)
+def _read_actions(actions, tol, u, lane):
+    """Stage 'actions' of the vector env: the batched actions (n, d) -> u (n,), entry 0 rounded to float32 (the
+    action space's dtype), and lane (n,), -1 / 0 / +1 of entry 1 (< -1/3: left, > 1/3: right; 0 when d = 1).
+    Returns False (u and lane partly written) at the first entry that is not finite or outside [-1 - tol, 1 + tol]."""
+    n, d = actions.shape
+    for i in range(n):
+        for j in range(d):
+            x = actions[i, j]
+            if not (x >= -1.0 - tol and x <= 1.0 + tol):
+                return False
+        u[i] = np.float64(np.float32(actions[i, 0]))
+        lane[i] = 0
+        if d > 1:
+            y = np.float64(np.float32(actions[i, 1]))
+            lane[i] = -1 if y < -1.0 / 3.0 else (1 if y > 1.0 / 3.0 else 0)
     return True
 
 
@@ -505,6 +516,8 @@ class TrafficBatch:
         n_u = 4 * self.m - 2
         uniforms = np.empty((k, n_u + 2))
         params = np.empty((k, 4))
+        roads = []
+        noise_seeds = []
         keys: dict[int, tuple] = {}  # per config object: its road key and values
         for r, (i, g, cfg) in enumerate(zip(index, rngs, cfgs)):
             known = keys.get(id(cfg))
@@ -519,12 +532,14 @@ class TrafficBatch:
             u[:] = g.random(n_u + 2)  # the traffic's uniforms, then the road seed's and the effect noise seed's
             road_seed = fixed_seed if fixed_seed is not None else low + min(int(u[n_u] * (high - low)),
                                                                             high - low - 1)
-            self.ego.start(i, ego_road(cfg, road_seed, base), int(u[n_u + 1] * 2.0 ** 63))
+            roads.append(ego_road(cfg, road_seed, base))
+            noise_seeds.append(int(u[n_u + 1] * 2.0 ** 63))
             self.configs[i] = cfg
             params[r] = (v0, density, duration, road_seed)
+        rows, random_states = self.ego.prepare(index, roads, noise_seeds)
         self._reset_info = np.zeros((N_INFO, self.n))
-        _start_episodes(np.asarray(index, dtype=np.int64), uniforms, params, self.ego.records, self.arrays,
-                        self.constants, self._reset_info)
+        _start_episodes(np.asarray(index, dtype=np.int64), uniforms, params, rows, random_states, self.ego.records,
+                        self.ego.starts.records, self.arrays, self.constants, self._reset_info)
 
     def step(self, active: np.ndarray, u: np.ndarray, lane_request: np.ndarray) -> StepOutput:
         """The compiled step of every sub-env (active ones move)."""
@@ -651,6 +666,8 @@ class EcoTrafficVectorEnv(gym.vector.VectorEnv):
         self._rngs = [seeding.np_random()[0] for _ in range(self.num_envs)]
         self._needs_reset = np.ones(self.num_envs, dtype=bool)
         self._all_active = np.ones(self.num_envs, dtype=bool)
+        self._u = np.zeros(self.num_envs)
+        self._lane = np.zeros(self.num_envs, dtype=np.int64)
         ego_road(cfg, cfg.road_seed if cfg.road_seed is not None else cfg.road_seed_range[0])
 
     @property
@@ -685,18 +702,16 @@ class EcoTrafficVectorEnv(gym.vector.VectorEnv):
         return self._batch.obs.copy(), self._info(self._batch._reset_info, mask, None)
 
     def _actions(self, actions: Any) -> tuple[np.ndarray, np.ndarray]:
-        """(command (n,), lane request (n,)) from the batched actions (a compiled bounds check on the fast path,
-        validate_actions otherwise and for every bad action)."""
+        """(command (n,), lane request (n,)) from the batched actions (one compiled pass on the fast path,
+        validate_actions first otherwise and for every bad action); the arrays are the env's own, rewritten at
+        every step."""
         n = self.num_envs
         space = cast(spaces.Box, self.single_action_space)
-        d = space.shape[0]
-        if type(actions) is np.ndarray and actions.shape == (n, d) and actions.dtype in (np.float32, np.float64) \
-                and _actions_in_bounds(actions.reshape(-1), BOUND_TOLERANCE):
-            a = actions.astype(np.float32).astype(np.float64)
-        else:
-            a = validate_actions(actions, space, n).astype(np.float64)
-        lane = _lane_requests(a[:, 1]) if d > 1 else np.zeros(n, dtype=np.int64)
-        return np.ascontiguousarray(a[:, 0]), lane
+        if not (type(actions) is np.ndarray and actions.shape == (n, space.shape[0])
+                and actions.dtype in (np.float32, np.float64)
+                and _read_actions(actions, BOUND_TOLERANCE, self._u, self._lane)):
+            _read_actions(validate_actions(actions, space, n), BOUND_TOLERANCE, self._u, self._lane)
+        return self._u, self._lane
 
     def step(self, actions):
         u, lane = self._actions(actions)

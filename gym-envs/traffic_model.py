@@ -87,7 +87,7 @@ def behaviour_array(behaviour) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------------------------- small helpers
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def not_zero(x):
     """x, or +-NOT_ZERO when |x| <= NOT_ZERO (utils.not_zero)."""
     if abs(x) > NOT_ZERO:
@@ -95,42 +95,42 @@ def not_zero(x):
     return NOT_ZERO if x >= 0.0 else -NOT_ZERO
 
 
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def wrap_to_pi(x):
     """x wrapped into [-pi, pi) (floored modulo, as Python's %)."""
     return ((x + math.pi) % (2.0 * math.pi)) - math.pi
 
 
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def _clip(x, lo, hi):
     return lo if x < lo else (hi if x > hi else x)
 
 
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def cos_difference(a, b):
     """cos(a - b), without the call for equal angles (cos 0 = 1 exactly: both headings 0 on a straight lane)."""
     return 1.0 if a == b else math.cos(a - b)
 
 
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def cos_heading(h):
     """cos h, without the call on a straight heading (cos 0 = 1)."""
     return 1.0 if h == 0.0 else math.cos(h)
 
 
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def sin_heading(h):
     """sin h, without the call on a straight heading (sin +-0 = +-0, h itself)."""
     return h if h == 0.0 else math.sin(h)
 
 
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def on_lane(veh, j, lane):
     """Whether vehicle j counts as on ``lane``: |y - y_lane| <= w / 2 + margin (the lanes have no end)."""
     return abs(veh[j, V_Y] - lane * LANE_WIDTH) <= LANE_WIDTH / 2.0 + LANE_MARGIN
 
 
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def closest_lane(y, lanes):
     """The lane whose centre line is nearest to y (the first of two at equal distance)."""
     best = 0
@@ -144,7 +144,7 @@ def closest_lane(y, lanes):
 
 
 # --------------------------------------------------------------------------------------------- neighbours
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def _nearer(veh, k, s, front, rear, front_x, rear_x):
     """One candidate k of the neighbour search at x = s: (front, rear, front_x, rear_x) updated (the tie rules of
     :func:`neighbours`)."""
@@ -157,7 +157,7 @@ def _nearer(veh, k, s, front, rear, front_x, rear_x):
     return front, rear, front_x, rear_x
 
 
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def neighbours(veh, m, j, lane):
     """(leader, follower) of vehicle j on ``lane`` among the vehicles on it (Road.neighbour_vehicles): the
     nearest with x >= x_j (of equal x the last in row order) and the nearest with x < x_j (of equal x the first);
@@ -170,7 +170,7 @@ def neighbours(veh, m, j, lane):
     return front, rear
 
 
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def index_lanes(veh, m, lanes, members, counts):
     """Stage 'lane index': the rows on each lane (:func:`on_lane`), in row order -> members[lane, :counts[lane]].
     Valid while no vehicle moves (a frame's decisions), so each neighbour search reads one lane's ~m / lanes
@@ -184,7 +184,7 @@ def index_lanes(veh, m, lanes, members, counts):
         counts[lane] = n
 
 
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def lane_neighbours(veh, members, counts, j, lane):
     """:func:`neighbours` of vehicle j on ``lane`` from the lane index of :func:`index_lanes` (the same rows in the
     same order, so the same result)."""
@@ -203,7 +203,7 @@ def lane_index_arrays(m: int, lanes: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 # --------------------------------------------------------------------------------------------- IDM
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def desired_gap(veh, beh, e, f):
     """IDM's desired centre-to-centre distance d* [m] of vehicle e behind vehicle f:
     d* = d_0 + v T + v dv / (2 sqrt(a_c b)), dv = v - v_f cos(psi_f - psi) (the closing speed along e's heading)."""
@@ -212,7 +212,7 @@ def desired_gap(veh, beh, e, f):
     return beh[B_JAM] + v * beh[B_TIME_GAP] + v * dv / beh[B_BRAKING_SCALE]
 
 
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def idm_acceleration(veh, beh, delta, limit, e, f):
     """IDM acceleration [m/s^2] of vehicle e behind vehicle f (f < 0: free road; e < 0: 0), with the speed
     exponent ``delta`` of the vehicle that asks (MOBIL evaluates its neighbours with its own model, as
@@ -230,7 +230,7 @@ def idm_acceleration(veh, beh, delta, limit, e, f):
 
 
 # --------------------------------------------------------------------------------------------- MOBIL
-@kernel()
+@kernel(refcount=False)
 def mobil(veh, members, counts, beh, limit, j, lane):
     """MOBIL's decision for vehicle j to change into ``lane`` (IDMVehicle.mobil, no route): safety for the new
     follower, then the politeness-weighted acceleration gain against the threshold (neighbours from the frame's
@@ -251,7 +251,7 @@ def mobil(veh, members, counts, beh, limit, j, lane):
     return gain >= beh[B_MIN_GAIN]
 
 
-@kernel()
+@kernel(refcount=False)
 def change_lane_policy(veh, m, members, counts, beh, lanes, limit, j):
     """IDMVehicle.change_lane_policy for vehicle j: during a lane change, abort it when another vehicle heads
     for the same lane within the desired gap ahead; otherwise, once the decision timer exceeds the delay, reset it
@@ -283,7 +283,7 @@ def change_lane_policy(veh, m, members, counts, beh, lanes, limit, j):
 
 
 # --------------------------------------------------------------------------------------------- lateral control
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def steering_control(veh, j):
     """Steering angle [rad] that brings vehicle j onto its target lane's centre line (module docstring)."""
     v = veh[j, V_SPEED]
@@ -299,7 +299,7 @@ def steering_control(veh, j):
 
 
 # --------------------------------------------------------------------------------------------- one frame
-@kernel()
+@kernel(refcount=False)
 def traffic_act(veh, m, beh, geo, members, counts):
     """Decisions of one frame (Road.act), in row order: the lane index of the frame's positions (no vehicle moves
     while the traffic decides; :func:`index_lanes` -> members, counts); the ego (row 0) only steers towards its
@@ -325,7 +325,7 @@ def traffic_act(veh, m, beh, geo, members, counts):
         veh[j, V_ACC] = _clip(acc, -beh[B_ACC_MAX], beh[B_ACC_MAX])
 
 
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def move(veh, j, lanes, dt, distance):
     """Kinematic bicycle step of vehicle j (Vehicle.step): the position advances by ``distance`` along
     psi + beta (the traffic passes v dt; the ego the distance its powertrain drove), a pending collision impact is
@@ -350,7 +350,7 @@ def move(veh, j, lanes, dt, distance):
         veh[j, V_LANE] = closest_lane(veh[j, V_Y], lanes)
 
 
-@kernel()
+@kernel(refcount=False)
 def traffic_move(veh, m, geo, dt):
     """Kinematics of the traffic vehicles (rows 1..m-1) over one frame: the decision timer runs, then
     :func:`kinematic_step`."""
@@ -360,7 +360,7 @@ def traffic_move(veh, m, geo, dt):
         kinematic_step(veh, j, lanes, dt)
 
 
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def kinematic_step(veh, j, lanes, dt):
     """Vehicle.step of vehicle j with its acceleration command: crashed vehicles steer straight and brake to a
     stop (a = -v), speeds above MAX_SPEED are pulled back, then the bicycle step and v <- v + a dt."""
@@ -377,7 +377,7 @@ def kinematic_step(veh, j, lanes, dt):
 
 
 # --------------------------------------------------------------------------------------------- collisions
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def _corners(veh, j, out):
     """The rectangle of vehicle j (length x width, rotated by its heading) as 5 points, the first repeated."""
     c = math.cos(veh[j, V_HEADING])
@@ -393,7 +393,7 @@ def _corners(veh, j, out):
     out[4, 1] = out[0, 1]
 
 
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def _project(poly, nx, ny):
     lo = poly[0, 0] * nx + poly[0, 1] * ny
     hi = lo
@@ -406,12 +406,12 @@ def _project(poly, nx, ny):
     return lo, hi
 
 
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def _interval_distance(min_a, max_a, min_b, max_b):
     return min_b - max_a if min_a < min_b else min_a - max_b
 
 
-@kernel()
+@kernel(refcount=False)
 def rectangles_collide(veh, a, b, dt, work):
     """Separating-axis test of vehicles a and b (utils.are_polygons_intersecting): (intersecting now, intersecting
     after both move by their velocity x dt, the push-out vector (x, y) of the smaller overlap). A sphere
@@ -472,7 +472,7 @@ def rectangles_collide(veh, a, b, dt, work):
     return intersecting, False, 0.0, 0.0
 
 
-@kernel()
+@kernel(refcount=False)
 def ego_collisions(veh, m, dt, work):
     """The ego's collision test against every other vehicle (RoadObject.handle_collisions; the traffic does not
     test itself, as in highway-fast-v0 and EcoHighway-v0): overlapping now crashes both; overlapping within dt at
@@ -494,13 +494,13 @@ def ego_collisions(veh, m, dt, work):
 
 
 # --------------------------------------------------------------------------------------------- observation
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def _lmap(v, lo, hi):
     """v mapped from [lo, hi] to [-1, 1] and clipped (utils.lmap + KinematicObservation's clip)."""
     return _clip(-1.0 + (v - lo) * 2.0 / (hi - lo), -1.0, 1.0)
 
 
-@kernel()
+@kernel(refcount=False)
 def kinematics_block(veh, m, lanes, rows, see_behind, order, key, out):
     """highway-env's Kinematics observation (KinematicObservation, features presence, x, y, vx, vy, normalised
     and clipped, sorted) of the ego -> out[rows * 5]: row 0 the ego's absolute values, then the nearest
@@ -548,14 +548,14 @@ def kinematics_block(veh, m, lanes, rows, see_behind, order, key, out):
         out[c + 4] = _lmap(veh[k, V_SPEED] * sin_heading(veh[k, V_HEADING]) - vy0, -v_range, v_range)
 
 
-@kernel()
+@kernel(refcount=False)
 def front_gap(veh, m):
     """(bumper-to-bumper gap [m] to the ego's leader on its lane, inf if none; closing speed [m/s], positive when
     approaching), as EcoHighway-v0's ego."""
     return leader_gap(veh, neighbours(veh, m, 0, int(veh[0, V_LANE]))[0])
 
 
-@kernel(forceinline=True)
+@kernel(forceinline=True, refcount=False)
 def leader_gap(veh, f):
     """:func:`front_gap` behind the ego's leader f (-1: none)."""
     if f < 0:

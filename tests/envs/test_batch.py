@@ -10,8 +10,9 @@ import pytest
 from numba import njit
 
 from roadload.envs import Action, SimulationError, Simulator
-from roadload.envs.batch import (Fleet, advance_vehicle, advance_vehicles, command_driver, command_forces,
-                                 command_wheel_force, state_of, vehicle_done)
+from roadload.envs.batch import (Fleet, FleetStarts, advance_vehicle, advance_vehicles, command_driver,
+                                 command_forces, command_wheel_force, effects_random_state, start_vehicle, state_of,
+                                 vehicle_done)
 from roadload.road_profiles import DriveCycle, load_profile
 
 
@@ -109,3 +110,54 @@ def test_fleet_input_errors_are_named(straight_road):
         fleet.state(0).speed = -1.0
     with pytest.raises(AttributeError, match="read-only"):
         fleet.state(0).mass = 1000.0  # type: ignore[misc]
+
+
+@njit(cache=True)
+def _start(records, index, starts, rows, random_states):
+    """A user kernel: episode starts of vehicles ``index`` from the packed starts."""
+    for r in range(index.size):
+        start_vehicle(records, index[r], starts, rows[r], random_states[r])
+
+
+def test_a_compiled_start_is_the_simulators_reset_and_load():
+    """start_vehicle from a FleetStarts row equals Simulator.reset(seed) + Fleet.load, record and road bit for bit
+    (random effects on, so the random state matters), and the vehicles then drive the same trajectories; a longer
+    road than the fleet's grows its arrays."""
+    roads = (load_profile("motorway", seed=1, length=2500.0), load_profile("hilly", seed=2, length=4000.0))
+    sims = [Simulator("bmw_i3", road, effects=["wind", "brake_pad_drift", "payload"], seed=0, initial_speed=v0)
+            for road, v0 in zip(roads, (20.0, 12.0))]
+    fleet, twin = Fleet(3), Fleet(3)
+    starts = FleetStarts(fleet)
+    rows = np.array([starts.add(sims[0]), starts.add(sims[1]), 0])
+    seeds = [11, 2 ** 62 + 3, 12]
+    _start(fleet.records, np.arange(3), starts.records, rows, np.array([effects_random_state(s) for s in seeds],
+                                                                      dtype=np.uint64))
+    for i, (row, seed) in enumerate(zip(rows, seeds)):
+        sims[row].reset(seed=seed)
+        twin.load(i, sims[row])
+    assert fleet.records.vehicles.tobytes() == twin.records.vehicles.tobytes()
+    for i in range(3):
+        n = int(fleet.records.vehicles[i]["road_points"])
+        assert np.array_equal(fleet.records.roads[i, :, :n], twin.records.roads[i, :, :n])
+    assert fleet.records.vehicles[0]["state"]["random_state"] != fleet.records.vehicles[2]["state"]["random_state"]
+    out, out_twin = np.zeros((3, 4)), np.zeros((3, 4))
+    for k in range(200):
+        forces = np.array([1200.0 * math.sin(0.05 * k + i) for i in range(3)])
+        _drive(fleet.records, forces, 10, out)
+        _drive(twin.records, forces, 10, out_twin)
+        assert np.array_equal(out, out_twin)
+    assert fleet.records.vehicles.tobytes() == twin.records.vehicles.tobytes()  # bitwise (the commands hold NaN)
+
+
+def test_fleet_start_errors_are_named(straight_road):
+    fleet = Fleet(2)
+    starts = FleetStarts(fleet)
+    with pytest.raises(SimulationError, match="expected a roadload.envs.Simulator"):
+        starts.add("bmw_i3")  # type: ignore[arg-type]
+    with pytest.raises(SimulationError, match="depends on the seed"):
+        starts.add(Simulator("bmw_i3", straight_road(), effects="poor_excitation"))
+    starts.add(Simulator("bmw_i3", straight_road()))
+    with pytest.raises(SimulationError, match="vehicle spec differs"):
+        starts.add(Simulator("gt_rwd", straight_road()))
+    with pytest.raises(SimulationError, match="shares its simulator"):
+        FleetStarts(Fleet.sharing(Simulator("bmw_i3", straight_road())))

@@ -12,13 +12,23 @@ surviving mutant or one that no selected test reaches counts against it.
     python scripts/mutation_score.py --module core/road_load.py --survivors
     python scripts/mutation_score.py --quick                      # CI: one small module, its own tests
     python scripts/mutation_score.py --module core/trip.py --rerun  # only the previous run's live mutants again
+    python scripts/mutation_score.py --module core/trip.py --resume  # continue a stopped run, keep its verdicts
+    python scripts/mutation_score.py --module envs/sensors.py --tests-from a7b604b^ --sample 150 --seed 0
+
+``--tests-from COMMIT`` scores against the ``tests/`` tree of that commit (and, unless ``--tests`` is given, the
+module's test selection listed in that commit's ``MODULES``): the "before" score of tests added later.
+``--sample N --seed S`` tests a seeded simple random sample of N of the module's mutants; the score is then printed
+with its 95 % Wilson interval.
 """
 
 from __future__ import annotations
 
 import argparse
+import ast
 import json
+import math
 import os
+import random
 import shutil
 import subprocess
 import sys
@@ -383,6 +393,7 @@ class ModuleScore:
     equivalent: int = 0
     other: int = 0
     seconds: float = 0.0
+    untested: int = 0  # mutants of the module not in this run's sample (or not reached yet by a stopped run)
     survivors: list[str] = field(default_factory=list)  # "name: diff" of every live non-equivalent mutant
     equivalents: list[str] = field(default_factory=list)
 
@@ -390,6 +401,21 @@ class ModuleScore:
     def score(self) -> float:
         live = self.total - self.equivalent
         return (self.killed + self.timeout) / live if live else float("nan")
+
+    @property
+    def interval(self) -> tuple[float, float]:
+        """95 % Wilson interval of the score (binomial, over the non-equivalent mutants tested)."""
+        return wilson_interval(self.killed + self.timeout, self.total - self.equivalent)
+
+
+def wilson_interval(successes: int, trials: int, z: float = 1.959964) -> tuple[float, float]:
+    """Wilson score interval of a binomial proportion (95 % by default); (nan, nan) without trials."""
+    if trials <= 0:
+        return float("nan"), float("nan")
+    p = successes / trials
+    centre = (p + z * z / (2 * trials)) / (1 + z * z / trials)
+    half = z * math.sqrt(p * (1 - p) / trials + z * z / (4 * trials * trials)) / (1 + z * z / trials)
+    return max(0.0, centre - half), min(1.0, centre + half)
 
 
 def _package_dirs(repo: Path) -> dict[str, Path]:
@@ -406,10 +432,41 @@ def _staged_path(module: str, repo: Path = REPO) -> str:
     return str(Path("src", *best[0].split("."), src.relative_to(best[1].resolve())))
 
 
-def stage(module: str, tests: tuple[str, ...], folder: Path, repo: Path = REPO) -> Path:
-    """A fresh folder laid out as the installed package plus the tests, configured to mutate ``module``."""
+def _tests_tree_of(commit: str, target: Path, repo: Path = REPO) -> None:
+    """Write the ``tests/`` tree of ``commit`` (any git revision) into ``target`` (its parent folder)."""
+    archive = subprocess.run(["git", "-C", str(repo), "archive", "--format=tar", commit, "tests"],
+                             capture_output=True)
+    if archive.returncode != 0:
+        raise SystemExit(f"--tests-from {commit}: git archive failed: {archive.stderr.decode(errors='replace')}")
+    subprocess.run(["tar", "-x", "-C", str(target.parent)], input=archive.stdout, check=True)
+
+
+def modules_at(commit: str, repo: Path = REPO) -> dict[str, tuple[str, ...]]:
+    """The ``MODULES`` test selection as it stood at ``commit`` (read from that commit's source, not imported)."""
+    shown = subprocess.run(["git", "-C", str(repo), "show", f"{commit}:experiments/mutation.py"],
+                           capture_output=True, text=True)
+    if shown.returncode != 0:
+        raise SystemExit(f"--tests-from {commit}: no experiments/mutation.py there ({shown.stderr.strip()}); "
+                         "pass --tests")
+    for node in ast.parse(shown.stdout).body:
+        if isinstance(node, ast.AnnAssign | ast.Assign):
+            targets = [node.target] if isinstance(node, ast.AnnAssign) else node.targets
+            if any(isinstance(t, ast.Name) and t.id == "MODULES" for t in targets) and node.value is not None:
+                return {k: tuple(v) for k, v in ast.literal_eval(node.value).items()}
+    raise SystemExit(f"--tests-from {commit}: its experiments/mutation.py defines no MODULES; pass --tests")
+
+
+def stage(module: str, tests: tuple[str, ...], folder: Path, repo: Path = REPO, tests_from: str | None = None,
+          keep: bool = False) -> Path:
+    """A folder laid out as the installed package plus the tests (the working tree's, or those of commit
+    ``tests_from``), configured to mutate ``module``. ``keep``: refresh the sources and tests but keep mutmut's
+    state (``mutants/``: the mutants, their verdicts, the test map), so that a stopped run continues; mutmut
+    itself tests again the mutants of every function whose source changed."""
     if folder.exists():
-        shutil.rmtree(folder)
+        for part in ("src", "tests") if keep else ():
+            shutil.rmtree(folder / part, ignore_errors=True)
+        if not keep:
+            shutil.rmtree(folder)
     ignore = shutil.ignore_patterns("__pycache__", "*.pyc", ".hypothesis")
     dirs = _package_dirs(repo)
     for pkg, source in sorted(dirs.items(), key=lambda item: item[0].count(".")):
@@ -417,7 +474,10 @@ def stage(module: str, tests: tuple[str, ...], folder: Path, repo: Path = REPO) 
         nested = [Path(*p.split(".")[len(pkg.split(".")):]).parts[0] for p in dirs if p.startswith(pkg + ".")]
         shutil.copytree(source, target, ignore=shutil.ignore_patterns(*nested, "__pycache__", "*.pyc"),
                         dirs_exist_ok=True)
-    shutil.copytree(repo / "tests", folder / "tests", ignore=ignore)
+    if tests_from:
+        _tests_tree_of(tests_from, folder / "tests", repo)
+    else:
+        shutil.copytree(repo / "tests", folder / "tests", ignore=ignore)
     table = {
         "source_paths": ["src"],
         "only_mutate": [_staged_path(module, repo)],
@@ -427,7 +487,7 @@ def stage(module: str, tests: tuple[str, ...], folder: Path, repo: Path = REPO) 
     }
     lines = ["", "[tool.mutmut]"] + [f"{key} = {json.dumps(value)}" for key, value in table.items()]
     # exists before mutmut starts: an import that met PYTHONPATH's folder missing would cache it as absent
-    (folder / "mutants" / "src").mkdir(parents=True)
+    (folder / "mutants" / "src").mkdir(parents=True, exist_ok=True)
     (folder / "pyproject.toml").write_text((repo / "pyproject.toml").read_text() + "\n".join(lines) + "\n")
     return folder
 
@@ -463,6 +523,9 @@ def collect(module: str, folder: Path, seconds: float, repo: Path = REPO) -> Mod
     os.chdir(folder)
     try:
         for name, code in sorted(meta["exit_code_by_key"].items()):
+            if code is None:  # outside the sample, or a stopped run's rest
+                score.untested += 1
+                continue
             score.total += 1
             if code in KILLED:
                 score.killed += 1
@@ -495,41 +558,89 @@ def _live_from_previous_run(module: str, folder: Path, repo: Path = REPO) -> dic
     return json.loads(meta.read_text())["exit_code_by_key"] if meta.is_file() else {}
 
 
-def run_module(module: str, workdir: Path, children: int, only: str | None = None, repo: Path = REPO,
-               tests: tuple[str, ...] | None = None, rerun: bool = False) -> ModuleScore:
-    """Stage ``module``, run mutmut on it (niced) and count the outcomes. ``rerun``: test again only the mutants
-    the previous run of this module left alive (same source, so the same mutant names) and keep the previous
-    verdict of the others, so that every mutant has a status."""
-    tests = MODULES[module] if tests is None else tests
-    folder = workdir / module.replace("/", "__").removesuffix(".py")
-    previous = _live_from_previous_run(module, folder, repo) if rerun else {}
-    if rerun and not previous:
-        raise SystemExit(f"--rerun: no previous run of {module} in {folder}")
-    names = [n for n, code in previous.items() if code not in KILLED | TIMEOUT | CRASH]
-    folder = stage(module, tests, folder, repo)
+def mutant_names(module: str, folder: Path, repo: Path = REPO) -> list[str]:
+    """Every mutant mutmut makes of ``module`` (full names, in mutmut's order), from the staged copy in
+    ``folder``, without running anything (a subprocess: mutmut reads its configuration from the working folder)."""
+    staged = _staged_path(module, repo)
+    code = ("import json, sys; from pathlib import Path; "
+            "from mutmut.mutation.file_mutation import mutate_file_contents; "
+            "from mutmut.utils.format_utils import get_mutant_name; p = Path(sys.argv[1]); "
+            "made = mutate_file_contents(str(p), p.read_text()); "
+            "print(json.dumps([get_mutant_name(p, n) for n in made.mutant_names]))")
+    out = subprocess.run([sys.executable, "-c", code, staged], cwd=folder, capture_output=True, text=True, check=True)
+    return list(json.loads(out.stdout))
+
+
+def sample_names(names: list[str], size: int, seed: int) -> list[str]:
+    """A seeded simple random sample of ``size`` mutant names (all of them when there are no more)."""
+    return sorted(random.Random(seed).sample(sorted(names), min(size, len(names))))
+
+
+def _mutmut_run(module: str, folder: Path, children: int, names: list[str], only: str | None, append: bool) -> None:
+    """``mutmut run`` in the staged ``folder`` (niced; all mutants without a verdict, or only ``names``)."""
     env = {**os.environ, "PYTHONPATH": str(folder / "mutants" / "src"), "PYTHONDONTWRITEBYTECODE": "1"}
     env.pop("MUTANT_UNDER_TEST", None)
     cmd = ["nice", "-n", "15", sys.executable, "-c", "from mutmut.__main__ import cli; cli()", "run",
            "--max-children", str(children)] + ([only] if only else []) + names
+    with open(folder / "mutmut.log", "a" if append else "w") as log:
+        res = subprocess.run(cmd, cwd=folder, env=env, stdout=log, stderr=subprocess.STDOUT)
+    if res.returncode != 0:
+        tail = (folder / "mutmut.log").read_text(errors="replace")[-3000:]
+        raise RuntimeError(f"mutmut failed on {module} (exit {res.returncode}); log {folder / 'mutmut.log'}:\n{tail}")
+
+
+def _restrict_verdicts(module: str, folder: Path, keep: dict[str, int | None], names: list[str],
+                       repo: Path = REPO) -> None:
+    """Rewrite the run's meta file: the verdicts of ``names`` (just tested) and ``keep``, every other mutant
+    untested (None)."""
+    meta_path = folder / "mutants" / f"{_staged_path(module, repo)}.meta"
+    meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {"exit_code_by_key": {}}
+    now = meta["exit_code_by_key"]
+    meta["exit_code_by_key"] = {**dict.fromkeys(now), **keep, **{n: now.get(n) for n in names}}
+    meta_path.write_text(json.dumps(meta))
+
+
+def run_module(module: str, workdir: Path, children: int, only: str | None = None, repo: Path = REPO,
+               tests: tuple[str, ...] | None = None, rerun: bool = False, resume: bool = False,
+               sample: int | None = None, seed: int = 0, tests_from: str | None = None) -> ModuleScore:
+    """Stage ``module``, run mutmut on it (niced) and count the outcomes.
+
+    ``rerun``: test again only the mutants the previous run of this module left alive (same source, so the same
+    mutant names) and keep the previous verdict of the others, so that every mutant has a status. ``resume``: keep
+    the staged folder's mutmut state and test only the mutants without a verdict (a stopped run continues where
+    it was; mutants of functions whose source changed lose theirs). ``sample``: only a seeded random sample of
+    that many mutants. ``tests_from``: the tests tree (and, without ``tests``, the selection) of that commit."""
+    if tests is None:
+        tests = modules_at(tests_from, repo)[module] if tests_from else MODULES[module]
+    folder = workdir / module.replace("/", "__").removesuffix(".py")
+    previous = _live_from_previous_run(module, folder, repo) if rerun or resume else {}
+    if rerun and not previous:
+        raise SystemExit(f"--rerun: no previous run of {module} in {folder}")
+    names = [n for n, code in previous.items() if code not in KILLED | TIMEOUT | CRASH] if rerun else []
+    folder = stage(module, tests, folder, repo, tests_from, keep=resume)
+    chosen: list[str] = []
+    if sample is not None:
+        chosen = sample_names(mutant_names(module, folder, repo), sample, seed)
+        names = [n for n in chosen if previous.get(n) is None]  # resumed: a sampled verdict already made stands
     start = time.monotonic()
-    if not rerun or names:
-        with open(folder / "mutmut.log", "w") as log:
-            res = subprocess.run(cmd, cwd=folder, env=env, stdout=log, stderr=subprocess.STDOUT)
-        if res.returncode != 0:
-            tail = (folder / "mutmut.log").read_text(errors="replace")[-3000:]
-            raise RuntimeError(f"mutmut failed on {module} (exit {res.returncode}); log {folder / 'mutmut.log'}:"
-                               f"\n{tail}")
+    if not (rerun or sample is not None) or names:
+        _mutmut_run(module, folder, children, names, only, append=resume)
     if rerun:  # the verdicts of the mutants not run again stand
-        meta_path = folder / "mutants" / f"{_staged_path(module, repo)}.meta"
-        meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {"exit_code_by_key": {}}
-        meta["exit_code_by_key"] = {**previous, **{n: meta["exit_code_by_key"].get(n) for n in names}}
-        meta_path.write_text(json.dumps(meta))
+        _restrict_verdicts(module, folder, previous, names, repo)
+    elif sample is not None:  # only the sample counts (resumed: with the verdicts mutmut kept, of unchanged code)
+        now = _live_from_previous_run(module, folder, repo)
+        _restrict_verdicts(module, folder, {n: now.get(n) for n in chosen}, names, repo)
     return collect(module, folder, time.monotonic() - start, repo)
 
 
 def _line(s: ModuleScore) -> str:
-    return (f"{s.module:32s} {s.total:5d} {s.killed:6d} {s.timeout:7d} {s.survived:8d} {s.unreached:9d} "
+    line = (f"{s.module:32s} {s.total:5d} {s.killed:6d} {s.timeout:7d} {s.survived:8d} {s.unreached:9d} "
             f"{s.equivalent:10d} {100 * s.score:6.1f} %  {'ok' if s.score >= TARGET else 'below'}  {s.seconds:7.0f} s")
+    if s.untested:  # a sample (or a stopped run): the score with its binomial interval
+        low, high = s.interval
+        line += (f"  (sample of {s.total} of {s.total + s.untested} mutants; 95 % interval "
+                 f"{100 * low:.1f}-{100 * high:.1f} %)")
+    return line
 
 
 HEADER = (f"{'module':32s} {'total':>5s} {'killed':>6s} {'timeout':>7s} {'survived':>8s} {'unreached':>9s} "
@@ -560,7 +671,16 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--quick", action="store_true", help="CI size: core/trip_schema.py against its own test file")
     ap.add_argument("--rerun", action="store_true",
                     help="test again only the mutants the previous run (same --workdir) left alive; keep the others")
+    ap.add_argument("--resume", action="store_true",
+                    help="continue the previous run in --workdir: keep its verdicts, test the mutants without one")
+    ap.add_argument("--sample", type=int, help="test a seeded random sample of this many mutants per module")
+    ap.add_argument("--seed", type=int, default=0, help="seed of --sample (default 0)")
+    ap.add_argument("--tests-from", metavar="COMMIT",
+                    help="score against the tests/ tree of this git revision and its MODULES selection (a before "
+                         "score)")
     args = ap.parse_args(argv)
+    if args.sample is not None and (args.rerun or args.sample < 1):
+        ap.error("--sample takes a positive size and does not combine with --rerun")
     args.repo = args.repo or _default_repo()
     modules = ["core/trip_schema.py"] if args.quick else (args.module or list(MODULES))
     tests = ("tests/core/test_trip_schema.py",) if args.quick else None
@@ -569,7 +689,8 @@ def main(argv: list[str] | None = None) -> None:
     print(HEADER, flush=True)
     scores = []
     for module in modules:
-        s = run_module(module, args.workdir, args.children, None, args.repo, tests, args.rerun)
+        s = run_module(module, args.workdir, args.children, None, args.repo, tests, args.rerun, args.resume,
+                       args.sample, args.seed, args.tests_from)
         scores.append(s)
         print(_line(s), flush=True)
     for s in scores:

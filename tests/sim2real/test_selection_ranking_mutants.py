@@ -15,16 +15,11 @@ from roadload.sim2real.catalog import get_candidate
 from roadload.sim2real.selection import Selector, cv_predict, design, fit_linear, make_split
 
 
-def _core():
-    """The synthetic force tables of test_core (one definition of the test world)."""
-    spec = importlib.util.spec_from_file_location("sim2real_core_tables", Path(__file__).with_name("test_core.py"))
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-CORE = _core()
+# the synthetic force tables of test_core (one definition of the test world)
+_SPEC = importlib.util.spec_from_file_location("sim2real_core_tables", Path(__file__).with_name("test_core.py"))
+assert _SPEC is not None and _SPEC.loader is not None
+CORE = importlib.util.module_from_spec(_SPEC)
+_SPEC.loader.exec_module(CORE)
 D_TRUE = 2500.0  # [m] the tire warm-up's decay distance
 
 

@@ -12,7 +12,9 @@ import numpy as np
 import pytest
 
 from roadload.sim2real.catalog import get_candidate
-from roadload.sim2real.selection import Selector, cv_predict, design, fit_linear, make_split
+from roadload.sim2real.robust import step_statistics
+from roadload.sim2real.selection import (Selector, cv_predict, design, fit_linear, fitted_parameters,
+                                         information_criteria, make_split)
 
 
 # the synthetic force tables of test_core (one definition of the test world)
@@ -21,6 +23,7 @@ assert _SPEC is not None and _SPEC.loader is not None
 CORE = importlib.util.module_from_spec(_SPEC)
 _SPEC.loader.exec_module(CORE)
 D_TRUE = 2500.0  # [m] the tire warm-up's decay distance
+NAMES = ("mass_offset", "drag_area", "rolling_scale", "torque_scale")
 
 
 def _warm(tab):
@@ -103,7 +106,7 @@ def mass_world():
         return Selector(tab, tab.residual.to_numpy(), split, CORE.MODEL, robust=False, n_boot=150, seed=0, **kw)
 
     sel = selector()
-    ranked, _ = sel.rank(("mass_offset", "drag_area", "rolling_scale", "torque_scale"))
+    ranked, _ = sel.rank(NAMES)
     return tab, split, selector, ranked
 
 
@@ -133,7 +136,7 @@ def test_a_step_that_loses_explains_nothing():
     tab = CORE.synth(lambda t: np.zeros(len(t)), n_trips=2, duration=500.0)
     sel = Selector(tab, tab.residual.to_numpy(), make_split(tab, seed=0, n_folds=4), CORE.MODEL, robust=False,
                    n_boot=150, seed=0, alpha=1.0, min_gain=-1.0)
-    steps = sel.forward(sel.rank(("mass_offset", "drag_area", "rolling_scale", "torque_scale"))[0])
+    steps = sel.forward(sel.rank(NAMES)[0])
     losing = [s for s in steps if s.gain_of_original < 0]
     assert losing and all(s.reference_robust_loss >= s.robust_loss_before for s in losing)
     for s in losing:
@@ -149,8 +152,96 @@ def test_a_p_value_equal_to_alpha_passes(mass_world):
     top = ranked[0]
     assert first.accepted and top.significant and top.null_p > 0 and first.null_p > 0
     at_rank = selector(alpha=top.null_p)
-    again = at_rank.rank(("mass_offset", "drag_area", "rolling_scale", "torque_scale"))[0]
+    again = at_rank.rank(NAMES)[0]
     assert again[0].name == top.name and again[0].null_p == top.null_p and again[0].significant
     at_step = selector(alpha=first.null_p)
     step = at_step.forward(ranked)[0]
     assert step.null_p == first.null_p and step.accepted and step.reason == "accepted"
+
+
+
+def _statistics(sel, choices):
+    """The robust step statistics of ``choices`` (each with every shape variant) over the sim as is."""
+    variants = [[sel.candidate_columns(c, sh) for sh in c.shapes()] for c in choices]
+    return step_statistics(np.zeros((len(sel.table), 0)), variants, sel.target, sel.signs)
+
+
+def test_ranking_figures_are_the_step_statistics_and_fits_written_out(mass_world):
+    tab, split, selector, _ = mass_world
+    sel = selector()
+    ranked, skipped = sel.rank(NAMES)
+    assert skipped == {}
+    cands = [get_candidate(n) for n in NAMES]
+    stats = _statistics(sel, cands)
+    y, tr = sel.residual, split.train
+    m = int(tr.sum())
+    aic0, bic0 = information_criteria(float(np.sum(y[tr] ** 2)), m, 0)
+    info = sel.baseline_info
+    ref_loss = info.reference_robust_loss
+    assert (info.robust_loss, info.aic, info.bic) == (1.0, aic0, bic0)
+    assert info.null.draws == sel.n_null and info.null.alpha == sel.alpha
+    assert [r.improvement for r in ranked] == sorted((r.improvement for r in ranked), reverse=True)
+    aics, bics = [aic0], [bic0]
+    for r in ranked:
+        j = NAMES.index(r.name)
+        cand = cands[j]
+        gain = float(stats.observed[j])
+        null_j = stats.null[:, j]
+        assert r.improvement == gain and r.cv_mse == 1.0 - gain and r.baseline_cv_mse == 1.0
+        assert r.shape == cand.shapes()[int(stats.variant[j])]
+        assert r.gain == (gain, float(np.quantile(null_j, 1 - sel.alpha)), float(null_j.max()))
+        assert r.null_p == stats.marginal_p(j)
+        d, fit = sel.final_fit([(cand, r.shape)])
+        sse = float(np.sum((y[tr] - d.A[tr] @ fit.X) ** 2))
+        assert (r.aic, r.bic) == information_criteria(sse, m, d.A.shape[1] + (1 if cand.shape_grid else 0))
+        aics.append(r.aic)
+        bics.append(r.bic)
+        explainable = 1.0 - min(ref_loss, 1.0 - gain)
+        assert r.explained_fraction == pytest.approx(min(gain / explainable, 1.0) if explainable > 0 else 0.0,
+                                                     rel=1e-12)
+        assert r.size == sel.effect_size(d, fit, cand.name)
+        assert r.significant == (r.null_p <= sel.alpha and gain >= sel.min_gain and r.size >= sel.min_size)
+        assert (r.description, r.shape_name, r.regime_hint, r.sim_effect) == (
+            cand.description, cand.shape_name, cand.regime_hint, cand.sim_effect)
+        values, errors, units = fitted_parameters(d, fit, cand.name)
+        assert (r.parameters, r.std_errors, r.units) == (values, errors, units)
+        assert all(np.isfinite(e) and e > 0 for e in errors.values())  # block-robust errors of the final fit
+    for r in ranked:
+        assert (r.delta_aic, r.delta_bic) == (r.aic - min(aics), r.bic - min(bics))
+    assert (info.delta_aic, info.delta_bic) == (aic0 - min(aics), bic0 - min(bics))
+    assert ranked[0].delta_aic == 0.0 and info.delta_aic > 0  # the mass offset is the best model here
+
+
+def test_forward_step_figures_are_the_step_statistics_written_out(mass_world):
+    _, _, selector, ranked = mass_world
+    sel = selector()
+    step = sel.forward(ranked)[0]
+    pool = [get_candidate(r.name) for r in ranked if r.significant]
+    stats = _statistics(sel, pool)
+    j = int(np.argmax(stats.observed))
+    gain = float(stats.observed[j])
+    null_q = float(np.quantile(stats.null.max(axis=1), 1 - sel.alpha))
+    assert (step.effect, step.gain_of_original, step.null_p) == (pool[j].name, gain, stats.p_value(j))
+    assert step.robust_loss_before == stats.loss_before and step.robust_loss_after == stats.loss_before - gain
+    assert step.null_quantile == null_q and step.gain[:2] == [gain, null_q]
+    assert step.relative_gain == gain / stats.loss_before
+    d, fit = sel.final_fit([(pool[j], step.shape)])
+    assert step.size_rms == sel.effect_size(d, fit, pool[j].name)
+
+
+def test_forward_rejection_reasons_name_their_figures(mass_world):
+    _, _, selector, ranked = mass_world
+    sel = selector()
+    steps = sel.forward(ranked)
+    by_p = [s for s in steps if s.null_p > sel.alpha]
+    assert by_p
+    for s in by_p:
+        assert s.reason == f"held-out gain not beyond the null (p = {s.null_p:.3f} > {sel.alpha})"
+    first = steps[0]
+    # the gain and explained-share floors are inclusive too
+    for kw in ({"min_gain": first.gain_of_original}, {"min_explained": first.explained_fraction}):
+        again = selector(**kw).forward(ranked)[0]
+        assert again.accepted and again.reason == "accepted", kw
+    high = selector(min_gain=first.gain_of_original + 1e-9).forward(ranked)[0]
+    floor = first.gain_of_original + 1e-9
+    assert high.reason == f"gain {first.gain_of_original:.3f} of the original gap, below {floor}"

@@ -379,6 +379,7 @@ KILLED = {1, 3}  # a selected test failed (3: pytest internal error)
 TIMEOUT = {36, 24, -24, 152, 255, -9}  # CPU limit reached, then killed: the mutant loops or crawls
 CRASH = {-11}
 UNREACHED = {5, 33}  # no selected test calls the mutated function
+STRATA = "strata.json"  # in a staged folder: the pool size and the names of a sampled run
 
 
 @dataclass
@@ -395,17 +396,39 @@ class ModuleScore:
     other: int = 0
     seconds: float = 0.0
     untested: int = 0  # mutants of the module not in this run's sample (or not reached yet by a stopped run)
+    pool: int = 0  # sampled run: the mutants the sample was drawn from (the others were all tested: a census)
+    sampled: int = 0  # of ``total``: those of the sample, with their killed (incl. timeouts) and equivalent counts
+    sampled_killed: int = 0
+    sampled_equivalent: int = 0
     survivors: list[str] = field(default_factory=list)  # "name: diff" of every live non-equivalent mutant
     equivalents: list[str] = field(default_factory=list)
 
+    def _at(self, share: float) -> float:
+        """The score when ``share`` of the pool's non-equivalent mutants are killed (census part as counted)."""
+        census_live = (self.total - self.sampled) - (self.equivalent - self.sampled_equivalent)
+        census_killed = (self.killed + self.timeout) - self.sampled_killed
+        pool_live = self.pool * (self.sampled - self.sampled_equivalent) / self.sampled if self.sampled else 0.0
+        live = census_live + pool_live
+        return (census_killed + share * pool_live) / live if live else float("nan")
+
     @property
     def score(self) -> float:
+        """Killed share of the non-equivalent mutants; for a sampled run the stratified estimate over the census
+        part and the pool the sample stands for."""
+        if self.pool:
+            live = self.sampled - self.sampled_equivalent
+            return self._at(self.sampled_killed / live if live else float("nan"))
         live = self.total - self.equivalent
         return (self.killed + self.timeout) / live if live else float("nan")
 
     @property
     def interval(self) -> tuple[float, float]:
-        """95 % Wilson interval of the score (binomial, over the non-equivalent mutants tested)."""
+        """95 % interval of the score: Wilson's for the sample's killed share, carried through the stratified
+        estimate (no finite-population correction: conservative). Without a sample, Wilson's over the mutants
+        tested."""
+        if self.pool:
+            low, high = wilson_interval(self.sampled_killed, self.sampled - self.sampled_equivalent)
+            return self._at(low), self._at(high)
         return wilson_interval(self.killed + self.timeout, self.total - self.equivalent)
 
 
@@ -520,6 +543,8 @@ def collect(module: str, folder: Path, seconds: float, repo: Path = REPO) -> Mod
     meta = json.loads((folder / "mutants" / f"{staged}.meta").read_text())
     known = EQUIVALENT.get(module, {})
     score = ModuleScore(module, seconds=round(seconds, 1))
+    strata = json.loads((folder / STRATA).read_text()) if (folder / STRATA).is_file() else {"pool": 0, "sample": []}
+    score.pool, sample = int(strata["pool"]), set(strata["sample"])
     cwd = os.getcwd()
     os.chdir(folder)
     try:
@@ -528,17 +553,19 @@ def collect(module: str, folder: Path, seconds: float, repo: Path = REPO) -> Mod
                 score.untested += 1
                 continue
             score.total += 1
-            if code in KILLED:
-                score.killed += 1
-                continue
-            if code in TIMEOUT or code in CRASH:
-                score.timeout += 1
+            in_sample = name in sample
+            score.sampled += in_sample
+            if code in KILLED | TIMEOUT | CRASH:
+                score.killed += code in KILLED
+                score.timeout += code not in KILLED
+                score.sampled_killed += in_sample
                 continue
             function = name.rpartition(".")[2].partition("__mutmut_")[0]
             entry = f"{function}: {_signature(get_diff_for_mutant(name, path=staged))}"
             reason = known.get(entry) or _equivalent_everywhere(entry.partition(": ")[2])
             if reason:
                 score.equivalent += 1
+                score.sampled_equivalent += in_sample
                 score.equivalents.append(f"{name}  {entry}  ({reason})")
                 continue
             if code in UNREACHED:
@@ -559,17 +586,42 @@ def _live_from_previous_run(module: str, folder: Path, repo: Path = REPO) -> dic
     return json.loads(meta.read_text())["exit_code_by_key"] if meta.is_file() else {}
 
 
-def mutant_names(module: str, folder: Path, repo: Path = REPO) -> list[str]:
-    """Every mutant mutmut makes of ``module`` (full names, in mutmut's order), from the staged copy in
-    ``folder``, without running anything (a subprocess: mutmut reads its configuration from the working folder)."""
+def mutants_of(module: str, folder: Path, repo: Path = REPO) -> tuple[list[str], dict[str, str]]:
+    """Every mutant mutmut makes of ``module`` (full names, in mutmut's order) and the hash of each mutated
+    function's source, from the staged copy in ``folder``, without running anything (a subprocess: mutmut reads
+    its configuration from the working folder)."""
     staged = _staged_path(module, repo)
     code = ("import json, sys; from pathlib import Path; "
             "from mutmut.mutation.file_mutation import mutate_file_contents; "
             "from mutmut.utils.format_utils import get_mutant_name; p = Path(sys.argv[1]); "
             "made = mutate_file_contents(str(p), p.read_text()); "
-            "print(json.dumps([get_mutant_name(p, n) for n in made.mutant_names]))")
+            "print(json.dumps([[get_mutant_name(p, n) for n in made.mutant_names], made.hash_by_function_name]))")
     out = subprocess.run([sys.executable, "-c", code, staged], cwd=folder, capture_output=True, text=True, check=True)
-    return list(json.loads(out.stdout))
+    names, hashes = json.loads(out.stdout)
+    return list(names), dict(hashes)
+
+
+def _function_of(name: str) -> str:
+    """The mangled function name of a mutant (``xǁSelectorǁrank`` of ``roadload....xǁSelectorǁrank__mutmut_3``)."""
+    return name.rpartition(".")[2].partition("__mutmut_")[0]
+
+
+def _plan(module: str, folder: Path, previous: dict, sample: int | None, seed: int, repo: Path = REPO
+          ) -> tuple[dict[str, int], list[str]]:
+    """The verdicts that stand (killed, timed out or crashed, in a function whose source is unchanged) and the
+    mutants to test: all the others, or a seeded sample of ``sample`` of them. A sample is recorded in the
+    folder's :data:`STRATA` file with the size of the pool it was drawn from (the score then estimates the pool)."""
+    names, hashes = mutants_of(module, folder, repo)
+    codes, old_hashes = previous.get("exit_code_by_key", {}), previous.get("hash_by_function_name", {})
+    kept = {n: codes[n] for n in names if codes.get(n) in KILLED | TIMEOUT | CRASH
+            and old_hashes.get(_function_of(n)) == hashes.get(_function_of(n))}
+    pool = [n for n in names if n not in kept]
+    (folder / STRATA).unlink(missing_ok=True)
+    if sample is None:
+        return kept, pool
+    chosen = sample_names(pool, sample, seed)
+    (folder / STRATA).write_text(json.dumps({"pool": len(pool), "sample": chosen, "seed": seed}))
+    return kept, chosen
 
 
 def sample_names(names: list[str], size: int, seed: int) -> list[str]:
@@ -608,39 +660,43 @@ def run_module(module: str, workdir: Path, children: int, only: str | None = Non
 
     ``rerun``: test again only the mutants the previous run of this module left alive (same source, so the same
     mutant names) and keep the previous verdict of the others, so that every mutant has a status. ``resume``: keep
-    the staged folder's mutmut state and test only the mutants without a verdict (a stopped run continues where
-    it was; mutants of functions whose source changed lose theirs). ``sample``: only a seeded random sample of
-    that many mutants. ``tests_from``: the tests tree (and, without ``tests``, the selection) of that commit."""
+    the killed verdicts of the previous run in the same folder (functions whose source changed excepted) and test
+    the rest: a stopped run continues, survivors meet tests added since. ``sample``: test only a seeded random
+    sample of that many of the mutants without a standing verdict; the score is then the stratified estimate.
+    ``tests_from``: the tests tree (and, without ``tests``, the selection) of that commit."""
     if tests is None:
         tests = modules_at(tests_from, repo)[module] if tests_from else MODULES[module]
     folder = workdir / module.replace("/", "__").removesuffix(".py")
-    previous = _live_from_previous_run(module, folder, repo) if rerun or resume else {}
+    meta_path = folder / "mutants" / f"{_staged_path(module, repo)}.meta"
+    previous = json.loads(meta_path.read_text()) if (rerun or resume) and meta_path.is_file() else {}
     if rerun and not previous:
         raise SystemExit(f"--rerun: no previous run of {module} in {folder}")
-    names = [n for n, code in previous.items() if code not in KILLED | TIMEOUT | CRASH] if rerun else []
     folder = stage(module, tests, folder, repo, tests_from, keep=resume)
-    chosen: list[str] = []
-    if sample is not None:
-        chosen = sample_names(mutant_names(module, folder, repo), sample, seed)
-        names = [n for n in chosen if previous.get(n) is None]  # resumed: a sampled verdict already made stands
     start = time.monotonic()
-    if not (rerun or sample is not None) or names:
+    if not (rerun or resume or sample is not None):  # a plain full run
+        _mutmut_run(module, folder, children, [], only, append=False)
+        return collect(module, folder, time.monotonic() - start, repo)
+    if rerun:
+        kept = {n: c for n, c in previous["exit_code_by_key"].items() if c in KILLED | TIMEOUT | CRASH}
+        names = [n for n in previous["exit_code_by_key"] if n not in kept]
+    else:
+        kept, names = _plan(module, folder, previous, sample, seed, repo)
+    if names:
         _mutmut_run(module, folder, children, names, only, append=resume)
-    if rerun:  # the verdicts of the mutants not run again stand
-        _restrict_verdicts(module, folder, previous, names, repo)
-    elif sample is not None:  # only the sample counts (resumed: with the verdicts mutmut kept, of unchanged code)
-        now = _live_from_previous_run(module, folder, repo)
-        _restrict_verdicts(module, folder, {n: now.get(n) for n in chosen}, names, repo)
+    _restrict_verdicts(module, folder, kept, names, repo)  # the standing verdicts, the new ones; the rest untested
     return collect(module, folder, time.monotonic() - start, repo)
 
 
 def _line(s: ModuleScore) -> str:
     line = (f"{s.module:32s} {s.total:5d} {s.killed:6d} {s.timeout:7d} {s.survived:8d} {s.unreached:9d} "
             f"{s.equivalent:10d} {100 * s.score:6.1f} %  {'ok' if s.score >= TARGET else 'below'}  {s.seconds:7.0f} s")
-    if s.untested:  # a sample (or a stopped run): the score with its binomial interval
-        low, high = s.interval
-        line += (f"  (sample of {s.total} of {s.total + s.untested} mutants; 95 % interval "
+    low, high = s.interval
+    if s.pool:  # a sample: the stratified estimate with its interval
+        census = f"all {s.total - s.sampled} others and " if s.total > s.sampled else ""
+        line += (f"  ({census}a sample of {s.sampled} of {s.pool} tested; 95 % interval "
                  f"{100 * low:.1f}-{100 * high:.1f} %)")
+    elif s.untested:  # a stopped run: the tested ones only
+        line += f"  ({s.untested} of {s.total + s.untested} mutants not tested)"
     return line
 
 
@@ -673,8 +729,11 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--rerun", action="store_true",
                     help="test again only the mutants the previous run (same --workdir) left alive; keep the others")
     ap.add_argument("--resume", action="store_true",
-                    help="continue the previous run in --workdir: keep its verdicts, test the mutants without one")
-    ap.add_argument("--sample", type=int, help="test a seeded random sample of this many mutants per module")
+                    help="continue the previous run in --workdir: keep its killed verdicts (of unchanged functions), "
+                         "test the other mutants (survivors meet the tests added since)")
+    ap.add_argument("--sample", type=int,
+                    help="test a seeded random sample of this many of the mutants without a standing verdict; the "
+                         "score is the stratified estimate with its 95 %% interval")
     ap.add_argument("--seed", type=int, default=0, help="seed of --sample (default 0)")
     ap.add_argument("--tests-from", metavar="COMMIT",
                     help="score against the tests/ tree of this git revision and its MODULES selection (a before "

@@ -13,12 +13,15 @@ import pytest
 
 from roadload.experiments.mutation import (
     REPO,
+    STRATA,
     ModuleScore,
+    _plan,
     _line,
     _staged_path,
     _tests_tree_of,
     collect,
     modules_at,
+    mutants_of,
     sample_names,
     stage,
     wilson_interval,
@@ -100,20 +103,71 @@ def test_resumed_staging_keeps_mutmut_state_and_refreshes_the_sources(tmp_path):
     assert not meta.exists()
 
 
-def test_collect_counts_only_tested_mutants_and_prints_the_interval(tmp_path):
-    module = "core/trip_schema.py"
-    folder = tmp_path / "m"
+def _meta(folder: Path, module: str, verdicts: dict) -> Path:
     meta = folder / "mutants" / f"{_staged_path(module)}.meta"
-    meta.parent.mkdir(parents=True)
+    meta.parent.mkdir(parents=True, exist_ok=True)
+    meta.write_text(json.dumps({"exit_code_by_key": verdicts}))
+    return meta
+
+
+def test_collect_counts_only_tested_mutants(tmp_path):
+    module = "core/trip_schema.py"
     verdicts = {f"roadload.trip_schema.x_f__mutmut_{i}": 1 for i in range(1, 9)}
     verdicts.update({"roadload.trip_schema.x_f__mutmut_9": -24, "roadload.trip_schema.x_f__mutmut_10": None,
                      "roadload.trip_schema.x_f__mutmut_11": None})
-    meta.write_text(json.dumps({"exit_code_by_key": verdicts}))
-    score = collect(module, folder, 1.0)
-    assert (score.total, score.killed, score.timeout, score.untested) == (9, 8, 1, 2)
-    assert score.score == 1.0
-    assert score.interval == wilson_interval(9, 9)
-    line = _line(score)
-    assert "sample of 9 of 11 mutants" in line and f"{100 * wilson_interval(9, 9)[0]:.1f}-100.0 %" in line
-    assert "sample" not in _line(ModuleScore(module, total=3, killed=3))
+    _meta(tmp_path, module, verdicts)
+    score = collect(module, tmp_path, 1.0)
+    assert (score.total, score.killed, score.timeout, score.untested, score.pool) == (9, 8, 1, 2, 0)
+    assert score.score == 1.0 and score.interval == wilson_interval(9, 9)
+    assert "(2 of 11 mutants not tested)" in _line(score)
+    assert "tested" not in _line(ModuleScore(module, total=3, killed=3))
 
+
+def test_a_sampled_score_is_the_stratified_estimate_with_wilsons_interval(tmp_path, monkeypatch):
+    """A census of 18 killed mutants and a sample of 10 of a pool of 100 (5 killed, 1 timed out, 1 equivalent,
+    3 live): the pool holds an estimated 90 live mutants of which 6 / 9 are killed."""
+    module = "core/trip_schema.py"
+    name = "roadload.trip_schema.x_f__mutmut_{}".format
+    verdicts = {name(i): 1 for i in range(1, 19)}
+    sample = [name(i) for i in range(100, 110)]
+    verdicts.update({s: code for s, code in zip(sample, [1, 1, 1, 1, 1, -24, 0, 0, 0, 0])})
+    verdicts.update({name(i): None for i in range(200, 290)})
+    _meta(tmp_path, module, verdicts)
+    (tmp_path / STRATA).write_text(json.dumps({"pool": 100, "sample": sample}))
+    import mutmut.mutation.diff_apply as diff_apply  # the survivors' diffs: no mutated file is staged here
+
+    def diff(mutant, path):  # the last one is an equivalent mutant listed for every module
+        return ('-    a = float("nan")\n+    a = float("NAN")\n' if mutant == sample[-1]
+                else "-    a = 1\n+    a = 2\n")
+
+    monkeypatch.setattr(diff_apply, "get_diff_for_mutant", diff)
+    score = collect(module, tmp_path, 1.0)
+    assert (score.sampled, score.sampled_killed, score.sampled_equivalent, score.untested) == (10, 6, 1, 90)
+    assert (score.survived, score.equivalent) == (3, 1)
+    assert score.score == pytest.approx((18 + 90 * 6 / 9) / (18 + 90))
+    low, high = wilson_interval(6, 9)
+    assert score.interval == (pytest.approx((18 + 90 * low) / 108), pytest.approx((18 + 90 * high) / 108))
+    assert "all 18 others and a sample of 10 of 100 tested" in _line(score)
+    plain = ModuleScore(module, total=10, killed=6, sampled=10, sampled_killed=6, pool=50)
+    assert plain.score == pytest.approx(0.6) and plain.interval == pytest.approx(wilson_interval(6, 10))
+
+
+def test_a_resumed_plan_keeps_killed_verdicts_of_unchanged_functions_only(tmp_path):
+    module = "core/tables.py"  # small, with three functions
+    folder = stage(module, (), tmp_path / "m")
+    names, hashes = mutants_of(module, folder)
+    assert len(names) == len(set(names)) > 10 and all(n.startswith("roadload.tables.") for n in names)
+    assert {n.rpartition(".")[2].partition("__mutmut_")[0] for n in names} <= set(hashes)
+    a, b, c = names[0], names[-1], names[1]
+    fa, fb = (n.rpartition(".")[2].partition("__mutmut_")[0] for n in (a, b))
+    assert fa != fb
+    previous = {"exit_code_by_key": {a: 1, b: 1, c: 0},
+                "hash_by_function_name": {**hashes, fb: "changed"}}
+    kept, todo = _plan(module, folder, previous, None, 0)
+    assert kept == {a: 1}  # b: its function changed; c: survived, so tested again
+    assert a not in todo and b in todo and c in todo and len(todo) == len(names) - 1
+    assert not (folder / STRATA).exists()
+    kept, chosen = _plan(module, folder, previous, 5, 7)
+    assert set(kept) == {a} and len(chosen) == 5 and a not in chosen
+    strata = json.loads((folder / STRATA).read_text())
+    assert strata["pool"] == len(names) - 1 and strata["sample"] == chosen

@@ -245,3 +245,20 @@ def test_forward_rejection_reasons_name_their_figures(mass_world):
     high = selector(min_gain=first.gain_of_original + 1e-9).forward(ranked)[0]
     floor = first.gain_of_original + 1e-9
     assert high.reason == f"gain {first.gain_of_original:.3f} of the original gap, below {floor}"
+
+
+def test_each_rejection_names_the_first_rule_it_fails_and_the_floors_are_inclusive(mass_world):
+    _, _, selector, ranked = mass_world
+    first = selector().forward(ranked)[0]
+    gain, p, size = first.gain_of_original, first.null_p, first.size_rms
+    # p exactly at the level passes that rule: the gain rule is the one named
+    step = selector(alpha=p, min_gain=gain + 1e-9).forward(ranked)[0]
+    assert step.reason.startswith(f"gain {gain:.3f} of the original gap, below ") and step.accepted is False
+    # the gain exactly at its floor passes: the explained-share rule is the one named
+    step = selector(min_gain=gain, min_explained=1.5).forward(ranked)[0]
+    assert step.reason == f"partial fit: explains {step.explained_fraction:.2f} of the removable remainder (< 1.5)"
+    # a size exactly at its floor passes; above the floor the step is rejected as too small (False, not falsy)
+    assert selector(min_size=size).forward(ranked)[0].accepted is True
+    step = selector(min_size=2 * size).forward(ranked)[0]
+    assert step.accepted is False and step.implausible is None
+    assert step.reason == f"too small: the fitted effect's RMS {size:.3g} is below {2 * size:g}"

@@ -262,3 +262,39 @@ def test_each_rejection_names_the_first_rule_it_fails_and_the_floors_are_inclusi
     step = selector(min_size=2 * size).forward(ranked)[0]
     assert step.accepted is False and step.implausible is None
     assert step.reason == f"too small: the fitted effect's RMS {size:.3g} is below {2 * size:g}"
+
+
+def test_fitted_columns_and_effect_size_with_a_base_design():
+    """With a base calibration's columns joined: braking rows zero the columns of effects that are not about the
+    friction brake (the base's and the brake's stand), and an effect's size is its contribution net of what the
+    other columns can take (least squares on the training rows)."""
+    tab = CORE.synth(CORE.mass_extra, n_trips=2, duration=300.0)
+    braking = (np.arange(len(tab)) % 500) < 40
+    tab.loc[braking, "mode"] = "braking"
+    tab.loc[braking, "brake_force"] = 800.0
+    split = make_split(tab, seed=0, n_folds=4)
+    base = np.column_stack([np.ones(len(tab)), tab.speed.to_numpy()])  # not zero on braking rows: left as given
+    y = tab.residual.to_numpy()
+    sel = Selector(tab, y, split, CORE.MODEL, robust=False, base_design=base)
+    assert sel.target.braking[braking].all()
+    d, fit = sel.final_fit([(get_candidate("mass_offset"), None), (get_candidate("friction_brake"), None)])
+    assert d.owner[:2] == ["base", "base"] and set(d.owner[2:]) == {"mass_offset", "friction_brake"}
+    cols = sel.fitted_columns(d)
+    mass = np.array([o == "mass_offset" for o in d.owner])
+    rows = sel.target.braking
+    assert (cols[np.ix_(rows, mass)] == 0.0).all() and (cols[np.ix_(~rows, mass)] == d.A[np.ix_(~rows, mass)]).all()
+    np.testing.assert_array_equal(cols[:, ~mass], d.A[:, ~mass])
+    assert (d.A[np.ix_(rows, mass)] != 0.0).any()  # the design itself is full (for predicting everywhere)
+    tr = split.train
+    own, other = np.flatnonzero(mass), np.flatnonzero(~mass)
+    contrib = cols[np.ix_(tr, own)] @ fit.X[own]
+    B = cols[np.ix_(tr, other)]
+    net = contrib - B @ np.linalg.lstsq(B, contrib, rcond=None)[0]
+    size = sel.effect_size(d, fit, "mass_offset")
+    assert size == pytest.approx(float(np.sqrt(np.mean(net ** 2))), rel=1e-9)
+    assert 0.0 < size < float(np.sqrt(np.mean(contrib ** 2)))  # the base takes part of it
+    assert sel.effect_size(d, fit, "wind") == 0.0  # no columns of its own
+    plain = Selector(tab, y, split, CORE.MODEL, robust=False)
+    d0, fit0 = plain.final_fit([(get_candidate("mass_offset"), None)])
+    assert plain.effect_size(d0, fit0, "mass_offset") == pytest.approx(
+        float(np.sqrt(np.mean((d0.A[tr] @ fit0.X) ** 2))), rel=1e-12)  # without a base: not netted

@@ -653,13 +653,20 @@ def _restrict_verdicts(module: str, folder: Path, keep: dict[str, int | None], n
     meta_path.write_text(json.dumps(meta))
 
 
+def _live_of(previous: dict) -> tuple[dict[str, int], list[str]]:
+    """The killed verdicts of a previous run (they stand) and its tested mutants that were not killed."""
+    codes = previous["exit_code_by_key"]
+    kept = {n: c for n, c in codes.items() if c in KILLED | TIMEOUT | CRASH}
+    return kept, [n for n, c in codes.items() if n not in kept and c is not None]
+
+
 def run_module(module: str, workdir: Path, children: int, only: str | None = None, repo: Path = REPO,
                tests: tuple[str, ...] | None = None, rerun: bool = False, resume: bool = False,
                sample: int | None = None, seed: int = 0, tests_from: str | None = None) -> ModuleScore:
     """Stage ``module``, run mutmut on it (niced) and count the outcomes.
 
     ``rerun``: test again only the mutants the previous run of this module left alive (same source, so the same
-    mutant names) and keep the previous verdict of the others, so that every mutant has a status. ``resume``: keep
+    mutant names) and keep the previous verdict of the others (and its sample, if it was one). ``resume``: keep
     the killed verdicts of the previous run in the same folder (functions whose source changed excepted) and test
     the rest: a stopped run continues, survivors meet tests added since. ``sample``: test only a seeded random
     sample of that many of the mutants without a standing verdict; the score is then the stratified estimate.
@@ -671,16 +678,15 @@ def run_module(module: str, workdir: Path, children: int, only: str | None = Non
     previous = json.loads(meta_path.read_text()) if (rerun or resume) and meta_path.is_file() else {}
     if rerun and not previous:
         raise SystemExit(f"--rerun: no previous run of {module} in {folder}")
+    strata = (folder / STRATA).read_text() if rerun and (folder / STRATA).is_file() else None
     folder = stage(module, tests, folder, repo, tests_from, keep=resume)
+    if strata:  # a sampled run tested again: the same sample stands for the same pool
+        (folder / STRATA).write_text(strata)
     start = time.monotonic()
     if not (rerun or resume or sample is not None):  # a plain full run
         _mutmut_run(module, folder, children, [], only, append=False)
         return collect(module, folder, time.monotonic() - start, repo)
-    if rerun:
-        kept = {n: c for n, c in previous["exit_code_by_key"].items() if c in KILLED | TIMEOUT | CRASH}
-        names = [n for n in previous["exit_code_by_key"] if n not in kept]
-    else:
-        kept, names = _plan(module, folder, previous, sample, seed, repo)
+    kept, names = _live_of(previous) if rerun else _plan(module, folder, previous, sample, seed, repo)
     if names:
         _mutmut_run(module, folder, children, names, only, append=resume)
     _restrict_verdicts(module, folder, kept, names, repo)  # the standing verdicts, the new ones; the rest untested

@@ -17,6 +17,7 @@ from roadload.experiments.mutation import (
     ModuleScore,
     _plan,
     _line,
+    _live_of,
     _staged_path,
     _tests_tree_of,
     collect,
@@ -171,3 +172,8 @@ def test_a_resumed_plan_keeps_killed_verdicts_of_unchanged_functions_only(tmp_pa
     assert set(kept) == {a} and len(chosen) == 5 and a not in chosen
     strata = json.loads((folder / STRATA).read_text())
     assert strata["pool"] == len(names) - 1 and strata["sample"] == chosen
+
+
+def test_a_rerun_tests_again_only_the_tested_mutants_not_killed():
+    kept, again = _live_of({"exit_code_by_key": {"a": 1, "b": 0, "c": None, "d": 33, "e": -24, "f": 3}})
+    assert kept == {"a": 1, "e": -24, "f": 3} and again == ["b", "d"]  # c: outside the sample, stays untested

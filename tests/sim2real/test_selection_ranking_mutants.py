@@ -9,12 +9,14 @@ import importlib.util
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from roadload.sim2real.catalog import get_candidate
 from roadload.sim2real.robust import step_statistics
 from roadload.sim2real.selection import (Selector, cv_predict, design, fit_linear, fitted_parameters,
                                          information_criteria, make_split)
+from roadload.sim2real.stats import block_ids
 
 
 # the synthetic force tables of test_core (one definition of the test world)
@@ -169,9 +171,10 @@ def _statistics(sel, choices):
 def test_ranking_figures_are_the_step_statistics_and_fits_written_out(mass_world):
     tab, split, selector, _ = mass_world
     sel = selector()
-    ranked, skipped = sel.rank(NAMES)
+    names = NAMES + ("tire_warmup",)  # one candidate with a shape grid (its shape counts as a parameter)
+    ranked, skipped = sel.rank(names)
     assert skipped == {}
-    cands = [get_candidate(n) for n in NAMES]
+    cands = [get_candidate(n) for n in names]
     stats = _statistics(sel, cands)
     y, tr = sel.residual, split.train
     m = int(tr.sum())
@@ -183,7 +186,7 @@ def test_ranking_figures_are_the_step_statistics_and_fits_written_out(mass_world
     assert [r.improvement for r in ranked] == sorted((r.improvement for r in ranked), reverse=True)
     aics, bics = [aic0], [bic0]
     for r in ranked:
-        j = NAMES.index(r.name)
+        j = names.index(r.name)
         cand = cands[j]
         gain = float(stats.observed[j])
         null_j = stats.null[:, j]
@@ -298,3 +301,30 @@ def test_fitted_columns_and_effect_size_with_a_base_design():
     d0, fit0 = plain.final_fit([(get_candidate("mass_offset"), None)])
     assert plain.effect_size(d0, fit0, "mass_offset") == pytest.approx(
         float(np.sqrt(np.mean((d0.A[tr] @ fit0.X) ** 2))), rel=1e-12)  # without a base: not netted
+
+
+def test_split_defaults_and_its_seeded_phase():
+    """Defaults: 60 s segments, every 3rd held out from a seeded random phase per trip, 5 folds, 10 s blocks."""
+    tab = CORE.synth(lambda t: np.zeros(len(t)), n_trips=3, duration=720.0)
+    split = make_split(tab)
+    trip, t = tab["trip"].to_numpy(), tab["t"].to_numpy()
+    np.testing.assert_array_equal(split.blocks, block_ids(trip, t, 10.0))
+    np.testing.assert_array_equal(split.segments, block_ids(trip, t, 60.0))
+    assert split.n_folds == 5 and set(np.unique(split.fold[split.train])) == set(range(5))
+    rng = np.random.default_rng(0)  # the phase of each trip, in trip order, is the seed's first draws in [0, 3)
+    for k in pd.unique(trip):
+        phase = int(rng.integers(0, 3))
+        segs = np.unique(split.segments[trip == k])
+        held = [i for i, s in enumerate(segs) if split.test[split.segments == s].all()]
+        assert held == [i for i in range(len(segs)) if (i + phase) % 3 == 0]
+    assert any(not np.array_equal(make_split(tab, seed=s).test, split.test) for s in range(1, 8))
+
+
+def test_split_reads_a_valid_flag_of_zeros_and_ones_as_booleans():
+    tab = CORE.synth(lambda t: np.zeros(len(t)), n_trips=2, duration=600.0)
+    tab.loc[100:700, "valid"] = False
+    as_int = tab.assign(valid=tab["valid"].astype(int))
+    a, b = make_split(tab, seed=2), make_split(as_int, seed=2)
+    for field in ("valid", "test", "fold"):
+        np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+    assert b.valid.dtype == bool and not b.train[100:701].any() and b.train.sum() == a.train.sum() > 0

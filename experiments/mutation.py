@@ -330,7 +330,21 @@ _SENSOR_EQUIVALENT: dict[str, str] = {
        for d in ("", "1", "None")},
     f"{_S}sample: val[nan[:, ii]] = np.nan -> val[nan[:, ii]] = None": _NAN,
 }
+_SEL = "xǁSelectorǁ"
+_RATIO = ("the removable part is loss_before - min(reference, loss_before - gain) >= gain, so where it is > 0 the "
+          "ratio never exceeds 1: the cap at 1 never applies")
+_STEP_FRAC = "frac = float(min(gain / explainable, {})) if explainable > 0 else 0.0"
+_ALONE_FRAC = "frac = float(np.clip(gain / explainable, -np.inf, {})) if explainable > 0 else 0.0"
+_TIME = 't = table["t"].to_numpy({})'
+SELECTION_EQUIVALENT: dict[str, str] = {
+    f"{_SEL}_judge_step: {_STEP_FRAC.format('1.0')} -> {_STEP_FRAC.format('2.0')}": _RATIO,
+    **{f"{_SEL}_judge_alone: {_ALONE_FRAC.format('1.0')} -> {_ALONE_FRAC.format(v)}": _RATIO
+       for v in ("2.0", "None")},
+    **{f"x_make_split: {_TIME.format('dtype=float')} -> {_TIME.format(v)}":
+       "block_ids, the time's only reader, converts it to float itself" for v in ("dtype=None", "")},
+}
 EQUIVALENT: dict[str, dict[str, str]] = {
+    "sim2real/selection.py": SELECTION_EQUIVALENT,
     "envs/sensors.py": _SENSOR_EQUIVALENT,
     "controllers/mpc.py": MPC_EQUIVALENT,
     "controllers/mpc_controller.py": MPC_CONTROLLER_EQUIVALENT,

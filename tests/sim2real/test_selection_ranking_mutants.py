@@ -328,3 +328,36 @@ def test_split_reads_a_valid_flag_of_zeros_and_ones_as_booleans():
     for field in ("valid", "test", "fold"):
         np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
     assert b.valid.dtype == bool and not b.train[100:701].any() and b.train.sum() == a.train.sum() > 0
+
+
+def test_a_consistency_rule_alone_rejects_a_step_with_its_reason(mass_world):
+    _, _, selector, ranked = mass_world
+    seen = []
+
+    def consistent(cand, params, shape, size):
+        seen.append((cand.name, dict(params), shape, size))
+        return "the power side shows no such mass"
+
+    sel = selector(consistent=consistent)
+    step = sel.forward(ranked)[0]
+    assert step.effect == "mass_offset" and step.accepted is False
+    assert step.reason == "implausible: the power side shows no such mass"
+    assert step.implausible == "the power side shows no such mass" and sel.chosen == []
+    name, params, shape, size = seen[0]
+    assert (name, shape, size) == ("mass_offset", None, step.size_rms) and set(params) == {"delta m_V"}
+    # a rule that finds nothing wrong leaves the step accepted
+    assert selector(consistent=lambda *a: None).forward(ranked)[0].accepted is True
+
+
+def test_without_null_draws_the_intervals_collapse_to_the_gain():
+    """n_null = 0: no bootstrap draws, so every p is 1, the ranking's interval is the gain itself and a step's
+    null quantile is NaN (nothing to take it from); alpha 1 lets the steps run."""
+    tab = CORE.synth(CORE.mass_extra, n_trips=2, duration=300.0)
+    sel = Selector(tab, tab.residual.to_numpy(), make_split(tab, seed=0, n_folds=4), CORE.MODEL, robust=False,
+                   n_null=0, alpha=1.0, seed=0)
+    ranked = sel.rank(("mass_offset", "drag_area"))[0]
+    for r in ranked:
+        assert r.null_p == 1.0 and r.gain == (r.improvement, r.improvement, r.improvement)
+    steps = sel.forward(ranked)
+    assert steps and all(s.null_p == 1.0 and np.isnan(s.null_quantile) for s in steps)
+    assert steps[0].relative_gain == pytest.approx(steps[0].gain_of_original / steps[0].robust_loss_before)

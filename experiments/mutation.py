@@ -336,12 +336,20 @@ _RATIO = ("the removable part is loss_before - min(reference, loss_before - gain
 _STEP_FRAC = "frac = float(min(gain / explainable, {})) if explainable > 0 else 0.0"
 _ALONE_FRAC = "frac = float(np.clip(gain / explainable, -np.inf, {})) if explainable > 0 else 0.0"
 _TIME = 't = table["t"].to_numpy({})'
+_CACHE = "cache = self.__dict__.setdefault({}, {{}})"
+_BRAKE = "brake = np.array([get_candidate(o).is_brake for o in d.owner], {})"
 SELECTION_EQUIVALENT: dict[str, str] = {
     f"{_SEL}_judge_step: {_STEP_FRAC.format('1.0')} -> {_STEP_FRAC.format('2.0')}": _RATIO,
     **{f"{_SEL}_judge_alone: {_ALONE_FRAC.format('1.0')} -> {_ALONE_FRAC.format(v)}": _RATIO
        for v in ("2.0", "None")},
     **{f"x_make_split: {_TIME.format('dtype=float')} -> {_TIME.format(v)}":
        "block_ids, the time's only reader, converts it to float itself" for v in ("dtype=None", "")},
+    **{f"{_SEL}_reference_loss: {_CACHE.format(chr(34) + '_ref_cache' + chr(34))} -> {_CACHE.format(v)}":
+       "the cache's key in the instance's dict is a name only this method reads" for v in ("None", '"XX_ref_cacheXX"',
+                                                                                          '"_REF_CACHE"')},
+    **{f"{_SEL}final_fit: {_BRAKE.format('dtype=bool')} -> {_BRAKE.format(v)}":
+       "a list of bools is a bool array without the dtype, and it is never empty (at least one effect is fitted)"
+       for v in ("dtype=None", "")},
 }
 EQUIVALENT: dict[str, dict[str, str]] = {
     "sim2real/selection.py": SELECTION_EQUIVALENT,

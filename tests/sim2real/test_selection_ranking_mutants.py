@@ -282,6 +282,8 @@ def test_fitted_columns_and_effect_size_with_a_base_design():
     assert sel.target.braking[braking].all()
     d, fit = sel.final_fit([(get_candidate("mass_offset"), None), (get_candidate("friction_brake"), None)])
     assert d.owner[:2] == ["base", "base"] and set(d.owner[2:]) == {"mass_offset", "friction_brake"}
+    assert d.names[:2] == ["base 0", "base 1"] and d.units[:2] == ["-", "-"] and len(d.names) == d.A.shape[1]
+    np.testing.assert_array_equal(d.A[:, :2], base)
     cols = sel.fitted_columns(d)
     mass = np.array([o == "mass_offset" for o in d.owner])
     rows = sel.target.braking
@@ -361,3 +363,43 @@ def test_without_null_draws_the_intervals_collapse_to_the_gain():
     steps = sel.forward(ranked)
     assert steps and all(s.null_p == 1.0 and np.isnan(s.null_quantile) for s in steps)
     assert steps[0].relative_gain == pytest.approx(steps[0].gain_of_original / steps[0].robust_loss_before)
+
+
+def test_with_a_base_design_every_step_is_judged_over_the_base_and_the_chosen_effects():
+    tab = CORE.synth(CORE.mass_extra, n_trips=2, duration=400.0)
+    split = make_split(tab, seed=0, n_folds=4)
+    base = np.column_stack([np.ones(len(tab)), tab.speed.to_numpy()])
+    sel = Selector(tab, tab.residual.to_numpy(), split, CORE.MODEL, robust=False, n_boot=150, seed=0,
+                   base_design=base, alpha=1.0, min_gain=-1.0, min_explained=-1.0)
+    names = ("mass_offset", "drag_area", "rolling_scale")
+    ranked = sel.rank(names)[0]
+    cands = [get_candidate(n) for n in names]
+    variants = [[sel.candidate_columns(c, sh) for sh in c.shapes()] for c in cands]
+    stats = step_statistics(base, variants, sel.target, sel.signs)
+    for r in ranked:
+        assert r.improvement == float(stats.observed[names.index(r.name)])
+    steps = sel.forward(ranked)
+    assert len(steps) == 3 and all(s.accepted for s in steps)
+    first = get_candidate(steps[0].effect)
+    rest = [c for c in cands if c.name != first.name]
+    after_first = np.hstack([base, sel.candidate_columns(first, steps[0].shape)])
+    stats2 = step_statistics(after_first, [[sel.candidate_columns(c, sh) for sh in c.shapes()] for c in rest],
+                             sel.target, sel.signs)
+    j = int(np.argmax(stats2.observed))
+    assert (steps[1].effect, steps[1].robust_loss_before, steps[1].gain_of_original) == (
+        rest[j].name, stats2.loss_before, float(stats2.observed[j]))
+
+
+def test_forward_takes_at_most_four_effects_from_the_top_six_by_default():
+    """Every rule switched off (alpha 1, any gain, any explained share): the steps stop at max_effects (4 by
+    default) or when the pool of the six best-ranked significant candidates is used up."""
+    tab = CORE.synth(lambda t: np.zeros(len(t)), n_trips=2, duration=300.0)
+    sel = Selector(tab, tab.residual.to_numpy(), make_split(tab, seed=0, n_folds=4), CORE.MODEL, robust=False,
+                   n_null=19, seed=0, alpha=1.0, min_gain=-1.0, min_explained=-1.0)
+    ranked = sel.rank(("mass_offset", "drag_area", "rolling_scale", "torque_scale", "rolling_speed", "wind",
+                       "accel_bias"))[0]
+    assert len(ranked) == 7 and all(r.significant for r in ranked)
+    steps = sel.forward(ranked)
+    assert len(steps) == 4 and all(s.accepted for s in steps) and len(sel.chosen) == 4
+    steps = sel.forward(ranked, max_effects=10)
+    assert len(steps) == 6 and {s.effect for s in steps} == {r.name for r in ranked[:6]}

@@ -13,10 +13,11 @@ import pandas as pd
 import pytest
 
 from roadload.sim2real.catalog import get_candidate
-from roadload.sim2real.robust import step_statistics
+from roadload.estimators.batch import m_estimate
+from roadload.sim2real.robust import robust_target, step_statistics
 from roadload.sim2real.selection import (Selector, cv_predict, design, fit_linear, fitted_parameters,
                                          information_criteria, make_split)
-from roadload.sim2real.stats import block_ids
+from roadload.sim2real.stats import block_ids, cluster_covariance
 
 
 # the synthetic force tables of test_core (one definition of the test world)
@@ -403,3 +404,81 @@ def test_forward_takes_at_most_four_effects_from_the_top_six_by_default():
     assert len(steps) == 4 and all(s.accepted for s in steps) and len(sel.chosen) == 4
     steps = sel.forward(ranked, max_effects=10)
     assert len(steps) == 6 and {s.effect for s in steps} == {r.name for r in ranked[:6]}
+
+
+def test_design_zeroes_non_finite_regressor_values():
+    tab = CORE.synth(lambda t: np.zeros(len(t)), n_trips=1, duration=60.0)
+    tab.loc[[3, 5, 7], "acceleration"] = [np.nan, np.inf, -np.inf]
+    sel = Selector(tab, tab.residual.to_numpy(), make_split(tab, n_folds=2, segment_length=10.0), CORE.MODEL)
+    A = design([(get_candidate("mass_offset"), None)], CORE.MODEL, sel.cols).A
+    assert (A[[3, 5, 7], 0] == 0.0).all() and np.isfinite(A).all() and (A[[2, 4, 6, 8], 0] != 0.0).all()
+
+
+def test_a_robust_fits_block_covariance_uses_the_huber_weights():
+    rng = np.random.default_rng(4)
+    n = 600
+    A = np.column_stack([np.ones(n), rng.normal(0.0, 2.0, n)])
+    y = A @ np.array([1.0, 3.0]) + rng.normal(0.0, 0.5, n)
+    y[::15] += 40.0  # outliers the Huber weights take down
+    rows, blocks = np.ones(n, bool), np.arange(n) // 20
+    fit = fit_linear(A, y, rows, True, blocks)
+    scale = np.sqrt(np.mean(A ** 2, axis=0))
+    weights = m_estimate(A / scale, y, "huber", max_iter=15, tol=1e-5).weights
+    np.testing.assert_allclose(fit.cov, cluster_covariance(A, y - A @ fit.X, blocks, weights), rtol=1e-9)
+    unweighted = cluster_covariance(A, y - A @ fit.X, blocks, None)
+    assert not np.allclose(fit.cov, unweighted, rtol=1e-3)
+
+
+def test_the_selector_passes_its_clip_to_the_robust_target_and_stores_a_float_residual():
+    tab = CORE.synth(CORE.mass_extra, n_trips=2, duration=300.0)
+    split = make_split(tab, seed=0, n_folds=4)
+    y = tab.residual.to_numpy()
+    for clip in (0.5, 5.0):
+        sel = Selector(tab, y, split, CORE.MODEL, clip=clip)
+        expected = robust_target(tab, y, split.train, split.blocks, split.fold, split.n_folds, clip=clip)
+        np.testing.assert_array_equal(sel.target.r_w, expected.r_w)
+    assert not np.array_equal(Selector(tab, y, split, CORE.MODEL, clip=0.5).target.r_w,
+                              Selector(tab, y, split, CORE.MODEL).target.r_w)
+    as_int = Selector(tab, np.round(y).astype(int), split, CORE.MODEL)
+    assert as_int.residual.dtype == float
+
+
+def test_reference_loss_with_a_base_design_and_chosen_effects():
+    tab = CORE.synth(CORE.mass_extra, n_trips=2, duration=300.0)
+    split = make_split(tab, seed=0, n_folds=4)
+    base = np.column_stack([np.ones(len(tab)), tab.speed.to_numpy()])
+    y = tab.residual.to_numpy()
+    sel = Selector(tab, y, split, CORE.MODEL, robust=False, n_boot=150, seed=0, base_design=base, alpha=1.0,
+                   min_gain=-1.0, min_explained=-1.0)  # every step accepted: the second sees the first's effect
+    t = sel.target
+    rows = t.segment >= 0
+    norm = float(np.sum(t.weight[rows] * t.r_w[rows] ** 2))
+
+    def loss_of(A):
+        pred = cv_predict(A, y, tab, split, False, reference=True)
+        return float(np.sum(t.weight[rows] * (t.r_w[rows] - np.nan_to_num(pred[rows])) ** 2)) / norm
+
+    ranked = sel.rank(("mass_offset", "drag_area"))[0]
+    assert sel.baseline_info.reference_robust_loss == pytest.approx(loss_of(base), rel=1e-12)
+    steps = sel.forward(ranked)
+    chosen = design([(get_candidate(steps[0].effect), steps[0].shape)], CORE.MODEL, sel.cols).A
+    assert len(steps) >= 2 and steps[0].accepted
+    assert steps[1].reference_robust_loss == pytest.approx(loss_of(np.hstack([base, chosen])), rel=1e-12)
+    assert steps[1].reference_robust_loss != pytest.approx(steps[0].reference_robust_loss, rel=1e-6)
+
+
+def test_a_zero_residual_has_no_reference_loss():
+    tab = CORE.synth(lambda t: np.zeros(len(t)), n_trips=2, duration=300.0)
+    sel = Selector(tab, np.zeros(len(tab)), make_split(tab, seed=0, n_folds=4), CORE.MODEL, robust=False, n_null=19)
+    sel.rank(("mass_offset",))
+    assert np.isnan(sel.baseline_info.reference_robust_loss)
+
+
+def test_the_plausibility_rule_reads_the_fitted_shape():
+    tab = CORE.synth(_warm, n_trips=2, duration=400.0, noise=5.0)
+    seen = []
+    sel = Selector(tab, tab.residual.to_numpy(), make_split(tab, n_folds=4), CORE.MODEL, robust=False, n_boot=150,
+                   plausible=lambda cand, params, shape: seen.append((cand.name, shape)))
+    steps = sel.forward(sel.rank(("tire_warmup", "mass_offset"))[0])
+    assert steps[0].effect == "tire_warmup" and steps[0].accepted and steps[0].shape == D_TRUE
+    assert seen[0] == ("tire_warmup", D_TRUE)

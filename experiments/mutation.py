@@ -338,6 +338,8 @@ _ALONE_FRAC = "frac = float(np.clip(gain / explainable, -np.inf, {})) if explain
 _TIME = 't = table["t"].to_numpy({})'
 _CACHE = "cache = self.__dict__.setdefault({}, {{}})"
 _BRAKE = "brake = np.array([get_candidate(o).is_brake for o in d.owner], {})"
+_MASK = 'mask = np.array([o != "base" and not get_candidate(o).is_brake for o in d.owner], {})'
+_RESHAPE = "B = np.asarray(self.base_design, dtype=float).reshape(len(self.table), {})"
 SELECTION_EQUIVALENT: dict[str, str] = {
     f"{_SEL}_judge_step: {_STEP_FRAC.format('1.0')} -> {_STEP_FRAC.format('2.0')}": _RATIO,
     **{f"{_SEL}_judge_alone: {_ALONE_FRAC.format('1.0')} -> {_ALONE_FRAC.format(v)}": _RATIO
@@ -350,6 +352,14 @@ SELECTION_EQUIVALENT: dict[str, str] = {
     **{f"{_SEL}final_fit: {_BRAKE.format('dtype=bool')} -> {_BRAKE.format(v)}":
        "a list of bools is a bool array without the dtype, and it is never empty (at least one effect is fitted)"
        for v in ("dtype=None", "")},
+    **{f"{_SEL}fitted_columns: {_MASK.format('dtype=bool')} -> {_MASK.format(v)}":
+       "a list of bools is a bool array without the dtype, and the design it masks has columns"
+       for v in ("dtype=None", "")},
+    f"{_SEL}__post_init__: {_RESHAPE.format('-1')} -> {_RESHAPE.format('-2')}":
+        "numpy infers a dimension given as any negative number, not only -1",
+    f"{_SEL}effect_size: return 0.0 -> return 1.0":
+        "unreachable: the contribution has one value per training row and a split always has training rows "
+        "(make_split refuses one without)",
 }
 EQUIVALENT: dict[str, dict[str, str]] = {
     "sim2real/selection.py": SELECTION_EQUIVALENT,

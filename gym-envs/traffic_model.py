@@ -213,19 +213,29 @@ def desired_gap(veh, beh, e, f):
 
 
 @kernel(forceinline=True, refcount=False)
-def idm_acceleration(veh, beh, delta, limit, e, f):
-    """IDM acceleration [m/s^2] of vehicle e behind vehicle f (f < 0: free road; e < 0: 0), with the speed
-    exponent ``delta`` of the vehicle that asks (MOBIL evaluates its neighbours with its own model, as
-    highway-env): a = a_c (1 - (max(v, 0) / v_0)^delta - (d* / d)^2), v_0 = the target speed capped at the limit."""
+def free_road_acceleration(veh, beh, delta, limit, e):
+    """IDM's free-road term a_c (1 - (max(v, 0) / v_0)^delta) [m/s^2] of vehicle e (e < 0: 0), v_0 = its target
+    speed capped at the limit, delta the speed exponent of the vehicle that asks (MOBIL evaluates its neighbours
+    with its own model, as highway-env). It does not depend on the leader: a decision computes it once per vehicle
+    and reuses it behind every candidate leader (:func:`idm_behind`)."""
     if e < 0:
         return 0.0
-    a_c = beh[B_COMFORT_ACC]
     v0 = _clip(veh[e, V_TARGET_SPEED], 0.0, limit)
-    acc = a_c * (1.0 - math.pow(max(veh[e, V_SPEED], 0.0) / abs(not_zero(v0)), delta))
+    return beh[B_COMFORT_ACC] * (1.0 - math.pow(max(veh[e, V_SPEED], 0.0) / abs(not_zero(v0)), delta))
+
+
+@kernel(forceinline=True, refcount=False)
+def idm_behind(veh, beh, free, e, f):
+    """IDM acceleration [m/s^2] of vehicle e behind vehicle f, a = a_c (1 - (max(v, 0) / v_0)^delta - (d* / d)^2),
+    from e's free-road term ``free`` (:func:`free_road_acceleration`): free - a_c (d* / d)^2 (f < 0: free road;
+    e < 0: 0)."""
+    if e < 0:
+        return 0.0
+    acc = free
     if f >= 0:
         d = veh[f, V_X] - veh[e, V_X]
         ratio = desired_gap(veh, beh, e, f) / not_zero(d)
-        acc -= a_c * ratio * ratio
+        acc -= beh[B_COMFORT_ACC] * ratio * ratio
     return acc
 
 
@@ -237,15 +247,18 @@ def mobil(veh, members, counts, beh, limit, j, lane):
     lane index, :func:`index_lanes`)."""
     delta = veh[j, V_DELTA]
     new_lead, new_follow = lane_neighbours(veh, members, counts, j, lane)
-    new_follow_a = idm_acceleration(veh, beh, delta, limit, new_follow, new_lead)
-    new_follow_pred_a = idm_acceleration(veh, beh, delta, limit, new_follow, j)
+    free = free_road_acceleration(veh, beh, delta, limit, new_follow)
+    new_follow_a = idm_behind(veh, beh, free, new_follow, new_lead)
+    new_follow_pred_a = idm_behind(veh, beh, free, new_follow, j)
     if new_follow_pred_a < -beh[B_MAX_BRAKING]:
         return False
     old_lead, old_follow = lane_neighbours(veh, members, counts, j, int(veh[j, V_LANE]))
-    self_pred_a = idm_acceleration(veh, beh, delta, limit, j, new_lead)
-    self_a = idm_acceleration(veh, beh, delta, limit, j, old_lead)
-    old_follow_a = idm_acceleration(veh, beh, delta, limit, old_follow, j)
-    old_follow_pred_a = idm_acceleration(veh, beh, delta, limit, old_follow, old_lead)
+    free = free_road_acceleration(veh, beh, delta, limit, j)
+    self_pred_a = idm_behind(veh, beh, free, j, new_lead)
+    self_a = idm_behind(veh, beh, free, j, old_lead)
+    free = free_road_acceleration(veh, beh, delta, limit, old_follow)
+    old_follow_a = idm_behind(veh, beh, free, old_follow, j)
+    old_follow_pred_a = idm_behind(veh, beh, free, old_follow, old_lead)
     gain = self_pred_a - self_a + beh[B_POLITENESS] * (new_follow_pred_a - new_follow_a + old_follow_pred_a
                                                         - old_follow_a)
     return gain >= beh[B_MIN_GAIN]
@@ -315,13 +328,12 @@ def traffic_act(veh, m, beh, geo, members, counts):
             continue
         change_lane_policy(veh, m, members, counts, beh, lanes, limit, j)
         veh[j, V_STEER] = steering_control(veh, j)
-        delta = veh[j, V_DELTA]
         own = int(veh[j, V_LANE])
-        acc = idm_acceleration(veh, beh, delta, limit, j, lane_neighbours(veh, members, counts, j, own)[0])
+        free = free_road_acceleration(veh, beh, veh[j, V_DELTA], limit, j)
+        acc = idm_behind(veh, beh, free, j, lane_neighbours(veh, members, counts, j, own)[0])
         target = int(veh[j, V_TARGET_LANE])
         if own != target:
-            acc = min(acc, idm_acceleration(veh, beh, delta, limit, j,
-                                            lane_neighbours(veh, members, counts, j, target)[0]))
+            acc = min(acc, idm_behind(veh, beh, free, j, lane_neighbours(veh, members, counts, j, target)[0]))
         veh[j, V_ACC] = _clip(acc, -beh[B_ACC_MAX], beh[B_ACC_MAX])
 
 

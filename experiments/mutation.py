@@ -35,6 +35,7 @@ import sys
 import tempfile
 import time
 import tomllib
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -575,8 +576,8 @@ def collect(module: str, folder: Path, seconds: float, repo: Path = REPO) -> Mod
     meta = json.loads((folder / "mutants" / f"{staged}.meta").read_text())
     known = EQUIVALENT.get(module, {})
     score = ModuleScore(module, seconds=round(seconds, 1))
-    strata = json.loads((folder / STRATA).read_text()) if (folder / STRATA).is_file() else {"pool": 0, "sample": []}
-    score.pool, sample = int(strata["pool"]), set(strata["sample"])
+    strata: dict = json.loads((folder / STRATA).read_text()) if (folder / STRATA).is_file() else {}
+    score.pool, sample = int(strata.get("pool", 0)), set(strata.get("sample", []))
     cwd = os.getcwd()
     os.chdir(folder)
     try:
@@ -674,7 +675,7 @@ def _mutmut_run(module: str, folder: Path, children: int, names: list[str], only
         raise RuntimeError(f"mutmut failed on {module} (exit {res.returncode}); log {folder / 'mutmut.log'}:\n{tail}")
 
 
-def _restrict_verdicts(module: str, folder: Path, keep: dict[str, int | None], names: list[str],
+def _restrict_verdicts(module: str, folder: Path, keep: Mapping[str, int | None], names: list[str],
                        repo: Path = REPO) -> None:
     """Rewrite the run's meta file: the verdicts of ``names`` (just tested) and ``keep``, every other mutant
     untested (None)."""

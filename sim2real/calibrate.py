@@ -12,14 +12,23 @@ energy side (battery-electric trips), r_P ≈ ΔP_aux + (s - 1) P_loss(ω_E, T_E
     signal gain error Δg [1] and offset ΔT_off [N m] (P_el,sim is computed from the *logged* torque, so a signal
     reading (1 + Δg) T + ΔT_off over-predicts the power by Δg T ω + ΔT_off ω);
 force side, r_F - Δg F_drive - ΔT_off i η / r_W + m_V b ≈ Δm_V (g sin θ + v̇ + g cos θ f_r(v)) + Δf_r0 m_V g cos θ
-    + Δf_r1 m_V g cos θ v + Δf_r4 m_V g cos θ v⁴ + Δ(c_x A_V) ρ_a/2 v² + ε_t max(F_drive, 0)
-    + ε_r min(F_drive, 0) + Δm_rot v̇
+    + Δf_r1 m_V g cos θ v + Δf_r4 m_V g cos θ v⁴ + Δ(c_x A_V) ρ_a/2 v² + ε |F_drive| + Δm_rot v̇
     (+ k F_B with brake pressure, + Δ(m_V²/c_yW) v⁴ κ²/4 with a path curvature; eq. 2.5-2.10, 2.15, 2.17):
-    mass, rolling resistance f_r0, f_r1 and f_r4, drag area, drive-train efficiency in traction η_t = η_sim / (1 + ε_t)
-    and in regeneration η_r = η_sim (1 + ε_r) (the pipeline turns the logged torque into force with η_sim:
-    T i η / r_W in traction, T i / (η r_W) in regeneration), rotating inertia Δm_rot = ΔI_red / r_W², brake gain
-    k; the torque-signal terms are those of the energy side and b is the accelerometer bias from the logged
-    elevation (:func:`.base.accelerometer_bias_from_elevation`).
+    mass, rolling resistance f_r0, f_r1 and f_r4, drag area, the drive-train's mesh-loss error ε — reported as the
+    efficiency in traction η_t = η_sim / (1 + ε) and in regeneration η_r = η_sim (1 - ε) (the pipeline turns the
+    logged torque into force with η_sim: T i η / r_W in traction, T i / (η r_W) in regeneration, so a loss
+    proportional to the transmitted torque, section 2.6, moves the two oppositely) —, rotating inertia
+    Δm_rot = ΔI_red / r_W², brake gain k; the torque-signal terms are those of the energy side and b is the
+    accelerometer bias from the logged elevation (:func:`.base.accelerometer_bias_from_elevation`).
+
+Why one loss error and not an efficiency per direction: the sim's drive force F_drive = m_V (v̇ + g sin θ + g cos θ
+f_r) + ρ/2 c_x A v² + ... is, term by term, in the span of the mass, rolling-resistance, drag-area and inertia
+regressors, so a *symmetric* part ε_s F_drive is collinear with scaling all of them (the residual cannot tell a
+drive force read 5 % high from a car 5 % heavier with 5 % more road load). With η_t and η_r fitted apart, that
+direction is set by the priors and by noise: on FASTSim's Zoe against the bmw_i3 preset the fit slid along it to
+mass +557 kg with η_t and η_r at their physical bounds (1.0 and 0.7), and with 100x wider priors to mass +1782 kg
+and ε_t = -1.07. Only the antisymmetric part, ε |F_drive|, is identified: fitted alone it reads η = 0.914 / 0.911
+(FASTSim's transmission: 0.92) and mass 1573 kg (1600), the same with 100x wider priors.
 
 Each side is a Gaussian posterior around the sim's values: the data's information is the inverse of the
 cluster-robust (10 s block) covariance of the fit, H M⁻¹ H with H = Aᵀ W A and M the blocks' score outer
@@ -54,17 +63,16 @@ import numpy as np
 import pandas as pd
 
 from roadload.envs.effects import EffectsConfig
-from roadload.estimators.models import ACCELERATION, GRADIENT_ANGLE, PATH_CURVATURE, SPEED
 from roadload.trip import Trip
-from roadload.units import G
 from roadload.vehicle import VehicleSpec, VehicleSpecError
 
 from .base import accelerometer_bias_from_elevation
-from .catalog import BRAKE_FORCE, DRIVE_FORCE
+from .catalog import DRIVE_FORCE
 from .diagnose import FLOOR_ROADS, DiagnosisSettings, Run, stage_floor, stage_split, stage_table
 from .energy import MOTOR_SPEED, POWER_RESIDUAL, SPEED_DERIVED, energy_columns
 from .errors import DiagnosisError
-from .forcemodel import AIR_DENSITY, SimForceModel
+from .forcemodel import SimForceModel
+from .held import DRIVETRAIN_LOSS, force_columns
 from .records import Record, RobustSummary
 from .robust import robust_target, winsorised
 from .selection import Split
@@ -126,6 +134,10 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("torque_signal_offset", "ΔT_off", "N*m", "energy", lambda s, m: 10.0, -100.0, 100.0, "N*m",
               "drive-torque signal offset T_off"),
 )
+#: the force side's fitted drive-train parameter: the loss error ε of the column |F_drive| (module doc), reported
+#: as the two efficiencies above; its prior and range are theirs (:func:`_bounds`)
+DRIVETRAIN_LOSS_PARAMETER = Parameter(DRIVETRAIN_LOSS, "ε", "1", "force", lambda s, m: 0.05, *ETA_PLAUSIBLE, "1",
+                                      "drive-train mesh-loss error ε: η_t = η_sim / (1 + ε), η_r = η_sim (1 - ε)")
 DRIVE_RATIO = Parameter("drive_ratio", "i_G i_D / r_W", "1/m", "force", lambda s, m: 0.0, 5.0, 200.0, "1/m",
                         "overall drive ratio per wheel radius (first gear), from the logged motor speed")
 ACCEL_BIAS = Parameter("accelerometer_bias", "b", "m/s^2", "force", lambda s, m: 0.0, -1.0, 1.0, "m/s^2",
@@ -136,7 +148,8 @@ ACCEL_BIAS = Parameter("accelerometer_bias", "b", "m/s^2", "force", lambda s, m:
 class CalibratedParameter(Record):
     """A calibrated parameter: the fitted change ``delta`` ± ``std_error`` (``unit``), the sim's value and the
     calibrated one in ``value_unit`` with its uncertainty, the prior's width, the physical range, whether the data
-    determined it (posterior SD below half the prior's) and flags (clipped to the range, implausible)."""
+    determined it (posterior SD below half the prior's), flags (clipped to the range, implausible) and ``held``:
+    the change the fit wanted beyond the end of its range and the range held back (``unit``; 0: none)."""
 
     name: str
     symbol: str
@@ -154,6 +167,7 @@ class CalibratedParameter(Record):
     determined: bool
     flag: str
     description: str
+    held: float = 0.0
 
 
 @dataclass
@@ -233,13 +247,26 @@ class Calibration(Record):
         return out
 
     @property
+    def held_at_bound(self) -> dict[str, float]:
+        """The fitted changes held at a bound of their range, by the name the fit gives them (the two drive-train
+        efficiencies are one loss error ε, :data:`.held.DRIVETRAIN_LOSS`) -> what the bound held back (signed, in
+        the change's unit): what every trip diagnosed against this calibration still carries (:mod:`.held`)."""
+        out = {}
+        for p in self.parameters:
+            if p.held:
+                traction = p.name == "drivetrain_efficiency_traction"
+                regen = p.name == "drivetrain_efficiency_regen"
+                out[DRIVETRAIN_LOSS if traction or regen else p.name] = -p.held if regen else p.held
+        return out
+
+    @property
     def sim_config(self) -> SimConfig:
         """The calibrated vehicle at the reference trips' median ambient temperature (the sim's own floor trips then
         see the reference's air density; the sim's default where the trips log none)."""
         effects = EffectsConfig()
         if np.isfinite(self.reference_ambient):
             effects = EffectsConfig.from_dict({**effects.to_dict(), "ambient_temperature": self.reference_ambient})
-        return SimConfig(self.spec, effects, f"{self.sim} calibrated")
+        return SimConfig(self.spec, effects, f"{self.sim} calibrated", self.held_at_bound)
 
 
 # ============================================================================================ the fit
@@ -272,28 +299,6 @@ def cluster_meat(A: np.ndarray, r: np.ndarray, blocks: np.ndarray, w: np.ndarray
     return g.T @ g
 
 
-def force_columns(table: pd.DataFrame, model: SimForceModel) -> tuple[np.ndarray, list[str]]:
-    """The force side's regressors and the parameter each belongs to (module doc); brake gain and cornering only
-    where the trips log brake pressure / a path curvature."""
-    c = {k: table[k].to_numpy(dtype=float) for k in (SPEED, ACCELERATION, GRADIENT_ANGLE, AIR_DENSITY, DRIVE_FORCE)}
-    th, v, a = c[GRADIENT_ANGLE], c[SPEED], c[ACCELERATION]
-    f = np.nan_to_num(c[DRIVE_FORCE])
-    m_g_cos = model.mass * G * np.cos(th)
-    cols = {"mass": G * np.sin(th) + a + G * np.cos(th) * model.rolling_resistance_coefficient(v),
-            "rolling_resistance_f0": m_g_cos, "rolling_resistance_f1": m_g_cos * v,
-            "rolling_resistance_f4": m_g_cos * v ** 4,
-            "drag_area": 0.5 * c[AIR_DENSITY] * v ** 2,
-            "drivetrain_efficiency_traction": np.clip(f, 0.0, None),
-            "drivetrain_efficiency_regen": np.clip(f, None, 0.0), "rotating_inertia": a}
-    if table.get("has_brake_pressure", pd.Series([False])).any():
-        cols["brake_gain"] = np.nan_to_num(table[BRAKE_FORCE].to_numpy(dtype=float))
-    kappa = np.nan_to_num(table[PATH_CURVATURE].to_numpy(dtype=float))
-    if np.any(kappa != 0):
-        cols["cornering"] = v ** 4 * kappa ** 2 / 4.0
-    names = list(cols)
-    return np.nan_to_num(np.column_stack([cols[n] for n in names])), names
-
-
 @dataclass
 class SideFit:
     """The fitted changes of one side with their covariance, and the prediction on every row."""
@@ -302,6 +307,7 @@ class SideFit:
     x: np.ndarray
     cov: np.ndarray
     predicted: np.ndarray
+    held: dict[str, float] = field(default_factory=dict)
 
     def get(self, name: str, default: float = 0.0) -> float:
         return float(self.x[self.names.index(name)]) if name in self.names else default
@@ -325,8 +331,8 @@ def fit_energy(table: pd.DataFrame, split: Split, spec: VehicleSpec, model: SimF
         names, A = [names[i] for i in keep], A[:, keep]
     yw, w = winsorised(np.where(ok, y, 0.0), rows, settings.clip)
     prior = np.array([_param(n).prior(spec, model) for n in names]) * settings.prior_scale
-    x, cov = bounded_posterior(A, yw, w, rows, split.blocks, prior, _bounds(names, spec, model))
-    return SideFit(names, x, cov, A @ x)
+    x, cov, back = bounded_posterior(A, yw, w, rows, split.blocks, prior, _bounds(names, spec, model))
+    return SideFit(names, x, cov, A @ x, {n: float(b) for n, b in zip(names, back) if b})
 
 
 def _torque_terms(table: pd.DataFrame, spec: VehicleSpec, model: SimForceModel, energy: SideFit | None
@@ -352,18 +358,22 @@ def fit_force(table: pd.DataFrame, split: Split, residual: np.ndarray, spec: Veh
     y = np.nan_to_num(residual) - known
     target = robust_target(table, y, split.train, split.segments, split.fold, split.n_folds, clip=settings.clip)
     A, names = force_columns(table, model)
-    drive = np.array([n.startswith("drivetrain_efficiency") for n in names])
+    drive = np.array([n == DRIVETRAIN_LOSS for n in names])
     A[np.ix_(target.braking, drive)] = 0.0
     prior = np.array([_param(n).prior(spec, model) for n in names]) * settings.prior_scale
-    x, cov = bounded_posterior(A, target.r_w, target.weight, split.train, split.blocks, prior,
-                               _bounds(names, spec, model))
-    return SideFit(names, x, cov, A @ x)
+    x, cov, back = bounded_posterior(A, target.r_w, target.weight, split.train, split.blocks, prior,
+                                     _bounds(names, spec, model))
+    return SideFit(names, x, cov, A @ x, {n: float(b) for n, b in zip(names, back) if b})
 
 
 def _bounds(names: list[str], spec: VehicleSpec, model: SimForceModel) -> np.ndarray:
     """(k x 2) bounds of the fitted changes that keep each calibrated value in its physical range."""
     out = []
     for n in names:
+        if n == DRIVETRAIN_LOSS:     # ε = ε_t = -ε_r: both efficiencies within their range
+            t, r = (_bounds([f"drivetrain_efficiency_{d}"], spec, model)[0] for d in ("traction", "regen"))
+            out.append((max(t[0], -r[1]), min(t[1], -r[0])))
+            continue
         p = _param(n)
         lo, hi = (_delta_for(n, v, spec, model) for v in (p.low, p.high))
         out.append((min(lo, hi), max(lo, hi)))
@@ -386,18 +396,25 @@ def _delta_for(name: str, value: float, spec: VehicleSpec, model: SimForceModel)
 
 
 def bounded_posterior(A: np.ndarray, y: np.ndarray, w: np.ndarray, rows: np.ndarray, blocks: np.ndarray,
-                      prior_std: np.ndarray, bounds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                      prior_std: np.ndarray, bounds: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`posterior` with every change kept within ``bounds``: a change that leaves them is held at its
     bound and the others refitted given it (so the rest of the calibration takes up what the bound holds back,
-    instead of a clipped value leaving it unexplained); a held change keeps its unconstrained uncertainty."""
+    instead of a clipped value leaving it unexplained); a held change keeps its unconstrained uncertainty.
+    Returns x, its covariance and per change what its bound held back: the fitted value beyond the bound minus
+    the bound where that is at least :data:`Z_HELD` standard errors (0 elsewhere; the data want beyond the range,
+    not just a noisy value at its edge)."""
     x, cov = posterior(A, y, w, rows, blocks, prior_std)
     held = np.zeros(x.size, dtype=bool)
+    held_back = np.zeros(x.size)
     for _ in range(x.size):
         out = (~held) & ((x < bounds[:, 0]) | (x > bounds[:, 1]))
         if not out.any():
             break
         held |= out
         x_held = np.clip(x, bounds[:, 0], bounds[:, 1])
+        beyond = np.where(out, x - x_held, 0.0)
+        se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        held_back = np.where(np.abs(beyond) >= Z_HELD * se, beyond, held_back)
         free = ~held
         x = x_held.copy()
         if free.any():
@@ -406,11 +423,14 @@ def bounded_posterior(A: np.ndarray, y: np.ndarray, w: np.ndarray, rows: np.ndar
             x[free] = x_free
             cov = cov.copy()
             cov[np.ix_(free, free)] = cov_free
-    return x, cov
+    return x, cov, held_back
+
+
+Z_HELD = 2.58      # a bound holds back a change when the fit wants beyond it by this many standard errors
 
 
 def _param(name: str) -> Parameter:
-    for p in PARAMETERS + (ACCEL_BIAS, DRIVE_RATIO):
+    for p in PARAMETERS + (ACCEL_BIAS, DRIVE_RATIO, DRIVETRAIN_LOSS_PARAMETER):
         if p.name == name:
             return p
     raise DiagnosisError(f"unknown calibration parameter {name!r}")
@@ -697,7 +717,8 @@ def _combined(passes: list[list[CalibratedParameter]]) -> list[CalibratedParamet
         se = last.calibrated_std * (value / last.calibrated if first.name in RELATIVE and last.calibrated else 1.0)
         out.append(CalibratedParameter(first.name, first.symbol, first.side, value - first.sim, se,
                                        first.value_unit, first.sim, value, se, first.value_unit, first.prior_std,
-                                       first.low, first.high, last.determined, last.flag, first.description))
+                                       first.low, first.high, last.determined, last.flag, first.description,
+                                       last.held))
     return out
 
 
@@ -709,9 +730,18 @@ def _parameters(force: SideFit, energy: SideFit | None, bias, spec: VehicleSpec,
             continue
         se = np.sqrt(np.clip(np.diag(fit.cov), 0, None))
         for j, name in enumerate(fit.names):
-            p = _param(name)
-            out.append(_calibrated(p, float(fit.x[j]), float(se[j]), spec, model,
-                                   p.prior(spec, model) * settings.prior_scale))
+            # the loss error ε is reported as the two efficiencies it sets: ε_t = ε, ε_r = -ε
+            for reported, sign in (((name, 1.0),) if name != DRIVETRAIN_LOSS else
+                                   (("drivetrain_efficiency_traction", 1.0), ("drivetrain_efficiency_regen", -1.0))):
+                p = _param(reported)
+                out.append(_calibrated(p, sign * float(fit.x[j]), float(se[j]), spec, model,
+                                       p.prior(spec, model) * settings.prior_scale))
+                out[-1].held = sign * fit.held.get(name, 0.0)
+                if out[-1].held and not out[-1].flag:
+                    v = out[-1].calibrated
+                    end = "upper" if abs(v - p.high) <= abs(v - p.low) else "lower"
+                    out[-1].flag = (f"held at the {end} end of its physical range [{p.low:g}, {p.high:g}] "
+                                    f"{p.value_unit}: the reference trips wanted beyond it")
     if bias is not None:
         out.append(_calibrated(ACCEL_BIAS, bias.value, bias.std_error, spec, model, 0.0))
     return out

@@ -43,6 +43,7 @@ from .energy import (ELECTRIC_POWER, POWER_RESIDUAL, SIM_ELECTRIC_POWER, SPEED_D
 from .errors import DiagnosisError
 from .floor import SimFloor, reduce_channels
 from .forcemodel import columns_of
+from .held import separability_check
 from .gap import GapMeasures, gap_measures
 from .pertrip import per_trip_sizes
 from .records import RobustSummary
@@ -91,7 +92,9 @@ class DiagnosisSettings:
     strict_candidates: a candidate the trips lack channels for is an error (the user asked for it by name)
     instead of being skipped with the reason; energy_consistency: a force-side effect must agree with the
     drive-torque signal gain the battery power shows (:func:`energy_consistency`), and a power-side signal effect
-    with the drive-torque gain the force residual shows (:func:`force_consistency`; neither with base_first)."""
+    with the drive-torque gain the force residual shows (:func:`force_consistency`; neither with base_first);
+    elevation_consistency: an accelerometer bias must agree with the one the logged elevation shows
+    (:func:`elevation_consistency`)."""
 
     candidates: tuple[str, ...] = DEFAULT_CANDIDATES
     regimes: tuple[str, ...] = DEFAULT_REGIMES
@@ -119,6 +122,7 @@ class DiagnosisSettings:
     replay: bool = True
     strict_candidates: bool = False
     energy_consistency: bool = True
+    elevation_consistency: bool = True
 
 
 def sim_trips(sim: SimConfig, roads: Sequence[tuple[str, int]], duration: float,
@@ -382,6 +386,39 @@ def energy_consistency(block: BaseBlock | None, table: pd.DataFrame, split: Spli
     return check
 
 
+ACCEL_BIAS_PARAMETER = "accelerometer bias b"
+
+
+def elevation_consistency(block: BaseBlock | None, sim: SimConfig, mass: float, settings: DiagnosisSettings
+                          ) -> Callable | None:
+    """The force side's check of ``accel_bias`` against the logged elevation (None without one, or with the base
+    calibrated first): a bias b of the accelerometer turns the eq. 5.2 grade by b/g, which the climb against the
+    logged elevation measures independently of the force balance (:func:`.base.accelerometer_bias_from_elevation`,
+    on the same grade column); the sim's own accelerometer bias (a calibration writes the reference trips' into
+    the spec) is in the sim's floor, so the bias the trips show beyond the sim is b̂ - b_sim. ``accel_bias`` is
+    inconsistent when its fitted b differs from that by >= 2.58 standard errors and by at least the size gate and
+    half its own fitted effect as a force m_V |Δb|: a constant force of another cause (more rolling resistance)
+    then cannot pass as a bias the elevation does not show."""
+    p = block.parameter("accel_bias") if block is not None else None
+    if p is None or not np.isfinite(p.std_error) or not settings.elevation_consistency or settings.base_first:
+        return None
+    channel = sim.vehicle.sensors.channels.get("accel_x")
+    b_hat, se = p.value - (channel.bias if channel is not None else 0.0), p.std_error
+
+    def check(cand, params: dict, shape, size: float) -> str | None:
+        if cand.name != "accel_bias" or ACCEL_BIAS_PARAMETER not in params:
+            return None
+        b = params[ACCEL_BIAS_PARAMETER]
+        force = abs(b - b_hat) * mass
+        if abs(b - b_hat) >= Z_SIGNIFICANT * se and force >= max(settings.min_size, 0.5 * size):
+            return (f"inconsistent with the logged elevation: it shows an accelerometer bias of {b_hat:+.4f} ± "
+                    f"{se:.4f} m/s^2 beyond the sim's where accel_bias fits {b:+.4f} (a {force:.0f} N force effect "
+                    "unexplained)")
+        return None
+
+    return check
+
+
 TORQUE_SCALE_PARAMETER = "torque scale error epsilon"
 
 
@@ -424,6 +461,19 @@ def force_consistency(ranked: Sequence[CandidateResult], table: pd.DataFrame, sp
     return check
 
 
+def chained(*checks: Callable | None) -> Callable | None:
+    """The acceptance checks (candidate, parameters, shape, size) -> reason | None run in turn: the first reason
+    wins (None when no check is given)."""
+    live = [c for c in checks if c is not None]
+    if not live:
+        return None
+
+    def check(cand, params: dict, shape, size: float) -> str | None:
+        return next((r for r in (c(cand, params, shape, size) for c in live) if r is not None), None)
+
+    return check
+
+
 def _side_candidates(settings: DiagnosisSettings, side: str) -> list[str]:
     return [n for n in settings.candidates if get_candidate(n).side == side]
 
@@ -433,8 +483,12 @@ def stage_rank(run: Run, fl: FloorStage, base: BaseStage) -> RankStage:
     cannot be fitted on these trips)."""
     run.stage("rank")
     s = run.settings
-    sel = _selector(run, fl.table, base.force, "force", s.min_size,
-                    energy_consistency(base.energy_block, fl.table.frame, base.force.split, s))
+    frame, model = fl.table.frame, fl.table.model
+    held = run.sim.held_at_bound
+    sel = _selector(run, fl.table, base.force, "force", s.min_size, chained(
+        energy_consistency(base.energy_block, frame, base.force.split, s),
+        elevation_consistency(base.force_block, run.sim, model.mass, s),
+        separability_check(held, frame, base.force.split.train, model, run.sim.vehicle, "force")))
     ranked, skipped = sel.rank(_side_candidates(s, "force"))
     out = RankStage(sel, ranked, skipped)
     if s.strict_candidates:
@@ -448,8 +502,9 @@ def stage_rank(run: Run, fl: FloorStage, base: BaseStage) -> RankStage:
             raise DiagnosisError(f"requested energy-side candidates {power_asked} need battery_voltage and "
                                  f"battery_current on the trips and a battery-electric sim vehicle")
         return out
-    out.energy = _selector(run, fl.table, base.energy, "power", s.min_power_size,
-                           force_consistency(ranked, fl.table.frame, base.force.split, fl.table.model, s))
+    out.energy = _selector(run, fl.table, base.energy, "power", s.min_power_size, chained(
+        force_consistency(ranked, frame, base.force.split, model, s),
+        separability_check(held, frame, base.energy.split.train, model, run.sim.vehicle, "power")))
     out.energy_ranked, out.energy_skipped = out.energy.rank(power_asked)
     return out
 

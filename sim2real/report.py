@@ -553,8 +553,9 @@ def write_calibration(cal, out: str | os.PathLike) -> dict[str, Path]:
     its report and the residual figure beside it (:func:`calibration_paths`); each file atomically."""
     paths = calibration_paths(out)
     fileio.write_json(paths["spec"], cal.spec.to_dict())
+    held = {"held_at_bound": cal.held_at_bound} if cal.held_at_bound else {}
     fileio.write_json(paths["sim"], {"vehicle": paths["spec"].name, "effects": cal.sim_config.effects.to_dict(),
-                                     "name": cal.sim_config.name})
+                                     "name": cal.sim_config.name, **held})
     fileio.write_json(paths["json"], {"calibrated_spec": paths["spec"].name, **jsonable(cal.to_dict())})
     figure_calibration_bins(cal, paths["figure"])
     fileio.write_text(paths["report"], calibration_markdown(cal, paths["figure"].name))

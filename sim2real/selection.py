@@ -32,6 +32,10 @@ from .reference import AdditiveRegimeModel
 from .robust import StepStatistics, TargetSummary, rademacher, robust_target, step_statistics
 from .stats import block_ids, cluster_covariance
 
+#: how an acceptance check's reason starts when the effect lies along a direction the calibration held at a bound
+#: of its physical range (:mod:`.held`): reported as it is, not as an implausible value
+NOT_SEPARABLE = "not separable from the calibration's base error"
+
 
 # ============================================================================================ split
 @dataclass
@@ -514,7 +518,8 @@ class Selector:
             reason = f"too small: the fitted effect's RMS {size:.3g} is below {self.min_size:g}"
         if accepted and implausible:
             accepted = False
-            reason = f"implausible: {implausible}"
+            # a direction the calibration held at a bound is no implausible value: it says so itself (.held)
+            reason = implausible if implausible.startswith(NOT_SEPARABLE) else f"implausible: {implausible}"
         else:
             implausible = None
         null_q = float(np.quantile(stats.null.max(axis=1), 1 - self.alpha)) if stats.null.size else float("nan")

@@ -4,7 +4,8 @@ A sim config file is JSON (a vehicle spec JSON is taken as that vehicle with no 
 
     {"vehicle": "bmw_i3",                      # preset name, or a path to a vehicle spec JSON
      "effects": {"effects": {"wind": {"mean_speed": 2.0}}, "ambient_temperature": 293.15},   # EffectsConfig
-     "name": "i3 as shipped"}
+     "name": "i3 as shipped",
+     "held_at_bound": {"motor_loss_scale": -0.3}}  # written by `roadload calibrate` (roadload.sim2real.held)
 
 :meth:`SimConfig.with_effect` gives the sim with one more effect switched on (the "after" of a diagnosis).
 """
@@ -26,7 +27,7 @@ from roadload.vehicle import VehicleSpec, VehicleSpecError, load_vehicle
 from .errors import DiagnosisError
 from roadload.presets import PRESETS, get_preset
 
-_KEYS = {"vehicle", "effects", "name"}
+_KEYS = {"vehicle", "effects", "name", "held_at_bound"}
 VEHICLE_SPEC_KEYS = {"name", "body", "aero", "tires", "drivetrain"}     # an object with these is a vehicle spec
 
 
@@ -36,15 +37,20 @@ class SimConfigFile(StrictModel):
     vehicle: str | dict[str, Any] = Field(description="preset name, vehicle spec file or an inline spec object")
     effects: str | dict[str, Any] | None = Field(None, description="EffectsConfig: 'wind,payload' or its dict form")
     name: str = Field("", description="label used in reports")
+    held_at_bound: dict[str, float] = Field(
+        default_factory=dict, description="calibrated changes held at a bound of their physical range -> what the "
+                                          "bound held back (the fitted change beyond it, in the change's unit)")
 
 
 @dataclass
 class SimConfig:
-    """vehicle: a VehicleSpec; effects: the EffectsConfig the sim runs with; name: for reports."""
+    """vehicle: a VehicleSpec; effects: the EffectsConfig the sim runs with; name: for reports; held_at_bound: the
+    calibration's changes held at a bound of their range (:mod:`.held`; empty for a sim that is no calibration)."""
 
     vehicle: VehicleSpec
     effects: EffectsConfig = field(default_factory=EffectsConfig)
     name: str = ""
+    held_at_bound: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not self.name:
@@ -74,7 +80,8 @@ class SimConfig:
             effects = EffectsConfig.parse(data.get("effects"))
         except EffectsError as exc:
             raise DiagnosisError(f"sim config 'effects': {exc}") from None
-        return cls(vehicle, effects, str(data.get("name", "")))
+        return cls(vehicle, effects, str(data.get("name", "")),
+                   {str(k): float(v) for k, v in (data.get("held_at_bound") or {}).items()})
 
     @classmethod
     def load(cls, source: str | Path) -> "SimConfig":
@@ -91,7 +98,8 @@ class SimConfig:
         return cls.from_dict(data, path.parent)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"vehicle": self.vehicle.name, "effects": self.effects.to_dict(), "name": self.name}
+        out = {"vehicle": self.vehicle.name, "effects": self.effects.to_dict(), "name": self.name}
+        return {**out, "held_at_bound": dict(self.held_at_bound)} if self.held_at_bound else out
 
     def with_effect(self, effect: str, params: dict[str, Any]) -> "SimConfig":
         """A copy with ``effect`` switched on (or re-parameterised) with ``params``; ``spec:<dotted.path>``
@@ -103,13 +111,13 @@ class SimConfig:
             vehicle = with_spec_change(vehicle, path, change)
         if effect.startswith("spec:"):
             return SimConfig(with_spec_change(vehicle, effect[5:], params),
-                             EffectsConfig.parse(self.effects), f"{self.name} + {effect}")
+                             EffectsConfig.parse(self.effects), f"{self.name} + {effect}", dict(self.held_at_bound))
         eff = EffectsConfig.parse(self.effects)
         try:
             eff.enable(effect, **params)
         except EffectsError as exc:
             raise DiagnosisError(f"cannot switch on {effect!r} in the sim: {exc}") from None
-        return SimConfig(vehicle, eff, f"{self.name} + {effect}")
+        return SimConfig(vehicle, eff, f"{self.name} + {effect}", dict(self.held_at_bound))
 
 
 def load_sim_vehicle(vehicle: str | dict, base: Path | None) -> VehicleSpec:

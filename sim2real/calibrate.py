@@ -316,7 +316,9 @@ class SideFit:
 def fit_energy(table: pd.DataFrame, split: Split, spec: VehicleSpec, model: SimForceModel,
                settings: CalibrationSettings, signal: bool = True) -> SideFit | None:
     """The energy side (module doc); None without battery power or a traction motor. ``signal`` False: without
-    the torque-signal gain and offset (they stay the sim's)."""
+    the torque-signal gain and offset (they stay the sim's, reported with a change of 0 and, as held back, what
+    the fit with them wanted where that is >= 2.58 standard errors: the battery power's signed T ω term the
+    calibration left to every trip, which the diagnosis' energy-consistency check then reads relative to)."""
     if not _bev(spec) or POWER_RESIDUAL not in table.columns:
         return None
     y = table[POWER_RESIDUAL].to_numpy(dtype=float)
@@ -326,13 +328,24 @@ def fit_energy(table: pd.DataFrame, split: Split, spec: VehicleSpec, model: SimF
         return None
     names = [p.name for p in PARAMETERS if p.side == "energy"]
     A = energy_columns(table, spec)
-    if not signal:
-        keep = [i for i, n in enumerate(names) if not n.startswith("torque_signal")]
-        names, A = [names[i] for i in keep], A[:, keep]
     yw, w = winsorised(np.where(ok, y, 0.0), rows, settings.clip)
     prior = np.array([_param(n).prior(spec, model) for n in names]) * settings.prior_scale
     x, cov, back = bounded_posterior(A, yw, w, rows, split.blocks, prior, _bounds(names, spec, model))
-    return SideFit(names, x, cov, A @ x, {n: float(b) for n, b in zip(names, back) if b})
+    held = {n: float(b) for n, b in zip(names, back) if b}
+    if signal:
+        return SideFit(names, x, cov, A @ x, held)
+    keep = np.array([not n.startswith("torque_signal") for n in names])
+    x_kept, cov_kept, back_kept = bounded_posterior(A[:, keep], yw, w, rows, split.blocks, prior[keep],
+                                                    _bounds([n for n, k in zip(names, keep) if k], spec, model))
+    se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    held = {n: float(b) for n, b in zip([n for n, k in zip(names, keep) if k], back_kept) if b}
+    held.update({n: float(v) for n, v, s_, k in zip(names, x, se, keep) if not k and abs(v) >= Z_HELD * s_})
+    x_out = np.zeros(len(names))
+    x_out[keep] = x_kept
+    cov[np.ix_(keep, keep)] = cov_kept
+    cov[np.ix_(keep, ~keep)] = 0.0
+    cov[np.ix_(~keep, keep)] = 0.0
+    return SideFit(names, x_out, cov, A[:, keep] @ x_kept, held)
 
 
 def _torque_terms(table: pd.DataFrame, spec: VehicleSpec, model: SimForceModel, energy: SideFit | None
@@ -722,6 +735,15 @@ def _combined(passes: list[list[CalibratedParameter]]) -> list[CalibratedParamet
     return out
 
 
+def _held_flag(p: Parameter, c: CalibratedParameter) -> str:
+    v = c.calibrated
+    if p.low < v < p.high:          # not fitted (the torque signal kept at the sim's, :func:`fit_energy`)
+        return f"kept at the sim's value; the reference trips wanted a change of {c.held:+.4g} {p.unit}"
+    end = "upper" if abs(v - p.high) <= abs(v - p.low) else "lower"
+    return (f"held at the {end} end of its physical range [{p.low:g}, {p.high:g}] {p.value_unit}: the reference "
+            "trips wanted beyond it")
+
+
 def _parameters(force: SideFit, energy: SideFit | None, bias, spec: VehicleSpec, model: SimForceModel,
                 settings: CalibrationSettings) -> list[CalibratedParameter]:
     out = []
@@ -738,10 +760,7 @@ def _parameters(force: SideFit, energy: SideFit | None, bias, spec: VehicleSpec,
                                        p.prior(spec, model) * settings.prior_scale))
                 out[-1].held = sign * fit.held.get(name, 0.0)
                 if out[-1].held and not out[-1].flag:
-                    v = out[-1].calibrated
-                    end = "upper" if abs(v - p.high) <= abs(v - p.low) else "lower"
-                    out[-1].flag = (f"held at the {end} end of its physical range [{p.low:g}, {p.high:g}] "
-                                    f"{p.value_unit}: the reference trips wanted beyond it")
+                    out[-1].flag = _held_flag(p, out[-1])
     if bias is not None:
         out.append(_calibrated(ACCEL_BIAS, bias.value, bias.std_error, spec, model, 0.0))
     return out

@@ -355,8 +355,8 @@ def _selector(run: Run, table: DiagnosisTable, side: SideInput, name: str, min_s
                     min_size=min_size, base_design=side.base_design, consistent=consistent)
 
 
-def energy_consistency(block: BaseBlock | None, table: pd.DataFrame, split: Split, settings: DiagnosisSettings
-                       ) -> Callable | None:
+def energy_consistency(block: BaseBlock | None, table: pd.DataFrame, split: Split, settings: DiagnosisSettings,
+                       held: dict[str, float] | None = None) -> Callable | None:
     """The force side's check against the battery power (None without it, or with the base calibrated first):
     P_el,sim is computed from the logged torque and motor speed, so the energy base block's signed -T_E ω_E term
     measures the drive-torque signal gain ĝ (a speed-signal scale too where the motor speed comes from the
@@ -365,11 +365,16 @@ def energy_consistency(block: BaseBlock | None, table: pd.DataFrame, split: Spli
     differs from ĝ by >= 2.58 standard errors and that difference, as a force ĝ F_drive (the force the drive
     torque delivers, :mod:`.table`), is at least the size
     gate and half the candidate's own fitted effect: a payload then cannot stand in for a torque signal reading
-    high, which scales the measured force the same way."""
+    high, which scales the measured force the same way. ``held``: the calibrated sim's held directions
+    (:attr:`.simconfig.SimConfig.held_at_bound`); ĝ is read relative to the torque-signal gain the calibration's
+    reference trips showed where it kept the signal at the sim's."""
+    held = held or {}
     p = block.parameter("torque_scale") if block is not None else None
     if p is None or not np.isfinite(p.std_error) or not settings.energy_consistency or settings.base_first:
         return None
-    g_hat, se = p.value, p.std_error          # the block's coefficient of -T ω is g
+    # the block's coefficient of -T ω is g; relative to what a calibration that kept the signal at the sim's
+    # left in that direction on its reference trips (a motor loss shape the loss map lacks, :mod:`.calibrate`)
+    g_hat, se = p.value - held.get("torque_signal_gain", 0.0), p.std_error
     speed_derived = bool(table[SPEED_DERIVED].any()) if SPEED_DERIVED in table else False
     f = np.nan_to_num(table[DRIVE_FORCE].to_numpy(dtype=float))[split.train]
     rms_f = float(np.sqrt(np.mean(f ** 2))) if f.size else 0.0
@@ -486,7 +491,7 @@ def stage_rank(run: Run, fl: FloorStage, base: BaseStage) -> RankStage:
     frame, model = fl.table.frame, fl.table.model
     held = run.sim.held_at_bound
     sel = _selector(run, fl.table, base.force, "force", s.min_size, chained(
-        energy_consistency(base.energy_block, frame, base.force.split, s),
+        energy_consistency(base.energy_block, frame, base.force.split, s, held),
         elevation_consistency(base.force_block, run.sim, model.mass, s),
         separability_check(held, frame, base.force.split.train, model, run.sim.vehicle, "force")))
     ranked, skipped = sel.rank(_side_candidates(s, "force"))

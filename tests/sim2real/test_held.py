@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 
 from roadload.sim2real.base import BaseBlock, BaseParameter
-from roadload.sim2real.calibrate import CalibrationSettings, bounded_posterior, drivetrain_efficiencies, fit_force
+from roadload.sim2real.calibrate import (CalibrationSettings, bounded_posterior, drivetrain_efficiencies, fit_energy,
+                                         fit_force)
 from roadload.sim2real.catalog import get_candidate
-from roadload.sim2real.diagnose import DiagnosisSettings, elevation_consistency
+from roadload.sim2real.diagnose import DiagnosisSettings, elevation_consistency, energy_consistency
 from roadload.sim2real.errors import DiagnosisError
 from roadload.sim2real.forcemodel import SimForceModel
 from roadload.sim2real.held import DRIVETRAIN_LOSS, held_share, separability_check
@@ -163,3 +164,42 @@ def test_an_accelerometer_bias_the_elevation_does_not_show_is_rejected():
     assert elevation_consistency(None, SimConfig(SPEC), 1500.0, s) is None
     assert elevation_consistency(_elevation_block(0.0, 0.001), SimConfig(SPEC), 1500.0,
                                  DiagnosisSettings(elevation_consistency=False)) is None
+
+
+def _power_table(gain: float, seed: int = 4):
+    """test_core's trips with a motor: the battery-power residual of a drive-torque signal reading ``gain`` high
+    (P_el,sim from the logged torque over-predicts by g T ω) plus noise."""
+    tab = _core.synth(lambda t: 0.0, noise=0.0, seed=seed)
+    rng = np.random.default_rng(seed)
+    tab["motor_speed"] = tab.speed * 27.6
+    tab["drive_torque"] = MODEL.predict(tab) * 0.35 / 9.665
+    tab["power_residual"] = -gain * tab.drive_torque * tab.motor_speed + rng.normal(0.0, 300.0, len(tab))
+    return tab
+
+
+def test_a_torque_signal_kept_at_the_sims_records_what_the_reference_wanted():
+    tab = _power_table(0.04)
+    split = make_split(tab, seed=4, n_folds=4)
+    kept = fit_energy(tab, split, SPEC, MODEL, CalibrationSettings(), signal=False)
+    fitted = fit_energy(tab, split, SPEC, MODEL, CalibrationSettings(), signal=True)
+    assert kept.get("torque_signal_gain") == 0.0 and kept.get("torque_signal_offset") == 0.0
+    assert fitted.get("torque_signal_gain") == pytest.approx(0.04, abs=0.005)
+    assert kept.held["torque_signal_gain"] == pytest.approx(fitted.get("torque_signal_gain"))
+    assert "torque_signal_gain" not in fitted.held
+    quiet = fit_energy(_power_table(0.0), split, SPEC, MODEL, CalibrationSettings(), signal=False)
+    assert "torque_signal_gain" not in quiet.held      # nothing wanted: nothing held back
+
+
+def test_energy_consistency_reads_the_gain_relative_to_the_reference():
+    """A calibration that kept the signal at the sim's left the reference trips' -T ω term (+0.04) in every trip:
+    a payload on new trips is consistent with that; without the reference the same block rejects it."""
+    tab = _table(lambda t, sim: 0.0)
+    tab["drive_force"] = MODEL.predict(tab)
+    split = make_split(tab, seed=3, n_folds=4)
+    block = BaseBlock([BaseParameter("drive-torque signal gain", "torque_scale", "drive-torque signal gain error g",
+                                     "1", 0.04, 0.005, 400.0, True)])
+    mass = get_candidate("mass_offset")
+    s = DiagnosisSettings()
+    assert energy_consistency(block, tab, split, s)(mass, {"delta m_V": 150.0}, None, 60.0) is not None
+    check = energy_consistency(block, tab, split, s, {"torque_signal_gain": 0.04})
+    assert check(mass, {"delta m_V": 150.0}, None, 60.0) is None

@@ -190,9 +190,9 @@ def test_a_torque_signal_kept_at_the_sims_records_what_the_reference_wanted():
     assert "torque_signal_gain" not in quiet.held      # nothing wanted: nothing held back
 
 
-def test_energy_consistency_reads_the_gain_relative_to_the_reference():
-    """A calibration that kept the signal at the sim's left the reference trips' -T ω term (+0.04) in every trip:
-    a payload on new trips is consistent with that; without the reference the same block rejects it."""
+def test_no_energy_consistency_where_the_calibration_found_the_gain_is_no_signal():
+    """A calibration that kept the signal at the sim's against the reference trips' -T ω term found that term is
+    no torque signal on this car: no check then; without that finding the same block rejects a payload."""
     tab = _table(lambda t, sim: 0.0)
     tab["drive_force"] = MODEL.predict(tab)
     split = make_split(tab, seed=3, n_folds=4)
@@ -201,5 +201,5 @@ def test_energy_consistency_reads_the_gain_relative_to_the_reference():
     mass = get_candidate("mass_offset")
     s = DiagnosisSettings()
     assert energy_consistency(block, tab, split, s)(mass, {"delta m_V": 150.0}, None, 60.0) is not None
-    check = energy_consistency(block, tab, split, s, {"torque_signal_gain": 0.04})
-    assert check(mass, {"delta m_V": 150.0}, None, 60.0) is None
+    assert energy_consistency(block, tab, split, s, {"torque_signal_gain": -0.055}) is None
+    assert energy_consistency(block, tab, split, s, {"motor_loss_scale": -0.3}) is not None

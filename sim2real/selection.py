@@ -482,7 +482,8 @@ class Selector:
             step, choice = self._judge_step(chosen, pool, len(steps) + 1)
             steps.append(step)
             pool = [(c, s) for c, s in pool if c.name != choice[0].name]
-            if step.implausible or (not step.accepted and step.reason.startswith(("too small", "partial fit"))):
+            skippable = ("too small", "partial fit", "final fit failed")
+            if step.implausible or (not step.accepted and step.reason.startswith(skippable)):
                 continue      # the next candidate may still be a real one
             if not step.accepted:
                 break
@@ -513,6 +514,10 @@ class Selector:
                   f"gain {gain:.3f} of the original gap, below {self.min_gain}" if gain < self.min_gain else
                   f"partial fit: explains {frac:.2f} of the removable remainder (< {self.min_explained})")
         size, implausible = self._size_and_plausibility(chosen, cand, shape, accepted)
+        if accepted and not np.isfinite(size):  # the final fit raised: its error is the reason, not a size of nan
+            accepted = False
+            reason = f"final fit failed: {implausible}"
+            implausible = None
         if accepted and not size >= self.min_size:
             accepted = False
             reason = f"too small: the fitted effect's RMS {size:.3g} is below {self.min_size:g}"

@@ -13,6 +13,7 @@ import pandas as pd
 import pytest
 
 from roadload.sim2real.catalog import get_candidate
+from roadload.sim2real.errors import DiagnosisError
 from roadload.estimators.batch import m_estimate
 from roadload.sim2real.robust import robust_target, step_statistics
 from roadload.sim2real.selection import (Selector, cv_predict, design, fit_linear, fitted_parameters,
@@ -482,3 +483,22 @@ def test_the_plausibility_rule_reads_the_fitted_shape():
     steps = sel.forward(sel.rank(("tire_warmup", "mass_offset"))[0])
     assert steps[0].effect == "tire_warmup" and steps[0].accepted and steps[0].shape == D_TRUE
     assert seen[0] == ("tire_warmup", D_TRUE)
+
+
+def test_a_step_whose_final_fit_fails_names_the_fits_error_and_the_next_candidate_is_tried(mass_world):
+    _, _, selector, ranked = mass_world
+    sel = selector()
+    real_fit = sel.final_fit
+
+    def final_fit(choices):
+        if any(c.name == "mass_offset" for c, _ in choices):
+            raise DiagnosisError("design matrix rank 3 of 4: mass_offset collinear with the base")
+        return real_fit(choices)
+
+    sel.final_fit = final_fit
+    steps = sel.forward(ranked)
+    first = steps[0]
+    assert first.effect == "mass_offset" and first.accepted is False and first.implausible is None
+    assert first.reason == "final fit failed: design matrix rank 3 of 4: mass_offset collinear with the base"
+    assert np.isnan(first.size_rms) and all(c.name != "mass_offset" for c, _ in sel.chosen)
+    assert len(steps) >= 2 and steps[1].effect != "mass_offset"  # the selection went on to the next candidate

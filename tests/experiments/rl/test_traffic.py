@@ -174,22 +174,25 @@ def test_speed_constraint_adds_the_priced_progress_and_its_multiplier_follows_th
         SpeedConstraint(plain, reference=20.0, price=0.1, step_time=0.1, window=10, margin=0.5)
 
 
-def test_the_multiplier_is_updated_once_per_window_from_the_windows_mean_speed():
+def test_the_multiplier_is_updated_from_the_mean_speed_of_the_episodes_ended_in_the_window():
     from roadload.experiments.rl.traffic_objective import SpeedConstraint
     from roadload.gym.traffic import EcoTrafficVectorEnv
 
     env = SpeedConstraint(EcoTrafficVectorEnv(2, config={"vehicles_count": 8, "duration": 2.0},
                                               autoreset_mode="same_step"),
-                          reference=40.0, price=0.1, step_time=0.1, window=8)
+                          reference=40.0, price=0.1, step_time=0.1, window=8, k_p=20.0, k_i=20.0)
     env.reset(seed=1)
-    distance = 0.0
-    for k in range(16):
-        _, _, _, _, info = env.step(np.zeros((2, 1), np.float32))
-        distance += float(np.sum(info["s"])) if k == 7 else 0.0
-    # two windows; the first one's mean speed is the distance of both egos over 8 steps (no reset yet)
-    assert len(env.history) == 2
-    assert env.history[0][0] == pytest.approx(distance / (8 * 2 * 0.1), rel=1e-9)
-    assert 20.0 < env.history[0][0] < 30.0 and env.multiplier > 0.0  # slower than 40 m/s: the price rises
+    ended = []
+    for _ in range(30):
+        _, _, term, trunc, info = env.step(np.zeros((2, 1), np.float32))
+        if (term | trunc).any():
+            ended.append(info["final_info"]["s"].copy())
+    # windows of 8 steps: none ends an episode before step 20, where both 2 s episodes end (one update); the next
+    # episodes end at step 40
+    assert len(ended) == 1 and len(env.history) == 1
+    speed = float(ended[0].sum()) / (2 * 2.0)
+    assert env.history[0][0] == pytest.approx(speed, rel=1e-9) and 20.0 < speed < 30.0
+    assert env.multiplier == pytest.approx(40.0 * (40.0 - speed) / 40.0)  # (k_p + k_i) e, e = (40 - v) / 40
 
 
 def test_paired_differences_compare_each_episode_with_the_reference_on_the_same_seed():

@@ -34,15 +34,18 @@ import gymnasium as gym
 import numpy as np
 import pandas as pd
 
-from roadload.gym.config import EcoTrafficConfig, make_config
+from roadload.gym.config import EcoHighwayReward, EcoTrafficConfig, make_config
 from roadload.gym.sb3 import SB3VecEnv
 from roadload.gym.traffic import EcoTrafficEnv, EcoTrafficVectorEnv
 from roadload.tables import markdown_table, write_csv
 
 from .common import RLError, _atomic_write_bytes
 from .highway import idm_policy
+from .traffic_objective import SpeedConstraint, TripEnd, reference_speed
 from .training import _curve_callback
 
+MECHANICAL_WEIGHT = EcoHighwayReward().mechanical_energy
+"""Battery-equivalent value of a joule of the ego's mechanical energy (the reward's credit), for net energy."""
 TRAFFIC_HELD_OUT = 50_000
 """First episode seed and road seed of the held-out evaluation (training roads are in [0, 100))."""
 TRAFFIC_TRAIN_CONFIG: dict[str, Any] = {"shield": {"enabled": True}}
@@ -52,7 +55,7 @@ TRAFFIC_PPO: dict[str, Any] = dict(n_steps=256, batch_size=512, n_epochs=10, lea
                                    policy_kwargs={"log_std_init": -1.0})
 """PPO settings: 32 sub-envs x 256 steps = 8192 samples per update; gamma 0.99 (a 10 s horizon at 10 Hz)."""
 EPISODE_COLUMNS = ["policy", "backend", "seed", "crashed", "distance_m", "energy_kWh", "time_s", "episode_return",
-                   "steps", "shield_steps"]
+                   "steps", "shield_steps", "mechanical_kWh"]
 
 
 # --------------------------------------------------------------------------------------------- evaluation
@@ -60,16 +63,17 @@ def traffic_episode(env: Any, policy: Callable[[np.ndarray], np.ndarray], seed: 
     """One held-out episode (episode and road seed ``seed``) of either backend under ``policy``."""
     obs, info = env.reset(seed=int(seed), options={"road_seed": int(seed)})
     e0 = info["source_energy_total"]
-    ret, shielded, steps, done = 0.0, 0, 0, False
+    ret, shielded, steps, mechanical, done = 0.0, 0, 0, 0.0, False
     while not done:
         obs, r, terminated, truncated, info = env.step(policy(obs))
         steps += 1
         ret += float(r)
         shielded += int(info.get("shield_active", False))
+        mechanical += float(info["terms"]["mechanical"])
         done = terminated or truncated
     return {"crashed": bool(info["crashed"]), "distance_m": float(info["s"]),
             "energy_kWh": float(info["source_energy_total"] - e0) / 3.6e6, "time_s": float(info["t"]),
-            "episode_return": ret, "steps": steps, "shield_steps": shielded}
+            "episode_return": ret, "steps": steps, "shield_steps": shielded, "mechanical_kWh": mechanical / 3.6e6}
 
 
 def make_backend_env(backend: str, cfg: EcoTrafficConfig) -> Any:
@@ -100,22 +104,60 @@ def evaluate_traffic(policies: dict[str, Callable[[np.ndarray], np.ndarray]], en
     return pd.DataFrame(rows, columns=EPISODE_COLUMNS)
 
 
-def summarise_traffic(table: pd.DataFrame) -> pd.DataFrame:
-    """Per policy and backend: episodes, crashes, energy per km, mean speed, mean return, share of shielded
-    steps."""
+def summarise_traffic(table: pd.DataFrame, mechanical_weight: float = MECHANICAL_WEIGHT) -> pd.DataFrame:
+    """Per policy and backend: episodes, crashes, energy per km, net energy per km (source energy less
+    ``mechanical_weight`` x the mechanical energy gained over the episode: speed or height left at the end is
+    credited, speed used up is charged, as the reward does), mean speed, mean return, share of shielded steps."""
     out = []
     for (name, backend), g in table.groupby(["policy", "backend"], sort=False):
         dist = g.distance_m.sum()
+        net = g.energy_kWh.sum() - mechanical_weight * g.mechanical_kWh.sum()
         out.append({"policy": name, "backend": backend, "episodes": len(g), "crashes": int(g.crashed.sum()),
                     "energy_Wh_per_km": g.energy_kWh.sum() * 1e6 / max(dist, 1e-9),
+                    "net_energy_Wh_per_km": net * 1e6 / max(dist, 1e-9),
                     "mean_speed_kmh": dist / max(g.time_s.sum(), 1e-9) * 3.6,
                     "mean_return": float(g.episode_return.mean()),
                     "shielded_steps": float(g.shield_steps.sum() / max(g.steps.sum(), 1))})
     return pd.DataFrame(out)
 
 
-def seed_intervals(summaries: pd.DataFrame, columns=("energy_Wh_per_km", "mean_speed_kmh", "mean_return",
-                                                      "crashes")) -> pd.DataFrame:
+def paired_differences(table: pd.DataFrame, reference: str = "IDM follower") -> pd.DataFrame:
+    """Per policy and backend, against ``reference`` on the same held-out episodes (paired by seed): the mean
+    per-episode difference of energy per km [Wh/km], net energy per km [Wh/km] (summarise_traffic) and mean speed
+    [km/h], each with its 95 % t-interval half-width over episodes, and the episodes where the policy was at least
+    as fast."""
+    from scipy import stats
+
+    per = table.assign(e=table.energy_kWh * 1e6 / table.distance_m.clip(lower=1e-9),
+                       n=(table.energy_kWh - MECHANICAL_WEIGHT * table.mechanical_kWh) * 1e6
+                       / table.distance_m.clip(lower=1e-9),
+                       v=table.distance_m / table.time_s.clip(lower=1e-9) * 3.6)
+    rows = []
+    for backend, b in per.groupby("backend", sort=False):
+        ref = b[b.policy == reference].set_index("seed")
+        for name, g in b[b.policy != reference].groupby("policy", sort=False):
+            both = g.set_index("seed").join(ref[["e", "n", "v"]], rsuffix="_ref", how="inner")
+            k = len(both)
+            if k == 0:
+                continue
+            t = stats.t.ppf(0.975, k - 1) / math.sqrt(k) if k > 1 else float("nan")
+            row: dict[str, Any] = {"policy": name, "backend": backend, "episodes": k}
+            for col, label in (("e", "d_energy_Wh_per_km"), ("n", "d_net_energy_Wh_per_km"),
+                               ("v", "d_speed_kmh")):
+                d = (both[col] - both[f"{col}_ref"]).to_numpy()
+                row[label] = float(d.mean())
+                row[f"{label}_ci95"] = float(t * d.std(ddof=1)) if k > 1 else float("nan")
+            row["at_least_as_fast"] = int((both.v >= both.v_ref).sum())
+            rows.append(row)
+    return pd.DataFrame(rows)
+
+
+PAIRED_COLUMNS = ("d_energy_Wh_per_km", "d_net_energy_Wh_per_km", "d_speed_kmh")
+"""The paired differences (:func:`paired_differences`) whose interval over training seeds is reported."""
+
+
+def seed_intervals(summaries: pd.DataFrame, columns=("energy_Wh_per_km", "net_energy_Wh_per_km", "mean_speed_kmh",
+                                                      "mean_return", "crashes")) -> pd.DataFrame:
     """Mean and 95 % t-interval (Student t, n - 1 degrees of freedom) over training seeds, per backend."""
     from scipy import stats
 
@@ -193,11 +235,14 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
                   env_config: dict[str, Any] | None = None, threads: int = 1, torch_threads: int = 1,
                   hyperparams: dict[str, Any] | None = None, progress: Callable[[str], None] | None = None,
                   report_every: int = 100_000, residual: float = 0.0,
-                  speed_floor: float | None = None) -> dict[str, Any]:
+                  speed_floor: float | None = None, speed_constraint: float | None = None,
+                  trip_end: bool = False) -> dict[str, Any]:
     """PPO on the native vector env (``residual`` > 0: a correction of that scale on the IDM follower,
-    :class:`ResidualActions`, at most ``speed_floor`` below it when given); saves ``ppo_traffic_seed<seed>.zip`` /
-    ``.json`` and the learning curve (training episode returns) to ``out_dir``; returns the model, its path, wall
-    and CPU seconds."""
+    :class:`ResidualActions`, at most ``speed_floor`` below it when given; ``speed_constraint`` = margin: trained on
+    the reward with a Lagrange multiplier holding the mean speed at (1 + margin) x the IDM follower's;
+    ``trip_end``: the time limit is terminal in training; roadload.experiments.rl.traffic_objective). Saves
+    ``ppo_traffic_seed<seed>.zip`` / ``.json`` and the learning curve (training episode returns) to ``out_dir``;
+    returns the model, its path, wall and CPU seconds."""
     import torch
     from stable_baselines3 import PPO
 
@@ -215,13 +260,17 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
     if residual > 0:
         native = ResidualActions(native, idm_policy(make_config(EcoTrafficConfig, env_config)), residual,
                                  speed_floor)
-    venv = SB3VecEnv(native)
-    venv.seed(seed)
     params: dict[str, Any] = {**TRAFFIC_PPO, **(hyperparams or {})}
     params["n_steps"] = max(8, min(params["n_steps"], max(timesteps // n_envs, 8)))
     params["batch_size"] = min(params["batch_size"], params["n_steps"] * n_envs)
+    c_start = time.process_time()
+    constraint = None if speed_constraint is None else _speed_constraint(native, env_config, n_envs,
+                                                                          params["n_steps"], speed_constraint)
+    trained: gym.vector.VectorEnv = native if constraint is None else constraint
+    venv = SB3VecEnv(TripEnd(trained) if trip_end else trained)
+    venv.seed(seed)
     model = PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **params)
-    t0, c0 = time.perf_counter(), time.process_time()
+    t0, c0 = time.perf_counter(), c_start
     reported = [0]
 
     def report(steps: int) -> None:
@@ -243,13 +292,28 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
     _atomic_write_bytes(out_dir / f"{stem}.zip", lambda tmp: model.save(str(tmp)))
     meta = {"algo": "ppo", "env": "EcoTraffic-v0", "timesteps": int(model.num_timesteps), "n_envs": n_envs,
             "seed": seed, "env_config": env_config, "hyperparams": params, "wall_seconds": wall,
-            "cpu_seconds": cpu, "threads": threads, "residual_scale": residual, "speed_floor": speed_floor}
+            "cpu_seconds": cpu, "threads": threads, "residual_scale": residual, "speed_floor": speed_floor,
+            "trip_end_terminal": trip_end,
+            "speed_constraint": None if constraint is None else {
+                "margin": speed_constraint, "reference_speed_mps": constraint.reference,
+                "k_p": constraint.k_p, "k_i": constraint.k_i,
+                "history": [{"mean_speed_mps": v, "multiplier": lam} for v, lam in constraint.history]}}
     _atomic_write_bytes(out_dir / f"{stem}.json", lambda tmp: tmp.write_text(json.dumps(meta, indent=1, default=str)))
     curve = pd.DataFrame([(t, v) for t, kind, v in callback.rows if kind == "train"],
                          columns=["timesteps", "episode_return"])
     write_csv(out_dir / f"{stem}_curve.csv", curve)
     return {"model": model, "path": out_dir / f"{stem}.zip", "wall_seconds": wall, "cpu_seconds": cpu,
             "timesteps": int(model.num_timesteps), "meta": meta, "curve": curve}
+
+
+def _speed_constraint(env: gym.vector.VectorEnv, env_config: dict[str, Any], n_envs: int, window: int,
+                      margin: float) -> SpeedConstraint:
+    """The constraint wrapper on ``env``: the reference is the IDM follower's mean speed on training episodes of
+    the same configuration (its CPU time counts as training time)."""
+    cfg = make_config(EcoTrafficConfig, env_config)
+    v_ref = reference_speed(idm_policy(cfg), env_config, n_envs)
+    price = cfg.reward.scale * cfg.reward.progress
+    return SpeedConstraint(env, v_ref, price, 1.0 / cfg.policy_frequency, window, margin)
 
 
 def load_traffic_policy(path: Path):
@@ -267,7 +331,8 @@ def run_traffic_experiment(seeds: tuple[int, ...], timesteps: int, out_dir: Path
                            progress: Callable[[str], None] | None = None,
                            train_config: dict[str, Any] | None = None,
                            hyperparams: dict[str, Any] | None = None, residual: float = 0.0,
-                           speed_floor: float | None = None) -> dict[str, Any]:
+                           speed_floor: float | None = None, speed_constraint: float | None = None,
+                           trip_end: bool = False) -> dict[str, Any]:
     """Train one PPO per seed (or load them with ``evaluate_only``), evaluate each with the IDM follower on
     ``episodes`` held-out native episodes and ``transfer_episodes`` on highway-env; write episodes.csv,
     summary.csv, intervals.csv and the learning curves to ``out_dir``. ``env_config`` is the evaluation's (and
@@ -289,7 +354,8 @@ def run_traffic_experiment(seeds: tuple[int, ...], timesteps: int, out_dir: Path
             floors[s] = meta.get("speed_floor")
         else:
             res = train_traffic(timesteps, out_dir, s, n_envs, trained_on, threads, hyperparams=hyperparams,
-                                progress=progress, residual=residual, speed_floor=speed_floor)
+                                progress=progress, residual=residual, speed_floor=speed_floor,
+                                speed_constraint=speed_constraint, trip_end=trip_end)
             models[s] = res["model"]
             times[s] = (res["wall_seconds"], res["cpu_seconds"], res["timesteps"])
             scales[s] = residual
@@ -312,12 +378,18 @@ def run_traffic_experiment(seeds: tuple[int, ...], timesteps: int, out_dir: Path
     summary = summarise_traffic(table)
     ppo = summary[summary.policy.str.startswith("PPO")]
     intervals = seed_intervals(ppo) if len(ppo) else pd.DataFrame()
+    paired = paired_differences(table)
+    paired_ppo = paired[paired.policy.str.startswith("PPO")] if len(paired) else paired
+    paired_intervals = seed_intervals(paired_ppo, PAIRED_COLUMNS) if len(paired_ppo) else pd.DataFrame()
     write_csv(out_dir / "episodes.csv", table)
     write_csv(out_dir / "summary.csv", summary)
     write_csv(out_dir / "intervals.csv", intervals)
+    write_csv(out_dir / "paired.csv", paired)
+    write_csv(out_dir / "paired_intervals.csv", paired_intervals)
     (out_dir / "training_times.json").write_text(json.dumps(
         {str(s): {"wall_seconds": w, "cpu_seconds": c, "timesteps": n} for s, (w, c, n) in times.items()}, indent=1))
-    return {"table": table, "summary": summary, "intervals": intervals, "times": times, "out_dir": out_dir}
+    return {"table": table, "summary": summary, "intervals": intervals, "paired": paired,
+            "paired_intervals": paired_intervals, "times": times, "out_dir": out_dir}
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -339,6 +411,11 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--speed-floor", type=float, default=None,
                     help="with --residual: the command stays at most this far [command units] below the IDM "
                          "follower's, so PPO cannot fall back behind the follower by coasting")
+    ap.add_argument("--speed-constraint", type=float, default=None, metavar="MARGIN",
+                    help="train on the reward with a Lagrange multiplier that holds the mean speed at (1 + MARGIN) x "
+                         "the IDM follower's (e.g. 0.005; roadload.experiments.rl.traffic_objective)")
+    ap.add_argument("--trip-end", action="store_true",
+                    help="train with the time limit as the trip's end (terminal, no bootstrap of the value beyond it)")
     ap.add_argument("--out", type=Path, default=Path("out/rl_traffic"))
     ap.add_argument("--evaluate-only", action="store_true", help="load the policies saved in --out")
     ap.add_argument("--quick", action="store_true", help="tiny run for CI")
@@ -359,8 +436,10 @@ def main(argv: list[str] | None = None) -> None:
                                  a.threads, a.evaluate_only, progress=lambda m: print(m, flush=True),
                                  train_config=json.loads(a.train_config) if a.train_config else None,
                                  hyperparams=json.loads(a.hyperparams) if a.hyperparams else None,
-                                 residual=a.residual, speed_floor=a.speed_floor)
+                                 residual=a.residual, speed_floor=a.speed_floor,
+                                 speed_constraint=a.speed_constraint, trip_end=a.trip_end)
     print(markdown_table(res["summary"], floatfmt=".4g"))
-    if len(res["intervals"]):
-        print(markdown_table(res["intervals"], floatfmt=".4g"))
+    for key in ("intervals", "paired", "paired_intervals"):
+        if len(res[key]):
+            print(markdown_table(res[key], floatfmt=".4g"))
     print(f"tables and policies in {res['out_dir']}")

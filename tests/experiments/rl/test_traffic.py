@@ -49,13 +49,16 @@ def test_summary_and_seed_interval():
     table = pd.DataFrame({"policy": ["a", "a", "b"], "backend": "native", "crashed": [False, True, False],
                           "distance_m": [1000.0, 500.0, 800.0], "energy_kWh": [0.1, 0.05, 0.2],
                           "time_s": [40.0, 20.0, 40.0], "episode_return": [1.0, 3.0, 2.0], "steps": [400, 200, 400],
-                          "shield_steps": [0, 60, 0]})
-    s = summarise_traffic(table).set_index("policy")
+                          "shield_steps": [0, 60, 0], "mechanical_kWh": [-0.01, 0.0, 0.002]})
+    s = summarise_traffic(table, mechanical_weight=0.9).set_index("policy")
     assert s.loc["a", "energy_Wh_per_km"] == pytest.approx(100.0) and s.loc["a", "crashes"] == 1
+    # speed used up is charged at 0.9 of its energy, speed gained credited
+    assert s.loc["a", "net_energy_Wh_per_km"] == pytest.approx((0.15 + 0.009) * 1e6 / 1500.0)
+    assert s.loc["b", "net_energy_Wh_per_km"] == pytest.approx((0.2 - 0.0018) * 1e6 / 800.0)
     assert s.loc["a", "mean_speed_kmh"] == pytest.approx(1500.0 / 60.0 * 3.6)
     assert s.loc["a", "shielded_steps"] == pytest.approx(0.1)
-    seeds = pd.DataFrame({"backend": "native", "energy_Wh_per_km": [70.0, 72.0, 74.0], "mean_speed_kmh": 75.0,
-                          "mean_return": 45.0, "crashes": 0})
+    seeds = pd.DataFrame({"backend": "native", "energy_Wh_per_km": [70.0, 72.0, 74.0], "net_energy_Wh_per_km": 80.0,
+                          "mean_speed_kmh": 75.0, "mean_return": 45.0, "crashes": 0})
     ci = seed_intervals(seeds).iloc[0]
     assert ci.energy_Wh_per_km == 72.0
     assert ci.energy_Wh_per_km_ci95 == pytest.approx(stats.t.ppf(0.975, 2) * 2.0 / np.sqrt(3))
@@ -122,3 +125,111 @@ def test_the_speed_floor_keeps_the_command_within_its_distance_below_the_base():
                           np.clip(base + 0.3 * action, -1, 1).astype(np.float32))
     with pytest.raises(RLError, match="speed floor"):
         ResidualActions(None, lambda obs: obs, 0.3, 0.5)  # a floor wider than the residual is no floor
+
+
+def test_step_distances_add_up_to_each_episodes_distance_across_same_step_autoresets():
+    from roadload.experiments.rl.traffic_objective import step_distance
+    from roadload.gym.traffic import EcoTrafficVectorEnv
+
+    env = EcoTrafficVectorEnv(3, config={"vehicles_count": 8, "duration": 2.0}, autoreset_mode="same_step")
+    env.reset(seed=7)
+    driven, finished = np.zeros(3), []
+    for _ in range(45):  # two episodes of 20 steps each and a few steps of a third
+        _, _, term, trunc, info = env.step(np.full((3, 1), 0.2, np.float32))
+        done = term | trunc
+        driven += step_distance(info, done)
+        if done.any():
+            finished += [(driven[i], info["final_info"]["s"][i]) for i in np.flatnonzero(done)]
+            driven[done] = 0.0
+    assert len(finished) == 6
+    for got, expected in finished:
+        assert expected > 40.0 and got == pytest.approx(expected, rel=1e-12)
+
+
+def test_speed_constraint_adds_the_priced_progress_and_its_multiplier_follows_the_pi_rule():
+    from roadload.experiments.rl.traffic_objective import SpeedConstraint, step_distance
+    from roadload.gym.traffic import EcoTrafficVectorEnv
+
+    config = {"vehicles_count": 8, "duration": 2.0}
+    plain = EcoTrafficVectorEnv(2, config=config, autoreset_mode="same_step")
+    wrapped = SpeedConstraint(EcoTrafficVectorEnv(2, config=config, autoreset_mode="same_step"), reference=20.0,
+                              price=0.1, step_time=0.1, window=10_000, margin=0.01, k_p=10.0, k_i=5.0)
+    wrapped.multiplier = 0.5
+    plain.reset(seed=3)
+    wrapped.reset(seed=3)
+    for _ in range(25):
+        a = np.full((2, 1), 0.1, np.float32)
+        _, r_p, term, trunc, info = plain.step(a)
+        _, r_w, *_ = wrapped.step(a)
+        assert r_w == pytest.approx(r_p + 0.5 * 0.1 * step_distance(info, term | trunc), abs=1e-12)
+    # PI on e = (1.01 * 20 - v) / 20: 1 m/s short -> e = 0.05, I = 0.25, lambda = 0.5 + 0.25
+    assert wrapped.update(19.2) == pytest.approx(0.75)
+    # back on target: the proportional part vanishes, the integral holds
+    assert wrapped.update(20.2) == pytest.approx(0.25)
+    # 1.8 m/s too fast: e = -0.09, the integral and the multiplier floor at zero
+    assert wrapped.update(22.0) == 0.0 and wrapped.integral == 0.0
+    with pytest.raises(RLError, match="reference speed"):
+        SpeedConstraint(plain, reference=0.0, price=0.1, step_time=0.1, window=10)
+    with pytest.raises(RLError, match="margin"):
+        SpeedConstraint(plain, reference=20.0, price=0.1, step_time=0.1, window=10, margin=0.5)
+
+
+def test_the_multiplier_is_updated_from_the_mean_speed_of_the_episodes_ended_in_the_window():
+    from roadload.experiments.rl.traffic_objective import SpeedConstraint
+    from roadload.gym.traffic import EcoTrafficVectorEnv
+
+    env = SpeedConstraint(EcoTrafficVectorEnv(2, config={"vehicles_count": 8, "duration": 2.0},
+                                              autoreset_mode="same_step"),
+                          reference=40.0, price=0.1, step_time=0.1, window=8, k_p=20.0, k_i=20.0)
+    env.reset(seed=1)
+    ended = []
+    for _ in range(30):
+        _, _, term, trunc, info = env.step(np.zeros((2, 1), np.float32))
+        if (term | trunc).any():
+            ended.append(info["final_info"]["s"].copy())
+    # windows of 8 steps: none ends an episode before step 20, where both 2 s episodes end (one update); the next
+    # episodes end at step 40
+    assert len(ended) == 1 and len(env.history) == 1
+    speed = float(ended[0].sum()) / (2 * 2.0)
+    assert env.history[0][0] == pytest.approx(speed, rel=1e-9) and 20.0 < speed < 30.0
+    assert env.multiplier == pytest.approx(40.0 * (40.0 - speed) / 40.0)  # (k_p + k_i) e, e = (40 - v) / 40
+
+
+def test_paired_differences_compare_each_episode_with_the_reference_on_the_same_seed():
+    from roadload.experiments.rl.traffic_training import MECHANICAL_WEIGHT, paired_differences
+
+    rows = []
+    for seed, (d_ref, d_pol) in enumerate([(800.0, 810.0), (900.0, 880.0), (1000.0, 1000.0)]):
+        rows.append({"policy": "IDM follower", "backend": "native", "seed": seed, "distance_m": d_ref,
+                     "energy_kWh": 0.08, "time_s": 40.0, "mechanical_kWh": 0.0})
+        rows.append({"policy": "PPO seed 0", "backend": "native", "seed": seed, "distance_m": d_pol,
+                     "energy_kWh": 0.07, "time_s": 40.0, "mechanical_kWh": -0.01})
+    p = paired_differences(pd.DataFrame(rows)).iloc[0]
+    d_e = np.array([70e3 / 810 - 80e3 / 800, 70e3 / 880 - 80e3 / 900, 70e3 / 1000 - 80e3 / 1000])
+    d_n = d_e + MECHANICAL_WEIGHT * 10e3 / np.array([810.0, 880.0, 1000.0])
+    d_v = np.array([10.0, -20.0, 0.0]) / 40.0 * 3.6
+    assert p.episodes == 3 and p.at_least_as_fast == 2
+    assert p.d_energy_Wh_per_km == pytest.approx(d_e.mean())
+    assert p.d_net_energy_Wh_per_km == pytest.approx(d_n.mean())
+    assert p.d_speed_kmh == pytest.approx(d_v.mean())
+    assert p.d_speed_kmh_ci95 == pytest.approx(stats.t.ppf(0.975, 2) * d_v.std(ddof=1) / np.sqrt(3))
+
+
+def test_the_trip_end_turns_the_time_limit_into_a_terminal_step():
+    from roadload.experiments.rl.traffic_objective import TripEnd
+    from roadload.gym.traffic import EcoTrafficVectorEnv
+
+    config = {"vehicles_count": 8, "duration": 1.0}
+    plain = EcoTrafficVectorEnv(2, config=config, autoreset_mode="same_step")
+    wrapped = TripEnd(EcoTrafficVectorEnv(2, config=config, autoreset_mode="same_step"))
+    plain.reset(seed=5)
+    wrapped.reset(seed=5)
+    ends = 0
+    for _ in range(25):  # two 1 s trips
+        a = np.full((2, 1), 0.1, np.float32)
+        _, r_p, term_p, trunc_p, _ = plain.step(a)
+        _, r_w, term_w, trunc_w, _ = wrapped.step(a)
+        assert np.array_equal(r_p, r_w) and not trunc_w.any()
+        assert np.array_equal(term_w, term_p | trunc_p)
+        ends += int(trunc_p.sum())
+    assert ends == 4

@@ -116,3 +116,48 @@ def test_four_concurrent_cold_starts_of_every_kernel_agree(tmp_path):
     """Every kernel, simulator core and vector env included (the damage test above uses the same CheckedCache)."""
     cache, script, results = cold_starts(tmp_path, "full")
     check_cold_starts_agree(cache, script, results, "full", min_index_files=40)
+
+
+RUNTIME = textwrap.dedent("""
+    import numpy as np
+    from numba.core.runtime import rtsys
+    from roadload import jitcache
+    from roadload.jitcache import cached_njit
+
+    @cached_njit
+    def doubled_cumsum(n):
+        out = np.empty(n)  # an NRT allocation: freed through the runtime's NRT_decref
+        acc = 0.0
+        for i in range(n):
+            acc += 2.0 * i
+            out[i] = acc
+        return out
+
+    total = sum(float(doubled_cumsum(1000)[-1]) for _ in range(50))
+    stats = rtsys.get_allocation_stats()
+    print(total, stats.alloc - stats.free, stats.mi_alloc - stats.mi_free, jitcache.runtime_origin)
+""")
+
+
+def test_the_runtime_module_is_loaded_from_the_cache_and_frees_what_kernels_allocate(tmp_path):
+    """numba's runtime (NRT) module is compiled on the first run and its object code loaded on the next; a kernel
+    allocates and frees through either alike (NRT statistics: nothing left allocated); a damaged file is rebuilt."""
+    script = tmp_path / "runtime_kernel.py"
+    script.write_text(RUNTIME)
+    env = {**_env(tmp_path / "cache"), "NUMBA_NRT_STATS": "1"}
+
+    def run():
+        out = subprocess.run([sys.executable, str(script)], env=env, capture_output=True, text=True, timeout=600)
+        assert out.returncode == 0, out.stderr[-3000:]
+        return out.stdout.split(), out.stderr
+
+    expected = str(50 * 999.0 * 1000.0)
+    (total, live, live_mi, from_cache), _ = run()  # cold: the kernel and the runtime compiled, both stored
+    assert (total, live, live_mi, from_cache) == (expected, "0", "0", "compiled")
+    [stored] = tmp_path.rglob("numba_runtime.*.nbc")
+    (total, live, live_mi, from_cache), _ = run()  # warm kernel and runtime: object code loaded
+    assert (total, live, live_mi, from_cache) == (expected, "0", "0", "cache")
+    stored.write_bytes(stored.read_bytes()[:100])
+    (total, live, live_mi, from_cache), err = run()
+    assert (total, live, live_mi, from_cache) == (expected, "0", "0", "compiled") and "is corrupt" in err
+    assert run()[0] == [expected, "0", "0", "cache"]

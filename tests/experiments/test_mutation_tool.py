@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 
 from roadload.experiments.mutation import (
-    REPO,
     STRATA,
     ModuleScore,
     _plan,
@@ -27,6 +26,9 @@ from roadload.experiments.mutation import (
     stage,
     wilson_interval,
 )
+
+# the checkout these tests live in: CI installs roadload non-editable, so the module's own folder has no sources
+REPO = Path(__file__).resolve().parents[2]
 
 
 def test_wilson_interval_analytic_cases():
@@ -90,22 +92,22 @@ def test_tests_tree_and_selection_of_an_earlier_commit(tmp_path):
 
 def test_resumed_staging_keeps_mutmut_state_and_refreshes_the_sources(tmp_path):
     module = "core/trip_schema.py"
-    folder = stage(module, ("tests/core/test_trip_schema.py",), tmp_path / "m")
-    meta = folder / "mutants" / f"{_staged_path(module)}.meta"
+    folder = stage(module, ("tests/core/test_trip_schema.py",), tmp_path / "m", repo=REPO)
+    meta = folder / "mutants" / f"{_staged_path(module, REPO)}.meta"
     meta.parent.mkdir(parents=True, exist_ok=True)
     meta.write_text(json.dumps({"exit_code_by_key": {"roadload.trip_schema.x_f__mutmut_1": 1}}))
     staged_test = folder / "tests" / "core" / "test_trip_schema.py"
     staged_test.write_text("stale")
-    stage(module, ("tests/core/test_trip_schema.py",), folder, keep=True)
+    stage(module, ("tests/core/test_trip_schema.py",), folder, repo=REPO, keep=True)
     assert json.loads(meta.read_text())["exit_code_by_key"] == {"roadload.trip_schema.x_f__mutmut_1": 1}
     assert staged_test.read_text() == (REPO / "tests" / "core" / "test_trip_schema.py").read_text()
     assert "[tool.mutmut]" in (folder / "pyproject.toml").read_text()
-    stage(module, ("tests/core/test_trip_schema.py",), folder)  # a fresh run starts from nothing
+    stage(module, ("tests/core/test_trip_schema.py",), folder, repo=REPO)  # a fresh run starts from nothing
     assert not meta.exists()
 
 
 def _meta(folder: Path, module: str, verdicts: dict) -> Path:
-    meta = folder / "mutants" / f"{_staged_path(module)}.meta"
+    meta = folder / "mutants" / f"{_staged_path(module, REPO)}.meta"
     meta.parent.mkdir(parents=True, exist_ok=True)
     meta.write_text(json.dumps({"exit_code_by_key": verdicts}))
     return meta
@@ -117,7 +119,7 @@ def test_collect_counts_only_tested_mutants(tmp_path):
     verdicts.update({"roadload.trip_schema.x_f__mutmut_9": -24, "roadload.trip_schema.x_f__mutmut_10": None,
                      "roadload.trip_schema.x_f__mutmut_11": None})
     _meta(tmp_path, module, verdicts)
-    score = collect(module, tmp_path, 1.0)
+    score = collect(module, tmp_path, 1.0, repo=REPO)
     assert (score.total, score.killed, score.timeout, score.untested, score.pool) == (9, 8, 1, 2, 0)
     assert score.score == 1.0 and score.interval == wilson_interval(9, 9)
     assert "(2 of 11 mutants not tested)" in _line(score)
@@ -142,7 +144,7 @@ def test_a_sampled_score_is_the_stratified_estimate_with_wilsons_interval(tmp_pa
                 else "-    a = 1\n+    a = 2\n")
 
     monkeypatch.setattr(diff_apply, "get_diff_for_mutant", diff)
-    score = collect(module, tmp_path, 1.0)
+    score = collect(module, tmp_path, 1.0, repo=REPO)
     assert (score.sampled, score.sampled_killed, score.sampled_equivalent, score.untested) == (10, 6, 1, 90)
     assert (score.survived, score.equivalent) == (3, 1)
     assert score.score == pytest.approx((18 + 90 * 6 / 9) / (18 + 90))
@@ -155,8 +157,8 @@ def test_a_sampled_score_is_the_stratified_estimate_with_wilsons_interval(tmp_pa
 
 def test_a_resumed_plan_keeps_killed_verdicts_of_unchanged_functions_only(tmp_path):
     module = "core/tables.py"  # small, with three functions
-    folder = stage(module, (), tmp_path / "m")
-    names, hashes = mutants_of(module, folder)
+    folder = stage(module, (), tmp_path / "m", repo=REPO)
+    names, hashes = mutants_of(module, folder, repo=REPO)
     assert len(names) == len(set(names)) > 10 and all(n.startswith("roadload.tables.") for n in names)
     assert {n.rpartition(".")[2].partition("__mutmut_")[0] for n in names} <= set(hashes)
     a, b, c = names[0], names[-1], names[1]
@@ -164,11 +166,11 @@ def test_a_resumed_plan_keeps_killed_verdicts_of_unchanged_functions_only(tmp_pa
     assert fa != fb
     previous = {"exit_code_by_key": {a: 1, b: 1, c: 0},
                 "hash_by_function_name": {**hashes, fb: "changed"}}
-    kept, todo = _plan(module, folder, previous, None, 0)
+    kept, todo = _plan(module, folder, previous, None, 0, repo=REPO)
     assert kept == {a: 1}  # b: its function changed; c: survived, so tested again
     assert a not in todo and b in todo and c in todo and len(todo) == len(names) - 1
     assert not (folder / STRATA).exists()
-    kept, chosen = _plan(module, folder, previous, 5, 7)
+    kept, chosen = _plan(module, folder, previous, 5, 7, repo=REPO)
     assert set(kept) == {a} and len(chosen) == 5 and a not in chosen
     strata = json.loads((folder / STRATA).read_text())
     assert strata["pool"] == len(names) - 1 and strata["sample"] == chosen

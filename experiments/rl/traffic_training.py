@@ -136,7 +136,7 @@ def paired_differences(table: pd.DataFrame, reference: str = "IDM follower") -> 
     for backend, b in per.groupby("backend", sort=False):
         ref = b[b.policy == reference].set_index("seed")
         for name, g in b[b.policy != reference].groupby("policy", sort=False):
-            both = g.set_index("seed").join(ref[["e", "n", "v"]], rsuffix="_ref", how="inner")
+            both = g.set_index("seed").join(ref[["e", "n", "v"]].add_suffix("_ref"), how="inner")
             k = len(both)
             if k == 0:
                 continue

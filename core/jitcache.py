@@ -64,6 +64,11 @@ class CheckedCache(FunctionCache):
                 pass
 
 
+#: the numba internals :func:`initialize_runtime` reads (numba 0.68); without any of them numba initialises its runtime
+#: itself (compiled in every run, as before the cache)
+_RUNTIME_INTERNALS_KNOWN = (hasattr(rtsys, "_init") and hasattr(rtsys, "initialize")
+                            and hasattr(_nrt_python, "c_helpers") and hasattr(nrtdynmod, "create_nrt_module"))
+
 #: how this process got numba's runtime module: "cache" (object code loaded), "compiled" (and stored) by
 #: :func:`initialize_runtime`, or None (not yet, or by numba itself: a kernel compiled first)
 runtime_origin: str | None = None
@@ -78,6 +83,9 @@ def initialize_runtime(target_context: Any, cache_dir: Path) -> None:
     every run. The file is keyed by the numba and llvmlite versions, the Python version and the codegen's target
     (triple, CPU, features); one that cannot be read is reported (RuntimeWarning) and rewritten."""
     global runtime_origin
+    if not _RUNTIME_INTERNALS_KNOWN:  # another numba than the one this was written against: its own initialisation
+        rtsys.initialize(target_context)
+        return
     if getattr(rtsys, "_init", True):
         return
     with global_compiler_lock:

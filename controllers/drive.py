@@ -52,7 +52,9 @@ class DriveSettings:
     time_weight: float = 8000.0  # [J/s], MPC only
     model: str = "M4"  # online force model: structure ...
     estimator: str = "RRLM"  # ... and catalog estimator
-    mpc: MpcSettings = field(default_factory=MpcSettings)
+    # the MPC's grid starts with 4 segments of 5 m (MpcSettings.near_segments: launches and stop approaches at the
+    # optimum's resolution), then 20 m
+    mpc: MpcSettings = field(default_factory=lambda: MpcSettings(near_segments=4))
     cruise: CruiseSettings = field(default_factory=CruiseSettings)
     dt: float = 0.1
     # the vehicle the abc model and the online model's prior come from (a fleet operator's nominal vehicle, e.g.

@@ -229,9 +229,10 @@ class MpcController(ControllerBase):
     def preview(self, s0: float, v0: float) -> Preview:
         st, road, en = self.settings.mpc, self.ctx.road, self.ctx.energy
         n, ds = st.n_nodes, st.ds
-        s = s0 + ds * np.arange(n + 1)
+        grid = st.grid_lengths()
+        s = s0 + np.concatenate([[0.0], np.cumsum(grid)])
         at_stop = self._nodes_at_stops(s)
-        segment_lengths = None if not at_stop else np.diff(s)
+        segment_lengths = None if not at_stop and np.all(grid == ds) else np.diff(s)
         if st.horizon_to_route_end and s[-1] > road.length:  # nodes past the road end collapse onto it
             beyond = s > road.length
             s[beyond] = road.length + 1e-3 * (1.0 + np.arange(int(beyond.sum())))
@@ -247,7 +248,7 @@ class MpcController(ControllerBase):
             if stop in at_stop:
                 cap[at_stop[stop]] = st.stop_speed
             elif s[0] - 1.0 <= stop <= s[-1]:
-                k = int(np.floor((stop - s0) / ds))
+                k = int(np.searchsorted(s, stop, side="right")) - 1  # the segment the line lies in
                 cap[max(k, 0):min(k + 2, n + 1)] = st.stop_speed
         inside = s0 + SEGMENT0_FRACTIONS * (s[1] - s0)  # sampled points of segment 0 (a node may sit at a stop)
         seg0 = np.interp(inside, self._fine_s, self._fine_cap)
@@ -276,17 +277,20 @@ class MpcController(ControllerBase):
         """Moves the grid node nearest to each unserved stop onto its line (in place; node 0 is the current state
         and stays), so the plan's stop speed holds at the line itself rather than on the whole segment before it:
         a cap on the node before the line made the plan crawl up to ds metres and the tracker slow down early.
-        Segments stay between ds/2 and 3 ds/2 long; a stop that would leave a shorter one (within ds/2 of the
-        vehicle, or next to another stop) keeps the caps on both nodes around it, and one beyond the last node
-        stays out of view. Returns {stop: node index}."""
-        ds, n = self.settings.mpc.ds, len(s) - 1
+        Each segment keeps at least half its grid length (MpcSettings.grid_lengths); a stop that would leave a
+        shorter one (within half a segment of the vehicle, or next to another stop) keeps the caps on both nodes
+        around it, and one beyond the last node stays out of view. Returns {stop: node index}."""
+        n = len(s) - 1
+        lengths = np.diff(s)  # the grid's lengths before any node moves
         moved: dict[float, int] = {}
         for stop in self._unserved:
-            j = int(round((stop - s[0]) / ds))
-            if not 1 <= j <= n or j in moved.values() or stop > s[-1]:  # the horizon stays where it ends
+            if not s[0] <= stop <= s[-1]:  # behind the vehicle, or beyond the horizon (which stays where it ends)
                 continue
-            right = s[j + 1] - stop if j < n else ds
-            if stop - s[j - 1] >= 0.5 * ds and right >= 0.5 * ds:
+            j = int(round(float(np.interp(stop, s, np.arange(n + 1)))))  # the nearest node (0: the vehicle's)
+            if j < 1 or j in moved.values():
+                continue
+            right = s[j + 1] - stop if j < n else lengths[-1]
+            if stop - s[j - 1] >= 0.5 * lengths[j - 1] and right >= 0.5 * lengths[min(j, n - 1)]:
                 s[j] = stop
                 moved[stop] = j
         return moved

@@ -112,12 +112,14 @@ def _settings(task: OptimumTask, controller: str) -> DriveSettings:
         return replace(base, controller="human")
     _, spec, *gears = controller.split(":")
     lam = case.lam0 if task.time_weight is None else task.time_weight
+    variant = dict(task.mpc)
+    lam = variant.pop("time_weight", lam)  # a variant's lambda [J/s] (the DriveSettings' value reaches the MPC)
     # ICE: the MPC requests its shift rule's gear (and a kick-down where full load needs it), as the optimum's tracker
     # does: the plant's own load-dependent strategy changes the fuel of a whole climb for a 0.1 % change of the
     # trajectory, which no plan can follow (docs/results/controllers.md); 'mpc:<model>:transmission' leaves the gear
     # to the transmission (the MPC's default elsewhere)
     settings = replace(base, controller="mpc", **force_model_settings(spec), time_weight=lam,
-                       gear_command=case.truck and gears != ["transmission"], mpc=replace(base.mpc, **dict(task.mpc)))
+                       gear_command=case.truck and gears != ["transmission"], mpc=replace(base.mpc, **variant))
     return settings if task.replan_period is None else replace(settings, replan_period=task.replan_period)
 
 
@@ -251,13 +253,17 @@ def dp_check(task: OptimumTask, road, rows: list[dict[str, Any]], settings: Opti
 # together; values per vehicle kind (car: 100 x 20 m; truck: 40 x 50 m, control period 0.2 s)
 BREAKDOWN: dict[str, dict[str, tuple[dict[str, Any], float | None]]] = {
     "car": {"": ({}, None),
+            "|uniform 20 m grid": ({"near_segments": 0}, None),
+            "|near grid 8 x 5 m": ({"near_segments": 8}, None),
             "|horizon 4 km": ({"n_nodes": 200}, None),
             "|grid 10 m": ({"n_nodes": 200, "ds": 10.0}, None),
             "|no comfort term": ({"accel_weight": 0.0}, None),
             "|no speed margin": ({"speed_margin": 0.0}, None),
             "|tol 1e-8": ({"warm_tol": 1e-8}, None),
             "|re-plan 0.2 s": ({}, 0.2),
-            "|all": ({"n_nodes": 400, "ds": 10.0, "accel_weight": 0.0, "speed_margin": 0.0, "warm_tol": 1e-8}, 0.2)},
+            "|lambda 4000": ({"time_weight": 4000.0}, None),
+            "|lambda 2000": ({"time_weight": 2000.0}, None),
+            "|all": ({"n_nodes": 200, "ds": 10.0, "accel_weight": 0.0, "warm_tol": 1e-8}, 0.2)},
     "truck": {"": ({}, None),
               "|horizon 4 km": ({"n_nodes": 80}, None),
               "|grid 25 m": ({"n_nodes": 80, "ds": 25.0}, None),

@@ -218,3 +218,61 @@ def test_preview_puts_a_node_on_each_stop_line():
     near = ctl.preview(1992.0, 13.0)  # the line 8 m ahead, inside segment 0: nodes 0 and 1 capped as before
     assert near.ds is None and near.speed_cap[1] == 1.0
     assert near.segment0_cap[-1] == 1.0 and near.segment0_cap[0] > 13.0
+
+
+def test_launch_reaches_the_cap_as_the_comfort_limits_allow():
+    """From standstill on a flat road with a 10 m/s limit (planning cap 9.7 m/s) at lambda = 8000 J/s the plan
+    wants the cap at once: 1.5 m/s^2 reaches 9.5 m/s after 30.1 m, plus the jerk ramp. A plan reaches a cap at a
+    node at the earliest, so on a uniform 20 m grid every re-plan spread the rest of the climb over the next 20 m
+    and the speed approached the cap exponentially (9.5 m/s only after 53 m); with 5 m near segments (the drives'
+    default, DriveSettings) it is there within 40 m."""
+    s = np.arange(0.0, 1001.0, 5.0)
+    road = RoadProfile("launch", s, np.zeros_like(s), np.zeros_like(s), np.zeros_like(s), np.full_like(s, 10.0))
+    reached = {}
+    for near in (4, 0):
+        ctl = MpcController(MpcControllerSettings(mpc=MpcSettings(n_nodes=40, time_weight=8000.0,
+                                                                  near_segments=near)))
+        log = run_closed_loop(ctl, ModelPlant(road, PARAMS, ENERGY, v0=0.0),
+                              DriveContext(road, ENERGY, FixedForceModel(PARAMS))).log
+        reached[near] = float(log["s"].to_numpy()[np.argmax(log["v"].to_numpy() >= 9.5)])
+        assert log["v"].max() <= 10.0 - 0.3 + 1e-3
+    assert reached[4] < 40.0 < 50.0 < reached[0], reached
+
+
+def test_near_segments_start_the_grid_and_a_stop_among_them_gets_its_node():
+    """4 near segments of 5 m, then 20 m; a stop line 8 m ahead moves the 10 m node onto it (each segment keeps
+    half its grid length), one 1.5 m ahead caps nodes 0 and 1 and the part of segment 0 past the line."""
+    st = MpcSettings(near_segments=4)
+    np.testing.assert_allclose(st.grid_lengths()[:6], [5.0, 5.0, 5.0, 5.0, 20.0, 20.0])
+    assert st.horizon == 1940.0 and MpcSettings(n_nodes=3, near_segments=9, near_ds=50.0).horizon == 60.0
+    with pytest.raises(MpcError, match="near_segments / near_ds"):
+        MpcSettings(near_ds=0.0)
+    road = scripted_road(length=3000.0, hills=False, stops=[2000.0])
+    ctl = MpcController(MpcControllerSettings(mpc=st))
+    ctl.reset(DriveContext(road, ENERGY, FixedForceModel(PARAMS)))
+    close = ctl.preview(1992.0, 13.0)
+    np.testing.assert_allclose(close.s[:5], [1992.0, 1997.0, 2000.0, 2007.0, 2012.0])
+    np.testing.assert_allclose(close.ds, np.diff(close.s))
+    assert close.speed_cap[2] == 1.0 and close.speed_cap[[1, 3]].min() > 13.0
+    near = ctl.preview(1998.5, 5.0)
+    assert near.s[1] == 2003.5 and near.speed_cap[1] == 1.0
+    assert near.segment0_cap[-1] == 1.0 and near.segment0_cap[0] > 13.0
+
+
+def test_warm_start_moves_the_previous_plan_by_position_onto_an_uneven_grid():
+    """The shifted warm start interpolates node values at the new nodes and segment values at the new segment
+    midpoints, whatever the two grids (near segments, a node on a stop line)."""
+    ocp = get_solver(MpcSettings(n_nodes=6, ds=20.0, near_segments=2), ENERGY)
+    old = np.array([0.0, 5.0, 10.0, 30.0, 50.0, 70.0, 90.0])
+    pv = Preview(s=old, grade=np.zeros(6), curvature=np.zeros(6), speed_cap=np.full(7, 30.0),
+                 ratio=np.full(6, 9.665), ds=np.diff(old))
+    E = 0.5 * (10.0 + 0.1 * old) ** 2
+    force = 0.5 * (old[1:] + old[:-1])  # a segment value equal to its midpoint [m]
+    x = np.concatenate([E, force, np.zeros(6), np.zeros(6)])
+    plan = ocp._plan_from_x(x, pv, True, "ok", 0.0, 1, 0.0, np.zeros(25), np.zeros(30))
+    new = np.array([7.0, 12.0, 17.0, 37.0, 57.0, 77.0, 97.0])
+    xs = ocp.shift(plan, 7.0, new)[0]
+    np.testing.assert_allclose(xs[:7], np.interp(new, old, E))
+    mid = 0.5 * (new[1:] + new[:-1])
+    np.testing.assert_allclose(xs[7:13], np.interp(mid, 0.5 * (old[1:] + old[:-1]), force))
+    assert xs[6] == E[-1]  # beyond the old plan's end: its last value

@@ -12,8 +12,13 @@ truck comparison) on generated long grades (``--roads long_grades``), target IPO
 car's 100-node problem on the same machine in the same run is the reference (``--vehicle bmw_i3,truck_40t``
 prints both and the ratio).
 
+The car runs the drives' grid (DriveSettings: four 5 m segments at the vehicle, then 20 m); ``--grids 4,0`` runs
+each car problem also with that many near segments (0: the uniform 20 m grid), the grids interleaved per road, and
+prints the CPU-time ratio of each to the first.
+
 Usage: python scripts/bench_mpc.py [--roads hilly,city] [--length 6000] [--vehicle bmw_i3] [--out bench_mpc.csv]
        python scripts/bench_mpc.py --vehicle bmw_i3,truck_40t --roads hilly,long_grades [--quick]
+       python scripts/bench_mpc.py --grids 4,0 [--quick]
 """
 
 from __future__ import annotations
@@ -29,6 +34,7 @@ import numpy as np
 import pandas as pd
 from roadload.controllers.base import DriveContext
 from roadload.controllers.closed_loop import Plant, run_closed_loop
+from roadload.controllers.drive import DriveSettings
 from roadload.controllers.force_model import FixedForceModel
 from roadload.controllers.mpc import MpcSettings
 from roadload.controllers.mpc_controller import MpcController, MpcControllerSettings
@@ -37,6 +43,7 @@ from roadload.controllers.vehicle_models import abc_parameters, energy_model_fro
 from roadload.experiments.controller_comparison import TRUCK_MPC
 from roadload.road_profiles import RoadProfile, city, hilly, long_grades
 
+CAR_MPC = DriveSettings().mpc  # the car's drives: 100 segments, the first 4 of 5 m, then 20 m
 ROADS: dict[str, Callable[..., RoadProfile]] = {"hilly": hilly, "city": city, "long_grades": long_grades}
 
 
@@ -64,7 +71,8 @@ def _bench(vehicle, road_name, road, mpc, energy, params) -> dict:
     ct = np.array([p.cpu_time for p in warm]) * 1e3
     it = np.array([p.iterations for p in warm])
     label = mpc.solver if mpc.solver == "osqp" else f"ipopt tol={mpc.warm_tol:g}"
-    return {"vehicle": vehicle, "road": road_name, "nodes": mpc.n_nodes, "ds_m": mpc.ds, "solver": label,
+    return {"vehicle": vehicle, "road": road_name, "nodes": mpc.n_nodes, "ds_m": mpc.ds,
+            "near_segments": mpc.near_segments, "solver": label,
             "warm_solves": len(warm), "cold_solves": len(cold),
             "median_ms": np.median(wt), "p99_ms": np.percentile(wt, 99), "max_ms": wt.max(),
             "cpu_median_ms": np.median(ct), "cpu_p99_ms": np.percentile(ct, 99),
@@ -75,6 +83,17 @@ def _bench(vehicle, road_name, road, mpc, energy, params) -> dict:
             "run_wall_s": wall_run}
 
 
+def _grid_ratios(table: pd.DataFrame, grids: list[int]) -> None:
+    """Per car road and solver: each grid's warm CPU median and p99 against the first grid's, same run."""
+    car = table[~table.vehicle.str.startswith("truck")]
+    for (road, solver), g in car.groupby(["road", "solver"], sort=False):
+        ref = g[g.near_segments == grids[0]].iloc[0]
+        for _, r in g[g.near_segments != grids[0]].iterrows():
+            print(f"# {road}, {solver}: {r.near_segments} near segments against {grids[0]}: warm CPU median "
+                  f"{r.cpu_median_ms:.2f} / {ref.cpu_median_ms:.2f} ms = {r.cpu_median_ms / ref.cpu_median_ms:.2f} x, "
+                  f"p99 {r.cpu_p99_ms / ref.cpu_p99_ms:.2f} x; energy {r.energy_kWh:.4f} / {ref.energy_kWh:.4f} kWh")
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--roads", default="hilly,city")
@@ -82,7 +101,10 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--vehicle", default="bmw_i3", help="comma-separated presets (bmw_i3, truck_40t, ...)")
     ap.add_argument("--out", default=None)
     ap.add_argument("--quick", action="store_true", help="tiny run (1.5 km, IPOPT tol 1e-4 only)")
+    ap.add_argument("--grids", default=str(CAR_MPC.near_segments),
+                    help="car: near segments of 5 m per grid, comma-separated (0: uniform 20 m)")
     args = ap.parse_args(argv)
+    grids = [int(g) for g in args.grids.split(",")]
     length = 1500.0 if args.quick else args.length
     solvers = (("ipopt", 1e-4),) if args.quick else (("ipopt", 1e-4), ("ipopt", 1e-6), ("osqp", 1e-4))
     rows = []
@@ -95,10 +117,11 @@ def main(argv: list[str] | None = None) -> None:
                 continue  # trucks on long grades, cars on the car roads
             road = ROADS[road_name](seed=1, length=length)
             for solver, warm_tol in solvers:
-                base = TRUCK_MPC if truck else MpcSettings(n_nodes=100, ds=20.0)
-                mpc = MpcSettings(**{**base.__dict__, "solver": solver, "warm_tol": warm_tol,
-                                     "time_weight": 1.6e5 if truck else 9000.0})
-                rows.append(_bench(vehicle, road_name, road, mpc, energy, params))
+                for near in [0] if truck else grids:
+                    base = TRUCK_MPC if truck else MpcSettings(**{**CAR_MPC.__dict__, "near_segments": near})
+                    mpc = MpcSettings(**{**base.__dict__, "solver": solver, "warm_tol": warm_tol,
+                                         "time_weight": 1.6e5 if truck else 9000.0})
+                    rows.append(_bench(vehicle, road_name, road, mpc, energy, params))
     table = pd.DataFrame(rows)
     load = os.getloadavg()
     print(f"# MPC per-step solve time, {args.vehicle}; {platform.processor() or platform.machine()}, "
@@ -110,6 +133,7 @@ def main(argv: list[str] | None = None) -> None:
             print(f"# {r.vehicle} on {r.road}: IPOPT warm median CPU time {r.cpu_median_ms:.2f} ms = "
                   f"{r.cpu_median_ms / ref:.2f} x the car's 100-node median ({ref:.2f} ms) in this run (wall "
                   f"{r.median_ms:.2f} ms at this load); target <= 10 ms")
+    _grid_ratios(table, grids)
     with pd.option_context("display.width", 200, "display.max_columns", 30):
         print(table.round(3).to_string(index=False))
     if args.out:

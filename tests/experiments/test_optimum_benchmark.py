@@ -6,7 +6,8 @@ import pytest
 
 from roadload.experiments.controller_comparison import force_model_settings
 from roadload.experiments.optimum_benchmark import (OptimumBenchmarkError, OptimumTask, _settings, dp_table,
-                                                    episode_cost_summary, summarise, summary_markdown)
+                                                    episode_cost_summary, pace_and_drive, summarise,
+                                                    summary_markdown)
 from roadload.road_profiles import RoadProfile
 
 
@@ -40,6 +41,23 @@ def test_controllers_are_compared_with_the_oracle_mpc_at_equal_time_through_thei
     assert s.loc["mpc:oracle", "vs_mpc:oracle_pct"] == 0.0
     md = summary_markdown(s.reset_index())
     assert "headwind_6ms" in md and "| reference |" in md and "+1.00 % [" in md
+
+
+def test_cost_against_the_mpc_splits_into_pace_along_the_optimum_and_drive_above_it():
+    """A policy 40 s slower than the MPC: its optimum saves 200 kJ for the 40 s, which lambda = 3000 J/s prices at
+    120 kJ (pace: -80 kJ), and it drives 50 kJ further above its optimum (drive: +50 kJ): cost -30 kJ. Over the
+    MPC's cost of 1000 + 3 x 120 = 1360 kJ: pace -5.88 %, drive +3.68 %, together -2.21 %."""
+    mpc = pd.DataFrame({"vehicle": "car", "road": "route", "condition": "nominal", "controller": "mpc:oracle",
+                        "seed": range(3), "arrived": True, "time_s": 120.0, "energy_J": [1.0e6, 1.01e6, 0.99e6],
+                        "optimum_energy_J": [0.99e6, 1.0e6, 0.98e6]})
+    ppo = mpc.assign(controller="ppo", time_s=160.0, optimum_energy_J=mpc.optimum_energy_J - 2.0e5,
+                     energy_J=mpc.energy_J - 2.0e5 + [4.9e4, 5.0e4, 5.1e4])
+    r = pace_and_drive(pd.concat([mpc, ppo], ignore_index=True), {"car": 3000.0}).iloc[0]
+    assert r.controller == "ppo" and r.seeds == 3 and r.time_s == 160.0 and r.time_s_ref == 120.0
+    assert r.pace_pct == pytest.approx(-100 * 80.0 / 1360.0) and r.pace_1sigma_pct == pytest.approx(0.0)
+    assert r.drive_pct == pytest.approx(100 * 50.0 / 1360.0)
+    assert r.cost_pct == pytest.approx(r.pace_pct + r.drive_pct)
+    assert r.drive_ci95_lo < r.drive_pct < r.drive_ci95_hi
 
 
 def test_dp_check_difference_keeps_its_sign_on_a_route_that_regenerates():

@@ -380,6 +380,11 @@ class EcoTrafficConfig(_TrafficScenario):
     see_behind: bool = Field(False, description="the Kinematics block also lists vehicles more than 10 m behind")
     traffic: TrafficBehaviour = Field(default_factory=TrafficBehaviour)
     shield: TrafficShield = Field(default_factory=TrafficShield)
+    spawn: Literal["highway-env", "outside-envelope"] = Field(
+        "highway-env", description="'highway-env': the ego placed as EcoHighway-v0 places it (often 15-20 m behind "
+                                   "slower traffic at its initial speed, inside the safety layer's braking "
+                                   "envelope); 'outside-envelope': moved back along its lane to the envelope's gap "
+                                   "(the shield's parameters) behind the vehicle ahead, for every policy alike")
 
     _seed_range = field_validator("road_seed_range")(classmethod(lambda cls, v: _check_seed_range(v)))
 

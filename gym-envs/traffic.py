@@ -20,7 +20,9 @@ second entry < -1/3 asks for the left, > 1/3 for the right lane (EcoHighway-v0's
 
 Safety layer (``shield.enabled``): before it is applied the command is capped at SHIELD_GAIN (v_safe - v), v_safe
 the braking envelope behind the leader (roadload.gym.config.TrafficShield); ``info['shield_active']`` tells when
-it bound.
+it bound. Spawn (``spawn``): highway-env's, or ``'outside-envelope'``: the ego moved back behind the vehicle ahead
+on its lane to that envelope's gap at the two speeds (:func:`spawn_outside_envelope`), so that no policy starts
+inside it.
 
 Observation (:func:`traffic_observation_layout`): highway-env's Kinematics block (``kinematics_rows`` rows of
 presence, x, y, vx, vy; row 0 the ego in absolute values, then the nearest vehicles relative to it; each mapped from
@@ -181,6 +183,33 @@ def envelope_command(gap, v, v_lead, reaction_time, deceleration, leader_deceler
     t = reaction_time
     v_safe = deceleration * (-t + math.sqrt(t * t + 2.0 * room / deceleration))
     return SHIELD_GAIN * (v_safe - v)
+
+
+@kernel(refcount=False)
+def envelope_gap(v, v_lead, reaction_time, deceleration, leader_deceleration, margin):
+    """The shortest bumper-to-bumper gap [m] at which the envelope of :func:`envelope_command` lets the ego drive
+    at v behind a leader at v_l: margin + v T + v^2 / (2 b) - v_l^2 / (2 b_l) (v_safe = v there), at least 0."""
+    need = margin + v * reaction_time + v * v / (2.0 * deceleration) - v_lead * v_lead / (2.0 * leader_deceleration)
+    return max(need, 0.0)
+
+
+@kernel(refcount=False)
+def spawn_outside_envelope(veh, m, reaction_time, deceleration, leader_deceleration, margin):
+    """Stage 'spawn outside the envelope' (``spawn='outside-envelope'``): the ego (row 0) moved back along its lane
+    until the gap to the nearest vehicle ahead on it is :func:`envelope_gap` at the two speeds, so that the
+    safety layer does not bind at the first step (highway-env's spawn puts the ego at its initial speed 15-20 m
+    behind slower traffic, inside any braking envelope). Every traffic vehicle spawns ahead of the ego, so the
+    move back frees a gap without closing another one. Returns the distance moved [m]."""
+    lead = neighbours(veh, m, 0, int(veh[0, V_LANE]))[0]
+    if lead < 0:
+        return 0.0
+    gap = veh[lead, V_X] - veh[0, V_X] - _tm.LENGTH
+    need = envelope_gap(veh[0, V_SPEED], veh[lead, V_SPEED], reaction_time, deceleration, leader_deceleration,
+                        margin)
+    if gap >= need:
+        return 0.0
+    veh[0, V_X] -= need - gap
+    return need - gap
 
 
 @kernel(refcount=False)
@@ -415,6 +444,10 @@ def _start_episodes(index, uniforms, params, rows, random_states, ego, starts, t
         p = params[r]
         start_ego(ego, i, starts, rows[r], random_states[r])
         spawn_traffic(tr.vehicles[i], uniforms[r], lanes, p[0], sp[0], p[1], sp[1], sp[2], sp[3])
+        if sp[4] > 0.5:
+            K = c.step
+            spawn_outside_envelope(tr.vehicles[i], tr.vehicles.shape[1], K[K_SHIELD_T], K[K_SHIELD_B],
+                                   K[K_SHIELD_BL], K[K_SHIELD_MARGIN])
         e = tr.episode[i]
         for col in range(e.size):
             e[col] = 0.0
@@ -500,7 +533,7 @@ class TrafficBatch:
             scale=np.array([row[2] for row in self.layout]),
             preview=PREVIEW.copy(),
             spawn=np.array([cfg.speed_limit, cfg.traffic.delta_range[0], cfg.traffic.delta_range[1],
-                            cfg.traffic.lane_change_delay]))
+                            cfg.traffic.lane_change_delay, cfg.spawn == "outside-envelope"]))
 
     def shared_changes(self, cfg: EcoTrafficConfig) -> list[str]:
         """Fields that differ from the shared configuration outside PER_ENV_FIELDS."""
@@ -770,5 +803,5 @@ def make_vector_env(num_envs: int = 1, **kwargs: Any) -> EcoTrafficVectorEnv:
 
 
 __all__ = ["EcoTrafficEnv", "EcoTrafficVectorEnv", "TrafficBatch", "make_vector_env", "spawn_traffic",
-           "envelope_command",
+           "envelope_command", "envelope_gap", "spawn_outside_envelope",
            "traffic_observation_layout", "TERM_NAMES", "INFO_KEYS"]

@@ -23,7 +23,7 @@ from roadload.gym.config import (SPACE_FIELDS_TRAFFIC, EcoHighwayConfig, EcoTraf
                                  TrafficBehaviour, make_config, updated_config)
 from roadload.gym.ecodrive import RouteTable
 from roadload.gym.highway import EcoHighwayEnv
-from roadload.gym.traffic import GAP_CAP, envelope_command, traffic_observation_layout
+from roadload.gym.traffic import GAP_CAP, envelope_command, envelope_gap, traffic_observation_layout
 from roadload.gym.traffic_ego import PREVIEW
 
 _HIGHWAY_FIELDS = ("vehicle", "road", "road_seed", "effects", "lanes_count", "vehicles_count", "vehicles_density",
@@ -124,6 +124,23 @@ class HighwayTrafficEnv(EcoHighwayEnv):
         if behaviour != TrafficBehaviour():
             for v in self.road.vehicles[1:]:
                 set_behaviour(v, behaviour, self.road.np_random)
+        if self.traffic_config.spawn == "outside-envelope":
+            self._spawn_outside_envelope()
+
+    def _spawn_outside_envelope(self) -> None:
+        """EcoTraffic-v0's ``spawn='outside-envelope'``: the ego moved back along its lane to the safety layer's
+        envelope gap (roadload.gym.traffic.envelope_gap) behind the vehicle ahead on it."""
+        ego = self.vehicle
+        front, _ = self.road.neighbour_vehicles(ego, ego.lane_index)
+        if front is None:
+            return
+        sh = self.traffic_config.shield
+        gap = ego.lane_distance_to(front) - 0.5 * (ego.LENGTH + front.LENGTH)
+        need = envelope_gap(ego.speed, front.speed, sh.reaction_time, sh.deceleration, sh.leader_deceleration,
+                            sh.margin)
+        if gap < need:
+            ego.position = ego.position - np.array([need - gap, 0.0])
+            ego.on_state_update()
 
     def step(self, action):
         a = np.array(validate_action(action, self.action_space), dtype=np.float32)

@@ -209,3 +209,96 @@ def test_reference_backend_runs_the_same_layout_on_highway_env():
     assert obs[idx["command"]] == pytest.approx(0.3, abs=1e-6)
     assert obs[idx["source_power"]] * 50e3 == pytest.approx(info["terms"]["energy"] * 10.0, rel=1e-9)
     assert set(info) >= {"speed", "crashed", "lane", "s", "t", "source_energy_total", "front_gap", "shield_active"}
+
+
+def _lane_leader_gap(veh: np.ndarray) -> tuple[float, float] | None:
+    """(bumper-to-bumper gap [m], leader speed [m/s]) of the nearest vehicle ahead on the ego's lane, or None."""
+    ahead = [k for k in range(1, veh.shape[0])
+             if veh[k, tm.V_LANE] == veh[0, tm.V_LANE] and veh[k, tm.V_X] >= veh[0, tm.V_X]]
+    if not ahead:
+        return None
+    k = min(ahead, key=lambda j: veh[j, tm.V_X])
+    return veh[k, tm.V_X] - veh[0, tm.V_X] - tm.LENGTH, veh[k, tm.V_SPEED]
+
+
+def test_safety_envelope_is_the_braking_bound_and_its_gap_inverts_it():
+    """v_safe from the cap solves v T + v^2 / (2 b) = gap - margin + v_l^2 / (2 b_l) (the ego reacting after T and
+    braking at b stops margin behind a leader braking at b_l), and at envelope_gap(v, v_l) the cap is exactly 0."""
+    from roadload.gym.ecodrive import SHIELD_GAIN
+    from roadload.gym.traffic import envelope_command, envelope_gap
+
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        gap, v, v_l = rng.uniform(5, 120), rng.uniform(0, 35), rng.uniform(0, 35)
+        t, b, b_l, margin = rng.uniform(0, 1), rng.uniform(2, 6), rng.uniform(3, 9), rng.uniform(0, 4)
+        v_safe = envelope_command(gap, v, v_l, t, b, b_l, margin) / SHIELD_GAIN + v
+        room = gap - margin + v_l ** 2 / (2 * b_l)
+        if room > 0:
+            assert v_safe * t + v_safe ** 2 / (2 * b) == pytest.approx(room, rel=1e-9)
+        need = envelope_gap(v, v_l, t, b, b_l, margin)
+        if need > 0:
+            assert envelope_command(need, v, v_l, t, b, b_l, margin) == pytest.approx(0.0, abs=1e-9)
+            assert envelope_command(need - 1.0, v, v_l, t, b, b_l, margin) < 0.0  # closer: the layer brakes
+    # the default layer at highway-env's spawn: 25 m/s, 18 m behind a 22 m/s leader -> ~19 m/s allowed
+    assert envelope_command(18.0, 25.0, 22.0, 0.3, 3.5, 6.0, 2.0) / SHIELD_GAIN + 25.0 == pytest.approx(18.8, abs=0.1)
+
+
+def test_spawn_outside_envelope_moves_only_the_ego_back_to_the_envelope_gap():
+    """highway-env's spawn puts the ego inside the safety layer's envelope on about half the episodes (its first
+    command is then capped, at full braking at most); 'outside-envelope' never does: the ego is moved back to the
+    envelope gap exactly where it was closer, left where it was not, and the traffic is the same vehicle for
+    vehicle."""
+    from roadload.gym.traffic import envelope_gap
+
+    sh = {"enabled": True}
+    spawns = {mode: EcoTrafficVectorEnv(64, shield=sh, spawn=mode, vehicles_density=1.5)
+              for mode in ("highway-env", "outside-envelope")}
+    for env in spawns.values():
+        env.reset(seed=11)
+    before, after = spawns["highway-env"].vehicles, spawns["outside-envelope"].vehicles
+    np.testing.assert_array_equal(before[:, 1:], after[:, 1:])
+    np.testing.assert_array_equal(before[:, 0, 1:], after[:, 0, 1:])  # all but the ego's x
+    inside = moved = 0
+    for i in range(64):
+        lead0, lead1 = _lane_leader_gap(before[i]), _lane_leader_gap(after[i])
+        if lead0 is None:
+            assert after[i, 0, tm.V_X] == before[i, 0, tm.V_X]
+            continue
+        need = envelope_gap(25.0, lead0[1], 0.3, 3.5, 6.0, 2.0)
+        assert lead1 is not None and lead1[0] >= need - 1e-9
+        if lead0[0] < need:
+            inside += 1
+            moved += int(lead1[0] == pytest.approx(need, abs=1e-9))
+        else:
+            assert after[i, 0, tm.V_X] == before[i, 0, tm.V_X]
+    assert inside >= 16 and moved == inside
+    # the first step at full throttle: capped (at -1 at most) in the highway-env spawn, free outside the envelope
+    throttle = np.ones((64, 1), dtype=np.float32)
+    _, _, _, _, info = spawns["highway-env"].step(throttle)
+    assert info["shield_active"].sum() >= inside
+    _, _, _, _, info = spawns["outside-envelope"].step(np.zeros((64, 1), dtype=np.float32))
+    assert not info["shield_active"].any()
+    single = EcoTrafficEnv(shield=sh, **FAST)
+    idx = {name: k for k, (name, _, _) in enumerate(single.layout)}
+    for seed in range(20):
+        single.reset(seed=seed)
+        obs, _, _, _, info = single.step(np.array([1.0], dtype=np.float32))
+        assert obs[idx["command"]] >= -1.0 and (info["shield_active"] or obs[idx["command"]] == 1.0)
+    with pytest.raises(GymConfigError, match="spawn"):
+        EcoTrafficEnv(spawn="behind")
+
+
+def test_reference_backend_spawns_outside_the_envelope_too():
+    from roadload.gym.traffic import envelope_gap
+    from roadload.gym.traffic_reference import HighwayTrafficEnv
+
+    env = HighwayTrafficEnv(curvature=False, spawn="outside-envelope", shield={"enabled": True}, **FAST)
+    for seed in range(4):
+        env.reset(seed=seed)
+        ego = env.vehicle
+        front, _ = env.road.neighbour_vehicles(ego, ego.lane_index)
+        if front is not None:
+            gap = ego.lane_distance_to(front) - tm.LENGTH
+            assert gap >= envelope_gap(ego.speed, front.speed, 0.3, 3.5, 6.0, 2.0) - 1e-9
+        _, _, _, _, info = env.step(np.array([0.0], dtype=np.float32))
+        assert not info["shield_active"]

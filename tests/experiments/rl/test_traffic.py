@@ -233,3 +233,29 @@ def test_the_trip_end_turns_the_time_limit_into_a_terminal_step():
         assert np.array_equal(term_w, term_p | trunc_p)
         ends += int(trunc_p.sum())
     assert ends == 4
+
+
+def test_lever_policies_keep_the_followers_mean_command_or_only_drop_its_braking():
+    """Pulse and glide drives the follower's mean command (sigma-delta) with only 0 and the pulse; coasting only
+    replaces braking by 0; the grade lever takes the grade force off the command (uphill: less)."""
+    from roadload.experiments.rl.highway import _indices, idm_policy
+    from roadload.experiments.rl.traffic_levers import coast_policy, grade_policy, pulse_glide_policy
+    from roadload.gym.config import EcoTrafficConfig
+
+    cfg = EcoTrafficConfig(shield={"enabled": True}, spawn="outside-envelope")
+    idx = _indices(cfg)
+    obs = np.zeros(len(idx), dtype=np.float32)
+    obs[idx["v"][0]], obs[idx["front_gap"][0]] = 21.0 / 30.0, 60.0 / 100.0  # 21 m/s, 60 m behind an equal-speed car
+    u = float(idm_policy(cfg)(obs)[0])
+    assert 0.0 < u < 0.2
+    glide = pulse_glide_policy(cfg, 0.2)
+    commands = np.array([float(glide(obs)[0]) for _ in range(1000)])
+    assert set(np.round(commands, 6)) == {0.0, 0.2} and commands.mean() == pytest.approx(u, abs=2e-4)
+    close = obs.copy()
+    close[idx["front_gap"][0]] = 0.3  # 30 m: the follower brakes
+    assert float(idm_policy(cfg)(close)[0]) < 0.0 and float(coast_policy(cfg)(close)[0]) == 0.0
+    assert float(coast_policy(cfg, 5.0)(close)[0]) == float(idm_policy(cfg)(close)[0])  # inside the envelope's reach
+    assert float(coast_policy(cfg)(obs)[0]) == u
+    uphill = obs.copy()
+    uphill[idx["grade@0m"][0]] = 0.02 / 0.05
+    assert float(grade_policy(cfg, 1.0)(uphill)[0]) < float(idm_policy(cfg)(uphill)[0]) - 0.03

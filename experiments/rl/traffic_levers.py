@@ -1,0 +1,143 @@
+"""Where an eco-driving policy could save energy against the IDM follower on ``roadload/EcoTraffic-v0``: rule-based
+variants of the follower, each testing one physical lever, on the held-out episodes of the PPO evaluation and
+paired with the follower by episode (roadload.experiments.rl.traffic_training.paired_differences).
+
+    python scripts/traffic_levers.py --episodes 50     # ~3 min CPU
+    python scripts/traffic_levers.py --quick           # CI smoke run (2 episodes)
+
+Levers (u the follower's command, roadload.experiments.rl.highway.idm_policy):
+
+- the follower's own settings (time gap, desired speed, feed-forward): its speed-energy line;
+- ``coast``: u clipped at 0 from below, i.e. the speed shed from the spawn's 25 m/s by rolling and air resistance
+  instead of regenerative braking (the kinetic energy goes straight into the road load, without the motor and
+  battery losses of braking and driving again);
+- ``coast outside the envelope``: the same while the gap one second ahead (at the current closing speed) is more
+  than ``margin`` above the safety layer's envelope gap (roadload.gym.traffic.envelope_gap), so the layer's braking
+  is not triggered;
+- ``grade``: u less ``gain`` x the grade force m g sin(theta) over the traction scale, so the speed falls uphill
+  and rises downhill (the gap to the leader as the buffer) instead of the motor lifting and the brakes lowering the
+  car;
+- ``pulse and glide``: where 0 < u < pulse, the command alternates between 0 and ``pulse`` with u's mean (a
+  sigma-delta modulator over ``period`` steps), driving the motor at higher torque for part of the time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from typing import Any, Callable
+
+import numpy as np
+import pandas as pd
+
+from roadload.gym.config import EcoTrafficConfig, make_config
+from roadload.gym.ecodrive import DriveScales
+from roadload.gym.traffic import envelope_gap
+from roadload.presets import get_preset
+from roadload.tables import markdown_table
+
+from .highway import _indices, idm_policy
+from .traffic_training import TRAFFIC_TRAIN_CONFIG, evaluate_traffic, paired_differences, summarise_traffic
+
+Policy = Callable[[np.ndarray], np.ndarray]
+
+
+def coast_policy(cfg: EcoTrafficConfig, margin: float | None = None) -> Policy:
+    """The follower, coasting (u = 0) where it would brake; with ``margin`` [m] only while the gap one second
+    ahead is more than margin above the envelope gap (module docstring)."""
+    idm = idm_policy(cfg)
+    idx = _indices(cfg)
+    (kv, sv), (kg, sg), (kc, sc) = idx["v"], idx["front_gap"], idx["front_closing_speed"]
+    sh = cfg.shield
+
+    def policy(obs: np.ndarray) -> np.ndarray:
+        u = idm(obs)
+        if u[0] >= 0.0:
+            return u
+        if margin is not None:
+            v, gap, closing = obs[kv] * sv, obs[kg] * sg, obs[kc] * sc
+            need = envelope_gap(v, max(v - closing, 0.0), sh.reaction_time, sh.deceleration, sh.leader_deceleration,
+                                sh.margin)
+            if gap - closing * 1.0 - need <= margin:
+                return u
+        return np.zeros_like(u)
+    return policy
+
+
+def grade_policy(cfg: EcoTrafficConfig, gain: float) -> Policy:
+    """The follower less ``gain`` x m g sin(theta) / (P_max / v): the grade force left to the speed (module
+    docstring)."""
+    idm = idm_policy(cfg)
+    idx = _indices(cfg)
+    (kv, sv), (kg, sg) = idx["v"], idx["grade@0m"]
+    spec = get_preset(cfg.vehicle)
+    weight = spec.body.mass * 9.81
+    drive = DriveScales.from_spec(spec)
+
+    def policy(obs: np.ndarray) -> np.ndarray:
+        v = float(obs[kv] * sv)
+        scale = min(drive.peak_traction_force, drive.peak_power / max(v, 1.0))
+        u = idm(obs) - gain * weight * math.sin(float(obs[kg] * sg)) / scale
+        return np.clip(u, -1.0, 1.0).astype(np.float32)
+    return policy
+
+
+def pulse_glide_policy(cfg: EcoTrafficConfig, pulse: float, period: int = 10) -> Policy:
+    """Pulse and glide around the follower's command (module docstring); stateful, one episode after another."""
+    idm = idm_policy(cfg)
+    state = {"sum": 0.0}
+
+    def policy(obs: np.ndarray) -> np.ndarray:
+        u = float(idm(obs)[0])
+        if not 0.0 < u < pulse:
+            state["sum"] = 0.0
+            return np.array([u], dtype=np.float32)
+        state["sum"] += u
+        if state["sum"] >= pulse * period / 10.0:
+            state["sum"] -= pulse
+            return np.array([pulse], dtype=np.float32)
+        return np.array([0.0], dtype=np.float32)
+    return policy
+
+
+def lever_policies(cfg: EcoTrafficConfig) -> dict[str, Policy]:
+    """The follower and every lever of the module docstring."""
+    return {"IDM follower": idm_policy(cfg),
+            "follower, time gap 1.2 s": idm_policy(cfg, time_gap=1.2),
+            "follower, time gap 1.8 s": idm_policy(cfg, time_gap=1.8),
+            "follower, desired speed 23 m/s": idm_policy(cfg, target_speed=23.0),
+            "follower, desired speed 27 m/s": idm_policy(cfg, target_speed=27.0),
+            "follower, no feed-forward": idm_policy(cfg, feed_forward=0.0),
+            "coast": coast_policy(cfg),
+            "coast outside the envelope (5 m)": coast_policy(cfg, 5.0),
+            "grade (gain 0.5)": grade_policy(cfg, 0.5),
+            "grade (gain 1)": grade_policy(cfg, 1.0),
+            "pulse and glide (0.2)": pulse_glide_policy(cfg, 0.2),
+            "pulse and glide (0.4)": pulse_glide_policy(cfg, 0.4)}
+
+
+def measure_levers(env_config: dict[str, Any] | None = None, episodes: int = 50) -> dict[str, pd.DataFrame]:
+    """Summary and paired differences to the follower of every lever on ``episodes`` held-out episodes."""
+    config = {**TRAFFIC_TRAIN_CONFIG, **(env_config or {})}
+    cfg = make_config(EcoTrafficConfig, config)
+    table = evaluate_traffic(lever_policies(cfg), config, episodes)
+    return {"summary": summarise_traffic(table), "paired": paired_differences(table)}
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Print the levers' summary and paired tables (``scripts/traffic_levers.py``)."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--episodes", type=int, default=50, help="held-out episodes per policy")
+    ap.add_argument("--config", default=None, help="EcoTraffic-v0 config as JSON text over the training default")
+    ap.add_argument("--quick", action="store_true", help="tiny run for CI")
+    a = ap.parse_args(argv)
+    config = json.loads(a.config) if a.config else {}
+    if a.quick:
+        a.episodes = 2
+        config = {"duration": 5.0, "vehicles_count": 10, **config}
+    if a.episodes < 2:
+        ap.error(f"--episodes: expected >= 2 (a paired interval needs two), got {a.episodes}")
+    res = measure_levers(config, a.episodes)
+    print(markdown_table(res["summary"], floatfmt=".4g"))
+    print(markdown_table(res["paired"], floatfmt=".4g"))

@@ -18,9 +18,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import numba
-
-from roadload.jitcache import cached_njit
+from roadload.compiled import kernel
 
 _HERE = Path(__file__).resolve().parent
 _SOURCES = ("_jit.py", "layout.py", "numerics.py", "drivetrain.py", "driver.py", "physics.py", "batch.py")
@@ -89,14 +87,23 @@ def jit(fn=None, *, refcount: bool = True, inline: bool = False):
 
 def _njit_cached(fn: Any, cache_dir: str, **options: Any) -> Any:
     """``njit(cache=True, error_model="numpy", **options)`` caching into cache_dir (a damaged cache file is rebuilt,
-    :mod:`roadload.jitcache`)."""
-    return cached_njit(fn, cache_dir=cache_dir, error_model="numpy", **options)
+    :mod:`roadload.jitcache`), or the ahead-of-time compiled kernel when this process uses those
+    (:mod:`roadload.compiled`: numba is then not imported)."""
+    def make() -> Any:
+        from roadload.jitcache import cached_njit  # numba: only when the kernel is numba's
+
+        return cached_njit(fn, cache_dir=cache_dir, error_model="numpy", **options)
+    return kernel(fn, make)
 
 
 def stage(fn):
     """``njit(inline="always")``: one named stage of a kernel, inlined into its caller in numba's IR, so a kernel
     written as a short sequence of stage calls compiles to the same single loop body as one long function."""
-    return numba.njit(inline="always")(fn)
+    def make() -> Any:
+        import numba  # only when the kernel is numba's (roadload.compiled)
+
+        return numba.njit(inline="always")(fn)
+    return kernel(fn, make)
 
 
 def dependent_jit(*sources: str | Path, core_stamp: str | None = None) -> Callable[..., Any]:

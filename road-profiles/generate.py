@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from roadload.jitcache import cached_njit
+from roadload.compiled import cached_kernel
 
 from roadload.units import G
 
@@ -134,7 +134,7 @@ def _gaussian_interior(x: np.ndarray, sigma: float, pad: int, n: int) -> np.ndar
     return _symmetric_correlate(x, weights[::-1].copy(), pad, n)
 
 
-@cached_njit
+@cached_kernel
 def _symmetric_correlate(x, w, lo, n):
     """y_k = x_{lo+k} w_c + sum_{m=0..c-1} (x_{lo+k+m-c} + x_{lo+k+c-m}) w_m, k = 0..n-1, for symmetric weights w of
     odd size 2c + 1 (scipy.ndimage's NI_Correlate1D order per output, loops over m outside)."""
@@ -220,7 +220,7 @@ def _cell_average(s: np.ndarray, knot_s: np.ndarray, knot_v: np.ndarray) -> np.n
     return _cell_means(s, h, knot_s, knot_v, area)
 
 
-@cached_njit
+@cached_kernel
 def _knot_integral(x, knot_s, knot_v, area):
     """Integral of the piecewise-linear (knot_s, knot_v) from knot_s[0] to x: area[k] + v_k dx + slope dx^2 / 2 on
     the knot interval k = (last knot <= x), clamped to the first / last interval (knot_s sorted)."""
@@ -238,7 +238,7 @@ def _knot_integral(x, knot_s, knot_v, area):
     return area[k] + knot_v[k] * dx + 0.5 * slope * (dx * dx)
 
 
-@cached_njit
+@cached_kernel
 def _cell_means(s, h, knot_s, knot_v, area):
     """(integral to s_i + h/2 - integral to s_i - h/2) / h for every grid point (numpy's order of operations)."""
     out = np.empty(s.size)

@@ -183,7 +183,14 @@ def load_all() -> None:
 _load = load_all  # the name the tests that walk every command call
 
 
+#: True in the ``roadload`` command's own process (set by :func:`main`): only there may a command switch the process
+#: to the ahead-of-time compiled kernels (roadload.compiled), not when a test or a program invokes ``app`` in-process
+runs_as_command = False
+
+
 def main() -> None:
+    global runs_as_command
+    runs_as_command = True
     # libgomp reads OMP_WAIT_POLICY once, when it is loaded, and the RL commands load it (torch, via
     # stable-baselines3): set the native vector env's default here, first, or `roadload train --threads 2` spins
     # idle OpenMP threads (32k instead of 160k steps/s at load 4.6, docs/results/scale.md)

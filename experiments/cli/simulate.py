@@ -45,6 +45,30 @@ def check_road(text: str, option: str = "--road") -> None:
                                             f"drive cycles, or give a .json/.csv/.gpx file")
 
 
+def build_compiled_kernels() -> None:
+    """After a run on numba's kernels that found no compiled extension: build it for the next runs (stderr says so;
+    a failed build is reported once and leaves numba in charge, roadload.compiled)."""
+    from roadload import compiled
+
+    if not compiled.build_wanted:
+        return
+    import time
+
+    from roadload.envs.aot import build
+
+    t0 = time.perf_counter()
+    try:
+        path = build()
+    except Exception as exc:  # no C compiler, a numba without pycc, ...: the JIT path stays, reported once
+        compiled.record_build_failure(exc)
+        typer.echo(f"note: the simulator stays on numba's JIT (the ahead-of-time build failed: {type(exc).__name__}: "
+                   f"{exc})", err=True)
+        return
+    if path is not None:
+        typer.echo(f"compiled the simulator ahead of time for the next runs ({time.perf_counter() - t0:.0f} s): "
+                   f"{path.parent}", err=True)
+
+
 def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
     @app.command("simulate")
     def simulate_cmd(
@@ -82,6 +106,12 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                 sensor_data = json.loads(sensors.read_text())
             except (OSError, json.JSONDecodeError) as exc:
                 raise CliInputError(f"--sensors {sensors}: cannot read a JSON sensor spec ({exc})") from None
+        from roadload.experiments import cli
+
+        if cli.runs_as_command:  # before the road generator and the simulator are imported: no numba, no LLVM
+            from roadload.compiled import use_compiled_kernels
+
+            use_compiled_kernels()
         check_road(road)
         if cycle is not None:
             check_road(cycle, "--cycle")
@@ -137,6 +167,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
             from roadload.trip import Trip
 
             typer.echo(f"wrote {plot_trip(Trip.load(path), out.with_suffix('.png'))}")
+        build_compiled_kernels()
 
     @app.command("plot")
     def plot_cmd(trip: Path = typer.Argument(..., help="trip file (.parquet)"),

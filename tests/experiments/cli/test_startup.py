@@ -57,7 +57,7 @@ def test_a_streamed_simulate_from_a_road_file_loads_no_pandas_no_scipy_filters_n
     road = save_profile(load_profile("motorway", seed=0, length=2000.0), tmp_path / "road.json")
     code, loaded = _imports_of(["simulate", "--vehicle", "bmw_i3", "--road", str(road), "--duration", "20", "--out",
                                 "trip.parquet"], ("pandas", "scipy.ndimage", "gymnasium", "numba"), cwd=tmp_path)
-    assert code == 0 and loaded == ["numba"]  # numba: the simulator ran
+    assert code == 0 and set(loaded) <= {"numba"}  # numba: on its JIT (the compiled kernels load without it)
     assert (tmp_path / "trip.parquet").exists()
 
 

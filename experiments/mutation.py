@@ -18,7 +18,9 @@ surviving mutant or one that no selected test reaches counts against it.
 ``--tests-from COMMIT`` scores against the ``tests/`` tree of that commit (and, unless ``--tests`` is given, the
 module's test selection listed in that commit's ``MODULES``): the "before" score of tests added later.
 ``--sample N --seed S`` tests a seeded simple random sample of N of the module's mutants; the score is then printed
-with its 95 % Wilson interval.
+with its 95 % Wilson interval. With ``--resume`` and the same seed, a stopped sampled run continues its own sample
+(its verdicts stand), and a larger N grows the sample by a seeded sample of the mutants not yet in it, so a sample
+can be sized to the CPU a run gets: ``--sample 40 --seed 0 --resume``, then ``--sample 160 --seed 0 --resume``.
 """
 
 from __future__ import annotations
@@ -57,7 +59,8 @@ MODULES: dict[str, tuple[str, ...]] = {
     "sim2real/floor.py": ("tests/sim2real/test_floor_fit.py", "tests/sim2real/test_floor.py"),
     "experiments/time_matching.py": ("tests/experiments/test_time_matching.py",
                                      "tests/experiments/test_time_matching_search.py"),
-    "controllers/mpc.py": ("tests/controllers/test_mpc_mutants.py",),
+    "controllers/mpc.py": ("tests/controllers/test_mpc_mutants.py",
+                           "tests/controllers/test_mpc_plan_report_mutants.py"),
     "controllers/mpc_controller.py": ("tests/controllers/test_mpc_controller_mutants.py",),
     "envs/sensors.py": ("tests/envs/test_sensors_mutants.py", "tests/envs/test_sensor_noise.py"),
 }
@@ -158,6 +161,22 @@ _PLANNING = "return np.maximum(np.asarray(preview.speed_cap, {}) - st.speed_marg
 for _source, _fn in ((_HEADWIND, "_params"), (_CROSSWIND, "_params"), (_PLANNING, "planning_cap")):
     for _variant in ("None", ""):
         MPC_EQUIVALENT[f"xǁOcpSolverǁ{_fn}: " + _source.format("float") + " -> " + _source.format(_variant)] = _NUMERIC
+_JNZ = 'jnz = np.asarray(jac.nonzeros()) if hasattr(jac, "nonzeros") else np.asarray({}).ravel()'
+MPC_EQUIVALENT["xǁOcpSolverǁ_qp_matrices: " + _JNZ.format("jac") + " -> " + _JNZ.format("None")] = \
+    "the QP data function is a CasADi Function: its Jacobian output is a DM, which has nonzeros() (dead branch)"
+_ADAPTIVE = '"acceptable_tol": 1e-4, "acceptable_iter": 5, "mu_strategy": "{}",'
+_A_INDPTR = "self._a_indptr = np.concatenate([[0], np.cumsum(np.bincount(cols_a, {}))])"
+MPC_EQUIVALENT.update({
+    "xǁOcpSolverǁ_build: " + _ADAPTIVE.format("adaptive") + " -> " + _ADAPTIVE.format("ADAPTIVE"):
+        "IPOPT reads option values in any case",
+    "xǁOcpSolverǁ_build: " + _A_INDPTR.format("minlength=self._nx") + " -> " + _A_INDPTR.format(""):
+        "every column of A holds its identity row, so the count already has one entry per column",
+    "xǁOcpSolverǁ_build: self._a_cols = np.array(cols_a, dtype=int) -> self._a_cols = np.array(cols_a, )":
+        "a list of Python ints is an int array without the dtype",
+    "xǁOcpSolverǁdiagnose: g = np.asarray(self._g_fun(plan.x, self._params(a_prev, preview, params, time_weight)))"
+    ".ravel() -> g = np.asarray(self._g_fun(plan.x, self._params(a_prev, preview, params, ))).ravel()":
+        "the constraint vector does not depend on the time weight (only the objective does)",
+})
 MPC_EQUIVALENT["xǁOcpSolverǁsolve: found += self.diagnose(plan, a_prev, preview, params, time_weight) -> "
                "found += self.diagnose(plan, a_prev, preview, params, )"] = \
     "the constraint vector the diagnosis reads does not depend on the time weight (only the objective does)"
@@ -639,13 +658,19 @@ def _function_of(name: str) -> str:
     return name.rpartition(".")[2].partition("__mutmut_")[0]
 
 
-def _plan(module: str, folder: Path, previous: dict, sample: int | None, seed: int, repo: Path = REPO
-          ) -> tuple[dict[str, int], list[str]]:
+def _plan(module: str, folder: Path, previous: dict, sample: int | None, seed: int, repo: Path = REPO,
+          strata: dict | None = None) -> tuple[dict[str, int], list[str]]:
     """The verdicts that stand (killed, timed out or crashed, in a function whose source is unchanged) and the
     mutants to test: all the others, or a seeded sample of ``sample`` of them. A sample is recorded in the
-    folder's :data:`STRATA` file with the size of the pool it was drawn from (the score then estimates the pool)."""
+    folder's :data:`STRATA` file with the size of the pool it was drawn from (the score then estimates the pool).
+    ``strata``: the previous run's sample. Drawn with the same seed, it is continued (a stopped sampled run): its
+    members keep any verdict of an unchanged function and only the others are tested. A larger ``sample`` grows
+    it when it was drawn from every mutant: the new members are a seeded sample of the mutants not yet in it (the
+    union is again a simple random sample of all of them)."""
     names, hashes = mutants_of(module, folder, repo)
     codes, old_hashes = previous.get("exit_code_by_key", {}), previous.get("hash_by_function_name", {})
+    if strata and sample is not None and strata.get("seed") == seed and sample >= len(strata["sample"]):
+        return _continue_sample(folder, strata, sample, names, hashes, previous)
     kept = {n: codes[n] for n in names if codes.get(n) in KILLED | TIMEOUT | CRASH
             and old_hashes.get(_function_of(n)) == hashes.get(_function_of(n))}
     pool = [n for n in names if n not in kept]
@@ -653,8 +678,27 @@ def _plan(module: str, folder: Path, previous: dict, sample: int | None, seed: i
     if sample is None:
         return kept, pool
     chosen = sample_names(pool, sample, seed)
-    (folder / STRATA).write_text(json.dumps({"pool": len(pool), "sample": chosen, "seed": seed}))
+    (folder / STRATA).write_text(json.dumps({"pool": len(pool), "sample": chosen, "seed": seed, "size": sample}))
     return kept, chosen
+
+
+def _continue_sample(folder: Path, strata: dict, size: int, names: list[str], hashes: dict[str, str],
+                     previous: dict) -> tuple[dict[str, int], list[str]]:
+    """The standing verdicts of a previous sample's members (any verdict, source unchanged) and the members to
+    test; the sample grown to ``size`` first when that is larger (only a sample of every mutant can grow)."""
+    codes, old_hashes = previous.get("exit_code_by_key", {}), previous.get("hash_by_function_name", {})
+    chosen = list(strata["sample"])
+    if size > len(chosen):
+        if strata["pool"] != len(names):
+            raise SystemExit(f"--sample {size} --resume: the previous sample of {len(chosen)} was drawn from "
+                             f"{strata['pool']} of the {len(names)} mutants (after a census); it cannot grow")
+        rest = sorted(set(names) - set(chosen))
+        chosen = sorted(chosen + sample_names(rest, size - len(chosen), strata["seed"]))
+        strata = {**strata, "sample": chosen, "size": size, "grown_from": strata.get("size", len(strata["sample"]))}
+    stand = {n: codes[n] for n in chosen if codes.get(n) is not None
+             and old_hashes.get(_function_of(n)) == hashes.get(_function_of(n))}
+    (folder / STRATA).write_text(json.dumps(strata))
+    return stand, [n for n in chosen if n not in stand]
 
 
 def sample_names(names: list[str], size: int, seed: int) -> list[str]:
@@ -703,6 +747,8 @@ def run_module(module: str, workdir: Path, children: int, only: str | None = Non
     the killed verdicts of the previous run in the same folder (functions whose source changed excepted) and test
     the rest: a stopped run continues, survivors meet tests added since. ``sample``: test only a seeded random
     sample of that many of the mutants without a standing verdict; the score is then the stratified estimate.
+    ``resume`` with the previous run's sample seed: that sample is continued or grown (:func:`_continue_sample`),
+    every verdict of its members standing (``rerun`` tests its live ones again).
     ``tests_from``: the tests tree (and, without ``tests``, the selection) of that commit."""
     if tests is None:
         tests = modules_at(tests_from, repo)[module] if tests_from else MODULES[module]
@@ -711,15 +757,16 @@ def run_module(module: str, workdir: Path, children: int, only: str | None = Non
     previous = json.loads(meta_path.read_text()) if (rerun or resume) and meta_path.is_file() else {}
     if rerun and not previous:
         raise SystemExit(f"--rerun: no previous run of {module} in {folder}")
-    strata = (folder / STRATA).read_text() if rerun and (folder / STRATA).is_file() else None
+    strata = (folder / STRATA).read_text() if (rerun or resume) and (folder / STRATA).is_file() else None
     folder = stage(module, tests, folder, repo, tests_from, keep=resume)
-    if strata:  # a sampled run tested again: the same sample stands for the same pool
+    if strata and rerun:  # a sampled run tested again: the same sample stands for the same pool
         (folder / STRATA).write_text(strata)
     start = time.monotonic()
     if not (rerun or resume or sample is not None):  # a plain full run
         _mutmut_run(module, folder, children, [], only, append=False)
         return collect(module, folder, time.monotonic() - start, repo)
-    kept, names = _live_of(previous) if rerun else _plan(module, folder, previous, sample, seed, repo)
+    kept, names = _live_of(previous) if rerun else _plan(module, folder, previous, sample, seed, repo,
+                                                         json.loads(strata) if strata and resume else None)
     if names:
         _mutmut_run(module, folder, children, names, only, append=resume)
     _restrict_verdicts(module, folder, kept, names, repo)  # the standing verdicts, the new ones; the rest untested
@@ -769,7 +816,8 @@ def main(argv: list[str] | None = None) -> None:
                     help="test again only the mutants the previous run (same --workdir) left alive; keep the others")
     ap.add_argument("--resume", action="store_true",
                     help="continue the previous run in --workdir: keep its killed verdicts (of unchanged functions), "
-                         "test the other mutants (survivors meet the tests added since)")
+                         "test the other mutants (survivors meet the tests added since); with --sample and the "
+                         "same --seed, continue (or, larger, grow) the previous sample")
     ap.add_argument("--sample", type=int,
                     help="test a seeded random sample of this many of the mutants without a standing verdict; the "
                          "score is the stratified estimate with its 95 %% interval")

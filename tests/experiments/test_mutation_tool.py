@@ -179,3 +179,33 @@ def test_a_resumed_plan_keeps_killed_verdicts_of_unchanged_functions_only(tmp_pa
 def test_a_rerun_tests_again_only_the_tested_mutants_not_killed():
     kept, again = _live_of({"exit_code_by_key": {"a": 1, "b": 0, "c": None, "d": 33, "e": -24, "f": 3}})
     assert kept == {"a": 1, "e": -24, "f": 3} and again == ["b", "d"]  # c: outside the sample, stays untested
+
+
+def test_a_resumed_sample_is_continued_and_grown_not_drawn_again(tmp_path):
+    module = "core/tables.py"
+    folder = stage(module, (), tmp_path / "m", repo=REPO)
+    names, hashes = mutants_of(module, folder, repo=REPO)
+    kept, first = _plan(module, folder, {}, 6, 3, repo=REPO)
+    strata = json.loads((folder / STRATA).read_text())
+    assert kept == {} and len(first) == 6 and strata == {"pool": len(names), "sample": first, "seed": 3, "size": 6}
+    # stopped after three verdicts (one survivor): those stand, the other three members are tested, nothing new
+    done = {first[0]: 1, first[1]: 0, first[2]: 33}
+    previous = {"exit_code_by_key": {**dict.fromkeys(names), **done}, "hash_by_function_name": hashes}
+    kept, todo = _plan(module, folder, previous, 6, 3, repo=REPO, strata=strata)
+    assert kept == done and todo == first[3:]
+    assert json.loads((folder / STRATA).read_text())["sample"] == first
+    # grown to 10: the 6 stay, 4 more from the mutants not in it; a member whose function changed is tested again
+    function = first[0].rpartition(".")[2].partition("__mutmut_")[0]
+    changed = {**hashes, function: "changed"}
+    kept, todo = _plan(module, folder, {**previous, "hash_by_function_name": changed}, 10, 3, repo=REPO,
+                       strata=strata)
+    grown = json.loads((folder / STRATA).read_text())
+    assert set(first) < set(grown["sample"]) and len(grown["sample"]) == 10 and grown["pool"] == len(names)
+    assert grown["grown_from"] == 6 and first[0] in todo
+    assert set(kept) == {n for n in done if n.rpartition(".")[2].partition("__mutmut_")[0] != function}
+    assert sorted(todo + list(kept)) == grown["sample"]
+    # another seed is a new sample; a sample drawn after a census cannot grow
+    _, other = _plan(module, folder, previous, 6, 4, repo=REPO, strata=strata)
+    assert other != first
+    with pytest.raises(SystemExit, match="cannot grow"):
+        _plan(module, folder, previous, 10, 3, repo=REPO, strata={**strata, "pool": len(names) - 1})

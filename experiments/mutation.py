@@ -169,8 +169,9 @@ _A_INDPTR = "self._a_indptr = np.concatenate([[0], np.cumsum(np.bincount(cols_a,
 MPC_EQUIVALENT.update({
     "xǁOcpSolverǁ_build: " + _ADAPTIVE.format("adaptive") + " -> " + _ADAPTIVE.format("ADAPTIVE"):
         "IPOPT reads option values in any case",
-    "xǁOcpSolverǁ_build: " + _A_INDPTR.format("minlength=self._nx") + " -> " + _A_INDPTR.format(""):
-        "every column of A holds its identity row, so the count already has one entry per column",
+    **{"xǁOcpSolverǁ_build: " + _A_INDPTR.format("minlength=self._nx") + " -> " + _A_INDPTR.format(v):
+       "every column of A holds its identity row, so the count already has one entry per column"
+       for v in ("", "minlength=None")},
     "xǁOcpSolverǁ_build: self._a_cols = np.array(cols_a, dtype=int) -> self._a_cols = np.array(cols_a, )":
         "a list of Python ints is an int array without the dtype",
     "xǁOcpSolverǁdiagnose: g = np.asarray(self._g_fun(plan.x, self._params(a_prev, preview, params, time_weight)))"

@@ -239,6 +239,9 @@ MPC_CONTROLLER_EQUIVALENT: dict[str, str] = {
         "a slice that ends past the array's end is the same slice",
     _MPC_CTL + "preview: " + _SEG0.format(">=") + " -> " + _SEG0.format(">"):
         "a sample at the line lies 1e-9 m above stop - 1e-9 either way",
+    _MPC_CTL + "preview: seg0 = np.where(inside >= stop - 1e-9, np.minimum(seg0, st.stop_speed), seg0) -> "
+    "seg0 = np.where(inside > stop - 1e-9, np.minimum(seg0, st.stop_speed), seg0)":
+        "a sampled point of segment 0 lies exactly 1e-9 m before a stop line only by coincidence of the grid",
     _MPC_CTL + "preview: v_guess = np.full(n, max(v0, st.speed_floor)) -> v_guess = np.full(n, None)":
         "the guessed speed only picks an EV's single ratio (an ICE's bound takes its lowest gear): any speed gives "
         "the same ratio",

@@ -178,6 +178,12 @@ MPC_EQUIVALENT.update({
     ".ravel() -> g = np.asarray(self._g_fun(plan.x, self._params(a_prev, preview, params, ))).ravel()":
         "the constraint vector does not depend on the time weight (only the objective does)",
 })
+_ITER = 'plan = self._plan_from_x(x, preview, ok, status, elapsed, int(stats.get("iter_count", {})),'
+_SHIFT_S = "new = self.settings.ds * np.arange(self.n + 1) + s0 if s is None else np.asarray(s, {})"
+MPC_EQUIVALENT.update({
+    "xǁOcpSolverǁ_solve_ipopt: " + _ITER.format("-1") + " -> " + _ITER.format("None"): _IPOPT_STATS,
+    **{"xǁOcpSolverǁshift: " + _SHIFT_S.format("float") + " -> " + _SHIFT_S.format(v): _NUMERIC for v in ("None", "")},
+})
 MPC_EQUIVALENT["xǁOcpSolverǁsolve: found += self.diagnose(plan, a_prev, preview, params, time_weight) -> "
                "found += self.diagnose(plan, a_prev, preview, params, )"] = \
     "the constraint vector the diagnosis reads does not depend on the time weight (only the objective does)"

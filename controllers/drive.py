@@ -52,9 +52,10 @@ class DriveSettings:
     time_weight: float = 8000.0  # [J/s], MPC only
     model: str = "M4"  # online force model: structure ...
     estimator: str = "RRLM"  # ... and catalog estimator
-    # the MPC's grid starts with 4 segments of 5 m (MpcSettings.near_segments: launches and stop approaches at the
-    # optimum's resolution), then 20 m
-    mpc: MpcSettings = field(default_factory=lambda: MpcSettings(near_segments=4))
+    # the MPC's grid starts with 8 segments of 5 m (MpcSettings.near_segments: launches and stop approaches at the
+    # optimum's resolution, over what a car at 50 km/h drives between two re-plans plus its braking distance to a
+    # stop at 2 m/s^2 less that), then 20 m
+    mpc: MpcSettings = field(default_factory=lambda: MpcSettings(near_segments=8))
     cruise: CruiseSettings = field(default_factory=CruiseSettings)
     dt: float = 0.1
     # the vehicle the abc model and the online model's prior come from (a fleet operator's nominal vehicle, e.g.

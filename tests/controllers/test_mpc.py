@@ -224,8 +224,8 @@ def test_launch_reaches_the_cap_as_the_comfort_limits_allow():
     """From standstill on a flat road with a 10 m/s limit (planning cap 9.7 m/s) at lambda = 8000 J/s the plan
     wants the cap at once: 1.5 m/s^2 reaches 9.5 m/s after 30.1 m, plus the jerk ramp. A plan reaches a cap at a
     node at the earliest, so on a uniform 20 m grid every re-plan spread the rest of the climb over the next 20 m
-    and the speed approached the cap exponentially (9.5 m/s only after 53 m); with 5 m near segments (the drives'
-    default, DriveSettings) it is there within 40 m."""
+    and the speed approached the cap exponentially (9.5 m/s only after 53 m); with 4 near segments of 5 m (the
+    drives use 8, DriveSettings) it is there within 40 m."""
     s = np.arange(0.0, 1001.0, 5.0)
     road = RoadProfile("launch", s, np.zeros_like(s), np.zeros_like(s), np.zeros_like(s), np.full_like(s, 10.0))
     reached = {}

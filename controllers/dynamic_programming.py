@@ -117,6 +117,22 @@ def _stage_costs(preview: Preview, energy: SourceEnergyModel, params: RoadLoadPa
     return cost, np.where(ok, dt, np.inf)
 
 
+def _speed_grid(st: OptimumSettings, top: float, ds_max: float, speed_step: float, energy_step: float | None
+                ) -> tuple[np.ndarray, int]:
+    """(speeds of the grid [m/s] from the floor to ``top``, the largest index change of one segment): uniform in
+    speed, or in E = v^2/2 with ``energy_step`` [m^2/s^2]."""
+    if energy_step is not None:
+        if not (math.isfinite(energy_step) and energy_step > 0):
+            raise OptimumError(f"energy_step: a finite step > 0 m^2/s^2, got {energy_step!r}")
+        e_grid = np.arange(0.5 * st.speed_floor ** 2, 0.5 * top ** 2 + energy_step, energy_step)
+        return np.sqrt(2.0 * e_grid), int(math.ceil(max(st.accel_max, st.decel_max) * ds_max / energy_step)) + 1
+    grid = np.arange(st.speed_floor, top + speed_step, speed_step)
+    # the largest speed change of one segment: speeding up from the floor, braking to a stop
+    reach = max(math.sqrt(st.speed_floor ** 2 + 2 * st.accel_max * ds_max) - st.speed_floor,
+                math.sqrt(2 * st.decel_max * ds_max))
+    return grid, int(math.ceil(min(reach, grid[-1]) / speed_step)) + 1
+
+
 def dp_optimum(preview: Preview, energy: SourceEnergyModel, params: RoadLoadParameters, model_time: float,
                start_speed: float, arrival_speed: float | None = None, settings: OptimumSettings | None = None,
                speed_step: float = 0.05, time_tol: float = 1e-4, terminal_value: float = 0.0,
@@ -137,19 +153,7 @@ def dp_optimum(preview: Preview, energy: SourceEnergyModel, params: RoadLoadPara
         raise OptimumError(f"model_time: a finite time > 0 s, got {model_time!r}")
     n = len(preview.s) - 1
     cap = np.maximum(np.asarray(preview.speed_cap, float) - st.speed_margin, st.speed_floor)
-    ds_max = float(np.max(np.diff(preview.s)))
-    if energy_step is not None:
-        if not (math.isfinite(energy_step) and energy_step > 0):
-            raise OptimumError(f"energy_step: a finite step > 0 m^2/s^2, got {energy_step!r}")
-        e_grid = np.arange(0.5 * st.speed_floor ** 2, 0.5 * float(cap.max()) ** 2 + energy_step, energy_step)
-        grid = np.sqrt(2.0 * e_grid)
-        width = int(math.ceil(max(st.accel_max, st.decel_max) * ds_max / energy_step)) + 1
-    else:
-        grid = np.arange(st.speed_floor, float(cap.max()) + speed_step, speed_step)
-        # the largest speed change of one segment: speeding up from the floor, braking to a stop
-        reach = max(math.sqrt(st.speed_floor ** 2 + 2 * st.accel_max * ds_max) - st.speed_floor,
-                    math.sqrt(2 * st.decel_max * ds_max))
-        width = int(math.ceil(min(reach, grid[-1]) / speed_step)) + 1
+    grid, width = _speed_grid(st, float(cap.max()), float(np.max(np.diff(preview.s))), speed_step, energy_step)
     offsets = np.arange(-width, width + 1)
     stages = [_stage_costs(preview, energy, params, st, grid, offsets, k, gear_choice, fuel_table) for k in range(n)]
     allowed = [grid <= c + 1e-9 for c in cap]

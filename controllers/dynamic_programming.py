@@ -13,6 +13,12 @@ amount that minimises the source power, within its limits; friction brakes for t
 P_source ds_k / v_mid. The time multiplier mu [J/s] is found by bisection so that the trip takes the target time.
 The jerk limit is not part of the DP (it would need the previous speed as a second state); compare it with the
 NLP solved with ``OptimumSettings(jerk=False)``.
+
+ICE with ``gear_choice``: every transition's fuel is that of the best gear for its wheel force and speed, with fuel
+cut while braking (:meth:`~.energy.SourceEnergyModel.best_gear_fuel_power`: any gear whose engine speed is in range
+and whose full load gives the force). The NLP prices fuel at the shift rule's gear and charges the engine's
+friction while braking too, so on a heavy truck, which brakes on descents and kicks down on climbs, the NLP's
+optimum is no bound on the plant; this DP's energy is one up to the Willans fit's error and the grid.
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ from .energy import SourceEnergyModel
 from .force_model import resistance_force
 from .mpc import Preview
 from .optimum import OptimumError, OptimumSettings
+from .vehicle_models import INFEASIBLE_FUEL
 
 
 @dataclass
@@ -42,9 +49,27 @@ class DpSolution:
     speed_step: float  # grid resolution [m/s]
 
 
+FuelTable = tuple[np.ndarray, np.ndarray, np.ndarray]  # (speeds [m/s], wheel forces [N], fuel [W] per gear)
+
+
+def fuel_table_power(table: FuelTable, v, force) -> np.ndarray:
+    """The least fuel power [W] over the gears of a (speed, wheel force) table (bilinear in each gear's; inf where
+    no gear can: a gear's value at or above :data:`~.vehicle_models.INFEASIBLE_FUEL` is refused)."""
+    from scipy.interpolate import RegularGridInterpolator
+
+    speeds, forces, fuel = table
+    v, force = np.broadcast_arrays(np.asarray(v, float), np.asarray(force, float))
+    points = np.stack([v.ravel(), force.ravel()], axis=-1)
+    best = np.full(points.shape[0], np.inf)
+    for gear in fuel:
+        value = RegularGridInterpolator((speeds, forces), gear, bounds_error=False, fill_value=INFEASIBLE_FUEL)(points)
+        best = np.minimum(best, np.where(value < 0.1 * INFEASIBLE_FUEL, value, np.inf))
+    return best.reshape(v.shape)
+
+
 def _stage_costs(preview: Preview, energy: SourceEnergyModel, params: RoadLoadParameters,
-                 settings: OptimumSettings, grid: np.ndarray, offsets: np.ndarray, k: int
-                 ) -> tuple[np.ndarray, np.ndarray]:
+                 settings: OptimumSettings, grid: np.ndarray, offsets: np.ndarray, k: int, gear_choice: bool = False,
+                 fuel_table: FuelTable | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(source energy [J], time [s]) of every transition v_i -> v_{i+d} of segment k (inf where infeasible)."""
     ds = float(preview.ds[k]) if preview.ds is not None else float(preview.s[k + 1] - preview.s[k])
     i = np.arange(grid.size)[:, None]
@@ -78,19 +103,49 @@ def _stage_costs(preview: Preview, energy: SourceEnergyModel, params: RoadLoadPa
     with np.errstate(divide="ignore", invalid="ignore"):
         x_opt = np.where(curv > 1e-12, 0.5 + 0.25 * (f0 - f1) / curv, np.where(f1 <= f0, 1.0, 0.0))
     x_opt = np.clip(np.nan_to_num(x_opt, nan=1.0), 0.0, 1.0)
-    power = np.asarray(energy.source_power(traction, x_opt * limit, vm, ratio_obj), float)
+    if fuel_table is not None:  # the plant's own fuel map, the gear of least fuel (module docstring)
+        power = fuel_table_power(fuel_table, vm, force)
+        ok &= np.isfinite(power)
+    elif energy.kind == "ice" and gear_choice:  # the gear of least fuel for the net wheel force, fuel cut in braking
+        power = energy.best_gear_fuel_power(force, vm)[0]
+        ok &= np.isfinite(power)
+    else:
+        power = np.asarray(energy.source_power(traction, x_opt * limit, vm, ratio_obj), float)
     ok &= need - x_opt * limit <= energy.brake_force_limit(params.mass) + 1e-6
     dt = ds / vm
     cost = np.where(ok, power * dt, np.inf)
     return cost, np.where(ok, dt, np.inf)
 
 
+def _speed_grid(st: OptimumSettings, top: float, ds_max: float, speed_step: float, energy_step: float | None
+                ) -> tuple[np.ndarray, int]:
+    """(speeds of the grid [m/s] from the floor to ``top``, the largest index change of one segment): uniform in
+    speed, or in E = v^2/2 with ``energy_step`` [m^2/s^2]."""
+    if energy_step is not None:
+        if not (math.isfinite(energy_step) and energy_step > 0):
+            raise OptimumError(f"energy_step: a finite step > 0 m^2/s^2, got {energy_step!r}")
+        e_grid = np.arange(0.5 * st.speed_floor ** 2, 0.5 * top ** 2 + energy_step, energy_step)
+        return np.sqrt(2.0 * e_grid), int(math.ceil(max(st.accel_max, st.decel_max) * ds_max / energy_step)) + 1
+    grid = np.arange(st.speed_floor, top + speed_step, speed_step)
+    # the largest speed change of one segment: speeding up from the floor, braking to a stop
+    reach = max(math.sqrt(st.speed_floor ** 2 + 2 * st.accel_max * ds_max) - st.speed_floor,
+                math.sqrt(2 * st.decel_max * ds_max))
+    return grid, int(math.ceil(min(reach, grid[-1]) / speed_step)) + 1
+
+
 def dp_optimum(preview: Preview, energy: SourceEnergyModel, params: RoadLoadParameters, model_time: float,
                start_speed: float, arrival_speed: float | None = None, settings: OptimumSettings | None = None,
-               speed_step: float = 0.05, time_tol: float = 1e-4, terminal_value: float = 0.0) -> DpSolution:
+               speed_step: float = 0.05, time_tol: float = 1e-4, terminal_value: float = 0.0,
+               gear_choice: bool = False, energy_step: float | None = None,
+               fuel_table: FuelTable | None = None) -> DpSolution:
     """The minimum-energy speed profile over the preview's nodes with trip time ``model_time`` [s] (module
     docstring). arrival_speed [m/s]: the end speed (nearest grid speed); None: the kinetic energy left is worth
-    ``terminal_value`` [J per J]. speed_step [m/s]: grid resolution."""
+    ``terminal_value`` [J per J]. speed_step [m/s]: grid resolution. gear_choice (ICE): fuel at the best gear
+    with fuel cut (module docstring). energy_step [m^2/s^2]: a grid uniform in E = v^2/2 instead, so the
+    accelerations a segment can take are spaced energy_step / ds at every speed (a speed grid spaces them
+    v dv / ds: at 20 m/s, 0.05 m/s and 10 m apart, 0.1 m/s^2, too coarse for a heavy truck climbing at full load,
+    whose deceleration there is a few hundredths of a m/s^2). fuel_table (ICE): the plant's own fuel map per gear
+    (:func:`~.vehicle_models.plant_fuel_table`) instead of the energy model, the gear of least fuel."""
     st = settings or OptimumSettings()
     if not (math.isfinite(speed_step) and speed_step > 0):
         raise OptimumError(f"speed_step: a finite step > 0 m/s, got {speed_step!r}")
@@ -98,13 +153,9 @@ def dp_optimum(preview: Preview, energy: SourceEnergyModel, params: RoadLoadPara
         raise OptimumError(f"model_time: a finite time > 0 s, got {model_time!r}")
     n = len(preview.s) - 1
     cap = np.maximum(np.asarray(preview.speed_cap, float) - st.speed_margin, st.speed_floor)
-    grid = np.arange(st.speed_floor, float(cap.max()) + speed_step, speed_step)
-    ds_max = float(np.max(np.diff(preview.s)))  # the largest speed change of one segment: speeding up from the
-    reach = max(math.sqrt(st.speed_floor ** 2 + 2 * st.accel_max * ds_max) - st.speed_floor,  # floor, braking
-                math.sqrt(2 * st.decel_max * ds_max))  # to a stop
-    width = int(math.ceil(min(reach, grid[-1]) / speed_step)) + 1
+    grid, width = _speed_grid(st, float(cap.max()), float(np.max(np.diff(preview.s))), speed_step, energy_step)
     offsets = np.arange(-width, width + 1)
-    stages = [_stage_costs(preview, energy, params, st, grid, offsets, k) for k in range(n)]
+    stages = [_stage_costs(preview, energy, params, st, grid, offsets, k, gear_choice, fuel_table) for k in range(n)]
     allowed = [grid <= c + 1e-9 for c in cap]
     v0 = max(start_speed, st.speed_floor)
     i0 = int(np.argmin(np.abs(grid - v0)))

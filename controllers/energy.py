@@ -53,6 +53,8 @@ class SourceEnergyModel:
     # ICE: wheel power at full load over the shaft speed, P = p0 + p1 omega + p2 omega^2 [W] (a fit over every
     # gear's full load); empty: max_power at every speed
     full_load_power: tuple[float, ...] = field(default=())
+    # ICE: engine speed range (idle, maximum) [rad/s] of the gear choice (best_gear_fuel_power); empty: unknown
+    engine_speed_range: tuple[float, ...] = field(default=())
 
     def __post_init__(self) -> None:
         if self.kind not in ("ev", "ice"):
@@ -137,6 +139,33 @@ class SourceEnergyModel:
         for g, vs in enumerate(self.shift_speeds):
             out = out + (r[g + 1] - r[g]) * 0.5 * (1.0 + tanh((v - vs) / width))
         return out
+
+    def best_gear_fuel_power(self, wheel_force, v) -> tuple[np.ndarray, np.ndarray]:
+        """ICE, numpy: the lowest fuel power [W] over every gear for a wheel force [N] (net: < 0 brakes) at speed v
+        [m/s], and that gear (0-based; -1 where none can). A gear can when its engine speed is in
+        :attr:`engine_speed_range` and, for a traction force, its full load (:attr:`traction_table`) gives it. Fuel
+        per gear: the Willans line of :meth:`source_power`, with fuel cut while braking,
+        P = max(0, (F v + P_loss(omega, 0)) / eta_i) for F < 0 (the engine's drag takes F v down to -P_loss, the
+        brakes the rest, no fuel). inf where no gear can. An ICE without the tables: the shift rule's gear."""
+        f, v = np.broadcast_arrays(np.asarray(wheel_force, float), np.asarray(v, float))
+        if self.kind != "ice":
+            raise EnergyModelError("best_gear_fuel_power: an ICE model only (an EV has one ratio)")
+        tables = bool(self.traction_table) and len(self.engine_speed_range) == 2
+        gears = range(len(self.gear_ratios)) if tables else [None]
+        idle, top = self.engine_speed_range if tables else (0.0, np.inf)
+        traction = np.maximum(f, 0.0)
+        best, gear = np.full(f.shape, np.inf), np.full(f.shape, -1)
+        for g in gears:
+            ratio = self.smooth_ratio(v) if g is None else self.gear_ratios[g]
+            omega = v * ratio / self.wheel_radius
+            ok = (omega >= idle) & (omega <= top)
+            if g is not None:
+                ok &= traction <= np.interp(v, self.traction_table[0], self.traction_table[g + 1])
+            willans = (f * v + self.loss_power(omega, traction * self.wheel_radius / ratio)) / self.indicated_efficiency
+            power = np.where(ok, np.maximum(willans, 0.0) + self.auxiliary_power, np.inf)
+            better = power < best
+            best, gear = np.where(better, power, best), np.where(better, -1 if g is None else g, gear)
+        return best, gear
 
     # ------------------------------------------------------------------ limits (numpy or casadi)
     def max_traction_force(self, v, ratio):

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import copy
 import functools
+import math
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -168,20 +169,33 @@ def fastsim_vehicle(withheld: str = NONE, variant: Variant = BEV_VARIANT) -> dic
     return d
 
 
-def run_fastsim(vehicle: dict, t: np.ndarray, v: np.ndarray, grade_sin: np.ndarray) -> dict[str, np.ndarray]:
+def run_fastsim(vehicle: dict, t: np.ndarray, v: np.ndarray, grade_sin: np.ndarray,
+                initial_soc: float | None = None) -> dict[str, np.ndarray]:
     """FASTSim's SimDrive on the cycle (t [s], v [m/s], grade = sin θ); its histories (SI) by short names.
-    ``source_mech``: motor mechanical power (BEV) or engine propulsion power (conventional) [W]."""
+    ``source_mech``: motor mechanical power (BEV) or engine propulsion power (conventional) [W].
+    initial_soc (BEV): the battery's state of charge at the start [-]; None: FASTSim's ``walk``, which starts at
+    the battery's max_soc, where 3.1 cuts the charge power to nothing within seconds of regeneration and then
+    refuses any braking the motor would regenerate (it has no friction-brake blend for a BEV)."""
     fs = _fastsim()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        veh = fs.Vehicle.from_dict(copy.deepcopy(vehicle))
+        vehicle = copy.deepcopy(vehicle)
+        if initial_soc is not None:
+            if "BEV" not in vehicle["pt_type"] or not (math.isfinite(initial_soc) and 0.0 < initial_soc < 1.0):
+                raise WorldError(f"initial_soc: a battery-electric vehicle's state of charge in (0, 1), got "
+                                 f"{initial_soc!r}")
+            vehicle["pt_type"]["BEV"]["res"]["state"]["soc"] = float(initial_soc)
+        veh = fs.Vehicle.from_dict(vehicle)
         veh.set_save_interval(1)
         cyc = fs.Cycle.from_dict({"time_seconds": t.tolist(), "speed_meters_per_second": v.tolist(),
                                   "grade": grade_sin.tolist(), "init_elev_meters": 0.0})
         params = fs.SimParams.default().to_dict()
         params["trace_miss_opts"] = "Allow"     # an under-powered case falls behind the trace (logged as driven)
         sd = fs.SimDrive(veh, cyc, fs.SimParams.from_dict(params))
-        sd.walk()
+        if initial_soc is None:
+            sd.walk()
+        else:
+            sd.walk_once()  # walk() would reset the state of charge to max_soc
         df = sd.to_dataframe()
     h = "veh.history."
     bev = "BEV" in vehicle["pt_type"]
@@ -205,6 +219,8 @@ def run_fastsim(vehicle: dict, t: np.ndarray, v: np.ndarray, grade_sin: np.ndarr
         out["source_mech"] = (df[b + "em.history.pwr_mech_prop_out_watts"].to_numpy(float)
                               + df[b + "em.history.pwr_mech_dyn_brake_watts"].to_numpy(float))
         out["battery_electrical"] = df[b + "res.history.pwr_out_electrical_watts"].to_numpy(float)
+        out["motor_electrical"] = (df[b + "em.history.pwr_elec_prop_in_watts"].to_numpy(float)
+                                   - df[b + "em.history.pwr_elec_dyn_brake_watts"].to_numpy(float))
         out["soc"] = df[b + "res.history.soc"].to_numpy(float)
     else:
         out["source_mech"] = df[b + "fc.history.pwr_prop_watts"].to_numpy(float)

@@ -1,5 +1,6 @@
 """The smoke stage of .ci/run, two jobs at a time: every ``scripts/*.py --quick``, the README's shell commands and
-the docs stage (.ci/docs: site build, the guides' commands with their stored outputs, the examples).
+the docs stage (.ci/docs: site build, the guides' commands with their stored outputs, the examples), whose parts
+(the site, the home page, each guide, each example) are jobs of their own.
 
 The jobs are independent (each script writes into its own temporary folders; the numba kernels come from the cache
 the test stage filled, which several processes may read and write at once), so two of them share the 2 cores
@@ -54,17 +55,26 @@ def scripts_run_by_docs() -> dict[str, str]:
     return found
 
 
+def docs_parts() -> list[str]:
+    """The parts of the docs stage (docs/tools/build_docs.sh --only=PART), the longest first: the guides (the
+    longest jobs of the smoke stage), the site build, the home page, the examples."""
+    guides = sorted((ROOT / "docs" / "guides").glob("*.md"), key=lambda p: -p.stat().st_size)
+    examples = sorted((ROOT / "examples").glob("*.py"))
+    return [*(str(p.relative_to(ROOT)) for p in guides), "site", "home", *(str(p.relative_to(ROOT)) for p in examples)]
+
+
 def jobs(smoke: Path) -> list[Job]:
-    """The docs stage first (the longest job, so that the scripts fill the other slot meanwhile), the README's
-    commands, then every entry point (a leading _ would mark a file that is not one) that the docs stage does not
-    run already."""
+    """The docs stage's parts first (the guides are the longest jobs: started first, the scripts fill the other slot
+    meanwhile and no long job starts last), the README's commands, then every entry point (a leading _ would mark a
+    file that is not one) that the docs stage does not run already."""
     out = []
     docs = ROOT / ".ci" / "docs"
     by_docs: dict[str, str] = {}
     readme = [sys.executable, str(ROOT / ".ci" / "doc_commands.py"), str(ROOT / "README.md"), "--workdir", str(smoke)]
     if docs.is_file() and os.access(docs, os.X_OK):
-        out.append(Job("docs: site build, guides' commands and outputs, examples", [str(docs)], ROOT,
-                       smoke / "docs.log"))
+        for part in docs_parts():
+            out.append(Job(f"docs: {part}", [str(docs), f"--only={part}"], ROOT,
+                           smoke / f"docs-{part.replace('/', '-')}.log"))
         by_docs = scripts_run_by_docs()
         readme += ["--covered-by", *map(str, DOCS_PAGES)]
     out.append(Job("README commands", readme, smoke, smoke / "readme.log"))

@@ -866,3 +866,29 @@ def test_gear_request_kicks_down_holds_while_shifting_and_returns_with_a_margin(
     ctl._requested = 1  # a request two gears away from the shift rule's is not held
     force["F"] = 1000.0
     assert request(2) == 3
+
+
+# --------------------------------------------------------------------------- stop nodes with several stops in view
+def test_a_stop_just_behind_the_vehicle_leaves_the_next_stop_its_node():
+    ctl = controller(road(stops=(40.0, 300.0)), n=16)
+    pv = ctl.preview(40.5, 0.5)  # 0.5 m past the first line (still unserved); the second 259.5 m ahead
+    # nearest node to 300 m: 40.5 + 13 x 20 = 300.5 m, moved onto the line, only it capped
+    np.testing.assert_allclose(pv.s[12:15], [280.5, 300.0, 320.5])
+    np.testing.assert_allclose(pv.speed_cap[12:15], [20.0, 1.0, 20.0])
+
+
+def test_a_stop_within_half_a_segment_leaves_the_next_stop_its_node():
+    ctl = controller(road(stops=(45.0, 300.0)), n=16)
+    pv = ctl.preview(41.0, 5.0)  # the first line 4 m ahead: nearest node is the vehicle's, nodes 0 and 1 capped
+    np.testing.assert_allclose(pv.speed_cap[:3], [1.0, 1.0, 20.0])
+    np.testing.assert_allclose(pv.s[12:15], [281.0, 300.0, 321.0])  # 301 m moved onto the second line
+    np.testing.assert_allclose(pv.speed_cap[12:15], [20.0, 1.0, 20.0])
+
+
+def test_a_second_stop_in_the_last_segment_caps_both_its_nodes():
+    ctl = controller(road(stops=(145.0, 150.0)))  # 8 segments of 20 m from 0 m
+    pv = ctl.preview(0.0, 10.0)
+    # 145 m takes node 7 (140 m); 150 m shares it, so it caps both nodes of the segment it lies in (145..160 m)
+    np.testing.assert_allclose(pv.s, [0.0, 20.0, 40.0, 60.0, 80.0, 100.0, 120.0, 145.0, 160.0])
+    np.testing.assert_allclose(pv.speed_cap, [20.0] * 7 + [1.0, 1.0])
+    np.testing.assert_array_equal(pv.stops, [145.0, 150.0])

@@ -18,7 +18,8 @@ Levers (u the follower's command, roadload.experiments.rl.highway.idm_policy):
   and rises downhill (the gap to the leader as the buffer) instead of the motor lifting and the brakes lowering the
   car;
 - ``pulse and glide``: where 0 < u < pulse, the command alternates between 0 and ``pulse`` with u's mean (a
-  sigma-delta modulator over ``period`` steps), driving the motor at higher torque for part of the time.
+  first-order sigma-delta modulator: it pulses whenever the accumulated command reaches ``pulse``), driving the
+  motor at higher torque for part of the time.
 """
 
 from __future__ import annotations
@@ -83,7 +84,7 @@ def grade_policy(cfg: EcoTrafficConfig, gain: float) -> Policy:
     return policy
 
 
-def pulse_glide_policy(cfg: EcoTrafficConfig, pulse: float, period: int = 10) -> Policy:
+def pulse_glide_policy(cfg: EcoTrafficConfig, pulse: float) -> Policy:
     """Pulse and glide around the follower's command (module docstring); stateful, one episode after another."""
     idm = idm_policy(cfg)
     state = {"sum": 0.0}
@@ -94,7 +95,7 @@ def pulse_glide_policy(cfg: EcoTrafficConfig, pulse: float, period: int = 10) ->
             state["sum"] = 0.0
             return np.array([u], dtype=np.float32)
         state["sum"] += u
-        if state["sum"] >= pulse * period / 10.0:
+        if state["sum"] >= pulse:
             state["sum"] -= pulse
             return np.array([pulse], dtype=np.float32)
         return np.array([0.0], dtype=np.float32)
@@ -132,7 +133,12 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--config", default=None, help="EcoTraffic-v0 config as JSON text over the training default")
     ap.add_argument("--quick", action="store_true", help="tiny run for CI")
     a = ap.parse_args(argv)
-    config = json.loads(a.config) if a.config else {}
+    try:
+        config = json.loads(a.config) if a.config else {}
+    except json.JSONDecodeError as exc:
+        ap.error(f"--config: expected a JSON object of EcoTraffic-v0 options, got {a.config!r} ({exc})")
+    if not isinstance(config, dict):
+        ap.error(f"--config: expected a JSON object of EcoTraffic-v0 options, got {a.config!r}")
     if a.quick:
         a.episodes = 2
         config = {"duration": 5.0, "vehicles_count": 10, **config}

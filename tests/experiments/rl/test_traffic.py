@@ -259,3 +259,13 @@ def test_lever_policies_keep_the_followers_mean_command_or_only_drop_its_braking
     uphill = obs.copy()
     uphill[idx["grade@0m"][0]] = 0.02 / 0.05
     assert float(grade_policy(cfg, 1.0)(uphill)[0]) < float(idm_policy(cfg)(uphill)[0]) - 0.03
+
+
+@pytest.mark.parametrize("bad", ["{bad", "[1, 2]"])
+def test_lever_script_refuses_a_config_that_is_not_a_json_object(bad, capsys):
+    from roadload.experiments.rl.traffic_levers import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--config", bad])
+    assert exc.value.code == 2
+    assert "--config: expected a JSON object of EcoTraffic-v0 options" in capsys.readouterr().err

@@ -42,7 +42,7 @@ from roadload.controllers.optimum import OptimumSettings, OptimumTarget, route_n
 from roadload.controllers.sim_plant import SimulatorPlant
 from roadload.controllers.vehicle_models import energy_model_from_spec, plant_fuel_table, rotational_mass
 from roadload.estimators import chapter5_settings
-from roadload.estimators.change import ChangeDetection
+from roadload.estimators.change import GUST_ROBUST
 from roadload.experiments.fastsim_check import fastsim_energy
 from roadload.presets import TRUCK_NOMINAL_MASS, truck_spec
 from roadload.road_profiles import (city, cycle_to_profile, hilly, load_profile_start, long_haul_truck, long_grades,
@@ -245,7 +245,8 @@ def parse_force_model(spec: str) -> tuple[str, dict[str, float] | None]:
 def force_model_settings(spec: str) -> dict[str, Any]:
     """DriveSettings fields of a force-model spec: 'online@SGMKF' (another catalogue estimator with chapter 5's
     settings), 'online@RRLM+forgetting=0.995' (a setting changed), 'online@RRLM+cusum' (with the CUSUM change
-    detector, roadload.estimators.change), the same after 'online_wind'; 'wrong:...' as parse_force_model."""
+    detector on block means, roadload.estimators.change.GUST_ROBUST), the same after 'online_wind'; 'wrong:...' as
+    parse_force_model."""
     fm, errors = parse_force_model(spec)
     out: dict[str, Any] = {"force_model": fm, "wrong_model": errors}
     head, _, options = spec.partition("@")
@@ -257,7 +258,7 @@ def force_model_settings(spec: str) -> dict[str, Any]:
     settings = dict(chapter5_settings("M4").get(estimator.upper(), {}))
     for item in items:
         if item == "cusum":
-            out["change_detection"] = ChangeDetection()
+            out["change_detection"] = GUST_ROBUST
             continue
         key, _, value = item.partition("=")
         if not value:

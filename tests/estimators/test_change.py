@@ -79,3 +79,22 @@ def test_cusum_follows_a_step_without_jumping_past_it():
     assert np.abs(cusum[500:, 0] - truth[500:, 0]).max() < step
     assert np.abs(cusum[500:, 1] - truth[500:, 1]).max() < 0.3 * TRUE[1]
     assert math.isfinite(det.scale) and abs(det.scale - NOISE) < 0.3 * NOISE
+
+
+def test_block_and_dwell_settings_are_checked_and_the_dwell_holds_the_test_quiet():
+    for bad in ({"window": 0}, {"window": 2.5}, {"dwell": -1}, {"window": True}):
+        with pytest.raises(ChangeDetectionError, match=r"an integer >= [01] \[residuals\]"):
+            ChangeDetection(**bad)
+    # a persistent shift of 2 sigma: without a dwell the test fires again and again, with it at most once per dwell
+    rng = np.random.default_rng(3)
+    noise, shifted = rng.normal(0.0, NOISE, 2000), rng.normal(2.0 * NOISE, NOISE, 1000)
+    counts = {}
+    for dwell in (0, 400):
+        det = CusumDetector(ChangeDetection(window=10, scale_forgetting=0.9, threshold=8.0, dwell=dwell))
+        quiet = sum(det.update(r) for r in noise)
+        fired = [k for k, r in enumerate(shifted) if det.update(r)]
+        assert quiet == 0 and fired and fired[0] < 200, (quiet, fired)  # blocks of 10: fires within 20 blocks
+        assert det.blocks == 299 and det.samples == 3000  # the first block mean starts the scale
+        counts[dwell] = fired
+    assert all(b - a >= 400 for a, b in zip(counts[400], counts[400][1:]))
+    assert len(counts[0]) > len(counts[400])

@@ -188,7 +188,8 @@ def run_optimum_task(task: OptimumTask) -> dict[str, Any]:
         base_row = {"vehicle": task.case, "road": task.road, "controller": name, "seed": task.seed,
                     "condition": task.condition, "arrived": True, "time_s": m["segment_time"],
                     "energy_raw_J": m["segment_energy_J"], "arrival_speed": m["arrival_speed"],
-                    "start_speed": m["segment_start_speed"], "speed_violations": m.get("speed_violations")}
+                    "start_speed": m["segment_start_speed"], "speed_violations": m.get("speed_violations"),
+                    **online_columns(m.get("online"), task.warmup)}
         try:
             o = run(opt_drive)
         except (ControllerError, OptimumError) as exc:  # e.g. a driver faster than the limits and comfort allow
@@ -212,6 +213,21 @@ def run_optimum_task(task: OptimumTask) -> dict[str, Any]:
         out["dp"] = dp_check(task, road, rows, opt_settings)
     out["cpu_s"] = time.process_time() - t0
     return out
+
+
+def online_columns(online: dict[str, Any] | None, warmup: float) -> dict[str, Any]:
+    """An online force model's diagnostics for a run's row: its change alarms, clipped parameters, the estimated
+    wind (speed [m/s], direction [rad]) and its estimate (JSON, parameter name -> value) at the start of the measured
+    segment (the last update before ``warmup`` [m]) and at the end; {} for other force models."""
+    if not online:
+        return {}
+    hist = online.get("history") or {}
+    names, xs, s = hist.get("parameters", []), hist.get("x", []), hist.get("s", [])
+    before = [i for i, si in enumerate(s) if si <= warmup]
+    start = dict(zip(names, xs[before[-1]])) if before else {}
+    return {"online_alarms": online.get("change_alarms"), "online_clipped": online.get("clipped"),
+            "online_wind_speed": online.get("wind_speed"), "online_wind_direction": online.get("wind_direction"),
+            "online_estimate_start": json.dumps(start), "online_estimate_end": json.dumps(online.get("estimate", {}))}
 
 
 def difference_pct(value: float, reference: float) -> float:

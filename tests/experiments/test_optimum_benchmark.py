@@ -1,12 +1,15 @@
 """The optimum benchmark's bookkeeping, the force-model specs of the paired comparison and the FASTSim check."""
 
+import json
+
 import numpy as np
 import pandas as pd
 import pytest
 
+from roadload.estimators.change import GUST_ROBUST
 from roadload.experiments.controller_comparison import force_model_settings
 from roadload.experiments.optimum_benchmark import (OptimumBenchmarkError, OptimumTask, _settings, dp_table,
-                                                    episode_cost_summary, pace_and_drive, summarise,
+                                                    episode_cost_summary, online_columns, pace_and_drive, summarise,
                                                     summary_markdown)
 from roadload.road_profiles import RoadProfile
 
@@ -41,6 +44,20 @@ def test_controllers_are_compared_with_the_oracle_mpc_at_equal_time_through_thei
     assert s.loc["mpc:oracle", "vs_mpc:oracle_pct"] == 0.0
     md = summary_markdown(s.reset_index())
     assert "headwind_6ms" in md and "| reference |" in md and "+1.00 % [" in md
+
+
+def test_an_online_runs_row_carries_its_estimate_at_the_segment_start_and_end():
+    """The last update before the warm-up's end is the estimate the measured segment starts with."""
+    online = {"change_alarms": 2, "clipped": 0, "wind_speed": 5.8, "wind_direction": 3.1,
+              "estimate": {"m_V f_r0": 12.9, "m_V": 1460.0},
+              "history": {"parameters": ["m_V f_r0", "m_V"], "t": [10.0, 20.0, 30.0], "s": [400.0, 1490.0, 1700.0],
+                          "x": [[14.0, 1500.0], [13.1, 1470.0], [12.9, 1460.0]]}}
+    row = online_columns(online, warmup=1500.0)
+    assert json.loads(row["online_estimate_start"]) == {"m_V f_r0": 13.1, "m_V": 1470.0}
+    assert json.loads(row["online_estimate_end"]) == online["estimate"]
+    assert row["online_alarms"] == 2 and row["online_wind_speed"] == 5.8
+    assert online_columns(None, 1500.0) == {}
+    assert json.loads(online_columns({**online, "history": {}}, 1500.0)["online_estimate_start"]) == {}
 
 
 def test_cost_against_the_mpc_splits_into_pace_along_the_optimum_and_drive_above_it():
@@ -88,7 +105,7 @@ def test_force_model_specs_of_the_paired_comparison():
     assert force_model_settings("abc") == {"force_model": "abc", "wrong_model": None}
     s = force_model_settings("online@RRLM+forgetting=0.995+cusum")
     assert s["estimator"] == "RRLM" and s["estimator_settings"]["forgetting"] == 0.995
-    assert s["change_detection"] is not None
+    assert s["change_detection"] is GUST_ROBUST and s["change_detection"].window > 1  # the test on block means
     assert force_model_settings("online_wind@SGMKF")["force_model"] == "online_wind"
     with pytest.raises(ValueError, match="online models only"):
         force_model_settings("oracle@RRLM")

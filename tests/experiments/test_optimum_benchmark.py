@@ -99,7 +99,7 @@ def test_force_model_specs_of_the_paired_comparison():
 def test_bad_benchmark_tasks_are_refused_with_the_reason():
     with pytest.raises(OptimumBenchmarkError, match="unknown"):
         OptimumTask("car", "hilly", 0, controllers=("mpc:magic",))
-    with pytest.raises(OptimumBenchmarkError, match="EcoDrive-v0 routes only"):
+    with pytest.raises(OptimumBenchmarkError, match="car only"):
         OptimumTask("truck_40t", "long_grades", 0, controllers=("ppo",))
     with pytest.raises(OptimumBenchmarkError, match="vehicle case"):
         OptimumTask("bus", "hilly", 0)

@@ -678,11 +678,12 @@ def ratio_of_means_ci(energy: np.ndarray, reference: np.ndarray) -> tuple[float,
     """Paired difference as a fleet total [%]: 100 mean(E - E_ref) / mean(E_ref) over the seeds where both are
     finite, its 1-sigma standard error and Student-t 95 % CI (the spread of the per-seed differences E - E_ref
     over the same mean reference). Unlike the mean of per-seed percentages it stays meaningful when one road is
-    net downhill and its energy ~0."""
+    net downhill and its energy ~0. Over |mean(E_ref)|: positive when E is the larger energy, also where the
+    reference's mean is negative (short downhill roads driven slowly regenerate more than they draw)."""
     ok = np.isfinite(energy) & np.isfinite(reference)
     if not ok.any():
         return (float("nan"),) * 4
-    scale = 100.0 / float(np.mean(reference[ok]))
+    scale = 100.0 / abs(float(np.mean(reference[ok])))
     mean, se, lo, hi = _mean_ci((energy[ok] - reference[ok]) * scale)
     return mean, se, lo, hi
 

@@ -43,7 +43,7 @@ from roadload.controllers.sim_plant import SimulatorPlant
 from roadload.controllers.vehicle_models import energy_model_from_spec, plant_fuel_table, rotational_mass
 from roadload.estimators import chapter5_settings
 from roadload.estimators.change import GUST_ROBUST
-from roadload.experiments.fastsim_check import fastsim_energy
+from roadload.experiments.fastsim_check import fastsim_energy, roadload_trace_fastsim_efficiency
 from roadload.presets import TRUCK_NOMINAL_MASS, truck_spec
 from roadload.road_profiles import (city, cycle_to_profile, hilly, load_profile_start, long_haul_truck, long_grades,
                                     motorway)
@@ -362,6 +362,7 @@ class _PairedRuns:
         self.points: dict[str, list[tuple[float, float]]] = {}
         self.points_other: dict[str, list[tuple[float, float]]] = {}
         self.fastsim_pts: dict[str, list[tuple[float, float]]] = {}
+        self.fastsim_efficiency_pts: dict[str, list[tuple[float, float]]] = {}
 
     def run(self, settings: DriveSettings, label: str | None = None):
         """One closed-loop run; with ``task.fastsim`` its speed trace also through FASTSim 3 (labelled runs)."""
@@ -380,6 +381,12 @@ class _PairedRuns:
         m["fastsim_energy_J"] = fs["energy_J"]
         m["fastsim_energy_net_J"] = fs["energy_J"] + ke
         self.fastsim_pts.setdefault(label, []).append((m["segment_time"], m["fastsim_energy_net_J"]))
+        # the same trace with roadload's own wheel power through FASTSim's efficiency chain: what separates the two
+        # models' savings that is efficiency alone
+        eff = roadload_trace_fastsim_efficiency(plant.sim.truth_log(), self.task.warmup, road.length)
+        m["fastsim_efficiency_energy_net_J"] = eff["fastsim_efficiency_J"] + ke
+        self.fastsim_efficiency_pts.setdefault(label, []).append((m["segment_time"],
+                                                                  m["fastsim_efficiency_energy_net_J"]))
 
     def _point(self, m: dict[str, Any]) -> tuple[tuple[float, float], tuple[float, float]]:
         """(time [s], energy [J]) of a run in the task's metric and in the other one."""
@@ -486,11 +493,16 @@ class _PairedRuns:
         return matched, lam_star, t_ref
 
     def fastsim_at(self, t_ref: float) -> dict[str, Any]:
-        """The same joint local fit on FASTSim's energies of the same runs."""
-        shifted = {k: [(t, e + self.offset) for t, e in v] for k, v in self.fastsim_pts.items()}
-        fs_fit = fit_energy_at_time({k: v for k, v in shifted.items() if k not in ("cruise", "human")}, t_ref)
-        fs_cruise = fit_energy_at_time({"cruise": shifted.get("cruise", [])}, t_ref, window=0.08)
-        return {"fastsim_energy_at_tref_J": fs_fit.energy, "fastsim_cruise_energy_J": fs_cruise.energy["cruise"]}
+        """The same joint local fit on FASTSim's energies of the same runs, and on roadload's wheel power through
+        FASTSim's efficiency chain (prefix ``fastsim_efficiency_``)."""
+        out: dict[str, Any] = {}
+        for prefix, points in (("fastsim", self.fastsim_pts), ("fastsim_efficiency", self.fastsim_efficiency_pts)):
+            shifted = {k: [(t, e + self.offset) for t, e in v] for k, v in points.items()}
+            fs_fit = fit_energy_at_time({k: v for k, v in shifted.items() if k not in ("cruise", "human")}, t_ref)
+            fs_cruise = fit_energy_at_time({"cruise": shifted.get("cruise", [])}, t_ref, window=0.08)
+            out.update({f"{prefix}_energy_at_tref_J": fs_fit.energy, f"{prefix}_cruise_energy_J":
+                        fs_cruise.energy["cruise"]})
+        return out
 
 
 def run_paired_task(task: PairedTask) -> dict[str, Any]:
@@ -667,11 +679,12 @@ def ratio_of_means_ci(energy: np.ndarray, reference: np.ndarray) -> tuple[float,
     """Paired difference as a fleet total [%]: 100 mean(E - E_ref) / mean(E_ref) over the seeds where both are
     finite, its 1-sigma standard error and Student-t 95 % CI (the spread of the per-seed differences E - E_ref
     over the same mean reference). Unlike the mean of per-seed percentages it stays meaningful when one road is
-    net downhill and its energy ~0."""
+    net downhill and its energy ~0. Over |mean(E_ref)|: positive when E is the larger energy, also where the
+    reference's mean is negative (short downhill roads driven slowly regenerate more than they draw)."""
     ok = np.isfinite(energy) & np.isfinite(reference)
     if not ok.any():
         return (float("nan"),) * 4
-    scale = 100.0 / float(np.mean(reference[ok]))
+    scale = 100.0 / abs(float(np.mean(reference[ok])))
     mean, se, lo, hi = _mean_ci((energy[ok] - reference[ok]) * scale)
     return mean, se, lo, hi
 
@@ -725,12 +738,13 @@ def _optimum_fastsim_columns(results: list[dict[str, Any]], energy: np.ndarray, 
         e_opt = np.array([r.get("optimum_energy_J", np.nan) for r in results], float)
         mo, so, lo, hi = ratio_of_means_ci(energy, e_opt)
         out.update(vs_optimum_pct=mo, vs_optimum_1sigma_pct=so, vs_optimum_ci95_lo=lo, vs_optimum_ci95_hi=hi)
-    if model is not None and any("fastsim_energy_at_tref_J" in r for r in results):
-        fs_m = np.array([r.get("fastsim_energy_at_tref_J", {}).get(model, np.nan) for r in results], float)
-        fs_c = np.array([r.get("fastsim_cruise_energy_J", np.nan) for r in results], float)
-        mf, sf, lf, hf = ratio_of_means_ci(fs_m, fs_c)
-        out.update(fastsim_vs_cruise_pct=mf, fastsim_vs_cruise_1sigma_pct=sf, fastsim_vs_cruise_ci95_lo=lf,
-                   fastsim_vs_cruise_ci95_hi=hf)
+    for prefix in ("fastsim", "fastsim_efficiency"):
+        if model is not None and any(f"{prefix}_energy_at_tref_J" in r for r in results):
+            fs_m = np.array([r.get(f"{prefix}_energy_at_tref_J", {}).get(model, np.nan) for r in results], float)
+            fs_c = np.array([r.get(f"{prefix}_cruise_energy_J", np.nan) for r in results], float)
+            mf, sf, lf, hf = ratio_of_means_ci(fs_m, fs_c)
+            out.update({f"{prefix}_vs_cruise_pct": mf, f"{prefix}_vs_cruise_1sigma_pct": sf,
+                        f"{prefix}_vs_cruise_ci95_lo": lf, f"{prefix}_vs_cruise_ci95_hi": hf})
     return out
 
 

@@ -98,3 +98,53 @@ def fastsim_energy(t: np.ndarray, s: np.ndarray, v: np.ndarray, road, preset: st
     energy = float(np.sum(power[1:] * np.diff(grid)))  # a step's value holds over the step that ends at it
     return {"energy_J": energy, "speed_end": float(out["speed"][-1]),
             "trace_miss": float(np.max(np.abs(out["speed"] - speed)))}
+
+
+def fastsim_efficiency_power(wheel_power, v, preset: str = "bmw_i3") -> np.ndarray:
+    """Battery power [W] of FASTSim's efficiency chain in the mapping (module docstring) for the power the
+    drive-train delivers at the wheels, P_W [W] (< 0: regeneration), at vehicle speed v [m/s]:
+
+    - motor mechanical power P_M = P_W / eta_T (drive) or P_W eta_T (regeneration), eta_T FASTSim's transmission
+      efficiency (one constant);
+    - motor electrical power P_E = P_M / eta_M(x) (drive) or P_M eta_M(0) (regeneration), eta_M FASTSim's one
+      efficiency curve over the fraction x = P_M / P_M,max of the motor power (no dependence on speed or torque;
+      3.1 regenerates at its value at x = 0, 0.84 for this motor, at any power);
+    - the regeneration held to the preset's limit as :func:`limited_battery_power` does;
+    - plus the auxiliary power.
+
+    It is FASTSim's own chain (``tests/experiments/test_fastsim_check.py`` drives a trace through FASTSim and
+    through this), applied to any trace's wheel power: roadload's traces scored with FASTSim's efficiency."""
+    d = _mapped(preset)
+    em, eta_t = d["pt_type"]["BEV"]["em"], float(d["pt_type"]["BEV"]["transmission"]["eff_interp"])
+    curve = em["eff_interp_achieved"]["data"]
+    x_grid, eta_grid = (np.asarray(curve[k]["data"] if k == "values" else curve[k][0]["data"], float)
+                        for k in ("grid", "values"))
+    wheel_power = np.asarray(wheel_power, float)
+    mech = np.where(wheel_power > 0, wheel_power / eta_t, wheel_power * eta_t)
+    # regeneration at the curve's value at x = 0 whatever the power: FASTSim 3.1 looks the efficiency up at the
+    # fraction of the propulsion output, which is 0 while regenerating (P_E / P_M = 0.840 in every regenerating
+    # step of a hilly run up to -57 kW)
+    eta_m = np.interp(np.minimum(np.maximum(mech, 0.0) / float(em["pwr_out_max_watts"]), 1.0), x_grid, eta_grid)
+    elec = np.where(mech > 0, mech / eta_m, mech * eta_m)
+    out = {"source_mech": mech, "motor_electrical": elec, "battery_electrical": elec + float(d["pwr_aux_base_watts"])}
+    return limited_battery_power(out, regeneration_limit(preset, v))
+
+
+def roadload_trace_fastsim_efficiency(truth: np.ndarray, start: float, end: float, preset: str = "bmw_i3"
+                                      ) -> dict[str, float]:
+    """A roadload run scored twice from its simulator truth log (rows = 10 ms substeps, columns
+    ``roadload.envs.TRUTH_LOG_COLUMNS``) between positions ``start`` and ``end`` [m]: roadload's own source energy
+    [J] and the same wheel power through FASTSim's efficiency chain (:func:`fastsim_efficiency_power`). The wheel
+    power of the drive-train is P_W = (T_R / r_W + F_B) v: the rim torque T_R (tractive force and wheel inertia)
+    less the friction brakes' share F_B [N]."""
+    from roadload.envs import TRUTH_LOG_COLUMNS
+
+    col = {name: truth[:, i] for i, name in enumerate(TRUTH_LOG_COLUMNS)}
+    radius = float(get_preset(preset).tires.dynamic_radius)
+    keep = (col["POS"] >= start) & (col["POS"] <= end)
+    dt = np.diff(col["T"], prepend=col["T"][0] - (col["T"][1] - col["T"][0]))[keep]
+    wheel = ((col["RIM"] / radius + col["FBRAKE"]) * col["V"])[keep]
+    battery = fastsim_efficiency_power(wheel, col["V"][keep], preset)
+    return {"roadload_J": float(np.sum(col["PSRC"][keep] * dt)), "fastsim_efficiency_J": float(np.sum(battery * dt)),
+            "wheel_drive_J": float(np.sum(np.maximum(wheel, 0) * dt)),
+            "wheel_regeneration_J": float(np.sum(np.minimum(wheel, 0) * dt))}

@@ -168,10 +168,11 @@ def headline_markdown(summary: pd.DataFrame, failures: list[str]) -> str:
         if "vs_optimum_pct" in summary:
             rows[-1]["vs the optimum"] = format_difference(r.vs_optimum_pct, r.vs_optimum_1sigma_pct,
                                                            r.vs_optimum_ci95_lo, r.vs_optimum_ci95_hi)
-        if "fastsim_vs_cruise_pct" in summary:
-            rows[-1]["FASTSim: vs cruise control"] = format_difference(
-                r.fastsim_vs_cruise_pct, r.fastsim_vs_cruise_1sigma_pct, r.fastsim_vs_cruise_ci95_lo,
-                r.fastsim_vs_cruise_ci95_hi)
+        for prefix, column in (("fastsim_efficiency", "roadload's wheel power, FASTSim's efficiency: vs cruise "
+                                                      "control"), ("fastsim", "FASTSim: vs cruise control")):
+            if f"{prefix}_vs_cruise_pct" in summary:
+                rows[-1][column] = format_difference(*(r[f"{prefix}_vs_cruise_{k}"] for k in (
+                    "pct", "1sigma_pct", "ci95_lo", "ci95_hi")))
     md = ["Energy at the source at exactly the cruise-control trip time (joint local fit over >= 3 time weights "
           "per model), paired per seed (same road, seed and plant for every force model); mean [95 % CI] "
           "(1σ = standard error of the paired mean = the resolution). 'not resolved': the CI contains 0.", "",

@@ -2,10 +2,11 @@
 
 Per (vehicle case, road, condition, seed) one task drives every controller once on the same road, seed and plant
 (roadload's simulator): cruise control, the truck's speed-band cruise, the human-like driver, the MPC with each
-force model, and trained RL policies (PPO / SAC in EcoDrive-v0, whose plant is the same simulator). For each run
-the full-route optimum (:mod:`roadload.controllers.optimum`: perfect knowledge, the oracle's parameters, the MPC's
-comfort limits) is solved for that run's trip time and arrival speed, from the speed the optimum's drive has at the
-segment start, and driven on the same plant by :class:`~roadload.controllers.optimum.OptimumTracker`:
+force model, and trained RL policies (PPO / SAC in EcoDrive-v0, whose plant is the same simulator, driving the
+task's road: :func:`policy_episode`). For each run the full-route optimum (:mod:`roadload.controllers.optimum`:
+perfect knowledge, the oracle's parameters, the MPC's comfort limits) is solved for that run's trip time and arrival
+speed, from the speed the optimum's drive has at the segment start, and driven on the same plant by
+:class:`~roadload.controllers.optimum.OptimumTracker`:
 
     excess = (E_run + dKE_start / eta_i) / E_opt(T_run, v_arr,run) - 1
 
@@ -97,7 +98,8 @@ class OptimumTask:
             raise OptimumBenchmarkError(f"warmup: a distance >= 0 m, got {self.warmup}")
         rl = [c for c in self.controllers if c in ("ppo", "sac")]
         if rl and (VEHICLE_CASES[self.case].truck or self.warmup > 0):
-            raise OptimumBenchmarkError(f"{rl}: RL policies drive the car's EcoDrive-v0 routes only (no warm-up)")
+            raise OptimumBenchmarkError(f"{rl}: RL policies drive the car only (EcoDrive-v0's bmw_i3, from "
+                                        f"standstill: no warm-up)")
 
 
 def _settings(task: OptimumTask, controller: str) -> DriveSettings:
@@ -123,10 +125,37 @@ def _settings(task: OptimumTask, controller: str) -> DriveSettings:
     return settings if task.replan_period is None else replace(settings, replan_period=task.replan_period)
 
 
+POLICY_MIN_MEAN_SPEED = 2.0
+"""[m/s] A policy's episode on a benchmark road is cut at road length / this + 60 s (EcoDrive-v0 cuts at twice its
+schedule time + 30 s, where a policy that coasts through 3 km of motorway from 23 m/s is cut 10 m before the end;
+the time limit is not in the observation, so it does not change how the policy drives)."""
+
+
+def policy_episode(policy, env_config: dict[str, Any], road, seed: int) -> dict[str, Any]:
+    """One episode of EcoDrive-v0 driven by ``policy(obs) -> action`` on the benchmark's ``road`` (any car road:
+    hilly, city, motorway_short, route), not on a road of EcoDrive-v0's own generator: the road is written to a
+    profile file and the env's route table (preview of grade, curvature, speed limits, stops, the schedule) is
+    built from it, the rest of the env (observation, action mapping, speed shield, plant) as the policy learnt it.
+    Returns the run metrics in the closed loop's names (segment = the whole road) plus the stop lines crossed
+    faster than the env's stop_speed."""
+    import tempfile
+
+    from roadload.experiments.rl.rollouts import run_policy
+    from roadload.road_profiles import save_profile
+
+    with tempfile.TemporaryDirectory(prefix="roadload-policy-road-") as tmp:
+        path = save_profile(road, Path(tmp) / "road.json")
+        m, _ = run_policy(policy, {**env_config, "road": str(path), "route_length": road.length,
+                                   "time_limit": road.length / POLICY_MIN_MEAN_SPEED + 60.0}, seed)
+    return {"segment_time": m["arrival_time"], "segment_energy_J": m["arrival_energy_J"],
+            "segment_start_speed": 0.0, "arrival_speed": m["arrival_speed"], "arrived": m["arrived"],
+            "speed_violations": m["speed_violations"], "stop_violations": m["stop_violations"]}
+
+
 def _policy_run(task: OptimumTask, algo: str, road) -> dict[str, Any]:
-    """One episode of a trained policy in EcoDrive-v0 on the task's route: the run metrics in the closed loop's
-    names (segment = the whole route)."""
-    from roadload.experiments.rl.rollouts import run_policy, sb3_policy
+    """One episode of the trained policy ``algo`` of ``task.policies`` on the task's road
+    (:func:`policy_episode`), in the env configuration it was trained with and the task's condition."""
+    from roadload.experiments.rl.rollouts import sb3_policy
     from roadload.experiments.rl.training import load_policy
 
     folder = Path(task.policies or "")
@@ -136,13 +165,9 @@ def _policy_run(task: OptimumTask, algo: str, road) -> dict[str, Any]:
                                     f"{algo} --out DIR` and pass --policies DIR)")
     meta_path = folder / f"{algo}_ecodrive.json"
     env_config = json.loads(meta_path.read_text()).get("env_config", {}) if meta_path.is_file() else {}
-    env_config = {**env_config, "road": "hilly", "route_length": road.length}
     if CONDITIONS[task.condition] is not None:  # nominal: the env's own default (no effects)
         env_config["effects"] = CONDITIONS[task.condition]
-    m, _ = run_policy(sb3_policy(load_policy(path)), env_config, task.seed)
-    return {"segment_time": m["arrival_time"], "segment_energy_J": m["arrival_energy_J"],
-            "segment_start_speed": 0.0, "arrival_speed": m["arrival_speed"], "arrived": m["arrived"],
-            "speed_violations": m["speed_violations"]}
+    return policy_episode(sb3_policy(load_policy(path)), env_config, road, task.seed)
 
 
 def benchmark_road(name: str, seed: int, warmup: float = 0.0):
@@ -176,6 +201,13 @@ def run_optimum_task(task: OptimumTask) -> dict[str, Any]:
                 ).inertial_mass
         else:
             m = run(_settings(task, controller))
+        if m.get("stop_violations"):  # EcoDrive-v0 prices a stop line crossed too fast, it has no stop and dwell
+            rows.append({"vehicle": task.case, "road": task.road, "controller": controller, "seed": task.seed,
+                         "condition": task.condition, "arrived": bool(m.get("arrived")), "time_s": m["segment_time"],
+                         "energy_raw_J": m["segment_energy_J"], "stop_violations": m["stop_violations"],
+                         "optimum_status": f"not comparable: crossed {m['stop_violations']} stop line(s) faster "
+                                           f"than EcoDrive-v0's stop_speed; the optimum stops and dwells at each"})
+            continue
         if not (m.get("arrived", False) and math.isfinite(m["segment_time"])):
             rows.append({"vehicle": task.case, "road": task.road, "controller": controller + task.label,
                          "seed": task.seed,
@@ -189,7 +221,8 @@ def run_optimum_task(task: OptimumTask) -> dict[str, Any]:
                     "condition": task.condition, "arrived": True, "time_s": m["segment_time"],
                     "energy_raw_J": m["segment_energy_J"], "arrival_speed": m["arrival_speed"],
                     "start_speed": m["segment_start_speed"], "speed_violations": m.get("speed_violations"),
-                    **online_columns(m.get("online"), task.warmup)}
+                    **online_columns(m.get("online"), task.warmup),
+                    **({"stop_violations": m["stop_violations"]} if "stop_violations" in m else {})}
         try:
             o = run(opt_drive)
         except (ControllerError, OptimumError) as exc:  # e.g. a driver faster than the limits and comfort allow
@@ -317,8 +350,6 @@ def optimum_tasks(cases: dict[str, list[str]], seeds: int, first_seed: dict[str,
             for road in roads:
                 ctl = (controllers or {}).get(case) or (TRUCK_CONTROLLERS if VEHICLE_CASES[case].truck
                                                          else CAR_CONTROLLERS)
-                if road != "route":
-                    ctl = tuple(c for c in ctl if c not in ("ppo", "sac"))
                 out.append(OptimumTask(case, road, first.get(road, 0) + i, controllers=ctl, **common))
     return out
 

@@ -32,7 +32,9 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                                         "cruise_band, human, mpc:oracle, mpc:abc, mpc:online); also mpc:online_wind; "
                                         "an online model's estimator options after '@' (mpc:online_wind@RRLM+cusum)"),
         policies: Path = typer.Option(None, help="folder with ppo_ecodrive.zip / sac_ecodrive.zip from `roadload "
-                                      "train --out DIR` (without it the car runs no RL policy)"),
+                                      "train --out DIR` (without it the car runs no RL policy); the policy drives "
+                                      "each car road of the benchmark in EcoDrive-v0 (a run that crosses a stop "
+                                      "line faster than the env's stop_speed is left out of the excess)"),
         condition: str = typer.Option("nominal", help="car condition (see benchmark controllers)"),
         truck_warmup: float = typer.Option(2000.0, help="trucks: warm-up [m] before the measured segment, driven "
                                            "by cruise control for the MPC runs and the optimum"),
@@ -43,7 +45,7 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         dp_step: float = typer.Option(0.05, help="EV: speed grid [m/s] of the dynamic-programming cross-check "
                                       "(0: off)"),
         quick: bool = typer.Option(False, "--quick", help="tiny run: car, 2 seeds on a 1.2 km road, cruise "
-                                   "control and the oracle MPC"),
+                                   "control and the oracle MPC (and the policies of --policies)"),
         episode_cost: bool = typer.Option(False, "--episode-cost", help="the RL episode's cost E + lambda T on the "
                                           "EcoDrive-v0 routes: the policies of --policies, the MPC (default, and with "
                                           "the route end in its horizon) and the optimum of that cost"),
@@ -81,7 +83,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         if policies is not None and not policies.is_dir():
             fail(f"--policies: {policies} is not a folder (train with `roadload train --out DIR`)")
         if quick:
-            cases, seeds, ctl, dp_step = ["car"], 2, QUICK_CONTROLLERS, 0.1 if dp_step else 0.0
+            rl = tuple(a for a in ("ppo", "sac") if policies is not None and (policies / f"{a}_ecodrive.zip").is_file())
+            cases, seeds, ctl, dp_step = ["car"], 2, QUICK_CONTROLLERS + rl, 0.1 if dp_step else 0.0
             roads = {"car": ["hilly_short"]}
         else:
             roads = {c: [r.strip() for r in (truck_roads if VEHICLE_CASES[c].truck else car_roads).split(",")

@@ -61,3 +61,47 @@ def test_initial_charge_is_checked():
     t = np.arange(0.0, 5.01, 0.1)
     with pytest.raises(WorldError, match="initial_soc"):
         run_fastsim(fastsim_vehicle(), t, np.full_like(t, 10.0), np.zeros_like(t), initial_soc=1.2)
+
+
+def test_fastsims_efficiency_chain_reproduces_fastsims_battery_power():
+    """The chain that scores roadload's traces with FASTSim's efficiency gives FASTSim's own battery power for
+    FASTSim's wheel power: drive, a 6 % climb, and braking above the regeneration limit."""
+    from roadload.experiments.fastsim_check import fastsim_efficiency_power
+
+    t = np.arange(0.0, 80.01, 0.1)
+    v = np.interp(t, [0, 20, 30, 40, 80], [0, 30, 30, 5, 15])
+    grade = np.where((t > 45) & (t < 70), 0.06, 0.0)
+    out = run_fastsim(fastsim_vehicle(), t, v, grade, initial_soc=INITIAL_SOC)
+    limited = limited_battery_power(out, regeneration_limit("bmw_i3", out["speed"]))
+    chain = fastsim_efficiency_power(out["transmission_out"], out["speed"])
+    assert out["transmission_out"].max() > 60e3 and out["source_mech"].min() < -80e3
+    np.testing.assert_allclose(chain[1:], limited[1:], rtol=1e-9, atol=1e-6)
+    # FASTSim 3.1 regenerates at its curve's value at zero power fraction (0.84) whatever the power
+    regen = out["source_mech"] < -1e3
+    np.testing.assert_allclose(out["motor_electrical"][regen] / out["source_mech"][regen], 0.84, rtol=1e-9)
+
+
+def test_roadload_trace_scored_with_fastsims_efficiency():
+    """An analytic trace: 20 kW at the wheels for 10 s, then 10 kW regenerated for 10 s, at 20 m/s."""
+    from roadload.envs import TRUTH_LOG_COLUMNS
+    from roadload.experiments.fastsim_check import roadload_trace_fastsim_efficiency
+
+    n, r = 2000, 0.35
+    truth = np.zeros((n, len(TRUTH_LOG_COLUMNS)))
+    col = {c: i for i, c in enumerate(TRUTH_LOG_COLUMNS)}
+    truth[:, col["T"]] = np.arange(n) * 0.01
+    truth[:, col["V"]] = 20.0
+    truth[:, col["POS"]] = 20.0 * truth[:, col["T"]]
+    wheel = np.where(np.arange(n) < n // 2, 20e3, -10e3)
+    # the regenerating half brakes 2 kW of it by friction: rim torque = -12 kW / v * r, friction 2 kW / v
+    truth[:, col["RIM"]] = np.where(wheel > 0, wheel, wheel - 2e3) / 20.0 * r
+    truth[:, col["FBRAKE"]] = np.where(wheel > 0, 0.0, 2e3 / 20.0)
+    truth[:, col["PSRC"]] = 1e3
+    out = roadload_trace_fastsim_efficiency(truth, 0.0, 1e9)
+    eta_t, aux = 0.92, 300.0
+    drive_eta = np.interp(20e3 / eta_t / 125e3, [0.1, 0.2], [0.92, 0.94])
+    expected = 10.0 * (20e3 / eta_t / drive_eta + aux) + 10.0 * (-10e3 * eta_t * 0.84 + aux)
+    assert out["fastsim_efficiency_J"] == pytest.approx(expected, rel=1e-3)
+    assert out["roadload_J"] == pytest.approx(20e3, rel=1e-3)
+    assert out["wheel_drive_J"] == pytest.approx(200e3, rel=1e-3)
+    assert out["wheel_regeneration_J"] == pytest.approx(-100e3, rel=1e-3)

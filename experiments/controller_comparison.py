@@ -748,6 +748,37 @@ def _optimum_fastsim_columns(results: list[dict[str, Any]], energy: np.ndarray, 
     return out
 
 
+FASTSIM_SCORINGS = {"roadload": ("energy_at_tref_J", "cruise_energy_J"),
+                    "fastsim_efficiency": ("fastsim_efficiency_energy_at_tref_J", "fastsim_efficiency_cruise_energy_J"),
+                    "fastsim": ("fastsim_energy_at_tref_J", "fastsim_cruise_energy_J")}
+"""The three scorings of the same runs in the FASTSim cross-check: roadload; roadload's wheel power through FASTSim's
+efficiency chain (experiments.fastsim_check.fastsim_efficiency_power); FASTSim: (MPC energy, cruise energy) keys."""
+
+
+def fastsim_per_seed(results: list[dict[str, Any]], model: str = "oracle") -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The MPC's (``model``) saving against cruise control at the cruise time per seed in the three scorings of
+    FASTSIM_SCORINGS [%], and the fleet totals with the gaps between them: each saving 100 sum(E_m - E_c) /
+    |sum E_c|, each gap (a - b) the mean of the per-seed d_i = 100 (dE_a,i / |mean E_c,a| - dE_b,i / |mean E_c,b|)
+    with its 1-sigma and Student-t 95 % CI (so the gap's mean is exactly the difference of the two savings)."""
+    rs = [r for r in results if "fastsim_energy_at_tref_J" in r and model in r["energy_at_tref_J"]]
+    if not rs:
+        return pd.DataFrame(), pd.DataFrame()
+    seeds = [r["task"]["seed"] for r in rs]
+    diff, scale, table = {}, {}, {"seed": seeds}
+    for name, (mpc_key, cruise_key) in FASTSIM_SCORINGS.items():
+        e_m = np.array([r[mpc_key].get(model, np.nan) for r in rs], float)
+        e_c = np.array([r[cruise_key] for r in rs], float)
+        diff[name], scale[name] = e_m - e_c, 100.0 / abs(float(np.mean(e_c)))
+        table[f"{name}_saving_pct"] = 100.0 * (e_m / e_c - 1.0)
+        table[f"{name}_cruise_kJ"], table[f"{name}_mpc_kJ"] = e_c / 1e3, e_m / 1e3
+    totals = [{"what": f"{name} saving", **dict(zip(("pct", "1sigma", "ci95_lo", "ci95_hi"),
+                                                       _mean_ci(diff[name] * scale[name])))} for name in diff]
+    for a, b in (("fastsim", "roadload"), ("fastsim_efficiency", "roadload"), ("fastsim", "fastsim_efficiency")):
+        totals.append({"what": f"{a} - {b} [pp]", **dict(zip(("pct", "1sigma", "ci95_lo", "ci95_hi"), _mean_ci(
+            diff[a] * scale[a] - diff[b] * scale[b])))})
+    return pd.DataFrame(table), pd.DataFrame(totals)
+
+
 def format_difference(mean: float, se: float, lo: float, hi: float) -> str:
     """'+0.42 % [+0.10, +0.74] (1σ 0.15)' or 'not resolved (-0.05 % [-0.30, +0.20], 1σ 0.12)'."""
     if not np.isfinite(mean):

@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from roadload.experiments.controller_comparison import (VEHICLE_CASES, PairedTask, format_difference,
+from roadload.experiments.controller_comparison import (VEHICLE_CASES, PairedTask, fastsim_per_seed,
+                                                        format_difference,
                                                         other_metric_results, paired_summary, run_paired_task)
 from dataclasses import replace
 
@@ -117,6 +118,10 @@ def run_paired(tasks: list[PairedTask], out: Path, scheduler: str | None = None,
     other = other_metric_results(results)  # the same runs with the other metric (before/after resolution)
     write_text(out / "summary_other_metric.csv", (paired_summary(other) if other else pd.DataFrame()).to_csv(
         index=False))
+    per_seed, totals = fastsim_per_seed(results)
+    if len(per_seed):  # the FASTSim cross-check: the three scorings of the same runs, per seed and as gaps
+        write_text(out / "fastsim_per_seed.csv", per_seed.to_csv(index=False))
+        write_text(out / "fastsim_gaps.csv", totals.to_csv(index=False))
     return summary, failures
 
 

@@ -114,3 +114,26 @@ def test_refit_results_recovers_levels_and_books_the_kinetic_energy_offset():
     assert raw["energy_at_tref_J"]["oracle"] == pytest.approx(1.0e6 + 7.0, rel=2e-4)
     with pytest.raises(ValueError, match="metric"):
         refit_results([r], "kwh")
+
+
+def test_fastsim_cross_check_gaps_are_the_differences_of_the_savings():
+    from roadload.experiments.controller_comparison import fastsim_per_seed
+
+    def result(seed, rl, eff, fs):  # (cruise, MPC) energies [J] in the three scorings
+        return {"task": {"seed": seed}, "cruise_energy_J": rl[0], "energy_at_tref_J": {"oracle": rl[1]},
+                "fastsim_efficiency_cruise_energy_J": eff[0],
+                "fastsim_efficiency_energy_at_tref_J": {"oracle": eff[1]},
+                "fastsim_cruise_energy_J": fs[0], "fastsim_energy_at_tref_J": {"oracle": fs[1]}}
+
+    results = [result(0, (1000, 900), (1000, 860), (950, 810)), result(1, (2000, 1900), (2000, 1880),
+                                                                      (1900, 1790)), result(2, (1500, 1400),
+                                                                                            (1500, 1350), (1400, 1240))]
+    per_seed, totals = fastsim_per_seed(results)
+    assert per_seed["roadload_saving_pct"].tolist() == pytest.approx([-10.0, -5.0, -100 / 15])
+    t = totals.set_index("what")["pct"]
+    assert t["roadload saving"] == pytest.approx(-300 / 4500 * 100)  # fleet total: sum dE / sum E_cruise
+    assert t["fastsim_efficiency saving"] == pytest.approx(-410 / 4500 * 100)
+    assert t["fastsim saving"] == pytest.approx(-410 / 4250 * 100)
+    assert t["fastsim - roadload [pp]"] == pytest.approx(t["fastsim saving"] - t["roadload saving"])
+    assert t["fastsim - fastsim_efficiency [pp]"] == pytest.approx(t["fastsim saving"]
+                                                                   - t["fastsim_efficiency saving"])

@@ -136,7 +136,8 @@ def roadload_trace_fastsim_efficiency(truth: np.ndarray, start: float, end: floa
     ``roadload.envs.TRUTH_LOG_COLUMNS``) between positions ``start`` and ``end`` [m]: roadload's own source energy
     [J] and the same wheel power through FASTSim's efficiency chain (:func:`fastsim_efficiency_power`). The wheel
     power of the drive-train is P_W = (T_R / r_W + F_B) v: the rim torque T_R (tractive force and wheel inertia)
-    less the friction brakes' share F_B [N]."""
+    less the friction brakes' share F_B [N]; also both split into the steps where the drive-train drives
+    (P_W > 0) and the rest (regeneration, coasting)."""
     from roadload.envs import TRUTH_LOG_COLUMNS
 
     col = {name: truth[:, i] for i, name in enumerate(TRUTH_LOG_COLUMNS)}
@@ -145,6 +146,12 @@ def roadload_trace_fastsim_efficiency(truth: np.ndarray, start: float, end: floa
     dt = np.diff(col["T"], prepend=col["T"][0] - (col["T"][1] - col["T"][0]))[keep]
     wheel = ((col["RIM"] / radius + col["FBRAKE"]) * col["V"])[keep]
     battery = fastsim_efficiency_power(wheel, col["V"][keep], preset)
-    return {"roadload_J": float(np.sum(col["PSRC"][keep] * dt)), "fastsim_efficiency_J": float(np.sum(battery * dt)),
+    source, driving = col["PSRC"][keep], wheel > 0
+    return {"roadload_J": float(np.sum(source * dt)), "fastsim_efficiency_J": float(np.sum(battery * dt)),
             "wheel_drive_J": float(np.sum(np.maximum(wheel, 0) * dt)),
-            "wheel_regeneration_J": float(np.sum(np.minimum(wheel, 0) * dt))}
+            "wheel_regeneration_J": float(np.sum(np.minimum(wheel, 0) * dt)),
+            # the same split by what the drive-train does: drives (P_W > 0), or regenerates / coasts
+            "roadload_driving_J": float(np.sum((source * dt)[driving])),
+            "fastsim_efficiency_driving_J": float(np.sum((battery * dt)[driving])),
+            "roadload_not_driving_J": float(np.sum((source * dt)[~driving])),
+            "fastsim_efficiency_not_driving_J": float(np.sum((battery * dt)[~driving]))}

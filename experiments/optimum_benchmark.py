@@ -205,6 +205,7 @@ def run_optimum_task(task: OptimumTask) -> dict[str, Any]:
             rows.append({"vehicle": task.case, "road": task.road, "controller": controller, "seed": task.seed,
                          "condition": task.condition, "arrived": bool(m.get("arrived")), "time_s": m["segment_time"],
                          "energy_raw_J": m["segment_energy_J"], "stop_violations": m["stop_violations"],
+                         "speed_violations": m.get("speed_violations"),
                          "optimum_status": f"not comparable: crossed {m['stop_violations']} stop line(s) faster "
                                            f"than EcoDrive-v0's stop_speed; the optimum stops and dwells at each"})
             continue

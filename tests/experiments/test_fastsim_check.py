@@ -105,3 +105,5 @@ def test_roadload_trace_scored_with_fastsims_efficiency():
     assert out["roadload_J"] == pytest.approx(20e3, rel=1e-3)
     assert out["wheel_drive_J"] == pytest.approx(200e3, rel=1e-3)
     assert out["wheel_regeneration_J"] == pytest.approx(-100e3, rel=1e-3)
+    assert out["fastsim_efficiency_driving_J"] == pytest.approx(10.0 * (20e3 / eta_t / drive_eta + aux), rel=1e-3)
+    assert out["roadload_driving_J"] + out["roadload_not_driving_J"] == pytest.approx(out["roadload_J"])

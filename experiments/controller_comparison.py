@@ -764,7 +764,9 @@ def fastsim_per_seed(results: list[dict[str, Any]], model: str = "oracle") -> tu
     if not rs:
         return pd.DataFrame(), pd.DataFrame()
     seeds = [r["task"]["seed"] for r in rs]
-    diff, scale, table = {}, {}, {"seed": seeds}
+    diff: dict[str, np.ndarray] = {}
+    scale: dict[str, float] = {}
+    table: dict[str, Any] = {"seed": seeds}
     for name, (mpc_key, cruise_key) in FASTSIM_SCORINGS.items():
         e_m = np.array([r[mpc_key].get(model, np.nan) for r in rs], float)
         e_c = np.array([r[cruise_key] for r in rs], float)

@@ -232,7 +232,7 @@ def shield_cap(veh, K):
     return cap
 
 
-@kernel(refcount=False)
+@kernel(forceinline=True, refcount=False)
 def _observe(i, ego, tr, c):
     """Stage 'observation' of sub-env i -> tr.obs[i] (float32): the Kinematics block, then the powertrain block
     (value / scale, clipped to [-5, 5]), the route table read at the ego's position first."""
@@ -272,7 +272,7 @@ def _observe(i, ego, tr, c):
         out[j] = np.float32(-5.0 if o < -5.0 else (5.0 if o > 5.0 else o))
 
 
-@kernel(refcount=False)
+@kernel(forceinline=True, refcount=False)
 def _gather_info(i, ego, tr, with_terms, info):
     """Stage 'info' of sub-env i -> column i of the info block (INFO_KEYS, then the terms, zero without)."""
     t, s, v, a, energy, mass, climb, gear, omega = ego_state(ego, i)
@@ -292,7 +292,7 @@ def _gather_info(i, ego, tr, with_terms, info):
         info[I_TERMS + k, i] = terms[k] if with_terms else 0.0
 
 
-@kernel(refcount=False)
+@kernel(forceinline=True, refcount=False)
 def _frame(i, ui, ego, tr, c, work):
     """One traffic frame of sub-env i under the command ui: the traffic decides (MOBIL, IDM, steering; the ego
     steers to its target lane); the ego's powertrain runs n_sub substeps under the wheel force of ui at the

@@ -255,7 +255,7 @@ def wheel_force(u, v, F):
     return u * min(F[0], F[1] / max(v, 1.0)) if u >= 0.0 else u * F[2]
 
 
-@kernel(refcount=False)
+@kernel(forceinline=True, refcount=False)
 def ego_advance(ego, i, u, n_sub):
     """n_sub substeps (10 ms each) of ego i under the wheel force of the normalised command u at its current
     speed (regen first, friction brakes for the rest), the built-in steering law keeping it on its road's

@@ -97,7 +97,11 @@ def not_zero(x):
 
 @kernel(forceinline=True, refcount=False)
 def wrap_to_pi(x):
-    """x wrapped into [-pi, pi) (floored modulo, as Python's %)."""
+    """x wrapped into [-pi, pi) (floored modulo, as Python's %). For |x| <= 1, x + pi lies in (0, 2 pi), where the
+    floored modulo returns its argument exactly (fmod is exact and needs no sign fix): (x + pi) - pi, the same
+    bits without the modulo (the steering law's heading errors are all in this range)."""
+    if -1.0 <= x <= 1.0:
+        return (x + math.pi) - math.pi
     return ((x + math.pi) % (2.0 * math.pi)) - math.pi
 
 
@@ -109,19 +113,58 @@ def _clip(x, lo, hi):
 @kernel(forceinline=True, refcount=False)
 def cos_difference(a, b):
     """cos(a - b), without the call for equal angles (cos 0 = 1 exactly: both headings 0 on a straight lane)."""
-    return 1.0 if a == b else math.cos(a - b)
+    return 1.0 if a == b else cos_small(a - b)
 
 
 @kernel(forceinline=True, refcount=False)
 def cos_heading(h):
     """cos h, without the call on a straight heading (cos 0 = 1)."""
-    return 1.0 if h == 0.0 else math.cos(h)
+    return cos_small(h)
 
 
 @kernel(forceinline=True, refcount=False)
 def sin_heading(h):
     """sin h, without the call on a straight heading (sin +-0 = +-0, h itself)."""
-    return h if h == 0.0 else math.sin(h)
+    return sin_small(h)
+
+
+SMALL_ANGLE = 2.0 ** -30
+"""|x| [rad] below which sin x, tan x, asin x, atan x round to x and cos x to 1 (the neglected terms, x^3 / 6 or
+x^3 / 3 and x^2 / 2, are below 2^-58 of the result, far under half its last bit); libm returns exactly these values
+there (glibc: its own small-argument branches, taken up to 2^-27 and beyond; tests/gym/test_traffic_model.py
+compares every function bit for bit over that range). A vehicle that has changed lanes keeps a heading and an
+offset from its centre line of ~1e-16 for the rest of the episode (the steering law quantises to a pi's last bit),
+a quarter of the traffic: its steering and bicycle step take these branches instead of nine libm calls."""
+
+
+@kernel(forceinline=True, refcount=False)
+def sin_small(x):
+    """sin x, without the call where it rounds to x (|x| < SMALL_ANGLE)."""
+    return x if abs(x) < SMALL_ANGLE else math.sin(x)
+
+
+@kernel(forceinline=True, refcount=False)
+def cos_small(x):
+    """cos x, without the call where it rounds to 1 (|x| < SMALL_ANGLE)."""
+    return 1.0 if abs(x) < SMALL_ANGLE else math.cos(x)
+
+
+@kernel(forceinline=True, refcount=False)
+def tan_small(x):
+    """tan x, without the call where it rounds to x (|x| < SMALL_ANGLE)."""
+    return x if abs(x) < SMALL_ANGLE else math.tan(x)
+
+
+@kernel(forceinline=True, refcount=False)
+def asin_small(x):
+    """asin x, without the call where it rounds to x (|x| < SMALL_ANGLE)."""
+    return x if abs(x) < SMALL_ANGLE else math.asin(x)
+
+
+@kernel(forceinline=True, refcount=False)
+def atan_small(x):
+    """atan x, without the call where it rounds to x (|x| < SMALL_ANGLE)."""
+    return x if abs(x) < SMALL_ANGLE else math.atan(x)
 
 
 @kernel(forceinline=True, refcount=False)
@@ -264,6 +307,14 @@ def mobil(veh, members, counts, beh, limit, j, lane):
     return gain >= beh[B_MIN_GAIN]
 
 
+@kernel(forceinline=True, refcount=False)
+def lane_policy_due(veh, beh, j):
+    """Whether :func:`change_lane_policy` can do anything for vehicle j this frame: it is changing lanes (the
+    abort test runs), or its decision timer has passed the delay (MOBIL runs). On ~9 frames in 10 of a vehicle
+    neither holds, and the policy returns at once: this test spares the call."""
+    return int(veh[j, V_LANE]) != int(veh[j, V_TARGET_LANE]) or beh[B_DELAY] < veh[j, V_TIMER]
+
+
 @kernel(refcount=False)
 def change_lane_policy(veh, m, members, counts, beh, lanes, limit, j):
     """IDMVehicle.change_lane_policy for vehicle j: during a lane change, abort it when another vehicle heads
@@ -304,15 +355,15 @@ def steering_control(veh, j):
     if lateral == 0.0 and veh[j, V_HEADING] == 0.0:  # on the centre line, straight: every stage below gives 0
         return 0.0
     lateral_speed_command = -KP_LATERAL * lateral
-    heading_command = math.asin(_clip(lateral_speed_command / not_zero(v), -1.0, 1.0))
+    heading_command = asin_small(_clip(lateral_speed_command / not_zero(v), -1.0, 1.0))
     heading_ref = _clip(heading_command, -math.pi / 4.0, math.pi / 4.0)
     heading_rate_command = KP_HEADING * wrap_to_pi(heading_ref - veh[j, V_HEADING])
-    slip = math.asin(_clip(LENGTH / 2.0 / not_zero(v) * heading_rate_command, -1.0, 1.0))
-    return _clip(math.atan(2.0 * math.tan(slip)), -MAX_STEERING, MAX_STEERING)
+    slip = asin_small(_clip(LENGTH / 2.0 / not_zero(v) * heading_rate_command, -1.0, 1.0))
+    return _clip(atan_small(2.0 * tan_small(slip)), -MAX_STEERING, MAX_STEERING)
 
 
 # --------------------------------------------------------------------------------------------- one frame
-@kernel(refcount=False)
+@kernel(forceinline=True, refcount=False)
 def traffic_act(veh, m, beh, geo, members, counts):
     """Decisions of one frame (Road.act), in row order: the lane index of the frame's positions (no vehicle moves
     while the traffic decides; :func:`index_lanes` -> members, counts); the ego (row 0) only steers towards its
@@ -326,7 +377,8 @@ def traffic_act(veh, m, beh, geo, members, counts):
     for j in range(1, m):
         if veh[j, V_CRASHED] > 0.5:
             continue
-        change_lane_policy(veh, m, members, counts, beh, lanes, limit, j)
+        if lane_policy_due(veh, beh, j):
+            change_lane_policy(veh, m, members, counts, beh, lanes, limit, j)
         veh[j, V_STEER] = steering_control(veh, j)
         own = int(veh[j, V_LANE])
         free = free_road_acceleration(veh, beh, veh[j, V_DELTA], limit, j)
@@ -348,10 +400,10 @@ def move(veh, j, lanes, dt, distance):
     if straight:
         veh[j, V_X] += distance
     else:
-        beta = math.atan(0.5 * math.tan(steer))
-        veh[j, V_X] += distance * math.cos(heading + beta)
-        veh[j, V_Y] += distance * math.sin(heading + beta)
-        veh[j, V_HEADING] += veh[j, V_SPEED] * math.sin(beta) / (LENGTH / 2.0) * dt
+        beta = atan_small(0.5 * tan_small(steer))
+        veh[j, V_X] += distance * cos_small(heading + beta)
+        veh[j, V_Y] += distance * sin_small(heading + beta)
+        veh[j, V_HEADING] += veh[j, V_SPEED] * sin_small(beta) / (LENGTH / 2.0) * dt
     if veh[j, V_IMPACT] > 0.5:
         veh[j, V_X] += veh[j, V_IMPACT_X]
         veh[j, V_Y] += veh[j, V_IMPACT_Y]
@@ -362,7 +414,7 @@ def move(veh, j, lanes, dt, distance):
         veh[j, V_LANE] = closest_lane(veh[j, V_Y], lanes)
 
 
-@kernel(refcount=False)
+@kernel(forceinline=True, refcount=False)
 def traffic_move(veh, m, geo, dt):
     """Kinematics of the traffic vehicles (rows 1..m-1) over one frame: the decision timer runs, then
     :func:`kinematic_step`."""
@@ -423,15 +475,23 @@ def _interval_distance(min_a, max_a, min_b, max_b):
     return min_b - max_a if min_a < min_b else min_a - max_b
 
 
+@kernel(forceinline=True, refcount=False)
+def within_reach(veh, a, b, dt):
+    """The sphere pre-check of :func:`rectangles_collide`: the centres of a and b are at most their half diagonals
+    plus a's travel v_a dt apart, sqrt(dx^2 + dy^2) <= sqrt(L^2 + W^2) + v_a dt (|dx| first: most pairs are far
+    along the road)."""
+    dx = veh[b, V_X] - veh[a, V_X]
+    dy = veh[b, V_Y] - veh[a, V_Y]
+    reach = math.sqrt(LENGTH * LENGTH + WIDTH * WIDTH) + veh[a, V_SPEED] * dt
+    return not (abs(dx) > reach or math.sqrt(dx * dx + dy * dy) > reach)
+
+
 @kernel(refcount=False)
 def rectangles_collide(veh, a, b, dt, work):
     """Separating-axis test of vehicles a and b (utils.are_polygons_intersecting): (intersecting now, intersecting
     after both move by their velocity x dt, the push-out vector (x, y) of the smaller overlap). A sphere
     pre-check skips pairs farther apart than their half diagonals plus a's travel."""
-    dx = veh[b, V_X] - veh[a, V_X]
-    dy = veh[b, V_Y] - veh[a, V_Y]
-    reach = math.sqrt(LENGTH * LENGTH + WIDTH * WIDTH) + veh[a, V_SPEED] * dt
-    if abs(dx) > reach or math.sqrt(dx * dx + dy * dy) > reach:  # |dx| first: most pairs are far along the road
+    if not within_reach(veh, a, b, dt):
         return False, False, 0.0, 0.0
     pa = work[0]
     pb = work[1]
@@ -484,13 +544,15 @@ def rectangles_collide(veh, a, b, dt, work):
     return intersecting, False, 0.0, 0.0
 
 
-@kernel(refcount=False)
+@kernel(forceinline=True, refcount=False)
 def ego_collisions(veh, m, dt, work):
     """The ego's collision test against every other vehicle (RoadObject.handle_collisions; the traffic does not
     test itself, as in highway-fast-v0 and EcoHighway-v0): overlapping now crashes both; overlapping within dt at
     their velocities pushes them apart by half the overlap each at the next frame, which crashes them then.
     Returns whether the ego is crashed."""
     for k in range(1, m):
+        if not within_reach(veh, 0, k, dt):  # the test's own pre-check, here to spare the call
+            continue
         now, soon, tx, ty = rectangles_collide(veh, 0, k, dt, work)
         if soon:
             veh[0, V_IMPACT] = 1.0

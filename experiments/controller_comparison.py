@@ -362,7 +362,10 @@ class _PairedRuns:
         self.points: dict[str, list[tuple[float, float]]] = {}
         self.points_other: dict[str, list[tuple[float, float]]] = {}
         self.fastsim_pts: dict[str, list[tuple[float, float]]] = {}
-        self.fastsim_efficiency_pts: dict[str, list[tuple[float, float]]] = {}
+        # roadload's wheel power through FASTSim's efficiency chain: everywhere ('fastsim_efficiency'), and only
+        # where the drive-train drives, roadload's own battery energy where it regenerates or coasts
+        self.efficiency_pts: dict[str, dict[str, list[tuple[float, float]]]] = {
+            "fastsim_efficiency": {}, "fastsim_efficiency_driving": {}}
 
     def run(self, settings: DriveSettings, label: str | None = None):
         """One closed-loop run; with ``task.fastsim`` its speed trace also through FASTSim 3 (labelled runs)."""
@@ -385,8 +388,10 @@ class _PairedRuns:
         # models' savings that is efficiency alone
         eff = roadload_trace_fastsim_efficiency(plant.sim.truth_log(), self.task.warmup, road.length)
         m["fastsim_efficiency_energy_net_J"] = eff["fastsim_efficiency_J"] + ke
-        self.fastsim_efficiency_pts.setdefault(label, []).append((m["segment_time"],
-                                                                  m["fastsim_efficiency_energy_net_J"]))
+        m["fastsim_efficiency_driving_energy_net_J"] = (eff["fastsim_efficiency_driving_J"]
+                                                        + eff["roadload_not_driving_J"] + ke)
+        for prefix, points in self.efficiency_pts.items():
+            points.setdefault(label, []).append((m["segment_time"], m[f"{prefix}_energy_net_J"]))
 
     def _point(self, m: dict[str, Any]) -> tuple[tuple[float, float], tuple[float, float]]:
         """(time [s], energy [J]) of a run in the task's metric and in the other one."""
@@ -494,9 +499,10 @@ class _PairedRuns:
 
     def fastsim_at(self, t_ref: float) -> dict[str, Any]:
         """The same joint local fit on FASTSim's energies of the same runs, and on roadload's wheel power through
-        FASTSim's efficiency chain (prefix ``fastsim_efficiency_``)."""
+        FASTSim's efficiency chain (prefix ``fastsim_efficiency_``; ``fastsim_efficiency_driving_``: only where the
+        drive-train drives)."""
         out: dict[str, Any] = {}
-        for prefix, points in (("fastsim", self.fastsim_pts), ("fastsim_efficiency", self.fastsim_efficiency_pts)):
+        for prefix, points in (("fastsim", self.fastsim_pts), *self.efficiency_pts.items()):
             shifted = {k: [(t, e + self.offset) for t, e in v] for k, v in points.items()}
             fs_fit = fit_energy_at_time({k: v for k, v in shifted.items() if k not in ("cruise", "human")}, t_ref)
             fs_cruise = fit_energy_at_time({"cruise": shifted.get("cruise", [])}, t_ref, window=0.08)
@@ -738,7 +744,7 @@ def _optimum_fastsim_columns(results: list[dict[str, Any]], energy: np.ndarray, 
         e_opt = np.array([r.get("optimum_energy_J", np.nan) for r in results], float)
         mo, so, lo, hi = ratio_of_means_ci(energy, e_opt)
         out.update(vs_optimum_pct=mo, vs_optimum_1sigma_pct=so, vs_optimum_ci95_lo=lo, vs_optimum_ci95_hi=hi)
-    for prefix in ("fastsim", "fastsim_efficiency"):
+    for prefix in ("fastsim", "fastsim_efficiency", "fastsim_efficiency_driving"):
         if model is not None and any(f"{prefix}_energy_at_tref_J" in r for r in results):
             fs_m = np.array([r.get(f"{prefix}_energy_at_tref_J", {}).get(model, np.nan) for r in results], float)
             fs_c = np.array([r.get(f"{prefix}_cruise_energy_J", np.nan) for r in results], float)
@@ -749,17 +755,21 @@ def _optimum_fastsim_columns(results: list[dict[str, Any]], energy: np.ndarray, 
 
 
 FASTSIM_SCORINGS = {"roadload": ("energy_at_tref_J", "cruise_energy_J"),
+                    "fastsim_efficiency_driving": ("fastsim_efficiency_driving_energy_at_tref_J",
+                                                   "fastsim_efficiency_driving_cruise_energy_J"),
                     "fastsim_efficiency": ("fastsim_efficiency_energy_at_tref_J", "fastsim_efficiency_cruise_energy_J"),
                     "fastsim": ("fastsim_energy_at_tref_J", "fastsim_cruise_energy_J")}
-"""The three scorings of the same runs in the FASTSim cross-check: roadload; roadload's wheel power through FASTSim's
-efficiency chain (experiments.fastsim_check.fastsim_efficiency_power); FASTSim: (MPC energy, cruise energy) keys."""
+"""The scorings of the same runs in the FASTSim cross-check: roadload; roadload's wheel power through FASTSim's
+efficiency chain (experiments.fastsim_check.fastsim_efficiency_power) only where the drive-train drives (roadload's
+own battery energy where it regenerates or coasts), and everywhere; FASTSim: (MPC energy, cruise energy) keys."""
 
 
 def fastsim_per_seed(results: list[dict[str, Any]], model: str = "oracle") -> tuple[pd.DataFrame, pd.DataFrame]:
-    """The MPC's (``model``) saving against cruise control at the cruise time per seed in the three scorings of
-    FASTSIM_SCORINGS [%], and the fleet totals with the gaps between them: each saving 100 sum(E_m - E_c) /
-    |sum E_c|, each gap (a - b) the mean of the per-seed d_i = 100 (dE_a,i / |mean E_c,a| - dE_b,i / |mean E_c,b|)
-    with its 1-sigma and Student-t 95 % CI (so the gap's mean is exactly the difference of the two savings)."""
+    """The MPC's (``model``) saving against cruise control at the cruise time per seed in each scoring of
+    FASTSIM_SCORINGS the results carry (runs stored before a scoring existed lack it) [%], and the fleet totals with
+    the gaps between them: each saving 100 sum(E_m - E_c) / |sum E_c|, each gap (a - b) the mean of the per-seed
+    d_i = 100 (dE_a,i / |mean E_c,a| - dE_b,i / |mean E_c,b|) with its 1-sigma and Student-t 95 % CI (so the gap's
+    mean is exactly the difference of the two savings)."""
     rs = [r for r in results if "fastsim_energy_at_tref_J" in r and model in r["energy_at_tref_J"]]
     if not rs:
         return pd.DataFrame(), pd.DataFrame()
@@ -768,6 +778,8 @@ def fastsim_per_seed(results: list[dict[str, Any]], model: str = "oracle") -> tu
     scale: dict[str, float] = {}
     table: dict[str, Any] = {"seed": seeds}
     for name, (mpc_key, cruise_key) in FASTSIM_SCORINGS.items():
+        if not all(mpc_key in r and cruise_key in r for r in rs):
+            continue
         e_m = np.array([r[mpc_key].get(model, np.nan) for r in rs], float)
         e_c = np.array([r[cruise_key] for r in rs], float)
         diff[name], scale[name] = e_m - e_c, 100.0 / abs(float(np.mean(e_c)))
@@ -775,7 +787,11 @@ def fastsim_per_seed(results: list[dict[str, Any]], model: str = "oracle") -> tu
         table[f"{name}_cruise_kJ"], table[f"{name}_mpc_kJ"] = e_c / 1e3, e_m / 1e3
     totals = [{"what": f"{name} saving", **dict(zip(("pct", "1sigma", "ci95_lo", "ci95_hi"),
                                                        _mean_ci(diff[name] * scale[name])))} for name in diff]
-    for a, b in (("fastsim", "roadload"), ("fastsim_efficiency", "roadload"), ("fastsim", "fastsim_efficiency")):
+    for a, b in (("fastsim", "roadload"), ("fastsim_efficiency", "roadload"),
+                 ("fastsim_efficiency_driving", "roadload"), ("fastsim_efficiency", "fastsim_efficiency_driving"),
+                 ("fastsim", "fastsim_efficiency")):
+        if a not in diff or b not in diff:
+            continue
         totals.append({"what": f"{a} - {b} [pp]", **dict(zip(("pct", "1sigma", "ci95_lo", "ci95_hi"), _mean_ci(
             diff[a] * scale[a] - diff[b] * scale[b])))})
     return pd.DataFrame(table), pd.DataFrame(totals)

@@ -173,7 +173,8 @@ def headline_markdown(summary: pd.DataFrame, failures: list[str]) -> str:
         if "vs_optimum_pct" in summary:
             rows[-1]["vs the optimum"] = format_difference(r.vs_optimum_pct, r.vs_optimum_1sigma_pct,
                                                            r.vs_optimum_ci95_lo, r.vs_optimum_ci95_hi)
-        for prefix, column in (("fastsim_efficiency", "roadload's wheel power, FASTSim's efficiency: vs cruise "
+        for prefix, column in (("fastsim_efficiency_driving", "FASTSim's efficiency while driving: vs cruise control"),
+                               ("fastsim_efficiency", "roadload's wheel power, FASTSim's efficiency: vs cruise "
                                                       "control"), ("fastsim", "FASTSim: vs cruise control")):
             if f"{prefix}_vs_cruise_pct" in summary:
                 rows[-1][column] = format_difference(*(r[f"{prefix}_vs_cruise_{k}"] for k in (

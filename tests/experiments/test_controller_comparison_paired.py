@@ -137,3 +137,12 @@ def test_fastsim_cross_check_gaps_are_the_differences_of_the_savings():
     assert t["fastsim - roadload [pp]"] == pytest.approx(t["fastsim saving"] - t["roadload saving"])
     assert t["fastsim - fastsim_efficiency [pp]"] == pytest.approx(t["fastsim saving"]
                                                                    - t["fastsim_efficiency saving"])
+    assert "fastsim_efficiency_driving saving" not in t  # runs stored before that scoring: left out, not failed
+    for r, driving in zip(results, ((1000, 880), (2000, 1890), (1500, 1380))):
+        r["fastsim_efficiency_driving_cruise_energy_J"] = driving[0]
+        r["fastsim_efficiency_driving_energy_at_tref_J"] = {"oracle": driving[1]}
+    t = fastsim_per_seed(results)[1].set_index("what")["pct"]
+    assert t["fastsim_efficiency_driving saving"] == pytest.approx(-350 / 4500 * 100)
+    # the efficiency gap splits into driving and regenerating / coasting exactly
+    assert (t["fastsim_efficiency_driving - roadload [pp]"] + t["fastsim_efficiency - fastsim_efficiency_driving [pp]"]
+            == pytest.approx(t["fastsim_efficiency - roadload [pp]"]))

@@ -162,9 +162,23 @@ def follower_on_grid(opt: FullRouteOptimum, params, trip: FollowerTrip) -> dict[
             "accel_max": float(acc.max()), "decel_max": float(-acc.min())}
 
 
+def later_headroom(cfg: EcoTrafficConfig, trip: FollowerTrip, params, energy, after: float,
+                   settings: OptimumSettings = LIMIT_SETTINGS) -> float:
+    """Headroom [Wh/km] of the trip from ``after`` [s] on (the follower's distance, speed and time then as the
+    start): what is left once the first seconds after the spawn are driven as the follower drove them."""
+    k = int(np.searchsorted(trip.t, after))
+    start, distance = float(trip.s[k]), float(trip.s[-1])
+    opt = FullRouteOptimum(ego_road(cfg, trip.seed).profile, energy, params, settings, start=start, end=distance)
+    own = follower_on_grid(opt, params, trip)
+    sol = opt.solve(own["time_s"], float(trip.v[k]), float(trip.v[-1]), terminal="speed")
+    return (own["energy_J"] - sol.energy_J) / 3.6 / (distance - start) if sol.success else math.nan
+
+
 def episode_limit(cfg: EcoTrafficConfig, trip: FollowerTrip, settings: OptimumSettings = LIMIT_SETTINGS,
-                  min_gap: float = MIN_GAP, gap_ocps: dict[int, GapLimitedOcp] | None = None) -> dict[str, Any]:
-    """The follower's plant and model energy, the two limits (module docstring) and the headrooms [Wh/km]."""
+                  min_gap: float = MIN_GAP, gap_ocps: dict[int, GapLimitedOcp] | None = None,
+                  after: float = 0.0) -> dict[str, Any]:
+    """The follower's plant and model energy, the two limits (module docstring) and the headrooms [Wh/km]; with
+    ``after`` > 0 [s] also the headroom of the trip from then on (later_headroom)."""
     road = ego_road(cfg, trip.seed)
     params = oracle_parameters(road.simulator.true_parameters(), get_preset(cfg.vehicle))
     energy = energy_model_from_spec(cfg.vehicle)
@@ -189,12 +203,14 @@ def episode_limit(cfg: EcoTrafficConfig, trip: FollowerTrip, settings: OptimumSe
             "limit_behind_Wh_per_km": behind * per_km if ok else float("nan"),
             "headroom_free_Wh_per_km": (own["energy_J"] - free.energy_J) * per_km if free.success else float("nan"),
             "headroom_behind_Wh_per_km": (own["energy_J"] - behind) * per_km if ok else float("nan"),
+            "headroom_later_Wh_per_km": later_headroom(cfg, trip, params, energy, after, settings) if after > 0
+            else math.nan, "later_from_s": after,
             "follower_accel_max": own["accel_max"], "follower_decel_max": own["decel_max"],
             "wall_bound_clipped_nodes": clipped, "nodes": opt.n}
 
 
-def measure_limit(env_config: dict[str, Any] | None = None, episodes: int = 50, min_gap: float = MIN_GAP
-                  ) -> pd.DataFrame:
+def measure_limit(env_config: dict[str, Any] | None = None, episodes: int = 50, min_gap: float = MIN_GAP,
+                  after: float = 0.0) -> pd.DataFrame:
     """Per held-out episode: the follower against the two limits (episode_limit)."""
     if episodes < 1:
         raise RLError(f"episodes: expected >= 1, got {episodes}")
@@ -206,7 +222,7 @@ def measure_limit(env_config: dict[str, Any] | None = None, episodes: int = 50, 
     rows = []
     for k in range(episodes):
         trip = record_follower(env, policy, TRAFFIC_HELD_OUT + k)
-        rows.append(episode_limit(cfg, trip, min_gap=min_gap, gap_ocps=gap_ocps))
+        rows.append(episode_limit(cfg, trip, min_gap=min_gap, gap_ocps=gap_ocps, after=after))
     return pd.DataFrame(rows)
 
 
@@ -219,9 +235,12 @@ def limit_summary(table: pd.DataFrame) -> pd.DataFrame:
     half = stats.t.ppf(0.975, k - 1) / math.sqrt(k) if k > 1 else float("nan")
     rows = []
     for col in ("follower_plant_Wh_per_km", "follower_model_Wh_per_km", "limit_free_Wh_per_km",
-                "limit_behind_Wh_per_km", "headroom_free_Wh_per_km", "headroom_behind_Wh_per_km"):
+                "limit_behind_Wh_per_km", "headroom_free_Wh_per_km", "headroom_behind_Wh_per_km",
+                "headroom_later_Wh_per_km"):
         x = table[col].to_numpy(float)
         ok = np.isfinite(x)
+        if not ok.any():
+            continue
         weighted = float(np.sum(x[ok] * table.distance_m[ok]) / np.sum(table.distance_m[ok])) if ok.any() else math.nan
         rows.append({"quantity": col, "episodes": int(ok.sum()), "mean": float(x[ok].mean()),
                      "ci95": float(half * x[ok].std(ddof=1)) if ok.sum() > 1 else math.nan,
@@ -238,6 +257,8 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--episodes", type=int, default=50, help="held-out episodes")
     ap.add_argument("--min-gap", type=float, default=MIN_GAP, help="bumper-to-bumper gap kept behind the traffic [m]")
+    ap.add_argument("--after", type=float, default=0.0,
+                    help="> 0: also the headroom of the trip from this time [s] on (the spawn's transient left out)")
     ap.add_argument("--csv", default=None, help="write the per-episode table here")
     ap.add_argument("--quick", action="store_true", help="tiny run for CI")
     a = ap.parse_args(argv)
@@ -250,7 +271,10 @@ def main(argv: list[str] | None = None) -> None:
     if not (math.isfinite(a.min_gap) and a.min_gap >= 0):
         ap.error(f"--min-gap: expected a gap >= 0 m, got {a.min_gap}")
     c0 = time.process_time()
-    table = measure_limit(config, a.episodes, a.min_gap)
+    duration = make_config(EcoTrafficConfig, {**TRAFFIC_TRAIN_CONFIG, **config}).duration
+    if not (math.isfinite(a.after) and 0 <= a.after < duration):
+        ap.error(f"--after: expected a time in [0, {duration:g}) s (the episode's duration), got {a.after}")
+    table = measure_limit(config, a.episodes, a.min_gap, a.after)
     if a.csv:
         table.to_csv(a.csv, index=False)
     print(markdown_table(limit_summary(table), floatfmt=".4g"))

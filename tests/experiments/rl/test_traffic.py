@@ -261,6 +261,43 @@ def test_lever_policies_keep_the_followers_mean_command_or_only_drop_its_braking
     assert float(grade_policy(cfg, 1.0)(uphill)[0]) < float(idm_policy(cfg)(uphill)[0]) - 0.03
 
 
+def test_cut_in_regeneration_and_cah_levers_change_the_command_only_where_they_should():
+    """A neighbour ahead on the next lane moving towards the ego's lane within the horizon becomes the leader (IDM
+    brakes for it; the coasting variant only lifts off); one moving away or too slowly does not. Regeneration-limited
+    braking floors the command at the regeneration force (about -0.29 at 25 m/s: 50 kW / 25 m/s over 0.5 m g); the
+    CAH brakes less than IDM for a large closing speed at a gap that needs no hard braking."""
+    from roadload.experiments.rl.highway import _indices, idm_policy
+    from roadload.experiments.rl.traffic_levers import anticipation_policy, cah_policy, regen_limited_policy
+    from roadload.gym.config import EcoTrafficConfig
+
+    cfg = EcoTrafficConfig(shield={"enabled": True}, spawn="outside-envelope")
+    idx = _indices(cfg)
+    obs = np.zeros(len(idx), dtype=np.float32)
+    obs[idx["v"][0]], obs[idx["front_gap"][0]] = 21.0 / 30.0, 80.0 / 100.0  # 21 m/s, 80 m behind an equal-speed car
+    obs[idx["veh1_presence"][0]] = 1.0
+    obs[idx["veh1_x"][0]] = 25.0 / 200.0  # 25 m ahead (20 m bumper to bumper), on the lane to the right (+4 m)
+    obs[idx["veh1_y"][0]] = 4.0 / 12.0
+    obs[idx["veh1_vy"][0]] = -1.5 / 80.0  # moving left, towards the ego's lane at 1.5 m/s: 2 m to go, 1.33 s
+    follower = float(idm_policy(cfg)(obs)[0])
+    assert follower > 0.0
+    assert float(anticipation_policy(cfg, 2.0)(obs)[0]) < -0.1  # 20 m at 21 m/s: IDM brakes for it
+    assert float(anticipation_policy(cfg, 1.0)(obs)[0]) == pytest.approx(follower)  # not within 1 s
+    assert float(anticipation_policy(cfg, 2.0, coast=True)(obs)[0]) == 0.0
+    away = obs.copy()
+    away[idx["veh1_vy"][0]] = 1.5 / 80.0
+    assert float(anticipation_policy(cfg, 4.0)(away)[0]) == pytest.approx(follower)
+    fast = obs.copy()
+    fast[idx["v"][0]], fast[idx["front_gap"][0]] = 25.0 / 30.0, 0.2  # 25 m/s, 20 m behind: the follower brakes hard
+    assert float(idm_policy(cfg)(fast)[0]) == -1.0
+    assert float(regen_limited_policy(cfg)(fast)[0]) == pytest.approx(-50e3 / 25.0 / (0.5 * 9.81 * 1400.0), rel=0.02)
+    assert float(regen_limited_policy(cfg)(obs)[0]) == pytest.approx(follower)
+    approach = obs.copy()
+    approach[idx["v"][0]], approach[idx["front_gap"][0]] = 25.0 / 30.0, 0.55  # 55 m behind a car at 21 m/s
+    approach[idx["front_closing_speed"][0]] = 4.0 / 30.0
+    u_idm, u_cah = float(idm_policy(cfg)(approach)[0]), float(cah_policy(cfg)(approach)[0])
+    assert u_idm < u_cah < 0.0
+
+
 @pytest.mark.parametrize("bad", ["{bad", "[1, 2]"])
 def test_lever_script_refuses_a_config_that_is_not_a_json_object(bad, capsys):
     from roadload.experiments.rl.traffic_levers import main

@@ -134,7 +134,7 @@ x^3 / 3 and x^2 / 2, are below 2^-58 of the result, far under half its last bit)
 there (glibc: its own small-argument branches, taken up to 2^-27 and beyond; tests/gym/test_traffic_model.py
 compares every function bit for bit over that range). A vehicle that has changed lanes keeps a heading and an
 offset from its centre line of ~1e-16 for the rest of the episode (the steering law quantises to a pi's last bit),
-a quarter of the traffic: its steering and bicycle step take these branches instead of nine libm calls."""
+a quarter of the traffic: its steering and bicycle step take these branches instead of ten libm calls."""
 
 
 @kernel(forceinline=True, refcount=False)

@@ -290,6 +290,7 @@ class DpProblem:
         if not (math.isfinite(speed_step) and speed_step > 0):
             raise OptimumError(f"speed_step: a finite step > 0 m/s, got {speed_step!r}")
         self.settings, self.speed_step, self.inertial_mass = st, float(speed_step), params.inertial_mass
+        self.fuel_table = fuel_table
         self.s = np.asarray(preview.s, float)
         self.n = n = len(preview.s) - 1
         cap = np.maximum(np.asarray(preview.speed_cap, float) - st.speed_margin, st.speed_floor)
@@ -394,9 +395,9 @@ class DpProblem:
                           multiplier=float(0.5 * (lo + hi)), speed_step=self.speed_step)
 
 
-# the plant-fuel bound of a truck: 20 m nodes, a grid uniform in v^2/2 of 0.5 m^2/s^2 from 5 m/s to the speed cap
+# the plant-fuel bound of a truck: 40 m nodes, a grid uniform in v^2/2 of 0.5 m^2/s^2 from 5 m/s to the speed cap
 # (no safety margin: a bound allows every speed the plant may drive), the fuel map over 4.5-26.5 m/s x -30...+80 kN
-TRUCK_BOUND_SETTINGS = OptimumSettings(ds=20.0, accel_max=1.0, decel_max=1.0, speed_floor=5.0, speed_margin=0.0,
+TRUCK_BOUND_SETTINGS = OptimumSettings(ds=40.0, accel_max=1.0, decel_max=1.0, speed_floor=5.0, speed_margin=0.0,
                                        jerk=False)
 TRUCK_BOUND_ENERGY_STEP = 0.5  # [m^2/s^2]
 _FUEL_MAPS: dict[str, PlantFuelMap] = {}
@@ -413,13 +414,14 @@ def cached_plant_fuel_map(vehicle) -> PlantFuelMap:
 
 
 class PlantFuelBound:
-    """A lower bound on an ICE plant's fuel [J] over the road segment [start, end] [m] at a given trip time, start
+    """A bound on an ICE plant's fuel [J] over the road segment [start, end] [m] at a given trip time, start
     and arrival speed: the dynamic programme with every transition's fuel at the gear of least fuel in the plant's
     own map (:class:`PlantFuelMap`: fuel cut in overrun, the brakes' force free), the true road-load parameters
     ``params`` (their rotating mass: the top gear's, the least), every speed from 5 m/s to the speed cap (no safety
-    margin), accelerations within +-1 m/s^2, no jerk limit. Above the plant's true optimum only by the grid (20 m,
-    0.5 m^2/s^2: measured in docs/results/controllers.md) and by what the quasi-static map leaves out in the
-    plant's favour (a lower gear's larger rotating mass when braking). Roads with stops are refused."""
+    margin), accelerations within +-1 m/s^2, no jerk limit. Not converged in its grid: a finer energy step lowers
+    it further (40 m nodes: 0.31 % lower at 0.25 m^2/s^2 on a 40 t climb; docs/results/controllers.md), so it lies
+    above the plant's quasi-static optimum by about that much; the map leaves out in the plant's favour a lower
+    gear's larger rotating mass when braking. Roads with stops are refused."""
 
     def __init__(self, road, vehicle, params: RoadLoadParameters, start: float = 0.0, end: float | None = None,
                  settings: OptimumSettings = TRUCK_BOUND_SETTINGS,
@@ -435,6 +437,7 @@ class PlantFuelBound:
             raise OptimumError(f"{vehicle.name}: the plant-fuel bound needs an ICE vehicle")
         self.eta = energy.indicated_efficiency
         self.inertial_mass = params.inertial_mass
+        self.params = params
         preview = route_preview(road, route_nodes(start, end, [], settings.ds), energy, settings)
         self.problem = DpProblem(preview, energy, params, settings, gear_choice=True, energy_step=energy_step,
                                  fuel_table=cached_plant_fuel_map(vehicle))

@@ -285,7 +285,8 @@ class DpProblem:
 
     def __init__(self, preview: Preview, energy: SourceEnergyModel, params: RoadLoadParameters,
                  settings: OptimumSettings | None = None, speed_step: float = 0.05, gear_choice: bool = False,
-                 energy_step: float | None = None, fuel_table: FuelTable | PlantFuelMap | None = None) -> None:
+                 energy_step: float | None = None, fuel_table: FuelTable | PlantFuelMap | None = None,
+                 overspeed: float = 0.0) -> None:
         st = settings or OptimumSettings()
         if not (math.isfinite(speed_step) and speed_step > 0):
             raise OptimumError(f"speed_step: a finite step > 0 m/s, got {speed_step!r}")
@@ -294,21 +295,24 @@ class DpProblem:
         self.s = np.asarray(preview.s, float)
         self.n = n = len(preview.s) - 1
         cap = np.maximum(np.asarray(preview.speed_cap, float) - st.speed_margin, st.speed_floor)
-        grid, width = _speed_grid(st, float(cap.max()), float(np.max(np.diff(preview.s))), speed_step, energy_step)
+        grid, width = _speed_grid(st, float(cap.max()) + overspeed, float(np.max(np.diff(preview.s))), speed_step,
+                                  energy_step)
+        self.cap, self.overspeed = cap, float(overspeed)
         self.grid = grid
         self.offsets = offsets = np.arange(-width, width + 1)
         self.cost = np.empty((n, grid.size, offsets.size), np.float32)
         self.ds = np.diff(self.s) if preview.ds is None else np.asarray(preview.ds, float)
         for k in range(n):
             self.cost[k] = _stage_costs(preview, energy, params, st, grid, offsets, k, gear_choice, fuel_table)[0]
-        self.allowed = grid[None, :] <= cap[:, None] + 1e-9
+        self.allowed = self._allowed = grid[None, :] <= cap[:, None] + 1e-9
         idx = np.arange(grid.size)[:, None] + offsets[None, :]
         self.inside = (idx >= 0) & (idx < grid.size)
         self.idx = np.clip(idx, 0, grid.size - 1)
         # time of a transition per metre: 1 / v_mid (the same at every segment; dt_k = ds_k / v_mid)
         self.pace = 2.0 / (grid[:, None] + grid[self.idx])
         self.energies = 0.5 * grid ** 2
-        self.extra = ([_boundary_actions(preview, params, st, fuel_table, grid, k, cap[k + 1]) for k in range(n)]
+        self.extra = ([_boundary_actions(preview, params, st, fuel_table, grid, k, cap[k + 1] + overspeed)
+                       for k in range(n)]
                       if isinstance(fuel_table, PlantFuelMap) else [])
 
     def _sweep(self, mu: float, final: np.ndarray, i0: int) -> tuple[np.ndarray, float, float]:
@@ -340,7 +344,7 @@ class DpProblem:
                 new_e = np.where(take, cost + (1 - w) * e_go[lo] + w * e_go[lo + 1], new_e)
                 new_t = np.where(take, dt_b + (1 - w) * t_go[lo] + w * t_go[lo + 1], new_t)
                 nxt[k] = np.where(take, np.where(w < 0.5, lo, lo + 1), nxt[k])
-            value = np.where(self.allowed[k], best_q, np.inf)
+            value = np.where(self._allowed[k], best_q, np.inf)
             e_go, t_go = np.where(np.isfinite(value), new_e, 0.0), np.where(np.isfinite(value), new_t, 0.0)
         if not np.isfinite(value[i0]):
             raise OptimumError("dynamic programming: no feasible speed profile on the grid (caps, limits or "
@@ -352,10 +356,11 @@ class DpProblem:
         return path, float(e_go[i0]), float(t_go[i0])
 
     def solve(self, model_time: float, start_speed: float, arrival_speed: float | None = None,
-              time_tol: float = 1e-4, terminal_value: float = 0.0) -> DpSolution:
+              time_tol: float = 1e-4, terminal_value: float = 0.0, over_cap: float = 0.0) -> DpSolution:
         """The minimum-energy profile in ``model_time`` [s] from ``start_speed`` [m/s] to ``arrival_speed`` [m/s]
         (nearest grid speeds; None: the kinetic energy left worth ``terminal_value`` [J per J]), the time
-        multiplier found by bisection."""
+        multiplier found by bisection. over_cap [m/s]: every speed cap raised by this much (at most the problem's
+        ``overspeed``), for a run that drove above the limit."""
         if not (math.isfinite(model_time) and model_time > 0):
             raise OptimumError(f"model_time: a finite time > 0 s, got {model_time!r}")
         st, grid = self.settings, self.grid
@@ -365,7 +370,8 @@ class DpProblem:
         else:
             final = np.full(grid.size, np.inf)
             final[int(np.argmin(np.abs(grid - max(arrival_speed, st.speed_floor))))] = 0.0
-        final = np.where(self.allowed[self.n], final, np.inf)
+        self._allowed = self.grid[None, :] <= self.cap[:, None] + min(max(over_cap, 0.0), self.overspeed) + 1e-9
+        final = np.where(self._allowed[self.n], final, np.inf)
         lo, hi = 0.0, 1.0e3
         fast = self._sweep(hi, final, i0)
         while fast[2] > model_time and hi < 1e9:  # mu too small: the trip is still too slow
@@ -400,6 +406,7 @@ class DpProblem:
 TRUCK_BOUND_SETTINGS = OptimumSettings(ds=40.0, accel_max=1.0, decel_max=1.0, speed_floor=5.0, speed_margin=0.0,
                                        jerk=False)
 TRUCK_BOUND_ENERGY_STEP = 0.5  # [m^2/s^2]
+BOUND_OVERSPEED = 2.0  # [m/s] the grid reaches this far above the speed limit, for runs that drove above it
 _FUEL_MAPS: dict[str, PlantFuelMap] = {}
 
 
@@ -439,13 +446,18 @@ class PlantFuelBound:
         self.inertial_mass = params.inertial_mass
         self.params = params
         preview = route_preview(road, route_nodes(start, end, [], settings.ds), energy, settings)
+        self.speed_limit = float(np.max(preview.speed_cap))
         self.problem = DpProblem(preview, energy, params, settings, gear_choice=True, energy_step=energy_step,
-                                 fuel_table=cached_plant_fuel_map(vehicle))
+                                 fuel_table=cached_plant_fuel_map(vehicle), overspeed=BOUND_OVERSPEED)
 
-    def solve(self, trip_time: float, start_speed: float, arrival_speed: float) -> tuple[float, DpSolution]:
+    def solve(self, trip_time: float, start_speed: float, arrival_speed: float, peak_speed: float = 0.0
+              ) -> tuple[float, DpSolution]:
         """(the bound's fuel [J] from ``start_speed`` to ``arrival_speed`` [m/s] in ``trip_time`` [s], the DP's
         solution). The DP starts and ends at the nearest grid speeds; the kinetic-energy difference to the exact
-        ones is booked at 1/eta_i (<= 0.25 m^2/s^2 x the inertial mass)."""
-        sol = self.problem.solve(trip_time, start_speed, arrival_speed)
+        ones is booked at 1/eta_i (<= 0.25 m^2/s^2 x the inertial mass). peak_speed [m/s]: the run's highest speed;
+        above the speed limit, the bound's caps are raised to it (at most :data:`BOUND_OVERSPEED`), so that it
+        allows what the run did."""
+        sol = self.problem.solve(trip_time, start_speed, arrival_speed,
+                                 over_cap=max(0.0, peak_speed - self.speed_limit))
         snap = (float(sol.v[0]) ** 2 - start_speed ** 2) + (arrival_speed ** 2 - float(sol.v[-1]) ** 2)
         return sol.energy_J + 0.5 * self.inertial_mass * snap / self.eta, sol

@@ -51,7 +51,7 @@ CAR_CONTROLLERS = ("cruise", "human", "mpc:oracle", "mpc:abc", "mpc:online", "pp
 TRUCK_CONTROLLERS = ("cruise", "cruise_band", "human", "mpc:oracle", "mpc:abc", "mpc:online", "mpc:oracle:transmission")
 TRUCK_OPTIMA = ("bound", "tracked")
 # the plant-fuel bound's grid and model; stored rows of another are re-solved (run_and_store)
-BOUND_KIND = "plant-fuel bound: 40 m, 0.5 m^2/s^2, full-load and overrun actions"
+BOUND_KIND = "plant-fuel bound: 40 m, 0.5 m^2/s^2, full-load and overrun actions, caps to the peak speed"
 CSV_COLUMNS = ["vehicle", "road", "controller", "seed", "energy_J", "time_s", "optimum_energy_J", "excess_pct"]
 
 
@@ -200,6 +200,7 @@ def run_optimum_task(task: OptimumTask) -> dict[str, Any]:
         res, plant = drive(vehicle, road, effects=effects, seed=task.seed, settings=settings)
         m = dict(res.metrics)
         m["inertial_mass"] = plant.true_parameters().inertial_mass
+        m["segment_peak_speed"] = float(res.log["v"][res.log["s"] >= task.warmup].max())
         return m
 
     bound = _truck_bound(task, road) if case.truck and task.truck_optimum == "bound" else None
@@ -284,10 +285,11 @@ def _bound_row(bound: PlantFuelBound, name: str, task: OptimumTask, m: dict[str,
            "condition": task.condition, "arrived": True, "time_s": m["segment_time"],
            "energy_raw_J": m["segment_energy_J"], "arrival_speed": m["arrival_speed"],
            "start_speed": m["segment_start_speed"], "speed_violations": m.get("speed_violations"),
-           "optimum_kind": BOUND_KIND}
+           "peak_speed": m.get("segment_peak_speed"), "optimum_kind": BOUND_KIND}
     t0 = time.process_time()
     try:
-        e_opt, sol = bound.solve(float(m["segment_time"]), float(m["segment_start_speed"]), float(m["arrival_speed"]))
+        e_opt, sol = bound.solve(float(m["segment_time"]), float(m["segment_start_speed"]), float(m["arrival_speed"]),
+                                 float(m.get("segment_peak_speed") or 0.0))
     except OptimumError as exc:
         return {**row, "optimum_status": f"not solved: {exc}"}
     return {**row, "energy_J": m["segment_energy_J"], "optimum_energy_J": e_opt,
@@ -319,7 +321,8 @@ def rebound_rows(task: OptimumTask, rows: list[dict[str, Any]]) -> list[dict[str
             out.append(r)
             continue
         m = {"segment_time": r["time_s"], "segment_energy_J": r["energy_raw_J"], "arrival_speed": r["arrival_speed"],
-             "segment_start_speed": r["start_speed"], "speed_violations": r.get("speed_violations")}
+             "segment_start_speed": r["start_speed"], "speed_violations": r.get("speed_violations"),
+             "segment_peak_speed": r.get("peak_speed")}
         out.append(_bound_row(bound, r["controller"], task, m))
     return out
 

@@ -288,8 +288,11 @@ def _bound_row(bound: PlantFuelBound, name: str, task: OptimumTask, m: dict[str,
            "peak_speed": m.get("segment_peak_speed"), "optimum_kind": BOUND_KIND}
     t0 = time.process_time()
     try:
+        # the run's peak speed (a stored run without it: at least its start and arrival speeds)
+        peak = max(float(m.get("segment_peak_speed") or 0.0), float(m["segment_start_speed"]),
+                   float(m["arrival_speed"]))
         e_opt, sol = bound.solve(float(m["segment_time"]), float(m["segment_start_speed"]), float(m["arrival_speed"]),
-                                 float(m.get("segment_peak_speed") or 0.0))
+                                 peak)
     except OptimumError as exc:
         return {**row, "optimum_status": f"not solved: {exc}"}
     return {**row, "energy_J": m["segment_energy_J"], "optimum_energy_J": e_opt,

@@ -35,10 +35,10 @@ import pandas as pd
 
 from roadload.controllers.base import ControllerError
 from roadload.controllers.drive import DriveSettings, drive
-from roadload.controllers.dynamic_programming import dp_optimum
+from roadload.controllers.dynamic_programming import PlantFuelBound, dp_optimum
 from roadload.controllers.optimum import FullRouteOptimum, OptimumError, OptimumSettings, OptimumTarget
 from roadload.controllers.sim_plant import SimulatorPlant
-from roadload.controllers.vehicle_models import energy_model_from_spec
+from roadload.controllers.vehicle_models import energy_model_from_spec, rotational_mass
 from roadload.experiments.controller_comparison import (CONDITIONS, VEHICLE_CASES, force_model_settings,
                                                         format_difference, paired_road, ratio_of_means_ci)
 from roadload.fileio import write_text
@@ -49,6 +49,9 @@ CONTROLLERS = ("cruise", "cruise_band", "human", "mpc:oracle", "mpc:abc", "mpc:o
                "mpc:oracle:transmission", "ppo", "sac")
 CAR_CONTROLLERS = ("cruise", "human", "mpc:oracle", "mpc:abc", "mpc:online", "ppo", "sac")
 TRUCK_CONTROLLERS = ("cruise", "cruise_band", "human", "mpc:oracle", "mpc:abc", "mpc:online", "mpc:oracle:transmission")
+TRUCK_OPTIMA = ("bound", "tracked")
+# the plant-fuel bound's grid and model; stored rows of another are re-solved (run_and_store)
+BOUND_KIND = "plant-fuel bound: 40 m, 0.5 m^2/s^2, full-load and overrun actions, caps to the peak speed"
 CSV_COLUMNS = ["vehicle", "road", "controller", "seed", "energy_J", "time_s", "optimum_energy_J", "excess_pct"]
 
 
@@ -79,6 +82,9 @@ class OptimumTask:
     mpc: tuple[tuple[str, Any], ...] = ()
     replan_period: float | None = None
     label: str = ""
+    # trucks: "bound" (the plant-fuel bound: the DP in the plant's own fuel map at the gear of least fuel, from each
+    # run's own start speed) or "tracked" (the NLP optimum driven on the plant by the optimum tracker)
+    truck_optimum: str = "bound"
 
     def __post_init__(self) -> None:
         if self.case not in VEHICLE_CASES:
@@ -94,6 +100,8 @@ class OptimumTask:
             raise OptimumBenchmarkError(f"controllers: unknown {bad}; choose from {list(CONTROLLERS)}")
         if self.condition not in CONDITIONS:
             raise OptimumBenchmarkError(f"condition {self.condition!r}: choose one of {list(CONDITIONS)}")
+        if self.truck_optimum not in TRUCK_OPTIMA:
+            raise OptimumBenchmarkError(f"truck_optimum {self.truck_optimum!r}: choose one of {list(TRUCK_OPTIMA)}")
         if not (math.isfinite(self.warmup) and self.warmup >= 0):
             raise OptimumBenchmarkError(f"warmup: a distance >= 0 m, got {self.warmup}")
         rl = [c for c in self.controllers if c in ("ppo", "sac")]
@@ -192,8 +200,10 @@ def run_optimum_task(task: OptimumTask) -> dict[str, Any]:
         res, plant = drive(vehicle, road, effects=effects, seed=task.seed, settings=settings)
         m = dict(res.metrics)
         m["inertial_mass"] = plant.true_parameters().inertial_mass
+        m["segment_peak_speed"] = float(res.log["v"][res.log["s"] >= task.warmup].max())
         return m
 
+    bound = _truck_bound(task, road) if case.truck and task.truck_optimum == "bound" else None
     for controller in task.controllers:
         if controller in ("ppo", "sac"):
             m = _policy_run(task, controller, road)
@@ -213,6 +223,10 @@ def run_optimum_task(task: OptimumTask) -> dict[str, Any]:
             rows.append({"vehicle": task.case, "road": task.road, "controller": controller + task.label,
                          "seed": task.seed,
                          "condition": task.condition, "arrived": False})
+            continue
+        if bound is not None:
+            rows.append(_bound_row(bound, controller + task.label if controller.startswith("mpc") else controller,
+                                   task, m))
             continue
         target = OptimumTarget(trip_time=float(m["segment_time"]), arrival_speed=float(m["arrival_speed"]))
         opt_drive = replace(_settings(task, "cruise_band"), controller="optimum", force_model="oracle",
@@ -262,6 +276,65 @@ def online_columns(online: dict[str, Any] | None, warmup: float) -> dict[str, An
     return {"online_alarms": online.get("change_alarms"), "online_clipped": online.get("clipped"),
             "online_wind_speed": online.get("wind_speed"), "online_wind_direction": online.get("wind_direction"),
             "online_estimate_start": json.dumps(start), "online_estimate_end": json.dumps(online.get("estimate", {}))}
+
+
+def _bound_row(bound: PlantFuelBound, name: str, task: OptimumTask, m: dict[str, Any]) -> dict[str, Any]:
+    """A truck run against the plant-fuel bound at its own trip time, start and arrival speed (not driven: the
+    bound is quasi-static)."""
+    row = {"vehicle": task.case, "road": task.road, "controller": name, "seed": task.seed,
+           "condition": task.condition, "arrived": True, "time_s": m["segment_time"],
+           "energy_raw_J": m["segment_energy_J"], "arrival_speed": m["arrival_speed"],
+           "start_speed": m["segment_start_speed"], "speed_violations": m.get("speed_violations"),
+           "peak_speed": m.get("segment_peak_speed"), "optimum_kind": BOUND_KIND}
+    t0 = time.process_time()
+    try:
+        # the run's peak speed (a stored run without it: at least its start and arrival speeds)
+        peak = max(float(m.get("segment_peak_speed") or 0.0), float(m["segment_start_speed"]),
+                   float(m["arrival_speed"]))
+        e_opt, sol = bound.solve(float(m["segment_time"]), float(m["segment_start_speed"]), float(m["arrival_speed"]),
+                                 peak)
+    except OptimumError as exc:
+        return {**row, "optimum_status": f"not solved: {exc}"}
+    return {**row, "energy_J": m["segment_energy_J"], "optimum_energy_J": e_opt,
+            "excess_pct": difference_pct(m["segment_energy_J"], e_opt), "optimum_time_s": sol.model_time,
+            "optimum_arrival_speed": float(sol.v[-1]), "optimum_start_speed": float(sol.v[0]),
+            "optimum_time_slope_J_per_s": -sol.multiplier, "optimum_status": "solved",
+            "optimum_min_speed": float(sol.v.min()), "optimum_cpu_s": time.process_time() - t0}
+
+
+def stored_task(fields: dict[str, Any]) -> OptimumTask:
+    """The OptimumTask of a stored result's ``task`` (JSON lists back to tuples)."""
+    fields = {**fields, "controllers": tuple(fields["controllers"]),
+              "mpc": tuple(tuple(x) for x in fields.get("mpc", ()))}
+    return OptimumTask(**fields)
+
+
+def _stale_bound(task: OptimumTask, stored: dict[str, Any]) -> bool:
+    return VEHICLE_CASES[task.case].truck and task.truck_optimum == "bound" and any(
+        r.get("arrived") and r.get("optimum_kind") != BOUND_KIND for r in stored["rows"])
+
+
+def rebound_rows(task: OptimumTask, rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Stored truck rows against the current plant-fuel bound (each run's time, energy, start and arrival speed
+    kept; the runs are not driven again)."""
+    bound = _truck_bound(task, benchmark_road(task.road, task.seed, task.warmup))
+    out = []
+    for r in rows:
+        if not r.get("arrived"):
+            out.append(r)
+            continue
+        m = {"segment_time": r["time_s"], "segment_energy_J": r["energy_raw_J"], "arrival_speed": r["arrival_speed"],
+             "segment_start_speed": r["start_speed"], "speed_violations": r.get("speed_violations"),
+             "segment_peak_speed": r.get("peak_speed")}
+        out.append(_bound_row(bound, r["controller"], task, m))
+    return out
+
+
+def _truck_bound(task: OptimumTask, road) -> PlantFuelBound:
+    vehicle = VEHICLE_CASES[task.case].vehicle()
+    params = replace(SimulatorPlant(vehicle, road, effects=CONDITIONS[task.condition], seed=task.seed
+                                    ).true_parameters(), rotational_mass=rotational_mass(vehicle))
+    return PlantFuelBound(road, vehicle, params, start=task.warmup)
 
 
 def difference_pct(value: float, reference: float) -> float:
@@ -362,6 +435,9 @@ def run_and_store(task: OptimumTask, folder: str) -> dict[str, Any]:
     if path.is_file():
         stored = json.loads(path.read_text())
         if stored.get("task") == json.loads(json.dumps(task.__dict__, default=float)):
+            if _stale_bound(task, stored):  # the runs kept, the bound re-solved with the current grid
+                stored["rows"] = rebound_rows(task, stored["rows"])
+                write_text(path, json.dumps(stored, default=float))
             return stored
     result = run_optimum_task(task)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -473,7 +549,13 @@ def run_benchmark(tasks: list[OptimumTask], out: Path, scheduler: str | None = N
                          workers=workers, description="optimum benchmark")
     results = [o.value for o in outcomes if o.ok]
     for path in merge or []:
-        results += [json.loads(p.read_text()) for p in sorted(Path(path).glob("*.json"))]
+        for p in sorted(Path(path).glob("*.json")):
+            stored = json.loads(p.read_text())
+            task = stored_task(stored["task"])
+            if _stale_bound(task, stored):  # re-solved once, written back as run_and_store does
+                stored["rows"] = rebound_rows(task, stored["rows"])
+                write_text(p, json.dumps(stored, default=float))
+            results.append(stored)
     failures = [f"{o.task.case}/{o.task.road}/seed {o.task.seed}: {o.error}" for o in outcomes if not o.ok]
     rows, summary = write_tables(results, failures, out)
     return rows, summary, failures

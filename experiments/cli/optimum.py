@@ -41,6 +41,10 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         car_warmup: float = typer.Option(0.0, help="car: warm-up [m] before the measured segment, driven by cruise "
                                          "control for every run (the online estimators converge there; not with "
                                          "RL policies)"),
+        truck_optimum: str = typer.Option("bound", help="trucks' optimum: bound (the plant-fuel bound: dynamic "
+                                          "programming in the plant's own fuel map at the gear of least fuel, fuel "
+                                          "cut in overrun; a lower bound on the plant) or tracked (the NLP optimum "
+                                          "at the shift rule's smooth ratio, driven on the plant)"),
         time_weight: float = typer.Option(-1.0, help="MPC time weight lambda [J/s] (< 0: the vehicle case's)"),
         dp_step: float = typer.Option(0.05, help="EV: speed grid [m/s] of the dynamic-programming cross-check "
                                       "(0: off)"),
@@ -129,7 +133,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                                        condition=condition if not VEHICLE_CASES[case].truck else "nominal",
                                        warmup=truck_warmup if VEHICLE_CASES[case].truck else car_warmup,
                                        time_weight=None if time_weight < 0 else time_weight,
-                                       policies=None if policies is None else str(policies), dp_step=dp_step)
+                                       policies=None if policies is None else str(policies), dp_step=dp_step,
+                                       truck_optimum=truck_optimum)
         except (OptimumBenchmarkError, ValueError) as exc:
             fail(str(exc))
         rows, summary, failures = run_benchmark(tasks, out, scheduler=scheduler, workers=workers, merge=list(merge))

@@ -1,6 +1,7 @@
 """The optimum benchmark's bookkeeping, the force-model specs of the paired comparison and the FASTSim check."""
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -8,9 +9,9 @@ import pytest
 
 from roadload.estimators.change import GUST_ROBUST
 from roadload.experiments.controller_comparison import force_model_settings
-from roadload.experiments.optimum_benchmark import (OptimumBenchmarkError, OptimumTask, _settings, dp_table,
-                                                    episode_cost_summary, online_columns, pace_and_drive, summarise,
-                                                    summary_markdown)
+from roadload.experiments.optimum_benchmark import (BOUND_KIND, OptimumBenchmarkError, OptimumTask, _settings,
+                                                    _stale_bound, dp_table, episode_cost_summary, online_columns,
+                                                    pace_and_drive, stored_task, summarise, summary_markdown)
 from roadload.road_profiles import RoadProfile
 
 
@@ -131,6 +132,19 @@ def test_bad_benchmark_tasks_are_refused_with_the_reason():
         OptimumTask("bus", "hilly", 0)
     with pytest.raises(OptimumBenchmarkError, match="key=value"):
         OptimumTask("car", "hilly", 0, controllers=("mpc:online_wind@RRLM+fast",))
+    with pytest.raises(OptimumBenchmarkError, match="truck_optimum 'exact'.*bound"):
+        OptimumTask("truck_40t", "long_grades", 0, truck_optimum="exact")
+
+
+def test_a_stored_task_comes_back_equal_and_its_bound_is_stale_when_the_grid_changed():
+    task = OptimumTask("truck_40t", "long_grades", 3, controllers=("cruise_band", "mpc:oracle"), warmup=2000.0,
+                       mpc=(("n_nodes", 80),))
+    stored = json.loads(json.dumps({"task": task.__dict__}, default=float))
+    assert stored_task(stored["task"]) == task
+    rows = [{"arrived": True, "optimum_kind": BOUND_KIND}, {"arrived": False}]
+    assert not _stale_bound(task, {"rows": rows})
+    assert _stale_bound(task, {"rows": [{**rows[0], "optimum_kind": "plant-fuel bound"}]})
+    assert not _stale_bound(replace(task, truck_optimum="tracked"), {"rows": [{"arrived": True}]})
 
 
 def test_an_online_mpc_takes_its_estimator_options_after_the_at():

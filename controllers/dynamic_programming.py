@@ -356,11 +356,14 @@ class DpProblem:
         return path, float(e_go[i0]), float(t_go[i0])
 
     def solve(self, model_time: float, start_speed: float, arrival_speed: float | None = None,
-              time_tol: float = 1e-4, terminal_value: float = 0.0, over_cap: float = 0.0) -> DpSolution:
+              time_tol: float = 1e-4, terminal_value: float = 0.0, over_cap: float = 0.0,
+              least_at_any_time: bool = False) -> DpSolution:
         """The minimum-energy profile in ``model_time`` [s] from ``start_speed`` [m/s] to ``arrival_speed`` [m/s]
         (nearest grid speeds; None: the kinetic energy left worth ``terminal_value`` [J per J]), the time
         multiplier found by bisection. over_cap [m/s]: every speed cap raised by this much (at most the problem's
-        ``overspeed``), for a run that drove above the limit."""
+        ``overspeed``), for a run that drove above the limit. least_at_any_time: a ``model_time`` slower than the
+        least-energy trip (multiplier 0) returns that trip (its own time) instead of an error: no profile at any
+        time uses less, so it is still a lower bound for the slower run."""
         if not (math.isfinite(model_time) and model_time > 0):
             raise OptimumError(f"model_time: a finite time > 0 s, got {model_time!r}")
         st, grid = self.settings, self.grid
@@ -381,6 +384,9 @@ class DpProblem:
             raise OptimumError(f"model_time: {model_time:.1f} s is faster than the grid's fastest trip "
                                f"({fast[2]:.1f} s)")
         slow = self._sweep(lo, final, i0)
+        if slow[2] < model_time and least_at_any_time and lo == 0.0:
+            return DpSolution(s=self.s, v=grid[slow[0]], energy_J=slow[1], model_time=slow[2], multiplier=0.0,
+                              speed_step=self.speed_step)
         if slow[2] < model_time:
             raise OptimumError(f"model_time: {model_time:.1f} s is slower than the grid's slowest trip "
                                f"({slow[2]:.1f} s)")
@@ -456,8 +462,9 @@ class PlantFuelBound:
         solution). The DP starts and ends at the nearest grid speeds; the kinetic-energy difference to the exact
         ones is booked at 1/eta_i (<= 0.25 m^2/s^2 x the inertial mass). peak_speed [m/s]: the run's highest speed;
         above the speed limit, the bound's caps are raised to it (at most :data:`BOUND_OVERSPEED`), so that it
-        allows what the run did."""
+        allows what the run did. A run slower than the least-fuel trip is bounded by that trip (the least fuel at
+        any time; the solution's ``model_time`` is then shorter than ``trip_time``)."""
         sol = self.problem.solve(trip_time, start_speed, arrival_speed,
-                                 over_cap=max(0.0, peak_speed - self.speed_limit))
+                                 over_cap=max(0.0, peak_speed - self.speed_limit), least_at_any_time=True)
         snap = (float(sol.v[0]) ** 2 - start_speed ** 2) + (arrival_speed ** 2 - float(sol.v[-1]) ** 2)
         return sol.energy_J + 0.5 * self.inertial_mass * snap / self.eta, sol

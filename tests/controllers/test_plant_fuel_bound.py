@@ -9,10 +9,10 @@ import pytest
 from scipy.interpolate import RegularGridInterpolator
 
 from roadload.controllers.drive import drive
-from roadload.controllers.dynamic_programming import PlantFuelBound, dp_optimum
+from roadload.controllers.dynamic_programming import DpProblem, PlantFuelBound, dp_optimum
 from roadload.controllers.energy import generic_ev
 from roadload.controllers.force_model import resistance_force
-from roadload.controllers.optimum import FullRouteOptimum, OptimumSettings
+from roadload.controllers.optimum import FullRouteOptimum, OptimumError, OptimumSettings
 from roadload.controllers.sim_plant import SimulatorPlant
 from roadload.controllers.vehicle_models import rotational_mass
 from roadload.experiments.optimum_benchmark import OptimumTask, _settings
@@ -105,3 +105,24 @@ def test_dp_solves_a_trip_slow_enough_for_a_zero_time_multiplier():
     fast = dp_optimum(opt.preview, energy, params, 1000.0 / 15.0, 6.0, None, settings, speed_step=0.1)
     assert np.isfinite(slow.energy_J) and slow.multiplier < 1e3
     assert slow.energy_J < fast.energy_J
+
+
+def test_a_trip_slower_than_the_least_energy_trip_is_bounded_by_that_trip_not_refused():
+    """A run slower than the DP's least-energy trip (multiplier 0): as a bound (least_at_any_time) the DP returns
+    that trip, with its own shorter time and multiplier 0, the least energy at any time; as an optimum at equal
+    time it is refused with the two times named."""
+    params = RoadLoadParameters.from_physical(1420.0, 0.009, 0.0, 0.0, 0.7, 1.2, 60000.0, rotational_mass=60.0)
+    energy = generic_ev()
+    s = np.arange(0.0, 601.0, 5.0)
+    z = np.zeros_like(s)
+    road = RoadProfile("flat", s, z, z, z, np.full_like(s, 30.0))
+    settings = OptimumSettings(ds=20.0, jerk=False)
+    problem = DpProblem(FullRouteOptimum(road, energy, params, settings).preview, energy, params, settings,
+                        speed_step=0.1)
+    least = problem.solve(1e4, 8.0, 8.0, least_at_any_time=True)  # 600 m in 10,000 s: slower than any grid trip
+    assert least.multiplier == 0.0 and least.model_time < 1e4
+    faster = problem.solve(0.9 * least.model_time, 8.0, 8.0)  # an equal-time optimum the grid reaches
+    assert least.energy_J < faster.energy_J
+    assert problem.solve(least.model_time, 8.0, 8.0).energy_J == pytest.approx(least.energy_J, rel=1e-3)
+    with pytest.raises(OptimumError, match="slower than the grid's slowest trip"):
+        problem.solve(1e4, 8.0, 8.0)

@@ -41,6 +41,18 @@ def _run(road: RoadProfile, controller: str, warmup: float = WARMUP) -> dict:
     return {**res.metrics, "peak_speed": float(res.log["v"][res.log["s"] >= warmup].max())}
 
 
+def _flat_ev(length: float):
+    """(the full-route optimum's problem, energy model, road load, settings) of an EV on a flat road of ``length``
+    [m] with a 30 m/s limit: the DP's analytic setting."""
+    params = RoadLoadParameters.from_physical(1420.0, 0.009, 0.0, 0.0, 0.7, 1.2, 60000.0, rotational_mass=60.0)
+    energy = generic_ev()
+    s = np.arange(0.0, length + 1.0, 5.0)
+    z = np.zeros_like(s)
+    road = RoadProfile("flat", s, z, z, z, np.full_like(s, 30.0))
+    settings = OptimumSettings(ds=20.0, jerk=False)
+    return FullRouteOptimum(road, energy, params, settings), energy, params, settings
+
+
 @pytest.mark.slow
 def test_bound_equals_the_plants_fuel_at_steady_constant_speed():
     """A flat road driven by cruise control at its set speed (settled after 2 km): the bound's map at the run's
@@ -94,13 +106,7 @@ def test_dp_solves_a_trip_slow_enough_for_a_zero_time_multiplier():
     """The recursion at mu = 0 (a target time the DP's mu = 1000 J/s already meets): infeasible transitions carry an
     infinite energy and a finite time, so mu dt is never 0 x inf = nan (which argmin took for the best transition
     and the DP reported "no feasible speed profile")."""
-    params = RoadLoadParameters.from_physical(1420.0, 0.009, 0.0, 0.0, 0.7, 1.2, 60000.0, rotational_mass=60.0)
-    energy = generic_ev()
-    s = np.arange(0.0, 1001.0, 5.0)
-    z = np.zeros_like(s)
-    road = RoadProfile("flat", s, z, z, z, np.full_like(s, 30.0))
-    settings = OptimumSettings(ds=20.0, jerk=False)
-    opt = FullRouteOptimum(road, energy, params, settings)
+    opt, energy, params, settings = _flat_ev(1000.0)
     slow = dp_optimum(opt.preview, energy, params, 1000.0 / 9.0, 6.0, None, settings, speed_step=0.1)
     fast = dp_optimum(opt.preview, energy, params, 1000.0 / 15.0, 6.0, None, settings, speed_step=0.1)
     assert np.isfinite(slow.energy_J) and slow.multiplier < 1e3
@@ -111,14 +117,8 @@ def test_a_trip_slower_than_the_least_energy_trip_is_bounded_by_that_trip_not_re
     """A run slower than the DP's least-energy trip (multiplier 0): as a bound (least_at_any_time) the DP returns
     that trip, with its own shorter time and multiplier 0, the least energy at any time; as an optimum at equal
     time it is refused with the two times named."""
-    params = RoadLoadParameters.from_physical(1420.0, 0.009, 0.0, 0.0, 0.7, 1.2, 60000.0, rotational_mass=60.0)
-    energy = generic_ev()
-    s = np.arange(0.0, 601.0, 5.0)
-    z = np.zeros_like(s)
-    road = RoadProfile("flat", s, z, z, z, np.full_like(s, 30.0))
-    settings = OptimumSettings(ds=20.0, jerk=False)
-    problem = DpProblem(FullRouteOptimum(road, energy, params, settings).preview, energy, params, settings,
-                        speed_step=0.1)
+    opt, energy, params, settings = _flat_ev(600.0)
+    problem = DpProblem(opt.preview, energy, params, settings, speed_step=0.1)
     least = problem.solve(1e4, 8.0, 8.0, least_at_any_time=True)  # 600 m in 10,000 s: slower than any grid trip
     assert least.multiplier == 0.0 and least.model_time < 1e4
     faster = problem.solve(0.9 * least.model_time, 8.0, 8.0)  # an equal-time optimum the grid reaches

@@ -27,8 +27,10 @@ ALGO_DEFAULTS: dict[str, dict[str, Any]] = {
     "ppo": dict(n_steps=1024, batch_size=256, n_epochs=10, learning_rate=3e-4, gamma=0.999, gae_lambda=0.95,
                 clip_range=0.2, ent_coef=0.0, policy_kwargs={"log_std_init": -1.0}),
     # 64x64 networks (as PPO's): SB3's default 256x256 runs ~4x slower per gradient step on one CPU thread
+    # gradient_steps -1: one gradient step per environment step collected (train_freq counts steps of the whole
+    # vector env, so gradient_steps 1 with the native env's 16 sub-envs made 1 update per 16 samples)
     "sac": dict(learning_rate=3e-4, buffer_size=200_000, learning_starts=5_000, batch_size=256, gamma=0.999,
-                tau=0.005, train_freq=1, gradient_steps=1, policy_kwargs={"net_arch": [64, 64]}),
+                tau=0.005, train_freq=1, gradient_steps=-1, policy_kwargs={"net_arch": [64, 64]}),
 }
 
 

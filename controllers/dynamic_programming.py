@@ -35,7 +35,6 @@ from .energy import SourceEnergyModel
 from .force_model import resistance_force
 from .mpc import Preview
 from .optimum import OptimumError, OptimumSettings
-from .vehicle_models import INFEASIBLE_FUEL
 
 
 @dataclass
@@ -48,24 +47,6 @@ class DpSolution:
     model_time: float  # [s]
     multiplier: float  # mu [J/s]
     speed_step: float  # grid resolution [m/s]
-
-
-FuelTable = tuple[np.ndarray, np.ndarray, np.ndarray]  # (speeds [m/s], wheel forces [N], fuel [W] per gear)
-
-
-def fuel_table_power(table: FuelTable, v, force) -> np.ndarray:
-    """The least fuel power [W] over the gears of a (speed, wheel force) table (bilinear in each gear's; inf where
-    no gear can: a gear's value at or above :data:`~.vehicle_models.INFEASIBLE_FUEL` is refused)."""
-    from scipy.interpolate import RegularGridInterpolator
-
-    speeds, forces, fuel = table
-    v, force = np.broadcast_arrays(np.asarray(v, float), np.asarray(force, float))
-    points = np.stack([v.ravel(), force.ravel()], axis=-1)
-    best = np.full(points.shape[0], np.inf)
-    for gear in fuel:
-        value = RegularGridInterpolator((speeds, forces), gear, bounds_error=False, fill_value=INFEASIBLE_FUEL)(points)
-        best = np.minimum(best, np.where(value < 0.1 * INFEASIBLE_FUEL, value, np.inf))
-    return best.reshape(v.shape)
 
 
 @dataclass(frozen=True)
@@ -159,7 +140,7 @@ def plant_fuel_map(vehicle, speeds: np.ndarray, forces: np.ndarray) -> PlantFuel
 
 def _stage_costs(preview: Preview, energy: SourceEnergyModel, params: RoadLoadParameters,
                  settings: OptimumSettings, grid: np.ndarray, offsets: np.ndarray, k: int, gear_choice: bool = False,
-                 fuel_table: FuelTable | PlantFuelMap | None = None) -> tuple[np.ndarray, np.ndarray]:
+                 fuel_table: PlantFuelMap | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(source energy [J], time [s]) of every transition v_i -> v_{i+d} of segment k (energy inf where
     infeasible; the time ds / v_mid everywhere)."""
     ds = float(preview.ds[k]) if preview.ds is not None else float(preview.s[k + 1] - preview.s[k])
@@ -182,7 +163,7 @@ def _stage_costs(preview: Preview, energy: SourceEnergyModel, params: RoadLoadPa
     ratio = float(preview.ratio[k])
     ratio_obj = energy.smooth_ratio(vm) if energy.kind == "ice" else ratio
     traction = np.maximum(force, 0.0)
-    if not isinstance(fuel_table, PlantFuelMap):  # the energy model's drive limits (the map has the plant's own)
+    if fuel_table is None:  # the energy model's drive limits (the map has the plant's own)
         ok &= traction <= float(energy.max_traction_force(None, ratio)) + 1e-6
         ok &= traction * vm <= energy.max_power + 1e-6
     need = np.maximum(-force, 0.0)
@@ -195,11 +176,8 @@ def _stage_costs(preview: Preview, energy: SourceEnergyModel, params: RoadLoadPa
     with np.errstate(divide="ignore", invalid="ignore"):
         x_opt = np.where(curv > 1e-12, 0.5 + 0.25 * (f0 - f1) / curv, np.where(f1 <= f0, 1.0, 0.0))
     x_opt = np.clip(np.nan_to_num(x_opt, nan=1.0), 0.0, 1.0)
-    if isinstance(fuel_table, PlantFuelMap):  # the plant's own fuel map, the gear of least fuel
+    if fuel_table is not None:  # the plant's own fuel map, the gear of least fuel
         power = fuel_table.power(vm, force)
-        ok &= np.isfinite(power)
-    elif fuel_table is not None:
-        power = fuel_table_power(fuel_table, vm, force)
         ok &= np.isfinite(power)
     elif energy.kind == "ice" and gear_choice:  # the gear of least fuel for the net wheel force, fuel cut in braking
         power = energy.best_gear_fuel_power(force, vm)[0]
@@ -234,7 +212,7 @@ def dp_optimum(preview: Preview, energy: SourceEnergyModel, params: RoadLoadPara
                start_speed: float, arrival_speed: float | None = None, settings: OptimumSettings | None = None,
                speed_step: float = 0.05, time_tol: float = 1e-4, terminal_value: float = 0.0,
                gear_choice: bool = False, energy_step: float | None = None,
-               fuel_table: FuelTable | PlantFuelMap | None = None) -> DpSolution:
+               fuel_table: PlantFuelMap | None = None) -> DpSolution:
     """The minimum-energy speed profile over the preview's nodes with trip time ``model_time`` [s] (module
     docstring). arrival_speed [m/s]: the end speed (nearest grid speed); None: the kinetic energy left is worth
     ``terminal_value`` [J per J]. speed_step [m/s]: grid resolution. gear_choice (ICE): fuel at the best gear
@@ -242,7 +220,8 @@ def dp_optimum(preview: Preview, energy: SourceEnergyModel, params: RoadLoadPara
     accelerations a segment can take are spaced energy_step / ds at every speed (a speed grid spaces them
     v dv / ds: at 20 m/s, 0.05 m/s and 10 m apart, 0.1 m/s^2, too coarse for a heavy truck climbing at full load,
     whose deceleration there is a few hundredths of a m/s^2). fuel_table (ICE): the plant's own fuel map per gear
-    (:func:`~.vehicle_models.plant_fuel_table`) instead of the energy model, the gear of least fuel."""
+    (:func:`plant_fuel_map`) instead of the energy model, the gear of least fuel, its drive limits the plant's
+    own, with the full-load and overrun transitions off the grid (:func:`_boundary_actions`)."""
     problem = DpProblem(preview, energy, params, settings, speed_step, gear_choice, energy_step, fuel_table)
     return problem.solve(model_time, start_speed, arrival_speed, time_tol, terminal_value)
 
@@ -285,7 +264,7 @@ class DpProblem:
 
     def __init__(self, preview: Preview, energy: SourceEnergyModel, params: RoadLoadParameters,
                  settings: OptimumSettings | None = None, speed_step: float = 0.05, gear_choice: bool = False,
-                 energy_step: float | None = None, fuel_table: FuelTable | PlantFuelMap | None = None,
+                 energy_step: float | None = None, fuel_table: PlantFuelMap | None = None,
                  overspeed: float = 0.0) -> None:
         st = settings or OptimumSettings()
         if not (math.isfinite(speed_step) and speed_step > 0):
@@ -313,7 +292,7 @@ class DpProblem:
         self.energies = 0.5 * grid ** 2
         self.extra = ([_boundary_actions(preview, params, st, fuel_table, grid, k, cap[k + 1] + overspeed)
                        for k in range(n)]
-                      if isinstance(fuel_table, PlantFuelMap) else [])
+                      if fuel_table is not None else [])
 
     def _sweep(self, mu: float, final: np.ndarray, i0: int) -> tuple[np.ndarray, float, float]:
         """Bellman's recursion at the time multiplier mu [J/s]: (path of grid indices, energy [J], time [s]). With

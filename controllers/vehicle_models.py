@@ -197,36 +197,6 @@ def _fit_energy(spec: VehicleSpec) -> SourceEnergyModel:
                              engine_speed_range=(float(e.idle_speed), float(e.max_speed)))
 
 
-INFEASIBLE_FUEL = 1e12  # [W] a fuel power standing for "this gear cannot give the force" in plant_fuel_table
-
-
-def plant_fuel_table(vehicle: VehicleSpec | str, speeds: np.ndarray, forces: np.ndarray) -> np.ndarray:
-    """ICE: the plant's own quasi-static fuel power [W] per gear over (speed [m/s], wheel force [N]), shape
-    (gears, speeds, forces): the engine torque that gives the wheel torque F r_W through that gear's losses
-    (``Powertrain.source_torque``, the exact inverse), the fuel map at it (0 at or below the drag curve: fuel cut;
-    a braking force beyond the drag is the brakes'); :data:`INFEASIBLE_FUEL` where the engine speed is out of range
-    or the torque above full load. No rotating-mass, shift or clutch transients."""
-    spec = _spec(vehicle)
-    pt = Powertrain(spec)
-    d = spec.drivetrain
-    engine = d.require_engine()
-    if engine is None:
-        raise ValueError(f"{spec.name}: plant_fuel_table needs an ICE")
-    r = float(spec.tires.dynamic_radius)
-    out = np.full((d.n_gears, len(speeds), len(forces)), INFEASIBLE_FUEL)
-    for g in range(1, d.n_gears + 1):
-        for i, v in enumerate(speeds):
-            omega = pt.speed_ratio(g) * float(v)
-            if not engine.idle_speed <= omega <= engine.max_speed:
-                continue
-            t_drag, t_max = pt.torque_limits(omega, float(v))
-            for j, f in enumerate(forces):
-                t_e = max(pt.source_torque(g, float(f) * r, omega), t_drag)
-                if t_e <= t_max:
-                    out[g - 1, i, j] = pt.fuel_power(omega, t_e)
-    return out
-
-
 _COAST_DOWN_BY_SPEC: dict[str, tuple[float, float, float]] = {}
 
 

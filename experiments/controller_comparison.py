@@ -19,7 +19,6 @@ of the logged speed over +-500 m rounded up to 10 km/h -- the same convention as
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass, replace
 from typing import Any
@@ -37,10 +36,10 @@ from roadload.io.importer import import_log
 from roadload.io.profiles import profile_from_trip
 from roadload.io.derived import distance_from_speed
 from roadload.controllers.mpc import MpcSettings
-from roadload.controllers.dynamic_programming import dp_optimum
+from roadload.controllers.dynamic_programming import cached_plant_fuel_map, dp_optimum
 from roadload.controllers.optimum import OptimumSettings, OptimumTarget, route_nodes, route_preview
 from roadload.controllers.sim_plant import SimulatorPlant
-from roadload.controllers.vehicle_models import energy_model_from_spec, plant_fuel_table, rotational_mass
+from roadload.controllers.vehicle_models import energy_model_from_spec, rotational_mass
 from roadload.estimators import chapter5_settings
 from roadload.estimators.change import GUST_ROBUST
 from roadload.experiments.fastsim_check import fastsim_energy, roadload_trace_fastsim_efficiency
@@ -579,18 +578,11 @@ TRUCK_BOUND = OptimumSettings(ds=20.0, accel_max=1.0, decel_max=1.0, speed_floor
 TRUCK_BOUND_ENERGY_STEP = 0.5  # [m^2/s^2]
 
 
-@functools.lru_cache(maxsize=4)
-def _truck_fuel_table(case: str):
-    """The plant's fuel map per gear of a truck case over 9.5-26 m/s (0.25 m/s) and -30 ... +45 kN (250 N)."""
-    speeds, forces = np.arange(9.5, 26.01, 0.25), np.arange(-30e3, 45e3 + 1, 250.0)
-    return speeds, forces, plant_fuel_table(VEHICLE_CASES[case].vehicle(), speeds, forces)
-
-
 def gear_choice_bound(task: PairedTask, road: RoadProfile, t_ref: float, start_speed: float,
                       offset: float) -> dict[str, Any]:
     """A truck's segment at T_ref by dynamic programming with the gear of least fuel for every segment, priced by
     the plant's own fuel map (fuel cut while braking; :func:`~roadload.controllers.dynamic_programming.dp_optimum`
-    with ``fuel_table``, :func:`~roadload.controllers.vehicle_models.plant_fuel_table`), from the
+    with ``fuel_table``, :func:`~roadload.controllers.dynamic_programming.cached_plant_fuel_map`), from the
     segment start speed [m/s], the kinetic energy left valued at 1/eta_i; the true parameters with the top gear's
     rotating mass. Its net energy [J] in the paired comparison's metric (+ ``offset``), not driven on the plant."""
     spec = VEHICLE_CASES[task.case].vehicle()
@@ -600,7 +592,7 @@ def gear_choice_bound(task: PairedTask, road: RoadProfile, t_ref: float, start_s
     preview = route_preview(road, route_nodes(task.warmup, road.length, [], TRUCK_BOUND.ds), energy, TRUCK_BOUND)
     sol = dp_optimum(preview, energy, params, t_ref, start_speed, None, TRUCK_BOUND,
                      terminal_value=1.0 / energy.indicated_efficiency, gear_choice=True,
-                     energy_step=TRUCK_BOUND_ENERGY_STEP, fuel_table=_truck_fuel_table(task.case))
+                     energy_step=TRUCK_BOUND_ENERGY_STEP, fuel_table=cached_plant_fuel_map(spec))
     ke = 0.5 * params.inertial_mass * (start_speed ** 2 - float(sol.v[-1]) ** 2) / energy.indicated_efficiency
     return {"bound_energy_J": sol.energy_J + ke + offset, "bound_arrival_speed": float(sol.v[-1])}
 

@@ -49,6 +49,14 @@ class DpSolution:
     speed_step: float  # grid resolution [m/s]
 
 
+def _cell(grid: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(index i of the grid cell [grid[i], grid[i + 1]] that holds each ``x``, clipped to the grid, and the weight
+    of grid[i + 1] in [0, 1]): linear interpolation on an increasing grid."""
+    x = np.clip(x, grid[0], grid[-1])
+    i = np.clip(np.searchsorted(grid, x, side="right") - 1, 0, grid.size - 2)
+    return i, (x - grid[i]) / (grid[i + 1] - grid[i])
+
+
 @dataclass(frozen=True)
 class PlantFuelMap:
     """An ICE plant's own quasi-static fuel power per gear over (speed [m/s], wheel force [N]), with each gear's
@@ -75,22 +83,19 @@ class PlantFuelMap:
     def power(self, v, force) -> np.ndarray:
         """The least fuel power [W] over the gears that can give ``force`` [N] at ``v`` [m/s] (inf where none
         can); a braking force below the table's lowest is the brakes' beyond the engine's drag (fuel 0)."""
-        from scipy.interpolate import RegularGridInterpolator
-
         v, force = np.broadcast_arrays(np.asarray(v, float), np.asarray(force, float))
-        points = np.stack([np.clip(v, self.speeds[0], self.speeds[-1]).ravel(),
-                           np.clip(force, self.forces[0], self.forces[-1]).ravel()], axis=-1)
         vf, ff = v.ravel(), force.ravel()
-        inside = (vf >= self.speeds[0]) & (vf <= self.speeds[-1]) & (ff <= self.forces[-1])
-        best = np.full(points.shape[0], np.inf)
+        i, wv = _cell(self.speeds, vf)
+        j, wf = _cell(self.forces, ff)
+        # bilinear in every gear's table at once: the cell's four corners, (gears, points)
+        fuel = ((1 - wv) * ((1 - wf) * self.fuel[:, i, j] + wf * self.fuel[:, i, j + 1])
+                + wv * ((1 - wf) * self.fuel[:, i + 1, j] + wf * self.fuel[:, i + 1, j + 1]))
+        max_force = (1 - wv) * self.max_force[:, i] + wv * self.max_force[:, i + 1]
+        omega = self.speed_ratio[:, None] * vf
         lo, hi = self.engine_speed_range
-        for g, table in enumerate(self.fuel):
-            omega = self.speed_ratio[g] * vf
-            ok = inside & (omega >= lo) & (omega <= hi) & (ff <= np.interp(vf, self.speeds, self.max_force[g]))
-            value = RegularGridInterpolator((self.speeds, self.forces), table)(points)
-            best = np.where(ok & (value < best), value, best)
-        return best.reshape(v.shape)
-
+        inside = (vf >= self.speeds[0]) & (vf <= self.speeds[-1]) & (ff <= self.forces[-1])
+        ok = inside & (omega >= lo) & (omega <= hi) & (ff <= max_force)
+        return np.where(ok, fuel, np.inf).min(axis=0).reshape(v.shape)
 
     def boundary_forces(self, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """At speed ``v`` [m/s]: (the largest full-load wheel force over the gears [N], its fuel power [W], the

@@ -380,11 +380,14 @@ class EcoTrafficConfig(_TrafficScenario):
     see_behind: bool = Field(False, description="the Kinematics block also lists vehicles more than 10 m behind")
     traffic: TrafficBehaviour = Field(default_factory=TrafficBehaviour)
     shield: TrafficShield = Field(default_factory=TrafficShield)
-    spawn: Literal["highway-env", "outside-envelope"] = Field(
+    spawn: Literal["highway-env", "outside-envelope", "stopping-gap"] = Field(
         "highway-env", description="'highway-env': the ego placed as EcoHighway-v0 places it (often 15-20 m behind "
                                    "slower traffic at its initial speed, inside the safety layer's braking "
                                    "envelope); 'outside-envelope': moved back along its lane to the envelope's gap "
-                                   "(the shield's parameters) behind the vehicle ahead, for every policy alike")
+                                   "(the shield's parameters) behind the vehicle ahead, for every policy alike; "
+                                   "'stopping-gap': moved back to the envelope's gap behind a vehicle at rest "
+                                   "(margin + v T + v^2 / (2 b) [m], 98.8 m at 25 m/s), so that the traffic's own "
+                                   "braking in its first seconds forces no policy to brake")
 
     _seed_range = field_validator("road_seed_range")(classmethod(lambda cls, v: _check_seed_range(v)))
 

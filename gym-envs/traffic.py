@@ -22,7 +22,8 @@ Safety layer (``shield.enabled``): before it is applied the command is capped at
 the braking envelope behind the leader (roadload.gym.config.TrafficShield); ``info['shield_active']`` tells when
 it bound. Spawn (``spawn``): highway-env's, or ``'outside-envelope'``: the ego moved back behind the vehicle ahead
 on its lane to that envelope's gap at the two speeds (:func:`spawn_outside_envelope`), so that no policy starts
-inside it.
+inside it, or ``'stopping-gap'``: to the envelope's gap behind a vehicle at rest, so that the traffic's braking in
+its first seconds (spawned at highway-env's spacing, it closes up) forces no policy to brake either.
 
 Observation (:func:`traffic_observation_layout`): highway-env's Kinematics block (``kinematics_rows`` rows of
 presence, x, y, vx, vy; row 0 the ego in absolute values, then the nearest vehicles relative to it; each mapped from
@@ -183,6 +184,10 @@ def envelope_command(gap, v, v_lead, reaction_time, deceleration, leader_deceler
     t = reaction_time
     v_safe = deceleration * (-t + math.sqrt(t * t + 2.0 * room / deceleration))
     return SHIELD_GAIN * (v_safe - v)
+
+
+SPAWN_MODES = ("highway-env", "outside-envelope", "stopping-gap")
+"""``spawn`` values in the order of their code in the spawn constants."""
 
 
 @kernel(refcount=False)
@@ -446,8 +451,10 @@ def _start_episodes(index, uniforms, params, rows, random_states, ego, starts, t
         spawn_traffic(tr.vehicles[i], uniforms[r], lanes, p[0], sp[0], p[1], sp[1], sp[2], sp[3])
         if sp[4] > 0.5:
             K = c.step
-            spawn_outside_envelope(tr.vehicles[i], tr.vehicles.shape[1], K[K_SHIELD_T], K[K_SHIELD_B],
-                                   K[K_SHIELD_BL], K[K_SHIELD_MARGIN])
+            # 'stopping-gap' (2): the envelope of a leader at rest, b_l -> inf drops its v_l^2 / (2 b_l)
+            b_lead = K[K_SHIELD_BL] if sp[4] < 1.5 else math.inf
+            spawn_outside_envelope(tr.vehicles[i], tr.vehicles.shape[1], K[K_SHIELD_T], K[K_SHIELD_B], b_lead,
+                                   K[K_SHIELD_MARGIN])
         e = tr.episode[i]
         for col in range(e.size):
             e[col] = 0.0
@@ -533,7 +540,7 @@ class TrafficBatch:
             scale=np.array([row[2] for row in self.layout]),
             preview=PREVIEW.copy(),
             spawn=np.array([cfg.speed_limit, cfg.traffic.delta_range[0], cfg.traffic.delta_range[1],
-                            cfg.traffic.lane_change_delay, cfg.spawn == "outside-envelope"]))
+                            cfg.traffic.lane_change_delay, SPAWN_MODES.index(cfg.spawn)]))
 
     def shared_changes(self, cfg: EcoTrafficConfig) -> list[str]:
         """Fields that differ from the shared configuration outside PER_ENV_FIELDS."""

@@ -124,20 +124,21 @@ class HighwayTrafficEnv(EcoHighwayEnv):
         if behaviour != TrafficBehaviour():
             for v in self.road.vehicles[1:]:
                 set_behaviour(v, behaviour, self.road.np_random)
-        if self.traffic_config.spawn == "outside-envelope":
-            self._spawn_outside_envelope()
+        if self.traffic_config.spawn != "highway-env":
+            self._spawn_outside_envelope(self.traffic_config.spawn == "stopping-gap")
 
-    def _spawn_outside_envelope(self) -> None:
+    def _spawn_outside_envelope(self, lead_at_rest: bool) -> None:
         """EcoTraffic-v0's ``spawn='outside-envelope'``: the ego moved back along its lane to the safety layer's
-        envelope gap (roadload.gym.traffic.envelope_gap) behind the vehicle ahead on it."""
+        envelope gap (roadload.gym.traffic.envelope_gap) behind the vehicle ahead on it; ``'stopping-gap'``
+        (``lead_at_rest``): to the envelope's gap behind a vehicle at rest."""
         ego = self.vehicle
         front, _ = self.road.neighbour_vehicles(ego, ego.lane_index)
         if front is None:
             return
         sh = self.traffic_config.shield
         gap = ego.lane_distance_to(front) - 0.5 * (ego.LENGTH + front.LENGTH)
-        need = envelope_gap(ego.speed, front.speed, sh.reaction_time, sh.deceleration, sh.leader_deceleration,
-                            sh.margin)
+        need = envelope_gap(ego.speed, 0.0 if lead_at_rest else front.speed, sh.reaction_time, sh.deceleration,
+                            sh.leader_deceleration, sh.margin)
         if gap < need:
             ego.position = ego.position - np.array([need - gap, 0.0])
             ego.on_state_update()

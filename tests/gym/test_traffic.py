@@ -288,17 +288,52 @@ def test_spawn_outside_envelope_moves_only_the_ego_back_to_the_envelope_gap():
         EcoTrafficEnv(spawn="behind")
 
 
+def test_stopping_gap_spawn_puts_the_ego_at_its_stopping_distance_and_the_traffic_start_forces_no_braking():
+    """'outside-envelope' leaves the ego exactly at the envelope of the leader's spawn speed, and the traffic,
+    spawned at highway-env's spacing, brakes in its first seconds: a coasting ego is then capped. 'stopping-gap'
+    moves it back to the envelope behind a vehicle at rest, margin + v T + v^2 / (2 b) = 2 + 7.5 + 625 / 7 m at
+    25 m/s, where it was closer (untouched where not, the traffic vehicle for vehicle the same): coasting for the
+    first 2 s is then never capped at the default density (it is on 43 of these 64 episodes after the
+    'outside-envelope' spawn; denser traffic cuts in and brakes harder, which no spawn rule removes)."""
+    stop_gap = 2.0 + 25.0 * 0.3 + 25.0 ** 2 / (2.0 * 3.5)
+    sh = {"enabled": True}
+    spawns = {mode: EcoTrafficVectorEnv(64, shield=sh, spawn=mode)
+              for mode in ("highway-env", "outside-envelope", "stopping-gap")}
+    for env in spawns.values():
+        env.reset(seed=11)
+    before, after = spawns["highway-env"].vehicles, spawns["stopping-gap"].vehicles
+    np.testing.assert_array_equal(before[:, 1:], after[:, 1:])
+    np.testing.assert_array_equal(before[:, 0, 1:], after[:, 0, 1:])
+    moved = 0
+    for i in range(64):
+        lead0, lead1 = _lane_leader_gap(before[i]), _lane_leader_gap(after[i])
+        if lead0 is not None and lead0[0] < stop_gap:
+            assert lead1 is not None and lead1[0] == pytest.approx(stop_gap, abs=1e-9)
+            moved += 1
+        else:
+            assert after[i, 0, tm.V_X] == before[i, 0, tm.V_X]
+    assert moved >= 40
+    coast = np.zeros((64, 1), dtype=np.float32)
+    capped = {mode: 0 for mode in spawns}
+    for _ in range(20):
+        for mode, env in spawns.items():
+            capped[mode] += int(env.step(coast)[4]["shield_active"].sum())
+    assert capped["stopping-gap"] == 0 and capped["outside-envelope"] >= 100
+
+
 def test_reference_backend_spawns_outside_the_envelope_too():
     from roadload.gym.traffic import envelope_gap
     from roadload.gym.traffic_reference import HighwayTrafficEnv
 
-    env = HighwayTrafficEnv(curvature=False, spawn="outside-envelope", shield={"enabled": True}, **FAST)
-    for seed in range(4):
-        env.reset(seed=seed)
-        ego = env.vehicle
-        front, _ = env.road.neighbour_vehicles(ego, ego.lane_index)
-        if front is not None:
-            gap = ego.lane_distance_to(front) - tm.LENGTH
-            assert gap >= envelope_gap(ego.speed, front.speed, 0.3, 3.5, 6.0, 2.0) - 1e-9
-        _, _, _, _, info = env.step(np.array([0.0], dtype=np.float32))
-        assert not info["shield_active"]
+    for spawn in ("outside-envelope", "stopping-gap"):
+        env = HighwayTrafficEnv(curvature=False, spawn=spawn, shield={"enabled": True}, **FAST)
+        for seed in range(4):
+            env.reset(seed=seed)
+            ego = env.vehicle
+            front, _ = env.road.neighbour_vehicles(ego, ego.lane_index)
+            if front is not None:
+                gap = ego.lane_distance_to(front) - tm.LENGTH
+                v_lead = 0.0 if spawn == "stopping-gap" else front.speed
+                assert gap >= envelope_gap(ego.speed, v_lead, 0.3, 3.5, 6.0, 2.0) - 1e-9
+            _, _, _, _, info = env.step(np.array([0.0], dtype=np.float32))
+            assert not info["shield_active"]

@@ -31,6 +31,7 @@ Headroom = follower's model energy - limit, in Wh/km of D, per episode; mean and
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import time
 from dataclasses import dataclass
@@ -259,13 +260,21 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--min-gap", type=float, default=MIN_GAP, help="bumper-to-bumper gap kept behind the traffic [m]")
     ap.add_argument("--after", type=float, default=0.0,
                     help="> 0: also the headroom of the trip from this time [s] on (the spawn's transient left out)")
+    ap.add_argument("--config", default=None, help="EcoTraffic-v0 config as JSON text over the evaluation's "
+                                                  "(safety layer on, spawn outside the envelope), e.g. a scenario "
+                                                  "variant '{\"duration\": 100}'")
     ap.add_argument("--csv", default=None, help="write the per-episode table here")
     ap.add_argument("--quick", action="store_true", help="tiny run for CI")
     a = ap.parse_args(argv)
-    config: dict[str, Any] = {}
+    try:
+        config: dict[str, Any] = json.loads(a.config) if a.config else {}
+    except json.JSONDecodeError as exc:
+        ap.error(f"--config: expected a JSON object, got {a.config!r} ({exc})")
+    if not isinstance(config, dict):
+        ap.error(f"--config: expected a JSON object, got {a.config!r}")
     if a.quick:
         a.episodes = 2
-        config = {"duration": 5.0, "vehicles_count": 10}
+        config = {**config, "duration": 5.0, "vehicles_count": 10}
     if a.episodes < 2:
         ap.error(f"--episodes: expected >= 2 (an interval needs two), got {a.episodes}")
     if not (math.isfinite(a.min_gap) and a.min_gap >= 0):

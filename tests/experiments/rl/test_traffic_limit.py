@@ -63,3 +63,22 @@ def test_a_speed_oscillation_costs_energy_the_limit_recovers_and_a_wall_ahead_ta
             assert walled["headroom_behind_Wh_per_km"] == pytest.approx(free["headroom_free_Wh_per_km"], abs=0.02)
         else:
             assert -0.02 < walled["headroom_behind_Wh_per_km"] < free["headroom_free_Wh_per_km"] - 2.0
+
+
+def test_scenario_variant_config_is_checked_before_any_episode(capsys):
+    """--config takes a scenario variant as JSON; malformed JSON, a non-object and an out-of-range field are
+    refused before anything runs, each naming the option or field and its expected value with its unit."""
+    from roadload.experiments.rl.traffic_limit import main
+    from roadload.gym.config import GymConfigError
+
+    for text in ("{duration: 100", "[100]"):
+        with pytest.raises(SystemExit):
+            main(["--episodes", "2", "--config", text])
+        assert "--config: expected a JSON object" in capsys.readouterr().err
+    with pytest.raises(GymConfigError, match=r"duration.*\[s\], > 0 and <= 3600"):
+        main(["--episodes", "2", "--config", '{"duration": -100}'])
+    with pytest.raises(GymConfigError, match=r"speed_limit.*\[m/s\]"):
+        main(["--episodes", "2", "--config", '{"speed_limit": 0}'])
+    with pytest.raises(SystemExit):  # --after beyond the variant's own duration
+        main(["--episodes", "2", "--after", "60", "--config", '{"duration": 50}'])
+    assert "[0, 50) s" in capsys.readouterr().err

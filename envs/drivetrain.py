@@ -19,7 +19,7 @@ from roadload.units import STANDARD_TEMPERATURE
 from ._jit import jit
 
 from .layout import MODE_LOCKED, T_DIFFLOSS, T_DRAG, T_FUEL, T_FULLLOAD, T_GBLOSS, T_MOTORLOSS
-from .numerics import invert_through_map, table1, table2
+from .numerics import invert_through_map_at, segment, table1, table2, table2_at
 
 
 @jit(inline=True)
@@ -74,19 +74,41 @@ def oil_loss_factor(p, oil_temperature):
 
 
 @jit(inline=True)
+def loss_map_speeds(tables, i_g, gear, omega_in):
+    """Where the loss maps are read at gearbox input speed omega_G [rad/s] in gear G >= 1 with ratio i_G:
+    (omega_D = omega_G / i_G [rad/s], its segment (j, w) on the differential map's speed axis, omega_G's segment on
+    gear G's gearbox map's speed axis). A substep reads both maps at one input speed twice, inverted for the source
+    torque (inverse_wheel_torque) and forward for the wheel torque (forward_wheel_torque): searched once."""
+    tabs, ti = tables
+    omega_d = omega_in / i_g
+    j_d, w_d = segment(tabs, ti[T_DIFFLOSS, 2], ti[T_DIFFLOSS, 3], omega_d)
+    k = T_GBLOSS + gear - 1
+    j_g, w_g = segment(tabs, ti[k, 2], ti[k, 3], omega_in)
+    return omega_d, j_d, w_d, j_g, w_g
+
+
+@jit(inline=True)
 def forward_wheel_torque(p, tables, gear, torque_in, omega_in, phi):
     """(T_W, gearbox loss, differential loss) for gearbox input torque T_G and speed omega_G (eq. 2.17).
     Neutral (gear 0): no input torque, only the differential's spin loss."""
-    i_d = p.final_drive
     if gear < 1:
         omega_d = omega_in  # caller passes the differential input speed in neutral
         loss_d = phi * _fade(omega_d) * table2(tables, T_DIFFLOSS, 0.0, omega_d)
         return -loss_d, 0.0, loss_d
+    speeds = loss_map_speeds(tables, p.gear_ratio[gear - 1], gear, omega_in)
+    return forward_wheel_torque_at(p, tables, gear, torque_in, omega_in, phi, speeds)
+
+
+@jit(inline=True)
+def forward_wheel_torque_at(p, tables, gear, torque_in, omega_in, phi, speeds):
+    """forward_wheel_torque in gear G >= 1 with the loss maps' speed segments ``speeds`` = loss_map_speeds(...,
+    omega_in): T_D = T_G i_G - phi f_G(T_G, omega_G), T_W = T_D i_D - phi f_D(T_D, omega_D)."""
+    omega_d, j_d, w_d, j_g, w_g = speeds
+    i_d = p.final_drive
     i_g = p.gear_ratio[gear - 1]
-    loss_g = phi * _fade(omega_in) * table2(tables, T_GBLOSS + gear - 1, torque_in, omega_in)
+    loss_g = phi * _fade(omega_in) * table2_at(tables, T_GBLOSS + gear - 1, torque_in, j_g, w_g)
     t_d = torque_in * i_g - loss_g
-    omega_d = omega_in / i_g
-    loss_d = phi * _fade(omega_d) * table2(tables, T_DIFFLOSS, t_d, omega_d)
+    loss_d = phi * _fade(omega_d) * table2_at(tables, T_DIFFLOSS, t_d, j_d, w_d)
     return t_d * i_d - loss_d, loss_g, loss_d
 
 
@@ -94,10 +116,17 @@ def forward_wheel_torque(p, tables, gear, torque_in, omega_in, phi):
 def inverse_wheel_torque(p, tables, gear, wheel_torque, omega_in, phi):
     """Gearbox input torque T_G that delivers the wheel torque T_W at input speed omega_G (exact inverse of
     ``forward_wheel_torque``)."""
+    speeds = loss_map_speeds(tables, p.gear_ratio[gear - 1], gear, omega_in)
+    return inverse_wheel_torque_at(p, tables, gear, wheel_torque, omega_in, phi, speeds)
+
+
+@jit(inline=True)
+def inverse_wheel_torque_at(p, tables, gear, wheel_torque, omega_in, phi, speeds):
+    """inverse_wheel_torque with the loss maps' speed segments ``speeds`` = loss_map_speeds(..., omega_in)."""
+    omega_d, j_d, w_d, j_g, w_g = speeds
     i_g = p.gear_ratio[gear - 1]
-    omega_d = omega_in / i_g
-    t_d = invert_through_map(tables, T_DIFFLOSS, p.final_drive, phi * _fade(omega_d), omega_d, wheel_torque)
-    return invert_through_map(tables, T_GBLOSS + gear - 1, i_g, phi * _fade(omega_in), omega_in, t_d)
+    t_d = invert_through_map_at(tables, T_DIFFLOSS, p.final_drive, phi * _fade(omega_d), j_d, w_d, wheel_torque)
+    return invert_through_map_at(tables, T_GBLOSS + gear - 1, i_g, phi * _fade(omega_in), j_g, w_g, t_d)
 
 
 @jit(inline=True)

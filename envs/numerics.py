@@ -49,6 +49,46 @@ def rng_normal(x):
     return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
 
 
+SMALL_ANGLE = 2.0 ** -30
+"""|x| [rad] below which sin x, tan x, asin x, atan x round to x and cos x to 1 (the neglected terms, x^3 / 6 or
+x^3 / 3 and x^2 / 2, are below 2^-58 of the result, far under half its last bit); libm returns exactly these values
+there (glibc: its own small-argument branches, taken up to 2^-27 and beyond; tests/envs/test_kernel_exactness.py
+compares every function bit for bit over that range). The ``*_small`` functions return them without the call: on a
+straight road the single-track model's angles are exactly 0 (five calls per substep), and a traffic vehicle that has
+changed lanes keeps a heading and an offset from its centre line of ~1e-16 for the rest of the episode (its steering
+and bicycle step: ten calls per frame, roadload.gym.traffic_model)."""
+
+
+@jit(inline=True)
+def sin_small(x):
+    """sin x, without the call where it rounds to x (|x| < SMALL_ANGLE)."""
+    return x if abs(x) < SMALL_ANGLE else math.sin(x)
+
+
+@jit(inline=True)
+def cos_small(x):
+    """cos x, without the call where it rounds to 1 (|x| < SMALL_ANGLE)."""
+    return 1.0 if abs(x) < SMALL_ANGLE else math.cos(x)
+
+
+@jit(inline=True)
+def tan_small(x):
+    """tan x, without the call where it rounds to x (|x| < SMALL_ANGLE)."""
+    return x if abs(x) < SMALL_ANGLE else math.tan(x)
+
+
+@jit(inline=True)
+def asin_small(x):
+    """asin x, without the call where it rounds to x (|x| < SMALL_ANGLE)."""
+    return x if abs(x) < SMALL_ANGLE else math.asin(x)
+
+
+@jit(inline=True)
+def atan_small(x):
+    """atan x, without the call where it rounds to x (|x| < SMALL_ANGLE)."""
+    return x if abs(x) < SMALL_ANGLE else math.atan(x)
+
+
 @jit(inline=True)
 def segment(tabs, off, n, x):
     """Index i and weight w with x = (1-w) a[i] + w a[i+1] on the increasing axis tabs[off:off+n], clamped."""
@@ -82,13 +122,19 @@ def table1(tables, k, x):
 def table2(tables, k, x, y):
     """Map k at (x, y) (bilinear, clamped)."""
     tabs, ti = tables
+    j, w = segment(tabs, ti[k, 2], ti[k, 3], y)
+    return table2_at(tables, k, x, j, w)
+
+
+@jit(inline=True)
+def table2_at(tables, k, x, j, w):
+    """Map k at (x, y) with y's segment (j, w) on its y axis already found (``segment``): bilinear, clamped."""
+    tabs, ti = tables
     ox = ti[k, 0]
     nx = ti[k, 1]
-    oy = ti[k, 2]
     ny = ti[k, 3]
     ov = ti[k, 4]
     i, u = segment(tabs, ox, nx, x)
-    j, w = segment(tabs, oy, ny, y)
     a = ov + i * ny + j
     b = a + ny
     return ((1.0 - u) * ((1.0 - w) * tabs[a] + w * tabs[a + 1])
@@ -103,12 +149,18 @@ def invert_through_map(tables, k, ratio, scale, speed, target):
     requires ratio > scale * df/dT (true for any physical loss map).
     """
     tabs, ti = tables
+    j, w = segment(tabs, ti[k, 2], ti[k, 3], speed)
+    return invert_through_map_at(tables, k, ratio, scale, j, w, target)
+
+
+@jit(inline=True)
+def invert_through_map_at(tables, k, ratio, scale, j, w, target):
+    """:func:`invert_through_map` with the speed's segment (j, w) on the map's y axis already found."""
+    tabs, ti = tables
     ox = ti[k, 0]
     nx = ti[k, 1]
-    oy = ti[k, 2]
     ny = ti[k, 3]
     ov = ti[k, 4]
-    j, w = segment(tabs, oy, ny, speed)
     t_prev = tabs[ox]
     f_prev = (1.0 - w) * tabs[ov + j] + w * tabs[ov + j + 1]
     g_prev = t_prev * ratio - scale * f_prev

@@ -44,8 +44,10 @@ from .drivetrain import (
     allocate,
     battery_current,
     forward_wheel_torque,
+    forward_wheel_torque_at,
     fuel_power,
-    inverse_wheel_torque,
+    inverse_wheel_torque_at,
+    loss_map_speeds,
     motor_electric_power,
     oil_loss_factor,
     regen_capacity,
@@ -61,7 +63,8 @@ from .layout import (
     L_RIM, L_SOC, L_T, L_TAMB, L_TE, L_V, L_VBAT, L_WE, L_WFL, L_WFR, L_WIND_A, L_WIND_S, L_WRL, L_WRR, L_YAW,
     MODE_LOCKED, MODE_OPEN, MODE_SLIP, R_BANK, R_CURV, R_ELEV, R_GRADE, R_HEAD, R_S, Route, Tables,
 )
-from .numerics import rng_normal, rng_uniform, road_blend, road_locate, road_value, road_weight
+from .numerics import (cos_small, rng_normal, rng_uniform, road_blend, road_locate, road_value, road_weight,
+                       sin_small, tan_small)
 
 LATERAL_VALIDITY_LIMIT = 4.0  # m/s^2, single-track model validity (section 2.5.1)
 
@@ -114,7 +117,8 @@ class Lateral(NamedTuple):
 
 class Shaft(NamedTuple):
     """The engaged drive-train: gear G, clutch mode, speed ratio k(G) [rad/s per m/s], gearbox input speed k v
-    [rad/s], source-side inertia I_src [kg m^2], engine speed omega_E [rad/s]."""
+    [rad/s], source-side inertia I_src [kg m^2], engine speed omega_E [rad/s], and where the loss maps are read at
+    the input speed (drivetrain.loss_map_speeds; zeros in neutral)."""
 
     gear: int
     mode: int
@@ -122,6 +126,7 @@ class Shaft(NamedTuple):
     input_speed: float
     inertia: float
     engine_speed: float
+    loss_map_speeds: tuple
 
 
 class SourceTorques(NamedTuple):
@@ -372,10 +377,10 @@ def lateral_single_track(x, p, steer, mass, c_f, c_r, bank, cth):
     lf = p.cg_to_front
     lr = p.cg_to_rear
     wb = p.wheelbase
-    g_lat = G * math.sin(bank) * cth
+    g_lat = G * sin_small(bank) * cth
     if v < 1.0:
         beta = lr / wb * delta
-        yaw = v * math.tan(delta) / wb
+        yaw = v * tan_small(delta) / wb
         a_y_kin = v * yaw
         fy_f = mass * (a_y_kin - g_lat) * lr / wb
         fy_r = mass * (a_y_kin - g_lat) * lf / wb
@@ -403,7 +408,7 @@ def lateral_single_track(x, p, steer, mass, c_f, c_r, bank, cth):
         fy_r = c_r * alpha_r
     x.side_slip_angle = beta
     x.yaw_rate = yaw
-    spec_fy = (fy_f * math.cos(delta) + fy_r) / mass  # what a lateral accelerometer senses (no gravity)
+    spec_fy = (fy_f * cos_small(delta) + fy_r) / mass  # what a lateral accelerometer senses (no gravity)
     a_y = spec_fy + g_lat  # kinematic lateral acceleration
     x.lateral_acceleration = a_y
     if abs(a_y) > abs(x.lateral_acceleration_peak):
@@ -417,13 +422,13 @@ def lateral_single_track(x, p, steer, mass, c_f, c_r, bank, cth):
 def cornering_resistance(fy_f, fy_r, alpha_f, alpha_r, c_f, toe, sin_toe, v):
     """F_Wc + F_Wt [N]: cornering resistance F_y12 sin(alpha_12) + F_y34 sin(alpha_34) (eq. 2.13-2.15) plus the
     toe-in resistance c_12 delta_toe sin(delta_toe) (section 2.4.5), faded in below 0.5 m/s."""
-    return fy_f * math.sin(alpha_f) + fy_r * math.sin(alpha_r) + c_f * toe * sin_toe * min(1.0, v / 0.5)
+    return fy_f * sin_small(alpha_f) + fy_r * sin_small(alpha_r) + c_f * toe * sin_toe * min(1.0, v / 0.5)
 
 
 @stage
 def path_following(x, v, beta, yaw, kappa, dt):
     """Lateral offset e_y [m] and heading error e_psi [rad] relative to the road centre line."""
-    x.lateral_offset += v * math.sin(x.heading_error + beta) * dt
+    x.lateral_offset += v * sin_small(x.heading_error + beta) * dt
     x.heading_error += (yaw - v * kappa) * dt
 
 
@@ -468,13 +473,19 @@ def gear_and_clutch(x, p, tables, f_req, phi, gear_req):
 @stage
 def engage(x, p, tables, f_req, phi, gear_req):
     """The engaged drive-train of this substep (Shaft): BEV locked in its single gear; ICE through
-    gear_and_clutch; speed ratio k(G) = i_G i_D / r_W, gearbox input speed k v, source-side inertia."""
+    gear_and_clutch; speed ratio k(G) = i_G i_D / r_W, gearbox input speed omega_G = k v, source-side inertia, and
+    the loss maps' speed segments at omega_G (in gear, both the source torque and the wheel torque read the maps
+    there)."""
     if p.is_bev > 0.5:
         gear, mode, omega_e = 1, MODE_LOCKED, x.engine_speed
     else:
         gear, mode, omega_e = gear_and_clutch(x, p, tables, f_req, phi, gear_req)
     k = speed_ratio(p, gear)
-    return Shaft(gear, mode, k, k * x.speed, source_side_inertia(p, gear), omega_e)
+    w_in = k * x.speed
+    speeds = (0.0, 0, 0.0, 0, 0.0)
+    if gear >= 1:
+        speeds = loss_map_speeds(tables, p.gear_ratio[gear - 1], gear, w_in)
+    return Shaft(gear, mode, k, w_in, source_side_inertia(p, gear), omega_e, speeds)
 
 
 @stage
@@ -498,7 +509,8 @@ def source_torques(x, p, tables, shaft, gear_req, f_req, phi):
     # the mode uses it: locked (a BEV unless sailing) or slipping
     t_req = 0.0
     if (bev and gear_req != 0) or (not bev and (mode == MODE_LOCKED or mode == MODE_SLIP)):
-        t_req = _clip(inverse_wheel_torque(p, tables, 1 if bev else gear, f_req * r, w_in, phi), t_min, t_max)
+        t_req = _clip(inverse_wheel_torque_at(p, tables, gear, f_req * r, w_in, phi, shaft.loss_map_speeds), t_min,
+                      t_max)
     if locked:
         t_e = t_req
         t_c = t_e
@@ -522,18 +534,13 @@ def source_torques(x, p, tables, shaft, gear_req, f_req, phi):
 @stage
 def wheel_torque(p, tables, shaft, src, v, phi):
     """Wheel torque T_W [N m] through gearbox and differential (eq. 2.17, with their load-dependent losses):
-    from T_E when locked, from the clutch torque T_C when slipping. Returns (T_W, gearbox loss, diff. loss)."""
+    from T_E when locked, from the clutch torque T_C when slipping, both at the gearbox input speed (when locked
+    the source turns at it). Returns (T_W, gearbox loss, diff. loss)."""
     gear = shaft.gear
     if gear == 0:  # neutral: the differential's spin loss at its input speed
-        torque_in = 0.0
-        omega_in = p.final_drive / p.wheel_radius * v
-    elif p.is_bev > 0.5 or shaft.mode == MODE_LOCKED:
-        torque_in = src.engine_torque
-        omega_in = src.engine_speed
-    else:
-        torque_in = src.clutch_torque
-        omega_in = shaft.input_speed
-    return forward_wheel_torque(p, tables, gear, torque_in, omega_in, phi)
+        return forward_wheel_torque(p, tables, gear, 0.0, p.final_drive / p.wheel_radius * v, phi)
+    torque_in = src.engine_torque if p.is_bev > 0.5 or shaft.mode == MODE_LOCKED else src.clutch_torque
+    return forward_wheel_torque_at(p, tables, gear, torque_in, shaft.input_speed, phi, shaft.loss_map_speeds)
 
 
 # ================================================================================ brakes

@@ -33,6 +33,7 @@ import math
 import numpy as np
 
 from roadload.envs.batch import dependent_jit
+from roadload.envs.numerics import asin_small, atan_small, cos_small, sin_small, tan_small
 
 kernel = dependent_jit(__file__)
 """njit(cache=True) keyed by this module's source (and the simulator core's)."""
@@ -126,45 +127,6 @@ def cos_heading(h):
 def sin_heading(h):
     """sin h, without the call on a straight heading (sin +-0 = +-0, h itself)."""
     return sin_small(h)
-
-
-SMALL_ANGLE = 2.0 ** -30
-"""|x| [rad] below which sin x, tan x, asin x, atan x round to x and cos x to 1 (the neglected terms, x^3 / 6 or
-x^3 / 3 and x^2 / 2, are below 2^-58 of the result, far under half its last bit); libm returns exactly these values
-there (glibc: its own small-argument branches, taken up to 2^-27 and beyond; tests/gym/test_traffic_model.py
-compares every function bit for bit over that range). A vehicle that has changed lanes keeps a heading and an
-offset from its centre line of ~1e-16 for the rest of the episode (the steering law quantises to a pi's last bit),
-a quarter of the traffic: its steering and bicycle step take these branches instead of ten libm calls."""
-
-
-@kernel(forceinline=True, refcount=False)
-def sin_small(x):
-    """sin x, without the call where it rounds to x (|x| < SMALL_ANGLE)."""
-    return x if abs(x) < SMALL_ANGLE else math.sin(x)
-
-
-@kernel(forceinline=True, refcount=False)
-def cos_small(x):
-    """cos x, without the call where it rounds to 1 (|x| < SMALL_ANGLE)."""
-    return 1.0 if abs(x) < SMALL_ANGLE else math.cos(x)
-
-
-@kernel(forceinline=True, refcount=False)
-def tan_small(x):
-    """tan x, without the call where it rounds to x (|x| < SMALL_ANGLE)."""
-    return x if abs(x) < SMALL_ANGLE else math.tan(x)
-
-
-@kernel(forceinline=True, refcount=False)
-def asin_small(x):
-    """asin x, without the call where it rounds to x (|x| < SMALL_ANGLE)."""
-    return x if abs(x) < SMALL_ANGLE else math.asin(x)
-
-
-@kernel(forceinline=True, refcount=False)
-def atan_small(x):
-    """atan x, without the call where it rounds to x (|x| < SMALL_ANGLE)."""
-    return x if abs(x) < SMALL_ANGLE else math.atan(x)
 
 
 @kernel(forceinline=True, refcount=False)

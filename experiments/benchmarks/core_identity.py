@@ -1,7 +1,8 @@
 """Are the simulator core's trajectories bitwise those of another commit? For speed work that must not change a
 single bit: every preset on a motorway, a city and a hilly road, without and with all effects, built-in driver,
 the whole truth log, the final step result, energy ledger and true parameters; plus the native vector env (random
-actions, observations, rewards).
+actions, observations, rewards) and EcoTraffic-v0 in four configurations (observations, rewards, flags, info,
+vehicle states).
 
     python scripts/check_core_identity.py --ref 8efaaad          # the working tree against commit 8efaaad
     python scripts/check_core_identity.py --quick                 # CI smoke run: HEAD, one short simulator run
@@ -60,7 +61,44 @@ def dump(out: Path, quick: bool) -> None:
             trace_reward.append(reward)
         arrays["vector_env/observations"] = np.asarray(trace_obs)
         arrays["vector_env/rewards"] = np.asarray(trace_reward)
+        arrays.update(traffic_arrays())
     np.savez(out, **arrays)  # type: ignore[arg-type]  # numpy's stubs read any keyword as allow_pickle
+
+
+TRAFFIC_CASES = {
+    "default": {},
+    "lane_changes_shield": {"lane_changes": "box", "shield": {"enabled": True}},
+    "curved_dense_see_behind": {"curvature": True, "vehicles_density": 1.5, "see_behind": True},
+    "highway_spawn_4_lanes": {"spawn": "highway-env", "vehicles_count": 10, "lanes_count": 4, "curvature": False},
+}
+"""EcoTraffic-v0 configurations of the identity check: the traffic model's stages (lane changes, the safety layer,
+curvature, density, the Kinematics block's see-behind, the spawn rules) and the ego's powertrain on straight and
+curved roads."""
+
+
+def traffic_arrays(envs: int = 32, steps: int = 400) -> dict[str, np.ndarray]:
+    """EcoTraffic-v0 (native vector env, random actions, autoresets) per TRAFFIC_CASES entry, threads 1 and 2 (the
+    chunks of the parallel step): observations, rewards, flags, every info row and the vehicle states."""
+    from roadload.gym.traffic import INFO_KEYS, EcoTrafficVectorEnv
+
+    arrays: dict[str, np.ndarray] = {}
+    for name, cfg in TRAFFIC_CASES.items():
+        for threads in (1, 2):
+            env = EcoTrafficVectorEnv(envs, config=cfg, threads=threads)
+            obs, _ = env.reset(seed=7)
+            d = env.single_action_space.shape[0]
+            actions = np.random.default_rng(7).uniform(-1, 1, (steps, envs, d)).astype(np.float32)
+            trace: dict[str, list] = {"obs": [obs], "reward": [], "flags": [], "info": [], "vehicles": []}
+            for k in range(steps):
+                obs, reward, term, trunc, info = env.step(actions[k])
+                trace["obs"].append(obs)
+                trace["reward"].append(reward)
+                trace["flags"].append(np.stack([term, trunc]))
+                trace["info"].append(np.stack([np.asarray(info[key], dtype=float) for key in INFO_KEYS]))
+                trace["vehicles"].append(env.vehicles)
+            for key, rows in trace.items():
+                arrays[f"traffic/{name}/threads{threads}/{key}"] = np.asarray(rows)
+    return arrays
 
 
 def compare(ref: str, quick: bool, repo: Path | None = None) -> int:

@@ -90,6 +90,10 @@ def run_traffic_benchmark(seconds: float = 5.0, n_envs: int = 256, threads: tupl
     ref = random_action_stepper(_reference_env(cfg)) if reference else None
     natives = {t: _native_stepper(cfg, n_envs, t, 0) for t in threads}
     fast = random_action_stepper(_highway_fast_env()) if highway_fast else None
+    for warm in (ref, fast):  # the first steps compile (the reference's ego kernels on a cold cache): not timed
+        if warm is not None:
+            for _ in range(3):
+                warm()
     rows = []
 
     def add(env: str, mode: str, rnd: int, t: int, per_call: int, sim_step: float, fn: Callable[[], None]) -> None:

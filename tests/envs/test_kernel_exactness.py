@@ -13,7 +13,8 @@ from numba import njit
 from roadload.envs import Simulator
 from roadload.envs import batch
 from roadload.envs import physics as ph
-from roadload.envs.numerics import road_value_at, road_value_near
+from roadload.envs import numerics
+from roadload.envs.numerics import SMALL_ANGLE, road_value_at, road_value_near
 from roadload.units import G
 
 
@@ -28,6 +29,27 @@ def test_skipped_libm_calls_are_exact_in_double_precision():
     for x in np.concatenate([np.linspace(25.0, 30.0, 501), [1e3, 1e6, 1e300]]):
         assert _libm(x)[0] == 1.0
     assert _libm(0.0)[1:] == (1.0, 0.0)
+
+
+@pytest.mark.parametrize("name", ["sin", "cos", "tan", "asin", "atan"])
+def test_small_angle_branches_equal_libm_bit_for_bit(name):
+    """sin_small & co. skip libm below SMALL_ANGLE (the single-track model on a straight road; the steering law and
+    the bicycle step of the quarter of the traffic that keeps a ~1e-16 heading after a lane change): the value they
+    return there must be libm's to the last bit, down to subnormals and signed zeros, and above the threshold they
+    are libm's call."""
+    rng = np.random.default_rng(11)
+    below = np.exp(rng.uniform(math.log(5e-324), math.log(SMALL_ANGLE), 4000))
+    above = SMALL_ANGLE * np.exp(rng.uniform(0.0, math.log(1.0 / SMALL_ANGLE), 1000))
+    edges = [0.0, 5e-324, SMALL_ANGLE, np.nextafter(SMALL_ANGLE, 0.0), 2.0 ** -27, 0.3]
+    fast = getattr(numerics, f"{name}_small")
+    exact = getattr(math, name)
+    n_below = 0
+    for x in np.concatenate([below, above, edges]):
+        for signed in (float(x), -float(x)):
+            got, want = fast(signed), exact(signed)
+            assert np.float64(got).tobytes() == np.float64(want).tobytes(), (name, signed, got, want)
+            n_below += abs(signed) < SMALL_ANGLE
+    assert n_below >= 8000  # the branch itself was exercised
 
 
 @pytest.mark.parametrize("bank", [0.0, 0.03])

@@ -19,6 +19,7 @@ scheduler gave), with the 1-minute load average as the row started. The ratio na
     python scripts/bench_traffic.py --vehicles 10 --threads 2 --rounds 3
     python scripts/bench_traffic.py --quick               # CI smoke run (N = 16, 0.5 s per row, one round)
     python scripts/bench_traffic.py --compare main --rounds 4   # native rows of commit main against the working tree
+    python scripts/bench_traffic.py --compare main --bursts 60  # the same in 60 paired short bursts (busy machine)
 
 ``--compare REF`` runs the native rows alone (``--native-only``) on commit REF (exported, refcompare) and on the
 working tree, in alternating child processes, and reports the per-round ratio new / old of env steps per CPU second
@@ -32,6 +33,10 @@ import argparse
 import json
 import os
 import statistics
+import subprocess
+import sys
+import tempfile
+import time
 from pathlib import Path
 from typing import Any, Callable, cast
 
@@ -188,7 +193,80 @@ def compare_with(args: argparse.Namespace, repo: Path | None = None) -> pd.DataF
     return compare_rounds(old, new)
 
 
-__all__ = ["run_traffic_benchmark", "traffic_ratios", "summary_line", "compare_rounds", "compare_with", "main",
+
+def burst_worker(n_envs: int, threads: int, vehicles: int) -> None:
+    """--burst-worker: a native vector env (as the rows') that steps the number of batch steps each line of stdin
+    asks for and answers with a JSON line of env steps per CPU second and per wall second (compare_bursts)."""
+    cfg = make_config(EcoTrafficConfig, {"curvature": False, "vehicles_count": vehicles})
+    step = _native_stepper(cfg, n_envs, threads, 0)
+    print("ready", flush=True)
+    for line in sys.stdin:
+        n = int(line)
+        w0, c0 = time.perf_counter(), time.process_time()
+        for _ in range(n):
+            step()
+        cpu, wall = time.process_time() - c0, time.perf_counter() - w0
+        print(json.dumps({"cpu": n * n_envs / max(cpu, 1e-9), "wall": n * n_envs / wall}), flush=True)
+
+
+def compare_bursts(args: argparse.Namespace, repo: Path | None = None) -> pd.DataFrame:
+    """--compare REF --bursts K: per thread count, two persistent child processes (commit REF exported, and the
+    working tree) step ``args.burst_steps`` batch steps in turn, K pairs (the first of a pair alternating), so that
+    each pair sees the same load within a second; the median and quartiles of the per-pair ratios new / old per
+    CPU second and per wall second. Robust to a busy machine, where whole child runs scatter by +-30 %."""
+    # imported here, not at the top: this file also runs against old package trees
+    from roadload.experiments.benchmarks.refcompare import _RUN_FILE, REPO, export_commit
+
+    out = []
+    with tempfile.TemporaryDirectory(prefix="roadload-ref-") as tmp:
+        pkg = export_commit(args.compare, Path(tmp), repo or REPO)
+        for t in (int(x) for x in args.threads.split(",")):
+            children = [_burst_child(str(pkg), t, args, _RUN_FILE), _burst_child(None, t, args, _RUN_FILE)]
+            pairs = []
+            loads = []
+            for k in range(args.bursts):
+                order = (0, 1) if k % 2 == 0 else (1, 0)
+                got = {i: _burst(children[i], args.burst_steps) for i in order}
+                pairs.append((got[0], got[1]))
+                loads.append(load_average())
+            for child in children:
+                cast(Any, child.stdin).close()
+                child.wait()
+            row: dict[str, Any] = {"threads": t, "pairs": len(pairs)}
+            for key in ("cpu", "wall"):
+                ratio = sorted(new[key] / old[key] for old, new in pairs)
+                q = statistics.quantiles(ratio, n=4) if len(ratio) > 1 else [ratio[0]] * 3
+                row.update({f"old_per_{key}_s": statistics.median(o[key] for o, _ in pairs),
+                            f"new_per_{key}_s": statistics.median(n[key] for _, n in pairs),
+                            f"new_over_old_{key}": q[1], f"quartiles_{key}": f"{q[0]:.3f}-{q[2]:.3f}"})
+            row["load_1min"] = statistics.median(loads)
+            out.append(row)
+    return pd.DataFrame(out)
+
+
+def _burst_child(pythonpath: str | None, threads: int, args: argparse.Namespace, code: str) -> subprocess.Popen:
+    """A burst worker of this file on the package under ``pythonpath`` (None: the installed one), ready."""
+    env = dict(os.environ)
+    env.pop("PYTHONPATH", None)
+    if pythonpath:
+        env["PYTHONPATH"] = pythonpath
+    cmd = [sys.executable, "-c", code, str(Path(__file__).resolve()), "--burst-worker", "--threads", str(threads),
+           "--n-envs", str(args.n_envs), "--vehicles", str(args.vehicles)]
+    child = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env,
+                             cwd=tempfile.gettempdir())
+    if cast(Any, child.stdout).readline().strip() != "ready":
+        raise RuntimeError(f"burst worker on {pythonpath or 'the working tree'} did not start")
+    return child
+
+
+def _burst(child: subprocess.Popen, steps: int) -> dict[str, float]:
+    cast(Any, child.stdin).write(f"{steps}\n")
+    cast(Any, child.stdin).flush()
+    return json.loads(cast(Any, child.stdout).readline())
+
+
+__all__ = ["run_traffic_benchmark", "traffic_ratios", "summary_line", "compare_rounds", "compare_with",
+           "compare_bursts", "burst_worker", "main",
            "TARGET_STEPS_PER_S", "TARGET_RATIO"]
 
 
@@ -210,8 +288,15 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--native-only", action="store_true", help="only the native rows (no highway-env, no ratios)")
     ap.add_argument("--compare", metavar="REF", help="native rows of commit REF (old) against the working tree "
                                                      "(new), --rounds interleaved child runs each")
+    ap.add_argument("--bursts", type=int, default=0, metavar="K", help="with --compare: K pairs of short bursts of "
+                                                                       "two persistent processes instead of child runs")
+    ap.add_argument("--burst-steps", type=int, default=150, help="batch steps per burst (--bursts)")
+    ap.add_argument("--burst-worker", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--quick", action="store_true", help="tiny run for CI")
     a = ap.parse_args(argv)
+    if a.burst_worker:
+        burst_worker(a.n_envs, int(a.threads), a.vehicles)
+        return
     try:
         threads = tuple(int(t) for t in a.threads.split(",") if t.strip())
     except ValueError:
@@ -222,6 +307,12 @@ def main(argv: list[str] | None = None) -> None:
         a.seconds, a.n_envs, a.rounds = 0.5, 16, 1
     console = Console(width=160)
     console.print(f"load average (1 min) at start: {load_average():.2f} on {os.cpu_count()} cores")
+    if a.compare and a.bursts > 0:
+        ratios = compare_bursts(a)
+        print_table(console, ratios, f"EcoTraffic-v0 native x{a.n_envs}, {a.vehicles} vehicles: {a.compare} (old) "
+                                     f"against the working tree (new), {a.bursts} paired bursts of {a.burst_steps} "
+                                     f"batch steps", "{:,.3f}")
+        return
     if a.compare:
         ratios = compare_with(a)
         print_table(console, ratios, f"EcoTraffic-v0 native x{a.n_envs}, {a.vehicles} vehicles: {a.compare} (old) "

@@ -294,11 +294,12 @@ class PlantFuelModel:
         fuel = self.gear_fuel_power(v, force, load_margin)
         stay = (float(self.gear_fuel_power(v, force)[current]) if current is not None and 0 <= current < self.gears
                 else np.inf)
+        keep = current is not None and bool(np.isfinite(stay))
         if not np.isfinite(fuel).any():
-            return int(current) if np.isfinite(stay) else int(np.argmax(self.full_load(v)))
+            return int(current) if keep and current is not None else int(np.argmax(self.full_load(v)))
         best = int(np.argmin(fuel))
-        if np.isfinite(stay) and stay <= (1.0 + hysteresis) * fuel[best] + 1e-9:
-            return int(current)  # type: ignore[arg-type]
+        if keep and current is not None and stay <= (1.0 + hysteresis) * fuel[best] + 1e-9:
+            return int(current)
         return best
 
     def full_load_envelope(self) -> tuple[np.ndarray, np.ndarray]:

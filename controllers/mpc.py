@@ -140,14 +140,17 @@ class MpcSettings:
             raise MpcError(f"time_weight must be >= 0, got {self.time_weight}")
         if not 0 < self.warm_tol < 1:
             raise MpcError(f"warm_tol must be in (0, 1), got {self.warm_tol}")
-        if self.terminal_value not in TERMINAL_VALUES:
-            raise MpcError(f"MpcSettings.terminal_value: choose one of {TERMINAL_VALUES}, got {self.terminal_value!r}")
-        if self.fuel_model not in FUEL_MODELS:
-            raise MpcError(f"MpcSettings.fuel_model: choose one of {FUEL_MODELS}, got {self.fuel_model!r}")
-        if self.solver not in SOLVERS:
-            raise MpcError(f"unknown solver {self.solver!r}; choose one of {SOLVERS}")
+        self._check_choices()
         if self.stop_speed < self.speed_floor:
             raise MpcError("stop_speed must be >= speed_floor")
+
+    def _check_choices(self) -> None:
+        """The named choices (terminal value, fuel model, solver) are known ones."""
+        for name, choices in (("terminal_value", TERMINAL_VALUES), ("fuel_model", FUEL_MODELS)):
+            if getattr(self, name) not in choices:
+                raise MpcError(f"MpcSettings.{name}: choose one of {choices}, got {getattr(self, name)!r}")
+        if self.solver not in SOLVERS:
+            raise MpcError(f"unknown solver {self.solver!r}; choose one of {SOLVERS}")
 
     @property
     def horizon(self) -> float:

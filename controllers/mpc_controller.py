@@ -492,9 +492,9 @@ class MpcController(ControllerBase):
 
     def _least_fuel_gear(self, obs: Observation) -> int:
         """The plant map's gear of least fuel (1-based) at the measured speed and the plan's wheel force here (the
-        command's off the plan; MpcControllerSettings.gear_fuel_hysteresis, gear_load_margin, gear_hold_time); the request is held while a
-        shift is under way and for gear_hold_time after one, unless its engine speed leaves the range or its full
-        load no longer gives the force."""
+        command's off the plan; MpcControllerSettings.gear_fuel_hysteresis, gear_load_margin, gear_hold_time); the
+        request is held while a shift is under way and for gear_hold_time after one, unless its engine speed leaves
+        the range or its full load no longer gives the force."""
         st, pf = self.settings, self.ctx.energy.plant_fuel
         assert pf is not None
         force = self._last_force if self._last_force is not None else 0.0

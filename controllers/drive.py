@@ -8,6 +8,8 @@ oracle) and the controller (mpc / cruise / human), runs :func:`~.closed_loop.run
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 from typing import Any
 
@@ -23,7 +25,8 @@ from roadload.vehicle import VehicleSpec
 from .base import ControllerError, DriveContext
 from .closed_loop import Controller, Handover, RunResult, run_closed_loop
 from .cruise import CruiseController, CruiseSettings
-from .energy import SourceEnergyModel, with_loss_error
+from .dynamic_programming import cached_plant_fuel_map
+from .energy import PlantFuelModel, SourceEnergyModel, with_loss_error
 from .force_model import FORCE_MODEL_NAMES, ErroredForceModel, FixedForceModel, ForceModel, OracleForceModel
 from .mpc import MpcSettings
 from .mpc_controller import MpcController, MpcControllerSettings, TripSchedule
@@ -217,6 +220,13 @@ def _online_history(force_model: OnlineForceModel, result: RunResult) -> dict:
     return desc
 
 
+def plant_fuel_model(spec: VehicleSpec) -> PlantFuelModel:
+    """The plant's own fuel map per gear of an ICE spec as the MPC's fuel model (MpcSettings.fuel_model
+    'plant_map'): :func:`~.dynamic_programming.cached_plant_fuel_map`, the map the plant-fuel bound uses."""
+    key = json.dumps(spec.to_dict(), sort_keys=True)
+    return PlantFuelModel(cached_plant_fuel_map(spec), f"{spec.name}:{hashlib.sha1(key.encode()).hexdigest()}")
+
+
 def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, seed: int = 0,
           settings: DriveSettings | None = None, progress=None, road_seed: int | None = None
           ) -> tuple[RunResult, SimulatorPlant]:
@@ -231,6 +241,8 @@ def drive(vehicle="bmw_i3", road: RoadProfile | str = "hilly", effects=None, see
                                                                          else spec)
     abc = abc_parameters(nominal)
     force_model, energy = _force_model(st, plant, road, nominal, abc, energy)
+    if st.controller == "mpc" and st.mpc.fuel_model.startswith("plant_map") and energy.kind == "ice":
+        energy = replace(energy, plant_fuel=plant_fuel_model(spec))
     ctx = DriveContext(road=road, energy=energy, force_model=force_model, dt=st.dt,
                        lateral_accel_max=st.mpc.lateral_accel_max)
     controller = _controller(st, road, abc)

@@ -12,6 +12,10 @@ Both powertrains use one smooth loss polynomial in shaft speed omega [rad/s] and
   drag (engine brake / retarder, fuel cut) is the ICE's ``regen`` force: limited, and free of fuel. The gear G is
   NOT optimised: it comes from a shift rule on speed (:meth:`SourceEnergyModel.gear_for_speed`), applied by
   the MPC as a smooth function of the planned speed (:meth:`SourceEnergyModel.smooth_ratio`).
+- ICE with the plant's fuel map (:class:`PlantFuelModel`, ``MpcSettings.fuel_model = "plant_map"``): the fuel
+  power of the gear of least fuel in the plant's own quasi-static map, over (speed, net wheel force), 0 in overrun
+  (fuel cut; the brakes take a force beyond the engine's drag), smoothed for the NLP
+  (:meth:`PlantFuelModel.smooth_table`); the gear is then chosen per move, not by a shift rule.
 
 The polynomial is convex in the forces and smooth in v > 0, which keeps the NLP (and the QP path) well-behaved.
 """
@@ -20,6 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -55,6 +60,8 @@ class SourceEnergyModel:
     full_load_power: tuple[float, ...] = field(default=())
     # ICE: engine speed range (idle, maximum) [rad/s] of the gear choice (best_gear_fuel_power); empty: unknown
     engine_speed_range: tuple[float, ...] = field(default=())
+    # ICE: the plant's own fuel map per gear (PlantFuelModel); None: not attached (MpcSettings.fuel_model "willans")
+    plant_fuel: PlantFuelModel | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in ("ev", "ice"):
@@ -213,6 +220,130 @@ class SourceEnergyModel:
 
     def brake_force_limit(self, mass: float) -> float:
         return self.max_brake_deceleration * mass
+
+
+class PlantFuelModel:
+    """An ICE plant's own quasi-static fuel map per gear, as the MPC uses it (``MpcSettings.fuel_model =
+    "plant_map"``), read from a :class:`~.dynamic_programming.PlantFuelMap` (the one the plant-fuel bound uses:
+    fuel[g, i, j] [W] at speed v_i [m/s] and net wheel force F_j [N], each gear's full load max_force[g, i] [N], its
+    overrun drag, its speed ratio k_g [rad/s per m/s] and the engine speed range [rad/s]).
+
+    - :meth:`gear_fuel_power`: P_g(v, F) [W] per gear, bilinear in the map, inf where gear g cannot (k_g v outside
+      the engine speed range, or F above its full load); 0 at or below the gear's drag (fuel cut, brakes free).
+    - :meth:`least_fuel_gear`: the gear the controller requests, argmin_g P_g(v, F) with hysteresis.
+    - :meth:`smooth_table`: phi(v, F) = min_g P_g(v, F) on the map's grid, continued linearly in F above the
+      largest full load, smoothed by a Gaussian of (sigma_v, sigma_F); the NLP's fuel power (a cubic B-spline
+      through it, :class:`~.mpc.OcpSolver`), with the traction limit F <= F_max(v) = max_g max_force[g](v)
+      (:meth:`full_load_envelope`).
+
+    Compared by ``key`` (the vehicle spec it was built from), so an energy model carrying it stays hashable."""
+
+    def __init__(self, fuel_map: Any, key: str) -> None:
+        for name in ("speeds", "forces", "fuel", "max_force", "speed_ratio", "engine_speed_range"):
+            if not hasattr(fuel_map, name):
+                raise EnergyModelError(f"PlantFuelModel: the fuel map has no {name!r} (expected a PlantFuelMap)")
+        self.map = fuel_map
+        self.key = key
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, PlantFuelModel) and other.key == self.key
+
+    def __hash__(self) -> int:
+        return hash(("PlantFuelModel", self.key))
+
+    def __repr__(self) -> str:
+        return f"PlantFuelModel({self.key!r})"
+
+    @property
+    def gears(self) -> int:
+        return int(np.asarray(self.map.fuel).shape[0])
+
+    def _cell(self, v: float, force: float) -> tuple[int, float, int, float]:
+        sp, fo = np.asarray(self.map.speeds), np.asarray(self.map.forces)
+        vc, fc = min(max(v, sp[0]), sp[-1]), min(max(force, fo[0]), fo[-1])
+        i = int(np.clip(np.searchsorted(sp, vc) - 1, 0, sp.size - 2))
+        j = int(np.clip(np.searchsorted(fo, fc) - 1, 0, fo.size - 2))
+        return i, (vc - sp[i]) / (sp[i + 1] - sp[i]), j, (fc - fo[j]) / (fo[j + 1] - fo[j])
+
+    def full_load(self, v: float) -> np.ndarray:
+        """Each gear's full-load wheel force [N] at speed v [m/s] (linear in the map's speeds); 0 where the gear's
+        engine speed is out of range."""
+        i, wv, _, _ = self._cell(v, 0.0)
+        mf = np.asarray(self.map.max_force)
+        lo, hi = self.map.engine_speed_range
+        omega = np.asarray(self.map.speed_ratio) * v
+        return np.where((omega >= lo) & (omega <= hi), (1 - wv) * mf[:, i] + wv * mf[:, i + 1], 0.0)
+
+    def gear_fuel_power(self, v: float, force: float, load_margin: float = 1.0) -> np.ndarray:
+        """P_g(v, F) [W] of every gear at speed v [m/s] and net wheel force F [N] (class docstring), inf where the
+        gear cannot give F / load_margin [N] (load_margin <= 1 keeps a reserve below full load) or its engine speed
+        is out of range."""
+        i, wv, j, wf = self._cell(v, force)
+        t = np.asarray(self.map.fuel)[:, i:i + 2, j:j + 2]
+        value = (1 - wv) * ((1 - wf) * t[:, 0, 0] + wf * t[:, 0, 1]) + wv * ((1 - wf) * t[:, 1, 0] + wf * t[:, 1, 1])
+        full = self.full_load(v)
+        return np.where((full > 0) & (force <= load_margin * full), value, np.inf)
+
+    def least_fuel_gear(self, v: float, force: float, current: int | None = None, hysteresis: float = 0.005,
+                        load_margin: float = 0.98) -> int:
+        """The gear (0-based) of least fuel at speed v [m/s] and net wheel force F [N] among those whose full load
+        gives F / load_margin (a reserve for a gear to shift into); ``current`` is kept while its full load gives F
+        and its fuel is within (1 + hysteresis) of the least (no hunting between gears of nearly equal fuel, e.g.
+        in overrun where every gear burns 0). No gear can: ``current`` if it can, else the one with the largest
+        full load."""
+        fuel = self.gear_fuel_power(v, force, load_margin)
+        stay = (float(self.gear_fuel_power(v, force)[current]) if current is not None and 0 <= current < self.gears
+                else np.inf)
+        keep = current is not None and bool(np.isfinite(stay))
+        if not np.isfinite(fuel).any():
+            return int(current) if keep and current is not None else int(np.argmax(self.full_load(v)))
+        best = int(np.argmin(fuel))
+        if keep and current is not None and stay <= (1.0 + hysteresis) * fuel[best] + 1e-9:
+            return int(current)
+        return best
+
+    def full_load_envelope(self) -> tuple[np.ndarray, np.ndarray]:
+        """(speeds [m/s], the largest full-load wheel force over the gears in range [N]) on the map's speeds."""
+        sp = np.asarray(self.map.speeds, float)
+        return sp, np.array([self.full_load(float(v)).max() for v in sp])
+
+    def smooth_table(self, sigma_speed: float = 0.5, sigma_force: float = 500.0, fuel_cut: bool = True,
+                     rule_gear: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(speeds [m/s], forces [N], phi [W] (speeds x forces)): the least fuel over the gears (class docstring),
+        continued linearly in F above the largest full load (the slope of its last 2 kN; the NLP's traction limit
+        keeps the plan below it), then smoothed by a Gaussian of sigma_speed [m/s] x sigma_force [N] so that a cubic
+        spline through it does not ring at the fuel cut and the gear changes.
+
+        Model variants that separate what the map buys: ``fuel_cut`` False charges a braking force the fuel of
+        F = 0 (the engine's friction fuelled, as the Willans line does); ``rule_gear`` (0-based gear per map speed,
+        a shift rule's) prices each speed in that gear, or where its full load cannot give F the highest lower
+        gear that can (a kick-down), instead of the least over the gears."""
+        from scipy.ndimage import gaussian_filter
+
+        sp, fo = np.asarray(self.map.speeds, float), np.asarray(self.map.forces, float)
+        lo, hi = self.map.engine_speed_range
+        omega = np.asarray(self.map.speed_ratio, float)[:, None] * sp[None, :]  # (gears, speeds)
+        able = (((omega >= lo) & (omega <= hi))[:, :, None]
+                & (fo[None, None, :] <= np.asarray(self.map.max_force, float)[:, :, None]))
+        per_gear = np.where(able, np.asarray(self.map.fuel, float), np.inf)
+        if rule_gear is None:
+            table = per_gear.min(axis=0)  # gear_fuel_power's least
+        else:
+            table = np.full(per_gear.shape[1:], np.inf)
+            for g in range(per_gear.shape[0] - 1, -1, -1):  # from the top: the rule's gear, else lower ones
+                take = (np.asarray(rule_gear)[:, None] >= g) & ~np.isfinite(table)
+                table = np.where(take, per_gear[g], table)
+        if not fuel_cut:
+            table = np.where(fo[None, :] < 0.0, table[:, [int(np.argmin(np.abs(fo)))]], table)
+        for row in table:
+            ok = np.flatnonzero(np.isfinite(row))
+            last = ok[-1]
+            tail = ok[fo[ok] >= fo[last] - 2000.0]
+            slope = np.polyfit(fo[tail], row[tail], 1)[0] if tail.size > 1 else 0.0
+            row[last + 1:] = row[last] + slope * (fo[last + 1:] - fo[last])
+            row[:ok[0]] = 0.0  # below every gear's table: brakes (fuel cut)
+        sigma = (sigma_speed / (sp[1] - sp[0]), sigma_force / (fo[1] - fo[0]))
+        return sp, fo, gaussian_filter(table, sigma, mode="nearest")
 
 
 def with_loss_error(model: SourceEnergyModel, error: float) -> SourceEnergyModel:

@@ -60,6 +60,8 @@ class MpcError(ValueError):
 
 
 SOLVERS = ("ipopt", "osqp")
+# the ICE's fuel model in the objective (MpcSettings.fuel_model); an EV's battery model is the same under both
+FUEL_MODELS = ("willans", "plant_map", "plant_map_no_cut", "plant_map_shift_rule")
 TERMINAL_VALUES = ("source", "wheel", "none")
 QP_E_SCALE = 30.0  # QP path: kinetic-energy variables in units of 30 m^2/s^2 (forces are in kN)
 
@@ -98,6 +100,17 @@ class MpcSettings:
     # closed-loop energy equal to 1e-6 within 0.1 %
     qp_tolerance: float = 1e-3  # OSQP eps_abs = eps_rel
     sqp_iterations: int = 1  # QP path: linearise-solve rounds per control step (1 = real-time iteration)
+    # ICE fuel power in the objective [W]: "willans" = the fitted Willans line at the shift rule's smoothed ratio,
+    # P = (F_t v + P_loss(omega, T)) / eta_i, engine friction charged while braking; "plant_map" = the plant's own
+    # quasi-static map at the gear of least fuel per move, P = phi(v_mid, F_t - F_r - F_b) (0 in overrun: fuel cut,
+    # the brakes free), phi a cubic B-spline through the smoothed least-over-gears table
+    # (energy.PlantFuelModel.smooth_table), with the traction limit F_t <= F_max(v_mid) of the best gear's full load
+    # in place of the power limit; the controller then requests the map's least-fuel gear
+    # (MpcControllerSettings.gear_command). Variants that separate what each part buys: "plant_map_no_cut" (a
+    # braking force charged the fuel of F = 0, the engine's friction fuelled) and "plant_map_shift_rule" (the map
+    # in the shift rule's gear, kick-down where it cannot, and the shift rule's gear requested: no gear choice).
+    # An EV ignores it.
+    fuel_model: str = "willans"
 
     def __post_init__(self) -> None:
         check_field_types(self, MpcError)
@@ -127,12 +140,17 @@ class MpcSettings:
             raise MpcError(f"time_weight must be >= 0, got {self.time_weight}")
         if not 0 < self.warm_tol < 1:
             raise MpcError(f"warm_tol must be in (0, 1), got {self.warm_tol}")
-        if self.terminal_value not in TERMINAL_VALUES:
-            raise MpcError(f"MpcSettings.terminal_value: choose one of {TERMINAL_VALUES}, got {self.terminal_value!r}")
-        if self.solver not in SOLVERS:
-            raise MpcError(f"unknown solver {self.solver!r}; choose one of {SOLVERS}")
+        self._check_choices()
         if self.stop_speed < self.speed_floor:
             raise MpcError("stop_speed must be >= speed_floor")
+
+    def _check_choices(self) -> None:
+        """The named choices (terminal value, fuel model, solver) are known ones."""
+        for name, choices in (("terminal_value", TERMINAL_VALUES), ("fuel_model", FUEL_MODELS)):
+            if getattr(self, name) not in choices:
+                raise MpcError(f"MpcSettings.{name}: choose one of {choices}, got {getattr(self, name)!r}")
+        if self.solver not in SOLVERS:
+            raise MpcError(f"unknown solver {self.solver!r}; choose one of {SOLVERS}")
 
     @property
     def horizon(self) -> float:
@@ -286,11 +304,32 @@ class OcpSolver:
         self.energy = energy
         n = settings.n_nodes
         self.n = n
+        self.plant_map = (self._plant_map() if settings.fuel_model.startswith("plant_map") and energy.kind == "ice"
+                          else None)
         self._build()
         self._osqp: Any = None  # osqp.OSQP workspace (osqp ships no type information)
         self._qp_x = None
 
     # ------------------------------------------------------------------ formulation
+    def _plant_map(self) -> tuple[ca.Function, ca.Function]:
+        """(phi(v [m/s], F [kN]) [W], F_max(v [m/s]) [N]): cubic B-splines through the smoothed least-fuel table
+        and the best gear's full load of the energy model's plant map (MpcSettings.fuel_model)."""
+        pf = self.energy.plant_fuel
+        if pf is None:
+            raise MpcError(f"MpcSettings.fuel_model 'plant_map': the energy model {self.energy.name!r} carries no "
+                           f"plant fuel map (SourceEnergyModel.plant_fuel; controllers.drive attaches it)")
+        model = self.settings.fuel_model
+        speeds = np.asarray(pf.map.speeds, float)
+        speeds, forces, table = pf.smooth_table(
+            fuel_cut=model != "plant_map_no_cut",
+            rule_gear=self.energy.gear_for_speed(speeds) if model == "plant_map_shift_rule" else None)
+        env_speeds, envelope = pf.full_load_envelope()
+        self._map_speeds = (float(speeds[0]), float(speeds[-1]))
+        self._ft_max = float(envelope.max()) / 1000.0  # [kN]
+        fuel = ca.interpolant("plant_fuel", "bspline", [speeds, forces / 1000.0], table.ravel(order="F"))
+        full = ca.interpolant("full_load", "bspline", [env_speeds], envelope)
+        return fuel, full
+
     def _formulate(self) -> dict[str, Any]:
         """The NLP's symbols: decision vector x, parameter vector p, constraint vector g and the objective's
         parts (source energy [kJ], time t_N [s], kinetic energy left at the end m E_N [kJ], comfort and
@@ -328,13 +367,19 @@ class OcpSolver:
         t_end = ca.sum1(dt)  # time state t_N, substituted: t_{k+1} = t_k + ds / v_mid
         jerk = ca.vertcat((acc[0] - a_prev) * v[0] / ds[0],
                           (acc[1:] - acc[:-1]) * v[1:-1] / (0.5 * (ds[:-1] + ds[1:])))
-        power = ft * vm - en.traction_power_limit(vm) / 1000.0  # kW above the drive's limit at this speed (<= 0)
         regen_power = fr * vm
+        if self.plant_map is not None:  # the plant's fuel at the gear of least fuel, the best gear's full load
+            fuel, full_load = self.plant_map
+            v_in = ca.fmin(ca.fmax(vm, self._map_speeds[0]), self._map_speeds[1])
+            power = (ft - full_load(v_in.T).T / 1000.0) * vm  # kW above the best gear's full load (<= 0)
+            psrc = fuel(ca.vertcat(v_in.T, (ft - fr - fb).T)).T
+        else:
+            power = ft * vm - en.traction_power_limit(vm) / 1000.0  # kW above the drive's limit at this speed (<= 0)
+            # ICE: gear from the speed-based shift rule, smooth in the planned speed; EV: the fixed ratio
+            ratio_obj = en.smooth_ratio(vm) if en.kind == "ice" else ratio
+            psrc = en.source_power(1000.0 * ft, 1000.0 * fr, vm, ratio_obj)
         g = ca.vertcat(dyn, acc, jerk, power, regen_power)
 
-        # ICE: gear from the speed-based shift rule, smooth in the planned speed; EV: the fixed ratio
-        ratio_obj = en.smooth_ratio(vm) if en.kind == "ice" else ratio
-        psrc = en.source_power(1000.0 * ft, 1000.0 * fr, vm, ratio_obj)
         energy = ca.sum1(psrc * dt) / 1000.0  # kJ
         return {"x": x, "p": p, "g": g, "energy": energy, "t_end": t_end, "lam": lam,
                 "terminal_energy": m_in * E[n] / 1000.0,
@@ -455,8 +500,9 @@ class OcpSolver:
         e_floor = 0.5 * st.speed_floor ** 2
         e0 = 0.5 * max(v0, st.speed_floor) ** 2
         lbx = np.concatenate([np.full(n + 1, e_floor), np.zeros(3 * n)])
-        ubx = np.concatenate([0.5 * self.reachable_cap(v0, preview, a_prev) ** 2,
-                              np.asarray(en.max_traction_force(None, preview.ratio), float) / 1000.0,
+        traction = (np.full(n, self._ft_max) if self.plant_map is not None
+                    else np.asarray(en.max_traction_force(None, preview.ratio), float) / 1000.0)
+        ubx = np.concatenate([0.5 * self.reachable_cap(v0, preview, a_prev) ** 2, traction,
                               np.full(n, 0.0) + np.asarray(en.max_regen_force(preview.ratio), float) / 1000.0,
                               np.full(n, en.brake_force_limit(params.mass) / 1000.0)])
         lbx[0] = ubx[0] = e0

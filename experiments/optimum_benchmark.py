@@ -36,6 +36,7 @@ import pandas as pd
 from roadload.controllers.base import ControllerError
 from roadload.controllers.drive import DriveSettings, drive
 from roadload.controllers.dynamic_programming import PlantFuelBound, dp_optimum
+from roadload.controllers.mpc import FUEL_MODELS
 from roadload.controllers.optimum import FullRouteOptimum, OptimumError, OptimumSettings, OptimumTarget
 from roadload.controllers.sim_plant import SimulatorPlant
 from roadload.controllers.vehicle_models import energy_model_from_spec, rotational_mass
@@ -46,7 +47,7 @@ from roadload.sweep import run_sweep
 from roadload.tables import markdown_table
 
 CONTROLLERS = ("cruise", "cruise_band", "human", "mpc:oracle", "mpc:abc", "mpc:online", "mpc:online_wind",
-               "mpc:oracle:transmission", "ppo", "sac")
+               "mpc:oracle:transmission", *(f"mpc:oracle:{m}" for m in FUEL_MODELS), "ppo", "sac")
 CAR_CONTROLLERS = ("cruise", "human", "mpc:oracle", "mpc:abc", "mpc:online", "ppo", "sac")
 TRUCK_CONTROLLERS = ("cruise", "cruise_band", "human", "mpc:oracle", "mpc:abc", "mpc:online", "mpc:oracle:transmission")
 TRUCK_OPTIMA = ("bound", "tracked")
@@ -129,6 +130,8 @@ def _settings(task: OptimumTask, controller: str) -> DriveSettings:
     # does: the plant's own load-dependent strategy changes the fuel of a whole climb for a 0.1 % change of the
     # trajectory, which no plan can follow (docs/results/controllers.md); 'mpc:<model>:transmission' leaves the gear
     # to the transmission (the MPC's default elsewhere)
+    if case.truck and len(gears) == 1 and gears[0] in FUEL_MODELS:  # 'mpc:<model>:<fuel model>' (MpcSettings)
+        variant.setdefault("fuel_model", gears[0])
     settings = replace(base, controller="mpc", **force_model_settings(spec), time_weight=lam,
                        gear_command=case.truck and gears != ["transmission"], mpc=replace(base.mpc, **variant))
     return settings if task.replan_period is None else replace(settings, replan_period=task.replan_period)

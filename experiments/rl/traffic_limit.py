@@ -274,7 +274,7 @@ def main(argv: list[str] | None = None) -> None:
         ap.error(f"--config: expected a JSON object, got {a.config!r}")
     if a.quick:
         a.episodes = 2
-        config = {**config, "duration": 5.0, "vehicles_count": 10}
+        config = {"spawn": "stopping-gap", **config, "duration": 5.0, "vehicles_count": 10}  # the newest spawn too
     if a.episodes < 2:
         ap.error(f"--episodes: expected >= 2 (an interval needs two), got {a.episodes}")
     if not (math.isfinite(a.min_gap) and a.min_gap >= 0):

@@ -126,6 +126,7 @@ def test_plant_map_setting_needs_a_map_and_a_known_name(truck):
 
 
 @pytest.mark.slow
+@pytest.mark.nightly  # ~3 min of MPC solves on a loaded machine: beyond the 15-minute CI
 def test_plant_map_mpc_uses_less_fuel_than_the_shift_rule_mpc_on_a_40_t_climb():
     """A 4 % climb of 800 m, flat, a 4 % descent of 600 m after a cruise-control warm-up: at equal time, through
     the plant-fuel bound at each run's own time, start and arrival speed (as the benchmark compares them: with the

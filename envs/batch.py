@@ -53,6 +53,7 @@ import numpy as np
 
 from . import physics
 from ._jit import dependent_jit, jit
+from .numerics import asin_small, atan_small, cos_small, sin_small, tan_small  # libm-exact, for kernels outside envs
 from .layout import COMMAND_DRIVER, COMMAND_FORCES, COMMAND_WHEEL_FORCE, N_LOG, N_ROAD, VEHICLE, Route, Tables
 from .simulator import SimulationError, Simulator, effects_random_state
 from .state import VehicleState
@@ -367,5 +368,6 @@ def vehicle_done(records, i):
 
 
 __all__ = ["SUBSTEP_SECONDS", "Fleet", "FleetRecords", "FleetStarts", "StartRecords", "advance_vehicle",
-           "advance_vehicles", "command_driver", "command_forces", "command_wheel_force", "dependent_jit",
-           "effects_random_state", "start_vehicle", "state_of", "vehicle_done"]
+           "advance_vehicles", "asin_small", "atan_small", "command_driver", "command_forces", "command_wheel_force",
+           "cos_small", "dependent_jit", "effects_random_state", "sin_small", "start_vehicle", "state_of", "tan_small",
+           "vehicle_done"]

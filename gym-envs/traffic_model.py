@@ -32,8 +32,7 @@ import math
 
 import numpy as np
 
-from roadload.envs.batch import dependent_jit
-from roadload.envs.numerics import asin_small, atan_small, cos_small, sin_small, tan_small
+from roadload.envs.batch import asin_small, atan_small, cos_small, dependent_jit, sin_small, tan_small
 
 kernel = dependent_jit(__file__)
 """njit(cache=True) keyed by this module's source (and the simulator core's)."""

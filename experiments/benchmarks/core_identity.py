@@ -15,6 +15,7 @@ file runs against an old package tree too: it imports from roadload only what ev
 from __future__ import annotations
 
 import tempfile
+from typing import Any
 from pathlib import Path
 
 import numpy as np
@@ -65,7 +66,7 @@ def dump(out: Path, quick: bool) -> None:
     np.savez(out, **arrays)  # type: ignore[arg-type]  # numpy's stubs read any keyword as allow_pickle
 
 
-TRAFFIC_CASES = {
+TRAFFIC_CASES: dict[str, dict[str, Any]] = {
     "default": {},
     "lane_changes_shield": {"lane_changes": "box", "shield": {"enabled": True}},
     "curved_dense_see_behind": {"curvature": True, "vehicles_density": 1.5, "see_behind": True},
@@ -86,7 +87,9 @@ def traffic_arrays(envs: int = 32, steps: int = 400) -> dict[str, np.ndarray]:
         for threads in (1, 2):
             env = EcoTrafficVectorEnv(envs, config=cfg, threads=threads)
             obs, _ = env.reset(seed=7)
-            d = env.single_action_space.shape[0]
+            shape = env.single_action_space.shape
+            assert shape is not None  # a Box action space
+            d = shape[0]
             actions = np.random.default_rng(7).uniform(-1, 1, (steps, envs, d)).astype(np.float32)
             trace: dict[str, list] = {"obs": [obs], "reward": [], "flags": [], "info": [], "vehicles": []}
             for k in range(steps):

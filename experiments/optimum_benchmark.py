@@ -25,6 +25,7 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
@@ -522,20 +523,38 @@ def pace_and_drive(rows: pd.DataFrame, time_weights: dict[str, float], reference
     return pd.DataFrame(out)
 
 
+def reference_controller(controllers: Iterable[str]) -> str:
+    """The controller the others are compared with at equal time: the oracle MPC ('mpc:oracle'), else the first
+    oracle MPC variant among ``controllers`` ('mpc:oracle:plant_map', ...), else 'mpc:oracle'."""
+    names = list(dict.fromkeys(controllers))
+    if "mpc:oracle" in names:
+        return "mpc:oracle"
+    return next((c for c in names if c.startswith("mpc:oracle:")), "mpc:oracle")
+
+
+def reference_name(reference: str) -> str:
+    """The reference as the tables name it: 'the oracle MPC' or the controller's own name."""
+    return "the oracle MPC" if reference == "mpc:oracle" else reference
+
+
 def summary_markdown(summary: pd.DataFrame, dp: pd.DataFrame | None = None) -> str:
-    """The excess table (every difference with its CI) and the DP cross-check."""
+    """The excess table (every difference with its CI, against the reference summarise() compared with) and the
+    DP cross-check."""
+    refs = [c[3:-4] for c in summary.columns if c.startswith("vs_") and c.endswith("_pct") and "1sigma" not in c]
+    ref = refs[0] if refs else "mpc:oracle"  # the reference summarise() compared with
+    name = reference_name(ref)
     rows = [{"vehicle": r["vehicle"], "road": r["road"], "condition": r.get("condition", "nominal"),
              "controller": r["controller"], "seeds": r["seeds"],
              "trip time [s]": round(r["time_s_mean"], 1), "energy [kJ]": round(r["energy_kJ_mean"], 1),
              "optimum [kJ]": round(r["optimum_kJ_mean"], 1),
              "excess over the optimum": format_difference(r["excess_pct"], r["excess_1sigma_pct"],
                                                           r["excess_ci95_lo"], r["excess_ci95_hi"]),
-             "vs the oracle MPC at equal time": "reference" if r["controller"] == "mpc:oracle" else format_difference(
-                 *(r.get(f"vs_mpc:oracle_{k}", float("nan")) for k in ("pct", "1sigma_pct", "ci95_lo", "ci95_hi")))}
+             f"vs {name} at equal time": "reference" if r["controller"] == ref else format_difference(
+                 *(r.get(f"vs_{ref}_{k}", float("nan")) for k in ("pct", "1sigma_pct", "ci95_lo", "ci95_hi")))}
             for r in summary.to_dict("records")]
     md = ["Energy at the source above the full-route optimum at each run's own trip time and arrival speed, on the "
-          "same plant; fleet total over seeds, mean [95 % CI] (1σ); 'not resolved': the CI contains 0. Against the "
-          "oracle MPC: the two runs' excesses over their optima, paired per seed, over the oracle MPC's energy.", "",
+          "same plant; fleet total over seeds, mean [95 % CI] (1σ); 'not resolved': the CI contains 0. Against "
+          f"{name}: the two runs' excesses over their optima, paired per seed, over {name}'s energy.", "",
           markdown_table(pd.DataFrame(rows))]
     if dp is not None and len(dp):
         mean, se, lo, hi = ratio_of_means_ci(dp["dp_energy_J"].to_numpy(float), dp["nlp_energy_J"].to_numpy(float))
@@ -573,22 +592,23 @@ def write_tables(results: list[dict[str, Any]], failures: list[str], out: Path) 
     extra = [c for c in rows.columns if c not in CSV_COLUMNS]
     rows = rows[[c for c in CSV_COLUMNS if c in rows.columns] + extra] if len(rows) else rows
     write_text(out / "excess_over_optimum.csv", rows.to_csv(index=False))
-    summary = summarise(rows) if len(rows) else pd.DataFrame()
+    ref = reference_controller(rows["controller"]) if len(rows) else "mpc:oracle"
+    summary = summarise(rows, ref) if len(rows) else pd.DataFrame()
     write_text(out / "summary.csv", summary.to_csv(index=False))
     dp = dp_table(results)
     write_text(out / "dp_check.csv", dp.to_csv(index=False))
     md = summary_markdown(summary, dp) if len(summary) else "no run arrived\n"
     lams = {res["task"]["case"]: res["task"].get("time_weight") or VEHICLE_CASES[res["task"]["case"]].lam0
             for res in results}
-    split = pace_and_drive(rows, lams) if len(rows) else pd.DataFrame()
+    split = pace_and_drive(rows, lams, ref) if len(rows) else pd.DataFrame()
     write_text(out / "pace_drive.csv", split.to_csv(index=False))
     if len(split):
-        md += ("\nCost E + lambda T against the oracle MPC, paired per seed, split into pace (the optimum at each "
-               "trip time) and drive (each run's excess over its optimum):\n\n" + markdown_table(pd.DataFrame(
+        md += (f"\nCost E + lambda T against {reference_name(ref)}, paired per seed, split into pace (the optimum "
+               "at each trip time) and drive (each run's excess over its optimum):\n\n" + markdown_table(pd.DataFrame(
                    [{"vehicle": r["vehicle"], "road": r["road"], "controller": r["controller"],
                      "lambda [J/s]": r["time_weight_J_per_s"], "seeds": r["seeds"],
                      "trip time [s] (reference)": f"{r['time_s']:.1f} ({r['time_s_ref']:.1f})",
-                     **{f"{k} vs the oracle MPC": format_difference(*(r[f"{k}_{x}"] for x in (
+                     **{f"{k} vs {reference_name(ref)}": format_difference(*(r[f"{k}_{x}"] for x in (
                          "pct", "1sigma_pct", "ci95_lo", "ci95_hi"))) for k in ("cost", "pace", "drive")}}
                     for r in split.to_dict("records")])) + "\n")
     if failures:

@@ -11,7 +11,8 @@ from roadload.estimators.change import GUST_ROBUST
 from roadload.experiments.controller_comparison import force_model_settings
 from roadload.experiments.optimum_benchmark import (BOUND_KIND, OptimumBenchmarkError, OptimumTask, _settings,
                                                     _stale_bound, dp_table, episode_cost_summary, online_columns,
-                                                    pace_and_drive, stored_task, summarise, summary_markdown)
+                                                    pace_and_drive, reference_controller, stored_task, summarise,
+                                                    summary_markdown, write_tables)
 from roadload.road_profiles import RoadProfile
 
 
@@ -54,6 +55,29 @@ def test_controllers_are_compared_with_the_oracle_mpc_at_equal_time_through_thei
     assert s.loc["mpc:oracle", "vs_mpc:oracle_pct"] == 0.0
     md = summary_markdown(s.reset_index())
     assert "headwind_6ms" in md and "| reference |" in md and "+1.00 % [" in md
+
+
+def test_without_the_oracle_mpc_the_tables_compare_with_the_oracle_mpc_variant_that_ran(tmp_path):
+    """A truck run of the speed-band cruise and the plant-map MPC only: the equal-time column and the pace/drive
+    split are against 'mpc:oracle:plant_map', not 'n/a' against an absent 'mpc:oracle'. The band's runs lie 20 J
+    further above their optima than the MPC's on 1000 J: +2 % at equal time."""
+    assert reference_controller(["cruise_band", "mpc:oracle:plant_map", "mpc:oracle"]) == "mpc:oracle"
+    assert reference_controller(["cruise_band", "mpc:oracle:plant_map"]) == "mpc:oracle:plant_map"
+    assert reference_controller(["cruise", "human"]) == "mpc:oracle"
+    mpc = pd.DataFrame({"vehicle": "truck_40t", "road": "long_grades", "condition": "nominal",
+                        "controller": "mpc:oracle:plant_map", "seed": range(3), "arrived": True,
+                        "energy_J": 1000.0, "optimum_energy_J": 990.0, "time_s": 200.0, "optimum_time_s": 200.0,
+                        "excess_pct": 1.0})
+    band = mpc.assign(controller="cruise_band", time_s=180.0, optimum_time_s=180.0, optimum_energy_J=1100.0,
+                      energy_J=1100.0 + 10.0 + np.array([19.0, 20.0, 21.0]))
+    results = [{"task": {"case": "truck_40t", "time_weight": 4000.0},
+                "rows": pd.concat([band, mpc], ignore_index=True).to_dict("records")}]
+    _, summary = write_tables(results, [], tmp_path)
+    s = summary.set_index("controller")
+    assert s.loc["cruise_band", "vs_mpc:oracle:plant_map_pct"] == pytest.approx(2.0)
+    md = (tmp_path / "summary.md").read_text()
+    assert "vs mpc:oracle:plant_map at equal time" in md and "| reference |" in md and "+2.00 % [" in md
+    assert "n/a" not in md and "drive vs mpc:oracle:plant_map" in md
 
 
 def test_an_online_runs_row_carries_its_estimate_at_the_segment_start_and_end():

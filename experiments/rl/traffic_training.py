@@ -43,7 +43,7 @@ from roadload.tables import markdown_table, write_csv
 
 from .common import RLError, _atomic_write_bytes
 from .highway import idm_policy
-from .traffic_objective import SpeedConstraint, TripEnd, reference_speed
+from .traffic_objective import SpeedBand, SpeedConstraint, TripEnd, reference_speed, speed_band
 from .training import _curve_callback
 
 MECHANICAL_WEIGHT = EcoHighwayReward().mechanical_energy
@@ -239,11 +239,13 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
                   hyperparams: dict[str, Any] | None = None, progress: Callable[[str], None] | None = None,
                   report_every: int = 100_000, residual: float = 0.0,
                   speed_floor: float | None = None, speed_constraint: float | None = None,
-                  trip_end: bool = False) -> dict[str, Any]:
+                  trip_end: bool = False, band: SpeedBand | None = None) -> dict[str, Any]:
     """PPO on the native vector env (``residual`` > 0: a correction of that scale on the IDM follower,
     :class:`ResidualActions`, at most ``speed_floor`` below it when given; ``speed_constraint`` = margin: trained on
     the reward with a Lagrange multiplier holding the mean speed at (1 + margin) x the IDM follower's;
-    ``trip_end``: the time limit is terminal in training; roadload.experiments.rl.traffic_objective). Saves
+    ``trip_end``: the time limit is terminal in training; ``band``: two multipliers holding the mean speed inside
+    the band around the follower's, instead of ``speed_constraint``'s floor;
+    roadload.experiments.rl.traffic_objective). Saves
     ``ppo_traffic_seed<seed>.zip`` / ``.json`` and the learning curve (training episode returns) to ``out_dir``;
     returns the model, its path, wall and CPU seconds."""
     import torch
@@ -251,6 +253,9 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
 
     if timesteps < 1 or n_envs < 1:
         raise RLError(f"timesteps and n_envs must be >= 1, got {timesteps}, {n_envs}")
+    if band is not None and speed_constraint is not None:
+        raise RLError("speed constraint: give either a floor margin (--speed-constraint) or a band (--speed-band), "
+                      "not both")
     torch.set_num_threads(torch_threads)
     env_config = dict(env_config if env_config is not None else TRAFFIC_TRAIN_CONFIG)
     make_config(EcoTrafficConfig, env_config)  # a bad key fails before any training
@@ -267,8 +272,9 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
     params["n_steps"] = max(8, min(params["n_steps"], max(timesteps // n_envs, 8)))
     params["batch_size"] = min(params["batch_size"], params["n_steps"] * n_envs)
     c_start = time.process_time()
-    constraint = None if speed_constraint is None else _speed_constraint(native, env_config, n_envs,
-                                                                          params["n_steps"], speed_constraint)
+    objective = band if band is not None else speed_constraint
+    constraint = None if objective is None else _speed_constraint(native, env_config, n_envs, params["n_steps"],
+                                                                  objective)
     trained: gym.vector.VectorEnv = native if constraint is None else constraint
     venv = SB3VecEnv(TripEnd(trained) if trip_end else trained)
     venv.seed(seed)
@@ -298,7 +304,8 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
             "cpu_seconds": cpu, "threads": threads, "residual_scale": residual, "speed_floor": speed_floor,
             "trip_end_terminal": trip_end,
             "speed_constraint": None if constraint is None else {
-                "margin": speed_constraint, "reference_speed_mps": constraint.reference,
+                "margin": speed_constraint if band is None else band.lower,
+                "upper": None if band is None else band.upper, "reference_speed_mps": constraint.reference,
                 "k_p": constraint.k_p, "k_i": constraint.k_i,
                 "history": [{"mean_speed_mps": v, "multiplier": lam} for v, lam in constraint.history]}}
     _atomic_write_bytes(out_dir / f"{stem}.json", lambda tmp: tmp.write_text(json.dumps(meta, indent=1, default=str)))
@@ -310,13 +317,15 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
 
 
 def _speed_constraint(env: gym.vector.VectorEnv, env_config: dict[str, Any], n_envs: int, window: int,
-                      margin: float) -> SpeedConstraint:
-    """The constraint wrapper on ``env``: the reference is the IDM follower's mean speed on training episodes of
-    the same configuration (its CPU time counts as training time)."""
+                      objective: float | SpeedBand) -> SpeedConstraint:
+    """The constraint wrapper on ``env`` (a floor margin or a band): the reference is the IDM follower's mean speed
+    on training episodes of the same configuration (its CPU time counts as training time)."""
     cfg = make_config(EcoTrafficConfig, env_config)
     v_ref = reference_speed(idm_policy(cfg), env_config, n_envs)
     price = cfg.reward.scale * cfg.reward.progress
-    return SpeedConstraint(env, v_ref, price, 1.0 / cfg.policy_frequency, window, margin)
+    if isinstance(objective, SpeedBand):
+        return SpeedConstraint.band(env, v_ref, price, 1.0 / cfg.policy_frequency, window, objective)
+    return SpeedConstraint(env, v_ref, price, 1.0 / cfg.policy_frequency, window, objective)
 
 
 def load_traffic_policy(path: Path):
@@ -335,7 +344,7 @@ def run_traffic_experiment(seeds: tuple[int, ...], timesteps: int, out_dir: Path
                            train_config: dict[str, Any] | None = None,
                            hyperparams: dict[str, Any] | None = None, residual: float = 0.0,
                            speed_floor: float | None = None, speed_constraint: float | None = None,
-                           trip_end: bool = False) -> dict[str, Any]:
+                           trip_end: bool = False, band: SpeedBand | None = None) -> dict[str, Any]:
     """Train one PPO per seed (or load them with ``evaluate_only``), evaluate each with the IDM follower on
     ``episodes`` held-out native episodes and ``transfer_episodes`` on highway-env; write episodes.csv,
     summary.csv, intervals.csv and the learning curves to ``out_dir``. ``env_config`` is the evaluation's (and
@@ -358,7 +367,7 @@ def run_traffic_experiment(seeds: tuple[int, ...], timesteps: int, out_dir: Path
         else:
             res = train_traffic(timesteps, out_dir, s, n_envs, trained_on, threads, hyperparams=hyperparams,
                                 progress=progress, residual=residual, speed_floor=speed_floor,
-                                speed_constraint=speed_constraint, trip_end=trip_end)
+                                speed_constraint=speed_constraint, trip_end=trip_end, band=band)
             models[s] = res["model"]
             times[s] = (res["wall_seconds"], res["cpu_seconds"], res["timesteps"])
             scales[s] = residual
@@ -418,6 +427,10 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--speed-constraint", type=float, default=None, metavar="MARGIN",
                     help="train on the reward with a Lagrange multiplier that holds the mean speed at (1 + MARGIN) x "
                          "the IDM follower's (e.g. 0.005; roadload.experiments.rl.traffic_objective)")
+    ap.add_argument("--speed-band", default=None, metavar="JSON",
+                    help="train on the reward with two Lagrange multipliers holding the mean speed between (1 + lower) "
+                         "and (1 + upper) x the IDM follower's, JSON text of SpeedBand (e.g. '{\"lower\": 0.001, "
+                         "\"upper\": 0.004}', gains k_p, k_i; roadload.experiments.rl.traffic_objective)")
     ap.add_argument("--trip-end", action="store_true",
                     help="train with the time limit as the trip's end (terminal, no bootstrap of the value beyond it)")
     ap.add_argument("--out", type=Path, default=Path("out/rl_traffic"))
@@ -436,12 +449,18 @@ def main(argv: list[str] | None = None) -> None:
             a.out = Path(tempfile.mkdtemp(prefix="roadload-rl-traffic-"))
     if not seeds or a.timesteps < 1 or a.episodes < 1:
         ap.error("--seeds, --timesteps and --episodes must be given and >= 1")
+    try:
+        band = None if a.speed_band is None else speed_band(a.speed_band)
+    except RLError as exc:
+        ap.error(f"--speed-band: {exc}")
+    if band is not None and a.speed_constraint is not None:
+        ap.error("--speed-constraint and --speed-band: give one (a floor or a band), not both")
     res = run_traffic_experiment(seeds, a.timesteps, a.out, a.episodes, a.transfer_episodes, a.n_envs, config,
                                  a.threads, a.evaluate_only, progress=lambda m: print(m, flush=True),
                                  train_config=json.loads(a.train_config) if a.train_config else None,
                                  hyperparams=json.loads(a.hyperparams) if a.hyperparams else None,
                                  residual=a.residual, speed_floor=a.speed_floor,
-                                 speed_constraint=a.speed_constraint, trip_end=a.trip_end)
+                                 speed_constraint=a.speed_constraint, trip_end=a.trip_end, band=band)
     print(markdown_table(res["summary"], floatfmt=".4g"))
     for key in ("intervals", "paired", "paired_intervals"):
         if len(res[key]):

@@ -306,3 +306,86 @@ def test_lever_script_refuses_a_config_that_is_not_a_json_object(bad, capsys):
         main(["--config", bad])
     assert exc.value.code == 2
     assert "--config: expected a JSON object of EcoTraffic-v0 options" in capsys.readouterr().err
+
+
+def test_the_two_sided_multipliers_rise_above_the_band_and_fall_below_it():
+    from roadload.experiments.rl.traffic_objective import SpeedBand, SpeedConstraint
+    from roadload.gym.traffic import EcoTrafficVectorEnv
+
+    env = SpeedConstraint.band(EcoTrafficVectorEnv(2, config={"vehicles_count": 8, "duration": 2.0},
+                                                   autoreset_mode="same_step"),
+                               reference=20.0, price=0.1, step_time=0.1, window=10,
+                               band=SpeedBand(lower=0.001, upper=0.004, k_p=10.0, k_i=5.0))
+    # band 20.02 ... 20.08 m/s. 1 m/s too fast: excess (21 - 20.08) / 20 = 0.046, mu = 10 * 0.046 + 5 * 0.046
+    assert env.update(21.0) == pytest.approx(-0.69) and env.multiplier == 0.0
+    assert env.update(21.0) == pytest.approx(-(0.46 + 0.46))  # the integral keeps rising while too fast
+    # inside the band near its top the ceiling is slack by 0.0015: mu eases off, lambda stays 0
+    assert env.update(20.05) == pytest.approx(-(10 * -0.0015 + 0.46 - 5 * 0.0015))
+    # 1 m/s too slow: e = (20.02 - 19.02) / 20 = 0.05 raises lambda; the ceiling's slack 0.053 empties mu
+    assert env.update(19.02) == pytest.approx(10 * 0.05 + 5 * 0.05)
+    assert env.upper_multiplier == 0.0 and env.upper_integral == pytest.approx(0.4525 - 5 * 0.053)
+    assert env.integral == pytest.approx(0.25)
+    assert [v for v, _ in env.history] == [21.0, 21.0, 20.05, 19.02]
+
+
+def test_at_the_net_multiplier_minus_one_the_training_reward_is_the_reward_without_progress_pay():
+    """Where the ceiling's multiplier cancels the pay for metres, the policy is trained on energy (and the
+    mechanical-energy credit and penalties) alone: the same reward as an env whose progress weight is 0."""
+    from roadload.experiments.rl.traffic_objective import SpeedConstraint
+    from roadload.gym.traffic import EcoTrafficVectorEnv
+
+    config = {"vehicles_count": 8, "duration": 2.0}
+    energy_only = EcoTrafficVectorEnv(2, config={**config, "reward": {"progress": 0.0}}, autoreset_mode="same_step")
+    wrapped = SpeedConstraint(EcoTrafficVectorEnv(2, config=config, autoreset_mode="same_step"), reference=20.0,
+                              price=1e-4 * 1000.0, step_time=0.1, window=10_000, margin=0.001, upper=0.004)
+    wrapped.upper_multiplier = 1.0
+    energy_only.reset(seed=4)
+    wrapped.reset(seed=4)
+    paid = 0.0
+    for k in range(30):  # across an autoreset
+        a = np.full((2, 1), 0.3 if k < 15 else -0.2, np.float32)
+        _, r_e, *_ = energy_only.step(a)
+        _, r_w, *_ = wrapped.step(a)
+        assert r_w == pytest.approx(r_e, abs=1e-9)
+        paid += float(np.abs(r_e).sum())
+    assert paid > 0.1  # the energy terms are not zero on this drive
+
+
+@pytest.mark.parametrize("bad, message", [
+    ('{"lower": 0.004, "upper": 0.001}', "must be below upper"),
+    ('{"lower": -0.5}', "lower: Input should be greater than or equal to -0.2 (got -0.5)"),
+    ('{"upper": 0.01, "k_p": -1}', "k_p: Input should be greater than or equal to 0"),
+    ('{"upper": NaN}', "upper"),
+    ('{"uper": 0.01}', "uper: unknown key"),
+    ("[0.001, 0.004]", "must be a SpeedBand or a dict"),
+    ("0.001,0.004", "expected JSON text"),
+])
+def test_a_bad_speed_band_is_refused_naming_the_field_value_and_range(bad, message, capsys):
+    from roadload.experiments.rl.traffic_objective import speed_band
+    from roadload.experiments.rl.traffic_training import main
+
+    with pytest.raises(RLError) as err:
+        speed_band(bad)
+    assert message in str(err.value)
+    with pytest.raises(SystemExit) as exit_:
+        main(["--speed-band", bad, "--out", "/nonexistent/never-written"])
+    assert exit_.value.code == 2 and message in capsys.readouterr().err
+
+
+def test_a_floor_and_a_band_together_are_refused(tmp_path, capsys):
+    from roadload.experiments.rl.traffic_objective import SpeedBand, SpeedConstraint
+    from roadload.experiments.rl.traffic_training import main
+    from roadload.gym.traffic import EcoTrafficVectorEnv
+
+    default = SpeedBand()  # at or above the follower's pace, within +0.5 %
+    assert 0.0 <= default.lower < default.upper <= 0.005
+    with pytest.raises(SystemExit):
+        main(["--speed-band", "{}", "--speed-constraint", "0.01", "--out", str(tmp_path / "run")])
+    assert "give one (a floor or a band)" in capsys.readouterr().err and not (tmp_path / "run").exists()
+    with pytest.raises(RLError, match="not both"):
+        train_traffic(100, tmp_path / "run", speed_constraint=0.01, band=SpeedBand())
+    assert not (tmp_path / "run").exists()
+    with pytest.raises(RLError, match="margin < upper"):
+        SpeedConstraint(EcoTrafficVectorEnv(2, config={"vehicles_count": 8}), reference=20.0, price=0.1,
+                        step_time=0.1, window=10, margin=0.01, upper=0.01)
+

@@ -378,6 +378,13 @@ class EcoTrafficConfig(_TrafficScenario):
     kinematics_rows: int = Field(5, ge=2, le=20, description="rows of the Kinematics block, the ego's first "
                                                              "(highway-env's vehicles_count)")
     see_behind: bool = Field(False, description="the Kinematics block also lists vehicles more than 10 m behind")
+    neighbour_features: tuple[Literal["ax", "lane_change", "cut_in_time"], ...] = Field(
+        (), description="extra features of each observed vehicle (the Kinematics block's rows 1 on, in its order), "
+                        "appended after the powertrain block: 'ax' its acceleration command [m/s^2], "
+                        "'lane_change' target lane - lane (-1 left, +1 right: MOBIL's decision in progress), "
+                        "'cut_in_time' the time until it turns into the ego's lane [s] (0 while it does, the time "
+                        "to its next lane decision where MOBIL accepts the ego's lane now, else 2 x the decision "
+                        "delay); () = highway-env's Kinematics features only")
     traffic: TrafficBehaviour = Field(default_factory=TrafficBehaviour)
     shield: TrafficShield = Field(default_factory=TrafficShield)
     spawn: Literal["highway-env", "outside-envelope", "stopping-gap"] = Field(
@@ -391,11 +398,18 @@ class EcoTrafficConfig(_TrafficScenario):
 
     _seed_range = field_validator("road_seed_range")(classmethod(lambda cls, v: _check_seed_range(v)))
 
+    @field_validator("neighbour_features")
+    @classmethod
+    def _features(cls, v: tuple[str, ...]) -> tuple[str, ...]:
+        if len(set(v)) != len(v):
+            raise ValueError(f"each feature at most once, got {list(v)}")
+        return v
+
     @property
     def road_length(self) -> float:
         """Length of the ego's road [m]: EcoHighway-v0's, duration x 60 m/s + 500 m, at least 2 km, at most 10 km."""
         return min(10_000.0, max(2000.0, self.duration * 60.0 + 500.0))
 
 
-SPACE_FIELDS_TRAFFIC = ("lane_changes", "kinematics_rows", "lanes_count", "vehicles_count")
+SPACE_FIELDS_TRAFFIC = ("lane_changes", "kinematics_rows", "neighbour_features", "lanes_count", "vehicles_count")
 """Fields of EcoTrafficConfig that shape the spaces or the batch arrays; reset options may not change them."""

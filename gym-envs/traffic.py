@@ -90,10 +90,15 @@ _BOOL_INFO = {"crashed", "shield_active"}
 N_INFO = len(INFO_KEYS) + len(TERM_NAMES)
 I_TERMS = len(INFO_KEYS)
 
+NEIGHBOUR_FEATURES = ("ax", "lane_change", "cut_in_time")
+"""The optional features of each observed vehicle (EcoTrafficConfig.neighbour_features), by code 0, 1, 2."""
+
 # shared constants (columns of K)
 K_FRAMES, K_N_SUB, K_DT, K_STEP_TIME, K_MIN_HEADWAY, K_LANE_CHANGES, K_ROWS, K_SEE_BEHIND = range(8)
 K_SHIELD, K_SHIELD_T, K_SHIELD_B, K_SHIELD_BL, K_SHIELD_MARGIN = range(8, 13)
-N_K = 13
+K_N_FEATURES = 13
+"""Number of neighbour features; their NEIGHBOUR_FEATURES codes follow in K_N_FEATURES + 1 ..."""
+N_K = K_N_FEATURES + 1 + len(NEIGHBOUR_FEATURES)
 # per-env episode values (columns of EP)
 EP_TIME, EP_DURATION, EP_U, EP_POWER, EP_ROAD_SEED, EP_SHIELD, EP_GAP = range(7)
 N_EP = 7
@@ -121,6 +126,11 @@ def traffic_observation_layout(config: EcoTrafficConfig) -> list[tuple[str, str,
     rows += [("lane", "1 (0 = leftmost, 1 = rightmost)", 1.0),
              ("front_gap", f"m (capped at {GAP_CAP:g})", SCALE["gap"]),
              ("front_closing_speed", "m/s", SCALE["dv"])]
+    units = {"ax": ("m/s^2", config.traffic.max_acceleration),
+             "lane_change": ("1 (target lane - lane: -1 left, +1 right)", 1.0),
+             "cut_in_time": (f"s (capped at {2 * config.traffic.lane_change_delay:g})",
+                             2.0 * config.traffic.lane_change_delay)}
+    rows += [(f"veh{r}_{f}", *units[f]) for r in range(1, config.kinematics_rows) for f in config.neighbour_features]
     return rows
 
 
@@ -269,12 +279,41 @@ def _observe(i, ego, tr, c):
     buf[k] = veh[0, V_LANE] / max(lanes - 1, 1)
     buf[k + 1] = min(gap, GAP_CAP)
     buf[k + 2] = closing
+    if K[K_N_FEATURES] > 0.5:
+        neighbour_block(veh, m, rows, tr.order[i], c, tr.lane_members[i], tr.lane_counts[i], buf, k + 3)
     e[EP_GAP] = gap
     out = tr.obs[i]
     scale = c.scale
     for j in range(buf.size):
         o = buf[j] / scale[j]
         out[j] = np.float32(-5.0 if o < -5.0 else (5.0 if o > 5.0 else o))
+
+
+@kernel(refcount=False)
+def neighbour_block(veh, m, rows, order, c, members, counts, buf, k):
+    """Stage 'neighbour features' -> buf[k:]: for each observed vehicle (the Kinematics block's rows 1 on, order
+    from :func:`kinematics_block`; zeros for missing rows), the features coded in K (NEIGHBOUR_FEATURES): its
+    acceleration command a [m/s^2], target lane - lane, and traffic_model.cut_in_time into the ego's lane [s]
+    (MOBIL on the present positions' lane index); a missing row reads 0, its cut-in time the cap."""
+    K = c.step
+    n_f = int(K[K_N_FEATURES])
+    lanes = int(c.road[_tm.G_LANES])
+    cap = 2.0 * c.behaviour[_tm.B_DELAY]
+    ego_lane = int(veh[0, V_LANE])
+    _tm.index_lanes(veh, m, lanes, members, counts)
+    for r in range(rows - 1):
+        present = buf[(r + 1) * 5] > 0.5
+        j = order[r]
+        for f in range(n_f):
+            code = int(K[K_N_FEATURES + 1 + f])
+            x = cap if code == 2 else 0.0  # a missing row: nobody to cut in
+            if present and code == 0:
+                x = veh[j, _tm.V_ACC]
+            elif present and code == 1:
+                x = veh[j, V_TARGET_LANE] - veh[j, V_LANE]
+            elif present:
+                x = _tm.cut_in_time(veh, members, counts, c.behaviour, c.road[_tm.G_LIMIT], j, ego_lane, cap)
+            buf[k + r * n_f + f] = x
 
 
 @kernel(forceinline=True, refcount=False)
@@ -530,7 +569,9 @@ class TrafficBatch:
         step = np.array([cfg.frames_per_action, cfg.n_substeps, 1.0 / cfg.simulation_frequency,
                          1.0 / cfg.policy_frequency, cfg.min_time_headway, cfg.lane_changes == "box",
                          cfg.kinematics_rows, cfg.see_behind, sh.enabled, sh.reaction_time, sh.deceleration,
-                         sh.leader_deceleration, sh.margin], dtype=np.float64)
+                         sh.leader_deceleration, sh.margin, len(cfg.neighbour_features)]
+                        + [NEIGHBOUR_FEATURES.index(f) for f in cfg.neighbour_features]
+                        + [-1] * (len(NEIGHBOUR_FEATURES) - len(cfg.neighbour_features)), dtype=np.float64)
         self.constants = TrafficConstants(
             behaviour=behaviour_array(cfg.traffic),
             road=np.array([cfg.lanes_count, cfg.speed_limit], dtype=np.float64),

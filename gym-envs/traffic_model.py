@@ -307,6 +307,27 @@ def change_lane_policy(veh, m, members, counts, beh, lanes, limit, j):
             veh[j, V_TARGET_LANE] = lane
 
 
+@kernel(forceinline=True, refcount=False)
+def cut_in_time(veh, members, counts, beh, limit, j, lane, cap):
+    """Time [s] until vehicle j turns into ``lane`` by :func:`change_lane_policy`: 0 while it changes into it
+    (target lane ``lane``, not yet its lane); on an adjacent lane, moving, with MOBIL accepting ``lane`` at the
+    present state, the time left to its next decision, max(delay - timer, 0); else ``cap`` (on ``lane`` already, or
+    no change wanted). The lane index (members, counts) must be the present positions' (:func:`index_lanes`)."""
+    own = int(veh[j, V_LANE])
+    if own == lane:
+        return cap
+    target = int(veh[j, V_TARGET_LANE])
+    if target == lane:
+        return 0.0
+    if target != own or abs(own - lane) != 1 or abs(veh[j, V_SPEED]) < 1.0:
+        return cap  # changing elsewhere, not adjacent, or not moving (change_lane_policy's conditions)
+    if abs(veh[j, V_Y] - lane * LANE_WIDTH) > 2.0 * LANE_WIDTH:
+        return cap
+    if not mobil(veh, members, counts, beh, limit, j, lane):
+        return cap
+    return min(max(beh[B_DELAY] - veh[j, V_TIMER], 0.0), cap)
+
+
 # --------------------------------------------------------------------------------------------- lateral control
 @kernel(forceinline=True, refcount=False)
 def steering_control(veh, j):

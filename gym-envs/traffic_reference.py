@@ -82,7 +82,30 @@ class _TrafficObservation(ObservationType):
         x[k + n:k + 2 * n] = look[RouteTable.CURVATURE]
         k += 2 * n
         x[k:k + 3] = (ego.lane_index[2] / max(lanes - 1, 1), min(gap, GAP_CAP), closing)
+        if env.traffic_config.neighbour_features:
+            x[k + 3:] = self._neighbour_features().reshape(-1)
         return np.clip(x / self.scale, -5.0, 5.0).astype(np.float32)
+
+    def _neighbour_features(self) -> np.ndarray:
+        """(rows - 1, features) EcoTrafficConfig.neighbour_features of the Kinematics block's vehicles, in its
+        order, from highway-env's own state: the acceleration command, target lane - lane, and the cut-in time into
+        the ego's lane (roadload.gym.traffic_model.cut_in_time's rule on IDMVehicle.mobil and its timer)."""
+        env: HighwayTrafficEnv = self.env
+        cfg = env.traffic_config
+        ego = env.vehicle
+        cap = 2.0 * cfg.traffic.lane_change_delay
+        names = cfg.neighbour_features
+        out = np.zeros((self.rows - 1, len(names)))
+        if "cut_in_time" in names:
+            out[:, names.index("cut_in_time")] = cap
+        close = env.road.close_objects_to(ego, env.PERCEPTION_DISTANCE, count=self.rows - 1,
+                                          see_behind=cfg.see_behind, sort=True, vehicles_only=True)
+        for r, v in enumerate(close):
+            values = {"ax": v.action["acceleration"],
+                      "lane_change": v.target_lane_index[2] - v.lane_index[2],
+                      "cut_in_time": _cut_in_time(env, v, ego.lane_index, cap)}
+            out[r] = [values[name] for name in names]
+        return out
 
 
 class HighwayTrafficEnv(EcoHighwayEnv):
@@ -171,6 +194,18 @@ class HighwayTrafficEnv(EcoHighwayEnv):
     def _simulate(self, action=None) -> None:
         super()._simulate(action)
         self.step_energy = float(self.vehicle.log["energy"])
+
+
+def _cut_in_time(env: "HighwayTrafficEnv", v: IDMVehicle, lane: Any, cap: float) -> float:
+    """Time [s] until v turns into ``lane`` (roadload.gym.traffic_model.cut_in_time on highway-env's vehicle)."""
+    if v.lane_index == lane:
+        return cap
+    if v.target_lane_index == lane:
+        return 0.0
+    if (v.target_lane_index != v.lane_index or abs(v.lane_index[2] - lane[2]) != 1 or abs(v.speed) < 1
+            or not env.road.network.get_lane(lane).is_reachable_from(v.position) or not v.mobil(lane)):
+        return cap
+    return float(min(max(v.LANE_CHANGE_DELAY - v.timer, 0.0), cap))
 
 
 def set_behaviour(vehicle: IDMVehicle, behaviour: TrafficBehaviour, np_random) -> None:

@@ -87,13 +87,17 @@ def _native_stepper(cfg: EcoTrafficConfig, n_envs: int, threads: int, seed: int)
 
 def run_traffic_benchmark(seconds: float = 5.0, n_envs: int = 256, threads: tuple[int, ...] = (1, 2),
                           rounds: int = 2, env_config: dict[str, Any] | None = None, highway_fast: bool = True,
-                          progress: Callable[[str], None] | None = None, reference: bool = True) -> pd.DataFrame:
+                          progress: Callable[[str], None] | None = None, reference: bool = True,
+                          variant: dict[str, Any] | None = None) -> pd.DataFrame:
     """The interleaved rows (module docstring): env, mode, round, threads, steps/s (wall, CPU), simulated
-    seconds per wall second, load average (``reference`` False: no EcoHighway-v0 rows)."""
+    seconds per wall second, load average (``reference`` False: no EcoHighway-v0 rows; ``variant``: native rows
+    of the configuration with these fields too, each right after the default's)."""
     cfg = make_config(EcoTrafficConfig, {"curvature": False, **(env_config or {})})
     step_time = 1.0 / cfg.policy_frequency
     ref = random_action_stepper(_reference_env(cfg)) if reference else None
     natives = {t: _native_stepper(cfg, n_envs, t, 0) for t in threads}
+    varied = make_config(EcoTrafficConfig, {**cfg.model_dump(), **variant}) if variant else None
+    variants = {t: _native_stepper(varied, n_envs, t, 0) for t in threads} if varied else {}
     fast = random_action_stepper(_highway_fast_env()) if highway_fast else None
     for warm in (ref, fast):  # the first steps compile (the reference's ego kernels on a cold cache): not timed
         if warm is not None:
@@ -115,6 +119,8 @@ def run_traffic_benchmark(seconds: float = 5.0, n_envs: int = 256, threads: tupl
             add("EcoHighway-v0 (highway-env)", "single process", rnd, 1, 1, step_time, ref)
         for t, fn in natives.items():
             add("EcoTraffic-v0 (native)", f"vector x{n_envs}", rnd, t, n_envs, step_time, fn)
+            if t in variants:
+                add("EcoTraffic-v0 (native, --config)", f"vector x{n_envs}", rnd, t, n_envs, step_time, variants[t])
         if fast is not None:
             add("highway-fast-v0 (highway-env)", "single process", rnd, 1, 1, 1.0, fast)
     return pd.DataFrame(rows)
@@ -142,6 +148,24 @@ def traffic_ratios(table: pd.DataFrame) -> pd.DataFrame:
             sim = g.simulated_s_per_wall_s / fast.simulated_s_per_wall_s.reindex(g.index)
             row["ratio_highway_fast_simulated_s"] = float(sim.median())
         out.append(row)
+    return pd.DataFrame(out)
+
+
+def variant_ratios(table: pd.DataFrame) -> pd.DataFrame:
+    """Per thread count: the per-round ratio of the ``--config`` variant's rate to the default's, each pair
+    measured back to back (median, min, max; per CPU second and per wall second)."""
+    out = []
+    base = table[table.env == "EcoTraffic-v0 (native)"]
+    var = table[table.env == "EcoTraffic-v0 (native, --config)"]
+    for t, grp in var.groupby("threads"):
+        g = grp.set_index("round")
+        b = base[base.threads == t].set_index("round").reindex(g.index)
+        cpu = g.steps_per_cpu_s / b.steps_per_cpu_s
+        wall = g.steps_per_s / b.steps_per_s
+        out.append({"threads": int(t), "default_steps_per_s": float(b.steps_per_s.median()),
+                    "config_steps_per_s": float(g.steps_per_s.median()), "ratio_cpu": float(cpu.median()),
+                    "ratio_cpu_min": float(cpu.min()), "ratio_cpu_max": float(cpu.max()),
+                    "ratio_wall": float(wall.median()), "load_1min": float(g.load_1min.median())})
     return pd.DataFrame(out)
 
 
@@ -270,6 +294,25 @@ __all__ = ["run_traffic_benchmark", "traffic_ratios", "summary_line", "compare_r
            "TARGET_STEPS_PER_S", "TARGET_RATIO"]
 
 
+def _variant_config(ap: argparse.ArgumentParser, a: argparse.Namespace) -> dict[str, Any] | None:
+    """The ``--config`` fields (checked against EcoTrafficConfig), or None."""
+    if not a.config:
+        return None
+    if not a.native_only:
+        ap.error("--config: only with --native-only (the variant's rows are native)")
+    try:
+        variant = json.loads(a.config)
+    except json.JSONDecodeError as exc:
+        ap.error(f"--config: expected a JSON object, got {a.config!r} ({exc})")
+    if not isinstance(variant, dict):
+        ap.error(f"--config: expected a JSON object, got {a.config!r}")
+    try:
+        make_config(EcoTrafficConfig, variant)  # a bad field fails before any row, naming it
+    except ValueError as exc:
+        ap.error(f"--config: {exc}")
+    return variant
+
+
 def main(argv: list[str] | None = None) -> None:
     """Run the benchmark and print its tables (``scripts/bench_traffic.py``; module docstring)."""
     from rich.console import Console
@@ -286,6 +329,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--no-highway-fast", action="store_true", help="skip highway-env's highway-fast-v0 rows")
     ap.add_argument("--json", metavar="PATH", help="also write the rows and ratios as JSON")
     ap.add_argument("--native-only", action="store_true", help="only the native rows (no highway-env, no ratios)")
+    ap.add_argument("--config", default=None, help="with --native-only: native rows of the config with these "
+                                                   "EcoTraffic-v0 fields too (JSON text), paired with the default's "
+                                                   "per round, e.g. '{\"kinematics_rows\": 10}'")
     ap.add_argument("--compare", metavar="REF", help="native rows of commit REF (old) against the working tree "
                                                      "(new), --rounds interleaved child runs each")
     ap.add_argument("--bursts", type=int, default=0, metavar="K", help="with --compare: K pairs of short bursts of "
@@ -318,10 +364,14 @@ def main(argv: list[str] | None = None) -> None:
         print_table(console, ratios, f"EcoTraffic-v0 native x{a.n_envs}, {a.vehicles} vehicles: {a.compare} (old) "
                                      f"against the working tree (new), {a.rounds} interleaved runs", "{:,.3f}")
         return
+    variant = _variant_config(ap, a)
     table = run_traffic_benchmark(a.seconds, a.n_envs, threads, a.rounds, {"vehicles_count": a.vehicles},
                                   highway_fast=not (a.no_highway_fast or a.native_only),
-                                  progress=lambda m: console.print(m), reference=not a.native_only)
+                                  progress=lambda m: console.print(m), reference=not a.native_only, variant=variant)
     print_table(console, table, "env steps per second (interleaved rounds)", "{:,.1f}")
+    if variant:
+        print_table(console, variant_ratios(table), f"--config {a.config} against the default, paired per round",
+                    "{:,.3f}")
     if a.native_only:
         if a.json:
             Path(a.json).write_text(json.dumps({"rows": table.to_dict("records"), "ratios": []}, indent=1))

@@ -77,21 +77,23 @@ def test_bad_config_and_actions_are_refused_with_the_field():
         env.step(np.array([1.5], dtype=np.float32))
 
 
+def _vector_rollout(venv: EcoTrafficVectorEnv, seed: int, actions: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(observation, reward) after the reset seeded ``seed`` and after each step of ``actions`` (steps, n, d)."""
+    obs, _ = venv.reset(seed=seed)
+    out = [(obs, np.zeros(venv.num_envs))]
+    for a in actions:
+        obs, r, te, tr, _ = venv.step(a)
+        out.append((obs, r))
+    return out
+
+
 def test_same_seed_same_episode_and_single_equals_vector_to_1e9():
     """Sub-env i of the vector env seeded s equals the single env seeded s + i, through autoresets (next-step
     rule) and with the work split over 2 threads."""
     n, steps = 4, 70
     config = dict(lane_changes="box", vehicles_count=12, duration=3.0)
     actions = np.random.default_rng(0).uniform(-1, 1, (steps, n, 2)).astype(np.float32)
-    runs = []
-    for threads in (1, 2):
-        venv = EcoTrafficVectorEnv(n, config, threads=threads)
-        obs, _ = venv.reset(seed=11)
-        out = [(obs, np.zeros(n))]
-        for k in range(steps):
-            obs, r, te, tr, _ = venv.step(actions[k])
-            out.append((obs, r))
-        runs.append(out)
+    runs = [_vector_rollout(EcoTrafficVectorEnv(n, config, threads=threads), 11, actions) for threads in (1, 2)]
     for (o1, r1), (o2, r2) in zip(*runs):
         assert np.array_equal(o1, o2) and np.array_equal(r1, r2)
     resets = 0
@@ -337,3 +339,106 @@ def test_reference_backend_spawns_outside_the_envelope_too():
                 assert gap >= envelope_gap(ego.speed, v_lead, 0.3, 3.5, 6.0, 2.0) - 1e-9
             _, _, _, _, info = env.step(np.array([0.0], dtype=np.float32))
             assert not info["shield_active"]
+
+
+NEIGHBOURS = dict(neighbour_features=("ax", "lane_change", "cut_in_time"))
+
+
+def _built_road(ego_to_b: float) -> np.ndarray:
+    """Ego on lane 1 at 25 m/s; A on lane 2 turning into lane 1 (target 1); B on lane 0 at 25 m/s, 15 m behind a
+    10 m/s car C and ``ego_to_b`` ahead of the ego, lane 1 empty ahead of it, its decision timer at 0.3 s."""
+    veh = np.zeros((4, tm.N_V))
+    for j, (x, lane, v, acc) in enumerate([(100.0, 1, 25.0, 0.0), (130.0, 2, 22.0, 0.7),
+                                           (100.0 + ego_to_b, 0, 25.0, -1.5), (100.0 + ego_to_b + 20.0, 0, 10.0, 0.2)]):
+        veh[j, tm.V_X], veh[j, tm.V_Y], veh[j, tm.V_SPEED], veh[j, tm.V_ACC] = x, 4.0 * lane, v, acc
+        veh[j, tm.V_LANE] = veh[j, tm.V_TARGET_LANE] = lane
+        veh[j, tm.V_TARGET_SPEED], veh[j, tm.V_DELTA] = max(v, 25.0), 4.0
+    veh[1, tm.V_TARGET_LANE] = 1
+    veh[2, tm.V_TIMER] = 0.3
+    return veh
+
+
+def test_neighbour_features_on_a_built_road():
+    """Each observed vehicle's acceleration command, target lane - lane and time to cut into the ego's lane, in the
+    Kinematics block's order. A (30 m ahead, turning in): 0 s. B (lane 0, a 10 m/s car 20 m ahead of its centre,
+    lane 1 empty ahead, its timer at 0.3 s): MOBIL's own gain is huge, so the ego as its new follower decides. At
+    70 m the ego's IDM behind B (traffic constants, dv = 0, d* = 10 + 25 x 1.5 = 47.5 m) is
+    3 (0 - (47.5 / 70)^2) = -1.38 m/s^2, safe (> -2): the change is accepted and comes at B's next decision,
+    delay - timer = 0.7 s. At 50 m it is 3 (0 - (47.5 / 50)^2) = -2.71 m/s^2: refused, the cap 2 s. C: cap."""
+    from roadload.gym.traffic import neighbour_block
+
+    env = EcoTrafficEnv(vehicles_count=3, kinematics_rows=5, **NEIGHBOURS)
+    c = env.unwrapped._batch.constants
+    expected = {70.0: [(0.7, -1, 0.0), (-1.5, 0, 0.7), (0.2, 0, 2.0)],  # A at 30 m, B at 70 m, C at 90 m
+                50.0: [(0.7, -1, 0.0), (-1.5, 0, 2.0), (0.2, 0, 2.0)]}
+    for ego_to_b, rows in expected.items():
+        veh = _built_road(ego_to_b)
+        order, key = np.zeros(4, np.int64), np.zeros(4)
+        buf = np.zeros(5 * 5 + 4 * 3)
+        tm.kinematics_block(veh, 4, 3, 5, False, order, key, buf)
+        members, counts = tm.lane_index_arrays(4, 3)
+        neighbour_block(veh, 4, 5, order, c, members, counts, buf, 25)
+        got = buf[25:].reshape(4, 3)
+        assert np.array_equal(got[:3], np.array(rows, float)), (ego_to_b, got)
+        assert np.array_equal(got[3], [0.0, 0.0, 2.0])  # the missing row: nobody to cut in
+    names = [n for n, _, _ in traffic_observation_layout(env.config)]
+    assert names[-12:-9] == ["veh1_ax", "veh1_lane_change", "veh1_cut_in_time"]
+    assert len(names) == 25 + 15 + 12  # Kinematics, powertrain, 4 rows x 3 features
+
+
+def test_neighbour_features_only_append_to_the_default_observation():
+    """With the option the dynamics, rewards and every default observation entry are bit for bit the default's;
+    the vector form with the option equals the single env to 1e-9 (2 threads, through autoresets); bad values are
+    refused naming the field."""
+    n, steps = 3, 45
+    config = dict(vehicles_count=15, duration=2.0, vehicles_density=2.0, spawn="stopping-gap", kinematics_rows=8)
+    actions = np.random.default_rng(3).uniform(-1, 1, (steps, n, 1)).astype(np.float32)
+    runs = [_vector_rollout(EcoTrafficVectorEnv(n, {**config, **extra}, threads=2), 5, actions)
+            for extra in ({}, NEIGHBOURS)]
+    n_default = runs[0][0][0].shape[1]
+    assert runs[1][0][0].shape[1] == n_default + 7 * 3
+    for (o0, r0), (o1, r1) in zip(*runs):
+        assert np.array_equal(o0, o1[:, :n_default]) and np.array_equal(r0, r1)
+    tail = np.concatenate([o[:, n_default:] for o, _ in runs[1]])
+    assert (tail[:, 2::3] < 1.0).any() and (tail[:, 0::3] != 0).any()  # cut-in times and accelerations were seen
+    env = EcoTrafficEnv({**config, **NEIGHBOURS})
+    for i in range(n):
+        obs, _ = env.reset(seed=5 + i)
+        done = False
+        for k in range(steps):
+            if done:
+                obs, _ = env.reset()
+                done = False
+            else:
+                obs, r, te, tr, _ = env.step(actions[k, i])
+                done = te or tr
+            assert np.abs(obs - runs[1][k + 1][0][i]).max() <= 1e-9
+    with pytest.raises(GymConfigError, match="neighbour_features"):
+        EcoTrafficEnv(neighbour_features=("ay",))
+    with pytest.raises(GymConfigError, match="neighbour_features.*at most once"):
+        EcoTrafficEnv(neighbour_features=("ax", "ax"))
+    with pytest.raises(GymConfigError, match="reset options .*neighbour_features"):
+        env.reset(options={"neighbour_features": ()})
+
+
+def test_neighbour_features_pass_the_checker_and_the_reference_backend_observes_them():
+    """check_env with the option; highway-env's backend fills the same entries from its own vehicles (their
+    acceleration command, target lane, MOBIL and timer) in the Kinematics block's order."""
+    from gymnasium.utils.env_checker import check_env
+
+    from roadload.gym.traffic_reference import HighwayTrafficEnv
+
+    check_env(gym.make("roadload/EcoTraffic-v0", **FAST, **NEIGHBOURS).unwrapped)
+    env = HighwayTrafficEnv(curvature=False, vehicles_density=2.0, **FAST, **NEIGHBOURS)
+    assert env.layout == EcoTrafficEnv(curvature=False, **FAST, **NEIGHBOURS).layout
+    idx = {name: k for k, (name, _, _) in enumerate(env.layout)}
+    env.reset(seed=3)
+    for _ in range(3):
+        obs, *_ = env.step(np.array([0.0], dtype=np.float32))
+    close = env.road.close_objects_to(env.vehicle, env.PERCEPTION_DISTANCE, count=4, see_behind=False,
+                                      vehicles_only=True)
+    assert len(close) == 4
+    for r, v in enumerate(close, start=1):
+        assert obs[idx[f"veh{r}_ax"]] == pytest.approx(v.action["acceleration"] / 6.0, abs=1e-6)
+        assert obs[idx[f"veh{r}_lane_change"]] == v.target_lane_index[2] - v.lane_index[2]
+        assert 0.0 <= obs[idx[f"veh{r}_cut_in_time"]] <= 1.0

@@ -47,6 +47,9 @@ class DpSolution:
     model_time: float  # [s]
     multiplier: float  # mu [J/s]
     speed_step: float  # grid resolution [m/s]
+    # the same profile's energy [J] in the problem's price table (DpProblem's price_table: e.g. the MPC's smooth
+    # fuel model optimised, its profile booked in the plant's raw map); None without one
+    priced_energy_J: float | None = None
 
 
 def _cell(grid: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -80,12 +83,16 @@ class PlantFuelMap:
     speed_ratio: np.ndarray  # k_g [rad/s per m/s], (gears,)
     engine_speed_range: tuple[float, float]  # [rad/s]
 
-    def power(self, v, force) -> np.ndarray:
-        """The least fuel power [W] over the gears that can give ``force`` [N] at ``v`` [m/s] (inf where none
-        can); a braking force below the table's lowest is the brakes' beyond the engine's drag (fuel 0)."""
+    def gear_power(self, v, force, clamp_speed: bool = False) -> np.ndarray:
+        """Every gear's fuel power [W] at speed ``v`` [m/s] and net wheel force ``force`` [N], shape (gears,
+        *broadcast shape), bilinear in the map, inf where the gear cannot (its engine speed k_g v outside the range,
+        or the force above its full load); a braking force below the table's lowest is the brakes' beyond the
+        engine's drag (fuel 0). Outside the map's speeds: inf (the bound refuses a speed it has no data for), or
+        with ``clamp_speed`` the map's edge speed used for the look-up and the gears' range (the MPC's gear
+        request, which must name a gear at any measured speed; the gears' engine speed still at the true speed)."""
         v, force = np.broadcast_arrays(np.asarray(v, float), np.asarray(force, float))
         vf, ff = v.ravel(), force.ravel()
-        i, wv = _cell(self.speeds, vf)
+        i, wv = _cell(self.speeds, vf)  # _cell clamps to the map's speeds
         j, wf = _cell(self.forces, ff)
         # bilinear in every gear's table at once: the cell's four corners, (gears, points)
         fuel = ((1 - wv) * ((1 - wf) * self.fuel[:, i, j] + wf * self.fuel[:, i, j + 1])
@@ -93,9 +100,16 @@ class PlantFuelMap:
         max_force = (1 - wv) * self.max_force[:, i] + wv * self.max_force[:, i + 1]
         omega = self.speed_ratio[:, None] * vf
         lo, hi = self.engine_speed_range
-        inside = (vf >= self.speeds[0]) & (vf <= self.speeds[-1]) & (ff <= self.forces[-1])
+        inside = ff <= self.forces[-1]
+        if not clamp_speed:
+            inside &= (vf >= self.speeds[0]) & (vf <= self.speeds[-1])
         ok = inside & (omega >= lo) & (omega <= hi) & (ff <= max_force)
-        return np.where(ok, fuel, np.inf).min(axis=0).reshape(v.shape)
+        return np.where(ok, fuel, np.inf).reshape((-1, *v.shape))
+
+    def power(self, v, force) -> np.ndarray:
+        """The least fuel power [W] over the gears that can give ``force`` [N] at ``v`` [m/s] (inf where none
+        can; :meth:`gear_power`)."""
+        return self.gear_power(v, force).min(axis=0)
 
     def boundary_forces(self, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """At speed ``v`` [m/s]: (the largest full-load wheel force over the gears [N], its fuel power [W], the
@@ -141,6 +155,26 @@ def plant_fuel_map(vehicle, speeds: np.ndarray, forces: np.ndarray) -> PlantFuel
                 t_e = min(max(pt.source_torque(g, float(forces[j]) * r, omega), t_drag), t_max)
                 fuel[g - 1, i, j] = pt.fuel_power(omega, t_e)
     return PlantFuelMap(speeds, forces, fuel, max_force, drag_force, ratios, (lo, hi))
+
+
+def smoothed_fuel_map(fuel_map: PlantFuelMap, sigma_speed: float = 0.5, sigma_force: float = 500.0,
+                      cut_power: float = 1.0) -> PlantFuelMap:
+    """The MPC's own fuel model (``MpcSettings.fuel_model = "plant_map"``) as a one-row :class:`PlantFuelMap`:
+    fuel phi(v, F) [W] = :meth:`~.energy.PlantFuelModel.smooth_table` of ``fuel_map`` (the least fuel over the
+    gears, smoothed by a Gaussian of sigma_speed [m/s] x sigma_force [N]; bilinear between its grid points where the
+    NLP passes a cubic B-spline through them), the traction limit F <= F_max(v), the best gear's full load
+    (:meth:`~.energy.PlantFuelModel.full_load_envelope`), and as its overrun edge the largest force at which
+    phi <= ``cut_power`` [W] (the smooth model's fuel cut, below the raw map's least drag: the smoothing fills in
+    the step there). One pseudo-gear of ratio 1 whose engine speed range is the map's speeds (every speed in it)."""
+    from .energy import PlantFuelModel
+
+    model = PlantFuelModel(fuel_map, "smoothed")
+    speeds, forces, phi = model.smooth_table(sigma_speed, sigma_force)
+    _, envelope = model.full_load_envelope()
+    first_fuelled = np.argmax(phi > cut_power, axis=1)  # the first force of each speed with fuel above cut_power
+    edge = forces[np.maximum(first_fuelled - 1, 0)]
+    return PlantFuelMap(speeds, forces, phi[None], envelope[None], edge[None], np.ones(1),
+                        (float(speeds[0]), float(speeds[-1])))
 
 
 def _stage_costs(preview: Preview, energy: SourceEnergyModel, params: RoadLoadParameters,
@@ -232,13 +266,15 @@ def dp_optimum(preview: Preview, energy: SourceEnergyModel, params: RoadLoadPara
 
 
 def _boundary_actions(preview: Preview, params: RoadLoadParameters, st: OptimumSettings, fuel: PlantFuelMap,
-                      grid: np.ndarray, k: int, cap_next: float) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+                      grid: np.ndarray, k: int, cap_next: float, price: PlantFuelMap | None = None
+                      ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
     """Two transitions of segment k from every grid speed whose end speed the grid would only approximate: full
     load in the gear of the largest force, and coasting in overrun (fuel cut) in the gear of the least drag, each
     [(end energy E = v^2/2 [m^2/s^2], fuel [J], time [s])], inf fuel where infeasible. Without them a grid's
     quantised accelerations cut off a full-load climb or a coast (a heavy truck's decelerations there are
     hundredths of a m/s^2, a grid of 0.5 m^2/s^2 over 20 m spaces them 0.025 m/s^2 apart), which puts the DP
-    above the plant's optimum by up to 1 % (docs/results/controllers.md)."""
+    above the plant's optimum by up to 1 % (docs/results/controllers.md). Each action also carries its fuel [J]
+    booked in ``price`` (another map: at the same force, capped at that map's full load; None: the same fuel)."""
     ds = float(preview.ds[k]) if preview.ds is not None else float(preview.s[k + 1] - preview.s[k])
     m_in, e0 = params.inertial_mass, 0.5 * grid ** 2
     p = params.as_vector()
@@ -258,7 +294,13 @@ def _boundary_actions(preview: Preview, params: RoadLoadParameters, st: OptimumS
               & (acc >= -st.decel_max) & (acc <= st.accel_max))
         dt = ds / vm
         power = fuel_full if action == "full" else np.zeros_like(vm)
-        out.append((np.where(ok, e1, 0.0), np.where(ok & np.isfinite(power), power * dt, np.inf), dt))
+        cost = np.where(ok & np.isfinite(power), power * dt, np.inf)
+        booked = cost
+        if price is not None:  # the same force in the other map (at most its own full load, a few N apart)
+            with np.errstate(invalid="ignore"):
+                f_price = np.minimum(force, price.boundary_forces(vm)[0] - 1e-6)
+                booked = np.where(ok, price.power(vm, np.nan_to_num(f_price, neginf=0.0)) * dt, np.inf)
+        out.append((np.where(ok, e1, 0.0), cost, dt, booked))
     return out
 
 
@@ -270,7 +312,8 @@ class DpProblem:
     def __init__(self, preview: Preview, energy: SourceEnergyModel, params: RoadLoadParameters,
                  settings: OptimumSettings | None = None, speed_step: float = 0.05, gear_choice: bool = False,
                  energy_step: float | None = None, fuel_table: PlantFuelMap | None = None,
-                 overspeed: float = 0.0) -> None:
+                 overspeed: float = 0.0, price_table: PlantFuelMap | None = None,
+                 price_costs: np.ndarray | None = None) -> None:
         st = settings or OptimumSettings()
         if not (math.isfinite(speed_step) and speed_step > 0):
             raise OptimumError(f"speed_step: a finite step > 0 m/s, got {speed_step!r}")
@@ -288,6 +331,20 @@ class DpProblem:
         self.ds = np.diff(self.s) if preview.ds is None else np.asarray(preview.ds, float)
         for k in range(n):
             self.cost[k] = _stage_costs(preview, energy, params, st, grid, offsets, k, gear_choice, fuel_table)[0]
+        # price_table: the chosen profile's energy also booked in another fuel map (the optimum of one model, its
+        # fuel in another); the price of a transition that map refuses is inf. price_costs: that map's transition
+        # costs already computed on this grid (another DpProblem's ``cost`` with the same settings and caps)
+        self.price = None
+        if price_table is not None and price_costs is not None:
+            if price_costs.shape != self.cost.shape:
+                raise OptimumError(f"price_costs: shape {price_costs.shape}, expected {self.cost.shape} (the same "
+                                   f"nodes, grid and limits)")
+            self.price = price_costs
+        elif price_table is not None:
+            self.price = np.empty_like(self.cost)
+            for k in range(n):
+                self.price[k] = _stage_costs(preview, energy, params, st, grid, offsets, k, gear_choice,
+                                             price_table)[0]
         self.allowed = self._allowed = grid[None, :] <= cap[:, None] + 1e-9
         idx = np.arange(grid.size)[:, None] + offsets[None, :]
         self.inside = (idx >= 0) & (idx < grid.size)
@@ -295,18 +352,19 @@ class DpProblem:
         # time of a transition per metre: 1 / v_mid (the same at every segment; dt_k = ds_k / v_mid)
         self.pace = 2.0 / (grid[:, None] + grid[self.idx])
         self.energies = 0.5 * grid ** 2
-        self.extra = ([_boundary_actions(preview, params, st, fuel_table, grid, k, cap[k + 1] + overspeed)
-                       for k in range(n)]
+        self.extra = ([_boundary_actions(preview, params, st, fuel_table, grid, k, cap[k + 1] + overspeed,
+                                         price_table) for k in range(n)]
                       if fuel_table is not None else [])
 
-    def _sweep(self, mu: float, final: np.ndarray, i0: int) -> tuple[np.ndarray, float, float]:
-        """Bellman's recursion at the time multiplier mu [J/s]: (path of grid indices, energy [J], time [s]). With
-        boundary actions (full load, overrun coasting; :func:`_boundary_actions`) their end state lies between
-        grid points: the value, energy and time to go are interpolated linearly there, and the path records the
-        nearest grid point."""
+    def _sweep(self, mu: float, final: np.ndarray, i0: int) -> tuple[np.ndarray, float, float, float]:
+        """Bellman's recursion at the time multiplier mu [J/s]: (path of grid indices, energy [J], time [s], the
+        path's energy booked in the price table [J]: the energy without one). With boundary actions (full load,
+        overrun coasting; :func:`_boundary_actions`) their end state lies between grid points: the value, energies
+        and time to go are interpolated linearly there, and the path records the nearest grid point."""
         n, rows = self.n, np.arange(self.grid.size)
         value = final
-        e_go, t_go = np.zeros(self.grid.size), np.zeros(self.grid.size)
+        books = 1 if self.price is None else 2  # rows of the energy to go: the objective's, the booked one
+        e_go, t_go = np.zeros((books, self.grid.size)), np.zeros(self.grid.size)
         nxt = np.zeros((n, self.grid.size), dtype=np.int32)
         for k in range(n - 1, -1, -1):
             dt = self.ds[k] * self.pace
@@ -314,18 +372,20 @@ class DpProblem:
             best = np.argmin(q, axis=1)
             best_q = q[rows, best]
             j = self.idx[rows, best]
-            new_e = self.cost[k][rows, best] + e_go[j]
+            tables = (self.cost[k],) if self.price is None else (self.cost[k], self.price[k])
+            new_e = np.stack([t[rows, best] for t in tables]) + e_go[:, j]
             new_t = dt[rows, best] + t_go[j]
             nxt[k] = j
-            for e_end, cost, dt_b in self.extra[k] if self.extra else ():
+            for e_end, cost, dt_b, booked in self.extra[k] if self.extra else ():
                 lo = np.clip(np.searchsorted(self.energies, e_end) - 1, 0, self.grid.size - 2)
                 w = np.clip((e_end - self.energies[lo]) / (self.energies[lo + 1] - self.energies[lo]), 0.0, 1.0)
                 finite = np.isfinite(value[lo]) & np.isfinite(value[lo + 1]) & np.isfinite(cost)
                 with np.errstate(invalid="ignore"):
                     cand = np.where(finite, cost + mu * dt_b + (1 - w) * value[lo] + w * value[lo + 1], np.inf)
-                take = cand < best_q
+                    take = cand < best_q
+                    spent = np.stack((cost, booked)[:books]) + (1 - w) * e_go[:, lo] + w * e_go[:, lo + 1]
                 best_q = np.where(take, cand, best_q)
-                new_e = np.where(take, cost + (1 - w) * e_go[lo] + w * e_go[lo + 1], new_e)
+                new_e = np.where(take, spent, new_e)
                 new_t = np.where(take, dt_b + (1 - w) * t_go[lo] + w * t_go[lo + 1], new_t)
                 nxt[k] = np.where(take, np.where(w < 0.5, lo, lo + 1), nxt[k])
             value = np.where(self._allowed[k], best_q, np.inf)
@@ -337,7 +397,7 @@ class DpProblem:
         path[0] = i0
         for k in range(n):
             path[k + 1] = nxt[k, path[k]]
-        return path, float(e_go[i0]), float(t_go[i0])
+        return path, float(e_go[0, i0]), float(t_go[i0]), float(e_go[-1, i0])
 
     def solve(self, model_time: float, start_speed: float, arrival_speed: float | None = None,
               time_tol: float = 1e-4, terminal_value: float = 0.0, over_cap: float = 0.0,
@@ -370,7 +430,7 @@ class DpProblem:
         slow = self._sweep(lo, final, i0)
         if slow[2] < model_time and least_at_any_time and lo == 0.0:
             return DpSolution(s=self.s, v=grid[slow[0]], energy_J=slow[1], model_time=slow[2], multiplier=0.0,
-                              speed_step=self.speed_step)
+                              speed_step=self.speed_step, priced_energy_J=None if self.price is None else slow[3])
         if slow[2] < model_time:
             raise OptimumError(f"model_time: {model_time:.1f} s is slower than the grid's slowest trip "
                                f"({slow[2]:.1f} s)")
@@ -384,11 +444,12 @@ class DpProblem:
             else:
                 hi, fast = mid, run
         # the energy at exactly the target time: linear between the two runs that bracket it
-        (p1, e1, t1), (p2, e2, t2) = fast, slow
+        (p1, e1, t1, b1), (p2, e2, t2, b2) = fast, slow
         w = 0.0 if t2 == t1 else (model_time - t1) / (t2 - t1)
         path = p1 if w <= 0.5 else p2
         return DpSolution(s=self.s, v=grid[path], energy_J=float(e1 + w * (e2 - e1)), model_time=float(model_time),
-                          multiplier=float(0.5 * (lo + hi)), speed_step=self.speed_step)
+                          multiplier=float(0.5 * (lo + hi)), speed_step=self.speed_step,
+                          priced_energy_J=None if self.price is None else float(b1 + w * (b2 - b1)))
 
 
 # the plant-fuel bound of a truck: 40 m nodes, a grid uniform in v^2/2 of 0.5 m^2/s^2 from 5 m/s to the speed cap
@@ -398,16 +459,19 @@ TRUCK_BOUND_SETTINGS = OptimumSettings(ds=40.0, accel_max=1.0, decel_max=1.0, sp
 TRUCK_BOUND_ENERGY_STEP = 0.5  # [m^2/s^2]
 BOUND_OVERSPEED = 2.0  # [m/s] the grid reaches this far above the speed limit, for runs that drove above it
 _FUEL_MAPS: dict[str, PlantFuelMap] = {}
+BOUND_MODELS = ("plant", "smooth")  # PlantFuelBound's fuel model: the plant's raw map, the MPC's smoothed one
 
 
-def cached_plant_fuel_map(vehicle) -> PlantFuelMap:
+def cached_plant_fuel_map(vehicle, smooth: bool = False) -> PlantFuelMap:
     """:func:`plant_fuel_map` of an ICE vehicle spec over 4.5-26.5 m/s (0.25 m/s) and -30 ... +80 kN (250 N),
-    once per process and spec."""
+    once per process and spec; ``smooth``: its :func:`smoothed_fuel_map` (the MPC's model)."""
     key = json.dumps(vehicle.to_dict(), sort_keys=True)
     if key not in _FUEL_MAPS:
         _FUEL_MAPS[key] = plant_fuel_map(vehicle, np.arange(4.5, 26.5 + 1e-9, 0.25),
                                          np.arange(-30e3, 80e3 + 1.0, 250.0))
-    return _FUEL_MAPS[key]
+    if smooth and "smooth:" + key not in _FUEL_MAPS:
+        _FUEL_MAPS["smooth:" + key] = smoothed_fuel_map(_FUEL_MAPS[key])
+    return _FUEL_MAPS[("smooth:" if smooth else "") + key]
 
 
 class PlantFuelBound:
@@ -418,14 +482,24 @@ class PlantFuelBound:
     margin), accelerations within +-1 m/s^2, no jerk limit. Not converged in its grid: a finer energy step lowers
     it further (40 m nodes: 0.31 % lower at 0.25 m^2/s^2 on a 40 t climb; docs/results/controllers.md), so it lies
     above the plant's quasi-static optimum by about that much; the map leaves out in the plant's favour a lower
-    gear's larger rotating mass when braking. Roads with stops are refused."""
+    gear's larger rotating mass when braking. Roads with stops are refused.
+
+    ``model`` "smooth": the same programme optimised in the MPC's own fuel model instead (:func:`smoothed_fuel_map`:
+    the smoothed least-over-gears table and its traction limit), and that profile's fuel booked in the plant's raw
+    map (:meth:`solve` returns the booked fuel, the solution's ``energy_J`` the smooth model's): the optimum of the
+    MPC's model over the whole route, in the plant's currency; no bound (it lies at or above the plant-fuel
+    bound, whose optimisation the raw map is). ``plant_bound``: the plant-fuel bound of the same segment and
+    settings, whose transition costs are the raw map's booking (computed once for both)."""
 
     def __init__(self, road, vehicle, params: RoadLoadParameters, start: float = 0.0, end: float | None = None,
                  settings: OptimumSettings = TRUCK_BOUND_SETTINGS,
-                 energy_step: float = TRUCK_BOUND_ENERGY_STEP) -> None:
+                 energy_step: float = TRUCK_BOUND_ENERGY_STEP, model: str = "plant",
+                 plant_bound: PlantFuelBound | None = None) -> None:
         from .optimum import route_nodes, route_preview
         from .vehicle_models import energy_model_from_spec
 
+        if model not in BOUND_MODELS:
+            raise OptimumError(f"PlantFuelBound model: choose one of {BOUND_MODELS}, got {model!r}")
         end = float(road.length if end is None else end)
         if any(start + 1e-6 < float(x) <= end + 1e-6 for x in np.asarray(road.stops, float)):
             raise OptimumError(f"road {road.name!r}: the plant-fuel bound takes roads without stops")
@@ -437,8 +511,12 @@ class PlantFuelBound:
         self.params = params
         preview = route_preview(road, route_nodes(start, end, [], settings.ds), energy, settings)
         self.speed_limit = float(np.max(preview.speed_cap))
+        raw = cached_plant_fuel_map(vehicle)
+        smooth = model == "smooth"
         self.problem = DpProblem(preview, energy, params, settings, gear_choice=True, energy_step=energy_step,
-                                 fuel_table=cached_plant_fuel_map(vehicle), overspeed=BOUND_OVERSPEED)
+                                 fuel_table=cached_plant_fuel_map(vehicle, smooth=True) if smooth else raw,
+                                 overspeed=BOUND_OVERSPEED, price_table=raw if smooth else None,
+                                 price_costs=plant_bound.problem.cost if smooth and plant_bound is not None else None)
 
     def solve(self, trip_time: float, start_speed: float, arrival_speed: float, peak_speed: float = 0.0
               ) -> tuple[float, DpSolution]:
@@ -451,4 +529,5 @@ class PlantFuelBound:
         sol = self.problem.solve(trip_time, start_speed, arrival_speed,
                                  over_cap=max(0.0, peak_speed - self.speed_limit), least_at_any_time=True)
         snap = (float(sol.v[0]) ** 2 - start_speed ** 2) + (arrival_speed ** 2 - float(sol.v[-1]) ** 2)
-        return sol.energy_J + 0.5 * self.inertial_mass * snap / self.eta, sol
+        fuel = sol.energy_J if sol.priced_energy_J is None else sol.priced_energy_J
+        return fuel + 0.5 * self.inertial_mass * snap / self.eta, sol

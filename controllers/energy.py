@@ -239,7 +239,7 @@ class PlantFuelModel:
     Compared by ``key`` (the vehicle spec it was built from), so an energy model carrying it stays hashable."""
 
     def __init__(self, fuel_map: Any, key: str) -> None:
-        for name in ("speeds", "forces", "fuel", "max_force", "speed_ratio", "engine_speed_range"):
+        for name in ("speeds", "forces", "fuel", "max_force", "speed_ratio", "engine_speed_range", "gear_power"):
             if not hasattr(fuel_map, name):
                 raise EnergyModelError(f"PlantFuelModel: the fuel map has no {name!r} (expected a PlantFuelMap)")
         self.map = fuel_map
@@ -258,17 +258,13 @@ class PlantFuelModel:
     def gears(self) -> int:
         return int(np.asarray(self.map.fuel).shape[0])
 
-    def _cell(self, v: float, force: float) -> tuple[int, float, int, float]:
-        sp, fo = np.asarray(self.map.speeds), np.asarray(self.map.forces)
-        vc, fc = min(max(v, sp[0]), sp[-1]), min(max(force, fo[0]), fo[-1])
-        i = int(np.clip(np.searchsorted(sp, vc) - 1, 0, sp.size - 2))
-        j = int(np.clip(np.searchsorted(fo, fc) - 1, 0, fo.size - 2))
-        return i, (vc - sp[i]) / (sp[i + 1] - sp[i]), j, (fc - fo[j]) / (fo[j + 1] - fo[j])
-
     def full_load(self, v: float) -> np.ndarray:
         """Each gear's full-load wheel force [N] at speed v [m/s] (linear in the map's speeds); 0 where the gear's
         engine speed is out of range."""
-        i, wv, _, _ = self._cell(v, 0.0)
+        sp = np.asarray(self.map.speeds)
+        vc = min(max(v, sp[0]), sp[-1])
+        i = int(np.clip(np.searchsorted(sp, vc) - 1, 0, sp.size - 2))
+        wv = (vc - sp[i]) / (sp[i + 1] - sp[i])
         mf = np.asarray(self.map.max_force)
         lo, hi = self.map.engine_speed_range
         omega = np.asarray(self.map.speed_ratio) * v
@@ -277,12 +273,11 @@ class PlantFuelModel:
     def gear_fuel_power(self, v: float, force: float, load_margin: float = 1.0) -> np.ndarray:
         """P_g(v, F) [W] of every gear at speed v [m/s] and net wheel force F [N] (class docstring), inf where the
         gear cannot give F / load_margin [N] (load_margin <= 1 keeps a reserve below full load) or its engine speed
-        is out of range."""
-        i, wv, j, wf = self._cell(v, force)
-        t = np.asarray(self.map.fuel)[:, i:i + 2, j:j + 2]
-        value = (1 - wv) * ((1 - wf) * t[:, 0, 0] + wf * t[:, 0, 1]) + wv * ((1 - wf) * t[:, 1, 0] + wf * t[:, 1, 1])
-        full = self.full_load(v)
-        return np.where((full > 0) & (force <= load_margin * full), value, np.inf)
+        is out of range: the map's own per-gear look-up (:meth:`~.dynamic_programming.PlantFuelMap.gear_power`) with
+        the speed clamped to the map's edge (a gear is named at any measured speed; the bound refuses such a
+        speed instead)."""
+        value = np.asarray(self.map.gear_power(v, force, clamp_speed=True), float)
+        return np.where(force <= load_margin * self.full_load(v), value, np.inf)
 
     def least_fuel_gear(self, v: float, force: float, current: int | None = None, hysteresis: float = 0.005,
                         load_margin: float = 0.98) -> int:

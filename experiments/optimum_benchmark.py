@@ -208,7 +208,7 @@ def run_optimum_task(task: OptimumTask) -> dict[str, Any]:
         m["segment_peak_speed"] = float(res.log["v"][res.log["s"] >= task.warmup].max())
         return m
 
-    bound = _truck_bound(task, road) if case.truck and task.truck_optimum == "bound" else None
+    bound = truck_bound(task, road) if case.truck and task.truck_optimum == "bound" else None
     for controller in task.controllers:
         if controller in ("ppo", "sac"):
             m = _policy_run(task, controller, road)
@@ -324,7 +324,7 @@ def _stale_bound(task: OptimumTask, stored: dict[str, Any]) -> bool:
 def rebound_rows(task: OptimumTask, rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Stored truck rows against the current plant-fuel bound (each run's time, energy, start and arrival speed
     kept; the runs are not driven again)."""
-    bound = _truck_bound(task, benchmark_road(task.road, task.seed, task.warmup))
+    bound = truck_bound(task, benchmark_road(task.road, task.seed, task.warmup))
     out = []
     for r in rows:
         if not r.get("arrived"):
@@ -337,11 +337,14 @@ def rebound_rows(task: OptimumTask, rows: list[dict[str, Any]]) -> list[dict[str
     return out
 
 
-def _truck_bound(task: OptimumTask, road) -> PlantFuelBound:
+def truck_bound(task: OptimumTask, road, model: str = "plant", plant_bound: PlantFuelBound | None = None
+                ) -> PlantFuelBound:
+    """The plant-fuel bound of the task's measured segment (``model`` "smooth": the optimum of the plant-map MPC's
+    own smoothed fuel model, booked in the plant's map, reusing ``plant_bound``'s costs; :class:`PlantFuelBound`)."""
     vehicle = VEHICLE_CASES[task.case].vehicle()
     params = replace(SimulatorPlant(vehicle, road, effects=CONDITIONS[task.condition], seed=task.seed
                                     ).true_parameters(), rotational_mass=rotational_mass(vehicle))
-    return PlantFuelBound(road, vehicle, params, start=task.warmup)
+    return PlantFuelBound(road, vehicle, params, start=task.warmup, model=model, plant_bound=plant_bound)
 
 
 def difference_pct(value: float, reference: float) -> float:

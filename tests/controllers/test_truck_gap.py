@@ -66,9 +66,9 @@ def _problem(spec, fmap, price=None, fuel=None, price_costs=None) -> DpProblem:
 
 def test_the_smooth_models_optimum_booked_in_the_raw_map_lies_at_or_above_the_raw_bound(truck):
     """The programme optimised in the smoothed map and booked in the raw map: at or above the raw map's own optimum
-    (which minimises that fuel) at two trip times below the least-fuel trip's, and different from its smooth fuel (the smoothing's error);
-    booked in the map it optimises, the booking equals its energy to the last joule (and its price table is the
-    raw problem's costs, which the benchmark reuses)."""
+    (which minimises that fuel) at two trip times below the least-fuel trip's, and different from its smooth fuel
+    (the smoothing's error); booked in the map it optimises, the booking equals its energy to the last joule (and
+    its price table is the raw problem's costs, which the benchmark reuses)."""
     spec, fmap = truck
     raw = _problem(spec, fmap)
     same = _problem(spec, fmap, price=fmap)
@@ -120,3 +120,24 @@ def test_gap_parts_add_up_to_the_total_and_a_bad_model_is_refused():
     assert r["model_error_pct"] == pytest.approx(100 * 0.001 * a.mean() / b.mean(), rel=1e-9)
     with pytest.raises(OptimumError, match="choose one of"):
         PlantFuelBound(None, truck_spec(40000.0), None, model="willans")
+
+
+@pytest.mark.nightly
+def test_gap_parts_of_a_stored_run_keep_its_bound_and_add_up():
+    """The plant-map MPC's stored run on 40 t long grades seed 0 (106.611 MJ in 217.19 s): the parts re-solve its
+    bound to the stored value (the booking of the smooth model leaves the plant-fuel bound as it was), the smooth
+    model's optimum booked in the raw map lies between the bound and the run, and the parts add up."""
+    from roadload.experiments.truck_gap import gap_parts
+
+    task = {"case": "truck_40t", "road": "long_grades", "seed": 0, "condition": "nominal",
+            "controllers": ["mpc:oracle:plant_map"], "warmup": 2000.0, "time_weight": None, "policies": None,
+            "dp_step": 0.05, "optimum_ds": 5.0, "mpc": [], "replan_period": None, "label": "",
+            "truck_optimum": "bound"}
+    row = {"controller": "mpc:oracle:plant_map", "arrived": True, "time_s": 217.18771657310612,
+           "energy_J": 106611401.4360998, "start_speed": 22.158762178142755, "arrival_speed": 21.73588151978414,
+           "peak_speed": 22.156656747288746}
+    parts = gap_parts([{"task": task, "rows": [row]}]).iloc[0]
+    print(parts.to_dict())
+    assert parts["bound_J"] == pytest.approx(105899071.48238261, abs=1.0)  # the benchmark's stored bound
+    assert parts["bound_J"] < parts["model_optimum_J"] < row["energy_J"]
+    assert parts["loop_J"] + parts["nonconvex_J"] == pytest.approx(parts["total_J"], abs=1e-3)

@@ -31,7 +31,7 @@ import numpy as np
 
 from roadload.road_load import RoadLoadParameters, crosswind_drag_increase
 
-from .energy import SourceEnergyModel
+from .energy import PlantFuelModel, SourceEnergyModel
 from .force_model import resistance_force
 from .mpc import Preview
 from .optimum import OptimumError, OptimumSettings
@@ -166,8 +166,6 @@ def smoothed_fuel_map(fuel_map: PlantFuelMap, sigma_speed: float = 0.5, sigma_fo
     (:meth:`~.energy.PlantFuelModel.full_load_envelope`), and as its overrun edge the largest force at which
     phi <= ``cut_power`` [W] (the smooth model's fuel cut, below the raw map's least drag: the smoothing fills in
     the step there). One pseudo-gear of ratio 1 whose engine speed range is the map's speeds (every speed in it)."""
-    from .energy import PlantFuelModel
-
     model = PlantFuelModel(fuel_map, "smoothed")
     speeds, forces, phi = model.smooth_table(sigma_speed, sigma_force)
     _, envelope = model.full_load_envelope()
@@ -490,6 +488,8 @@ class PlantFuelBound:
     MPC's model over the whole route, in the plant's currency; no bound (it lies at or above the plant-fuel
     bound, whose optimisation the raw map is). ``plant_bound``: the plant-fuel bound of the same segment and
     settings, whose transition costs are the raw map's booking (computed once for both)."""
+
+    problem: DpProblem
 
     def __init__(self, road, vehicle, params: RoadLoadParameters, start: float = 0.0, end: float | None = None,
                  settings: OptimumSettings = TRUCK_BOUND_SETTINGS,

@@ -21,7 +21,6 @@ the Kinematics block sorts by |dx| when it decided (rank < kinematics_rows - 1: 
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from typing import Any
 
@@ -34,6 +33,7 @@ from roadload.gym.traffic import EcoTrafficEnv
 from roadload.presets import get_preset
 from roadload.tables import markdown_table
 
+from .common import json_object_option
 from .highway import idm_policy
 from .traffic_training import TRAFFIC_HELD_OUT, TRAFFIC_TRAIN_CONFIG
 
@@ -168,12 +168,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--csv", default=None, help="write the braking runs here")
     ap.add_argument("--quick", action="store_true", help="tiny run for CI")
     a = ap.parse_args(argv)
-    try:
-        config: dict[str, Any] = json.loads(a.config) if a.config else {}
-    except json.JSONDecodeError as exc:
-        ap.error(f"--config: expected a JSON object, got {a.config!r} ({exc})")
-    if not isinstance(config, dict):
-        ap.error(f"--config: expected a JSON object, got {a.config!r}")
+    config = json_object_option(ap, a.config)
     if a.quick:
         a.episodes = 3  # the third holds a cut-in at 0.6 s
         config = {"vehicles_density": 2.0, "spawn": "stopping-gap", **config, "duration": 5.0}

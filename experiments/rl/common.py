@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import argparse
+import json
 from pathlib import Path
 from typing import Any, Callable
 
@@ -88,3 +90,16 @@ def make_vec_env(n_envs: int, seed: int, env_config: dict[str, Any] | None = Non
     kwargs = {"start_method": start_method} if (vec == "subproc" and start_method) else None
     return sb3_make_vec_env(ENV_ID, n_envs=n_envs, seed=seed, env_kwargs={"config": dict(env_config or {})},
                             vec_env_cls=cls, vec_env_kwargs=kwargs)
+
+
+def json_object_option(ap: argparse.ArgumentParser, text: str | None, option: str = "--config") -> dict[str, Any]:
+    """The JSON object given to a command-line ``option`` ({} without), or the parser's error naming it."""
+    if not text:
+        return {}
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        ap.error(f"{option}: expected a JSON object, got {text!r} ({exc})")
+    if not isinstance(value, dict):
+        ap.error(f"{option}: expected a JSON object, got {text!r}")
+    return value

@@ -36,6 +36,7 @@ import argparse
 import json
 import os
 import re
+import resource
 import subprocess
 import sys
 import time
@@ -133,6 +134,14 @@ class PythonWorker:
             stray.append(line)
         return False, "".join(stray) + "\nthe Python worker died (see its stderr above)"
 
+    def cpu_seconds(self) -> float:
+        """CPU seconds (user + system) of the worker so far, with its finished children (/proc/PID/stat)."""
+        try:
+            fields = Path(f"/proc/{self.proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            return 0.0
+        return sum(int(f) for f in fields[11:15]) / os.sysconf("SC_CLK_TCK")  # utime stime cutime cstime
+
     def close(self) -> None:
         if self.proc.stdin is not None:
             self.proc.stdin.close()
@@ -157,6 +166,12 @@ def skip_reason(block: Block, covered: dict[str, str] | None) -> str | None:
     if covered and normalise(block.code) in covered:
         return f"the same block runs in {covered[normalise(block.code)]}"
     return None
+
+
+def cpu_seconds(worker: PythonWorker | None) -> float:
+    """CPU seconds of this process's finished children (the shell blocks) plus the page's Python worker so far."""
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return children.ru_utime + children.ru_stime + (worker.cpu_seconds() if worker is not None else 0.0)
 
 
 def run_block(block: Block, workdir: Path, worker: PythonWorker | None) -> tuple[bool, str]:
@@ -190,12 +205,13 @@ def run_page(page: Path, workdir: Path, python: bool, update: bool,
             if reason:
                 print(f"skip: {where} ({reason}): {first}")
                 continue
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), cpu_seconds(worker)
             ok, out = run_block(block, workdir, worker)
+            took = f"{time.perf_counter() - t0:.0f} s, {cpu_seconds(worker) - c0:.0f} s CPU"
             ran += 1
             if not ok:
                 failures.append(f"{where}: {block.kind} block failed: {first}\n{out[-3000:]}")
-                print(f"FAILED: {where} ({time.perf_counter() - t0:.0f} s): {first}")
+                print(f"FAILED: {where} ({took}): {first}")
                 break  # later blocks may depend on this one
             status = "ok"
             if block.expected is not None:
@@ -208,7 +224,7 @@ def run_page(page: Path, workdir: Path, python: bool, update: bool,
                         failures.append(f"{where}: stored output differs from what the block prints; "
                                         f"{first_difference(block.expected, out)}\n--- printed ---\n{out[-3000:]}")
                         status = "OUTPUT DIFFERS"
-            print(f"{status}: {where} ({time.perf_counter() - t0:.0f} s): {first}")
+            print(f"{status}: {where} ({took}): {first}")
     finally:
         if worker is not None:
             worker.close()

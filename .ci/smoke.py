@@ -18,6 +18,7 @@ also a block of those pages runs there only.
 from __future__ import annotations
 
 import argparse
+import ast
 import os
 import re
 import subprocess
@@ -34,6 +35,21 @@ from doc_commands import shell_blocks  # noqa: E402  (the page reader of .ci/doc
 #: the pages whose shell blocks the docs stage runs (docs/tools/build_docs.sh)
 DOCS_PAGES = [ROOT / "docs" / "index.md", *sorted((ROOT / "docs" / "guides").glob("*.md"))]
 SCRIPT_QUICK = re.compile(r"^python scripts/([\w.-]+\.py) --quick$")
+#: scripts whose ``--quick`` run is this ``roadload`` command with the options of the script's ``QUICK`` list (and an
+#: ``--out``): a docs page line that runs the same command with those options and another ``--out`` runs the same
+#: code at the same size, so the script is not run again. A changed page line or a changed ``QUICK`` list no longer
+#: matches: the script runs again.
+QUICK_COMMANDS = {"train_rl.py": "roadload train"}
+
+
+def quick_command(script: str) -> str | None:
+    """The ``roadload`` command line (without ``--out``) that ``scripts/<script> --quick`` runs, or None."""
+    if script not in QUICK_COMMANDS:
+        return None
+    for node in ast.parse((ROOT / "scripts" / script).read_text()).body:
+        if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "QUICK" for t in node.targets):
+            return " ".join([QUICK_COMMANDS[script], *ast.literal_eval(node.value)])
+    return None
 
 
 @dataclass
@@ -45,13 +61,18 @@ class Job:
 
 
 def scripts_run_by_docs() -> dict[str, str]:
-    """``{script file name: page:line}`` of the ``python scripts/NAME.py --quick`` lines the docs stage runs."""
+    """``{script file name: page:line}`` of the ``python scripts/NAME.py --quick`` lines the docs stage runs, and of
+    the :data:`QUICK_COMMANDS` lines that run a script's quick command."""
     found: dict[str, str] = {}
     for code, where in shell_blocks(DOCS_PAGES).items():
         for line in code.splitlines():
             m = SCRIPT_QUICK.match(line.strip())
             if m:
                 found.setdefault(m.group(1), where)
+            for script in QUICK_COMMANDS:
+                command = quick_command(script)
+                if command and re.fullmatch(re.escape(command) + r" --out \S+", line.strip()):
+                    found.setdefault(script, where)
     return found
 
 

@@ -90,8 +90,10 @@ def gap_parts(results: list[dict[str, Any]]) -> pd.DataFrame:
 def gap_parts_summary(rows: pd.DataFrame) -> pd.DataFrame:
     """Per (vehicle, road, controller): each part over the bound as a fleet total [%], 1-sigma and 95 % CI, and
     the smooth model's error on its optimum's profile, 100 mean(A_phi - A) / mean(B)."""
+    if rows.empty:  # no truck MPC run among the tasks
+        return pd.DataFrame()
     out = []
-    ok = rows[rows["status"] == "solved"] if len(rows) else rows
+    ok = rows[rows["status"] == "solved"]
     for (veh, road, ctl), g in ok.groupby(["vehicle", "road", "controller"], sort=False):
         b = g["bound_J"].to_numpy(float)
         rec: dict[str, Any] = {"vehicle": veh, "road": road, "controller": ctl, "seeds": len(g),

@@ -15,7 +15,7 @@ from roadload.controllers.energy import PlantFuelModel
 from roadload.controllers.optimum import OptimumError, route_nodes, route_preview
 from roadload.controllers.sim_plant import SimulatorPlant
 from roadload.controllers.vehicle_models import energy_model_from_spec, rotational_mass
-from roadload.experiments.truck_gap import PARTS, gap_parts_summary
+from roadload.experiments.truck_gap import PARTS, gap_parts_markdown, gap_parts_summary
 from roadload.presets import truck_spec
 from roadload.road_profiles import RoadProfile
 
@@ -118,6 +118,8 @@ def test_gap_parts_add_up_to_the_total_and_a_bad_model_is_refused():
     for part in PARTS:
         assert r[f"{part}_ci95_lo"] < r[f"{part}_pct"] < r[f"{part}_ci95_hi"]
     assert r["model_error_pct"] == pytest.approx(100 * 0.001 * a.mean() / b.mean(), rel=1e-9)
+    assert gap_parts_summary(pd.DataFrame()).empty  # a run without a truck MPC: an empty table, not an error
+    assert "no truck run" in gap_parts_markdown(pd.DataFrame())
     with pytest.raises(OptimumError, match="choose one of"):
         PlantFuelBound(None, truck_spec(40000.0), None, model="willans")
 

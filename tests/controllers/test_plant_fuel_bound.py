@@ -54,6 +54,7 @@ def _flat_ev(length: float):
 
 
 @pytest.mark.slow
+@pytest.mark.nightly  # 33-44 s of CPU each; the 15-minute CI runs the fast tests of the same code
 def test_bound_equals_the_plants_fuel_at_steady_constant_speed():
     """A flat road driven by cruise control at its set speed (settled after 2 km): the bound's map at the run's
     speed and road load gives the plant's fuel within 0.2 % in one of the gears in range; the bound at the run's
@@ -81,6 +82,7 @@ def test_bound_equals_the_plants_fuel_at_steady_constant_speed():
 
 
 @pytest.mark.slow
+@pytest.mark.nightly  # 33-44 s of CPU each; the 15-minute CI runs the fast tests of the same code
 def test_bound_lies_below_every_controller_on_a_short_truck_route_at_40_t():
     """A 4 % climb of 800 m, flat, a 4 % descent of 600 m: the speed-band cruise, the oracle MPC and the human-like
     driver each use at least the bound's fuel (measured: 19 %, 10 % and 35 % above it) at their own trip time,

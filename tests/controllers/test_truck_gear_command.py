@@ -124,6 +124,7 @@ def _segment_drive(monkeypatch, road, vehicle, settings):
 
 
 @pytest.mark.slow
+@pytest.mark.nightly  # 33-44 s of CPU each; the 15-minute CI runs the fast tests of the same code
 def test_gear_command_removes_the_plant_gear_penalty_without_kick_down_hunting(monkeypatch):
     """truck 15 t, long grades seed 6 (a 3.7 km 4.1 % climb), both force models at equal time (168 s target
     schedule, the same cruise-control warm-up). Without the gear command the plant's load-dependent strategy

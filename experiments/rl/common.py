@@ -92,14 +92,16 @@ def make_vec_env(n_envs: int, seed: int, env_config: dict[str, Any] | None = Non
                             vec_env_cls=cls, vec_env_kwargs=kwargs)
 
 
-def json_object_option(ap: argparse.ArgumentParser, text: str | None, option: str = "--config") -> dict[str, Any]:
-    """The JSON object given to a command-line ``option`` ({} without), or the parser's error naming it."""
+def json_object_option(ap: argparse.ArgumentParser, text: str | None, option: str = "--config",
+                       what: str = "of EcoTraffic-v0 options") -> dict[str, Any]:
+    """The JSON object given to a command-line ``option`` ({} without), or the parser's error naming it and what
+    the object holds (``what``)."""
     if not text:
         return {}
     try:
         value = json.loads(text)
     except json.JSONDecodeError as exc:
-        ap.error(f"{option}: expected a JSON object, got {text!r} ({exc})")
+        ap.error(f"{option}: expected a JSON object {what}, got {text!r} ({exc})")
     if not isinstance(value, dict):
-        ap.error(f"{option}: expected a JSON object, got {text!r}")
+        ap.error(f"{option}: expected a JSON object {what}, got {text!r}")
     return value

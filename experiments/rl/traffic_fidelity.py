@@ -49,6 +49,8 @@ from roadload.gym.traffic_model import (LANE_MARGIN, LANE_WIDTH, LENGTH, V_DELTA
 from roadload.gym.traffic_reference import highway_config
 from roadload.tables import markdown_table, write_csv
 
+from .common import json_object_option
+
 from .highway import idm_policy
 
 FIDELITY_TARGETS = {"headway_median_s": 0.10, "speed_median_mps": 0.10, "lane_changes_per_vehicle_min": 0.25,
@@ -334,7 +336,7 @@ def main(argv: list[str] | None = None) -> None:
                                                           "states (same traffic and road per episode)")
     ap.add_argument("--quick", action="store_true", help="2 short episodes per backend")
     a = ap.parse_args(argv)
-    config = json.loads(a.config) if a.config else {}
+    config = json_object_option(ap, a.config)
     if a.quick:
         a.episodes, a.native_episodes = 2, 2
         config = {"duration": 5.0, "vehicles_count": 10, **config}

@@ -41,7 +41,6 @@ Levers (u the follower's command, roadload.experiments.rl.highway.idm_policy):
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from typing import Any, Callable
 
@@ -56,6 +55,7 @@ from roadload.gym.traffic_model import LANE_WIDTH, LENGTH, MAX_SPEED, PERCEPTION
 from roadload.presets import get_preset
 from roadload.tables import markdown_table
 
+from .common import json_object_option
 from .highway import _indices, idm_policy
 from .traffic_training import TRAFFIC_TRAIN_CONFIG, evaluate_traffic, paired_differences, summarise_traffic
 
@@ -234,12 +234,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--config", default=None, help="EcoTraffic-v0 config as JSON text over the training default")
     ap.add_argument("--quick", action="store_true", help="tiny run for CI")
     a = ap.parse_args(argv)
-    try:
-        config = json.loads(a.config) if a.config else {}
-    except json.JSONDecodeError as exc:
-        ap.error(f"--config: expected a JSON object of EcoTraffic-v0 options, got {a.config!r} ({exc})")
-    if not isinstance(config, dict):
-        ap.error(f"--config: expected a JSON object of EcoTraffic-v0 options, got {a.config!r}")
+    config = json_object_option(ap, a.config)
     if a.quick:
         a.episodes = 2
         config = {"duration": 5.0, "vehicles_count": 10, **config}

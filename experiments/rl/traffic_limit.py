@@ -31,7 +31,6 @@ Headroom = follower's model energy - limit, in Wh/km of D, per episode; mean and
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import time
 from dataclasses import dataclass
@@ -49,7 +48,7 @@ from roadload.gym.traffic_ego import ego_road
 from roadload.presets import get_preset
 from roadload.tables import markdown_table
 
-from .common import RLError
+from .common import RLError, json_object_option
 from .highway import idm_policy
 from .traffic_training import TRAFFIC_HELD_OUT, TRAFFIC_TRAIN_CONFIG
 
@@ -266,12 +265,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--csv", default=None, help="write the per-episode table here")
     ap.add_argument("--quick", action="store_true", help="tiny run for CI")
     a = ap.parse_args(argv)
-    try:
-        config: dict[str, Any] = json.loads(a.config) if a.config else {}
-    except json.JSONDecodeError as exc:
-        ap.error(f"--config: expected a JSON object, got {a.config!r} ({exc})")
-    if not isinstance(config, dict):
-        ap.error(f"--config: expected a JSON object, got {a.config!r}")
+    config = json_object_option(ap, a.config)
     if a.quick:
         a.episodes = 2
         config = {"spawn": "stopping-gap", **config, "duration": 5.0, "vehicles_count": 10}  # the newest spawn too

@@ -41,7 +41,7 @@ from roadload.gym.sb3 import SB3VecEnv
 from roadload.gym.traffic import EcoTrafficEnv, EcoTrafficVectorEnv
 from roadload.tables import markdown_table, write_csv
 
-from .common import RLError, _atomic_write_bytes
+from .common import RLError, _atomic_write_bytes, json_object_option
 from .highway import idm_policy
 from .traffic_objective import SpeedBand, SpeedConstraint, TripEnd, reference_speed, speed_band
 from .training import _curve_callback
@@ -441,7 +441,7 @@ def main(argv: list[str] | None = None) -> None:
         seeds = tuple(int(s) for s in a.seeds.split(",") if s.strip())
     except ValueError:
         ap.error(f"--seeds: expected comma-separated integers, got {a.seeds!r}")
-    config = json.loads(a.config) if a.config else {}
+    config = json_object_option(ap, a.config)
     if a.quick:
         seeds, a.timesteps, a.n_envs, a.episodes, a.transfer_episodes = (0,), 4096, 8, 2, 1
         config = {"duration": 5.0, "vehicles_count": 10, **config}

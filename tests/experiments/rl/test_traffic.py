@@ -389,3 +389,16 @@ def test_a_floor_and_a_band_together_are_refused(tmp_path, capsys):
         SpeedConstraint(EcoTrafficVectorEnv(2, config={"vehicles_count": 8}), reference=20.0, price=0.1,
                         step_time=0.1, window=10, margin=0.01, upper=0.01)
 
+
+
+@pytest.mark.parametrize("module", ["traffic_fidelity", "traffic_training", "traffic_limit", "cut_in_diagnosis"])
+def test_every_traffic_script_refuses_a_config_that_is_not_a_json_object(module, capsys):
+    """One parser of the traffic scripts' --config: a clean usage error (exit 2) naming the option, not a traceback."""
+    import importlib
+
+    main = importlib.import_module(f"roadload.experiments.rl.{module}").main
+    for bad in ("{bad", "[1, 2]"):
+        with pytest.raises(SystemExit) as exc:
+            main(["--config", bad])
+        assert exc.value.code == 2
+        assert "--config: expected a JSON object of EcoTraffic-v0 options" in capsys.readouterr().err

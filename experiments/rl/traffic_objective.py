@@ -35,6 +35,19 @@ multipliers leave of it, so the policy can only gain by spending less energy at 
 weight that makes speed worthless would do the same only if the value of a metre against energy were known per
 scenario (it is 1.0-1.9 Wh/km per km/h on the follower's own settings, and differs in dense traffic); the
 multipliers find it from the measured speed, per scenario, with no tuning to a figure.
+
+Why a paired reference (``follower=``, :class:`PairedFollower`): in training a window's mean speed scatters 0.6-0.9 %
+from rollout to rollout with the traffic alone (2-3x the band's width) and the fixed v_ref of 64 training episodes
+is known to +-0.5 %, so the multipliers chased the traffic's noise and two of three dense seeds landed slower than
+the follower. With the follower, an IDM vector env seeded like the training env, stepped in lockstep, drives the
+same episodes: the native env draws sub-env i's episodes (traffic, road, effect noise) from sub-env i's own
+generator at reset only, so episode k of sub-env i is the same traffic in both envs whatever the ego does. Each
+ended training episode is paired with the follower's episode of the same sub-env and index, and the PI rule acts on
+the window's v / v_ref,window with both the sums over the same episodes: the traffic's scatter cancels in the ratio.
+Why lockstep rather than a cache of per-seed follower speeds: the vector env draws the episodes inside its
+generators (no per-episode seed to key a cache on), and one more native step of 32 sub-envs plus the IDM command
+costs a few % of a PPO step; a reward relative to the follower's per-step progress would need the two drives to
+stay step-aligned, which they do not once the policy's gap differs.
 """
 
 from __future__ import annotations
@@ -126,16 +139,65 @@ def speed_band(text: str | dict[str, Any]) -> SpeedBand:
         raise RLError(str(exc)) from None
 
 
+class PairedFollower:
+    """The IDM follower (``policy``) driving the training env's episodes in lockstep on its own vector env
+    ``env`` (same configuration and sub-env count, seeded like the training env at every reset; module docstring).
+    Per sub-env it keeps the (distance [m], time [s]) of its ended episodes in order, for :class:`SpeedConstraint`
+    to pair with the training env's episodes of the same index."""
+
+    def __init__(self, env: gym.vector.VectorEnv, policy: Callable[[np.ndarray], np.ndarray],
+                 step_time: float) -> None:
+        mode = getattr(env, "autoreset_mode", None)
+        if mode != gym.vector.AutoresetMode.SAME_STEP:
+            raise RLError(f"paired follower: autoreset_mode: expected 'same_step' (the training env's), got {mode!r}")
+        self.env, self.policy, self.step_time = env, policy, step_time
+        self._obs: np.ndarray | None = None
+        self._distance = np.zeros(env.num_envs)
+        self._steps = np.zeros(env.num_envs, dtype=np.int64)
+        self.ended: list[list[tuple[float, float]]] = [[] for _ in range(env.num_envs)]
+
+    def reset(self, seed: int | list[int | None] | None, options: dict[str, Any] | None = None) -> None:
+        """New episodes seeded as the training env's; unseeded resets are refused (the follower could then drive
+        other episodes than the policy)."""
+        seeds = seed if isinstance(seed, list) else [seed]
+        if any(s is None for s in seeds):
+            raise RLError(f"paired follower: reset seed: expected an integer seed for every sub-env (the follower "
+                          f"replays the training env's episodes from it), got {seed!r}")
+        # gymnasium annotates VectorEnv.reset(seed: int | None); its vector envs take one seed per sub-env too
+        self._obs, _ = self.env.reset(seed=seed, options=options)  # type: ignore[arg-type]
+        self._distance[:] = 0.0
+        self._steps[:] = 0
+        self.ended = [[] for _ in range(self.env.num_envs)]
+
+    def step(self) -> None:
+        if self._obs is None:
+            raise RLError("paired follower: step before reset")
+        self._obs, _, terminated, truncated, info = self.env.step(self.policy(self._obs))
+        done = terminated | truncated
+        self._distance += step_distance(info, done)
+        self._steps += 1
+        for i in np.flatnonzero(done):
+            self.ended[i].append((float(self._distance[i]), float(self._steps[i]) * self.step_time))
+        self._distance[done] = 0.0
+        self._steps[done] = 0
+
+    def close(self) -> None:
+        self.env.close()
+
+
 class SpeedConstraint(gym.vector.VectorWrapper):
     """The training reward r + (lambda - mu) * price * dx with lambda a PI-controlled Lagrange multiplier on the mean
     speed's floor (1 + margin) v_ref and, when ``upper`` is given, mu one on its ceiling (1 + upper) v_ref (module
     docstring). ``price`` [reward per m] = the env's reward scale x its progress weight; ``step_time`` [s];
     ``window`` env steps at least between multiplier updates (PPO's n_steps: one value per rollout);
-    ``multiplier``: lambda's start value."""
+    ``multiplier``: lambda's start value. With ``follower`` (:class:`PairedFollower`) the band is around the
+    follower's mean speed on the window's own episodes instead of the fixed ``reference`` (which then only names
+    the scale in the history and the metadata; module docstring)."""
 
     def __init__(self, env: gym.vector.VectorEnv, reference: float, price: float, step_time: float,
                  window: int, margin: float = 0.0, k_p: float = 20.0, k_i: float = 20.0,
-                 multiplier: float = 0.0, upper: float | None = None) -> None:
+                 multiplier: float = 0.0, upper: float | None = None,
+                 follower: PairedFollower | None = None) -> None:
         if not reference > 0 or not price > 0 or not step_time > 0:
             raise RLError(f"speed constraint: expected a reference speed [m/s], price [1/m] and step time [s] > 0, "
                           f"got {reference}, {price}, {step_time}")
@@ -145,28 +207,57 @@ class SpeedConstraint(gym.vector.VectorWrapper):
         if upper is not None and not margin < upper <= 0.2:
             raise RLError(f"speed constraint: expected margin < upper <= 0.2 (relative speeds over the reference), "
                           f"got margin {margin}, upper {upper}")
+        if follower is not None and follower.env.num_envs != env.num_envs:
+            raise RLError(f"speed constraint: follower num_envs: expected the training env's {env.num_envs} "
+                          f"sub-envs (episodes are paired per sub-env), got {follower.env.num_envs}")
+        if follower is not None and abs(follower.step_time - step_time) > 1e-12:
+            raise RLError(f"speed constraint: follower step_time: expected the training env's {step_time} s, got "
+                          f"{follower.step_time} s")
         super().__init__(env)
-        self.target = reference * (1.0 + margin)
-        self.ceiling = None if upper is None else reference * (1.0 + upper)
+        self.margin, self.upper = margin, upper
         self.reference = reference
+        self.follower = follower
         self.price, self.step_time, self.window = price, step_time, window
         self.k_p, self.k_i = k_p, k_i
         self.multiplier = self.integral = max(0.0, multiplier)
         self.upper_multiplier = self.upper_integral = 0.0
         self._episode_distance = np.zeros(self.num_envs)
         self._episode_steps = np.zeros(self.num_envs, dtype=np.int64)
-        self._distance = 0.0  # of the episodes ended in this window
-        self._time = 0.0
+        self._ended: list[list[tuple[float, float]]] = [[] for _ in range(self.num_envs)]  # awaiting the follower's
+        self._distance = self._time = 0.0  # of the (paired) episodes ended in this window
+        self._ref_distance = self._ref_time = 0.0  # the follower's on the same episodes
         self._steps = 0
-        self.history: list[tuple[float, float]] = []
-        """(mean speed of the window's ended episodes [m/s], lambda - mu after it) per update."""
+        self.history: list[tuple[float, float, float]] = []
+        """(mean speed of the window's ended episodes [m/s], the reference speed they are held to [m/s],
+        lambda - mu after it) per update."""
 
     @classmethod
     def band(cls, env: gym.vector.VectorEnv, reference: float, price: float, step_time: float, window: int,
-             band: SpeedBand) -> "SpeedConstraint":
-        """The two-sided constraint holding the mean speed in ``band`` around ``reference`` [m/s]."""
+             band: SpeedBand, follower: PairedFollower | None = None) -> "SpeedConstraint":
+        """The two-sided constraint holding the mean speed in ``band`` around ``reference`` [m/s] (around the
+        follower's on the same episodes with ``follower``)."""
         return cls(env, reference, price, step_time, window, margin=band.lower, k_p=band.k_p, k_i=band.k_i,
-                   upper=band.upper)
+                   upper=band.upper, follower=follower)
+
+    @property
+    def target(self) -> float:
+        """The floor (1 + margin) v_ref [m/s] at the fixed reference."""
+        return self.reference * (1.0 + self.margin)
+
+    @property
+    def ceiling(self) -> float | None:
+        """The ceiling (1 + upper) v_ref [m/s] at the fixed reference, None without one."""
+        return None if self.upper is None else self.reference * (1.0 + self.upper)
+
+    def reset(self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None):
+        # gymnasium annotates VectorEnv.reset(seed: int | None); its vector envs take one seed per sub-env too
+        obs, info = self.env.reset(seed=seed, options=options)  # type: ignore[arg-type]
+        if self.follower is not None:
+            self.follower.reset(seed, options)
+        self._episode_distance[:] = 0.0
+        self._episode_steps[:] = 0
+        self._ended = [[] for _ in range(self.num_envs)]
+        return obs, info
 
     def step(self, actions):
         obs, reward, terminated, truncated, info = self.env.step(actions)
@@ -175,27 +266,55 @@ class SpeedConstraint(gym.vector.VectorWrapper):
         done = terminated | truncated
         self._episode_distance += dx
         self._episode_steps += 1
-        if done.any():
-            self._distance += float(self._episode_distance[done].sum())
-            self._time += float(self._episode_steps[done].sum()) * self.step_time
-            self._episode_distance[done] = 0.0
-            self._episode_steps[done] = 0
+        for i in np.flatnonzero(done):
+            self._ended[i].append((float(self._episode_distance[i]), float(self._episode_steps[i]) * self.step_time))
+        self._episode_distance[done] = 0.0
+        self._episode_steps[done] = 0
+        if self.follower is not None:
+            self.follower.step()
+        self._pair()
         self._steps += 1
         if self._steps >= self.window and self._time > 0.0:
-            self.update(self._distance / self._time)
-            self._distance, self._time, self._steps = 0.0, 0.0, 0
+            reference = self._ref_distance / self._ref_time if self.follower is not None else None
+            self.update(self._distance / self._time, reference)
+            self._distance = self._time = self._ref_distance = self._ref_time = 0.0
+            self._steps = 0
         return obs, shaped, terminated, truncated, info
 
-    def update(self, speed: float) -> float:
-        """The PI step of the multipliers after a window whose mean speed was ``speed`` [m/s]; returns the net
+    def _pair(self) -> None:
+        """Counts each ended episode into the window, with the follower: once the follower's episode of the same
+        sub-env and index has ended too (one that crashed early waits for the other)."""
+        for i in range(self.num_envs):
+            mine = self._ended[i]
+            theirs = None if self.follower is None else self.follower.ended[i]
+            while mine and (theirs is None or theirs):
+                d, t = mine.pop(0)
+                self._distance += d
+                self._time += t
+                if theirs is not None:
+                    d_ref, t_ref = theirs.pop(0)
+                    self._ref_distance += d_ref
+                    self._ref_time += t_ref
+
+    def update(self, speed: float, reference: float | None = None) -> float:
+        """The PI step of the multipliers after a window whose mean speed was ``speed`` [m/s], against
+        ``reference`` [m/s] (the follower's on the same episodes; the fixed reference when None); returns the net
         multiplier lambda - mu (lambda alone without a ceiling)."""
-        error = (self.target - speed) / self.reference
+        ref = self.reference if reference is None else reference
+        if not ref > 0:
+            raise RLError(f"speed constraint: reference speed: expected > 0 m/s, got {ref}")
+        error = (1.0 + self.margin) - speed / ref
         self.integral = max(0.0, self.integral + self.k_i * error)
         self.multiplier = max(0.0, self.k_p * error + self.integral)
-        if self.ceiling is not None:
-            excess = (speed - self.ceiling) / self.reference
+        if self.upper is not None:
+            excess = speed / ref - (1.0 + self.upper)
             self.upper_integral = max(0.0, self.upper_integral + self.k_i * excess)
             self.upper_multiplier = max(0.0, self.k_p * excess + self.upper_integral)
         net = self.multiplier - self.upper_multiplier
-        self.history.append((speed, net))
+        self.history.append((speed, ref, net))
         return net
+
+    def close(self, **kwargs: Any) -> None:
+        if self.follower is not None:
+            self.follower.close()
+        super().close(**kwargs)

@@ -43,7 +43,7 @@ from roadload.tables import markdown_table, write_csv
 
 from .common import RLError, _atomic_write_bytes, json_object_option
 from .highway import idm_policy
-from .traffic_objective import SpeedBand, SpeedConstraint, TripEnd, reference_speed, speed_band
+from .traffic_objective import PairedFollower, SpeedBand, SpeedConstraint, TripEnd, reference_speed, speed_band
 from .training import _curve_callback
 
 MECHANICAL_WEIGHT = EcoHighwayReward().mechanical_energy
@@ -239,13 +239,15 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
                   hyperparams: dict[str, Any] | None = None, progress: Callable[[str], None] | None = None,
                   report_every: int = 100_000, residual: float = 0.0,
                   speed_floor: float | None = None, speed_constraint: float | None = None,
-                  trip_end: bool = False, band: SpeedBand | None = None) -> dict[str, Any]:
+                  trip_end: bool = False, band: SpeedBand | None = None,
+                  paired_reference: bool = False) -> dict[str, Any]:
     """PPO on the native vector env (``residual`` > 0: a correction of that scale on the IDM follower,
     :class:`ResidualActions`, at most ``speed_floor`` below it when given; ``speed_constraint`` = margin: trained on
     the reward with a Lagrange multiplier holding the mean speed at (1 + margin) x the IDM follower's;
     ``trip_end``: the time limit is terminal in training; ``band``: two multipliers holding the mean speed inside
-    the band around the follower's, instead of ``speed_constraint``'s floor;
-    roadload.experiments.rl.traffic_objective). Saves
+    the band around the follower's, instead of ``speed_constraint``'s floor; ``paired_reference``: the constraint
+    holds the speed relative to the IDM follower driving the same training episodes in lockstep,
+    :class:`PairedFollower`; roadload.experiments.rl.traffic_objective). Saves
     ``ppo_traffic_seed<seed>.zip`` / ``.json`` and the learning curve (training episode returns) to ``out_dir``;
     returns the model, its path, wall and CPU seconds."""
     import torch
@@ -256,6 +258,9 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
     if band is not None and speed_constraint is not None:
         raise RLError("speed constraint: give either a floor margin (--speed-constraint) or a band (--speed-band), "
                       "not both")
+    if paired_reference and band is None and speed_constraint is None:
+        raise RLError("paired reference: applies to a speed constraint (give a band, --speed-band, or a floor, "
+                      "--speed-constraint)")
     torch.set_num_threads(torch_threads)
     env_config = dict(env_config if env_config is not None else TRAFFIC_TRAIN_CONFIG)
     make_config(EcoTrafficConfig, env_config)  # a bad key fails before any training
@@ -274,7 +279,8 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
     c_start = time.process_time()
     objective = band if band is not None else speed_constraint
     constraint = None if objective is None else _speed_constraint(native, env_config, n_envs, params["n_steps"],
-                                                                  objective)
+                                                                  objective, paired_reference,
+                                                                  threads)
     trained: gym.vector.VectorEnv = native if constraint is None else constraint
     venv = SB3VecEnv(TripEnd(trained) if trip_end else trained)
     venv.seed(seed)
@@ -306,8 +312,9 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
             "speed_constraint": None if constraint is None else {
                 "margin": speed_constraint if band is None else band.lower,
                 "upper": None if band is None else band.upper, "reference_speed_mps": constraint.reference,
-                "k_p": constraint.k_p, "k_i": constraint.k_i,
-                "history": [{"mean_speed_mps": v, "multiplier": lam} for v, lam in constraint.history]}}
+                "paired": paired_reference, "k_p": constraint.k_p, "k_i": constraint.k_i,
+                "history": [{"mean_speed_mps": v, "reference_mps": ref, "multiplier": lam}
+                            for v, ref, lam in constraint.history]}}
     _atomic_write_bytes(out_dir / f"{stem}.json", lambda tmp: tmp.write_text(json.dumps(meta, indent=1, default=str)))
     curve = pd.DataFrame([(t, v) for t, kind, v in callback.rows if kind == "train"],
                          columns=["timesteps", "episode_return"])
@@ -317,15 +324,19 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
 
 
 def _speed_constraint(env: gym.vector.VectorEnv, env_config: dict[str, Any], n_envs: int, window: int,
-                      objective: float | SpeedBand) -> SpeedConstraint:
+                      objective: float | SpeedBand, paired: bool = False, threads: int = 1) -> SpeedConstraint:
     """The constraint wrapper on ``env`` (a floor margin or a band): the reference is the IDM follower's mean speed
-    on training episodes of the same configuration (its CPU time counts as training time)."""
+    on training episodes of the same configuration (its CPU time counts as training time); with ``paired`` the
+    follower's on the same training episodes, driven in lockstep (its CPU time counts too)."""
     cfg = make_config(EcoTrafficConfig, env_config)
     v_ref = reference_speed(idm_policy(cfg), env_config, n_envs)
     price = cfg.reward.scale * cfg.reward.progress
+    step_time = 1.0 / cfg.policy_frequency
+    follower = PairedFollower(EcoTrafficVectorEnv(n_envs, config=env_config, autoreset_mode="same_step",
+                                                  threads=threads), idm_policy(cfg), step_time) if paired else None
     if isinstance(objective, SpeedBand):
-        return SpeedConstraint.band(env, v_ref, price, 1.0 / cfg.policy_frequency, window, objective)
-    return SpeedConstraint(env, v_ref, price, 1.0 / cfg.policy_frequency, window, objective)
+        return SpeedConstraint.band(env, v_ref, price, step_time, window, objective, follower)
+    return SpeedConstraint(env, v_ref, price, step_time, window, objective, follower=follower)
 
 
 def load_traffic_policy(path: Path):
@@ -344,7 +355,8 @@ def run_traffic_experiment(seeds: tuple[int, ...], timesteps: int, out_dir: Path
                            train_config: dict[str, Any] | None = None,
                            hyperparams: dict[str, Any] | None = None, residual: float = 0.0,
                            speed_floor: float | None = None, speed_constraint: float | None = None,
-                           trip_end: bool = False, band: SpeedBand | None = None) -> dict[str, Any]:
+                           trip_end: bool = False, band: SpeedBand | None = None,
+                           paired_reference: bool = False) -> dict[str, Any]:
     """Train one PPO per seed (or load them with ``evaluate_only``), evaluate each with the IDM follower on
     ``episodes`` held-out native episodes and ``transfer_episodes`` on highway-env; write episodes.csv,
     summary.csv, intervals.csv and the learning curves to ``out_dir``. ``env_config`` is the evaluation's (and
@@ -367,7 +379,8 @@ def run_traffic_experiment(seeds: tuple[int, ...], timesteps: int, out_dir: Path
         else:
             res = train_traffic(timesteps, out_dir, s, n_envs, trained_on, threads, hyperparams=hyperparams,
                                 progress=progress, residual=residual, speed_floor=speed_floor,
-                                speed_constraint=speed_constraint, trip_end=trip_end, band=band)
+                                speed_constraint=speed_constraint, trip_end=trip_end, band=band,
+                                paired_reference=paired_reference)
             models[s] = res["model"]
             times[s] = (res["wall_seconds"], res["cpu_seconds"], res["timesteps"])
             scales[s] = residual
@@ -431,6 +444,10 @@ def main(argv: list[str] | None = None) -> None:
                     help="train on the reward with two Lagrange multipliers holding the mean speed between (1 + lower) "
                          "and (1 + upper) x the IDM follower's, JSON text of SpeedBand (e.g. '{\"lower\": 0.001, "
                          "\"upper\": 0.004}', gains k_p, k_i; roadload.experiments.rl.traffic_objective)")
+    ap.add_argument("--paired-reference", action="store_true",
+                    help="with --speed-band or --speed-constraint: hold the mean speed relative to the IDM follower "
+                         "driving the same training episodes in lockstep (paired per episode) instead of its mean "
+                         "speed on separate reference episodes")
     ap.add_argument("--trip-end", action="store_true",
                     help="train with the time limit as the trip's end (terminal, no bootstrap of the value beyond it)")
     ap.add_argument("--out", type=Path, default=Path("out/rl_traffic"))
@@ -455,12 +472,15 @@ def main(argv: list[str] | None = None) -> None:
         ap.error(f"--speed-band: {exc}")
     if band is not None and a.speed_constraint is not None:
         ap.error("--speed-constraint and --speed-band: give one (a floor or a band), not both")
+    if a.paired_reference and band is None and a.speed_constraint is None and not a.evaluate_only:
+        ap.error("--paired-reference: applies to a speed constraint, give --speed-band or --speed-constraint")
     res = run_traffic_experiment(seeds, a.timesteps, a.out, a.episodes, a.transfer_episodes, a.n_envs, config,
                                  a.threads, a.evaluate_only, progress=lambda m: print(m, flush=True),
                                  train_config=json.loads(a.train_config) if a.train_config else None,
                                  hyperparams=json.loads(a.hyperparams) if a.hyperparams else None,
                                  residual=a.residual, speed_floor=a.speed_floor,
-                                 speed_constraint=a.speed_constraint, trip_end=a.trip_end, band=band)
+                                 speed_constraint=a.speed_constraint, trip_end=a.trip_end, band=band,
+                                 paired_reference=a.paired_reference)
     print(markdown_table(res["summary"], floatfmt=".4g"))
     for key in ("intervals", "paired", "paired_intervals"):
         if len(res[key]):

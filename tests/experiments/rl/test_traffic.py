@@ -325,7 +325,7 @@ def test_the_two_sided_multipliers_rise_above_the_band_and_fall_below_it():
     assert env.update(19.02) == pytest.approx(10 * 0.05 + 5 * 0.05)
     assert env.upper_multiplier == 0.0 and env.upper_integral == pytest.approx(0.4525 - 5 * 0.053)
     assert env.integral == pytest.approx(0.25)
-    assert [v for v, _ in env.history] == [21.0, 21.0, 20.05, 19.02]
+    assert [v for v, _, _ in env.history] == [21.0, 21.0, 20.05, 19.02]
 
 
 def test_at_the_net_multiplier_minus_one_the_training_reward_is_the_reward_without_progress_pay():
@@ -402,3 +402,87 @@ def test_every_traffic_script_refuses_a_config_that_is_not_a_json_object(module,
             main(["--config", bad])
         assert exc.value.code == 2
         assert "--config: expected a JSON object of EcoTraffic-v0 options" in capsys.readouterr().err
+
+
+def _paired(policy_env_actions_base: bool, n_follower: int = 2, **kwargs):
+    from roadload.experiments.rl.highway import idm_policy
+    from roadload.experiments.rl.traffic_objective import PairedFollower, SpeedBand, SpeedConstraint
+    from roadload.experiments.rl.traffic_training import ResidualActions
+    from roadload.gym.config import EcoTrafficConfig, make_config
+    from roadload.gym.traffic import EcoTrafficVectorEnv
+
+    config = {"vehicles_count": 8, "duration": 2.0}
+    idm = idm_policy(make_config(EcoTrafficConfig, config))
+    env = EcoTrafficVectorEnv(2, config=config, autoreset_mode="same_step")
+    if policy_env_actions_base:
+        env = ResidualActions(env, idm, 0.3)
+    follower = PairedFollower(EcoTrafficVectorEnv(n_follower, config=config, autoreset_mode="same_step"), idm, 0.1)
+    band = SpeedBand(lower=0.001, upper=0.004, k_p=10.0, k_i=5.0)
+    return SpeedConstraint.band(env, reference=40.0, price=0.1, step_time=0.1, window=8, band=band,
+                                follower=follower, **kwargs), idm, config
+
+
+def test_the_paired_reference_is_the_followers_mean_speed_on_the_same_episodes():
+    """The follower env replays the training env's episodes: its speed in the history equals the IDM follower's
+    driven alone on single envs seeded like the sub-envs (seed + i), and the policy's speed is its own drive's."""
+    from roadload.gym.traffic import EcoTrafficEnv
+
+    env, idm, config = _paired(False)
+    env.reset(seed=5)
+    own = 0.0
+    for _ in range(20):  # both 2 s episodes end at step 20: one update
+        _, _, term, trunc, info = env.step(np.full((2, 1), -0.3, np.float32))  # a light brake
+        if (term | trunc).any():
+            own = float(info["final_info"]["s"].sum())
+    alone_distance, alone_time = 0.0, 0.0
+    for i in range(2):
+        single = EcoTrafficEnv(config)
+        obs, _ = single.reset(seed=5 + i)
+        done = False
+        while not done:
+            obs, _, term, trunc, info = single.step(idm(obs))
+            alone_time += 0.1
+            done = term or trunc
+        alone_distance += float(info["s"])
+    assert len(env.history) == 1
+    speed, reference, net = env.history[0]
+    assert reference == pytest.approx(alone_distance / alone_time, rel=1e-9)
+    assert speed == pytest.approx(own / 4.0, rel=1e-9)
+    # the fixed command runs 10 % ahead of the follower, which closes on its leader: above the band's ceiling
+    # (1.004), mu = (k_p + k_i) x excess of the paired ratio, lambda 0
+    excess = speed / reference - 1.004
+    assert excess > 0.05 and net == pytest.approx(-(10.0 + 5.0) * excess, rel=1e-9)
+
+
+def test_the_multipliers_act_on_the_paired_difference_not_on_the_fixed_reference():
+    """The residual policy with a zero correction drives exactly as the follower: the paired relative speed is 0,
+    so lambda = (k_p + k_i) x lower, although the window's speed is half the fixed reference of 40 m/s."""
+    env, _, _ = _paired(True)
+    env.reset(seed=[11, 12])
+    for _ in range(20):
+        env.step(np.zeros((2, 1), np.float32))
+    (speed, reference, net), = env.history
+    assert speed == reference and speed < 30.0
+    assert net == pytest.approx((10.0 + 5.0) * 0.001, rel=1e-9) and env.upper_multiplier == 0.0
+
+
+def test_a_bad_paired_reference_is_refused_naming_the_field_and_value(tmp_path, capsys):
+    from roadload.experiments.rl.highway import idm_policy
+    from roadload.experiments.rl.traffic_objective import PairedFollower
+    from roadload.experiments.rl.traffic_training import main
+    from roadload.gym.config import EcoTrafficConfig
+    from roadload.gym.traffic import EcoTrafficVectorEnv
+
+    with pytest.raises(RLError, match=r"follower num_envs: expected the training env's 2 sub-envs .*got 3"):
+        _paired(False, n_follower=3)
+    env, _, _ = _paired(False)
+    with pytest.raises(RLError, match=r"reset seed: expected an integer seed for every sub-env .*got None"):
+        env.reset()
+    with pytest.raises(RLError, match=r"autoreset_mode: expected 'same_step'"):
+        PairedFollower(EcoTrafficVectorEnv(2, config={"vehicles_count": 8}), idm_policy(EcoTrafficConfig()), 0.1)
+    with pytest.raises(RLError, match="paired reference: applies to a speed constraint"):
+        train_traffic(100, tmp_path / "run", paired_reference=True)
+    with pytest.raises(SystemExit) as exc:
+        main(["--paired-reference", "--out", str(tmp_path / "run")])
+    assert exc.value.code == 2 and "--paired-reference: applies to a speed constraint" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()

@@ -98,7 +98,8 @@ class OptimumSettings:
         return MpcSettings(n_nodes=n_nodes, ds=self.ds, accel_max=self.accel_max, decel_max=self.decel_max,
                            jerk_max=self.jerk_max, lateral_accel_max=self.lateral_accel_max,
                            speed_floor=self.speed_floor, stop_speed=self.stop_speed, speed_margin=self.speed_margin,
-                           accel_weight=self.accel_weight, max_iterations=self.max_iterations, warm_tol=self.tol)
+                           accel_weight=self.accel_weight, max_iterations=self.max_iterations,
+                           cold_max_iterations=self.max_iterations, warm_tol=self.tol)
 
 
 @dataclass

@@ -56,10 +56,11 @@ def test_settings_accept_their_boundary_values():
     ({"speed_margin": -0.1}, r"^MpcSettings.speed_margin: must be >= 0 \[m/s\] \(a negative margin plans above the "
                              r"limit\), got -0.1$"),
     ({"accel_weight": -0.01}, r"^MpcSettings.accel_weight: must be >= 0, got -0.01$"),
-    ({"qp_tolerance": 0.0}, r"^MpcSettings: qp_tolerance must be > 0 and max_iterations, sqp_iterations >= 1, got "
-                            r"0.0, 100, 1$"),
-    ({"max_iterations": 0}, r"got 0.001, 0, 1$"),
-    ({"sqp_iterations": 0}, r"got 0.001, 100, 0$"),
+    ({"qp_tolerance": 0.0}, r"^MpcSettings: qp_tolerance must be > 0 and max_iterations, cold_max_iterations, "
+                            r"sqp_iterations >= 1, got 0.0, 100, 500, 1$"),
+    ({"max_iterations": 0}, r"got 0.001, 0, 500, 1$"),
+    ({"cold_max_iterations": 0}, r"got 0.001, 100, 0, 1$"),
+    ({"sqp_iterations": 0}, r"got 0.001, 100, 500, 0$"),
     ({"ds": 0.0}, r"^ds must be positive, got 0.0$"),
     ({"ds": -20.0}, r"^ds must be positive, got -20.0$"),
     ({"accel_max": 0.0}, r"^accel_max must be positive, got 0.0$"),
@@ -449,11 +450,26 @@ def test_warm_start_from_the_previous_plan_converges_at_once_to_the_same_plan():
 
 
 def test_an_iteration_cap_is_reported_as_not_converged():
-    ocp = solver(max_iterations=1)
+    ocp = solver(cold_max_iterations=1)
     plan = ocp.solve(5.0, 0.0, preview(np.array([30.0] * 4 + [3.0] * 3)), PARAMS)
     assert not plan.converged and not plan.success and plan.feasibility == "infeasible"
     assert plan.solver_status == "Maximum_Iterations_Exceeded" and plan.iterations == 1
     assert plan.status.startswith("infeasible: ") and plan.status.endswith("[solver: Maximum_Iterations_Exceeded]")
+
+
+def test_a_cold_solve_has_its_own_iteration_cap():
+    """The warm solves' cap (max_iterations) does not cut a cold solve short: the first plan of a run starts from
+    a guess, not from a converged plan, and needs more iterations (a 40 t truck at 23 m/s on its 2 km horizon:
+    about 170, against the warm cap of 100; cut there, the controller fell back to its cruise control)."""
+    pv = preview(np.array([30.0] * 4 + [3.0] * 3))
+    ocp = solver(max_iterations=1)
+    cold = ocp.solve(5.0, 0.0, pv, PARAMS)
+    assert cold.converged and cold.iterations > 1
+    moved = Preview(s=pv.s + DS, grade=pv.grade, curvature=pv.curvature,
+                    speed_cap=np.append(pv.speed_cap[1:], 3.0), ratio=pv.ratio)
+    warm = ocp.solve(float(cold.v[1]) + 0.5, float(cold.accel[0]), moved, PARAMS, warm=cold)
+    assert warm.iterations == 1  # the warm cap still applies
+    assert solver(cold_max_iterations=1).solve(5.0, 0.0, pv, PARAMS).iterations == 1
 
 
 def test_qp_path_reaches_the_ipopt_plan():

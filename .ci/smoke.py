@@ -8,6 +8,12 @@ instead of waiting for each other. Each job's output goes to its own log; the li
 its CPU time (user + system, children included). A failed job prints the end of its log; the jobs already running
 finish, no new one starts, and the stage fails.
 
+The script jobs start from one process that imported the heavy libraries once (torch, stable-baselines3, CasADi,
+highway-env, pandas, matplotlib and roadload's packages: 5-10 s of CPU per interpreter, most of a quick run's cost):
+each ``scripts/*.py --quick`` and each ``examples/*.py --quick`` of the docs stage is a ``fork()`` of it that runs
+the file as ``python FILE --quick`` would (its own process, argv, working folder, ``__main__``, log and exit status).
+The guides, the home page, the site build and the README commands start their own interpreters, as a user would.
+
 Nothing runs twice: a ``python scripts/NAME.py --quick`` line of a shell block in the pages the docs stage runs
 (docs/index.md, docs/guides/*.md: docs/tools/build_docs.sh) is its smoke run, and a README shell block that is
 also a block of those pages runs there only.
@@ -19,12 +25,18 @@ from __future__ import annotations
 
 import argparse
 import ast
+import atexit
+import importlib
+import io
 import os
 import re
+import runpy
 import subprocess
 import sys
 import tempfile
+import threading
 import time
+import traceback
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -40,6 +52,16 @@ SCRIPT_QUICK = re.compile(r"^python scripts/([\w.-]+\.py) --quick$")
 #: code at the same size, so the script is not run again. A changed page line or a changed ``QUICK`` list no longer
 #: matches: the script runs again.
 QUICK_COMMANDS = {"train_rl.py": "roadload train"}
+#: imported once by the smoke process before the script jobs are forked from it: the libraries whose import is most
+#: of a quick script's CPU (each interpreter would pay them again)
+PRELOAD = ("numpy", "scipy.optimize", "scipy.signal", "scipy.stats", "pandas", "pyarrow.parquet", "matplotlib.pyplot",
+           "numba", "casadi", "torch", "gymnasium", "stable_baselines3", "highway_env", "roadload.envs",
+           "roadload.estimators", "roadload.controllers", "roadload.gym.vector", "roadload.gym.traffic",
+           "roadload.gym.highway", "roadload.gym.sb3", "roadload.sim2real", "roadload.experiments.rl",
+           "roadload.experiments.cli")
+#: scripts that measure the memory of their own process or of the processes they start (a fork of the preloaded
+#: process starts at its size): each runs in a fresh interpreter
+FRESH_INTERPRETER = {"bench_cli_startup.py", "bench_simulator.py", "bench_trip_storage.py"}
 
 
 def quick_command(script: str) -> str | None:
@@ -58,6 +80,74 @@ class Job:
     argv: list[str]
     cwd: Path
     log: Path
+    script: Path | None = None  # a ``python SCRIPT --quick`` job: forked from the preloaded smoke process
+
+
+def preload() -> None:
+    """Import :data:`PRELOAD` in this process (the script jobs fork from it). OMP_WAIT_POLICY is set first, as the
+    scripts that set it do before torch / numba load libgomp; a module that fails to import is left to the job."""
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+    os.environ.setdefault("MPLBACKEND", "Agg")
+    for name in PRELOAD:
+        try:
+            importlib.import_module(name)
+        except Exception as exc:  # the job that needs it fails with its own traceback
+            print(f"preload: {name} not imported ({type(exc).__name__}: {exc})", flush=True)
+
+
+def run_script_in_child(job: Job) -> None:
+    """In a forked child: run ``job.script --quick`` as ``python`` would run it (``__main__``, argv, sys.path[0],
+    working folder, stdout and stderr to the job's log, non-daemon threads joined and exit handlers run at the end),
+    then leave the process with the script's exit status. Never returns."""
+    code = 1
+    try:
+        fd = os.open(job.log, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        os.dup2(fd, 1)
+        os.dup2(fd, 2)
+        os.close(fd)
+        # new stream objects on the new descriptors: the inherited ones may buffer (or be a capturing wrapper)
+        sys.stdout = sys.__stdout__ = io.TextIOWrapper(io.FileIO(1, "w", closefd=False), write_through=True)
+        sys.stderr = sys.__stderr__ = io.TextIOWrapper(io.FileIO(2, "w", closefd=False), write_through=True)
+        os.chdir(job.cwd)
+        assert job.script is not None
+        sys.argv = [str(job.script), *job.argv[2:]]
+        sys.path[:] = [str(job.script.parent), *(p for p in sys.path[1:] if p != str(ROOT / ".ci"))]
+        try:
+            runpy.run_path(str(job.script), run_name="__main__")
+            code = 0
+        except SystemExit as exc:
+            if exc.code is None or isinstance(exc.code, int):
+                code = exc.code or 0
+            else:
+                print(exc.code, file=sys.stderr)
+                code = 1
+        for thread in threading.enumerate():
+            if thread is not threading.main_thread() and not thread.daemon:
+                thread.join()
+        atexit._run_exitfuncs()
+    except BaseException:
+        traceback.print_exc()
+        code = 1
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except Exception:
+                pass
+        os._exit(code)
+
+
+def start(job: Job) -> int:
+    """Start ``job``: a script job forked from this (preloaded) process, any other in its own interpreter; its pid."""
+    if job.script is not None:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        pid = os.fork()
+        if pid == 0:
+            run_script_in_child(job)
+        return pid
+    with job.log.open("wb") as log:
+        return subprocess.Popen(job.argv, cwd=job.cwd, stdout=log, stderr=subprocess.STDOUT).pid
 
 
 def scripts_run_by_docs() -> dict[str, str]:
@@ -94,8 +184,11 @@ def jobs(smoke: Path) -> list[Job]:
     readme = [sys.executable, str(ROOT / ".ci" / "doc_commands.py"), str(ROOT / "README.md"), "--workdir", str(smoke)]
     if docs.is_file() and os.access(docs, os.X_OK):
         for part in docs_parts():
-            out.append(Job(f"docs: {part}", [str(docs), f"--only={part}"], ROOT,
-                           smoke / f"docs-{part.replace('/', '-')}.log"))
+            log = smoke / f"docs-{part.replace('/', '-')}.log"
+            if part.startswith("examples/"):  # what build_docs.sh --only=PART runs: the example --quick in the root
+                out.append(Job(f"docs: {part}", [sys.executable, part, "--quick"], ROOT, log, script=ROOT / part))
+            else:
+                out.append(Job(f"docs: {part}", [str(docs), f"--only={part}"], ROOT, log))
         by_docs = scripts_run_by_docs()
         readme += ["--covered-by", *map(str, DOCS_PAGES)]
     out.append(Job("README commands", readme, smoke, smoke / "readme.log"))
@@ -104,7 +197,7 @@ def jobs(smoke: Path) -> list[Job]:
             print(f"scripts/{script.name} --quick: run by the docs stage ({by_docs[script.name]})")
             continue
         out.append(Job(f"scripts/{script.name} --quick", [sys.executable, str(script), "--quick"], smoke,
-                       smoke / f"{script.name}.log"))
+                       smoke / f"{script.name}.log", script=None if script.name in FRESH_INTERPRETER else script))
     return out
 
 
@@ -113,34 +206,41 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2, help="jobs at a time (2: the CI machine's cores)")
     ap.add_argument("--workdir", type=Path, default=None, help="folder the scripts run in (default: a new temporary "
                                                                "folder)")
+    ap.add_argument("--no-preload", action="store_true", help="every script in its own fresh interpreter")
     args = ap.parse_args(argv)
     smoke = args.workdir or Path(tempfile.mkdtemp(prefix="roadload-smoke."))
     smoke.mkdir(parents=True, exist_ok=True)
     pending = jobs(smoke)
-    running: dict[int, tuple[Job, subprocess.Popen, float]] = {}
+    if args.no_preload:
+        for job in pending:
+            job.script = None
+    elif any(job.script for job in pending):
+        t0, c0 = time.perf_counter(), time.process_time()
+        preload()
+        print(f"preloaded for the script jobs ({time.perf_counter() - t0:.0f} s, "
+              f"{time.process_time() - c0:.0f} s CPU)", flush=True)
+    running: dict[int, tuple[Job, float]] = {}
     failed: list[Job] = []
     t_stage, cpu_total = time.perf_counter(), 0.0
     while pending or running:
         while pending and not failed and len(running) < max(1, args.jobs):
             job = pending.pop(0)
-            with job.log.open("wb") as log:
-                proc = subprocess.Popen(job.argv, cwd=job.cwd, stdout=log, stderr=subprocess.STDOUT)
-            running[proc.pid] = (job, proc, time.perf_counter())
+            running[start(job)] = (job, time.perf_counter())
         if not running:
             break
         pid, status, usage = os.wait4(-1, 0)
         if pid not in running:
             continue
-        job, proc, start = running.pop(pid)
-        proc.returncode = os.waitstatus_to_exitcode(status)
+        job, started = running.pop(pid)
+        returncode = os.waitstatus_to_exitcode(status)
         cpu = usage.ru_utime + usage.ru_stime
         cpu_total += cpu
-        wall = time.perf_counter() - start
-        if proc.returncode == 0:
+        wall = time.perf_counter() - started
+        if returncode == 0:
             print(f"ok: {job.label} ({wall:.0f} s, {cpu:.0f} s CPU)", flush=True)
             continue
         failed.append(job)
-        print(f"FAILED: {job.label} (exit {proc.returncode}, {wall:.0f} s); the end of {job.log}:", flush=True)
+        print(f"FAILED: {job.label} (exit {returncode}, {wall:.0f} s); the end of {job.log}:", flush=True)
         print("\n".join(job.log.read_text(errors="replace").splitlines()[-40:]), flush=True)
     print(f"smoke stage: {time.perf_counter() - t_stage:.0f} s wall, {cpu_total:.0f} s CPU "
           f"({len(failed)} failed, {len(pending)} not started)")

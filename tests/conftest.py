@@ -16,6 +16,13 @@ from roadload.data import shared_data_dir
 from roadload.road_profiles import RoadProfile, load_profile
 
 
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """A nightly test is also a slow one: the README's ``pytest -m "not slow"`` (which CI runs) leaves both out."""
+    for item in items:
+        if item.get_closest_marker("nightly") and not item.get_closest_marker("slow"):
+            item.add_marker(pytest.mark.slow)
+
+
 @pytest.fixture
 def shared_data():
     """Path to ../shared/data; skips the test with a reason when it is absent."""

@@ -14,7 +14,9 @@ Lagrangian methods"). v_ref is the IDM follower's mean speed on training episode
 (:func:`reference_speed`). After every ``window`` steps (PPO's rollout) in which episodes ended, with
 e = ((1 + margin) v_ref - v) / v_ref and v the mean speed of those whole episodes (a window's steps alone would
 mix the slow start of an episode with the cruise in proportions that change from window to window):
-I <- max(0, I + k_i e), lambda = max(0, k_p e + I). The multiplier prices a metre
+I <- min(I_max, max(0, I + k_i e)), lambda = max(0, k_p e + I) (I_max the anti-windup cap, none by default:
+while the policy cannot follow, the integral would keep pricing a metre higher, and it takes as many windows above
+the floor to unwind as it rose). The multiplier prices a metre
 at exactly what keeps the mean speed at the reference. At that speed the policy can only gain by spending less
 energy. The env's reward and its figures are unchanged; evaluation reports both.
 
@@ -65,6 +67,7 @@ in the same state). Summed over an episode it is the paired difference the evalu
 from __future__ import annotations
 
 import json
+import math
 from typing import Any, Callable, cast
 
 import gymnasium as gym
@@ -128,6 +131,9 @@ class SpeedBand(BaseModel):
                          "[1] (0.004 = +0.4 %)")
     k_p: float = Field(20.0, ge=0.0, le=1000.0, description="proportional gain per relative speed error [1]")
     k_i: float = Field(20.0, ge=0.0, le=1000.0, description="integral gain per relative speed error and window [1]")
+    integral_max: float | None = Field(None, gt=0.0, le=1000.0, description="anti-windup: the largest value each "
+                                       "multiplier's integral may hold [1] (1.0: the integral alone prices a metre "
+                                       "at most 2x the env's pay); None: no cap")
 
     @model_validator(mode="after")
     def _ordered(self) -> "SpeedBand":
@@ -233,7 +239,8 @@ class SpeedConstraint(gym.vector.VectorWrapper):
     def __init__(self, env: gym.vector.VectorEnv, reference: float, price: float, step_time: float,
                  window: int, margin: float = 0.0, k_p: float = 20.0, k_i: float = 20.0,
                  multiplier: float = 0.0, upper: float | None = None,
-                 follower: PairedFollower | None = None, relative: bool = False) -> None:
+                 follower: PairedFollower | None = None, relative: bool = False,
+                 integral_max: float | None = None) -> None:
         if not reference > 0 or not price > 0 or not step_time > 0:
             raise RLError(f"speed constraint: expected a reference speed [m/s], price [1/m] and step time [s] > 0, "
                           f"got {reference}, {price}, {step_time}")
@@ -246,6 +253,9 @@ class SpeedConstraint(gym.vector.VectorWrapper):
         if follower is not None and follower.env.num_envs != env.num_envs:
             raise RLError(f"speed constraint: follower num_envs: expected the training env's {env.num_envs} "
                           f"sub-envs (episodes are paired per sub-env), got {follower.env.num_envs}")
+        if integral_max is not None and not 0 < integral_max <= 1000:
+            raise RLError(f"speed constraint: integral_max: expected 0 < integral_max <= 1000 (multiplier units [1]) "
+                          f"or None, got {integral_max}")
         if relative and follower is None:
             raise RLError("speed constraint: relative reward: needs the paired follower (its reward on the same "
                           "episodes is what is subtracted), got follower None")
@@ -258,6 +268,7 @@ class SpeedConstraint(gym.vector.VectorWrapper):
         self.follower, self.relative = follower, relative
         self.price, self.step_time, self.window = price, step_time, window
         self.k_p, self.k_i = k_p, k_i
+        self.integral_max = math.inf if integral_max is None else integral_max
         self.multiplier = self.integral = max(0.0, multiplier)
         self.upper_multiplier = self.upper_integral = 0.0
         self.episodes = EpisodeAccumulator(self.num_envs, step_time)  # ended ones wait for the follower's
@@ -274,7 +285,7 @@ class SpeedConstraint(gym.vector.VectorWrapper):
         """The two-sided constraint holding the mean speed in ``band`` around ``reference`` [m/s] (around the
         follower's on the same episodes with ``follower``)."""
         return cls(env, reference, price, step_time, window, margin=band.lower, k_p=band.k_p, k_i=band.k_i,
-                   upper=band.upper, follower=follower, relative=relative)
+                   upper=band.upper, follower=follower, relative=relative, integral_max=band.integral_max)
 
     @property
     def target(self) -> float:
@@ -335,11 +346,11 @@ class SpeedConstraint(gym.vector.VectorWrapper):
         if not ref > 0:
             raise RLError(f"speed constraint: reference speed: expected > 0 m/s, got {ref}")
         error = (1.0 + self.margin) - speed / ref
-        self.integral = max(0.0, self.integral + self.k_i * error)
+        self.integral = min(self.integral_max, max(0.0, self.integral + self.k_i * error))
         self.multiplier = max(0.0, self.k_p * error + self.integral)
         if self.upper is not None:
             excess = speed / ref - (1.0 + self.upper)
-            self.upper_integral = max(0.0, self.upper_integral + self.k_i * excess)
+            self.upper_integral = min(self.integral_max, max(0.0, self.upper_integral + self.k_i * excess))
             self.upper_multiplier = max(0.0, self.k_p * excess + self.upper_integral)
         net = self.multiplier - self.upper_multiplier
         self.history.append((speed, ref, net))

@@ -319,6 +319,7 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
                 "upper": None if band is None else band.upper, "reference_speed_mps": constraint.reference,
                 "paired": paired_reference, "relative_reward": relative_reward, "k_p": constraint.k_p,
                 "k_i": constraint.k_i,
+                "integral_max": None if band is None else band.integral_max,
                 "history": [{"mean_speed_mps": v, "reference_mps": ref, "multiplier": lam}
                             for v, ref, lam in constraint.history]}}
     _atomic_write_bytes(out_dir / f"{stem}.json", lambda tmp: tmp.write_text(json.dumps(meta, indent=1, default=str)))

@@ -372,6 +372,7 @@ def test_at_the_net_multiplier_minus_one_the_training_reward_is_the_reward_witho
     ('{"upper": 0.01, "k_p": -1}', "k_p: Input should be greater than or equal to 0"),
     ('{"upper": NaN}', "upper"),
     ('{"uper": 0.01}', "uper: unknown key"),
+    ('{"integral_max": 0}', "integral_max: Input should be greater than 0 (got 0)"),
     ("[0.001, 0.004]", "must be a SpeedBand or a dict"),
     ("0.001,0.004", "expected JSON text"),
 ])
@@ -545,3 +546,29 @@ def test_a_relative_reward_without_the_paired_follower_is_refused(tmp_path, caps
     assert exc.value.code == 2 and "--relative-reward: subtracts the paired follower's reward, give " \
         "--paired-reference too" in capsys.readouterr().err
     assert not (tmp_path / "run").exists()
+
+
+def test_the_integral_cap_stops_the_windup_and_the_multiplier_unwinds_at_once():
+    """Ten windows 5 % under the floor: without a cap the integral holds 10 x k_i x 0.05 = 2.5, with the cap 1.0 it
+    holds 1.0; one window 0.25 % above the floor (inside the band) then leaves lambda = k_p e + I: 2.4625 without,
+    0.9625 with the cap. The ceiling's integral is capped alike."""
+    from roadload.experiments.rl.traffic_objective import SpeedBand, SpeedConstraint
+    from roadload.gym.traffic import EcoTrafficVectorEnv
+
+    def constraint(cap):
+        band = SpeedBand(lower=0.0, upper=0.004, k_p=10.0, k_i=5.0, integral_max=cap)
+        return SpeedConstraint.band(EcoTrafficVectorEnv(2, config={"vehicles_count": 8}, autoreset_mode="same_step"),
+                                    reference=20.0, price=0.1, step_time=0.1, window=10, band=band)
+
+    free, capped = constraint(None), constraint(1.0)
+    for env in (free, capped):
+        for _ in range(10):
+            env.update(19.0)
+    assert free.integral == pytest.approx(2.5) and capped.integral == 1.0
+    assert free.update(20.05) == pytest.approx(2.4625) and capped.update(20.05) == pytest.approx(0.9625)
+    for _ in range(10):  # 10 % above: the ceiling's integral rises by 5 x 0.096 per window, to the cap
+        capped.update(22.0)
+    assert capped.upper_integral == 1.0 and capped.upper_multiplier == pytest.approx(10.0 * 0.096 + 1.0)
+    with pytest.raises(RLError, match=r"integral_max: expected 0 < integral_max <= 1000 .* got -1.0"):
+        SpeedConstraint(EcoTrafficVectorEnv(2, config={"vehicles_count": 8}, autoreset_mode="same_step"),
+                        reference=20.0, price=0.1, step_time=0.1, window=10, integral_max=-1.0)

@@ -240,14 +240,16 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
                   report_every: int = 100_000, residual: float = 0.0,
                   speed_floor: float | None = None, speed_constraint: float | None = None,
                   trip_end: bool = False, band: SpeedBand | None = None,
-                  paired_reference: bool = False) -> dict[str, Any]:
+                  paired_reference: bool = False, relative_reward: bool = False) -> dict[str, Any]:
     """PPO on the native vector env (``residual`` > 0: a correction of that scale on the IDM follower,
     :class:`ResidualActions`, at most ``speed_floor`` below it when given; ``speed_constraint`` = margin: trained on
     the reward with a Lagrange multiplier holding the mean speed at (1 + margin) x the IDM follower's;
     ``trip_end``: the time limit is terminal in training; ``band``: two multipliers holding the mean speed inside
     the band around the follower's, instead of ``speed_constraint``'s floor; ``paired_reference``: the constraint
     holds the speed relative to the IDM follower driving the same training episodes in lockstep,
-    :class:`PairedFollower`; roadload.experiments.rl.traffic_objective). Saves
+    :class:`PairedFollower`; ``relative_reward``: with the paired follower, trained on the reward less the
+    follower's reward of the same step, ``SpeedConstraint``'s ``relative``;
+    roadload.experiments.rl.traffic_objective). Saves
     ``ppo_traffic_seed<seed>.zip`` / ``.json`` and the learning curve (training episode returns) to ``out_dir``;
     returns the model, its path, wall and CPU seconds."""
     import torch
@@ -261,6 +263,9 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
     if paired_reference and band is None and speed_constraint is None:
         raise RLError("paired reference: applies to a speed constraint (give a band, --speed-band, or a floor, "
                       "--speed-constraint)")
+    if relative_reward and not paired_reference:
+        raise RLError("relative reward: subtracts the paired follower's reward, give the paired reference too "
+                      "(--paired-reference)")
     torch.set_num_threads(torch_threads)
     env_config = dict(env_config if env_config is not None else TRAFFIC_TRAIN_CONFIG)
     make_config(EcoTrafficConfig, env_config)  # a bad key fails before any training
@@ -280,7 +285,7 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
     objective = band if band is not None else speed_constraint
     constraint = None if objective is None else _speed_constraint(native, env_config, n_envs, params["n_steps"],
                                                                   objective, paired_reference,
-                                                                  threads)
+                                                                  threads, relative_reward)
     trained: gym.vector.VectorEnv = native if constraint is None else constraint
     venv = SB3VecEnv(TripEnd(trained) if trip_end else trained)
     venv.seed(seed)
@@ -312,7 +317,9 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
             "speed_constraint": None if constraint is None else {
                 "margin": speed_constraint if band is None else band.lower,
                 "upper": None if band is None else band.upper, "reference_speed_mps": constraint.reference,
-                "paired": paired_reference, "k_p": constraint.k_p, "k_i": constraint.k_i,
+                "paired": paired_reference, "relative_reward": relative_reward, "k_p": constraint.k_p,
+                "k_i": constraint.k_i,
+                "integral_max": None if band is None else band.integral_max,
                 "history": [{"mean_speed_mps": v, "reference_mps": ref, "multiplier": lam}
                             for v, ref, lam in constraint.history]}}
     _atomic_write_bytes(out_dir / f"{stem}.json", lambda tmp: tmp.write_text(json.dumps(meta, indent=1, default=str)))
@@ -324,7 +331,8 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
 
 
 def _speed_constraint(env: gym.vector.VectorEnv, env_config: dict[str, Any], n_envs: int, window: int,
-                      objective: float | SpeedBand, paired: bool = False, threads: int = 1) -> SpeedConstraint:
+                      objective: float | SpeedBand, paired: bool = False, threads: int = 1,
+                      relative: bool = False) -> SpeedConstraint:
     """The constraint wrapper on ``env`` (a floor margin or a band): the reference is the IDM follower's mean speed
     on training episodes of the same configuration (its CPU time counts as training time); with ``paired`` the
     follower's on the same training episodes, driven in lockstep (its CPU time counts too)."""
@@ -335,8 +343,8 @@ def _speed_constraint(env: gym.vector.VectorEnv, env_config: dict[str, Any], n_e
     follower = PairedFollower(EcoTrafficVectorEnv(n_envs, config=env_config, autoreset_mode="same_step",
                                                   threads=threads), idm_policy(cfg), step_time) if paired else None
     if isinstance(objective, SpeedBand):
-        return SpeedConstraint.band(env, v_ref, price, step_time, window, objective, follower)
-    return SpeedConstraint(env, v_ref, price, step_time, window, objective, follower=follower)
+        return SpeedConstraint.band(env, v_ref, price, step_time, window, objective, follower, relative)
+    return SpeedConstraint(env, v_ref, price, step_time, window, objective, follower=follower, relative=relative)
 
 
 def load_traffic_policy(path: Path):
@@ -356,7 +364,7 @@ def run_traffic_experiment(seeds: tuple[int, ...], timesteps: int, out_dir: Path
                            hyperparams: dict[str, Any] | None = None, residual: float = 0.0,
                            speed_floor: float | None = None, speed_constraint: float | None = None,
                            trip_end: bool = False, band: SpeedBand | None = None,
-                           paired_reference: bool = False) -> dict[str, Any]:
+                           paired_reference: bool = False, relative_reward: bool = False) -> dict[str, Any]:
     """Train one PPO per seed (or load them with ``evaluate_only``), evaluate each with the IDM follower on
     ``episodes`` held-out native episodes and ``transfer_episodes`` on highway-env; write episodes.csv,
     summary.csv, intervals.csv and the learning curves to ``out_dir``. ``env_config`` is the evaluation's (and
@@ -380,7 +388,7 @@ def run_traffic_experiment(seeds: tuple[int, ...], timesteps: int, out_dir: Path
             res = train_traffic(timesteps, out_dir, s, n_envs, trained_on, threads, hyperparams=hyperparams,
                                 progress=progress, residual=residual, speed_floor=speed_floor,
                                 speed_constraint=speed_constraint, trip_end=trip_end, band=band,
-                                paired_reference=paired_reference)
+                                paired_reference=paired_reference, relative_reward=relative_reward)
             models[s] = res["model"]
             times[s] = (res["wall_seconds"], res["cpu_seconds"], res["timesteps"])
             scales[s] = residual
@@ -448,6 +456,10 @@ def main(argv: list[str] | None = None) -> None:
                     help="with --speed-band or --speed-constraint: hold the mean speed relative to the IDM follower "
                          "driving the same training episodes in lockstep (paired per episode) instead of its mean "
                          "speed on separate reference episodes")
+    ap.add_argument("--relative-reward", action="store_true",
+                    help="with --paired-reference: train on the reward less the paired IDM follower's reward of the "
+                         "same step (independent of the policy's actions: the same optimum, the traffic's share of "
+                         "the return's scatter cancelled; roadload.experiments.rl.traffic_objective)")
     ap.add_argument("--trip-end", action="store_true",
                     help="train with the time limit as the trip's end (terminal, no bootstrap of the value beyond it)")
     ap.add_argument("--out", type=Path, default=Path("out/rl_traffic"))
@@ -474,13 +486,15 @@ def main(argv: list[str] | None = None) -> None:
         ap.error("--speed-constraint and --speed-band: give one (a floor or a band), not both")
     if a.paired_reference and band is None and a.speed_constraint is None and not a.evaluate_only:
         ap.error("--paired-reference: applies to a speed constraint, give --speed-band or --speed-constraint")
+    if a.relative_reward and not a.paired_reference and not a.evaluate_only:
+        ap.error("--relative-reward: subtracts the paired follower's reward, give --paired-reference too")
     res = run_traffic_experiment(seeds, a.timesteps, a.out, a.episodes, a.transfer_episodes, a.n_envs, config,
                                  a.threads, a.evaluate_only, progress=lambda m: print(m, flush=True),
                                  train_config=json.loads(a.train_config) if a.train_config else None,
                                  hyperparams=json.loads(a.hyperparams) if a.hyperparams else None,
                                  residual=a.residual, speed_floor=a.speed_floor,
                                  speed_constraint=a.speed_constraint, trip_end=a.trip_end, band=band,
-                                 paired_reference=a.paired_reference)
+                                 paired_reference=a.paired_reference, relative_reward=a.relative_reward)
     print(markdown_table(res["summary"], floatfmt=".4g"))
     for key in ("intervals", "paired", "paired_intervals"):
         if len(res[key]):

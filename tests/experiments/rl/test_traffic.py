@@ -128,22 +128,37 @@ def test_the_speed_floor_keeps_the_command_within_its_distance_below_the_base():
 
 
 def test_step_distances_add_up_to_each_episodes_distance_across_same_step_autoresets():
-    from roadload.experiments.rl.traffic_objective import step_distance
+    from roadload.experiments.rl.traffic_objective import EpisodeAccumulator, step_distance
     from roadload.gym.traffic import EcoTrafficVectorEnv
 
     env = EcoTrafficVectorEnv(3, config={"vehicles_count": 8, "duration": 2.0}, autoreset_mode="same_step")
     env.reset(seed=7)
+    episodes = EpisodeAccumulator(3, 0.1)
     driven, finished = np.zeros(3), []
-    for _ in range(45):  # two episodes of 20 steps each and a few steps of a third
+    for step in range(45):  # two episodes of 20 steps each and a few steps of a third
+        if step == 3:
+            env.step(np.full((3, 1), 0.2, np.float32))  # not counted: the accumulator starts over at its reset
+            episodes.reset()
+            env.reset(seed=7)
+            driven[:] = 0.0
         _, _, term, trunc, info = env.step(np.full((3, 1), 0.2, np.float32))
         done = term | trunc
-        driven += step_distance(info, done)
+        dx = episodes.add(info, done)
+        assert np.array_equal(dx, step_distance(info, done))
+        driven += dx
         if done.any():
             finished += [(driven[i], info["final_info"]["s"][i]) for i in np.flatnonzero(done)]
             driven[done] = 0.0
     assert len(finished) == 6
     for got, expected in finished:
         assert expected > 40.0 and got == pytest.approx(expected, rel=1e-12)
+    # the accumulator's ended episodes: per sub-env, in order, each the env's own distance over its 2 s
+    assert [len(e) for e in episodes.ended] == [2, 2, 2]
+    for i in range(3):
+        for k, (distance, time) in enumerate(episodes.ended[i]):
+            assert distance == pytest.approx(finished[3 * k + i][1], rel=1e-12) and time == pytest.approx(2.0)
+    with pytest.raises(RLError, match=r"expected num_envs >= 1 and step_time > 0 s, got 2, 0.0"):
+        EpisodeAccumulator(2, 0.0)
 
 
 def test_speed_constraint_adds_the_priced_progress_and_its_multiplier_follows_the_pi_rule():
@@ -357,6 +372,7 @@ def test_at_the_net_multiplier_minus_one_the_training_reward_is_the_reward_witho
     ('{"upper": 0.01, "k_p": -1}', "k_p: Input should be greater than or equal to 0"),
     ('{"upper": NaN}', "upper"),
     ('{"uper": 0.01}', "uper: unknown key"),
+    ('{"integral_max": 0}', "integral_max: Input should be greater than 0 (got 0)"),
     ("[0.001, 0.004]", "must be a SpeedBand or a dict"),
     ("0.001,0.004", "expected JSON text"),
 ])
@@ -486,3 +502,73 @@ def test_a_bad_paired_reference_is_refused_naming_the_field_and_value(tmp_path, 
         main(["--paired-reference", "--out", str(tmp_path / "run")])
     assert exc.value.code == 2 and "--paired-reference: applies to a speed constraint" in capsys.readouterr().err
     assert not (tmp_path / "run").exists()
+
+
+def test_the_relative_reward_is_the_reward_less_the_followers_on_the_same_episode_and_step():
+    """With ``relative`` the training reward is the env reward less the paired IDM follower's of the same step (the
+    multipliers 0 until the first update): equal to r - r_follower of two separately driven envs, and exactly 0
+    for a residual policy with zero correction, which drives as the follower does, across an autoreset."""
+    from roadload.gym.traffic import EcoTrafficVectorEnv
+
+    env, idm, config = _paired(False, relative=True)
+    own = EcoTrafficVectorEnv(2, config=config, autoreset_mode="same_step")
+    alone = EcoTrafficVectorEnv(2, config=config, autoreset_mode="same_step")
+    env.reset(seed=[3, 4])
+    own.reset(seed=[3, 4])
+    obs_alone, _ = alone.reset(seed=[3, 4])
+    brake = np.full((2, 1), -0.3, np.float32)
+    for _ in range(20):  # one 2 s episode: no multiplier update before its end
+        _, r_rel, *_ = env.step(brake)
+        _, r_own, *_ = own.step(brake)
+        obs_alone, r_idm, *_ = alone.step(idm(obs_alone))
+        assert np.all(np.abs(r_own - r_idm) > 1e-6)
+        assert r_rel == pytest.approx(r_own - r_idm, abs=1e-12)
+    zero, _, _ = _paired(True, relative=True)
+    zero.reset(seed=[11, 12])
+    for _ in range(45):  # two updates (lambda = (k_p + k_i) x lower > 0 after the first) and an autoreset
+        _, r_rel, *_ = zero.step(np.zeros((2, 1), np.float32))
+        assert np.all(r_rel == 0.0)
+    assert len(zero.history) == 2 and zero.multiplier > 0
+
+
+def test_a_relative_reward_without_the_paired_follower_is_refused(tmp_path, capsys):
+    from roadload.experiments.rl.traffic_objective import SpeedBand, SpeedConstraint
+    from roadload.experiments.rl.traffic_training import main
+    from roadload.gym.traffic import EcoTrafficVectorEnv
+
+    with pytest.raises(RLError, match=r"relative reward: needs the paired follower .*got follower None"):
+        SpeedConstraint(EcoTrafficVectorEnv(2, config={"vehicles_count": 8}, autoreset_mode="same_step"),
+                        reference=20.0, price=0.1, step_time=0.1, window=10, relative=True)
+    with pytest.raises(RLError, match=r"relative reward: .*give the paired reference too"):
+        train_traffic(100, tmp_path / "run", band=SpeedBand(), relative_reward=True)
+    with pytest.raises(SystemExit) as exc:
+        main(["--speed-band", "{}", "--relative-reward", "--out", str(tmp_path / "run")])
+    assert exc.value.code == 2 and "--relative-reward: subtracts the paired follower's reward, give " \
+        "--paired-reference too" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
+
+
+def test_the_integral_cap_stops_the_windup_and_the_multiplier_unwinds_at_once():
+    """Ten windows 5 % under the floor: without a cap the integral holds 10 x k_i x 0.05 = 2.5, with the cap 1.0 it
+    holds 1.0; one window 0.25 % above the floor (inside the band) then leaves lambda = k_p e + I: 2.4625 without,
+    0.9625 with the cap. The ceiling's integral is capped alike."""
+    from roadload.experiments.rl.traffic_objective import SpeedBand, SpeedConstraint
+    from roadload.gym.traffic import EcoTrafficVectorEnv
+
+    def constraint(cap):
+        band = SpeedBand(lower=0.0, upper=0.004, k_p=10.0, k_i=5.0, integral_max=cap)
+        return SpeedConstraint.band(EcoTrafficVectorEnv(2, config={"vehicles_count": 8}, autoreset_mode="same_step"),
+                                    reference=20.0, price=0.1, step_time=0.1, window=10, band=band)
+
+    free, capped = constraint(None), constraint(1.0)
+    for env in (free, capped):
+        for _ in range(10):
+            env.update(19.0)
+    assert free.integral == pytest.approx(2.5) and capped.integral == 1.0
+    assert free.update(20.05) == pytest.approx(2.4625) and capped.update(20.05) == pytest.approx(0.9625)
+    for _ in range(10):  # 10 % above: the ceiling's integral rises by 5 x 0.096 per window, to the cap
+        capped.update(22.0)
+    assert capped.upper_integral == 1.0 and capped.upper_multiplier == pytest.approx(10.0 * 0.096 + 1.0)
+    with pytest.raises(RLError, match=r"integral_max: expected 0 < integral_max <= 1000 .* got -1.0"):
+        SpeedConstraint(EcoTrafficVectorEnv(2, config={"vehicles_count": 8}, autoreset_mode="same_step"),
+                        reference=20.0, price=0.1, step_time=0.1, window=10, integral_max=-1.0)

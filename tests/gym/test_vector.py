@@ -185,6 +185,7 @@ def test_sb3_adapter_episode_bookkeeping():
         SB3VecEnv(EcoDriveVectorEnv(1))
 
 
+@pytest.mark.slow  # the first compile of the parallel step kernel: ~30 s of CPU that no other CI test needs
 def test_two_threads_give_the_one_thread_trajectories():
     """threads=2 (reached through gymnasium.make_vec's keyword) splits the vehicles over numba threads; every
     sub-env's observation, reward, flags and info equal the 1-thread env's to 1e-9 through autoresets, for an odd N

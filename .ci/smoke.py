@@ -137,17 +137,20 @@ def run_script_in_child(job: Job) -> None:
         os._exit(code)
 
 
-def start(job: Job) -> int:
-    """Start ``job``: a script job forked from this (preloaded) process, any other in its own interpreter; its pid."""
+def start(job: Job) -> tuple[int, subprocess.Popen | None]:
+    """Start ``job``: a script job forked from this (preloaded) process, any other in its own interpreter; its pid
+    and its Popen (None for a fork). The Popen is kept until the job is reaped: a dropped one that is still running
+    goes to subprocess's list of unreaped children, which a later Popen polls, and could reap it first."""
     if job.script is not None:
         sys.stdout.flush()
         sys.stderr.flush()
         pid = os.fork()
         if pid == 0:
             run_script_in_child(job)
-        return pid
+        return pid, None
     with job.log.open("wb") as log:
-        return subprocess.Popen(job.argv, cwd=job.cwd, stdout=log, stderr=subprocess.STDOUT).pid
+        proc = subprocess.Popen(job.argv, cwd=job.cwd, stdout=log, stderr=subprocess.STDOUT)
+    return proc.pid, proc
 
 
 def scripts_run_by_docs() -> dict[str, str]:
@@ -219,20 +222,23 @@ def main(argv: list[str] | None = None) -> int:
         preload()
         print(f"preloaded for the script jobs ({time.perf_counter() - t0:.0f} s, "
               f"{time.process_time() - c0:.0f} s CPU)", flush=True)
-    running: dict[int, tuple[Job, float]] = {}
+    running: dict[int, tuple[Job, subprocess.Popen | None, float]] = {}
     failed: list[Job] = []
     t_stage, cpu_total = time.perf_counter(), 0.0
     while pending or running:
         while pending and not failed and len(running) < max(1, args.jobs):
             job = pending.pop(0)
-            running[start(job)] = (job, time.perf_counter())
+            pid, proc = start(job)
+            running[pid] = (job, proc, time.perf_counter())
         if not running:
             break
         pid, status, usage = os.wait4(-1, 0)
         if pid not in running:
             continue
-        job, started = running.pop(pid)
+        job, proc, started = running.pop(pid)
         returncode = os.waitstatus_to_exitcode(status)
+        if proc is not None:
+            proc.returncode = returncode  # reaped here: the Popen must not wait for it again
         cpu = usage.ru_utime + usage.ru_stime
         cpu_total += cpu
         wall = time.perf_counter() - started

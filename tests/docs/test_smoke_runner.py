@@ -41,7 +41,7 @@ smoke = importlib.util.module_from_spec(spec)
 sys.modules["ci_smoke"] = smoke
 spec.loader.exec_module(smoke)
 job = smoke.Job("probe", {job.argv!r}, Path({str(job.cwd)!r}), Path({str(job.log)!r}), script=Path({str(job.script)!r}))
-_, status = os.waitpid(smoke.start(job), 0)
+_, status = os.waitpid(smoke.start(job)[0], 0)
 print("status", os.waitstatus_to_exitcode(status))
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)

@@ -211,6 +211,9 @@ def main(argv: list[str] | None = None) -> int:
                                                                "folder)")
     ap.add_argument("--no-preload", action="store_true", help="every script in its own fresh interpreter")
     args = ap.parse_args(argv)
+    # the jobs run two at a time beside the two test processes: an OpenBLAS pool of one spinning thread per core in
+    # every job would oversubscribe the cores (the tests' conftest sets the same; set before the preload loads numpy)
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     smoke = args.workdir or Path(tempfile.mkdtemp(prefix="roadload-smoke."))
     smoke.mkdir(parents=True, exist_ok=True)
     pending = jobs(smoke)

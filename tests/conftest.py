@@ -6,6 +6,11 @@ import os
 # libgomp reads OMP_WAIT_POLICY once, when torch first loads it: set the native vector env's policy before any test
 # imports torch, as the roadload command does, or a multi-threaded vector env warns that it cannot take effect
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+# `pytest -n 2` runs one test process per core; OpenBLAS would start a pool of one thread per core in each of them
+# (numpy's and scipy's each), whose threads spin while they wait: on the busy cores that costs CPU the tests need.
+# Measured, tests/sim2real twice at once on 2 cores: 118 s CPU per run with the pools, 97 s with one BLAS thread.
+# Set before numpy loads (nothing imports it before this file), unless the caller chose a count.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from typing import Any, Callable
 

@@ -63,6 +63,16 @@ def _algo_class(algo: str):
     return classes[algo.lower()]
 
 
+def silent_logger(model: Any) -> Any:
+    """``model`` (an SB3 algorithm) with a logger that writes nothing. Without one, every ``learn()`` at verbose 0
+    and without a tensorboard folder makes an empty folder ``SB3-<date>`` in the system's temporary folder (SB3's
+    default logger); roadload records its own training curves."""
+    from stable_baselines3.common.logger import Logger
+
+    model.set_logger(Logger(folder=None, output_formats=[]))
+    return model
+
+
 VEC_MODES = ("native", "dummy", "subproc")
 
 

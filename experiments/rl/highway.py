@@ -32,7 +32,7 @@ from roadload.gym.traffic import traffic_observation_layout
 from roadload.presets import get_preset
 from roadload.tables import write_csv
 
-from .common import RLError, _atomic_write_bytes
+from .common import RLError, _atomic_write_bytes, silent_logger
 from .training import _curve_callback
 
 HIGHWAY_ENV_ID = "roadload:roadload/EcoHighway-v0"
@@ -156,7 +156,7 @@ def train_highway(timesteps: int, out_dir: Path, n_envs: int = 4, seed: int = 0,
     params: dict[str, Any] = dict(HIGHWAY_PPO)
     params["n_steps"] = max(16, min(params["n_steps"], max(timesteps // n_envs, 16)))
     params["batch_size"] = min(params["batch_size"], params["n_steps"] * n_envs)
-    model = PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **params)
+    model = silent_logger(PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **params))
     callback = _curve_callback(env_config, eval_every=0, progress=None)  # training episode returns only
     t0 = time.perf_counter()
     try:

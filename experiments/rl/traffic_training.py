@@ -41,7 +41,7 @@ from roadload.gym.sb3 import SB3VecEnv
 from roadload.gym.traffic import EcoTrafficEnv, EcoTrafficVectorEnv
 from roadload.tables import markdown_table, write_csv
 
-from .common import RLError, _atomic_write_bytes, json_object_option
+from .common import RLError, _atomic_write_bytes, json_object_option, silent_logger
 from .highway import idm_policy
 from .traffic_objective import PairedFollower, SpeedBand, SpeedConstraint, TripEnd, reference_speed, speed_band
 from .training import _curve_callback
@@ -289,7 +289,7 @@ def train_traffic(timesteps: int, out_dir: Path, seed: int = 0, n_envs: int = 32
     trained: gym.vector.VectorEnv = native if constraint is None else constraint
     venv = SB3VecEnv(TripEnd(trained) if trip_end else trained)
     venv.seed(seed)
-    model = PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **params)
+    model = silent_logger(PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **params))
     t0, c0 = time.perf_counter(), c_start
     reported = [0]
 

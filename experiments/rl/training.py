@@ -15,7 +15,8 @@ import pandas as pd
 from roadload.gym.config import EcoDriveConfig, make_config
 from roadload.fileio import save_figure
 
-from .common import ALGO_DEFAULTS, RLError, VALIDATION_SEEDS, _algo_class, _atomic_write_bytes, _route, make_vec_env
+from .common import (ALGO_DEFAULTS, RLError, VALIDATION_SEEDS, _algo_class, _atomic_write_bytes, _route, make_vec_env,
+                     silent_logger)
 from .rollouts import run_policy, sb3_policy
 
 
@@ -155,7 +156,7 @@ def train_policy(algo: str, timesteps: int, out_dir: Path, n_envs: int = 2, seed
                                lambda m, rows, nxt: _save_checkpoint(m, Path(out_dir), algo, identity, rows, nxt),
                                checkpoint_every)
     if state is not None:
-        model = cls.load(str(paths["model"]), env=venv, device="cpu")
+        model = silent_logger(cls.load(str(paths["model"]), env=venv, device="cpu"))
         if "replay_sha256" in state:
             model.load_replay_buffer(str(paths["replay"]))
         callback.rows = [tuple(r) for r in state["rows"]]
@@ -163,7 +164,7 @@ def train_policy(algo: str, timesteps: int, out_dir: Path, n_envs: int = 2, seed
         callback._next_checkpoint = (int(state["timesteps"]) // checkpoint_every + 1) * checkpoint_every
         resume = f"resumed at {int(state['timesteps'])} of {timesteps} steps from {paths['state']}"
     else:
-        model = cls("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **params)
+        model = silent_logger(cls("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **params))
         resume = why
     t0 = time.perf_counter()
     try:

@@ -92,12 +92,15 @@ SAME_SEED_CASE = dict(n=4, steps=70, config=dict(lane_changes="box", vehicles_co
 
 @pytest.mark.slow  # the first compile of the parallel step kernel: ~30 s of CPU that no other CI test needs
 def test_two_threads_give_the_one_thread_traffic_to_the_bit():
-    """The work split over 2 threads gives the 1-thread vector env's observations and rewards exactly."""
+    """The work split over 2 threads gives the 1-thread vector env's observations and rewards exactly, with the
+    default observation and with the neighbour features."""
     n, steps, config = SAME_SEED_CASE["n"], SAME_SEED_CASE["steps"], SAME_SEED_CASE["config"]
     actions = np.random.default_rng(0).uniform(-1, 1, (steps, n, 2)).astype(np.float32)
-    runs = [_vector_rollout(EcoTrafficVectorEnv(n, config, threads=threads), 11, actions) for threads in (1, 2)]
-    for (o1, r1), (o2, r2) in zip(*runs):
-        assert np.array_equal(o1, o2) and np.array_equal(r1, r2)
+    for extra in ({}, NEIGHBOURS):
+        runs = [_vector_rollout(EcoTrafficVectorEnv(n, {**config, **extra}, threads=threads), 11, actions)
+                for threads in (1, 2)]
+        for (o1, r1), (o2, r2) in zip(*runs):
+            assert np.array_equal(o1, o2) and np.array_equal(r1, r2)
 
 
 def test_same_seed_same_episode_and_single_equals_vector_to_1e9():
@@ -398,12 +401,12 @@ def test_neighbour_features_on_a_built_road():
 
 def test_neighbour_features_only_append_to_the_default_observation():
     """With the option the dynamics, rewards and every default observation entry are bit for bit the default's;
-    the vector form with the option equals the single env to 1e-9 (2 threads, through autoresets); bad values are
-    refused naming the field."""
+    the vector form with the option equals the single env to 1e-9 (through autoresets; its 2-thread split is the
+    slow test above); bad values are refused naming the field."""
     n, steps = 3, 45
     config = dict(vehicles_count=15, duration=2.0, vehicles_density=2.0, spawn="stopping-gap", kinematics_rows=8)
     actions = np.random.default_rng(3).uniform(-1, 1, (steps, n, 1)).astype(np.float32)
-    runs = [_vector_rollout(EcoTrafficVectorEnv(n, {**config, **extra}, threads=2), 5, actions)
+    runs = [_vector_rollout(EcoTrafficVectorEnv(n, {**config, **extra}, threads=1), 5, actions)
             for extra in ({}, NEIGHBOURS)]
     n_default = runs[0][0][0].shape[1]
     assert runs[1][0][0].shape[1] == n_default + 7 * 3

@@ -64,9 +64,16 @@ def test_summary_and_seed_interval():
     assert ci.energy_Wh_per_km_ci95 == pytest.approx(stats.t.ppf(0.975, 2) * 2.0 / np.sqrt(3))
 
 
-def test_short_ppo_run_trains_saves_and_is_evaluated(tmp_path):
+def test_short_ppo_run_trains_saves_and_is_evaluated(tmp_path, monkeypatch):
+    import tempfile
+
+    system_tmp = tmp_path / "system_tmp"
+    system_tmp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(system_tmp))
     res = train_traffic(2048, tmp_path, seed=0, n_envs=8, env_config={"vehicles_count": 8, "duration": 4.0})
     assert res["path"].is_file() and res["timesteps"] >= 2048 and res["cpu_seconds"] > 0
+    # SB3's default logger would leave an empty SB3-<date> folder in the system's temporary folder per run
+    assert not list(system_tmp.glob("SB3-*"))
     table = evaluate_traffic({"ppo": lambda obs: res["model"].predict(obs, deterministic=True)[0]},
                              {"vehicles_count": 8, "duration": 4.0, "shield": {"enabled": True}}, episodes=2)
     assert len(table) == 2 and (table.distance_m > 50).all() and not table.crashed.any()

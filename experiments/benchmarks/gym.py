@@ -97,8 +97,9 @@ def main(argv: list[str] | None = None, repo: Path | None = None) -> None:
     ap.add_argument("--seconds", type=float, default=5.0, help="measurement time per row [s]")
     ap.add_argument("--native", type=int, default=256, help="sub-envs of the native vector env")
     ap.add_argument("--dummy", type=int, default=16, help="sub-envs of the DummyVecEnv reference")
-    ap.add_argument("--threads", type=_thread_counts, default=(1, 2),
-                    help="numba thread counts of the native env and its bare loop, comma-separated (default 1,2)")
+    ap.add_argument("--threads", type=_thread_counts, default=None,
+                    help="numba thread counts of the native env and its bare loop, comma-separated (default 1,2; "
+                         "with --quick 1)")
     ap.add_argument("--n-envs", type=int, default=2, help="vectorised environments of the classic table")
     ap.add_argument("--no-highway", action="store_true", help="skip EcoHighway-v0 and highway-fast-v0")
     ap.add_argument("--no-classic", action="store_true", help="only the native-vector-env table")
@@ -109,6 +110,9 @@ def main(argv: list[str] | None = None, repo: Path | None = None) -> None:
     args = ap.parse_args(argv)
     if args.quick:
         args.seconds, args.native, args.dummy, args.no_classic = 0.5, 32, 4, True
+    # --quick (CI) on one thread unless told otherwise: the 2-thread step kernel's first compile (~35 s of CPU) is
+    # left to the slow test that checks its trajectories against one thread's (tests/gym/test_vector.py)
+    args.threads = args.threads or ((1,) if args.quick else (1, 2))
     if args.compare:
         compare_with(args, repo)
         return

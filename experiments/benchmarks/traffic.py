@@ -323,7 +323,8 @@ def main(argv: list[str] | None = None) -> None:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=5.0, help="measurement time per row [s]")
     ap.add_argument("--n-envs", type=int, default=256, help="sub-envs of the native vector env")
-    ap.add_argument("--threads", default="1,2", help="numba thread counts, comma-separated")
+    ap.add_argument("--threads", default=None, help="numba thread counts, comma-separated (default 1,2; with "
+                                                    "--quick 1)")
     ap.add_argument("--rounds", type=int, default=2, help="interleaved rounds")
     ap.add_argument("--vehicles", type=int, default=20, help="traffic vehicles per env")
     ap.add_argument("--no-highway-fast", action="store_true", help="skip highway-env's highway-fast-v0 rows")
@@ -343,6 +344,9 @@ def main(argv: list[str] | None = None) -> None:
     if a.burst_worker:
         burst_worker(a.n_envs, int(a.threads), a.vehicles)
         return
+    # --quick (CI) on one thread unless told otherwise: the 2-thread step kernel's first compile (~35 s of CPU) is
+    # left to the slow test that checks its traffic against one thread's (tests/gym/test_traffic.py)
+    a.threads = a.threads or ("1" if a.quick else "1,2")
     try:
         threads = tuple(int(t) for t in a.threads.split(",") if t.strip())
     except ValueError:

@@ -127,6 +127,7 @@ def _settings(task: OptimumTask, controller: str) -> DriveSettings:
     lam = case.lam0 if task.time_weight is None else task.time_weight
     variant = dict(task.mpc)
     lam = variant.pop("time_weight", lam)  # a variant's lambda [J/s] (the DriveSettings' value reaches the MPC)
+    lam *= variant.pop("time_weight_scale", 1.0)
     # ICE: the MPC requests its shift rule's gear (and a kick-down where full load needs it), as the optimum's tracker
     # does: the plant's own load-dependent strategy changes the fuel of a whole climb for a 0.1 % change of the
     # trajectory, which no plan can follow (docs/results/controllers.md); 'mpc:<model>:transmission' leaves the gear
@@ -202,8 +203,10 @@ def run_optimum_task(task: OptimumTask) -> dict[str, Any]:
     t0 = time.process_time()
 
     def run(settings: DriveSettings) -> dict[str, Any]:
+        cpu0 = time.process_time()
         res, plant = drive(vehicle, road, effects=effects, seed=task.seed, settings=settings)
         m = dict(res.metrics)
+        m["run_cpu_s"] = time.process_time() - cpu0
         m["inertial_mass"] = plant.true_parameters().inertial_mass
         m["segment_peak_speed"] = float(res.log["v"][res.log["s"] >= task.warmup].max())
         return m
@@ -290,7 +293,11 @@ def _bound_row(bound: PlantFuelBound, name: str, task: OptimumTask, m: dict[str,
            "condition": task.condition, "arrived": True, "time_s": m["segment_time"],
            "energy_raw_J": m["segment_energy_J"], "arrival_speed": m["arrival_speed"],
            "start_speed": m["segment_start_speed"], "speed_violations": m.get("speed_violations"),
-           "peak_speed": m.get("segment_peak_speed"), "optimum_kind": BOUND_KIND}
+           "peak_speed": m.get("segment_peak_speed"), "optimum_kind": BOUND_KIND,
+           # the MPC's cost in CPU (the whole drive, warm-up included) and its solves (MPC runs only)
+           **{k: m[src] for k, src in (("run_cpu_s", "run_cpu_s"), ("mpc_solves", "ctl_solves"),
+                                       ("mpc_solve_time_median_s", "ctl_solve_time_median"),
+                                       ("mpc_solver_failures", "ctl_solver_failures")) if src in m}}
     t0 = time.process_time()
     try:
         # the run's peak speed (a stored run without it: at least its start and arrival speeds)
@@ -337,14 +344,28 @@ def rebound_rows(task: OptimumTask, rows: list[dict[str, Any]]) -> list[dict[str
     return out
 
 
+# the bounds of the last segment built (a breakdown's variants, one task each, share their seed's road; building
+# the programme's costs takes ~35 s of CPU on a 4 km segment at 40 t, solving it ~5 s)
+_SEGMENT_BOUNDS: dict[tuple[Any, ...], PlantFuelBound] = {}
+
+
 def truck_bound(task: OptimumTask, road, model: str = "plant", plant_bound: PlantFuelBound | None = None
                 ) -> PlantFuelBound:
     """The plant-fuel bound of the task's measured segment (``model`` "smooth": the optimum of the plant-map MPC's
-    own smoothed fuel model, booked in the plant's map, reusing ``plant_bound``'s costs; :class:`PlantFuelBound`)."""
-    vehicle = VEHICLE_CASES[task.case].vehicle()
-    params = replace(SimulatorPlant(vehicle, road, effects=CONDITIONS[task.condition], seed=task.seed
-                                    ).true_parameters(), rotational_mass=rotational_mass(vehicle))
-    return PlantFuelBound(road, vehicle, params, start=task.warmup, model=model, plant_bound=plant_bound)
+    own smoothed fuel model, booked in the plant's map, reusing ``plant_bound``'s costs, which must be the same
+    segment's; :class:`PlantFuelBound`). ``road`` is the task's road (:func:`benchmark_road`); the last segment's
+    bounds are kept and reused by the next task on the same segment."""
+    segment = (task.case, task.road, task.seed, task.warmup, task.condition, road.length)
+    if any(key[:-1] != segment for key in _SEGMENT_BOUNDS):
+        _SEGMENT_BOUNDS.clear()
+    key = (*segment, model)
+    if key not in _SEGMENT_BOUNDS:
+        vehicle = VEHICLE_CASES[task.case].vehicle()
+        params = replace(SimulatorPlant(vehicle, road, effects=CONDITIONS[task.condition], seed=task.seed
+                                        ).true_parameters(), rotational_mass=rotational_mass(vehicle))
+        _SEGMENT_BOUNDS[key] = PlantFuelBound(road, vehicle, params, start=task.warmup, model=model,
+                                              plant_bound=plant_bound)
+    return _SEGMENT_BOUNDS[key]
 
 
 def difference_pct(value: float, reference: float) -> float:
@@ -383,7 +404,9 @@ def dp_check(task: OptimumTask, road, rows: list[dict[str, Any]], settings: Opti
 
 
 # the gap breakdown: the oracle MPC with one design choice at a time set to the optimum's (or refined), and all
-# together; values per vehicle kind (car: 100 x 20 m; truck: 40 x 50 m, control period 0.2 s)
+# together; values per vehicle kind (car: 8 x 5 m, then 20 m to 1.88 km, re-planning every 1 s; truck: 40 x 50 m =
+# 2 km, re-planning every 1 s, control period 0.2 s). "time_weight" [J/s] replaces lambda, "time_weight_scale"
+# multiplies the case's lambda (both handled by _settings, not MpcSettings fields)
 BREAKDOWN: dict[str, dict[str, tuple[dict[str, Any], float | None]]] = {
     "car": {"": ({}, None),
             "|uniform 20 m grid": ({"near_segments": 0}, None),
@@ -399,42 +422,67 @@ BREAKDOWN: dict[str, dict[str, tuple[dict[str, Any], float | None]]] = {
             "|all": ({"n_nodes": 200, "ds": 10.0, "accel_weight": 0.0, "warm_tol": 1e-8}, 0.2)},
     "truck": {"": ({}, None),
               "|horizon 4 km": ({"n_nodes": 80}, None),
+              # the long grades' measured 4 km from the hand-over: the horizon ends on the route end, where the
+              # terminal value applies (the most any terminal value at a 2 km horizon end could give)
+              "|route end in the horizon": ({"n_nodes": 80, "horizon_to_route_end": True}, None),
               "|grid 25 m": ({"n_nodes": 80, "ds": 25.0}, None),
+              "|near grid 8 x 12.5 m": ({"n_nodes": 46, "near_segments": 8, "near_ds": 12.5}, None),  # 2 km
               "|no comfort term": ({"accel_weight": 0.0}, None),
+              # the bound's caps are the speed limits (or the run's peak above them): no margin below them
+              "|no speed margin": ({"speed_margin": 0.0}, None),
               "|terminal at the wheel": ({"terminal_value": "wheel"}, None),
               "|tol 1e-8": ({"warm_tol": 1e-8}, None),
-              "|re-plan 0.4 s": ({}, 0.4),
-              "|all": ({"n_nodes": 160, "ds": 25.0, "accel_weight": 0.0, "warm_tol": 1e-8}, 0.4)},
+              "|re-plan 0.2 s": ({}, 0.2),
+              "|lambda x0.5": ({"time_weight_scale": 0.5}, None),
+              "|all": ({"n_nodes": 160, "ds": 25.0, "accel_weight": 0.0, "warm_tol": 1e-8}, 0.2)},
 }
 
 
-def breakdown_tasks(cases: dict[str, list[str]], seeds: int, first_seed: dict[str, int] | None = None,
+def breakdown_tasks(cases: dict[str, list[str]], seeds: int | list[int], first_seed: dict[str, int] | None = None,
+                    controller: str = "mpc:oracle", variants: list[str] | None = None,
                     **common: Any) -> list[OptimumTask]:
-    """The oracle MPC in every BREAKDOWN variant (labels appended to 'mpc:oracle'), seed-major."""
+    """The MPC ``controller`` (an 'mpc:oracle' variant, e.g. 'mpc:oracle:plant_map') in every BREAKDOWN variant of
+    its vehicle kind, or in those labelled ``variants`` ('' or 'base': the unchanged MPC; labels with or without
+    the leading '|'), the labels appended to its name; per case and road seed-major; ``seeds``: a count (from
+    first_seed per road) or the seeds themselves."""
+    if not controller.startswith("mpc:oracle"):
+        raise OptimumBenchmarkError(f"breakdown: the controller must be an oracle MPC ('mpc:oracle' or "
+                                    f"'mpc:oracle:<fuel model>'), got {controller!r}")
     first = first_seed or {}
     out = []
-    for i in range(seeds):
-        for case, roads in cases.items():
-            kind = "truck" if VEHICLE_CASES[case].truck else "car"
-            for road in roads:
-                for label, (mpc, replan) in BREAKDOWN[kind].items():
-                    out.append(OptimumTask(case, road, first.get(road, 0) + i, controllers=("mpc:oracle",),
+    for case, roads in cases.items():
+        kind = "truck" if VEHICLE_CASES[case].truck else "car"
+        chosen = BREAKDOWN[kind]
+        if variants is not None:
+            wanted = ["" if v in ("", "base") else "|" + v.lstrip("|") for v in variants]
+            unknown = [v for v in wanted if v not in chosen]
+            if unknown:
+                raise OptimumBenchmarkError(f"breakdown variants: unknown {unknown} for the {kind}; choose from "
+                                            f"{['base', *(k.lstrip('|') for k in chosen if k)]}")
+            chosen = {k: chosen[k] for k in wanted}
+        for road in roads:
+            seed_list = list(seeds) if isinstance(seeds, list) else [first.get(road, 0) + i for i in range(seeds)]
+            for seed in seed_list:
+                for label, (mpc, replan) in chosen.items():
+                    out.append(OptimumTask(case, road, seed, controllers=(controller,),
                                            mpc=tuple(sorted(mpc.items())), replan_period=replan, label=label,
                                            **common))
     return out
 
 
-def optimum_tasks(cases: dict[str, list[str]], seeds: int, first_seed: dict[str, int] | None = None,
+def optimum_tasks(cases: dict[str, list[str]], seeds: int | list[int], first_seed: dict[str, int] | None = None,
                   controllers: dict[str, tuple[str, ...]] | None = None, **common: Any) -> list[OptimumTask]:
-    """Tasks seed-major over {case: [road, ...]}; first_seed per road (e.g. 50000 for the EcoDrive routes)."""
+    """Tasks seed-major over {case: [road, ...]}; ``seeds``: a count from first_seed per road (e.g. 50000 for the
+    EcoDrive routes) or the seeds themselves."""
     first = first_seed or {}
     out = []
-    for i in range(seeds):
+    for i in range(seeds if isinstance(seeds, int) else len(seeds)):
         for case, roads in cases.items():
             for road in roads:
                 ctl = (controllers or {}).get(case) or (TRUCK_CONTROLLERS if VEHICLE_CASES[case].truck
                                                          else CAR_CONTROLLERS)
-                out.append(OptimumTask(case, road, first.get(road, 0) + i, controllers=ctl, **common))
+                seed = first.get(road, 0) + i if isinstance(seeds, int) else seeds[i]
+                out.append(OptimumTask(case, road, seed, controllers=ctl, **common))
     return out
 
 

@@ -37,6 +37,9 @@ from roadload.experiments.controller_comparison import VEHICLE_CASES, format_dif
 from roadload.experiments.optimum_benchmark import benchmark_road, stored_task, truck_bound
 from roadload.tables import markdown_table
 
+# the run's own columns carried into its gap parts: the MPC's CPU for the whole drive [s], its solves' median wall
+# time [s] and failed solves
+RUN_COLUMNS = ("run_cpu_s", "mpc_solves", "mpc_solve_time_median_s", "mpc_solver_failures")
 PARTS = {"total": "MPC above the bound", "loop": "MPC above its model's optimum",
          "nonconvex": "its model's optimum above the bound"}
 
@@ -59,7 +62,8 @@ def gap_parts_of_task(stored: dict[str, Any]) -> list[dict[str, Any]]:
         peak = max(float(r.get("peak_speed") or 0.0), float(r["start_speed"]), float(r["arrival_speed"]))
         args = (float(r["time_s"]), float(r["start_speed"]), float(r["arrival_speed"]), peak)
         row = {"vehicle": task.case, "road": task.road, "seed": task.seed, "controller": r["controller"],
-               "time_s": r["time_s"], "energy_J": float(r["energy_J"])}
+               "time_s": r["time_s"], "energy_J": float(r["energy_J"]),
+               **{k: r[k] for k in RUN_COLUMNS if r.get(k) is not None}}
         try:
             b, _ = bound.solve(*args)
             a, sol = smooth.solve(*args)
@@ -68,7 +72,8 @@ def gap_parts_of_task(stored: dict[str, Any]) -> list[dict[str, Any]]:
             continue
         snap = a - float(sol.priced_energy_J if sol.priced_energy_J is not None else sol.energy_J)
         out.append({**row, "bound_J": b, "model_optimum_J": a, "model_optimum_phi_J": sol.energy_J + snap,
-                    "model_optimum_time_s": sol.model_time, "status": "solved"})
+                    "model_optimum_time_s": sol.model_time, "model_optimum_time_slope_J_per_s": -sol.multiplier,
+                    "status": "solved"})
     for row in out:
         row["cpu_s"] = time.process_time() - t0
     return out
@@ -97,7 +102,8 @@ def gap_parts_summary(rows: pd.DataFrame) -> pd.DataFrame:
     for (veh, road, ctl), g in ok.groupby(["vehicle", "road", "controller"], sort=False):
         b = g["bound_J"].to_numpy(float)
         rec: dict[str, Any] = {"vehicle": veh, "road": road, "controller": ctl, "seeds": len(g),
-                               "time_s_mean": float(g["time_s"].mean())}
+                               "time_s_mean": float(g["time_s"].mean()),
+                               "run_cpu_s_mean": float(g["run_cpu_s"].mean()) if "run_cpu_s" in g else float("nan")}
         for part in PARTS:
             mean, se, lo, hi = ratio_of_means_ci(b + g[f"{part}_J"].to_numpy(float), b)
             rec.update({f"{part}_pct": mean, f"{part}_1sigma_pct": se, f"{part}_ci95_lo": lo,
@@ -117,5 +123,6 @@ def gap_parts_markdown(summary: pd.DataFrame) -> str:
          "trip time [s]": f"{r['time_s_mean']:.1f}",
          **{name: format_difference(*(r[f"{part}_{x}"] for x in ("pct", "1sigma_pct", "ci95_lo", "ci95_hi")))
             for part, name in PARTS.items()},
-         "smooth model's error on its optimum": f"{r['model_error_pct']:+.2f} %"}
+         "smooth model's error on its optimum": f"{r['model_error_pct']:+.2f} %",
+         "CPU per drive [s]": f"{r['run_cpu_s_mean']:.0f}" if np.isfinite(r.get("run_cpu_s_mean", np.nan)) else "-"}
         for r in summary.to_dict("records")])) + "\n"

@@ -27,6 +27,8 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                                         "3-6 %), longhaul_real (10 km windows of the real long-haul cycle)"),
         seeds: int = typer.Option(10, help="seeds (= roads) per vehicle and road"),
         first_seed: int = typer.Option(None, help="first seed (default: 50000 for 'route', 0 otherwise)"),
+        seed_list: str = typer.Option("", help="comma-separated seeds to run instead of --seeds / --first-seed "
+                                      "(e.g. 8,5,3)"),
         controllers: str = typer.Option("", help="comma-separated controllers for every vehicle (default: car "
                                         "cruise, human, mpc:oracle, mpc:abc, mpc:online, ppo, sac; truck cruise, "
                                         "cruise_band, human, mpc:oracle, mpc:abc, mpc:online); also mpc:online_wind; "
@@ -55,7 +57,11 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
                                           "the route end in its horizon) and the optimum of that cost"),
         breakdown: bool = typer.Option(False, "--breakdown", help="the oracle MPC's gap to the optimum, one design "
                                        "choice at a time (horizon, grid, comfort term, speed margin, terminal value, "
-                                       "solver tolerance, re-planning period) and all together"),
+                                       "solver tolerance, re-planning period) and all together; the MPC is the "
+                                       "one oracle MPC of --controllers (default mpc:oracle; trucks e.g. "
+                                       "mpc:oracle:plant_map, with --gap-parts)"),
+        variants: str = typer.Option("", help="--breakdown: comma-separated variant labels to run (default all; "
+                                     "'base' = the MPC unchanged, e.g. 'base,horizon 4 km,no comfort term')"),
         gap_parts: bool = typer.Option(False, "--gap-parts", help="trucks: each run's energy above the plant-fuel "
                                        "bound in two parts that add up to it, against the full-route optimum of the "
                                        "plant-map MPC's own smoothed fuel model booked in the plant's map: above that "
@@ -98,8 +104,22 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
         else:
             roads = {c: [r.strip() for r in (truck_roads if VEHICLE_CASES[c].truck else car_roads).split(",")
                          if r.strip()] for c in cases}
-        if seeds < 2 and not (seeds == 0 and merge):
+        seed_values: int | list[int] = seeds
+        if seed_list.strip():
+            try:
+                seed_values = [int(v) for v in seed_list.split(",") if v.strip()]
+            except ValueError:
+                fail(f"--seed-list: comma-separated integers, got {seed_list!r}")
+            if not seed_values or min(seed_values) < 0 or len(set(seed_values)) < len(seed_values):
+                fail(f"--seed-list: distinct seeds >= 0, got {seed_list!r}")
+        elif seeds < 2 and not (seeds == 0 and merge):
             fail(f"--seeds: need at least 2 for a confidence interval (0 with --merge: summarise only), got {seeds}")
+        if variants.strip() and not breakdown:
+            fail("--variants: only with --breakdown")
+        mpcs = [c for c in ctl if c.startswith("mpc:oracle")]
+        if breakdown and (len(mpcs) > 1 or len(mpcs) < len(ctl)):
+            fail(f"--breakdown: --controllers names one oracle MPC (mpc:oracle or mpc:oracle:<fuel model>), got "
+                 f"{list(ctl)}")
         rl_wanted = ("ppo" in ctl or "sac" in ctl) or (not ctl and policies is not None)
         per_case = {}
         for c in cases:
@@ -130,11 +150,14 @@ def register(app: typer.Typer, benchmark_app: typer.Typer) -> None:
             tasks = []
             for case in cases:
                 if breakdown:
-                    tasks += breakdown_tasks({case: roads[case]}, seeds, starts,
+                    tasks += breakdown_tasks({case: roads[case]}, seed_values, starts,
+                                             controller=mpcs[0] if mpcs else "mpc:oracle",
+                                             variants=[v.strip() for v in variants.split(",")] if variants.strip()
+                                             else None,
                                              warmup=truck_warmup if VEHICLE_CASES[case].truck else car_warmup,
                                              time_weight=None if time_weight < 0 else time_weight)
                     continue
-                tasks += optimum_tasks({case: roads[case]}, seeds, starts, {case: per_case[case]},
+                tasks += optimum_tasks({case: roads[case]}, seed_values, starts, {case: per_case[case]},
                                        condition=condition if not VEHICLE_CASES[case].truck else "nominal",
                                        warmup=truck_warmup if VEHICLE_CASES[case].truck else car_warmup,
                                        time_weight=None if time_weight < 0 else time_weight,

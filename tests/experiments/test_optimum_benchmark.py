@@ -10,9 +10,9 @@ import pytest
 from roadload.estimators.change import GUST_ROBUST
 from roadload.experiments.controller_comparison import force_model_settings
 from roadload.experiments.optimum_benchmark import (BOUND_KIND, OptimumBenchmarkError, OptimumTask, _settings,
-                                                    _stale_bound, dp_table, episode_cost_summary, online_columns,
-                                                    pace_and_drive, reference_controller, stored_task, summarise,
-                                                    summary_markdown, write_tables)
+                                                    _stale_bound, breakdown_tasks, dp_table, episode_cost_summary,
+                                                    online_columns, pace_and_drive, reference_controller, stored_task,
+                                                    summarise, summary_markdown, write_tables)
 from roadload.road_profiles import RoadProfile
 
 
@@ -169,6 +169,30 @@ def test_a_stored_task_comes_back_equal_and_its_bound_is_stale_when_the_grid_cha
     assert not _stale_bound(task, {"rows": rows})
     assert _stale_bound(task, {"rows": [{**rows[0], "optimum_kind": "plant-fuel bound"}]})
     assert not _stale_bound(replace(task, truck_optimum="tracked"), {"rows": [{"arrived": True}]})
+
+
+def test_the_truck_breakdown_varies_one_lever_of_the_plant_map_mpc_on_the_seeds_asked_for():
+    tasks = breakdown_tasks({"truck_40t": ["long_grades"]}, [8, 5], controller="mpc:oracle:plant_map",
+                            variants=["base", "route end in the horizon", "|lambda x0.5", "re-plan 0.2 s"],
+                            warmup=2000.0)
+    assert [(t.seed, t.label) for t in tasks] == [
+        (s, lab) for s in (8, 5) for lab in ("", "|route end in the horizon", "|lambda x0.5", "|re-plan 0.2 s")]
+    base, route_end, slow, replan = (_settings(t, "mpc:oracle:plant_map") for t in tasks[:4])
+    # every variant keeps the plant-map fuel model and its gear request; only its own lever moves
+    assert {s.mpc.fuel_model for s in (base, route_end, slow, replan)} == {"plant_map"}
+    assert base.gear_command and base.mpc.horizon == 2000.0 and base.time_weight == 160_000.0
+    assert route_end.mpc.horizon == 4000.0 and route_end.mpc.horizon_to_route_end
+    assert replace(route_end.mpc, n_nodes=40, horizon_to_route_end=False) == base.mpc
+    assert slow.time_weight == 80_000.0 and slow.mpc == base.mpc
+    assert replan.replan_period == 0.2 and base.replan_period == 1.0 and replan.mpc == base.mpc
+    near = _settings(breakdown_tasks({"truck_40t": ["long_grades"]}, [0], controller="mpc:oracle:plant_map",
+                                     variants=["near grid 8 x 12.5 m"])[0], "mpc:oracle:plant_map").mpc
+    assert near.horizon == base.mpc.horizon and near.grid_lengths()[0] == 12.5
+    assert len(breakdown_tasks({"car": ["hilly"]}, 2)) == 2 * 12  # a count of seeds from 0, every car variant
+    with pytest.raises(OptimumBenchmarkError, match="unknown.*'|horizon 9 km'.*choose from"):
+        breakdown_tasks({"truck_40t": ["long_grades"]}, [0], variants=["horizon 9 km"])
+    with pytest.raises(OptimumBenchmarkError, match="oracle MPC.*'cruise'"):
+        breakdown_tasks({"truck_40t": ["long_grades"]}, [0], controller="cruise")
 
 
 def test_an_online_mpc_takes_its_estimator_options_after_the_at():

@@ -438,6 +438,12 @@ BREAKDOWN: dict[str, dict[str, tuple[dict[str, Any], float | None]]] = {
 }
 
 
+def road_seeds(seeds: int | list[int], first_seed: dict[str, int], road: str) -> list[int]:
+    """The seeds of ``road``: ``seeds`` themselves (a list), or a count of them from the road's first seed (0 unless
+    ``first_seed`` names one, e.g. 50000 for the EcoDrive routes)."""
+    return list(seeds) if isinstance(seeds, list) else [first_seed.get(road, 0) + i for i in range(seeds)]
+
+
 def breakdown_tasks(cases: dict[str, list[str]], seeds: int | list[int], first_seed: dict[str, int] | None = None,
                     controller: str = "mpc:oracle", variants: list[str] | None = None,
                     **common: Any) -> list[OptimumTask]:
@@ -461,8 +467,7 @@ def breakdown_tasks(cases: dict[str, list[str]], seeds: int | list[int], first_s
                                             f"{['base', *(k.lstrip('|') for k in chosen if k)]}")
             chosen = {k: chosen[k] for k in wanted}
         for road in roads:
-            seed_list = list(seeds) if isinstance(seeds, list) else [first.get(road, 0) + i for i in range(seeds)]
-            for seed in seed_list:
+            for seed in road_seeds(seeds, first, road):
                 for label, (mpc, replan) in chosen.items():
                     out.append(OptimumTask(case, road, seed, controllers=(controller,),
                                            mpc=tuple(sorted(mpc.items())), replan_period=replan, label=label,
@@ -481,8 +486,7 @@ def optimum_tasks(cases: dict[str, list[str]], seeds: int | list[int], first_see
             for road in roads:
                 ctl = (controllers or {}).get(case) or (TRUCK_CONTROLLERS if VEHICLE_CASES[case].truck
                                                          else CAR_CONTROLLERS)
-                seed = first.get(road, 0) + i if isinstance(seeds, int) else seeds[i]
-                out.append(OptimumTask(case, road, seed, controllers=ctl, **common))
+                out.append(OptimumTask(case, road, road_seeds(seeds, first, road)[i], controllers=ctl, **common))
     return out
 
 
